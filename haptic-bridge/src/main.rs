@@ -1,0 +1,80 @@
+//! `nanopush-haptic`: the 1-DOF haptic bridge.
+//!
+//! `nanopush-haptic render` reads a force curve (`nanopush model --force-curve --json`) on
+//! stdin and prints, for each point, the handle position and the force the operator's hand
+//! would feel under the chosen scaling: the way to choose gains before a session.
+
+use std::io::Read;
+use std::process::ExitCode;
+
+use anyhow::{Context, bail};
+use clap::{Parser, Subcommand};
+use nanopush_haptic::scaling::Scaling;
+use nanopush_proto::model::ForceCurveReport;
+
+/// The nanopush 1-DOF haptic bridge.
+#[derive(Parser, Debug)]
+#[command(name = "nanopush-haptic", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Render a force curve (JSON on stdin) as the operator would feel it through the handle.
+    Render {
+        /// Tip nanometres per handle millimetre.
+        #[arg(long, default_value_t = 10.0)]
+        nm_per_mm: f64,
+        /// Hand newtons per tip nanonewton.
+        #[arg(long, default_value_t = 0.1)]
+        n_per_nn: f64,
+        /// Peak force the device renders (N).
+        #[arg(long, default_value_t = 3.0)]
+        peak_n: f64,
+    },
+}
+
+fn render(nm_per_mm: f64, n_per_nn: f64, peak_n: f64) -> anyhow::Result<String> {
+    let scaling = Scaling::new(nm_per_mm * 1e-9 / 1e-3, n_per_nn / 1e-9, peak_n)?;
+    let mut input = String::new();
+    std::io::stdin().read_to_string(&mut input).context("reading the force curve from stdin")?;
+    let curve: ForceCurveReport = serde_json::from_str(&input).context("stdin is not the JSON of `nanopush model --force-curve --json`")?;
+    if curve.schema != "nanopush.force_curve" || curve.version != nanopush_proto::VERSION {
+        bail!("expected schema nanopush.force_curve version {}, got {} version {}", nanopush_proto::VERSION, curve.schema, curve.version);
+    }
+    let mut out = String::from("branch,handle_mm,hand_force_n,tip_force_nn\n");
+    for (branch, pts) in [("approach", &curve.approach), ("retraction", &curve.retraction)] {
+        for p in pts {
+            let handle_mm = scaling.handle_position(p.distance) * 1e3;
+            out += &format!("{branch},{handle_mm:.6},{:.6},{:.6}\n", scaling.hand_force(p.force), p.force * 1e9);
+        }
+    }
+    Ok(out)
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Render { nm_per_mm, n_per_nn, peak_n } => render(nm_per_mm, n_per_nn, peak_n),
+    };
+    match result {
+        Ok(text) => {
+            use std::io::Write;
+            let mut o = std::io::stdout().lock();
+            match o.write_all(text.as_bytes()) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::from(2)
+                }
+            }
+        }
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,0 +1,65 @@
+//! `nanopush`: the command line of the nanopush model and (later) server.
+
+mod model_cmd;
+mod units;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+use nanopush::scene::Scene;
+
+/// Force-controlled AFM pushing of nanoparticles (Sitti & Hashimoto).
+#[derive(Parser, Debug)]
+#[command(name = "nanopush", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Print the scene's derived quantities (Eq 9-18), or its force curve (Fig 3).
+    Model(model_cmd::ModelArgs),
+}
+
+/// Loads `--scene FILE`, or the embedded default scene; prints its warnings to stderr.
+pub fn load_scene(path: Option<&PathBuf>) -> anyhow::Result<Scene> {
+    let scene = match path {
+        Some(p) => Scene::from_path(p).with_context(|| format!("loading scene {}", p.display()))?,
+        None => Scene::default_scene(),
+    };
+    for w in &scene.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(scene)
+}
+
+/// Writes the command's output; a closed pipe (`nanopush model | head`) is not an error.
+fn print_stdout(text: &str) -> ExitCode {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: writing to stdout: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Model(args) => model_cmd::run(&args),
+    };
+    match result {
+        Ok(text) => print_stdout(&text),
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

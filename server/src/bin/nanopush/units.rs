@@ -1,0 +1,44 @@
+//! Engineering-unit formatting for the readable tables.
+
+/// `value` with an SI prefix chosen so the mantissa is in [1, 1000), e.g. `1.427 kN/m`.
+pub fn eng(value: f64, unit: &str) -> String {
+    if !value.is_finite() {
+        return format!("{value} {unit}");
+    }
+    if value == 0.0 {
+        return format!("0 {unit}");
+    }
+    const PREFIXES: [(f64, &str); 11] = [
+        (1e15, "P"),
+        (1e12, "T"),
+        (1e9, "G"),
+        (1e6, "M"),
+        (1e3, "k"),
+        (1.0, ""),
+        (1e-3, "m"),
+        (1e-6, "µ"),
+        (1e-9, "n"),
+        (1e-12, "p"),
+        (1e-15, "f"),
+    ];
+    let a = value.abs();
+    let (scale, prefix) = PREFIXES
+        .iter()
+        .copied()
+        .find(|(s, _)| a >= *s * 0.9995)
+        .unwrap_or((1e-18, "a"));
+    format!("{:.4} {prefix}{unit}", value / scale)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::eng;
+
+    #[test]
+    fn prefixes() {
+        assert_eq!(eng(1427.0, "N/m"), "1.4270 kN/m");
+        assert_eq!(eng(0.2215e-9, "m"), "221.5000 pm");
+        assert_eq!(eng(-904.8e-9, "N"), "-904.8000 nN");
+        assert_eq!(eng(0.0, "m"), "0 m");
+    }
+}

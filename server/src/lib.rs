@@ -1,0 +1,18 @@
+//! nanopush: force-controlled pushing of nanoparticles with an AFM, after Sitti & Hashimoto,
+//! *Force Controlled Pushing of Nanoparticles: Modeling and Experiments*.
+//!
+//! - [`physics`]: the paper's Section 2, pure functions in SI units (corrected per the errata);
+//! - [`scene`]: the TOML scene format (units in field names), its validation, and the SI model
+//!   assembled from it;
+//! - [`report`]: the derived quantities printed by `nanopush model`.
+//!
+//! ```
+//! let scene = nanopush::scene::Scene::default_scene();
+//! let model = scene.push_params();
+//! assert!((model.cantilever.k_y() - 1427.0).abs() < 1.0);
+//! ```
+#![deny(missing_docs)]
+
+pub mod physics;
+pub mod report;
+pub mod scene;

@@ -1,0 +1,170 @@
+//! The cantilever: compliance matrix (Eq 10), measured deflection (Eq 11), lateral force from
+//! the deflection (Eq 12), and the dynamic parameters of Sec 2.5.
+
+use nalgebra::{Matrix2, Matrix3, Vector3};
+
+/// Cantilever geometry and material, SI.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cantilever {
+    /// Normal stiffness `k_c` (N/m).
+    pub k_c: f64,
+    /// Width `L_x` (m).
+    pub l_x: f64,
+    /// Length `L_y` (m).
+    pub l_y: f64,
+    /// Tip height `L_z` (m).
+    pub l_z: f64,
+    /// Thickness `t_c` (m).
+    pub t_c: f64,
+    /// First flexural resonance `f_r` (Hz).
+    pub f_r: f64,
+    /// Quality factor in air `Q_c`.
+    pub q_c: f64,
+    /// Tilt `α` about the x axis (rad).
+    pub tilt: f64,
+}
+
+impl Cantilever {
+    /// `c₁ = 2L_z²/L_y² + t_c²/L_x²` (Eq 10).
+    pub fn c1(&self) -> f64 {
+        2.0 * self.l_z * self.l_z / (self.l_y * self.l_y) + self.t_c * self.t_c / (self.l_x * self.l_x)
+    }
+    /// `c₂ = 3L_z²/L_y²` (Eq 10).
+    pub fn c2(&self) -> f64 {
+        3.0 * self.l_z * self.l_z / (self.l_y * self.l_y)
+    }
+    /// `c₃ = 3L_z/(2L_y)` (Eq 10).
+    pub fn c3(&self) -> f64 {
+        1.5 * self.l_z / self.l_y
+    }
+
+    /// Eq 10: `ζ = C F`, `C = (1/k_c) [[c₁,0,0],[0,c₂,c₃],[0,c₃,1]]` (m/N), in the cantilever's
+    /// own axes. Symmetric positive definite: `c₂ − c₃² = (3/4)L_z²/L_y² > 0`.
+    pub fn compliance(&self) -> Matrix3<f64> {
+        let (c1, c2, c3) = (self.c1(), self.c2(), self.c3());
+        Matrix3::new(c1, 0.0, 0.0, 0.0, c2, c3, 0.0, c3, 1.0) / self.k_c
+    }
+
+    /// The y-z block of `C` (m/N).
+    pub fn compliance_yz(&self) -> Matrix2<f64> {
+        Matrix2::new(self.c2(), self.c3(), self.c3(), 1.0) / self.k_c
+    }
+
+    /// The y-z stiffness `K = C_yz⁻¹` (N/m): the exact inverse of the compliance, which the
+    /// dynamics use (Eq 17's `k_y`, `k_z`, `k_yz` coupling terms are its first-order form).
+    pub fn stiffness_yz(&self) -> Matrix2<f64> {
+        let (c2, c3) = (self.c2(), self.c3());
+        let det = c2 - c3 * c3;
+        Matrix2::new(1.0, -c3, -c3, c2) * (self.k_c / det)
+    }
+
+    /// Sec 2.5: `k_y = k_c/c₂` (N/m): 1427 N/m for the paper's cantilever.
+    pub fn k_y(&self) -> f64 {
+        self.k_c / self.c2()
+    }
+    /// Sec 2.5: `k_z = k_c` (N/m).
+    pub fn k_z(&self) -> f64 {
+        self.k_c
+    }
+    /// Sec 2.5: `k_yz = k_c/c₃` (N/m; printed `k_xy`): 123.4 N/m for the paper's cantilever.
+    pub fn k_yz(&self) -> f64 {
+        self.k_c / self.c3()
+    }
+
+    /// Effective mass `m_c* = k_z/(4π² f_r²)` (kg) — the print omits the square (ERRATA item 8).
+    pub fn effective_mass(&self) -> f64 {
+        self.k_z() / (4.0 * std::f64::consts::PI.powi(2) * self.f_r * self.f_r)
+    }
+
+    /// Damping `b_y = b_z = 2π f_r m_c*/Q_c` (N·s/m), Sec 2.5.
+    pub fn damping(&self) -> f64 {
+        2.0 * std::f64::consts::PI * self.f_r * self.effective_mass() / self.q_c
+    }
+
+    /// Eq 10 applied: the deflection (m) under a force given in the cantilever's axes (N).
+    pub fn deflection(&self, force: Vector3<f64>) -> Vector3<f64> {
+        self.compliance() * force
+    }
+
+    /// Eq 11: the measured (normal) deflection `ζ_z = (c₃F_y + F_z)/k_c` (m).
+    pub fn measured_deflection(&self, f_y: f64, f_z: f64) -> f64 {
+        (self.c3() * f_y + f_z) / self.k_c
+    }
+
+    /// Eq 12: the change of lateral force from a change of measured deflection, assuming the
+    /// normal force constant: `ΔF_y = k_c Δζ_z / c₃` (N).
+    pub fn lateral_force_change(&self, d_zeta_z: f64) -> f64 {
+        self.k_c * d_zeta_z / self.c3()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    pub(crate) fn paper() -> Cantilever {
+        Cantilever {
+            k_c: 8.0,
+            l_x: 50e-6,
+            l_y: 155e-6,
+            l_z: 6.7e-6,
+            t_c: 2.4e-6,
+            f_r: 138e3,
+            q_c: 100.0,
+            tilt: 15f64.to_radians(),
+        }
+    }
+
+    #[test]
+    fn paper_stiffnesses() {
+        // ERRATA item 9.
+        let c = paper();
+        assert!((c.c2() - 0.005605).abs() < 1e-6);
+        assert!((c.c3() - 0.06484).abs() < 1e-5);
+        assert!((c.k_y() - 1427.0).abs() < 1.0, "{}", c.k_y());
+        assert!((c.k_yz() - 123.4).abs() < 0.1, "{}", c.k_yz());
+    }
+
+    #[test]
+    fn effective_mass_uses_f_squared() {
+        let c = paper();
+        let m = c.effective_mass();
+        // The resonance of m* on k_z is f_r.
+        let f = (c.k_z() / m).sqrt() / (2.0 * std::f64::consts::PI);
+        assert!((f - c.f_r).abs() < 1e-6 * c.f_r);
+    }
+
+    #[test]
+    fn stiffness_inverts_compliance() {
+        let c = paper();
+        let i = c.stiffness_yz() * c.compliance_yz();
+        assert!((i - Matrix2::identity()).abs().max() < 1e-12);
+    }
+
+    #[test]
+    fn eq11_eq12_round_trip() {
+        let c = paper();
+        let z0 = c.measured_deflection(0.0, 5e-9);
+        let z1 = c.measured_deflection(100e-9, 5e-9);
+        assert!((c.lateral_force_change(z1 - z0) - 100e-9).abs() < 1e-18);
+        // Eq 11 is the third row of Eq 10.
+        let d = c.deflection(Vector3::new(0.0, 100e-9, 5e-9));
+        assert!((d.z - z1).abs() < 1e-24);
+    }
+
+    proptest! {
+        #[test]
+        fn compliance_is_symmetric_positive_definite(
+            k in 0.01..100.0_f64, lx in 5e-6..200e-6_f64, ly in 20e-6..600e-6_f64,
+            lz in 1e-6..30e-6_f64, t in 0.2e-6..10e-6_f64,
+        ) {
+            let c = Cantilever { k_c: k, l_x: lx, l_y: ly, l_z: lz, t_c: t, f_r: 1e5, q_c: 100.0, tilt: 0.2 };
+            let m = c.compliance();
+            prop_assert!((m - m.transpose()).abs().max() == 0.0);
+            prop_assert!(m.cholesky().is_some(), "not SPD: {}", m);
+            let e = m.symmetric_eigenvalues();
+            prop_assert!(e.iter().all(|&v| v > 0.0 && v.is_finite()));
+        }
+    }
+}

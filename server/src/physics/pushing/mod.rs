@@ -1,0 +1,12 @@
+//! The pushing mechanism of Sec 2.5: parameters, state layout, the Eq 17 dynamics and the Eq 18
+//! steady state.
+
+pub mod layout;
+pub mod model;
+pub mod params;
+pub mod steady;
+
+pub use layout::{Layout, MAX_STATES};
+pub use model::{FrictionPhase, Mode, Probe, PushModel, SwitchKind, Switching, Tangential};
+pub use params::{Dof, Dofs, Interactions, LongRange, PushParams};
+pub use steady::{SteadyInputs, SteadyState, steady_state};

@@ -1,0 +1,598 @@
+//! The kinetic pushing dynamics, **Eq 17**, as a state-space model `M x' = f(t, x)` with an exact
+//! Jacobian.
+//!
+//! # Geometry (the push frame of Sec 2.5)
+//! `y` points along the push, `z` up, in the frame of the substrate. The stage moves the
+//! cantilever base by `s(t)` relative to the substrate (`s = Vt` for an ideal stage, Eq 13 when
+//! the stage is dynamic). The cantilever is tilted by `α`: its long axis is `y' = (cos α, −sin α)`
+//! and its normal `z' = (sin α, cos α)` in `(y, z)`, so that pushing loads the particle downward,
+//! as in Eq 14 (this choice reproduces Eq 14's `f_as` and `F_as` exactly). The tip is a sphere
+//! `Rₜ` whose centre is the base plus the deflection `R(α)ζ`; the particle a sphere `Rₐ` with centre
+//! `(y, Rₐ + a₀ + z)` and rotation `θ`. At `t = 0` the tip touches the particle at the contact
+//! angle `β` (tip centre at `β` above the horizontal through the particle centre).
+//!
+//! # Forces
+//! - **Tip-particle normal**: JKR (Eq 5) on the overlap `a₀ − h` (gap `h` between the spheres'
+//!   surfaces; contact at `h = a₀`) plus the included long-range terms (Eq 1, 3, 4) at
+//!   `max(h, a₀)`, along the line of centres `n`.
+//! - **Particle-substrate normal**: JKR on the indentation `−z` plus Eq 2, 3, 4 at `a₀ + z`.
+//! - **Friction** (Eq 6, 7) at both contacts, as an elastic spring-slider: while a contact sticks
+//!   its tangential displacement stretches a spring (`k_as* = 8RₐG*` as in Eq 14's `F_y = k_as* y`;
+//!   `k_ta* = 8R̃G*_ta` at the tip) up to the static limit `μˢ(A + F_l)`; while it slips the force
+//!   is the kinetic `μᵏ(A + F_l)` against the slip. The tangential coordinates are
+//!   `s_as = y − Rₐθ` (substrate contact point) and `ξ = (Rₜ+Rₐ)φ + Rₐθ` (tip contact, `φ` the angle
+//!   of `n`; exact while the gap is small against the radii).
+//! - **Modes** (Sec 2.5): *stick* (both contacts stick), *slip* (the particle slides on the
+//!   substrate), *roll* (it sticks on the substrate, rotates, and slides under the tip). Switches
+//!   are discrete events ([`PushModel::switching`]), not a smooth blur.
+//!
+//! # Equations (one row per state; `Dof::QuasiStatic` rows have zero mass)
+//! - cantilever: `m_c* ζ̈ + b ζ̇ + Kζ = R(α)ᵀ F_tip`, `K = C_yz⁻¹` (Eq 10) — Eq 17's first two lines
+//!   are the first-order form of this with `k_y`, `k_z`, `k_yz`;
+//! - particle: `mₐ ÿ = F_y,tip + F_t,as + mₐ s̈`, `mₐ z̈ + b_as ż = P_as + F_lr,as + F_z,tip`,
+//!   `I₀ θ̈ = Rₐ(F_t,ta − F_t,as)` (Eq 17 lines 3-5, `I₀ = 2mₐRₐ²/5`);
+//! - stage: Eq 13 with the friction load `f_as`.
+//!
+//! Deviations from the print: Eq 17 mixes `γ = β − α` (an angle) with `γ_L` (a surface energy),
+//! named apart here (ERRATA item 10); the printed lines for `F_y^c`, `F_z^c` are the projections
+//! of `F_tip` that this model computes from the geometry instead.
+
+use crate::physics::forces::capillary::Meniscus;
+use crate::physics::pushing::layout::{Layout, MAX_STATES};
+use crate::physics::pushing::params::PushParams;
+use crate::physics::real::{Dual, Real};
+
+/// State of one frictional contact.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Tangential {
+    /// Sticking: the tangential spring is anchored at `anchor` (m).
+    Stick {
+        /// The spring's rest position in the contact's tangential coordinate (m).
+        anchor: f64,
+    },
+    /// Slipping in `direction` (±1): the friction is kinetic and opposes it.
+    Slip {
+        /// Sign of the slip velocity.
+        direction: f64,
+    },
+}
+
+/// The discrete part of the hybrid state: what the continuous right-hand side depends on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Mode {
+    /// Particle-substrate friction.
+    pub substrate: Tangential,
+    /// Tip-particle friction.
+    pub tip: Tangential,
+    /// Tip-particle meniscus (Eq 3 hysteresis).
+    pub meniscus: Meniscus,
+    /// Whether the tip-particle JKR contact exists (formed at `h ≤ a₀`, broken below the JKR
+    /// stable branch).
+    pub tip_contact: bool,
+}
+
+/// The friction phase of the particle, as Sec 2.5 names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum FrictionPhase {
+    /// Both contacts stick: static phase (Eq 14).
+    Stick,
+    /// The particle slides on the substrate.
+    Slip,
+    /// The particle rolls: it sticks on the substrate and rotates under the tip.
+    Roll,
+}
+
+impl FrictionPhase {
+    /// Lower-case name, for traces.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            FrictionPhase::Stick => "stick",
+            FrictionPhase::Slip => "slip",
+            FrictionPhase::Roll => "roll",
+        }
+    }
+}
+
+/// Forces and kinematics at one state (SI), for traces, events and reports.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Probe<T> {
+    /// Tip-particle surface gap `h` (m); contact at `a₀`.
+    pub gap: T,
+    /// Tip-particle normal force on the particle, along `n` (N, positive repulsive): `F_ta`.
+    pub normal_ta: T,
+    /// Tip-particle friction `f_ta` (N, along `ξ`).
+    pub friction_ta: T,
+    /// Tip-particle normal load for friction, `A_ta + F_l^ta` (N).
+    pub load_ta: T,
+    /// Particle-substrate friction `f_as` (N, along `y`, on the particle).
+    pub friction_as: T,
+    /// Particle-substrate normal load for friction, `A_as + F_l^as` (N).
+    pub load_as: T,
+    /// Substrate contact coordinate `s_as = y − Rₐθ` (m).
+    pub contact_as: T,
+    /// Tip contact coordinate `ξ` (m).
+    pub contact_ta: T,
+    /// Rate of `s_as` (m/s): the substrate slip velocity while slipping.
+    pub slip_rate_as: T,
+    /// Rate of `ξ` (m/s).
+    pub slip_rate_ta: T,
+    /// Measured deflection `ζ_z'` (m), Eq 11.
+    pub zeta_z: T,
+    /// `ζ_y'` (m).
+    pub zeta_y: T,
+    /// Stage displacement `s` (m).
+    pub stage: T,
+    /// Stage acceleration `s̈` (m/s²).
+    pub stage_accel: T,
+}
+
+/// The switching functions of the hybrid model. Each is positive while the present mode holds
+/// and an event fires when it crosses zero; `None` when a switch does not apply.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Switching {
+    /// Substrate: `μˢN − |f|` while sticking (→ slip), `direction·ṡ_as` while slipping (→ stick).
+    pub substrate: Option<f64>,
+    /// Tip: the same for the tip-particle contact.
+    pub tip: Option<f64>,
+    /// Meniscus: `h − (L_t + a₀)` while absent (→ forms), `L_r + a₀ − h` while formed
+    /// (→ ruptures).
+    pub meniscus: Option<f64>,
+    /// Tip contact: `h − a₀` while apart (→ touches), `(a₀ − h) − δ_min` while in contact
+    /// (→ breaks off the JKR stable branch).
+    pub tip_contact: Option<f64>,
+}
+
+/// The assembled pushing model for one scene: parameters, layout and precomputed constants.
+#[derive(Debug, Clone)]
+pub struct PushModel {
+    /// The parameters.
+    pub p: PushParams,
+    /// The state layout.
+    pub layout: Layout,
+    base: (f64, f64),
+    rot: (f64, f64),
+    k: (f64, f64, f64),
+    m_c: f64,
+    b_c: f64,
+    z_fixed: f64,
+    adhesion_as: f64,
+}
+
+impl PushModel {
+    /// Assembles the model; the particle's initial indentation is its JKR equilibrium under the
+    /// included long-range attraction with no tip load.
+    pub fn new(p: PushParams) -> PushModel {
+        let layout = Layout::new(&p.dofs);
+        let a0 = p.interactions.a0;
+        let lr_as: f64 = p.interactions.particle_substrate_force(a0);
+        let z_fixed = -p.jkr_as.indentation_from_load(-lr_as).unwrap_or(0.0);
+        let (sa, ca) = p.cantilever.tilt.sin_cos();
+        let (sb, cb) = p.beta.sin_cos();
+        let d = p.r_t + p.r_a + a0;
+        let base = (-d * cb, p.r_a + a0 + z_fixed + d * sb);
+        let kk = p.cantilever.stiffness_yz();
+        PushModel {
+            layout,
+            base,
+            rot: (sa, ca),
+            k: (kk[(0, 0)], kk[(0, 1)], kk[(1, 1)]),
+            m_c: p.cantilever.effective_mass(),
+            b_c: p.cantilever.damping(),
+            z_fixed,
+            adhesion_as: p.adhesion_as(),
+            p,
+        }
+    }
+
+    /// State dimension.
+    pub fn len(&self) -> usize {
+        self.layout.len
+    }
+
+    /// Whether the state is empty (never: the cantilever and particle y are always present).
+    pub fn is_empty(&self) -> bool {
+        self.layout.len == 0
+    }
+
+    /// Initial state: particle at rest at its equilibrium indentation, tip touching it at `β`
+    /// (gap `a₀`, no elastic load), cantilever undeflected, stage at 0. Quasi-static rows are not
+    /// yet balanced: see [`Self::equilibrate`].
+    pub fn initial_state(&self) -> [f64; MAX_STATES] {
+        let mut x = [0.0; MAX_STATES];
+        if let Some(z) = self.layout.particle_z {
+            x[z.pos] = self.z_fixed;
+        }
+        x
+    }
+
+    /// Initial mode: both contacts stick where they are, the meniscus is formed if the humidity
+    /// allows one, the tip is in contact.
+    pub fn initial_mode(&self) -> Mode {
+        let meniscus = match &self.p.interactions.tip_particle.capillary {
+            Some(c) if c.possible() => Meniscus::Formed,
+            _ => Meniscus::Absent,
+        };
+        let mut mode = Mode {
+            substrate: Tangential::Stick { anchor: 0.0 },
+            tip: Tangential::Stick { anchor: 0.0 },
+            meniscus,
+            tip_contact: true,
+        };
+        let x = self.initial_state();
+        let pr = self.probe(0.0, &x[..self.len()], &mode);
+        mode.substrate = Tangential::Stick { anchor: pr.contact_as };
+        mode.tip = Tangential::Stick { anchor: pr.contact_ta };
+        mode
+    }
+
+    /// The friction phase a mode stands for.
+    pub fn phase(&self, mode: &Mode) -> FrictionPhase {
+        match (mode.substrate, mode.tip, self.layout.rotation.is_some()) {
+            (Tangential::Slip { .. }, _, _) => FrictionPhase::Slip,
+            (Tangential::Stick { .. }, Tangential::Slip { .. }, true) => FrictionPhase::Roll,
+            _ => FrictionPhase::Stick,
+        }
+    }
+
+    /// The diagonal mass matrix of `M x' = f`.
+    pub fn mass_diagonal(&self) -> [f64; MAX_STATES] {
+        self.layout.mass_diagonal()
+    }
+
+    /// The right-hand side `f(t, x)` for the given mode; writes `out[..len]`.
+    pub fn rhs(&self, t: f64, x: &[f64], mode: &Mode, out: &mut [f64]) {
+        let (f, _) = self.eval(t, x, mode);
+        out[..self.len()].copy_from_slice(&f[..self.len()]);
+    }
+
+    /// The exact Jacobian `∂f/∂x` (column-major `len × len`, as nalgebra stores it), one
+    /// forward-mode dual evaluation per column: no finite differences, no allocation.
+    pub fn jacobian(&self, t: f64, x: &[f64], mode: &Mode, jac: &mut [f64]) {
+        let n = self.len();
+        let mut xd = [Dual::default(); MAX_STATES];
+        for (d, &v) in xd.iter_mut().zip(x.iter()).take(n) {
+            *d = Dual::new(v, 0.0);
+        }
+        for j in 0..n {
+            xd[j].eps = 1.0;
+            let (f, _) = self.eval(t, &xd[..n], mode);
+            for i in 0..n {
+                jac[j * n + i] = f[i].eps;
+            }
+            xd[j].eps = 0.0;
+        }
+    }
+
+    /// Forces and kinematics at `(t, x)`.
+    pub fn probe(&self, t: f64, x: &[f64], mode: &Mode) -> Probe<f64> {
+        self.eval(t, x, mode).1
+    }
+
+    /// The switching functions at `(t, x)` (see [`Switching`]); an event fires when a value
+    /// becomes negative. Slip→stick needs the slip rate, which a quasi-static DOF does not carry:
+    /// then it is `None` and the integrator decides from the sign of the force balance.
+    pub fn switching(&self, t: f64, x: &[f64], mode: &Mode) -> Switching {
+        let pr = self.probe(t, x, mode);
+        let p = &self.p;
+        let a0 = p.interactions.a0;
+        let has_rate_as = self.layout.particle_y.vel.is_some();
+        let has_rate_ta = has_rate_as && self.layout.zeta_y.vel.is_some();
+        let tangential = |t: Tangential, mu_s: f64, load: f64, force: f64, rate: f64, has_rate: bool| match t {
+            Tangential::Stick { .. } => Some(mu_s * load.max(0.0) - force.abs()),
+            Tangential::Slip { direction } => has_rate.then_some(direction * rate),
+        };
+        let meniscus = p
+            .interactions
+            .tip_particle
+            .capillary
+            .filter(|c| c.possible())
+            .map(|c| match mode.meniscus {
+                Meniscus::Absent => c.formation_gap + a0 - pr.gap,
+                Meniscus::Formed => c.rupture_gap + a0 - pr.gap,
+            });
+        // Sign convention: every function is positive while the mode holds.
+        let meniscus = meniscus.map(|g| if mode.meniscus == Meniscus::Absent { -g } else { g });
+        let tip_contact = Some(if mode.tip_contact {
+            (a0 - pr.gap) - p.jkr_ta.min_indentation()
+        } else {
+            pr.gap - a0
+        });
+        Switching {
+            substrate: tangential(
+                mode.substrate,
+                p.mu_as_s,
+                pr.load_as,
+                pr.friction_as,
+                pr.slip_rate_as,
+                has_rate_as,
+            ),
+            tip: tangential(
+                mode.tip,
+                p.mu_ta_s,
+                pr.load_ta,
+                pr.friction_ta,
+                pr.slip_rate_ta,
+                has_rate_ta,
+            ),
+            meniscus,
+            tip_contact,
+        }
+    }
+
+    /// The mode after the switch whose function crossed zero, keeping forces continuous: a contact
+    /// that starts to slip slips along its stretch; one that sticks again is anchored so that the
+    /// spring force equals the kinetic friction it had.
+    pub fn transition(&self, t: f64, x: &[f64], mode: &Mode, which: SwitchKind) -> Mode {
+        let pr = self.probe(t, x, mode);
+        let p = &self.p;
+        let mut m = *mode;
+        match which {
+            SwitchKind::Substrate => {
+                m.substrate = match mode.substrate {
+                    Tangential::Stick { anchor } => Tangential::Slip {
+                        direction: sign(pr.contact_as - anchor),
+                    },
+                    Tangential::Slip { direction } => Tangential::Stick {
+                        anchor: pr.contact_as - direction * p.mu_as_k * pr.load_as.max(0.0) / p.k_as_t,
+                    },
+                }
+            }
+            SwitchKind::Tip => {
+                m.tip = match mode.tip {
+                    Tangential::Stick { anchor } => Tangential::Slip {
+                        direction: sign(pr.contact_ta - anchor),
+                    },
+                    Tangential::Slip { direction } => Tangential::Stick {
+                        anchor: pr.contact_ta - direction * p.mu_ta_k * pr.load_ta.max(0.0) / p.k_ta_t,
+                    },
+                }
+            }
+            SwitchKind::Meniscus => {
+                m.meniscus = match mode.meniscus {
+                    Meniscus::Absent => Meniscus::Formed,
+                    Meniscus::Formed => Meniscus::Absent,
+                }
+            }
+            SwitchKind::TipContact => {
+                m.tip_contact = !mode.tip_contact;
+                if m.tip_contact {
+                    m.tip = Tangential::Stick { anchor: pr.contact_ta };
+                }
+            }
+        }
+        m
+    }
+
+    /// Balances the quasi-static (algebraic) rows by Newton's method, holding the differential
+    /// states fixed: a consistent initial value for the DAE. Returns the final residual norm
+    /// (m). Allocates; call it at set-up, not per tick.
+    pub fn equilibrate(&self, t: f64, x: &mut [f64], mode: &Mode) -> f64 {
+        let n = self.len();
+        let mass = self.mass_diagonal();
+        let alg: Vec<usize> = (0..n).filter(|&i| mass[i] == 0.0).collect();
+        let mut f = vec![0.0; n];
+        let mut jac = vec![0.0; n * n];
+        let mut res = 0.0;
+        for _ in 0..100 {
+            self.rhs(t, x, mode, &mut f);
+            res = alg.iter().map(|&i| f[i] * f[i]).sum::<f64>().sqrt();
+            if alg.is_empty() || res < 1e-16 {
+                break;
+            }
+            self.jacobian(t, x, mode, &mut jac);
+            let m = alg.len();
+            let a = nalgebra::DMatrix::from_fn(m, m, |r, c| jac[alg[c] * n + alg[r]]);
+            let b = nalgebra::DVector::from_fn(m, |r, _| -f[alg[r]]);
+            let Some(dx) = a.lu().solve(&b) else { break };
+            for (k, &i) in alg.iter().enumerate() {
+                x[i] += dx[k];
+            }
+        }
+        res
+    }
+
+    /// The measured deflection `ζ_z'` (m) at a state.
+    pub fn measured_deflection(&self, x: &[f64]) -> f64 {
+        x[self.layout.zeta_z.pos]
+    }
+
+    fn eval<T: Real>(&self, t: f64, x: &[T], mode: &Mode) -> ([T; MAX_STATES], Probe<T>) {
+        let p = &self.p;
+        let l = &self.layout;
+        let a0 = p.interactions.a0;
+        let zero = T::cst(0.0);
+        let vel = |s: Option<usize>| s.map_or(zero, |i| x[i]);
+
+        // Stage (Eq 13, or ideal at speed V).
+        let (s, s_dot) = match l.stage {
+            Some(st) => (x[st.pos], vel(st.vel)),
+            None => (T::cst(p.speed * t), T::cst(p.speed)),
+        };
+        // Cantilever deflection in its own axes, and its rate.
+        let (zy, zz) = (x[l.zeta_y.pos], x[l.zeta_z.pos]);
+        let (zy_d, zz_d) = (vel(l.zeta_y.vel), vel(l.zeta_z.vel));
+        // Particle.
+        let y = x[l.particle_y.pos];
+        let y_d = vel(l.particle_y.vel);
+        let (z, z_d) = match l.particle_z {
+            Some(sl) => (x[sl.pos], vel(sl.vel)),
+            None => (T::cst(self.z_fixed), zero),
+        };
+        let (th, om) = match l.rotation {
+            Some(sl) => (x[sl.pos], vel(sl.vel)),
+            None => (zero, zero),
+        };
+
+        // Tip centre: base + R(α)ζ, with y' = (cos α, −sin α), z' = (sin α, cos α).
+        let (sa, ca) = self.rot;
+        let tip_y = s + self.base.0 + zy * ca + zz * sa;
+        let tip_z = T::cst(self.base.1) - zy * sa + zz * ca;
+        let tip_vy = s_dot + zy_d * ca + zz_d * sa;
+        let tip_vz = -(zy_d * sa) + zz_d * ca;
+        let pa_z = z + (p.r_a + a0);
+
+        // Line of centres, tip → particle.
+        let dy = y - tip_y;
+        let dz = pa_z - tip_z;
+        let dist = (dy * dy + dz * dz).sqrt();
+        let (ny, nz) = (dy / dist, dz / dist);
+        let (ty, tz) = (-nz, ny);
+        let gap = dist - (p.r_t + p.r_a);
+        let rsum = p.r_t + p.r_a;
+
+        // Tip-particle normal force (positive pushes the particle along n).
+        let elastic_ta = if mode.tip_contact {
+            p.jkr_ta.load_from_indentation(-(gap - a0)).unwrap_or(zero)
+        } else {
+            zero
+        };
+        let lr_ta = p.interactions.tip_particle_force(gap, mode.meniscus);
+        let normal_ta = elastic_ta + lr_ta;
+        // Eq 7: f_ta ≤ μ_ta (A_ta + F_l^ta), A_ta = attraction holding the pair + JKR pull-off.
+        let load_ta = if mode.tip_contact {
+            (elastic_ta - lr_ta - p.jkr_ta.pull_off_load()).max_c(0.0)
+        } else {
+            zero
+        };
+        // Tip tangential coordinate ξ = (Rₜ+Rₐ)φ + Rₐθ and its rate.
+        let phi = dz.atan2(dy);
+        let xi = phi * rsum + th * p.r_a;
+        let (rvy, rvz) = (y_d - tip_vy, z_d - tip_vz);
+        let phi_d = (dy * rvz - dz * rvy) / (dist * dist);
+        let xi_d = phi_d * rsum + om * p.r_a;
+        let friction_ta = if mode.tip_contact {
+            match mode.tip {
+                Tangential::Stick { anchor } => -((xi - anchor) * p.k_ta_t),
+                Tangential::Slip { direction } => -(load_ta * (direction * p.mu_ta_k)),
+            }
+        } else {
+            zero
+        };
+        // ∂ξ/∂p_a = (Rₜ+Rₐ)/dist · t.
+        let lever = T::cst(rsum) / dist;
+        let fpa_y = normal_ta * ny + friction_ta * lever * ty;
+        let fpa_z = normal_ta * nz + friction_ta * lever * tz;
+
+        // Particle-substrate.
+        let gap_as = z + a0;
+        let lr_as = p.interactions.particle_substrate_force(gap_as);
+        let elastic_as = p.jkr_as.load_from_indentation(-z).unwrap_or(zero);
+        // Eq 6: f_as ≤ μ_as (A_as + F_l^as), F_l^as = the tip's downward push on the particle.
+        let load_as = (-fpa_z + self.adhesion_as).max_c(0.0);
+        let contact_as = y - th * p.r_a;
+        let slip_rate_as = y_d - om * p.r_a;
+        let friction_as = match mode.substrate {
+            Tangential::Stick { anchor } => -((contact_as - anchor) * p.k_as_t) - slip_rate_as * p.b_as,
+            Tangential::Slip { direction } => -(load_as * (direction * p.mu_as_k)),
+        };
+
+        // Stage (Eq 13): the substrate carries the friction load −f_as.
+        let stage_accel = match l.stage {
+            Some(_) => {
+                let w = p.stage.omega();
+                (T::cst(p.speed * t) + friction_as / p.stage.stiffness() - s) * (w * w) - s_dot * (w / p.stage.q_y)
+            }
+            None => zero,
+        };
+
+        let mut f = [zero; MAX_STATES];
+        let mut put =
+            |slot: crate::physics::pushing::layout::Slot, force: T, mass: f64, scale: f64, rate: T| match slot.vel {
+                Some(v) => {
+                    f[slot.pos] = rate;
+                    f[v] = force / mass;
+                }
+                None => f[slot.pos] = force / scale,
+            };
+
+        // Cantilever: m ζ̈ + b ζ̇ + Kζ = R(α)ᵀ F_tip, F_tip = −F_on_particle.
+        let (ftip_y, ftip_z) = (-fpa_y, -fpa_z);
+        let fp_y = ftip_y * ca - ftip_z * sa;
+        let fp_z = ftip_y * sa + ftip_z * ca;
+        let (k11, k12, k22) = self.k;
+        let damp = |r: T| if l.zeta_y.vel.is_some() { r * self.b_c } else { zero };
+        let kc = p.cantilever.k_c;
+        put(l.zeta_y, fp_y - zy * k11 - zz * k12 - damp(zy_d), self.m_c, kc, zy_d);
+        put(l.zeta_z, fp_z - zy * k12 - zz * k22 - damp(zz_d), self.m_c, kc, zz_d);
+
+        // Particle y, with the frame's fictitious force when the stage accelerates.
+        put(
+            l.particle_y,
+            fpa_y + friction_as + stage_accel * p.m_a,
+            p.m_a,
+            p.k_as_t,
+            y_d,
+        );
+        if let Some(sl) = l.particle_z {
+            let damping = if sl.vel.is_some() { z_d * p.b_as } else { zero };
+            put(sl, elastic_as + lr_as + fpa_z - damping, p.m_a, p.k_as_t, z_d);
+        }
+        if let Some(sl) = l.rotation {
+            let torque = (friction_ta - friction_as) * p.r_a;
+            put(sl, torque, self.p.inertia(), p.k_as_t * p.r_a * p.r_a, om);
+        }
+        if let Some(st) = l.stage {
+            f[st.pos] = s_dot;
+            if let Some(v) = st.vel {
+                f[v] = stage_accel;
+            }
+        }
+
+        let probe = Probe {
+            gap,
+            normal_ta,
+            friction_ta,
+            load_ta,
+            friction_as,
+            load_as,
+            contact_as,
+            contact_ta: xi,
+            slip_rate_as,
+            slip_rate_ta: xi_d,
+            zeta_z: zz,
+            zeta_y: zy,
+            stage: s,
+            stage_accel,
+        };
+        (f, probe)
+    }
+}
+
+/// Which switch fired.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SwitchKind {
+    /// Particle-substrate stick ↔ slip.
+    Substrate,
+    /// Tip-particle stick ↔ slip.
+    Tip,
+    /// Meniscus formation / rupture.
+    Meniscus,
+    /// Tip-particle contact make / break.
+    TipContact,
+}
+
+fn sign(v: f64) -> f64 {
+    if v < 0.0 { -1.0 } else { 1.0 }
+}
+
+impl Probe<f64> {
+    /// Whether every field is finite.
+    pub fn is_finite(&self) -> bool {
+        [
+            self.gap,
+            self.normal_ta,
+            self.friction_ta,
+            self.load_ta,
+            self.friction_as,
+            self.load_as,
+            self.zeta_z,
+            self.zeta_y,
+            self.stage,
+        ]
+        .iter()
+        .all(|v| v.is_finite())
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,211 @@
+//! The closed-form kinetic steady state of pushing, **Eq 18**.
+//!
+//! Assumptions of the paper: pure sliding (no rolling, `θ̈ = 0`, so `f_as = f_ta`), tip-particle
+//! indentation `h ≈ 0`, kinetic friction at both contacts. Derivation of the printed `F_ta`:
+//! with `f_ta = F_ta cos β/(1 + sin β)` (from `f_as = f_ta` and `f_as = F_ta cos β − f_ta sin β`)
+//! and `F_as = F_ta sin β + μ_ta^k(A_ta + F_ta) cos β`, Eq 6 `f_as = μ_as^k(A_as + F_as)` gives
+//!
+//! `F_ta = μ_as^k(μ_ta^k cos β A_ta + A_as) / (cos β/(1+sin β) − μ_as^k(μ_ta^k cos β + sin β))`
+//!
+//! exactly as printed (the print's `μ_k` is `μ_as^k`). Note the derivation uses two different
+//! expressions for `f_ta` (the torque balance and the kinetic law); we keep the paper's result.
+//! The remaining lines are linear in `(y, ζ_y, ζ_z)`; substituting Eq 17's
+//! `F_y^c = k_y cos α y − F_ta cos β + f_ta sin γ`, `F_z^c = k_z sin α y − F_ta sin β − f_ta cos γ`
+//! (`γ = β − α`, an angle: not the surface energy `γ_L`, ERRATA item 10) gives
+//! `ζ_y = a_y y + b_y`, `ζ_z = a_z y + b_z` and `y = (ζ_y, ζ_z)·(P, Q)`, solved in closed form.
+//! The last line `z = δ(β̃)` is the JKR indentation (Eq 5) under the normal load at the
+//! corrected contact angle `β̃`, `P_z = F_ta sin β̃ + f_ta cos β̃ + A_as` (load plus the adhesion
+//! that holds the particle down).
+
+use crate::physics::contact::jkr::Jkr;
+
+/// Inputs of Eq 18 (SI, angles in rad).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SteadyInputs {
+    /// `k_y = k_c/c₂` (N/m).
+    pub k_y: f64,
+    /// `k_z = k_c` (N/m).
+    pub k_z: f64,
+    /// `k_yz = k_c/c₃` (N/m).
+    pub k_yz: f64,
+    /// Tilt `α`.
+    pub alpha: f64,
+    /// Contact angle `β`.
+    pub beta: f64,
+    /// `μ_as^k`.
+    pub mu_as_k: f64,
+    /// `μ_ta^k`.
+    pub mu_ta_k: f64,
+    /// `A_as` (N).
+    pub adhesion_as: f64,
+    /// `A_ta` (N).
+    pub adhesion_ta: f64,
+    /// `Rₐ` (m).
+    pub r_a: f64,
+}
+
+/// The steady state of Eq 18.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SteadyState {
+    /// Tip-particle normal force `F_ta` (N).
+    pub normal_ta: f64,
+    /// Tip-particle friction `f_ta = f_as` (N).
+    pub friction_ta: f64,
+    /// Particle-substrate normal load `F_as` (N).
+    pub load_as: f64,
+    /// Particle `y` (m): its settling offset behind the stage (Fig 7, 10-13).
+    pub y: f64,
+    /// `ζ_y` (m).
+    pub zeta_y: f64,
+    /// `ζ_z` (m): the measured deflection of Figs 10-13.
+    pub zeta_z: f64,
+    /// `Δy` (m).
+    pub delta_y: f64,
+    /// `Δz` (m).
+    pub delta_z: f64,
+    /// Corrected contact angle `β̃` (rad).
+    pub beta_tilde: f64,
+    /// `F_z = k_y ζ_y sin α − k_z ζ_z cos α` (N).
+    pub f_z: f64,
+    /// Particle `z = −δ(β̃)` (m), JKR.
+    pub z: f64,
+}
+
+/// Why Eq 18 has no steady state.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum SteadyError {
+    /// `cos β/(1+sin β) ≤ μ_as^k(μ_ta^k cos β + sin β)`: friction grows faster than the push.
+    #[error(
+        "no kinetic steady state: cos β/(1+sin β) = {lhs:.4} ≤ μ_as^k(μ_ta^k cos β + sin β) = {rhs:.4} (the particle jams under the tip)"
+    )]
+    Jammed {
+        /// `cos β/(1+sin β)`.
+        lhs: f64,
+        /// `μ_as^k(μ_ta^k cos β + sin β)`.
+        rhs: f64,
+    },
+    /// `1 − a_y P − a_z Q = 0`: the linear system of Eq 18 is singular for these angles.
+    #[error("Eq 18 is singular for this tilt and contact angle")]
+    Singular,
+}
+
+/// Eq 18: the kinetic steady state, or why there is none.
+pub fn steady_state(i: &SteadyInputs, jkr_as: &Jkr) -> Result<SteadyState, SteadyError> {
+    let (sb, cb) = i.beta.sin_cos();
+    let (sa, ca) = i.alpha.sin_cos();
+    let gamma = i.beta - i.alpha;
+    let (sg, cg) = gamma.sin_cos();
+    let lhs = cb / (1.0 + sb);
+    let rhs = i.mu_as_k * (i.mu_ta_k * cb + sb);
+    if lhs - rhs <= 0.0 {
+        return Err(SteadyError::Jammed { lhs, rhs });
+    }
+    let normal_ta = i.mu_as_k * (i.mu_ta_k * cb * i.adhesion_ta + i.adhesion_as) / (lhs - rhs);
+    let friction_ta = normal_ta * cb / (1.0 + sb);
+    let load_as = normal_ta * sb + friction_ta * cb;
+    // ζ_y = y cos α − (F_y^c/k_y + F_z^c/k_yz), ζ_z = y sin α − (F_z^c/k_z + F_y^c/k_yz).
+    let gy = normal_ta * cb - friction_ta * sg; // −(F_y^c − k_y cos α y)
+    let gz = normal_ta * sb + friction_ta * cg; // −(F_z^c − k_z sin α y)
+    let a_y = -i.k_z * sa / i.k_yz;
+    let b_y = gy / i.k_y + gz / i.k_yz;
+    let a_z = -i.k_y * ca / i.k_yz;
+    let b_z = gz / i.k_z + gy / i.k_yz;
+    let sbcb = sb * cb;
+    // y = ζ_y cos α + ζ_z sin α + (ζ_y sin α − ζ_z cos α) sin β cos β.
+    let pp = ca + sa * sbcb;
+    let qq = sa - ca * sbcb;
+    let den = 1.0 - a_y * pp - a_z * qq;
+    if den.abs() < 1e-12 {
+        return Err(SteadyError::Singular);
+    }
+    let y = (b_y * pp + b_z * qq) / den;
+    let zeta_y = a_y * y + b_y;
+    let zeta_z = a_z * y + b_z;
+    let lever = zeta_y * sa - zeta_z * ca;
+    let delta_y = lever * sbcb;
+    let delta_z = lever * sb * sb;
+    let beta_tilde = ((i.r_a * sb + delta_z) / (i.r_a * cb - delta_y)).atan();
+    let f_z = i.k_y * zeta_y * sa - i.k_z * zeta_z * ca;
+    let (sbt, cbt) = beta_tilde.sin_cos();
+    let p_z = normal_ta * sbt + friction_ta * cbt + i.adhesion_as;
+    let z = -jkr_as.indentation_from_load(p_z).unwrap_or(0.0);
+    Ok(SteadyState {
+        normal_ta,
+        friction_ta,
+        load_as,
+        y,
+        zeta_y,
+        zeta_z,
+        delta_y,
+        delta_z,
+        beta_tilde,
+        f_z,
+        z,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn paper() -> SteadyInputs {
+        let r_eff = 30e-9 * 1e-6 / (1e-6 + 30e-9);
+        SteadyInputs {
+            k_y: 1427.0,
+            k_z: 8.0,
+            k_yz: 123.4,
+            alpha: 15f64.to_radians(),
+            beta: 30f64.to_radians(),
+            mu_as_k: 0.2,
+            mu_ta_k: 0.2,
+            adhesion_as: 4.0 * std::f64::consts::PI * 1e-6 * 0.072,
+            adhesion_ta: 2.0 * std::f64::consts::PI * r_eff * 0.072,
+            r_a: 1e-6,
+        }
+    }
+
+    fn jkr() -> Jkr {
+        Jkr::new(
+            1e-6,
+            crate::physics::contact::jkr::contact_modulus(3.4e9, 0.34, 169e9, 0.27),
+            0.0,
+        )
+    }
+
+    #[test]
+    fn satisfies_its_own_equations() {
+        let i = paper();
+        let s = steady_state(&i, &jkr()).unwrap();
+        let (sb, cb) = i.beta.sin_cos();
+        let (sa, ca) = i.alpha.sin_cos();
+        let (sg, cg) = (i.beta - i.alpha).sin_cos();
+        // Torque balance and the kinetic law as derived.
+        let f_as = s.normal_ta * cb - s.friction_ta * sb;
+        assert!((f_as - s.friction_ta).abs() < 1e-12 * s.friction_ta);
+        let f_as_kin = i.mu_as_k * (i.adhesion_as + s.normal_ta * sb + i.mu_ta_k * (i.adhesion_ta + s.normal_ta) * cb);
+        assert!((f_as_kin - s.friction_ta).abs() < 1e-9 * s.friction_ta);
+        // The ζ lines.
+        let fyc = i.k_y * ca * s.y - s.normal_ta * cb + s.friction_ta * sg;
+        let fzc = i.k_z * sa * s.y - s.normal_ta * sb - s.friction_ta * cg;
+        assert!((s.zeta_y - (s.y * ca - (fyc / i.k_y + fzc / i.k_yz))).abs() < 1e-18);
+        assert!((s.zeta_z - (s.y * sa - (fzc / i.k_z + fyc / i.k_yz))).abs() < 1e-18);
+        assert!((s.y - (s.zeta_y * ca + s.zeta_z * sa + s.delta_y)).abs() < 1e-18);
+        assert!(s.z < 0.0 && s.z.is_finite());
+    }
+
+    #[test]
+    fn paper_scene_magnitudes() {
+        // F_ta ≈ 410 nN, f_ta ≈ 237 nN for the Sec 5 parameters (hand calculation).
+        let s = steady_state(&paper(), &jkr()).unwrap();
+        assert!((s.normal_ta - 410e-9).abs() < 2e-9, "{}", s.normal_ta);
+        assert!((s.friction_ta - 236.7e-9).abs() < 1e-9);
+        assert!(s.y > 0.0 && s.y < 50e-9, "y = {}", s.y);
+    }
+
+    #[test]
+    fn jams_at_high_friction() {
+        let mut i = paper();
+        i.mu_as_k = 1.2;
+        assert!(matches!(steady_state(&i, &jkr()), Err(SteadyError::Jammed { .. })));
+    }
+}

@@ -1,0 +1,159 @@
+//! The derived quantities of a scene (`nanopush model`) and its force curve (`--force-curve`).
+
+use nanopush_proto::model::{ForceCurvePoint, ForceCurveReport, ModelReport, SteadyStateReport};
+
+use crate::physics::force_curve::CurvePoint;
+use crate::physics::friction;
+use crate::physics::pushing::{PushModel, SteadyInputs, steady_state};
+use crate::physics::shearing::StaticPhase;
+use crate::scene::Scene;
+
+/// Everything `nanopush model` prints, computed from a validated scene.
+pub fn model_report(scene: &Scene) -> ModelReport {
+    let p = scene.push_params();
+    let c = &p.cantilever;
+    let a_as = p.paper_adhesion_as();
+    let a_ta = p.paper_adhesion_ta();
+    let static_phase = |adhesion| {
+        StaticPhase {
+            k_y: c.k_y(),
+            k_z: c.k_z(),
+            alpha: c.tilt,
+            mu_s: p.mu_as_s,
+            adhesion,
+        }
+        .shearing_point()
+    };
+    let fz = friction::feasibility(p.mu_as_s, p.r_a, p.r_t, p.beta, c.k_y(), c.k_z(), c.tilt);
+    let model = PushModel::new(p);
+    let r1 = p
+        .interactions
+        .tip_particle
+        .capillary
+        .map_or(0.0, |cap| cap.kelvin_radius);
+    let steady = steady_state(
+        &SteadyInputs {
+            k_y: c.k_y(),
+            k_z: c.k_z(),
+            k_yz: c.k_yz(),
+            alpha: c.tilt,
+            beta: p.beta,
+            mu_as_k: p.mu_as_k,
+            mu_ta_k: p.mu_ta_k,
+            adhesion_as: p.adhesion_as(),
+            adhesion_ta: p.adhesion_ta(),
+            r_a: p.r_a,
+        },
+        &p.jkr_as,
+    );
+    ModelReport {
+        schema: "nanopush.model".into(),
+        version: nanopush_proto::VERSION,
+        scene: scene.file.name.clone(),
+        c1: c.c1(),
+        c2: c.c2(),
+        c3: c.c3(),
+        k_y: c.k_y(),
+        k_z: c.k_z(),
+        k_yz: c.k_yz(),
+        m_c: c.effective_mass(),
+        b_y: c.damping(),
+        k_as: p.k_as_t,
+        a_as,
+        a_ta,
+        a_as_model: p.adhesion_as(),
+        a_ta_model: p.adhesion_ta(),
+        r_eff: p.r_eff(),
+        r1,
+        meniscus_formation_gap: 2.0 * r1,
+        meniscus_breaking_length: p.jkr_ta.meniscus_breaking_length(p.gamma_l),
+        y_star: static_phase(a_as),
+        y_star_model: static_phase(p.adhesion_as()),
+        mu_lower_bound: fz.lower,
+        mu_upper_bound: fz.upper.is_finite().then_some(fz.upper),
+        mu_as_static: p.mu_as_s,
+        mu_feasible: fz.satisfied,
+        no_sticking_to_tip: friction::no_sticking_to_tip(p.r_a, p.r_eff(), p.beta),
+        particle_mass: p.m_a,
+        contact_period: 2.0 * std::f64::consts::PI * (p.m_a / p.k_as_t).sqrt(),
+        cantilever_period: 1.0 / c.f_r,
+        stage_period: 1.0 / p.stage.f_y,
+        state_dimension: model.len(),
+        states: model.layout.names().into_iter().map(String::from).collect(),
+        steady_state: steady.as_ref().ok().map(|s| SteadyStateReport {
+            normal_ta: s.normal_ta,
+            friction_ta: s.friction_ta,
+            y: s.y,
+            zeta_y: s.zeta_y,
+            zeta_z: s.zeta_z,
+            beta_tilde: s.beta_tilde,
+            z: s.z,
+        }),
+        steady_state_error: steady.err().map(|e| e.to_string()),
+        warnings: scene.warnings.iter().map(|w| w.to_string()).collect(),
+    }
+}
+
+/// The Fig 3 force curve of the scene's tip on its bare substrate: approach from 3 L_t (at
+/// least 10 nm) to a repulsive load of twice the pull-off scale, and back.
+pub fn force_curve_report(scene: &Scene, steps: usize) -> ForceCurveReport {
+    let ts = scene.tip_sample();
+    let lt = ts.long_range.capillary.map_or(0.0, |c| c.formation_gap);
+    let d_far = (3.0 * lt).max(10e-9);
+    // Enough travel into the sample to reach a repulsive load above the adhesion scale.
+    let adhesion: f64 = -ts.long_range.sphere_plane(
+        ts.r_t,
+        ts.a0,
+        crate::physics::forces::capillary::Meniscus::Formed,
+        ts.a0,
+    ) - ts.jkr.pull_off_load();
+    let d_near = -(2.0 * adhesion.max(1e-9) / ts.k_c);
+    let c = ts.curve(d_far, d_near, steps);
+    let conv = |p: &CurvePoint| ForceCurvePoint {
+        distance: p.distance,
+        gap: p.gap,
+        deflection: p.deflection,
+        force: p.force,
+        meniscus: p.meniscus,
+        contact: p.contact,
+    };
+    ForceCurveReport {
+        schema: "nanopush.force_curve".into(),
+        version: nanopush_proto::VERSION,
+        scene: scene.file.name.clone(),
+        k_c: ts.k_c,
+        tip_radius: ts.r_t,
+        snap_in_distance: c.snap_in_distance,
+        pull_off_force: c.pull_off_force,
+        pull_off_distance: c.pull_off_distance,
+        approach: c.approach.iter().map(conv).collect(),
+        retraction: c.retraction.iter().map(conv).collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_figures_in_the_report() {
+        let r = model_report(&Scene::default_scene());
+        assert!((r.k_y - 1427.0).abs() < 1.0);
+        assert!((r.k_yz - 123.4).abs() < 0.1);
+        assert!((r.a_as - 904.8e-9).abs() < 0.1e-9);
+        assert!((r.y_star.unwrap() - 0.2215e-9).abs() < 0.001e-9);
+        assert!((r.mu_upper_bound.unwrap() - 3.75).abs() < 0.01);
+        assert!(r.mu_feasible);
+        assert!((r.r1 - 1.7e-9).abs() < 0.02e-9);
+        assert_eq!(r.state_dimension, 12);
+        assert!(r.steady_state.is_some());
+    }
+
+    #[test]
+    fn force_curve_has_hysteresis() {
+        let r = force_curve_report(&Scene::default_scene(), 300);
+        assert!(r.snap_in_distance.is_some() && r.pull_off_distance.is_some());
+        assert!(r.pull_off_force < 0.0);
+        assert!(r.pull_off_distance.unwrap() > r.snap_in_distance.unwrap());
+    }
+}

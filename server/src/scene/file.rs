@@ -1,0 +1,221 @@
+//! The scene file as written: TOML, user units with the unit in each field's name.
+//!
+//! Every table rejects unknown keys, and every field is required (the default scene shows them
+//! all), so a typo is an error, not a silently ignored setting.
+
+use serde::{Deserialize, Serialize};
+
+/// A whole scene file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    /// Short name.
+    pub name: String,
+    /// What the scene is.
+    pub description: String,
+    /// The AFM tip.
+    pub tip: TipFile,
+    /// The cantilever.
+    pub cantilever: CantileverFile,
+    /// The substrate.
+    pub substrate: SubstrateFile,
+    /// The particles on the substrate (at least one).
+    pub particles: Vec<ParticleFile>,
+    /// Ambient conditions.
+    pub environment: EnvironmentFile,
+    /// Friction coefficients.
+    pub friction: FrictionFile,
+    /// The push.
+    pub push: PushFile,
+    /// The piezo stage.
+    pub stage: StageFile,
+    /// The deflection sensor.
+    pub sensor: SensorFile,
+    /// Which physics the scene includes.
+    pub physics: PhysicsFile,
+}
+
+/// `[tip]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TipFile {
+    /// Apex radius `Rₜ` (nm).
+    pub radius_nm: f64,
+    /// Young's modulus `Eₜ` (GPa).
+    pub youngs_modulus_gpa: f64,
+    /// Poisson's ratio `νₜ`.
+    pub poisson_ratio: f64,
+    /// Hamaker constant across vacuum (zJ = 1e-21 J).
+    pub hamaker_zj: f64,
+}
+
+/// `[cantilever]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CantileverFile {
+    /// Normal stiffness `k_c` (N/m).
+    pub stiffness_n_per_m: f64,
+    /// Width `L_x` (µm).
+    pub width_um: f64,
+    /// Length `L_y` (µm).
+    pub length_um: f64,
+    /// Tip height `L_z` (µm).
+    pub tip_height_um: f64,
+    /// Thickness `t_c` (µm).
+    pub thickness_um: f64,
+    /// First resonance `f_r` (kHz).
+    pub resonance_khz: f64,
+    /// Quality factor in air `Q_c`.
+    pub quality_factor: f64,
+    /// Tilt `α` (degrees).
+    pub tilt_deg: f64,
+}
+
+/// `[substrate]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SubstrateFile {
+    /// Material name, for display.
+    pub material: String,
+    /// Young's modulus `E_s` (GPa).
+    pub youngs_modulus_gpa: f64,
+    /// Poisson's ratio `ν_s`.
+    pub poisson_ratio: f64,
+    /// Hamaker constant across vacuum (zJ).
+    pub hamaker_zj: f64,
+}
+
+/// `[[particles]]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParticleFile {
+    /// Identifier, unique in the scene.
+    pub id: u32,
+    /// Material name, for display.
+    pub material: String,
+    /// Radius `Rₐ` (nm).
+    pub radius_nm: f64,
+    /// Position on the substrate, x (µm).
+    pub x_um: f64,
+    /// Position on the substrate, y (µm).
+    pub y_um: f64,
+    /// Young's modulus `Eₐ` (GPa).
+    pub youngs_modulus_gpa: f64,
+    /// Poisson's ratio `νₐ`.
+    pub poisson_ratio: f64,
+    /// Density (kg/m³).
+    pub density_kg_per_m3: f64,
+    /// Hamaker constant of its surface across vacuum (zJ).
+    pub hamaker_zj: f64,
+}
+
+/// `[environment]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EnvironmentFile {
+    /// Relative humidity `P/Pₛ`, in [0, 1).
+    pub relative_humidity: f64,
+    /// Liquid (water) surface tension `γ_L` (mJ/m²).
+    pub surface_tension_mj_per_m2: f64,
+    /// Solid-liquid interface energy `γ_SL` (mJ/m²): the JKR work of adhesion of the solid
+    /// contacts (Eq 3's `F_s-s`); 0 gives Hertz contacts.
+    pub solid_liquid_energy_mj_per_m2: f64,
+    /// Hamaker constant of the liquid layer (zJ), used in the combining rule when humid.
+    pub medium_hamaker_zj: f64,
+    /// Interatomic cut-off `a₀` (nm).
+    pub interatomic_cutoff_nm: f64,
+    /// Work-function voltage tip-particle `U` (V).
+    pub tip_particle_voltage_v: f64,
+    /// Work-function voltage particle-substrate `U` (V).
+    pub particle_substrate_voltage_v: f64,
+    /// Work-function voltage tip-substrate `U` (V).
+    pub tip_substrate_voltage_v: f64,
+}
+
+/// `[friction]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrictionFile {
+    /// `μ_as^s`.
+    pub particle_substrate_static: f64,
+    /// `μ_as^k`.
+    pub particle_substrate_kinetic: f64,
+    /// `μ_ta^s`.
+    pub tip_particle_static: f64,
+    /// `μ_ta^k`.
+    pub tip_particle_kinetic: f64,
+    /// Damping ratio of the particle-substrate contact (`b_as = 2ζ sqrt(k_as* mₐ)`).
+    pub contact_damping_ratio: f64,
+}
+
+/// `[push]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PushFile {
+    /// Id of the particle the model pushes.
+    pub particle_id: u32,
+    /// Tip-particle contact angle `β` (degrees).
+    pub contact_angle_deg: f64,
+    /// Stage speed `V` (µm/s).
+    pub speed_um_per_s: f64,
+}
+
+/// `[stage]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StageFile {
+    /// Resonance `f_y` (Hz).
+    pub resonance_hz: f64,
+    /// Amplification factor `Q_y`.
+    pub quality_factor: f64,
+    /// Stage + sample moving mass (g).
+    pub moving_mass_g: f64,
+    /// Travel in x, y, z (µm).
+    pub range_um: f64,
+}
+
+/// `[sensor]`: the piezoresistive measurement of `ζ_z`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorFile {
+    /// Output at zero deflection (V).
+    pub baseline_v: f64,
+    /// Gain (V per nm of `ζ_z`).
+    pub gain_v_per_nm: f64,
+    /// White noise, RMS (mV).
+    pub noise_rms_mv: f64,
+}
+
+/// How a degree of freedom enters the model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DofFile {
+    /// With inertia.
+    Dynamic,
+    /// At force balance (no inertia).
+    QuasiStatic,
+    /// Left out.
+    Off,
+}
+
+/// `[physics]`: which force terms and degrees of freedom the scene includes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PhysicsFile {
+    /// Van der Waals (Eq 1, 2).
+    pub van_der_waals: bool,
+    /// Capillary (Eq 3).
+    pub capillary: bool,
+    /// Electrostatic (Eq 4).
+    pub electrostatic: bool,
+    /// Particle position along the push: `dynamic` or `quasi_static`.
+    pub particle_y: DofFile,
+    /// Particle height: `dynamic`, `quasi_static` or `off`.
+    pub particle_z: DofFile,
+    /// Particle rotation: `dynamic`, `quasi_static` or `off`.
+    pub particle_rotation: DofFile,
+    /// Cantilever y/z deflection: `dynamic` or `quasi_static`.
+    pub cantilever: DofFile,
+    /// Stage: `dynamic` (Eq 13) or `off` (ideal, constant speed).
+    pub stage: DofFile,
+}

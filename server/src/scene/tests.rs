@@ -1,0 +1,228 @@
+//! Scene loading and validation: every kind of bad input gets its own message.
+
+use super::*;
+
+fn with(replace: &str, by: &str) -> Result<Scene, SceneError> {
+    assert!(
+        DEFAULT_SCENE.contains(replace),
+        "test setup: {replace:?} not in the default scene"
+    );
+    Scene::parse("test.toml", &DEFAULT_SCENE.replacen(replace, by, 1))
+}
+
+fn err(replace: &str, by: &str) -> String {
+    with(replace, by).expect_err("scene must be rejected").to_string()
+}
+
+#[test]
+fn default_scene_is_valid_and_feasible() {
+    let s = Scene::default_scene();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert_eq!(s.file.name, "paper-default");
+}
+
+#[test]
+fn shipped_scenes_are_valid() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let s = Scene::from_path(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            assert!(s.warnings.is_empty(), "{}: {:?}", path.display(), s.warnings);
+            let p = s.push_params();
+            assert!(p.m_a > 0.0 && p.k_as_t > 0.0 && p.b_as >= 0.0);
+            n += 1;
+        }
+    }
+    assert!(n >= 4, "expected the four shipped scenes, found {n}");
+}
+
+#[test]
+fn embedded_default_matches_the_shipped_file() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/paper-default.toml");
+    assert_eq!(std::fs::read_to_string(path).unwrap(), DEFAULT_SCENE);
+}
+
+#[test]
+fn unknown_key_is_named() {
+    let e = err("radius_nm = 30.0", "radius_nm = 30.0\nradius_um = 0.03");
+    assert!(e.contains("unknown field `radius_um`"), "{e}");
+    assert!(e.contains("test.toml"), "{e}");
+}
+
+#[test]
+fn missing_field_is_named() {
+    let e = err("quality_factor = 100.0      # not given: typical Q", "# no Q");
+    assert!(e.contains("missing field `quality_factor`"), "{e}");
+}
+
+#[test]
+fn wrong_type_is_reported() {
+    let e = err("radius_nm = 30.0", "radius_nm = \"thirty\"");
+    assert!(e.contains("radius_nm") || e.contains("invalid type"), "{e}");
+}
+
+#[test]
+fn negative_and_zero_sizes() {
+    let e = err("radius_nm = 1000.0", "radius_nm = -5.0");
+    assert!(
+        e.contains("particles[0].radius_nm = -5") && e.contains("[2, 10000] nm"),
+        "{e}"
+    );
+    let e = err("stiffness_n_per_m = 8.0", "stiffness_n_per_m = 0.0");
+    assert!(
+        e.contains("cantilever.stiffness_n_per_m = 0") && e.contains("[0.01, 500] N/m"),
+        "{e}"
+    );
+    let e = err("range_um = 100.0", "range_um = 0.0");
+    assert!(e.contains("stage.range_um = 0") && e.contains("(0, 1000] µm"), "{e}");
+}
+
+#[test]
+fn nan_and_infinity() {
+    let e = err("radius_nm = 30.0", "radius_nm = nan");
+    assert!(e.contains("tip.radius_nm = NaN is not a finite number"), "{e}");
+    let e = err("speed_um_per_s = 1.0", "speed_um_per_s = inf");
+    assert!(e.contains("push.speed_um_per_s = inf is not a finite number"), "{e}");
+}
+
+#[test]
+fn humidity_outside_zero_one() {
+    let e = err("relative_humidity = 0.73", "relative_humidity = 1.0");
+    assert!(
+        e.contains("environment.relative_humidity = 1") && e.contains("[0, 1)"),
+        "{e}"
+    );
+    let e = err("relative_humidity = 0.73", "relative_humidity = -0.1");
+    assert!(e.contains("relative_humidity = -0.1"), "{e}");
+    assert!(with("relative_humidity = 0.73", "relative_humidity = 0.0").is_ok());
+    assert!(with("relative_humidity = 0.73", "relative_humidity = 0.999").is_ok());
+}
+
+#[test]
+fn angles_out_of_range() {
+    let e = err("tilt_deg = 15.0", "tilt_deg = 95.0");
+    assert!(
+        e.contains("cantilever.tilt_deg = 95") && e.contains("[0, 75] degrees"),
+        "{e}"
+    );
+    let e = err("contact_angle_deg = 30.0", "contact_angle_deg = 0.0");
+    assert!(
+        e.contains("push.contact_angle_deg = 0") && e.contains("[1, 89] degrees"),
+        "{e}"
+    );
+}
+
+#[test]
+fn kinetic_above_static_friction() {
+    let e = err("particle_substrate_kinetic = 0.2", "particle_substrate_kinetic = 0.4");
+    assert!(
+        e.contains("friction.particle_substrate_kinetic = 0.4") && e.contains("at most the static"),
+        "{e}"
+    );
+}
+
+#[test]
+fn mu_above_eq16_is_a_warning() {
+    let s = with("particle_substrate_static = 0.3", "particle_substrate_static = 4.0").unwrap();
+    assert_eq!(s.warnings.len(), 1);
+    let w = s.warnings[0].to_string();
+    assert!(
+        w.contains("Eq 16 upper bound 3.75") && w.contains("cannot be pushed"),
+        "{w}"
+    );
+}
+
+#[test]
+fn mu_below_eq9_is_a_warning() {
+    let text = DEFAULT_SCENE
+        .replacen("particle_substrate_static = 0.3", "particle_substrate_static = 0.01", 1)
+        .replacen(
+            "particle_substrate_kinetic = 0.2",
+            "particle_substrate_kinetic = 0.005",
+            1,
+        );
+    let s = Scene::parse("test.toml", &text).unwrap();
+    assert!(
+        s.warnings.iter().any(|w| w.0.contains("Eq 9 lower bound")),
+        "{:?}",
+        s.warnings
+    );
+}
+
+#[test]
+fn unknown_particle_and_duplicate_ids() {
+    let e = err("particle_id = 1", "particle_id = 7");
+    assert!(
+        e.contains("push.particle_id") && e.contains("no particle has id 7"),
+        "{e}"
+    );
+    let dup = DEFAULT_SCENE.to_string()
+        + "\n[[particles]]\nid = 1\nmaterial = \"x\"\nradius_nm = 10.0\nx_um = 10.0\ny_um = 10.0\nyoungs_modulus_gpa = 3.0\npoisson_ratio = 0.3\ndensity_kg_per_m3 = 1000.0\nhamaker_zj = 60.0\n";
+    // Appended after [physics], the array-of-tables still belongs to the root.
+    let e = Scene::parse("dup.toml", &dup).unwrap_err().to_string();
+    assert!(e.contains("particles[1].id") && e.contains("already used"), "{e}");
+}
+
+#[test]
+fn particle_outside_stage_range() {
+    let e = err("x_um = 50.0", "x_um = 150.0");
+    assert!(
+        e.contains("particles[0].x_um = 150") && e.contains("stage range"),
+        "{e}"
+    );
+}
+
+#[test]
+fn dof_choices_are_checked() {
+    let e = err("particle_y = \"dynamic\"", "particle_y = \"off\"");
+    assert!(
+        e.contains("physics.particle_y") && e.contains("allowed: dynamic, quasi_static"),
+        "{e}"
+    );
+    let e = err("stage = \"dynamic\"", "stage = \"quasi_static\"");
+    assert!(
+        e.contains("physics.stage") && e.contains("allowed: dynamic, off"),
+        "{e}"
+    );
+    let e = err("stage = \"dynamic\"", "stage = \"wobbly\"");
+    assert!(e.contains("unknown variant `wobbly`"), "{e}");
+}
+
+#[test]
+fn zero_sensor_gain() {
+    let e = err("gain_v_per_nm = -0.05", "gain_v_per_nm = 0.0");
+    assert!(e.contains("sensor.gain_v_per_nm = 0"), "{e}");
+}
+
+#[test]
+fn unreadable_file() {
+    let e = Scene::from_path(std::path::Path::new("/nonexistent/scene.toml"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("cannot read scene file /nonexistent/scene.toml"), "{e}");
+}
+
+#[test]
+fn units_convert_once_to_si() {
+    let p = Scene::default_scene().push_params();
+    assert!((p.r_t - 30e-9).abs() < 1e-21);
+    assert!((p.r_a - 1e-6).abs() < 1e-18);
+    assert!((p.cantilever.l_y - 155e-6).abs() < 1e-18);
+    assert!((p.beta - 30f64.to_radians()).abs() < 1e-15);
+    assert!((p.speed - 1e-6).abs() < 1e-18);
+    assert!((p.gamma_l - 0.072).abs() < 1e-15);
+    // Mass of a 1 µm latex sphere: 4.40e-15 kg.
+    assert!((p.m_a - 4.398e-15).abs() < 0.01e-15, "{}", p.m_a);
+}
+
+#[test]
+fn left_out_terms_are_absent() {
+    let s = Scene::from_path(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/minimal.toml")).unwrap();
+    let p = s.push_params();
+    assert!(p.interactions.tip_particle.hamaker.is_some());
+    assert!(p.interactions.tip_particle.capillary.is_none());
+    assert!(p.interactions.tip_particle.electrostatic.is_none());
+    assert!(p.interactions.particle_substrate.capillary.is_none());
+}

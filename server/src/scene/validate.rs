@@ -1,0 +1,344 @@
+//! Range checks of a parsed scene: each rejected value gets one error naming the field, the
+//! value and the allowed range.
+
+use super::error::SceneError;
+use super::file::{DofFile, SceneFile};
+
+/// An allowed interval with its unit, e.g. `(0, 10000] nm`.
+#[derive(Debug, Clone, Copy)]
+pub struct Range {
+    lo: f64,
+    hi: f64,
+    lo_open: bool,
+    hi_open: bool,
+    unit: &'static str,
+}
+
+impl Range {
+    /// `[lo, hi]`.
+    pub const fn closed(lo: f64, hi: f64, unit: &'static str) -> Range {
+        Range {
+            lo,
+            hi,
+            lo_open: false,
+            hi_open: false,
+            unit,
+        }
+    }
+    /// `(lo, hi]`.
+    pub const fn open_closed(lo: f64, hi: f64, unit: &'static str) -> Range {
+        Range {
+            lo,
+            hi,
+            lo_open: true,
+            hi_open: false,
+            unit,
+        }
+    }
+    /// `[lo, hi)`.
+    pub const fn closed_open(lo: f64, hi: f64, unit: &'static str) -> Range {
+        Range {
+            lo,
+            hi,
+            lo_open: false,
+            hi_open: true,
+            unit,
+        }
+    }
+    fn contains(&self, v: f64) -> bool {
+        let lo_ok = if self.lo_open { v > self.lo } else { v >= self.lo };
+        let hi_ok = if self.hi_open { v < self.hi } else { v <= self.hi };
+        lo_ok && hi_ok
+    }
+}
+
+impl std::fmt::Display for Range {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let l = if self.lo_open { '(' } else { '[' };
+        let r = if self.hi_open { ')' } else { ']' };
+        write!(f, "{l}{}, {}{r}", self.lo, self.hi)?;
+        if !self.unit.is_empty() {
+            write!(f, " {}", self.unit)?;
+        }
+        Ok(())
+    }
+}
+
+/// Checks one number against its range.
+fn check(origin: &str, field: &str, value: f64, range: Range) -> Result<(), SceneError> {
+    if !value.is_finite() {
+        return Err(SceneError::NotFinite {
+            origin: origin.into(),
+            field: field.into(),
+            value,
+            allowed: range.to_string(),
+        });
+    }
+    if !range.contains(value) {
+        return Err(SceneError::OutOfRange {
+            origin: origin.into(),
+            field: field.into(),
+            value,
+            allowed: range.to_string(),
+        });
+    }
+    Ok(())
+}
+
+const MODULUS: Range = Range::closed(0.01, 1500.0, "GPa");
+const POISSON: Range = Range::closed(0.0, 0.5, "");
+const HAMAKER: Range = Range::closed(1.0, 1000.0, "zJ");
+const MU: Range = Range::closed(0.0, 5.0, "");
+
+/// Every range check of a scene, in file order; the first failure is returned.
+pub fn validate(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
+    let c = |field: &str, v: f64, r: Range| check(origin, field, v, r);
+    c("tip.radius_nm", s.tip.radius_nm, Range::closed(1.0, 1000.0, "nm"))?;
+    c("tip.youngs_modulus_gpa", s.tip.youngs_modulus_gpa, MODULUS)?;
+    c("tip.poisson_ratio", s.tip.poisson_ratio, POISSON)?;
+    c("tip.hamaker_zj", s.tip.hamaker_zj, HAMAKER)?;
+
+    let k = &s.cantilever;
+    c(
+        "cantilever.stiffness_n_per_m",
+        k.stiffness_n_per_m,
+        Range::closed(0.01, 500.0, "N/m"),
+    )?;
+    c("cantilever.width_um", k.width_um, Range::closed(1.0, 1000.0, "µm"))?;
+    c("cantilever.length_um", k.length_um, Range::closed(5.0, 5000.0, "µm"))?;
+    c(
+        "cantilever.tip_height_um",
+        k.tip_height_um,
+        Range::closed(0.5, 100.0, "µm"),
+    )?;
+    c(
+        "cantilever.thickness_um",
+        k.thickness_um,
+        Range::closed(0.05, 50.0, "µm"),
+    )?;
+    c(
+        "cantilever.resonance_khz",
+        k.resonance_khz,
+        Range::closed(1.0, 10000.0, "kHz"),
+    )?;
+    c(
+        "cantilever.quality_factor",
+        k.quality_factor,
+        Range::closed(0.5, 100000.0, ""),
+    )?;
+    c("cantilever.tilt_deg", k.tilt_deg, Range::closed(0.0, 75.0, "degrees"))?;
+
+    c("substrate.youngs_modulus_gpa", s.substrate.youngs_modulus_gpa, MODULUS)?;
+    c("substrate.poisson_ratio", s.substrate.poisson_ratio, POISSON)?;
+    c("substrate.hamaker_zj", s.substrate.hamaker_zj, HAMAKER)?;
+
+    c(
+        "stage.resonance_hz",
+        s.stage.resonance_hz,
+        Range::closed(1.0, 100000.0, "Hz"),
+    )?;
+    c(
+        "stage.quality_factor",
+        s.stage.quality_factor,
+        Range::closed(0.5, 1000.0, ""),
+    )?;
+    c(
+        "stage.moving_mass_g",
+        s.stage.moving_mass_g,
+        Range::closed(0.1, 100000.0, "g"),
+    )?;
+    c(
+        "stage.range_um",
+        s.stage.range_um,
+        Range::open_closed(0.0, 1000.0, "µm"),
+    )?;
+
+    if s.particles.is_empty() {
+        return Err(SceneError::Inconsistent {
+            origin: origin.into(),
+            field: "particles".into(),
+            message: "the scene needs at least one [[particles]] entry".into(),
+        });
+    }
+    let travel = Range::closed(0.0, s.stage.range_um, "µm (the stage range)");
+    for (i, p) in s.particles.iter().enumerate() {
+        let f = |name: &str| format!("particles[{i}].{name}");
+        c(&f("radius_nm"), p.radius_nm, Range::closed(2.0, 10000.0, "nm"))?;
+        c(&f("x_um"), p.x_um, travel)?;
+        c(&f("y_um"), p.y_um, travel)?;
+        c(&f("youngs_modulus_gpa"), p.youngs_modulus_gpa, MODULUS)?;
+        c(&f("poisson_ratio"), p.poisson_ratio, POISSON)?;
+        c(
+            &f("density_kg_per_m3"),
+            p.density_kg_per_m3,
+            Range::closed(100.0, 25000.0, "kg/m³"),
+        )?;
+        c(&f("hamaker_zj"), p.hamaker_zj, HAMAKER)?;
+        for (j, q) in s.particles.iter().enumerate().take(i) {
+            if q.id == p.id {
+                return Err(SceneError::Inconsistent {
+                    origin: origin.into(),
+                    field: f("id"),
+                    message: format!("id {} is already used by particles[{j}]", p.id),
+                });
+            }
+            let d_nm = ((p.x_um - q.x_um).powi(2) + (p.y_um - q.y_um).powi(2)).sqrt() * 1e3;
+            if d_nm < p.radius_nm + q.radius_nm {
+                return Err(SceneError::Inconsistent {
+                    origin: origin.into(),
+                    field: f("x_um"),
+                    message: format!(
+                        "particle {} overlaps particle {}: centres {d_nm:.1} nm apart, radii sum to {:.1} nm",
+                        p.id,
+                        q.id,
+                        p.radius_nm + q.radius_nm
+                    ),
+                });
+            }
+        }
+    }
+
+    let e = &s.environment;
+    c(
+        "environment.relative_humidity",
+        e.relative_humidity,
+        Range::closed_open(0.0, 1.0, "(P/Pₛ)"),
+    )?;
+    c(
+        "environment.surface_tension_mj_per_m2",
+        e.surface_tension_mj_per_m2,
+        Range::closed(0.0, 500.0, "mJ/m²"),
+    )?;
+    c(
+        "environment.solid_liquid_energy_mj_per_m2",
+        e.solid_liquid_energy_mj_per_m2,
+        Range::closed(0.0, 500.0, "mJ/m²"),
+    )?;
+    c(
+        "environment.medium_hamaker_zj",
+        e.medium_hamaker_zj,
+        Range::closed(0.0, 1000.0, "zJ"),
+    )?;
+    c(
+        "environment.interatomic_cutoff_nm",
+        e.interatomic_cutoff_nm,
+        Range::closed(0.1, 0.5, "nm"),
+    )?;
+    let volts = Range::closed(-10.0, 10.0, "V");
+    c("environment.tip_particle_voltage_v", e.tip_particle_voltage_v, volts)?;
+    c(
+        "environment.particle_substrate_voltage_v",
+        e.particle_substrate_voltage_v,
+        volts,
+    )?;
+    c("environment.tip_substrate_voltage_v", e.tip_substrate_voltage_v, volts)?;
+
+    let fr = &s.friction;
+    c("friction.particle_substrate_static", fr.particle_substrate_static, MU)?;
+    c(
+        "friction.particle_substrate_kinetic",
+        fr.particle_substrate_kinetic,
+        Range::closed(0.0, fr.particle_substrate_static, "(at most the static coefficient)"),
+    )?;
+    c("friction.tip_particle_static", fr.tip_particle_static, MU)?;
+    c(
+        "friction.tip_particle_kinetic",
+        fr.tip_particle_kinetic,
+        Range::closed(0.0, fr.tip_particle_static, "(at most the static coefficient)"),
+    )?;
+    c(
+        "friction.contact_damping_ratio",
+        fr.contact_damping_ratio,
+        Range::closed(0.0, 10.0, ""),
+    )?;
+
+    c(
+        "push.contact_angle_deg",
+        s.push.contact_angle_deg,
+        Range::closed(1.0, 89.0, "degrees"),
+    )?;
+    c(
+        "push.speed_um_per_s",
+        s.push.speed_um_per_s,
+        Range::open_closed(0.0, 1000.0, "µm/s"),
+    )?;
+    if !s.particles.iter().any(|p| p.id == s.push.particle_id) {
+        let ids: Vec<String> = s.particles.iter().map(|p| p.id.to_string()).collect();
+        return Err(SceneError::Inconsistent {
+            origin: origin.into(),
+            field: "push.particle_id".into(),
+            message: format!(
+                "no particle has id {}; ids in the scene: {}",
+                s.push.particle_id,
+                ids.join(", ")
+            ),
+        });
+    }
+
+    c(
+        "sensor.baseline_v",
+        s.sensor.baseline_v,
+        Range::closed(-10.0, 10.0, "V"),
+    )?;
+    c(
+        "sensor.gain_v_per_nm",
+        s.sensor.gain_v_per_nm,
+        Range::closed(-10.0, 10.0, "V/nm"),
+    )?;
+    if s.sensor.gain_v_per_nm == 0.0 {
+        return Err(SceneError::OutOfRange {
+            origin: origin.into(),
+            field: "sensor.gain_v_per_nm".into(),
+            value: 0.0,
+            allowed: "[-10, 10] V/nm, not 0".into(),
+        });
+    }
+    c(
+        "sensor.noise_rms_mv",
+        s.sensor.noise_rms_mv,
+        Range::closed(0.0, 1000.0, "mV"),
+    )?;
+
+    let ph = &s.physics;
+    let dof = |field: &str, v: DofFile, allowed: &[DofFile]| -> Result<(), SceneError> {
+        if allowed.contains(&v) {
+            return Ok(());
+        }
+        let names: Vec<&str> = allowed.iter().map(|d| dof_name(*d)).collect();
+        Err(SceneError::Inconsistent {
+            origin: origin.into(),
+            field: field.into(),
+            message: format!("\"{}\" is not allowed here; allowed: {}", dof_name(v), names.join(", ")),
+        })
+    };
+    use DofFile::*;
+    dof("physics.particle_y", ph.particle_y, &[Dynamic, QuasiStatic])?;
+    dof("physics.particle_z", ph.particle_z, &[Dynamic, QuasiStatic, Off])?;
+    dof(
+        "physics.particle_rotation",
+        ph.particle_rotation,
+        &[Dynamic, QuasiStatic, Off],
+    )?;
+    dof("physics.cantilever", ph.cantilever, &[Dynamic, QuasiStatic])?;
+    dof("physics.stage", ph.stage, &[Dynamic, Off])?;
+    Ok(())
+}
+
+fn dof_name(d: DofFile) -> &'static str {
+    match d {
+        DofFile::Dynamic => "dynamic",
+        DofFile::QuasiStatic => "quasi_static",
+        DofFile::Off => "off",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn range_display() {
+        assert_eq!(Range::open_closed(0.0, 5.0, "nm").to_string(), "(0, 5] nm");
+        assert_eq!(Range::closed_open(0.0, 1.0, "").to_string(), "[0, 1)");
+    }
+}

@@ -1,0 +1,4 @@
+//! End-to-end tests: the real binaries, started as a user would start them.
+
+mod haptic;
+mod model;

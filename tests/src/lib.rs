@@ -1,0 +1,62 @@
+//! Helpers for the end-to-end tests: find the workspace's real binaries (building them if they
+//! are missing) and run them.
+#![deny(missing_docs)]
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::{Command, Output, Stdio};
+use std::sync::Once;
+
+/// The workspace root.
+pub fn workspace() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).parent().expect("tests/ is inside the workspace").to_path_buf()
+}
+
+fn target_dir() -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR").map(PathBuf::from).unwrap_or_else(|| workspace().join("target"))
+}
+
+static BUILD: Once = Once::new();
+
+/// Path of a workspace binary in the profile these tests were built with. The binaries are
+/// built once per test run (`cargo build --bins`), so a stale binary is never tested.
+pub fn bin(name: &str) -> PathBuf {
+    let release = !cfg!(debug_assertions);
+    BUILD.call_once(|| {
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let mut cmd = Command::new(cargo);
+        cmd.current_dir(workspace()).args(["build", "--workspace", "--bins", "--quiet"]);
+        if release {
+            cmd.arg("--release");
+        }
+        let status = cmd.status().expect("running cargo build for the end-to-end tests");
+        assert!(status.success(), "cargo build --workspace --bins failed");
+    });
+    let path = target_dir().join(if release { "release" } else { "debug" }).join(name);
+    assert!(path.exists(), "{} was not built", path.display());
+    path
+}
+
+/// Runs a workspace binary with arguments and optional stdin, from the workspace root.
+pub fn run(name: &str, args: &[&str], stdin: Option<&[u8]>) -> Output {
+    let mut child = Command::new(bin(name))
+        .current_dir(workspace())
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("starting {name}: {e}"));
+    {
+        let mut pipe = child.stdin.take().expect("stdin is piped");
+        if let Some(input) = stdin {
+            pipe.write_all(input).expect("writing stdin");
+        }
+    }
+    child.wait_with_output().expect("waiting for the process")
+}
+
+/// Stdout and stderr as text.
+pub fn text(o: &Output) -> (String, String) {
+    (String::from_utf8_lossy(&o.stdout).into_owned(), String::from_utf8_lossy(&o.stderr).into_owned())
+}
