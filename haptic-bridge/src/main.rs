@@ -39,16 +39,28 @@ enum Command {
 fn render(nm_per_mm: f64, n_per_nn: f64, peak_n: f64) -> anyhow::Result<String> {
     let scaling = Scaling::new(nm_per_mm * 1e-9 / 1e-3, n_per_nn / 1e-9, peak_n)?;
     let mut input = String::new();
-    std::io::stdin().read_to_string(&mut input).context("reading the force curve from stdin")?;
-    let curve: ForceCurveReport = serde_json::from_str(&input).context("stdin is not the JSON of `nanopush model --force-curve --json`")?;
+    std::io::stdin()
+        .read_to_string(&mut input)
+        .context("reading the force curve from stdin")?;
+    let curve: ForceCurveReport =
+        serde_json::from_str(&input).context("stdin is not the JSON of `nanopush model --force-curve --json`")?;
     if curve.schema != "nanopush.force_curve" || curve.version != nanopush_proto::VERSION {
-        bail!("expected schema nanopush.force_curve version {}, got {} version {}", nanopush_proto::VERSION, curve.schema, curve.version);
+        bail!(
+            "expected schema nanopush.force_curve version {}, got {} version {}",
+            nanopush_proto::VERSION,
+            curve.schema,
+            curve.version
+        );
     }
     let mut out = String::from("branch,handle_mm,hand_force_n,tip_force_nn\n");
     for (branch, pts) in [("approach", &curve.approach), ("retraction", &curve.retraction)] {
         for p in pts {
             let handle_mm = scaling.handle_position(p.distance) * 1e3;
-            out += &format!("{branch},{handle_mm:.6},{:.6},{:.6}\n", scaling.hand_force(p.force), p.force * 1e9);
+            out += &format!(
+                "{branch},{handle_mm:.6},{:.6},{:.6}\n",
+                scaling.hand_force(p.force),
+                p.force * 1e9
+            );
         }
     }
     Ok(out)
@@ -57,7 +69,11 @@ fn render(nm_per_mm: f64, n_per_nn: f64, peak_n: f64) -> anyhow::Result<String> 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Render { nm_per_mm, n_per_nn, peak_n } => render(nm_per_mm, n_per_nn, peak_n),
+        Command::Render {
+            nm_per_mm,
+            n_per_nn,
+            peak_n,
+        } => render(nm_per_mm, n_per_nn, peak_n),
     };
     match result {
         Ok(text) => {

@@ -31,18 +31,30 @@ pub struct Scaling {
 impl Scaling {
     /// A checked scaling.
     pub fn new(position_gain: f64, force_gain: f64, peak_force: f64) -> Result<Scaling, ScalingError> {
-        for (name, value) in [("position_gain", position_gain), ("force_gain", force_gain), ("peak_force", peak_force)] {
+        for (name, value) in [
+            ("position_gain", position_gain),
+            ("force_gain", force_gain),
+            ("peak_force", peak_force),
+        ] {
             if !(value.is_finite() && value > 0.0) {
                 return Err(ScalingError::NotPositive { name, value });
             }
         }
-        Ok(Scaling { position_gain, force_gain, peak_force })
+        Ok(Scaling {
+            position_gain,
+            force_gain,
+            peak_force,
+        })
     }
 
     /// The default: 1 mm of handle is 10 nm of tip; 1 nN at the tip is 0.1 N in the hand; a
     /// desktop 1-DOF device renders up to 3 N.
     pub fn default_device() -> Scaling {
-        Scaling { position_gain: 10e-9 / 1e-3, force_gain: 0.1 / 1e-9, peak_force: 3.0 }
+        Scaling {
+            position_gain: 10e-9 / 1e-3,
+            force_gain: 0.1 / 1e-9,
+            peak_force: 3.0,
+        }
     }
 
     /// Tip displacement (m) for a handle displacement (m).
@@ -82,7 +94,13 @@ mod tests {
 
     #[test]
     fn rejects_bad_gains() {
-        assert!(matches!(Scaling::new(0.0, 1.0, 1.0), Err(ScalingError::NotPositive { name: "position_gain", .. })));
+        assert!(matches!(
+            Scaling::new(0.0, 1.0, 1.0),
+            Err(ScalingError::NotPositive {
+                name: "position_gain",
+                ..
+            })
+        ));
         assert!(Scaling::new(1.0, f64::INFINITY, 1.0).is_err());
         assert!(Scaling::new(1e-5, 1e8, 3.0).is_ok());
     }

@@ -74,10 +74,26 @@ fn bad_scene_gets_one_clear_error_and_no_panic() {
     std::fs::create_dir_all(&dir).unwrap();
     let good = std::fs::read_to_string(nanopush_e2e::workspace().join("scenes/paper-default.toml")).unwrap();
     let cases = [
-        ("radius_nm = 30.0", "radius_nm = -1.0", "tip.radius_nm = -1 is out of range; allowed: [1, 1000] nm"),
-        ("relative_humidity = 0.73", "relative_humidity = 1.5", "environment.relative_humidity = 1.5 is out of range; allowed: [0, 1)"),
-        ("tilt_deg = 15.0", "tilt_deg = nan", "cantilever.tilt_deg = NaN is not a finite number"),
-        ("radius_nm = 30.0", "radius_nm = 30.0\ncolour = \"red\"", "unknown field `colour`"),
+        (
+            "radius_nm = 30.0",
+            "radius_nm = -1.0",
+            "tip.radius_nm = -1 is out of range; allowed: [1, 1000] nm",
+        ),
+        (
+            "relative_humidity = 0.73",
+            "relative_humidity = 1.5",
+            "environment.relative_humidity = 1.5 is out of range; allowed: [0, 1)",
+        ),
+        (
+            "tilt_deg = 15.0",
+            "tilt_deg = nan",
+            "cantilever.tilt_deg = NaN is not a finite number",
+        ),
+        (
+            "radius_nm = 30.0",
+            "radius_nm = 30.0\ncolour = \"red\"",
+            "unknown field `colour`",
+        ),
     ];
     for (i, (from, to, expected)) in cases.iter().enumerate() {
         let path = dir.join(format!("bad{i}.toml"));
@@ -106,8 +122,16 @@ fn infeasible_friction_is_a_warning() {
     std::fs::create_dir_all(&dir).unwrap();
     let good = std::fs::read_to_string(nanopush_e2e::workspace().join("scenes/paper-default.toml")).unwrap();
     let path = dir.join("mu.toml");
-    std::fs::write(&path, good.replacen("particle_substrate_static = 0.3", "particle_substrate_static = 4.5", 1)).unwrap();
-    let o = run("nanopush", &["model", "--scene", path.to_str().unwrap(), "--json"], None);
+    std::fs::write(
+        &path,
+        good.replacen("particle_substrate_static = 0.3", "particle_substrate_static = 4.5", 1),
+    )
+    .unwrap();
+    let o = run(
+        "nanopush",
+        &["model", "--scene", path.to_str().unwrap(), "--json"],
+        None,
+    );
     let (out, err) = text(&o);
     assert!(o.status.success(), "{err}");
     assert!(err.contains("warning:") && err.contains("cannot be pushed"), "{err}");
