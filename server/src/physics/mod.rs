@@ -8,6 +8,7 @@ pub mod contact;
 pub mod force_curve;
 pub mod forces;
 pub mod friction;
+pub mod integrate;
 pub mod pushing;
 pub mod real;
 pub mod sensor;

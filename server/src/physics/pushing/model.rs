@@ -37,6 +37,9 @@
 //! named apart here (ERRATA item 10); the printed lines for `F_y^c`, `F_z^c` are the projections
 //! of `F_tip` that this model computes from the geometry instead.
 
+// Numerical kernels index several arrays with one loop variable: index loops are clearer.
+#![allow(clippy::needless_range_loop)]
+
 use crate::physics::forces::capillary::Meniscus;
 use crate::physics::pushing::layout::{Layout, MAX_STATES};
 use crate::physics::pushing::params::PushParams;
@@ -245,6 +248,20 @@ impl PushModel {
         out[..self.len()].copy_from_slice(&f[..self.len()]);
     }
 
+    /// `∂f/∂t` at `(t, x)` (the stage command `Vt` is the only explicit time dependence), by
+    /// one dual evaluation with `t` as the active variable.
+    pub fn time_derivative(&self, t: f64, x: &[f64], mode: &Mode, out: &mut [f64]) {
+        let n = self.len();
+        let mut xd = [Dual::default(); MAX_STATES];
+        for (d, &v) in xd.iter_mut().zip(x.iter()).take(n) {
+            *d = Dual::new(v, 0.0);
+        }
+        let (f, _) = self.eval(Dual::var(t), &xd[..n], mode);
+        for i in 0..n {
+            out[i] = f[i].eps;
+        }
+    }
+
     /// The exact Jacobian `∂f/∂x` (column-major `len × len`, as nalgebra stores it), one
     /// forward-mode dual evaluation per column: no finite differences, no allocation.
     pub fn jacobian(&self, t: f64, x: &[f64], mode: &Mode, jac: &mut [f64]) {
@@ -255,7 +272,7 @@ impl PushModel {
         }
         for j in 0..n {
             xd[j].eps = 1.0;
-            let (f, _) = self.eval(t, &xd[..n], mode);
+            let (f, _) = self.eval(Dual::new(t, 0.0), &xd[..n], mode);
             for i in 0..n {
                 jac[j * n + i] = f[i].eps;
             }
@@ -396,7 +413,7 @@ impl PushModel {
         x[self.layout.zeta_z.pos]
     }
 
-    fn eval<T: Real>(&self, t: f64, x: &[T], mode: &Mode) -> ([T; MAX_STATES], Probe<T>) {
+    fn eval<T: Real>(&self, t: T, x: &[T], mode: &Mode) -> ([T; MAX_STATES], Probe<T>) {
         let p = &self.p;
         let l = &self.layout;
         let a0 = p.interactions.a0;
@@ -406,7 +423,7 @@ impl PushModel {
         // Stage (Eq 13, or ideal at speed V).
         let (s, s_dot) = match l.stage {
             Some(st) => (x[st.pos], vel(st.vel)),
-            None => (T::cst(p.speed * t), T::cst(p.speed)),
+            None => (t * p.speed, T::cst(p.speed)),
         };
         // Cantilever deflection in its own axes, and its rate.
         let (zy, zz) = (x[l.zeta_y.pos], x[l.zeta_z.pos]);
@@ -490,7 +507,7 @@ impl PushModel {
         let stage_accel = match l.stage {
             Some(_) => {
                 let w = p.stage.omega();
-                (T::cst(p.speed * t) + friction_as / p.stage.stiffness() - s) * (w * w) - s_dot * (w / p.stage.q_y)
+                (t * p.speed + friction_as / p.stage.stiffness() - s) * (w * w) - s_dot * (w / p.stage.q_y)
             }
             None => zero,
         };

@@ -1,0 +1,276 @@
+//! The adaptive driver shared by the methods: step-size control from the embedded error
+//! estimate, event location on the dense output, statistics. No heap allocation: everything
+//! lives in fixed-size arrays inside [`Integrator`].
+
+// Numerical kernels index several arrays with one loop variable: index loops are clearer.
+#![allow(clippy::needless_range_loop)]
+
+use std::time::Instant;
+
+use super::methods::{Method, StepFailure, Work};
+use super::problem::{Events, IntegrateError, MAX_DIM, Options, Outcome, Problem, Stats};
+
+/// Most switching functions one problem may have.
+pub const MAX_EVENTS: usize = 8;
+
+/// An adaptive integrator for `M y' = f(t, y)`; it keeps its step size between calls, so a
+/// control loop calling it once per tick does not restart from a tiny step.
+#[derive(Debug, Clone)]
+pub struct Integrator {
+    /// The method.
+    pub method: Method,
+    /// Tolerances and limits.
+    pub opts: Options,
+    h: f64,
+    h_old: f64,
+    err_old: f64,
+    last_rejected: bool,
+    work: Work,
+}
+
+impl Integrator {
+    /// A new integrator; the first step size is chosen from the problem on the first call.
+    pub fn new(method: Method, opts: Options) -> Integrator {
+        Integrator {
+            method,
+            opts,
+            h: 0.0,
+            h_old: 0.0,
+            err_old: 1.0,
+            last_rejected: false,
+            work: Work::new(method),
+        }
+    }
+
+    /// Forgets the step-size history (after a discontinuity such as an event).
+    pub fn reset_step(&mut self) {
+        self.h_old = 0.0;
+        self.err_old = 1.0;
+    }
+
+    /// The step size the next step will try (s).
+    pub fn step_size(&self) -> f64 {
+        self.h
+    }
+
+    fn error_norm(&self, n: usize) -> f64 {
+        let w = &self.work;
+        let mut sum = 0.0;
+        for i in 0..n {
+            let sc = self.opts.atol * w.scale[i] + self.opts.rtol * w.y0[i].abs().max(w.y1[i].abs());
+            sum += (w.err[i] / sc).powi(2);
+        }
+        (sum / n as f64).sqrt()
+    }
+
+    /// Initial step from the size of `y'` (Hairer & Wanner's heuristic, first part).
+    fn initial_step<P: Problem>(&self, p: &P, n: usize, span: f64) -> f64 {
+        let w = &self.work;
+        let mut d = 0.0f64;
+        for i in 0..n {
+            if w.mass[i] != 0.0 {
+                let sc = self.opts.atol * w.scale[i] + self.opts.rtol * w.y0[i].abs();
+                d += (w.f0[i] / sc).powi(2);
+            }
+        }
+        let d = (d / n as f64).sqrt();
+        let _ = p;
+        let h = if d > 1e-300 { 0.01 / d } else { span * 1e-3 };
+        h.min(span).max(self.opts.h_min)
+    }
+
+    /// Advances `(t, y)` towards `t_end`, stopping early at the first event (a switching
+    /// function crossing from positive to non-positive), where `(t, y)` is left within
+    /// `event_tol` after the crossing.
+    pub fn advance<P: Problem, E: Events>(
+        &mut self,
+        p: &P,
+        events: &E,
+        t: &mut f64,
+        y: &mut [f64],
+        t_end: f64,
+    ) -> Result<(Outcome, Stats), IntegrateError> {
+        let start = Instant::now();
+        let mut st = Stats::default();
+        let n = p.len();
+        if n > MAX_DIM {
+            return Err(IntegrateError::TooLarge { n, max: MAX_DIM });
+        }
+        let ne = events.count().min(MAX_EVENTS);
+        let q = self.method.controller_order();
+        self.work.n = n;
+        for i in 0..n {
+            self.work.mass[i] = p.mass(i);
+        }
+        let mut g0 = [f64::NAN; MAX_EVENTS];
+        if ne > 0 {
+            events.eval(*t, y, &mut g0);
+        }
+        let result = loop {
+            let remaining = t_end - *t;
+            if remaining <= 1e-14 * t_end.abs().max(1e-300) || remaining <= 0.0 {
+                break Ok(Outcome::Reached);
+            }
+            if st.steps + st.rejected >= self.opts.max_steps {
+                break Err(IntegrateError::TooManySteps {
+                    t: *t,
+                    max: self.opts.max_steps,
+                });
+            }
+            // Data at the start of the step: f, ∂f/∂t, J (reused by every attempt).
+            let w = &mut self.work;
+            w.y0[..n].copy_from_slice(&y[..n]);
+            p.rhs(*t, &w.y0[..n], &mut w.f0[..n]);
+            p.time_derivative(*t, &w.y0[..n], &mut w.ft[..n]);
+            p.jacobian(*t, &w.y0[..n], &mut w.jac[..n * n]);
+            st.rhs_evals += 1;
+            st.jac_evals += 1;
+            for i in 0..n {
+                w.scale[i] = self.opts.atol * p.scale(i) + self.opts.rtol * w.y0[i].abs();
+            }
+            if !w.f0[..n].iter().all(|v| v.is_finite()) {
+                break Err(IntegrateError::NonFinite { t: *t });
+            }
+            if self.h <= 0.0 {
+                self.h = self.initial_step(p, n, remaining);
+            }
+            let mut h = self.h;
+            if self.opts.h_max > 0.0 {
+                h = h.min(self.opts.h_max);
+            }
+            // Do not leave a sliver: stretch the last step to the end.
+            if h >= remaining || remaining - h < 0.01 * h {
+                h = remaining;
+            }
+            let accepted = loop {
+                if h < self.opts.h_min {
+                    break Err(IntegrateError::StepTooSmall { t: *t, h });
+                }
+                let r0 = self.work.rhs_evals;
+                let f0 = self.work.factorizations;
+                let outcome = self.work.step(p, *t, h);
+                st.rhs_evals += self.work.rhs_evals - r0;
+                st.factorizations += self.work.factorizations - f0;
+                match outcome {
+                    Err(StepFailure::Newton) | Err(StepFailure::Singular) => {
+                        st.rejected += 1;
+                        h *= 0.25;
+                        self.last_rejected = true;
+                        continue;
+                    }
+                    Ok(()) => {}
+                }
+                let err = self.error_norm(n);
+                if !err.is_finite() || !self.work.y1[..n].iter().all(|v| v.is_finite()) {
+                    st.rejected += 1;
+                    h *= 0.25;
+                    self.last_rejected = true;
+                    continue;
+                }
+                // Step control (Hairer & Wanner IV.8, with Gustafsson's predictive controller).
+                let safe = 0.9;
+                let mut fac = (err.powf(1.0 / q) / safe).clamp(1.0 / 6.0, 5.0);
+                if err <= 1.0 {
+                    if self.h_old > 0.0 {
+                        let pred =
+                            ((self.h_old / h) * (err * err / self.err_old).powf(1.0 / q) / safe).clamp(1.0 / 6.0, 5.0);
+                        fac = fac.max(pred);
+                    }
+                    let mut h_new = h / fac;
+                    if self.last_rejected {
+                        h_new = h_new.min(h);
+                    }
+                    self.h_old = h;
+                    self.err_old = err.max(1e-2);
+                    self.last_rejected = false;
+                    break Ok((h, err, h_new));
+                }
+                st.rejected += 1;
+                self.last_rejected = true;
+                h /= fac;
+            };
+            let (h, err, h_new) = match accepted {
+                Ok(v) => v,
+                Err(e) => break Err(e),
+            };
+            st.steps += 1;
+            st.max_local_error = st.max_local_error.max(err);
+            st.error_sum += err;
+            self.h = h_new;
+            let t1 = *t + h;
+            // Events: the earliest switching function that went from > 0 to ≤ 0.
+            if ne > 0 {
+                let mut g1 = [f64::NAN; MAX_EVENTS];
+                events.eval(t1, &self.work.y1[..n], &mut g1);
+                let mut first: Option<(usize, f64)> = None;
+                for k in 0..ne {
+                    if g0[k] > 0.0 && g1[k] <= 0.0 {
+                        let theta = self.locate(p, events, k, *t, h, g0[k], g1[k]);
+                        if first.is_none_or(|(_, th)| theta < th) {
+                            first = Some((k, theta));
+                        }
+                    }
+                }
+                if let Some((k, theta)) = first {
+                    let mut ye = [0.0; MAX_DIM];
+                    self.work.dense(theta, &mut ye[..n]);
+                    *t += theta * h;
+                    y[..n].copy_from_slice(&ye[..n]);
+                    st.events += 1;
+                    break Ok(Outcome::Event { index: k });
+                }
+                g0 = g1;
+            }
+            *t = if t_end - t1 < 1e-14 * t_end.abs() { t_end } else { t1 };
+            y[..n].copy_from_slice(&self.work.y1[..n]);
+        };
+        st.wall_time = start.elapsed().as_secs_f64();
+        result.map(|o| (o, st))
+    }
+
+    /// Illinois (modified regula falsi) on `θ ↦ g_k(t + θh, y(θ))` with the dense output, to
+    /// `event_tol` in time. Returns the right end of the final bracket (`g ≤ 0` there).
+    #[allow(clippy::too_many_arguments)]
+    fn locate<P: Problem, E: Events>(&self, p: &P, events: &E, k: usize, t: f64, h: f64, ga: f64, gb: f64) -> f64 {
+        let n = p.len();
+        let (mut a, mut b) = (0.0f64, 1.0f64);
+        let (mut fa, mut fb) = (ga, gb);
+        let mut side = 0i32;
+        let mut ys = [0.0; MAX_DIM];
+        let mut g = [f64::NAN; MAX_EVENTS];
+        for _ in 0..200 {
+            if (b - a) * h <= self.opts.event_tol {
+                break;
+            }
+            let mut c = (a * fb - b * fa) / (fb - fa);
+            if !(c > a && c < b) {
+                c = 0.5 * (a + b);
+            }
+            self.work.dense(c, &mut ys[..n]);
+            events.eval(t + c * h, &ys[..n], &mut g);
+            let fc = g[k];
+            if fc.is_nan() {
+                // The function stopped applying inside the bracket: bisect towards it.
+                b = c;
+                fb = -0.0;
+                continue;
+            }
+            if fc > 0.0 {
+                a = c;
+                fa = fc;
+                if side == -1 {
+                    fb *= 0.5;
+                }
+                side = -1;
+            } else {
+                b = c;
+                fb = fc;
+                if side == 1 {
+                    fa *= 0.5;
+                }
+                side = 1;
+            }
+        }
+        b
+    }
+}

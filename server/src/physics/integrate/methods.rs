@@ -1,0 +1,392 @@
+//! The three one-step methods, written for `M y' = f(t, y)` with diagonal `M`:
+//!
+//! - **Rodas4** (Hairer & Wanner, *Solving ODEs II*, Sec VI.4; the coefficients of their code
+//!   RODAS): a 6-stage linearly implicit Rosenbrock method of order 4 with an embedded order-3
+//!   solution, L-stable and stiffly accurate, index-1 DAEs included, with a 3rd-order dense
+//!   output. One Jacobian and one LU per step, no Newton iteration.
+//! - **TR-BDF2** (Bank et al. 1985; as an ESDIRK by Hosea & Shampine, *Appl. Numer. Math.* 20,
+//!   1996): trapezoidal stage to `γh`, BDF2 stage to `h`, `γ = 2 − √2`; order 2, L-stable,
+//!   stiffly accurate, embedded order-3 estimate filtered by `(M − hdJ)⁻¹`, quadratic dense
+//!   output through its stages. Simplified Newton on each implicit stage.
+//! - **Implicit Euler**: order 1, L-stable; the baseline. Its error estimate is
+//!   `(M − hJ)⁻¹ (h/2)(f(t₁, y₁) − f(t₀, y₀))` (the filtered `h²y''/2`), dense output linear.
+
+// Numerical kernels index several arrays with one loop variable: index loops are clearer.
+#![allow(clippy::needless_range_loop)]
+
+use super::linalg::Lu;
+use super::problem::{MAX_DIM, Problem};
+
+/// An integration method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Method {
+    /// Rosenbrock, order 4(3).
+    Rodas4,
+    /// ESDIRK TR-BDF2, order 2(3).
+    TrBdf2,
+    /// Implicit Euler, order 1.
+    ImplicitEuler,
+}
+
+impl Method {
+    /// All methods.
+    pub const ALL: [Method; 3] = [Method::Rodas4, Method::TrBdf2, Method::ImplicitEuler];
+
+    /// Command-line name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Rodas4 => "rodas4",
+            Method::TrBdf2 => "trbdf2",
+            Method::ImplicitEuler => "implicit-euler",
+        }
+    }
+
+    /// Parses a command-line name.
+    pub fn parse(s: &str) -> Option<Method> {
+        Method::ALL.into_iter().find(|m| m.name() == s)
+    }
+
+    /// Classical order of the method.
+    pub fn order(self) -> u32 {
+        match self {
+            Method::Rodas4 => 4,
+            Method::TrBdf2 => 2,
+            Method::ImplicitEuler => 1,
+        }
+    }
+
+    /// Order of the error estimate plus one: the exponent of the step controller.
+    pub(crate) fn controller_order(self) -> f64 {
+        match self {
+            Method::Rodas4 => 4.0,
+            Method::TrBdf2 => 3.0,
+            Method::ImplicitEuler => 2.0,
+        }
+    }
+}
+
+type Vector = [f64; MAX_DIM];
+
+/// Per-step data shared by the methods, and the dense output of the last accepted step.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Work {
+    pub n: usize,
+    pub mass: Vector,
+    pub y0: Vector,
+    pub f0: Vector,
+    pub ft: Vector,
+    pub jac: [f64; MAX_DIM * MAX_DIM],
+    pub y1: Vector,
+    pub err: Vector,
+    lu: Lu,
+    k: [Vector; 6],
+    tmp: Vector,
+    tmp2: Vector,
+    /// Error-norm scale `atol·scaleᵢ + rtol·|y₀ᵢ|`, set by the driver; the Newton test uses it.
+    pub scale: Vector,
+    // Dense output: Rodas4 uses (cont3, cont4); TR-BDF2 the stage at γh; implicit Euler none.
+    cont3: Vector,
+    cont4: Vector,
+    method: Method,
+    pub rhs_evals: u64,
+    pub factorizations: u64,
+}
+
+/// Why a step attempt failed (the driver shrinks the step and tries again).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum StepFailure {
+    /// The iteration matrix was singular.
+    Singular,
+    /// Newton did not converge.
+    Newton,
+}
+
+// RODAS (Hairer & Wanner) coefficients, in the transformed variables of their code.
+const R_GAMMA: f64 = 0.25;
+const R_C: [f64; 4] = [0.386, 0.21, 0.63, 1.0];
+const R_D: [f64; 4] = [0.25, -0.1043, 0.1035, -0.362_000_000_000_002_3e-1];
+const R_A: [[f64; 5]; 5] = [
+    [1.544, 0.0, 0.0, 0.0, 0.0],
+    [0.946_678_528_081_582_6, 0.255_701_169_898_328_4, 0.0, 0.0, 0.0],
+    [
+        3.314_825_187_068_521,
+        2.896_124_015_972_201,
+        0.998_641_913_997_781_7,
+        0.0,
+        0.0,
+    ],
+    [
+        1.221_224_509_226_641,
+        6.019_134_481_288_629,
+        12.537_083_329_320_87,
+        -0.687_886_036_105_895,
+        0.0,
+    ],
+    [
+        1.221_224_509_226_641,
+        6.019_134_481_288_629,
+        12.537_083_329_320_87,
+        -0.687_886_036_105_895,
+        1.0,
+    ],
+];
+const R_CC: [[f64; 5]; 5] = [
+    [-5.6688, 0.0, 0.0, 0.0, 0.0],
+    [-2.430_093_356_833_875, -0.206_359_915_709_191_5, 0.0, 0.0, 0.0],
+    [
+        -0.107_352_905_815_137_5,
+        -9.594_562_251_023_355,
+        -20.470_286_148_096_16,
+        0.0,
+        0.0,
+    ],
+    [
+        7.496_443_313_967_647,
+        -10.246_804_314_643_52,
+        -33.999_903_528_199_05,
+        11.708_908_932_061_6,
+        0.0,
+    ],
+    [
+        8.083_246_795_921_522,
+        -7.981_132_988_064_893,
+        -31.521_594_328_743_71,
+        16.319_305_431_231_36,
+        -6.058_818_238_834_054,
+    ],
+];
+const R_D2: [f64; 5] = [
+    10.126_235_083_445_86,
+    -7.487_995_877_610_167,
+    -34.800_918_615_557_47,
+    -7.992_771_707_568_823,
+    1.025_137_723_295_662,
+];
+const R_D3: [f64; 5] = [
+    -0.676_280_339_280_125_3,
+    6.087_714_651_680_015,
+    16.430_843_208_924_78,
+    24.767_225_114_183_86,
+    -6.594_389_125_716_872,
+];
+
+// TR-BDF2 (Hosea & Shampine 1996).
+const T_GAMMA: f64 = 2.0 - std::f64::consts::SQRT_2;
+const T_D: f64 = T_GAMMA / 2.0;
+const T_W: f64 = std::f64::consts::SQRT_2 / 4.0;
+
+impl Work {
+    pub fn new(method: Method) -> Work {
+        Work {
+            n: 0,
+            mass: [0.0; MAX_DIM],
+            y0: [0.0; MAX_DIM],
+            f0: [0.0; MAX_DIM],
+            ft: [0.0; MAX_DIM],
+            jac: [0.0; MAX_DIM * MAX_DIM],
+            y1: [0.0; MAX_DIM],
+            err: [0.0; MAX_DIM],
+            lu: Lu::default(),
+            k: [[0.0; MAX_DIM]; 6],
+            tmp: [0.0; MAX_DIM],
+            tmp2: [0.0; MAX_DIM],
+            scale: [1.0; MAX_DIM],
+            cont3: [0.0; MAX_DIM],
+            cont4: [0.0; MAX_DIM],
+            method,
+            rhs_evals: 0,
+            factorizations: 0,
+        }
+    }
+
+    /// Factorizes `M/(hg) − J` (Rodas form) or `M − hgJ` (implicit form).
+    fn factor(&mut self, diag: impl Fn(f64) -> f64, jac_factor: f64) -> bool {
+        let n = self.n;
+        let mut a = [0.0; MAX_DIM * MAX_DIM];
+        for j in 0..n {
+            for i in 0..n {
+                a[j * n + i] = jac_factor * self.jac[j * n + i];
+            }
+            a[j * n + j] += diag(self.mass[j]);
+        }
+        self.factorizations += 1;
+        self.lu.factor(n, &a)
+    }
+
+    /// One attempt of a step of size `h` from `(t, y0)` (with `f0`, `ft`, `jac` already set).
+    /// On success `y1` and `err` hold the new state and the local error estimate.
+    pub fn step<P: Problem>(&mut self, p: &P, t: f64, h: f64) -> Result<(), StepFailure> {
+        match self.method {
+            Method::Rodas4 => self.rodas4(p, t, h),
+            Method::TrBdf2 => self.trbdf2(p, t, h),
+            Method::ImplicitEuler => self.implicit_euler(p, t, h),
+        }
+    }
+
+    fn rodas4<P: Problem>(&mut self, p: &P, t: f64, h: f64) -> Result<(), StepFailure> {
+        let n = self.n;
+        if !self.factor(|m| m / (h * R_GAMMA), -1.0) {
+            return Err(StepFailure::Singular);
+        }
+        // Stage 1.
+        for i in 0..n {
+            self.k[0][i] = self.f0[i] + h * R_D[0] * self.ft[i];
+        }
+        self.lu.solve(&mut self.k[0][..n]);
+        // Stages 2..6.
+        for s in 1..6 {
+            for i in 0..n {
+                let mut v = self.y0[i];
+                for j in 0..s {
+                    v += R_A[s - 1][j] * self.k[j][i];
+                }
+                self.tmp[i] = v;
+            }
+            let ts = t + if s < 5 { R_C[s - 1] } else { 1.0 } * h;
+            p.rhs(ts, &self.tmp[..n], &mut self.tmp2[..n]);
+            self.rhs_evals += 1;
+            for i in 0..n {
+                let mut c = 0.0;
+                for j in 0..s {
+                    c += R_CC[s - 1][j] * self.k[j][i];
+                }
+                let d = if s < 4 { R_D[s] } else { 0.0 };
+                self.k[s][i] = self.tmp2[i] + d * h * self.ft[i] + self.mass[i] * c / h;
+            }
+            self.lu.solve(&mut self.k[s][..n]);
+        }
+        // tmp holds stage 6's argument y0 + Σ a6j kj; the solution adds k6, the error is k6.
+        for i in 0..n {
+            self.y1[i] = self.tmp[i] + self.k[5][i];
+            self.err[i] = self.k[5][i];
+            let (mut c3, mut c4) = (0.0, 0.0);
+            for j in 0..5 {
+                c3 += R_D2[j] * self.k[j][i];
+                c4 += R_D3[j] * self.k[j][i];
+            }
+            self.cont3[i] = c3;
+            self.cont4[i] = c4;
+        }
+        Ok(())
+    }
+
+    /// Simplified Newton for the implicit stage `M(Y − y₀) − h·d·(f(ts, Y) + E) = 0` (`E` the
+    /// explicit part of the stage), started at `y`; the iteration matrix `M − h d J` is
+    /// factorized already. Leaves the stage value in `y` and `f(ts, Y)` in `fy`. Converged when
+    /// the weighted update is below 1e-3 of the tolerance (or contracting below 1e-2).
+    fn newton<P: Problem>(
+        &mut self,
+        p: &P,
+        ts: f64,
+        hd: f64,
+        explicit: &Vector,
+        y: &mut Vector,
+        fy: &mut Vector,
+    ) -> Result<(), StepFailure> {
+        let n = self.n;
+        let mut prev = f64::INFINITY;
+        for iter in 0..10 {
+            p.rhs(ts, &y[..n], &mut fy[..n]);
+            self.rhs_evals += 1;
+            let mut dy = [0.0; MAX_DIM];
+            for i in 0..n {
+                dy[i] = hd * (fy[i] + explicit[i]) - self.mass[i] * (y[i] - self.y0[i]);
+            }
+            self.lu.solve(&mut dy[..n]);
+            let mut norm = 0.0;
+            for i in 0..n {
+                y[i] += dy[i];
+                norm += (dy[i] / self.scale[i]).powi(2);
+            }
+            let norm = (norm / n as f64).sqrt();
+            if !norm.is_finite() {
+                return Err(StepFailure::Newton);
+            }
+            if norm < 1e-3 || (iter > 0 && norm < 1e-2 && norm < 0.5 * prev) {
+                p.rhs(ts, &y[..n], &mut fy[..n]);
+                self.rhs_evals += 1;
+                return Ok(());
+            }
+            if iter > 1 && norm > 0.9 * prev {
+                return Err(StepFailure::Newton);
+            }
+            prev = norm;
+        }
+        Err(StepFailure::Newton)
+    }
+
+    fn trbdf2<P: Problem>(&mut self, p: &P, t: f64, h: f64) -> Result<(), StepFailure> {
+        let n = self.n;
+        let hd = h * T_D;
+        if !self.factor(|m| m, -hd) {
+            return Err(StepFailure::Singular);
+        }
+        // Stage 2 at t + γh: M(Y₂ − y₀) = h d (f₀ + f(Y₂)).
+        let explicit2 = self.f0;
+        let mut y2 = self.y0;
+        let mut f2 = [0.0; MAX_DIM];
+        self.newton(p, t + T_GAMMA * h, hd, &explicit2, &mut y2, &mut f2)?;
+        // Stage 3 at t + h: M(Y₃ − y₀) = h (w f₀ + w f₂ + d f(Y₃)).
+        let mut explicit3 = [0.0; MAX_DIM];
+        let mut y3 = [0.0; MAX_DIM];
+        for i in 0..n {
+            explicit3[i] = T_W * (self.f0[i] + f2[i]) / T_D;
+            y3[i] = self.y0[i] + (y2[i] - self.y0[i]) / T_GAMMA;
+        }
+        let mut f3 = [0.0; MAX_DIM];
+        self.newton(p, t + h, hd, &explicit3, &mut y3, &mut f3)?;
+        // Error: (M − hdJ)⁻¹ h Σ (bᵢ − b̂ᵢ) Fᵢ with b = (w, w, d), b̂ = ((1−w)/3, (3w+1)/3, d/3).
+        let e = [T_W - (1.0 - T_W) / 3.0, T_W - (3.0 * T_W + 1.0) / 3.0, T_D - T_D / 3.0];
+        for i in 0..n {
+            self.err[i] = h * (e[0] * self.f0[i] + e[1] * f2[i] + e[2] * f3[i]);
+            self.y1[i] = y3[i];
+            self.cont3[i] = y2[i];
+        }
+        self.lu.solve(&mut self.err[..n]);
+        Ok(())
+    }
+
+    fn implicit_euler<P: Problem>(&mut self, p: &P, t: f64, h: f64) -> Result<(), StepFailure> {
+        let n = self.n;
+        if !self.factor(|m| m, -h) {
+            return Err(StepFailure::Singular);
+        }
+        let mut y = self.y0;
+        let mut f1 = [0.0; MAX_DIM];
+        self.newton(p, t + h, h, &[0.0; MAX_DIM], &mut y, &mut f1)?;
+        for i in 0..n {
+            self.y1[i] = y[i];
+            self.err[i] = 0.5 * h * (f1[i] - self.f0[i]);
+        }
+        self.lu.solve(&mut self.err[..n]);
+        Ok(())
+    }
+
+    /// Dense output at `θ ∈ [0, 1]` of the last accepted step (`y0` → `y1`).
+    pub fn dense(&self, theta: f64, out: &mut [f64]) {
+        let n = self.n;
+        match self.method {
+            Method::Rodas4 => {
+                let s1 = 1.0 - theta;
+                for i in 0..n {
+                    out[i] = s1 * self.y0[i] + theta * (self.y1[i] + s1 * (self.cont3[i] + theta * self.cont4[i]));
+                }
+            }
+            Method::TrBdf2 => {
+                // Quadratic through (0, y0), (γ, Y2), (1, y1).
+                let g = T_GAMMA;
+                let l0 = (theta - g) * (theta - 1.0) / g;
+                let l1 = theta * (theta - 1.0) / (g * (g - 1.0));
+                let l2 = theta * (theta - g) / (1.0 - g);
+                for i in 0..n {
+                    out[i] = l0 * self.y0[i] + l1 * self.cont3[i] + l2 * self.y1[i];
+                }
+            }
+            Method::ImplicitEuler => {
+                for i in 0..n {
+                    out[i] = (1.0 - theta) * self.y0[i] + theta * self.y1[i];
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,15 @@
+//! Stiff integration of `M y' = f(t, y)`: Rosenbrock (Rodas4), ESDIRK (TR-BDF2) and implicit
+//! Euler with adaptive steps, dense output and event location.
+
+mod driver;
+mod linalg;
+mod methods;
+mod problem;
+pub mod test_problems;
+
+pub use driver::{Integrator, MAX_EVENTS};
+pub use methods::Method;
+pub use problem::{Events, IntegrateError, MAX_DIM, NoEvents, Options, Outcome, Problem, Stats};
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,173 @@
+//! What an integrator integrates: `M y' = f(t, y)` with a diagonal mass matrix, and the
+//! switching functions whose zeros are events.
+
+/// Largest state dimension the integrators handle; their workspaces are fixed-size arrays of
+/// this length, so a step allocates nothing.
+pub const MAX_DIM: usize = 12;
+
+/// A semi-explicit DAE `M y' = f(t, y)`, `M` diagonal with entries 1 (differential row) or 0
+/// (algebraic row, index 1).
+pub trait Problem {
+    /// Dimension (≤ [`MAX_DIM`]).
+    fn len(&self) -> usize;
+    /// Whether the problem has no state.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Diagonal of `M`.
+    fn mass(&self, i: usize) -> f64;
+    /// `f(t, y)` into `out[..len]`.
+    fn rhs(&self, t: f64, y: &[f64], out: &mut [f64]);
+    /// `∂f/∂y` into `jac`, column-major `len × len`.
+    fn jacobian(&self, t: f64, y: &[f64], jac: &mut [f64]);
+    /// `∂f/∂t` into `out` (zero for autonomous problems).
+    fn time_derivative(&self, _t: f64, _y: &[f64], out: &mut [f64]) {
+        out[..self.len()].fill(0.0);
+    }
+    /// Typical magnitude of component `i`: the absolute tolerance is `atol · scale(i)`.
+    fn scale(&self, _i: usize) -> f64 {
+        1.0
+    }
+}
+
+/// Switching functions `g_k(t, y)`: an event is a sign change from positive to negative.
+pub trait Events {
+    /// Number of switching functions.
+    fn count(&self) -> usize;
+    /// Values into `out[..count]`; `f64::NAN` marks one that does not apply now.
+    fn eval(&self, t: f64, y: &[f64], out: &mut [f64]);
+}
+
+/// No events.
+pub struct NoEvents;
+
+impl Events for NoEvents {
+    fn count(&self) -> usize {
+        0
+    }
+    fn eval(&self, _t: f64, _y: &[f64], _out: &mut [f64]) {}
+}
+
+/// Step-size control and tolerances.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Options {
+    /// Relative tolerance.
+    pub rtol: f64,
+    /// Absolute tolerance, multiplied by each component's [`Problem::scale`].
+    pub atol: f64,
+    /// Smallest step (s) before the integrator gives up.
+    pub h_min: f64,
+    /// Largest step (s); 0 = no limit.
+    pub h_max: f64,
+    /// Most steps in one call.
+    pub max_steps: u64,
+    /// Event location tolerance in time (s).
+    pub event_tol: f64,
+}
+
+impl Options {
+    /// Tolerances `rtol` and `atol = rtol` (of each component's scale), no step limit.
+    pub fn with_rtol(rtol: f64) -> Options {
+        Options {
+            rtol,
+            atol: rtol,
+            h_min: 1e-20,
+            h_max: 0.0,
+            max_steps: 1_000_000,
+            event_tol: 1e-15,
+        }
+    }
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options::with_rtol(1e-6)
+    }
+}
+
+/// Work done by one call.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Stats {
+    /// Accepted steps.
+    pub steps: u64,
+    /// Rejected steps (error too large or Newton failure).
+    pub rejected: u64,
+    /// Right-hand side evaluations.
+    pub rhs_evals: u64,
+    /// Jacobian evaluations.
+    pub jac_evals: u64,
+    /// LU factorizations.
+    pub factorizations: u64,
+    /// Largest weighted local error estimate of an accepted step (1 = at tolerance).
+    pub max_local_error: f64,
+    /// Sum of the accepted local error estimates in the problem's units, RMS-weighted: a
+    /// (pessimistic) estimate of the global error after the call.
+    pub error_sum: f64,
+    /// Events located.
+    pub events: u64,
+    /// Wall time of the call (s).
+    pub wall_time: f64,
+}
+
+impl Stats {
+    /// Adds another call's work.
+    pub fn add(&mut self, o: &Stats) {
+        self.steps += o.steps;
+        self.rejected += o.rejected;
+        self.rhs_evals += o.rhs_evals;
+        self.jac_evals += o.jac_evals;
+        self.factorizations += o.factorizations;
+        self.max_local_error = self.max_local_error.max(o.max_local_error);
+        self.error_sum += o.error_sum;
+        self.events += o.events;
+        self.wall_time += o.wall_time;
+    }
+}
+
+/// Why integration stopped early.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum IntegrateError {
+    /// The step fell below `h_min`.
+    #[error("step size {h:e} s fell below the minimum at t = {t:e} s")]
+    StepTooSmall {
+        /// Time reached.
+        t: f64,
+        /// Step tried.
+        h: f64,
+    },
+    /// More than `max_steps` steps.
+    #[error("more than {max} steps before t = {t:e} s")]
+    TooManySteps {
+        /// Time reached.
+        t: f64,
+        /// The limit.
+        max: u64,
+    },
+    /// The right-hand side produced a non-finite value.
+    #[error("non-finite state at t = {t:e} s")]
+    NonFinite {
+        /// Time reached.
+        t: f64,
+    },
+    /// The problem is larger than the integrator's workspace.
+    #[error("dimension {n} exceeds the integrator's maximum {max}")]
+    TooLarge {
+        /// Dimension.
+        n: usize,
+        /// Maximum.
+        max: usize,
+    },
+}
+
+/// How a call ended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Outcome {
+    /// The end time was reached.
+    Reached,
+    /// Switching function `index` crossed zero at the returned time (state at the event).
+    Event {
+        /// Which switching function.
+        index: usize,
+    },
+}

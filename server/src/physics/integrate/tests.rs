@@ -1,0 +1,221 @@
+//! Integrator tests: observed order of convergence, published references for Van der Pol and
+//! Robertson, event location against a known switching time, an index-1 DAE.
+
+// Numerical kernels index several arrays with one loop variable: index loops are clearer.
+#![allow(clippy::needless_range_loop)]
+
+use super::test_problems::{LinearStiff, Robertson, VanDerPol};
+use super::*;
+
+/// Fixed steps of size `h` (a tolerance so loose that nothing is rejected, `h_max = h`).
+fn fixed_step_error(method: Method, h: f64) -> f64 {
+    let mut opts = Options::with_rtol(1e12);
+    opts.h_max = h;
+    let mut it = Integrator::new(method, opts);
+    let mut y = LinearStiff::Y0;
+    let mut t = 0.0;
+    let (o, st) = it.advance(&LinearStiff, &NoEvents, &mut t, &mut y, 1.0).unwrap();
+    assert_eq!(o, Outcome::Reached);
+    assert_eq!(st.rejected, 0);
+    let ex = LinearStiff::exact(1.0);
+    ((y[0] - ex[0]).powi(2) + (y[1] - ex[1]).powi(2)).sqrt()
+}
+
+#[test]
+fn observed_order_of_convergence() {
+    // hλ for the fast mode runs from −100 to −12.5: the stiff regime.
+    for m in Method::ALL {
+        let hs = [0.1, 0.05, 0.025, 0.0125];
+        let errs: Vec<f64> = hs.iter().map(|&h| fixed_step_error(m, h)).collect();
+        let n = errs.len();
+        let observed = (errs[n - 2] / errs[n - 1]).log2();
+        let p = m.order() as f64;
+        assert!(
+            (observed - p).abs() <= 0.3,
+            "{}: observed order {observed:.3} (errors {errs:?}), theory {p}",
+            m.name()
+        );
+    }
+}
+
+fn solve<P: Problem>(p: &P, y0: &[f64], t_end: f64, m: Method, rtol: f64) -> (Vec<f64>, Stats) {
+    let mut it = Integrator::new(m, Options::with_rtol(rtol));
+    let mut y = y0.to_vec();
+    let mut t = 0.0;
+    let (o, st) = it.advance(p, &NoEvents, &mut t, &mut y, t_end).unwrap();
+    assert_eq!(o, Outcome::Reached);
+    assert!((t - t_end).abs() <= 1e-12 * t_end);
+    (y, st)
+}
+
+#[test]
+fn van_der_pol_matches_the_published_reference() {
+    let p = VanDerPol { eps: 1e-6 };
+    for (m, rtol, tol) in [
+        (Method::Rodas4, 1e-8, 1e-5),
+        (Method::TrBdf2, 1e-7, 1e-3),
+        (Method::ImplicitEuler, 1e-5, 3e-2),
+    ] {
+        let (y, st) = solve(&p, &VanDerPol::Y0, VanDerPol::T_END, m, rtol);
+        let err = (y[0] - VanDerPol::REFERENCE[0])
+            .abs()
+            .max((y[1] - VanDerPol::REFERENCE[1]).abs());
+        assert!(
+            err < tol,
+            "{}: y = {y:?}, error {err:e} (steps {}, rejected {})",
+            m.name(),
+            st.steps,
+            st.rejected
+        );
+    }
+}
+
+#[test]
+fn robertson_matches_the_published_reference() {
+    for (m, rtol) in [(Method::Rodas4, 1e-8), (Method::TrBdf2, 1e-8)] {
+        let (y, st) = solve(&Robertson, &Robertson::Y0, Robertson::T_END, m, rtol);
+        for i in 0..3 {
+            let r = Robertson::REFERENCE[i];
+            assert!(
+                (y[i] - r).abs() <= 1e-3 * r.abs(),
+                "{}: y[{i}] = {:e}, reference {r:e} ({} steps)",
+                m.name(),
+                y[i],
+                st.steps
+            );
+        }
+        // Mass conservation y₁ + y₂ + y₃ = 1 holds to rounding for a linearly implicit method.
+        assert!((y.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn error_falls_with_tolerance_and_the_estimate_tracks_it() {
+    let p = VanDerPol { eps: 1e-6 };
+    for m in [Method::Rodas4, Method::TrBdf2] {
+        let mut prev = f64::INFINITY;
+        for rtol in [1e-4, 1e-6, 1e-8] {
+            let (y, _) = solve(&p, &VanDerPol::Y0, VanDerPol::T_END, m, rtol);
+            let err = (y[0] - VanDerPol::REFERENCE[0]).abs();
+            assert!(
+                err < prev,
+                "{}: error {err:e} at rtol {rtol:e} is not below {prev:e}",
+                m.name()
+            );
+            // The global error stays within a modest factor of what was asked.
+            assert!(err < 1e3 * rtol, "{}: error {err:e} at rtol {rtol:e}", m.name());
+            prev = err;
+        }
+    }
+}
+
+/// A ball falling from 1 m: `y'' = −g`, event when `y` crosses 0 at `t = sqrt(2/g)`.
+struct Falling;
+impl Problem for Falling {
+    fn len(&self) -> usize {
+        2
+    }
+    fn mass(&self, _i: usize) -> f64 {
+        1.0
+    }
+    fn rhs(&self, _t: f64, y: &[f64], out: &mut [f64]) {
+        out[0] = y[1];
+        out[1] = -9.81;
+    }
+    fn jacobian(&self, _t: f64, _y: &[f64], jac: &mut [f64]) {
+        jac[..4].copy_from_slice(&[0.0, 0.0, 1.0, 0.0]);
+    }
+}
+struct Ground;
+impl Events for Ground {
+    fn count(&self) -> usize {
+        2
+    }
+    fn eval(&self, _t: f64, y: &[f64], out: &mut [f64]) {
+        out[0] = f64::NAN; // never applies
+        out[1] = y[0];
+    }
+}
+
+#[test]
+fn event_is_located_at_the_known_time() {
+    let t_hit = (2.0 / 9.81f64).sqrt();
+    for m in Method::ALL {
+        let mut opts = Options::with_rtol(1e-9);
+        opts.event_tol = 1e-12;
+        let mut it = Integrator::new(m, opts);
+        let mut y = [1.0, 0.0];
+        let mut t = 0.0;
+        let (o, st) = it.advance(&Falling, &Ground, &mut t, &mut y, 10.0).unwrap();
+        assert_eq!(o, Outcome::Event { index: 1 }, "{}", m.name());
+        assert_eq!(st.events, 1);
+        // The event is located on the numerical solution to event_tol; what remains is the
+        // method's own global error (first order for implicit Euler).
+        let tol = if m == Method::ImplicitEuler { 1e-4 } else { 1e-9 };
+        assert!((t - t_hit).abs() < tol, "{}: event at {t}, exact {t_hit}", m.name());
+        assert!(y[0] <= 0.0 && y[0] > -1e-8, "{}: y at the event {}", m.name(), y[0]);
+    }
+}
+
+/// An index-1 DAE: `y₁' = −y₁ + y₂`, `0 = y₂ − y₁²/2`... written as `0 = y₁² − 2y₂`; exact
+/// `y₁ = 2/(1 + e^{t}) ...` is not needed: the algebraic constraint must hold at every step.
+struct Dae;
+impl Problem for Dae {
+    fn len(&self) -> usize {
+        2
+    }
+    fn mass(&self, i: usize) -> f64 {
+        if i == 0 { 1.0 } else { 0.0 }
+    }
+    fn rhs(&self, _t: f64, y: &[f64], out: &mut [f64]) {
+        out[0] = -y[0] + y[1];
+        out[1] = y[0] * y[0] - 2.0 * y[1];
+    }
+    fn jacobian(&self, _t: f64, y: &[f64], jac: &mut [f64]) {
+        jac[..4].copy_from_slice(&[-1.0, 2.0 * y[0], 1.0, -2.0]);
+    }
+}
+
+#[test]
+fn index_one_dae_keeps_its_constraint() {
+    // y₂ = y₁²/2 ⇒ y₁' = −y₁ + y₁²/2, a Bernoulli equation: y₁ = 2/(1 + e^{t}) for y₁(0) = 1.
+    for m in Method::ALL {
+        let (y, _) = solve(&Dae, &[1.0, 0.5], 2.0, m, 1e-8);
+        let exact = 2.0 / (1.0 + 2f64.exp());
+        assert!(
+            (y[1] - 0.5 * y[0] * y[0]).abs() < 1e-8,
+            "{}: constraint residual",
+            m.name()
+        );
+        let tol = if m == Method::ImplicitEuler { 1e-4 } else { 1e-6 };
+        assert!((y[0] - exact).abs() < tol, "{}: y₁ = {}, exact {exact}", m.name(), y[0]);
+    }
+}
+
+#[test]
+fn too_large_and_non_finite_are_errors() {
+    struct Bad;
+    impl Problem for Bad {
+        fn len(&self) -> usize {
+            1
+        }
+        fn mass(&self, _i: usize) -> f64 {
+            1.0
+        }
+        fn rhs(&self, _t: f64, y: &[f64], out: &mut [f64]) {
+            out[0] = if y[0] > 2.0 { f64::NAN } else { 1.0 };
+        }
+        fn jacobian(&self, _t: f64, _y: &[f64], jac: &mut [f64]) {
+            jac[0] = 0.0;
+        }
+    }
+    let opts = Options { max_steps: 10_000, ..Options::default() };
+    let mut it = Integrator::new(Method::Rodas4, opts);
+    let mut y = [0.0];
+    let mut t = 0.0;
+    let r = it.advance(&Bad, &NoEvents, &mut t, &mut y, 10.0);
+    // The solution runs into the region where f is NaN: never accepted, the call fails
+    // cleanly (step too small or too many steps creeping up to y = 2) with a finite state.
+    assert!(r.is_err(), "{r:?}");
+    assert!(y[0].is_finite() && y[0] <= 2.0 && t < 10.0);
+}
