@@ -42,6 +42,7 @@ pub fn model_report(scene: &Scene) -> ModelReport {
             mu_ta_k: p.mu_ta_k,
             adhesion_as: p.adhesion_as(),
             adhesion_ta: p.adhesion_ta(),
+            attraction_as: p.attraction_as(),
             r_a: p.r_a,
         },
         &p.jkr_as,
@@ -95,7 +96,8 @@ pub fn model_report(scene: &Scene) -> ModelReport {
 }
 
 /// The Fig 3 force curve of the scene's tip on its bare substrate: approach from 3 L_t (at
-/// least 10 nm) to a repulsive load of twice the pull-off scale, and back.
+/// least 10 nm) to a repulsive load of twice the adhesion, and back out until the adhesion has
+/// let go (1.5 adhesion/k_c beyond the start).
 pub fn force_curve_report(scene: &Scene, steps: usize) -> ForceCurveReport {
     let ts = scene.tip_sample();
     let lt = ts.long_range.capillary.map_or(0.0, |c| c.formation_gap);
@@ -108,7 +110,9 @@ pub fn force_curve_report(scene: &Scene, steps: usize) -> ForceCurveReport {
         ts.a0,
     ) - ts.jkr.pull_off_load();
     let d_near = -(2.0 * adhesion.max(1e-9) / ts.k_c);
-    let c = ts.curve(d_far, d_near, steps);
+    // Out again far enough for the adhesion to let go: its deflection is adhesion/k_c.
+    let d_retract = d_far + 1.5 * adhesion.max(1e-9) / ts.k_c;
+    let c = ts.curve(d_far, d_near, d_retract, steps);
     let conv = |p: &CurvePoint| ForceCurvePoint {
         distance: p.distance,
         gap: p.gap,
@@ -145,7 +149,7 @@ mod tests {
         assert!((r.mu_upper_bound.unwrap() - 3.75).abs() < 0.01);
         assert!(r.mu_feasible);
         assert!((r.r1 - 1.7e-9).abs() < 0.02e-9);
-        assert_eq!(r.state_dimension, 12);
+        assert_eq!(r.state_dimension, 7);
         assert!(r.steady_state.is_some());
     }
 

@@ -23,7 +23,7 @@ fn default_scene_json_has_the_paper_figures() {
     assert!((f("y_star") - 0.22e-9).abs() < 0.005e-9);
     assert!((f("mu_upper_bound") - 3.75).abs() < 0.01);
     assert_eq!(v["mu_feasible"], true);
-    assert_eq!(v["state_dimension"], 12);
+    assert_eq!(v["state_dimension"], 7);
     assert!(v["steady_state"]["zeta_z"].is_f64());
 }
 
@@ -47,7 +47,13 @@ fn minimal_scene_leaves_out_dofs() {
 
 #[test]
 fn every_shipped_scene_runs() {
-    for s in ["paper-default", "gold-latex-500nm", "gold-14nm", "minimal"] {
+    for s in [
+        "paper-default",
+        "paper-full-dynamics",
+        "gold-latex-500nm",
+        "gold-14nm",
+        "minimal",
+    ] {
         let path = format!("scenes/{s}.toml");
         let v = json(&["model", "--scene", &path, "--json"]);
         assert_eq!(v["scene"], s);

@@ -8,7 +8,7 @@
 //! form with `Rₐ → Rₜ`, 4). The tip follows its equilibrium quasi-statically; when that
 //! equilibrium vanishes (a fold: the force gradient exceeds `k_c`) it jumps to the next one in
 //! the direction it is moving: snap-in on approach, pull-off on retraction. The meniscus
-//! (Eq 3: forms at `L_t`, ruptures at `max(L_t, δ_b)`) and the JKR contact (forms at `a₀`,
+//! (Eq 3: forms at `L_t`, ruptures at `L_t + δ_b`) and the JKR contact (forms at `a₀`,
 //! breaks off its stable branch) keep their state between steps, so the two curves differ.
 
 use crate::physics::contact::jkr::Jkr;
@@ -54,11 +54,12 @@ pub struct ForceCurve {
     pub approach: Vec<CurvePoint>,
     /// Retraction, from the deepest point back out.
     pub retraction: Vec<CurvePoint>,
-    /// Piezo distance of the snap-in jump on approach (m), if there was one.
+    /// Piezo distance where the tip came into contact on approach (the snap-in jump when the
+    /// attraction's gradient exceeds `k_c`) (m).
     pub snap_in_distance: Option<f64>,
     /// Most attractive force on retraction, just before pull-off (N, negative).
     pub pull_off_force: f64,
-    /// Piezo distance of the pull-off jump (m).
+    /// Piezo distance where the contact broke on retraction (m).
     pub pull_off_distance: Option<f64>,
 }
 
@@ -144,8 +145,9 @@ impl TipSample {
         }
     }
 
-    /// Approach from `d_far` to `d_near` and retract back, in `steps` equal steps each way.
-    pub fn curve(&self, d_far: f64, d_near: f64, steps: usize) -> ForceCurve {
+    /// Approach from `d_far` to `d_near`, then retract to `d_retract` (≥ `d_far`: a soft lever
+    /// needs a long way out before the adhesion lets go), in `steps` equal steps each way.
+    pub fn curve(&self, d_far: f64, d_near: f64, d_retract: f64, steps: usize) -> ForceCurve {
         let steps = steps.max(2);
         let mut s = Contact {
             meniscus: Meniscus::Absent,
@@ -171,17 +173,19 @@ impl TipSample {
             }
         };
         sweep(d_far, d_near, &mut approach, &mut s, &mut h);
-        sweep(d_near, d_far, &mut retraction, &mut s, &mut h);
+        sweep(d_near, d_retract.max(d_far), &mut retraction, &mut s, &mut h);
 
-        let jump = |pts: &[CurvePoint]| {
+        // Contact made on approach, broken on retraction: the piezo distance of the first point
+        // past the change.
+        let change = |pts: &[CurvePoint], to: bool| {
             pts.windows(2)
-                .find(|w| (w[1].gap - w[0].gap).abs() > 2.0 * (w[1].distance - w[0].distance).abs() + 0.05e-9)
-                .map(|w| w[0].distance)
+                .find(|w| w[0].contact != to && w[1].contact == to)
+                .map(|w| w[1].distance)
         };
         let pull_off_force = retraction.iter().map(|p| p.force).fold(0.0, f64::min);
         ForceCurve {
-            snap_in_distance: jump(&approach),
-            pull_off_distance: jump(&retraction),
+            snap_in_distance: change(&approach, true),
+            pull_off_distance: change(&retraction, false),
             approach,
             retraction,
             pull_off_force,
@@ -214,9 +218,28 @@ mod tests {
     }
 
     #[test]
+    fn soft_lever_pulls_off_too() {
+        // At k_c = 0.5 N/m the ~54 nN adhesion needs ~110 nm of retraction to let go.
+        let mut t = si_tip(true);
+        t.k_c = 0.5;
+        let c = t.curve(10e-9, -20e-9, 10e-9 + 1.5 * 60e-9 / 0.5, 2000);
+        assert!(c.pull_off_distance.is_some(), "never let go");
+        assert!(!c.retraction.last().unwrap().contact);
+        let expected =
+            -(4.0 * std::f64::consts::PI * 30e-9 * 0.072) + sphere_plane_force(1.865e-19, 30e-9, 0.165e-9, 0.165e-9);
+        assert!(
+            (c.pull_off_force / expected - 1.0).abs() < 0.05,
+            "{} vs {}",
+            c.pull_off_force,
+            expected
+        );
+        assert!(c.snap_in_distance.unwrap() > c.approach.last().unwrap().distance);
+    }
+
+    #[test]
     fn snap_in_and_pull_off_hysteresis() {
         let t = si_tip(true);
-        let c = t.curve(10e-9, -5e-9, 600);
+        let c = t.curve(10e-9, -5e-9, 10e-9, 600);
         // Approach: no force far away, a snap-in, then repulsion at the deepest point.
         assert!(c.approach[0].force.abs() < 0.1e-9, "{}", c.approach[0].force);
         assert!(c.snap_in_distance.is_some());
@@ -251,7 +274,7 @@ mod tests {
     #[test]
     fn equilibrium_holds_at_every_point() {
         let t = si_tip(true);
-        let c = t.curve(10e-9, -5e-9, 200);
+        let c = t.curve(10e-9, -5e-9, 10e-9, 200);
         for p in c.approach.iter().chain(&c.retraction) {
             let s = Contact {
                 meniscus: if p.meniscus { Meniscus::Formed } else { Meniscus::Absent },
@@ -268,7 +291,7 @@ mod tests {
     #[test]
     fn dry_van_der_waals_only_pull_off() {
         let t = si_tip(false);
-        let c = t.curve(10e-9, -5e-9, 600);
+        let c = t.curve(10e-9, -5e-9, 10e-9, 600);
         let vdw = sphere_plane_force(1.865e-19, 30e-9, 0.165e-9, 0.165e-9);
         assert!((c.pull_off_force / vdw - 1.0).abs() < 0.05);
     }

@@ -86,7 +86,12 @@ mod tests {
 
     #[test]
     fn eq8_sharp_tip() {
-        // "always correct": Rₐ > R̃ ≥ 0.5 R̃ sin β whenever Rₜ > 0.
+        // "always correct" for a spherical tip: R̃ < Rₐ, so Rₐ > 0.5 R̃ sin β whenever Rₜ > 0.
         assert!(no_sticking_to_tip(10e-9, 30e-9 * 10e-9 / 40e-9, 1.5));
+        // The boundary itself: 0.5 R̃ sin β against Rₐ.
+        let beta = 30f64.to_radians();
+        // 0.5 R̃ sin β = 1.0 nm for R̃ = 4 nm, β = 30°: just above passes, just below fails.
+        assert!(no_sticking_to_tip(1.01e-9, 4.0e-9, beta));
+        assert!(!no_sticking_to_tip(0.99e-9, 4.0e-9, beta));
     }
 }

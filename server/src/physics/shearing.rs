@@ -53,11 +53,12 @@ impl StaticPhase {
     /// Eq 15, the shearing point (m):
     /// `y* = μ_as^s A_as / (k_y cos²α + k_z sin²α − μ_as^s sin α cos α (k_y − k_z))`,
     /// with `A_as = 4πRₐγ_L` in the paper. `None` when the denominator is not positive: the
-    /// friction grows at least as fast as the push and the particle cannot be pushed (Eq 16).
+    /// friction grows at least as fast as the push and the particle cannot be pushed (Eq 16),
+    /// or when there is no adhesion (`A ≤ 0`: the static phase of Eq 14 has no extent).
     pub fn shearing_point(&self) -> Option<f64> {
         let (s, c) = self.alpha.sin_cos();
         let den = self.k_y * c * c + self.k_z * s * s - self.mu_s * s * c * (self.k_y - self.k_z);
-        (den > 0.0).then(|| self.mu_s * self.adhesion / den)
+        (den > 0.0 && self.adhesion > 0.0).then(|| self.mu_s * self.adhesion / den)
     }
 }
 

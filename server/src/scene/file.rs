@@ -144,7 +144,7 @@ pub struct FrictionFile {
     pub tip_particle_static: f64,
     /// `μ_ta^k`.
     pub tip_particle_kinetic: f64,
-    /// Damping ratio of the particle-substrate contact (`b_as = 2ζ sqrt(k_as* mₐ)`).
+    /// Damping ratio ζ of the contacts: `b_as = 2ζ sqrt(k_as* mₐ)`, `b_ta = 2ζ sqrt(k_ta* mₐ)`.
     pub contact_damping_ratio: f64,
 }
 

@@ -167,6 +167,7 @@ impl Scene {
         let r1 = kelvin_radius(rh);
         let m_a = part.density_kg_per_m3 * 4.0 / 3.0 * std::f64::consts::PI * r_a.powi(3);
         let k_as_t = 8.0 * r_a * tangential_modulus(e_a, nu_a, e_s, nu_s);
+        let k_ta_t = 8.0 * r_eff * tangential_modulus(e_t, nu_t, e_a, nu_a);
         let tip_particle = LongRange {
             hamaker: ph.van_der_waals.then(|| self.hamaker(tip.hamaker_zj, part.hamaker_zj)),
             capillary: ph
@@ -208,8 +209,9 @@ impl Scene {
             },
             speed: f.push.speed_um_per_s * UM,
             k_as_t,
-            k_ta_t: 8.0 * r_eff * tangential_modulus(e_t, nu_t, e_a, nu_a),
+            k_ta_t,
             b_as: 2.0 * f.friction.contact_damping_ratio * (k_as_t * m_a).sqrt(),
+            b_ta: 2.0 * f.friction.contact_damping_ratio * (k_ta_t * m_a).sqrt(),
             mu_as_s: f.friction.particle_substrate_static,
             mu_as_k: f.friction.particle_substrate_kinetic,
             mu_ta_s: f.friction.tip_particle_static,
@@ -298,6 +300,12 @@ impl Scene {
             w.push(SceneWarning(format!(
                 "friction.particle_substrate_static = {mu} is below the Eq 9 lower bound {:.4} = cos β/(2(1+Rₐ/Rₜ)): the push is not reliable (Eq 16 window [{:.4}, {:.4}])",
                 fz.lower, fz.lower, fz.upper
+            )));
+        }
+        if f.physics.electrostatic && kelvin_radius(f.environment.relative_humidity) < self.a0() {
+            w.push(SceneWarning(format!(
+                "physics.electrostatic is on, but at environment.relative_humidity = {} there is no meniscus, so the shared area S = 4πR r₁ of Eq 4 is zero and the electrostatic force vanishes",
+                f.environment.relative_humidity
             )));
         }
         if !friction::no_sticking_to_tip(r_a, r_t * r_a / (r_t + r_a), beta) {

@@ -35,7 +35,7 @@ fn shipped_scenes_are_valid() {
             n += 1;
         }
     }
-    assert!(n >= 4, "expected the four shipped scenes, found {n}");
+    assert!(n >= 5, "expected the five shipped scenes, found {n}");
 }
 
 #[test]
@@ -176,7 +176,7 @@ fn particle_outside_stage_range() {
 
 #[test]
 fn dof_choices_are_checked() {
-    let e = err("particle_y = \"dynamic\"", "particle_y = \"off\"");
+    let e = err("particle_y = \"quasi_static\"", "particle_y = \"off\"");
     assert!(
         e.contains("physics.particle_y") && e.contains("allowed: dynamic, quasi_static"),
         "{e}"
@@ -225,4 +225,41 @@ fn left_out_terms_are_absent() {
     assert!(p.interactions.tip_particle.capillary.is_none());
     assert!(p.interactions.tip_particle.electrostatic.is_none());
     assert!(p.interactions.particle_substrate.capillary.is_none());
+}
+
+#[test]
+fn repulsive_van_der_waals_is_rejected() {
+    let e = err("hamaker_zj = 65.0", "hamaker_zj = 10.0");
+    assert!(
+        e.contains("particles[0].hamaker_zj = 10") && e.contains("above environment.medium_hamaker_zj = 37 zJ"),
+        "{e}"
+    );
+    // Dry, there is no water layer in the combining rule: allowed.
+    let dry = DEFAULT_SCENE
+        .replacen("hamaker_zj = 65.0", "hamaker_zj = 10.0", 1)
+        .replacen("relative_humidity = 0.73", "relative_humidity = 0.0", 1);
+    assert!(Scene::parse("dry.toml", &dry).is_ok());
+}
+
+#[test]
+fn dry_electrostatics_is_a_warning() {
+    let text = DEFAULT_SCENE
+        .replacen("relative_humidity = 0.73", "relative_humidity = 0.0", 1)
+        .replacen("electrostatic = false", "electrostatic = true", 1);
+    let s = Scene::parse("dry.toml", &text).unwrap();
+    assert!(
+        s.warnings.iter().any(|w| w.0.contains("electrostatic force vanishes")),
+        "{:?}",
+        s.warnings
+    );
+}
+
+#[test]
+fn tangential_stiffness_and_damping_by_hand() {
+    // k_as* = 8RₐG*, G* = ((2−νₐ)/Gₐ + (2−ν_s)/G_s)⁻¹, G = E/(2(1+ν)): latex on silicon,
+    // Gₐ = 1.2687 GPa, G_s = 66.54 GPa → G* = 0.7494 GPa → k_as* = 5995 N/m.
+    let p = Scene::default_scene().push_params();
+    assert!((p.k_as_t - 5995.0).abs() < 1.0, "{}", p.k_as_t);
+    // b_as = 2ζ sqrt(k_as* mₐ) with ζ = 0.05.
+    assert!((p.b_as - 0.1 * (5994.88 * 4.3982e-15f64).sqrt()).abs() < 1e-3 * p.b_as);
 }

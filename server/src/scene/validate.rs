@@ -300,6 +300,33 @@ pub fn validate(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
     )?;
 
     let ph = &s.physics;
+    // Across the water layer the Hamaker combining rule (Sec 2.2.1) is attractive only when every
+    // body's constant exceeds the medium's; the model's van der Waals laws are attractive.
+    if ph.van_der_waals && e.relative_humidity > 0.0 {
+        let medium = e.medium_hamaker_zj;
+        let mut bodies: Vec<(String, f64)> = vec![
+            ("tip.hamaker_zj".into(), s.tip.hamaker_zj),
+            ("substrate.hamaker_zj".into(), s.substrate.hamaker_zj),
+        ];
+        bodies.extend(
+            s.particles
+                .iter()
+                .enumerate()
+                .map(|(i, p)| (format!("particles[{i}].hamaker_zj"), p.hamaker_zj)),
+        );
+        for (field, h) in bodies {
+            if h <= medium {
+                return Err(SceneError::OutOfRange {
+                    origin: origin.into(),
+                    field,
+                    value: h,
+                    allowed: format!(
+                        "above environment.medium_hamaker_zj = {medium} zJ: at or below it van der Waals across the water layer is repulsive, which the model does not describe"
+                    ),
+                });
+            }
+        }
+    }
     let dof = |field: &str, v: DofFile, allowed: &[DofFile]| -> Result<(), SceneError> {
         if allowed.contains(&v) {
             return Ok(());

@@ -60,7 +60,7 @@ impl Jkr {
     pub fn radius_from_load(&self, p: f64) -> Option<f64> {
         let prw = 3.0 * std::f64::consts::PI * self.radius * self.work;
         let disc = 2.0 * prw * p + prw * prw;
-        if disc.is_nan() || disc < 0.0 || !p.is_finite() {
+        if disc.is_nan() || disc < 0.0 || !p.is_finite() || p < self.pull_off_load() {
             return None;
         }
         let a3 = self.radius / self.modulus * (p + prw + disc.sqrt());
@@ -229,15 +229,19 @@ mod tests {
         // At the pull-off load the discriminant is zero: the radius is still defined.
         assert!(j.radius_from_load(j.pull_off_load()).is_some());
         assert!(j.radius_from_load(j.pull_off_load() * 1.01).is_none());
+        // Hertz (w = 0) cannot hold a tensile load.
+        let h = Jkr::new(1e-6, 5e9, 0.0);
+        assert!(h.radius_from_load(-1e-9).is_none());
+        assert_eq!(h.radius_from_load(0.0), Some(0.0));
     }
 
     proptest! {
         #[test]
         fn jkr_is_consistent_and_repulsive_past_pull_off(
-            r in 2e-9..10e-6_f64,
-            e1 in 1e9..400e9_f64,
-            e2 in 1e9..400e9_f64,
-            w in 0.0..0.3_f64,
+            r in 1e-9..10e-6_f64,
+            e1 in 0.01e9..1500e9_f64,
+            e2 in 0.01e9..1500e9_f64,
+            w in 0.0..0.5_f64,
             frac in 0.0..1.0_f64,
         ) {
             let j = Jkr::new(r, contact_modulus(e1, 0.3, e2, 0.3), w);

@@ -54,6 +54,15 @@ mod tests {
         assert!((f1 / f10 - 100.0).abs() < 1e-9);
     }
 
+    proptest::proptest! {
+        #[test]
+        fn electrostatic_is_finite_and_attractive(u in -10.0..10.0_f64, r in 1e-9..10e-6_f64, r1 in 0.0..100e-9_f64, h in -1e-9..1e-4_f64) {
+            let e = Electrostatic { voltage: u, area: 4.0 * std::f64::consts::PI * r * r1, a0: 0.165e-9 };
+            let f: f64 = e.force(h);
+            proptest::prop_assert!(f.is_finite() && f <= 0.0);
+        }
+    }
+
     #[test]
     fn contact_potential_from_work_functions() {
         // Gold 5.1 eV against silicon 4.85 eV gives the paper's 0.25 V.

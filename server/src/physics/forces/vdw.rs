@@ -200,10 +200,10 @@ mod tests {
     proptest! {
         #[test]
         fn van_der_waals_is_finite_and_attractive(
-            rt in 1e-9..200e-9_f64,
+            rt in 1e-9..1000e-9_f64,
             ra in 2e-9..10e-6_f64,
-            h in -5e-9..50e-6_f64,
-            hamaker in 1e-21..5e-19_f64,
+            h in -5e-9..100e-6_f64,
+            hamaker in 1e-21..1e-18_f64,
         ) {
             let f = sphere_sphere_force(hamaker, rt, ra, h, A0);
             prop_assert!(f.is_finite() && f < 0.0, "sphere-sphere {}", f);

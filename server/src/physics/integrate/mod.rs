@@ -2,8 +2,8 @@
 //! Euler with adaptive steps, dense output and event location.
 
 mod driver;
-mod linalg;
-mod methods;
+pub(crate) mod linalg;
+pub(crate) mod methods;
 mod problem;
 pub mod test_problems;
 

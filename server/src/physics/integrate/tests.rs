@@ -209,7 +209,10 @@ fn too_large_and_non_finite_are_errors() {
             jac[0] = 0.0;
         }
     }
-    let opts = Options { max_steps: 10_000, ..Options::default() };
+    let opts = Options {
+        max_steps: 10_000,
+        ..Options::default()
+    };
     let mut it = Integrator::new(Method::Rodas4, opts);
     let mut y = [0.0];
     let mut t = 0.0;

@@ -4,9 +4,11 @@
 pub mod layout;
 pub mod model;
 pub mod params;
+pub mod simulation;
 pub mod steady;
 
 pub use layout::{Layout, MAX_STATES};
 pub use model::{FrictionPhase, Mode, Probe, PushModel, SwitchKind, Switching, Tangential};
 pub use params::{Dof, Dofs, Interactions, LongRange, PushParams};
+pub use simulation::{Simulation, SimulationError, TickReport};
 pub use steady::{SteadyInputs, SteadyState, steady_state};

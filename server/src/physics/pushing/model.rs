@@ -27,8 +27,10 @@
 //!   are discrete events ([`PushModel::switching`]), not a smooth blur.
 //!
 //! # Equations (one row per state; `Dof::QuasiStatic` rows have zero mass)
-//! - cantilever: `m_c* ζ̈ + b ζ̇ + Kζ = R(α)ᵀ F_tip`, `K = C_yz⁻¹` (Eq 10) — Eq 17's first two lines
-//!   are the first-order form of this with `k_y`, `k_z`, `k_yz`;
+//! - cantilever: `m_c* ζ̈ + b ζ̇ + Kζ = R(α)ᵀ F_tip`, `K = C_yz⁻¹` (Eq 10). In statics Eq 17's
+//!   first two lines are exactly `ζ = C F` (`k_y ζ_y = F_y + (k_y/k_yz) F_z` is
+//!   `ζ_y = (c₂F_y + c₃F_z)/k_c`); in dynamics they put the coupling on the force side, this
+//!   model in the stiffness `K`;
 //! - particle: `mₐ ÿ = F_y,tip + F_t,as + mₐ s̈`, `mₐ z̈ + b_as ż = P_as + F_lr,as + F_z,tip`,
 //!   `I₀ θ̈ = Rₐ(F_t,ta − F_t,as)` (Eq 17 lines 3-5, `I₀ = 2mₐRₐ²/5`);
 //! - stage: Eq 13 with the friction load `f_as`.
@@ -41,6 +43,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use crate::physics::forces::capillary::Meniscus;
+use crate::physics::integrate::linalg::Lu;
 use crate::physics::pushing::layout::{Layout, MAX_STATES};
 use crate::physics::pushing::params::PushParams;
 use crate::physics::real::{Dual, Real};
@@ -133,7 +136,8 @@ pub struct Probe<T> {
 /// and an event fires when it crosses zero; `None` when a switch does not apply.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Switching {
-    /// Substrate: `μˢN − |f|` while sticking (→ slip), `direction·ṡ_as` while slipping (→ stick).
+    /// Substrate: `μˢN − |f|` while sticking (→ slip), `direction·ṡ_as` while slipping
+    /// (→ stick; the rate is exact for quasi-static DOFs too, see [`PushModel::contact_rates`]).
     pub substrate: Option<f64>,
     /// Tip: the same for the tip-particle contact.
     pub tip: Option<f64>,
@@ -292,11 +296,11 @@ impl PushModel {
         let pr = self.probe(t, x, mode);
         let p = &self.p;
         let a0 = p.interactions.a0;
-        let has_rate_as = self.layout.particle_y.vel.is_some();
-        let has_rate_ta = has_rate_as && self.layout.zeta_y.vel.is_some();
-        let tangential = |t: Tangential, mu_s: f64, load: f64, force: f64, rate: f64, has_rate: bool| match t {
+        let slipping = matches!(mode.substrate, Tangential::Slip { .. }) || matches!(mode.tip, Tangential::Slip { .. });
+        let rates = if slipping { self.contact_rates(t, x, mode) } else { None };
+        let tangential = |t: Tangential, mu_s: f64, load: f64, force: f64, rate: Option<f64>| match t {
             Tangential::Stick { .. } => Some(mu_s * load.max(0.0) - force.abs()),
-            Tangential::Slip { direction } => has_rate.then_some(direction * rate),
+            Tangential::Slip { direction } => rate.map(|r| direction * r),
         };
         let meniscus = p
             .interactions
@@ -304,33 +308,28 @@ impl PushModel {
             .capillary
             .filter(|c| c.possible())
             .map(|c| match mode.meniscus {
-                Meniscus::Absent => c.formation_gap + a0 - pr.gap,
+                Meniscus::Absent => pr.gap - (c.formation_gap + a0),
                 Meniscus::Formed => c.rupture_gap + a0 - pr.gap,
             });
-        // Sign convention: every function is positive while the mode holds.
-        let meniscus = meniscus.map(|g| if mode.meniscus == Meniscus::Absent { -g } else { g });
         let tip_contact = Some(if mode.tip_contact {
             (a0 - pr.gap) - p.jkr_ta.min_indentation()
         } else {
             pr.gap - a0
         });
+        let tip_friction = if mode.tip_contact {
+            tangential(mode.tip, p.mu_ta_s, pr.load_ta, pr.friction_ta, rates.map(|r| r.1))
+        } else {
+            None
+        };
         Switching {
             substrate: tangential(
                 mode.substrate,
                 p.mu_as_s,
                 pr.load_as,
                 pr.friction_as,
-                pr.slip_rate_as,
-                has_rate_as,
+                rates.map(|r| r.0),
             ),
-            tip: tangential(
-                mode.tip,
-                p.mu_ta_s,
-                pr.load_ta,
-                pr.friction_ta,
-                pr.slip_rate_ta,
-                has_rate_ta,
-            ),
+            tip: tip_friction,
             meniscus,
             tip_contact,
         }
@@ -381,31 +380,110 @@ impl PushModel {
     }
 
     /// Balances the quasi-static (algebraic) rows by Newton's method, holding the differential
-    /// states fixed: a consistent initial value for the DAE. Returns the final residual norm
-    /// (m). Allocates; call it at set-up, not per tick.
+    /// states fixed: a consistent initial value for the DAE, and again after an event changes
+    /// a force discontinuously. Returns the final residual norm (m). No allocation.
     pub fn equilibrate(&self, t: f64, x: &mut [f64], mode: &Mode) -> f64 {
         let n = self.len();
         let mass = self.mass_diagonal();
-        let alg: Vec<usize> = (0..n).filter(|&i| mass[i] == 0.0).collect();
-        let mut f = vec![0.0; n];
-        let mut jac = vec![0.0; n * n];
+        let mut alg = [0usize; MAX_STATES];
+        let mut m = 0;
+        for i in 0..n {
+            if mass[i] == 0.0 {
+                alg[m] = i;
+                m += 1;
+            }
+        }
+        let mut f = [0.0; MAX_STATES];
+        let mut jac = [0.0; MAX_STATES * MAX_STATES];
         let mut res = 0.0;
+        let mut lu = Lu::default();
         for _ in 0..100 {
             self.rhs(t, x, mode, &mut f);
-            res = alg.iter().map(|&i| f[i] * f[i]).sum::<f64>().sqrt();
-            if alg.is_empty() || res < 1e-16 {
+            res = alg[..m].iter().map(|&i| f[i] * f[i]).sum::<f64>().sqrt();
+            if m == 0 || res < 1e-16 || !res.is_finite() {
                 break;
             }
             self.jacobian(t, x, mode, &mut jac);
-            let m = alg.len();
-            let a = nalgebra::DMatrix::from_fn(m, m, |r, c| jac[alg[c] * n + alg[r]]);
-            let b = nalgebra::DVector::from_fn(m, |r, _| -f[alg[r]]);
-            let Some(dx) = a.lu().solve(&b) else { break };
-            for (k, &i) in alg.iter().enumerate() {
-                x[i] += dx[k];
+            let mut a = [0.0; MAX_STATES * MAX_STATES];
+            let mut b = [0.0; MAX_STATES];
+            for c in 0..m {
+                for r in 0..m {
+                    a[c * m + r] = jac[alg[c] * n + alg[r]];
+                }
+                b[c] = -f[alg[c]];
+            }
+            if !lu.factor(m, &a) {
+                break;
+            }
+            lu.solve(&mut b[..m]);
+            for k in 0..m {
+                x[alg[k]] += b[k];
             }
         }
         res
+    }
+
+    /// The time derivative of the whole state, `ẋ`: `f` on the differential rows; on the
+    /// algebraic rows the derivative of the constraint, `J_aa ẋ_a = −(J_ad ẋ_d + ∂f_a/∂t)`.
+    /// `false` when the constraint Jacobian is singular.
+    pub fn state_rate(&self, t: f64, x: &[f64], mode: &Mode, out: &mut [f64]) -> bool {
+        let n = self.len();
+        let mass = self.mass_diagonal();
+        self.rhs(t, x, mode, out);
+        let mut alg = [0usize; MAX_STATES];
+        let mut m = 0;
+        for i in 0..n {
+            if mass[i] == 0.0 {
+                alg[m] = i;
+                m += 1;
+            }
+        }
+        if m == 0 {
+            return true;
+        }
+        let mut jac = [0.0; MAX_STATES * MAX_STATES];
+        let mut ft = [0.0; MAX_STATES];
+        self.jacobian(t, x, mode, &mut jac);
+        self.time_derivative(t, x, mode, &mut ft);
+        let mut a = [0.0; MAX_STATES * MAX_STATES];
+        let mut b = [0.0; MAX_STATES];
+        for (r, &i) in alg[..m].iter().enumerate() {
+            let mut rhs = -ft[i];
+            for j in 0..n {
+                if mass[j] != 0.0 {
+                    rhs -= jac[j * n + i] * out[j];
+                }
+            }
+            b[r] = rhs;
+            for (c, &j) in alg[..m].iter().enumerate() {
+                a[c * m + r] = jac[j * n + i];
+            }
+        }
+        let mut lu = Lu::default();
+        if !lu.factor(m, &a) {
+            return false;
+        }
+        lu.solve(&mut b[..m]);
+        for (k, &i) in alg[..m].iter().enumerate() {
+            out[i] = b[k];
+        }
+        true
+    }
+
+    /// Rates of the two tangential contact coordinates `(ṡ_as, ξ̇)` (m/s), exact for dynamic
+    /// and quasi-static DOFs alike: the probe is differentiated along `(ẋ, 1)`.
+    pub fn contact_rates(&self, t: f64, x: &[f64], mode: &Mode) -> Option<(f64, f64)> {
+        let n = self.len();
+        let mut xdot = [0.0; MAX_STATES];
+        if !self.state_rate(t, x, mode, &mut xdot) {
+            return None;
+        }
+        let mut xd = [Dual::default(); MAX_STATES];
+        for i in 0..n {
+            xd[i] = Dual::new(x[i], xdot[i]);
+        }
+        let (_, pr) = self.eval(Dual::var(t), &xd[..n], mode);
+        Some((pr.contact_as.eps, pr.contact_ta.eps))
     }
 
     /// The measured deflection `ζ_z'` (m) at a state.
@@ -464,22 +542,26 @@ impl PushModel {
             zero
         };
         let lr_ta = p.interactions.tip_particle_force(gap, mode.meniscus);
-        let normal_ta = elastic_ta + lr_ta;
-        // Eq 7: f_ta ≤ μ_ta (A_ta + F_l^ta), A_ta = attraction holding the pair + JKR pull-off.
+        // Rates: of the gap and of the tip tangential coordinate ξ = (Rₜ+Rₐ)φ + Rₐθ.
+        let (rvy, rvz) = (y_d - tip_vy, z_d - tip_vz);
+        let gap_d = (dy * rvy + dz * rvz) / dist;
+        let phi = dz.atan2(dy);
+        let xi = phi * rsum + th * p.r_a;
+        let phi_d = (dy * rvz - dz * rvy) / (dist * dist);
+        let xi_d = phi_d * rsum + om * p.r_a;
+        // Contact damping along the normal while in contact (every contact dissipates).
+        let damping_ta = if mode.tip_contact { gap_d * p.b_ta } else { zero };
+        let normal_ta = elastic_ta + lr_ta - damping_ta;
+        // Eq 7: f_ta ≤ μ_ta (A_ta + F_l^ta). The external load F_l = elastic + long-range and the
+        // adhesion A_ta = −long-range − P_c (JKR pull-off): the long-range part cancels.
         let load_ta = if mode.tip_contact {
-            (elastic_ta - lr_ta - p.jkr_ta.pull_off_load()).max_c(0.0)
+            (elastic_ta - p.jkr_ta.pull_off_load()).max_c(0.0)
         } else {
             zero
         };
-        // Tip tangential coordinate ξ = (Rₜ+Rₐ)φ + Rₐθ and its rate.
-        let phi = dz.atan2(dy);
-        let xi = phi * rsum + th * p.r_a;
-        let (rvy, rvz) = (y_d - tip_vy, z_d - tip_vz);
-        let phi_d = (dy * rvz - dz * rvy) / (dist * dist);
-        let xi_d = phi_d * rsum + om * p.r_a;
         let friction_ta = if mode.tip_contact {
             match mode.tip {
-                Tangential::Stick { anchor } => -((xi - anchor) * p.k_ta_t),
+                Tangential::Stick { anchor } => -((xi - anchor) * p.k_ta_t) - xi_d * p.b_ta,
                 Tangential::Slip { direction } => -(load_ta * (direction * p.mu_ta_k)),
             }
         } else {

@@ -131,8 +131,12 @@ pub struct PushParams {
     pub k_as_t: f64,
     /// Tip-particle tangential contact stiffness `k_ta* = 8R̃G*_ta` (N/m).
     pub k_ta_t: f64,
-    /// Particle-substrate damping `b_as` (N·s/m).
+    /// Particle-substrate damping `b_as` (N·s/m), on the contact's normal and tangential rates.
     pub b_as: f64,
+    /// Tip-particle contact damping `b_ta` (N·s/m), on the contact's normal and tangential
+    /// rates. The paper neglects it; without it the rolling mode of a free particle (tip
+    /// tangential spring against the particle's inertia, ~25 ns) would ring for ever.
+    pub b_ta: f64,
     /// Static / kinetic friction coefficients, particle-substrate and tip-particle.
     pub mu_as_s: f64,
     /// Kinetic particle-substrate friction coefficient.
@@ -175,6 +179,10 @@ impl PushParams {
     /// Equals the paper's `4πRₐγ_L` for a capillary-only scene.
     pub fn adhesion_as(&self) -> f64 {
         -self.interactions.particle_substrate_force(self.interactions.a0) - self.jkr_as.pull_off_load()
+    }
+    /// The long-range part of [`Self::adhesion_as`]: the included attraction at contact (N).
+    pub fn attraction_as(&self) -> f64 {
+        -self.interactions.particle_substrate_force(self.interactions.a0)
     }
     /// The tip-particle adhesion (Eq 7's `A_ta`) from the included terms, at contact with the
     /// meniscus formed: `2πR̃γ_L` for a capillary-only scene.

@@ -14,8 +14,8 @@
 //! (`γ = β − α`, an angle: not the surface energy `γ_L`, ERRATA item 10) gives
 //! `ζ_y = a_y y + b_y`, `ζ_z = a_z y + b_z` and `y = (ζ_y, ζ_z)·(P, Q)`, solved in closed form.
 //! The last line `z = δ(β̃)` is the JKR indentation (Eq 5) under the normal load at the
-//! corrected contact angle `β̃`, `P_z = F_ta sin β̃ + f_ta cos β̃ + A_as` (load plus the adhesion
-//! that holds the particle down).
+//! corrected contact angle `β̃`, `P_z = F_ta sin β̃ + f_ta cos β̃ + A_lr` (load plus the
+//! long-range attraction that holds the particle down; the JKR adhesion is inside Eq 5).
 
 use crate::physics::contact::jkr::Jkr;
 
@@ -40,6 +40,9 @@ pub struct SteadyInputs {
     pub adhesion_as: f64,
     /// `A_ta` (N).
     pub adhesion_ta: f64,
+    /// The long-range part of `A_as` (N): the load the JKR indentation sees on top of `F_as`
+    /// (the JKR adhesion itself is inside Eq 5, so it is not added again).
+    pub attraction_as: f64,
     /// `Rₐ` (m).
     pub r_a: f64,
 }
@@ -127,7 +130,7 @@ pub fn steady_state(i: &SteadyInputs, jkr_as: &Jkr) -> Result<SteadyState, Stead
     let beta_tilde = ((i.r_a * sb + delta_z) / (i.r_a * cb - delta_y)).atan();
     let f_z = i.k_y * zeta_y * sa - i.k_z * zeta_z * ca;
     let (sbt, cbt) = beta_tilde.sin_cos();
-    let p_z = normal_ta * sbt + friction_ta * cbt + i.adhesion_as;
+    let p_z = normal_ta * sbt + friction_ta * cbt + i.attraction_as;
     let z = -jkr_as.indentation_from_load(p_z).unwrap_or(0.0);
     Ok(SteadyState {
         normal_ta,
@@ -160,6 +163,7 @@ mod tests {
             mu_ta_k: 0.2,
             adhesion_as: 4.0 * std::f64::consts::PI * 1e-6 * 0.072,
             adhesion_ta: 2.0 * std::f64::consts::PI * r_eff * 0.072,
+            attraction_as: 4.0 * std::f64::consts::PI * 1e-6 * 0.072,
             r_a: 1e-6,
         }
     }

@@ -385,8 +385,15 @@ fn left_out_dofs_change_the_state_not_the_forces() {
         f.probe(0.0, &xf[..f.len()], &f.initial_mode()),
         q.probe(0.0, &xq[..q.len()], &q.initial_mode()),
     );
-    assert!((pf.normal_ta - pq.normal_ta).abs() < 1e-15);
-    assert!((pf.load_as - pq.load_as).abs() < 1e-15);
+    // Up to the contact damping, which sees the ideal stage's speed V in the quasi-static model
+    // and a stage at rest in the full one (b_ta·V ≈ 1e-13 N).
+    assert!(
+        (pf.normal_ta - pq.normal_ta).abs() < 1e-12,
+        "{} vs {}",
+        pf.normal_ta,
+        pq.normal_ta
+    );
+    assert!((pf.load_as - pq.load_as).abs() < 1e-12);
 }
 
 #[test]

@@ -1,0 +1,214 @@
+//! The hybrid simulation of a push: the Eq 17 model integrated tick by tick, with the friction,
+//! meniscus and contact switches located as events and the mode changed at each.
+
+use crate::physics::integrate::{
+    Events, IntegrateError, Integrator, MAX_EVENTS, Method, Options, Outcome, Problem, Stats,
+};
+use crate::physics::pushing::layout::MAX_STATES;
+use crate::physics::pushing::model::{FrictionPhase, Mode, PushModel, SwitchKind, Tangential};
+
+/// The model in one mode, as the integrator sees it.
+struct InMode<'a> {
+    model: &'a PushModel,
+    mode: Mode,
+    scale: [f64; MAX_STATES],
+}
+
+impl Problem for InMode<'_> {
+    fn len(&self) -> usize {
+        self.model.len()
+    }
+    fn mass(&self, i: usize) -> f64 {
+        self.model.mass_diagonal()[i]
+    }
+    fn rhs(&self, t: f64, y: &[f64], out: &mut [f64]) {
+        self.model.rhs(t, y, &self.mode, out);
+    }
+    fn jacobian(&self, t: f64, y: &[f64], jac: &mut [f64]) {
+        self.model.jacobian(t, y, &self.mode, jac);
+    }
+    fn time_derivative(&self, t: f64, y: &[f64], out: &mut [f64]) {
+        self.model.time_derivative(t, y, &self.mode, out);
+    }
+    fn scale(&self, i: usize) -> f64 {
+        self.scale[i]
+    }
+}
+
+const SWITCHES: [SwitchKind; 4] = [
+    SwitchKind::Substrate,
+    SwitchKind::Tip,
+    SwitchKind::Meniscus,
+    SwitchKind::TipContact,
+];
+
+impl Events for InMode<'_> {
+    fn count(&self) -> usize {
+        SWITCHES.len()
+    }
+    fn eval(&self, t: f64, y: &[f64], out: &mut [f64]) {
+        let s = self.model.switching(t, y, &self.mode);
+        for (o, v) in out.iter_mut().zip([s.substrate, s.tip, s.meniscus, s.tip_contact]) {
+            *o = v.unwrap_or(f64::NAN);
+        }
+    }
+}
+
+/// What one call of [`Simulation::advance_to`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TickReport {
+    /// Integrator work (steps, rejections, Jacobians, LUs, local error, wall time).
+    pub stats: Stats,
+    /// Mode switches handled.
+    pub switches: u32,
+}
+
+/// Why a simulation stopped.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum SimulationError {
+    /// The integrator failed.
+    #[error("integration failed: {0}")]
+    Integrate(#[from] IntegrateError),
+    /// Mode switches chatter (more than the limit inside one call): the friction law cannot
+    /// decide between stick and slip at this resolution.
+    #[error("{count} mode switches before t = {t:e} s: chattering between friction phases")]
+    Chattering {
+        /// Switches counted.
+        count: u32,
+        /// Time reached.
+        t: f64,
+    },
+}
+
+/// A push in progress.
+#[derive(Debug, Clone)]
+pub struct Simulation {
+    /// The model.
+    pub model: PushModel,
+    /// Current discrete mode.
+    pub mode: Mode,
+    /// Current time (s).
+    pub t: f64,
+    /// Current state (`x[..model.len()]`).
+    pub x: [f64; MAX_STATES],
+    /// Work done since the start.
+    pub total: Stats,
+    /// Time of the first stick → slip of the substrate contact, the shearing time `t*` (s).
+    pub shearing_time: Option<f64>,
+    integrator: Integrator,
+    scale: [f64; MAX_STATES],
+    /// Most mode switches in one call before it is called chattering.
+    pub max_switches: u32,
+}
+
+impl Simulation {
+    /// Starts a push at `t = 0` from the model's initial state and mode, with the quasi-static
+    /// rows balanced.
+    pub fn new(model: PushModel, method: Method, opts: Options) -> Simulation {
+        let mode = model.initial_mode();
+        let mut x = model.initial_state();
+        let n = model.len();
+        model.equilibrate(0.0, &mut x[..n], &mode);
+        let scale = Self::scales(&model);
+        Simulation {
+            integrator: Integrator::new(method, opts),
+            model,
+            mode,
+            t: 0.0,
+            x,
+            total: Stats::default(),
+            shearing_time: None,
+            scale,
+            max_switches: 10_000,
+        }
+    }
+
+    /// Typical magnitudes of the states, for the absolute tolerance: 1 nm for positions and
+    /// 1 nm of arc for rotations; 1 mm/s (1 nm/µs) for rates. The forces on a femtogram particle
+    /// are µN-scale terms that nearly cancel, so its acceleration carries rounding noise of
+    /// ~1e-9 m/s²: a rate tolerance much below 1e-9 m/s at millisecond steps would chase noise.
+    fn scales(model: &PushModel) -> [f64; MAX_STATES] {
+        let mut s = [1e-9; MAX_STATES];
+        let l = &model.layout;
+        let r_a = model.p.r_a;
+        for slot in [
+            l.stage,
+            Some(l.zeta_y),
+            Some(l.zeta_z),
+            Some(l.particle_y),
+            l.particle_z,
+        ]
+        .into_iter()
+        .flatten()
+        {
+            s[slot.pos] = 1e-9;
+            if let Some(v) = slot.vel {
+                s[v] = 1e-3;
+            }
+        }
+        if let Some(r) = l.rotation {
+            s[r.pos] = 1e-9 / r_a;
+            if let Some(v) = r.vel {
+                s[v] = 1e-3 / r_a;
+            }
+        }
+        s
+    }
+
+    /// The integration method.
+    pub fn method(&self) -> Method {
+        self.integrator.method
+    }
+
+    /// The friction phase now.
+    pub fn phase(&self) -> FrictionPhase {
+        self.model.phase(&self.mode)
+    }
+
+    /// Advances to `t_end`, switching modes at events. Allocation-free.
+    pub fn advance_to(&mut self, t_end: f64) -> Result<TickReport, SimulationError> {
+        let n = self.model.len();
+        let mut report = TickReport::default();
+        while self.t < t_end {
+            let problem = InMode {
+                model: &self.model,
+                mode: self.mode,
+                scale: self.scale,
+            };
+            let (outcome, st) = self
+                .integrator
+                .advance(&problem, &problem, &mut self.t, &mut self.x[..n], t_end)?;
+            report.stats.add(&st);
+            match outcome {
+                Outcome::Reached => break,
+                Outcome::Event { index } => {
+                    let kind = SWITCHES[index.min(MAX_EVENTS - 1).min(SWITCHES.len() - 1)];
+                    let before = self.mode;
+                    self.mode = self.model.transition(self.t, &self.x[..n], &self.mode, kind);
+                    if kind == SwitchKind::Substrate
+                        && self.shearing_time.is_none()
+                        && matches!(before.substrate, Tangential::Stick { .. })
+                    {
+                        self.shearing_time = Some(self.t);
+                    }
+                    // A switch may change a force discontinuously (meniscus, contact): balance the
+                    // quasi-static rows again and restart the step-size history.
+                    self.model.equilibrate(self.t, &mut self.x[..n], &self.mode);
+                    self.integrator.reset_step();
+                    report.switches += 1;
+                    if report.switches > self.max_switches {
+                        return Err(SimulationError::Chattering {
+                            count: report.switches,
+                            t: self.t,
+                        });
+                    }
+                }
+            }
+        }
+        self.total.add(&report.stats);
+        Ok(report)
+    }
+}
+
+#[cfg(test)]
+mod tests;
