@@ -15,6 +15,7 @@
 #![deny(missing_docs)]
 
 pub mod model;
+pub mod simulate;
 
 /// Version of every document in this crate; bumped on any incompatible change.
 pub const VERSION: u32 = 1;

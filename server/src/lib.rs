@@ -4,7 +4,8 @@
 //! - [`physics`]: the paper's Section 2, pure functions in SI units (corrected per the errata);
 //! - [`scene`]: the TOML scene format (units in field names), its validation, and the SI model
 //!   assembled from it;
-//! - [`report`]: the derived quantities printed by `nanopush model`.
+//! - [`report`]: the derived quantities printed by `nanopush model`;
+//! - [`push_run`]: a push at constant speed, sampled into a trace (`nanopush simulate`).
 //!
 //! ```
 //! let scene = nanopush::scene::Scene::default_scene();
@@ -14,5 +15,6 @@
 #![deny(missing_docs)]
 
 pub mod physics;
+pub mod push_run;
 pub mod report;
 pub mod scene;

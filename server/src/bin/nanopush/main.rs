@@ -1,6 +1,7 @@
 //! `nanopush`: the command line of the nanopush model and (later) server.
 
 mod model_cmd;
+mod simulate_cmd;
 mod units;
 
 use std::path::PathBuf;
@@ -22,6 +23,8 @@ struct Cli {
 enum Command {
     /// Print the scene's derived quantities (Eq 9-18), or its force curve (Fig 3).
     Model(model_cmd::ModelArgs),
+    /// Simulate a push at constant stage speed (Eq 17) and report the result and the work done.
+    Simulate(simulate_cmd::SimulateArgs),
 }
 
 /// Loads `--scene FILE`, or the embedded default scene; prints its warnings to stderr.
@@ -54,6 +57,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Model(args) => model_cmd::run(&args),
+        Command::Simulate(args) => simulate_cmd::run(&args),
     };
     match result {
         Ok(text) => print_stdout(&text),

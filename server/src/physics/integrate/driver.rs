@@ -26,6 +26,10 @@ pub struct Integrator {
     err_old: f64,
     last_rejected: bool,
     work: Work,
+    /// `(t, y)` where `work.*_next` and `g_next` are valid: the end of the last call, when it
+    /// ended at its end time. A call that starts there skips re-evaluating them.
+    cached_at: Option<(f64, [f64; MAX_DIM])>,
+    g_next: [f64; MAX_EVENTS],
 }
 
 impl Integrator {
@@ -39,13 +43,19 @@ impl Integrator {
             err_old: 1.0,
             last_rejected: false,
             work: Work::new(method),
+            cached_at: None,
+            g_next: [f64::NAN; MAX_EVENTS],
         }
     }
 
-    /// Forgets the step-size history (after a discontinuity such as an event).
+    /// Forgets the step-size history and the derivatives kept from the last call: call it
+    /// whenever the problem changes (an event switched the mode, a parameter changed). A call
+    /// that starts where the previous one ended otherwise reuses `f`, `∂f/∂t`, `J` and the
+    /// switching functions evaluated there, assuming the same problem.
     pub fn reset_step(&mut self) {
         self.h_old = 0.0;
         self.err_old = 1.0;
+        self.cached_at = None;
     }
 
     /// The step size the next step will try (s).
@@ -102,10 +112,16 @@ impl Integrator {
         for i in 0..n {
             self.work.mass[i] = p.mass(i);
         }
+        // Whether f, ∂f/∂t and J at (t, y) are already in the work arrays (computed at the end of
+        // the previous accepted step, possibly in the previous call).
+        let mut have_start = matches!(&self.cached_at, Some((tc, yc)) if *tc == *t && yc[..n] == y[..n]);
         let mut g0 = [f64::NAN; MAX_EVENTS];
-        if ne > 0 {
+        if have_start {
+            g0 = self.g_next;
+        } else if ne > 0 {
             events.eval(*t, y, &mut g0);
         }
+        self.cached_at = None;
         let result = loop {
             let remaining = t_end - *t;
             if remaining <= 1e-14 * t_end.abs().max(1e-300) || remaining <= 0.0 {
@@ -120,11 +136,17 @@ impl Integrator {
             // Data at the start of the step: f, ∂f/∂t, J (reused by every attempt).
             let w = &mut self.work;
             w.y0[..n].copy_from_slice(&y[..n]);
-            p.rhs(*t, &w.y0[..n], &mut w.f0[..n]);
-            p.time_derivative(*t, &w.y0[..n], &mut w.ft[..n]);
-            p.jacobian(*t, &w.y0[..n], &mut w.jac[..n * n]);
-            st.rhs_evals += 1;
-            st.jac_evals += 1;
+            if have_start {
+                w.f0[..n].copy_from_slice(&w.f_next[..n]);
+                w.ft[..n].copy_from_slice(&w.ft_next[..n]);
+                w.jac[..n * n].copy_from_slice(&w.jac_next[..n * n]);
+            } else {
+                p.rhs(*t, &w.y0[..n], &mut w.f0[..n]);
+                p.time_derivative(*t, &w.y0[..n], &mut w.ft[..n]);
+                p.jacobian(*t, &w.y0[..n], &mut w.jac[..n * n]);
+                st.rhs_evals += 1;
+                st.jac_evals += 1;
+            }
             for i in 0..n {
                 w.scale[i] = self.opts.atol * p.scale(i) + self.opts.rtol * w.y0[i].abs();
             }
@@ -198,10 +220,27 @@ impl Integrator {
             st.error_sum += err;
             self.h = h_new;
             let t1 = *t + h;
+            // The next step's start data, evaluated once here so the events can use it too.
+            {
+                let w = &mut self.work;
+                p.rhs(t1, &w.y1[..n], &mut w.f_next[..n]);
+                p.time_derivative(t1, &w.y1[..n], &mut w.ft_next[..n]);
+                p.jacobian(t1, &w.y1[..n], &mut w.jac_next[..n * n]);
+                st.rhs_evals += 1;
+                st.jac_evals += 1;
+            }
             // Events: the earliest switching function that went from > 0 to ≤ 0.
             if ne > 0 {
                 let mut g1 = [f64::NAN; MAX_EVENTS];
-                events.eval(t1, &self.work.y1[..n], &mut g1);
+                let w = &self.work;
+                events.eval_at_step(
+                    t1,
+                    &w.y1[..n],
+                    &w.f_next[..n],
+                    &w.ft_next[..n],
+                    &w.jac_next[..n * n],
+                    &mut g1,
+                );
                 let mut first: Option<(usize, f64)> = None;
                 for k in 0..ne {
                     if g0[k] > 0.0 && g1[k] <= 0.0 {
@@ -223,7 +262,14 @@ impl Integrator {
             }
             *t = if t_end - t1 < 1e-14 * t_end.abs() { t_end } else { t1 };
             y[..n].copy_from_slice(&self.work.y1[..n]);
+            have_start = true;
         };
+        if result == Ok(Outcome::Reached) && have_start {
+            let mut yc = [0.0; MAX_DIM];
+            yc[..n].copy_from_slice(&y[..n]);
+            self.cached_at = Some((*t, yc));
+            self.g_next = g0;
+        }
         st.wall_time = start.elapsed().as_secs_f64();
         result.map(|o| (o, st))
     }

@@ -36,6 +36,12 @@ pub trait Events {
     fn count(&self) -> usize;
     /// Values into `out[..count]`; `f64::NAN` marks one that does not apply now.
     fn eval(&self, t: f64, y: &[f64], out: &mut [f64]);
+    /// The same at the end of an accepted step, where the driver has already evaluated `f`,
+    /// `∂f/∂t` and the Jacobian (column-major) for the next step: switching functions that need
+    /// derivatives can reuse them.
+    fn eval_at_step(&self, t: f64, y: &[f64], _f: &[f64], _ft: &[f64], _jac: &[f64], out: &mut [f64]) {
+        self.eval(t, y, out);
+    }
 }
 
 /// No events.

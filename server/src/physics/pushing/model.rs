@@ -191,6 +191,12 @@ impl PushModel {
         }
     }
 
+    /// The particle's vertical displacement when its z DOF is off: its equilibrium indentation
+    /// under the substrate attraction (m, negative = into the substrate).
+    pub fn frozen_particle_z(&self) -> f64 {
+        self.z_fixed
+    }
+
     /// State dimension.
     pub fn len(&self) -> usize {
         self.layout.len
@@ -293,11 +299,24 @@ impl PushModel {
     /// becomes negative. Slip→stick needs the slip rate, which a quasi-static DOF does not carry:
     /// then it is `None` and the integrator decides from the sign of the force balance.
     pub fn switching(&self, t: f64, x: &[f64], mode: &Mode) -> Switching {
+        let rates = if Self::slipping(mode) {
+            self.contact_rates(t, x, mode)
+        } else {
+            None
+        };
+        self.switching_with(t, x, mode, rates)
+    }
+
+    /// Whether a contact slips in this mode (then the switching functions need the rates).
+    pub fn slipping(mode: &Mode) -> bool {
+        matches!(mode.substrate, Tangential::Slip { .. }) || matches!(mode.tip, Tangential::Slip { .. })
+    }
+
+    /// [`Self::switching`] with the contact rates `(ṡ_as, ξ̇)` already known.
+    pub fn switching_with(&self, t: f64, x: &[f64], mode: &Mode, rates: Option<(f64, f64)>) -> Switching {
         let pr = self.probe(t, x, mode);
         let p = &self.p;
         let a0 = p.interactions.a0;
-        let slipping = matches!(mode.substrate, Tangential::Slip { .. }) || matches!(mode.tip, Tangential::Slip { .. });
-        let rates = if slipping { self.contact_rates(t, x, mode) } else { None };
         let tangential = |t: Tangential, mu_s: f64, load: f64, force: f64, rate: Option<f64>| match t {
             Tangential::Stick { .. } => Some(mu_s * load.max(0.0) - force.abs()),
             Tangential::Slip { direction } => rate.map(|r| direction * r),
@@ -428,8 +447,20 @@ impl PushModel {
     /// `false` when the constraint Jacobian is singular.
     pub fn state_rate(&self, t: f64, x: &[f64], mode: &Mode, out: &mut [f64]) -> bool {
         let n = self.len();
+        let mut f = [0.0; MAX_STATES];
+        let mut jac = [0.0; MAX_STATES * MAX_STATES];
+        let mut ft = [0.0; MAX_STATES];
+        self.rhs(t, x, mode, &mut f);
+        self.jacobian(t, x, mode, &mut jac);
+        self.time_derivative(t, x, mode, &mut ft);
+        self.state_rate_from(&f[..n], &ft[..n], &jac[..n * n], out)
+    }
+
+    /// [`Self::state_rate`] from `f`, `∂f/∂t` and `J` already evaluated at the state.
+    pub fn state_rate_from(&self, f: &[f64], ft: &[f64], jac: &[f64], out: &mut [f64]) -> bool {
+        let n = self.len();
         let mass = self.mass_diagonal();
-        self.rhs(t, x, mode, out);
+        out[..n].copy_from_slice(&f[..n]);
         let mut alg = [0usize; MAX_STATES];
         let mut m = 0;
         for i in 0..n {
@@ -441,10 +472,6 @@ impl PushModel {
         if m == 0 {
             return true;
         }
-        let mut jac = [0.0; MAX_STATES * MAX_STATES];
-        let mut ft = [0.0; MAX_STATES];
-        self.jacobian(t, x, mode, &mut jac);
-        self.time_derivative(t, x, mode, &mut ft);
         let mut a = [0.0; MAX_STATES * MAX_STATES];
         let mut b = [0.0; MAX_STATES];
         for (r, &i) in alg[..m].iter().enumerate() {
@@ -473,17 +500,22 @@ impl PushModel {
     /// Rates of the two tangential contact coordinates `(ṡ_as, ξ̇)` (m/s), exact for dynamic
     /// and quasi-static DOFs alike: the probe is differentiated along `(ẋ, 1)`.
     pub fn contact_rates(&self, t: f64, x: &[f64], mode: &Mode) -> Option<(f64, f64)> {
-        let n = self.len();
         let mut xdot = [0.0; MAX_STATES];
         if !self.state_rate(t, x, mode, &mut xdot) {
             return None;
         }
+        Some(self.contact_rates_along(t, x, mode, &xdot))
+    }
+
+    /// The contact rates along a known `ẋ`.
+    pub fn contact_rates_along(&self, t: f64, x: &[f64], mode: &Mode, xdot: &[f64]) -> (f64, f64) {
+        let n = self.len();
         let mut xd = [Dual::default(); MAX_STATES];
         for i in 0..n {
             xd[i] = Dual::new(x[i], xdot[i]);
         }
         let (_, pr) = self.eval(Dual::var(t), &xd[..n], mode);
-        Some((pr.contact_as.eps, pr.contact_ta.eps))
+        (pr.contact_as.eps, pr.contact_ta.eps)
     }
 
     /// The measured deflection `ζ_z'` (m) at a state.

@@ -47,10 +47,24 @@ impl Events for InMode<'_> {
         SWITCHES.len()
     }
     fn eval(&self, t: f64, y: &[f64], out: &mut [f64]) {
-        let s = self.model.switching(t, y, &self.mode);
-        for (o, v) in out.iter_mut().zip([s.substrate, s.tip, s.meniscus, s.tip_contact]) {
-            *o = v.unwrap_or(f64::NAN);
-        }
+        write_switching(self.model.switching(t, y, &self.mode), out);
+    }
+    fn eval_at_step(&self, t: f64, y: &[f64], f: &[f64], ft: &[f64], jac: &[f64], out: &mut [f64]) {
+        let rates = if PushModel::slipping(&self.mode) {
+            let mut xdot = [0.0; MAX_STATES];
+            self.model
+                .state_rate_from(f, ft, jac, &mut xdot)
+                .then(|| self.model.contact_rates_along(t, y, &self.mode, &xdot))
+        } else {
+            None
+        };
+        write_switching(self.model.switching_with(t, y, &self.mode, rates), out);
+    }
+}
+
+fn write_switching(s: crate::physics::pushing::Switching, out: &mut [f64]) {
+    for (o, v) in out.iter_mut().zip([s.substrate, s.tip, s.meniscus, s.tip_contact]) {
+        *o = v.unwrap_or(f64::NAN);
     }
 }
 
@@ -67,7 +81,7 @@ pub struct TickReport {
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum SimulationError {
     /// The integrator failed.
-    #[error("integration failed: {0}")]
+    #[error("integration failed")]
     Integrate(#[from] IntegrateError),
     /// Mode switches chatter (more than the limit inside one call): the friction law cannot
     /// decide between stick and slip at this resolution.

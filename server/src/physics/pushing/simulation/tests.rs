@@ -40,4 +40,3 @@ fn paper_scene_runs_a_few_ticks() {
     let n = sim.model.len();
     assert!(sim.x[..n].iter().all(|v| v.is_finite()));
 }
-

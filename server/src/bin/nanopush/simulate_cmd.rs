@@ -1,0 +1,190 @@
+//! `nanopush simulate`.
+
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::Args;
+use nanopush::physics::integrate::{Method, Options};
+use nanopush::physics::pushing::PushModel;
+use nanopush::push_run::{PushRun, run_push};
+use nanopush_proto::simulate::SimulateReport;
+
+use crate::units::eng;
+
+/// Arguments of `nanopush simulate`.
+#[derive(Args, Debug)]
+pub struct SimulateArgs {
+    /// Scene file (TOML); the embedded paper scene when absent.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Simulated time (s), in (0, 100].
+    #[arg(long, default_value_t = 0.05)]
+    duration: f64,
+    /// Integration method: rodas4, trbdf2 or implicit-euler.
+    #[arg(long, default_value = "rodas4")]
+    method: String,
+    /// Relative tolerance, in [1e-12, 1e-1].
+    #[arg(long, default_value_t = 1e-6)]
+    rtol: f64,
+    /// Trace sample interval (s), in [1e-7, duration].
+    #[arg(long, default_value_t = 1e-4)]
+    sample: f64,
+    /// Write the trace (CSV) here.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Print one JSON object (SI units) instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+fn check(a: &SimulateArgs) -> anyhow::Result<Method> {
+    let method = Method::parse(&a.method).with_context(|| {
+        format!(
+            "--method {}: unknown; allowed: rodas4, trbdf2, implicit-euler",
+            a.method
+        )
+    })?;
+    if !(a.duration.is_finite() && a.duration > 0.0 && a.duration <= 100.0) {
+        bail!("--duration {} s is out of range; allowed: (0, 100] s", a.duration);
+    }
+    if !(a.rtol.is_finite() && (1e-12..=1e-1).contains(&a.rtol)) {
+        bail!("--rtol {} is out of range; allowed: [1e-12, 1e-1]", a.rtol);
+    }
+    if !(a.sample.is_finite() && a.sample >= 1e-7 && a.sample <= a.duration) {
+        bail!(
+            "--sample {} s is out of range; allowed: [1e-7, duration = {}] s",
+            a.sample,
+            a.duration
+        );
+    }
+    if a.duration / a.sample > 2e6 {
+        bail!(
+            "--duration/--sample = {:.0} trace rows; allowed: at most 2000000",
+            a.duration / a.sample
+        );
+    }
+    Ok(method)
+}
+
+/// Writes the trace CSV through a temporary file renamed into place, so a failure never leaves
+/// a partial file under the requested name.
+fn write_trace(path: &PathBuf, run: &PushRun) -> anyhow::Result<()> {
+    let tmp = path.with_extension("csv.partial");
+    {
+        let file = std::fs::File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
+        let mut w = std::io::BufWriter::new(file);
+        writeln!(
+            w,
+            "t_s,stage_y_m,particle_y_m,particle_z_m,theta_rad,zeta_y_m,zeta_z_m,normal_ta_n,friction_ta_n,load_as_n,friction_as_n,phase"
+        )?;
+        for r in &run.trace {
+            writeln!(
+                w,
+                "{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{}",
+                r.t,
+                r.stage_y,
+                r.particle_y,
+                r.particle_z,
+                r.theta,
+                r.zeta_y,
+                r.zeta_z,
+                r.normal_ta,
+                r.friction_ta,
+                r.load_as,
+                r.friction_as,
+                r.phase
+            )?;
+        }
+        w.flush()?;
+    }
+    std::fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))?;
+    Ok(())
+}
+
+/// Runs `nanopush simulate`; returns what to print on stdout.
+pub fn run(a: &SimulateArgs) -> anyhow::Result<String> {
+    let method = check(a)?;
+    let scene = crate::load_scene(a.scene.as_ref())?;
+    let model = PushModel::new(scene.push_params());
+    let speed = model.p.speed;
+    let run = run_push(model.clone(), method, Options::with_rtol(a.rtol), a.duration, a.sample)
+        .context("simulating the push")?;
+    // The estimated global error: a rerun at a hundredth of the tolerance.
+    let fine = run_push(
+        model,
+        method,
+        Options::with_rtol((a.rtol * 1e-2).max(1e-13)),
+        a.duration,
+        a.duration,
+    )
+    .context("simulating the reference push at rtol/100")?;
+    if let Some(path) = &a.out {
+        write_trace(path, &run)?;
+    }
+    let st = &run.stats;
+    let report = SimulateReport {
+        schema: "nanopush.simulate".into(),
+        version: nanopush_proto::VERSION,
+        scene: scene.file.name.clone(),
+        method: method.name().into(),
+        rtol: a.rtol,
+        duration: a.duration,
+        speed,
+        final_particle_y: run.final_particle_y(),
+        final_stage: run.trace.last().map_or(0.0, |r| r.stage_y),
+        steady_zeta_z: run.steady_zeta_z(),
+        shearing_time: run.shearing_time,
+        final_phase: run.final_phase.into(),
+        steps: st.steps,
+        rejected: st.rejected,
+        jacobians: st.jac_evals,
+        factorizations: st.factorizations,
+        events: st.events,
+        estimated_error_y: (run.final_particle_y() - fine.final_particle_y()).abs(),
+        estimated_error_zeta_z: (run.final_zeta_z() - fine.final_zeta_z()).abs(),
+        wall_time: st.wall_time,
+        real_time_factor: a.duration / st.wall_time.max(1e-12),
+        trace_rows: if a.out.is_some() { run.trace.len() } else { 0 },
+    };
+    let mut out = String::new();
+    if a.json {
+        writeln!(out, "{}", serde_json::to_string(&report)?)?;
+        return Ok(out);
+    }
+    let r = &report;
+    writeln!(
+        out,
+        "Push in scene \"{}\": {} at V = {}, {} with rtol {:e}",
+        r.scene,
+        eng(r.duration, "s"),
+        eng(r.speed, "m/s"),
+        r.method,
+        r.rtol
+    )?;
+    let rows: Vec<(&str, String)> = vec![
+        ("final particle y", eng(r.final_particle_y, "m")),
+        ("final stage travel", eng(r.final_stage, "m")),
+        ("steady ζ_z (last 20 %)", eng(r.steady_zeta_z, "m")),
+        (
+            "shearing time t*",
+            r.shearing_time.map_or("never sheared".into(), |t| eng(t, "s")),
+        ),
+        ("final phase", r.final_phase.clone()),
+        ("steps / rejected", format!("{} / {}", r.steps, r.rejected)),
+        ("Jacobians / LUs", format!("{} / {}", r.jacobians, r.factorizations)),
+        ("mode switches", r.events.to_string()),
+        ("est. global error y", eng(r.estimated_error_y, "m")),
+        ("est. global error ζ_z", eng(r.estimated_error_zeta_z, "m")),
+        ("wall time", eng(r.wall_time, "s")),
+        ("real-time factor", format!("{:.1}", r.real_time_factor)),
+    ];
+    for (k, v) in rows {
+        writeln!(out, "  {k:<24} {v:>20}")?;
+    }
+    if let Some(path) = &a.out {
+        writeln!(out, "  trace: {} rows in {}", r.trace_rows, path.display())?;
+    }
+    Ok(out)
+}
