@@ -14,6 +14,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod accuracy;
 pub mod model;
 pub mod simulate;
 

@@ -5,6 +5,7 @@
 //! - [`scene`]: the TOML scene format (units in field names), its validation, and the SI model
 //!   assembled from it;
 //! - [`report`]: the derived quantities printed by `nanopush model`;
+//! - [`accuracy`]: the work-precision report (`nanopush accuracy`);
 //! - [`push_run`]: a push at constant speed, sampled into a trace (`nanopush simulate`).
 //!
 //! ```
@@ -14,6 +15,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod accuracy;
 pub mod physics;
 pub mod push_run;
 pub mod report;

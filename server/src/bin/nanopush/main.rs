@@ -1,5 +1,6 @@
 //! `nanopush`: the command line of the nanopush model and (later) server.
 
+mod accuracy_cmd;
 mod model_cmd;
 mod simulate_cmd;
 mod units;
@@ -25,6 +26,8 @@ enum Command {
     Model(model_cmd::ModelArgs),
     /// Simulate a push at constant stage speed (Eq 17) and report the result and the work done.
     Simulate(simulate_cmd::SimulateArgs),
+    /// Error against run time for each method and tolerance (work-precision report).
+    Accuracy(accuracy_cmd::AccuracyArgs),
 }
 
 /// Loads `--scene FILE`, or the embedded default scene; prints its warnings to stderr.
@@ -58,6 +61,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Model(args) => model_cmd::run(&args),
         Command::Simulate(args) => simulate_cmd::run(&args),
+        Command::Accuracy(args) => accuracy_cmd::run(&args),
     };
     match result {
         Ok(text) => print_stdout(&text),

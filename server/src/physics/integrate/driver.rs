@@ -67,7 +67,7 @@ impl Integrator {
         let w = &self.work;
         let mut sum = 0.0;
         for i in 0..n {
-            let sc = self.opts.atol * w.scale[i] + self.opts.rtol * w.y0[i].abs().max(w.y1[i].abs());
+            let sc = w.abs_tol[i] + self.opts.rtol * w.y0[i].abs().max(w.y1[i].abs());
             sum += (w.err[i] / sc).powi(2);
         }
         (sum / n as f64).sqrt()
@@ -79,8 +79,7 @@ impl Integrator {
         let mut d = 0.0f64;
         for i in 0..n {
             if w.mass[i] != 0.0 {
-                let sc = self.opts.atol * w.scale[i] + self.opts.rtol * w.y0[i].abs();
-                d += (w.f0[i] / sc).powi(2);
+                d += (w.f0[i] / w.scale[i]).powi(2);
             }
         }
         let d = (d / n as f64).sqrt();
@@ -148,7 +147,8 @@ impl Integrator {
                 st.jac_evals += 1;
             }
             for i in 0..n {
-                w.scale[i] = self.opts.atol * p.scale(i) + self.opts.rtol * w.y0[i].abs();
+                w.abs_tol[i] = self.opts.atol * p.scale(i);
+                w.scale[i] = w.abs_tol[i] + self.opts.rtol * w.y0[i].abs();
             }
             if !w.f0[..n].iter().all(|v| v.is_finite()) {
                 break Err(IntegrateError::NonFinite { t: *t });

@@ -88,6 +88,8 @@ pub(crate) struct Work {
     tmp2: Vector,
     /// Error-norm scale `atol·scaleᵢ + rtol·|y₀ᵢ|`, set by the driver; the Newton test uses it.
     pub scale: Vector,
+    /// The absolute part alone, `atol·scaleᵢ`.
+    pub abs_tol: Vector,
     // Dense output: Rodas4 uses (cont3, cont4); TR-BDF2 the stage at γh; implicit Euler none.
     cont3: Vector,
     cont4: Vector,
@@ -198,6 +200,7 @@ impl Work {
             tmp: [0.0; MAX_DIM],
             tmp2: [0.0; MAX_DIM],
             scale: [1.0; MAX_DIM],
+            abs_tol: [1.0; MAX_DIM],
             cont3: [0.0; MAX_DIM],
             cont4: [0.0; MAX_DIM],
             method,

@@ -81,7 +81,7 @@ pub struct TickReport {
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum SimulationError {
     /// The integrator failed.
-    #[error("integration failed")]
+    #[error(transparent)]
     Integrate(#[from] IntegrateError),
     /// Mode switches chatter (more than the limit inside one call): the friction law cannot
     /// decide between stick and slip at this resolution.

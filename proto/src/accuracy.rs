@@ -1,0 +1,68 @@
+//! The document of `nanopush accuracy --json`.
+
+use serde::{Deserialize, Serialize};
+
+/// One method at one tolerance on one problem.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AccuracyPoint {
+    /// `push` (the scene), `van-der-pol` or `robertson`.
+    pub problem: String,
+    /// `rodas4`, `trbdf2` or `implicit-euler`.
+    pub method: String,
+    /// Relative tolerance.
+    pub rtol: f64,
+    /// Final-time error: m for the push (largest position error), relative for the classical
+    /// problems (largest component); `null` when the run failed.
+    pub final_error: Option<f64>,
+    /// Trajectory L2 error of the push (m); `null` for the classical problems.
+    pub trajectory_error: Option<f64>,
+    /// The integrator's accumulated local error estimate in the same units.
+    pub estimated_error: Option<f64>,
+    /// Median wall time (s).
+    pub wall_time: f64,
+    /// Accepted steps.
+    pub steps: u64,
+    /// Rejected steps.
+    pub rejected: u64,
+    /// Why the run failed, when it did.
+    pub failure: Option<String>,
+}
+
+/// What leaving out inertia costs: the scene as given against all DOFs dynamic.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct QuasiStaticCost {
+    /// Simulated window (s).
+    pub duration: f64,
+    /// Largest difference of particle y and ζ_z at the end (m); `null` if the full model failed.
+    pub final_difference: Option<f64>,
+    /// Wall time of the scene as given (s).
+    pub reduced_wall_time: f64,
+    /// Wall time of the full model (s).
+    pub full_wall_time: f64,
+    /// Steps of the full model.
+    pub full_steps: u64,
+    /// Why the full model failed, when it did.
+    pub failure: Option<String>,
+}
+
+/// `nanopush accuracy --json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AccuracyReport {
+    /// Always `"nanopush.accuracy"`.
+    pub schema: String,
+    /// [`crate::VERSION`].
+    pub version: u32,
+    /// Scene name.
+    pub scene: String,
+    /// Simulated push duration (s).
+    pub duration: f64,
+    /// Difference between the reference (Rodas4, rtol 1e-12) and its cross-check (TR-BDF2,
+    /// rtol 1e-10) at the end (m).
+    pub reference_crosscheck: f64,
+    /// Repetitions per point (the wall time is their median).
+    pub repetitions: usize,
+    /// All points.
+    pub points: Vec<AccuracyPoint>,
+    /// The cost of the quasi-static reduction.
+    pub quasi_static_cost: Option<QuasiStaticCost>,
+}

@@ -1,0 +1,166 @@
+//! The work-precision report: error against run time for each method and tolerance, on the
+//! scene's push and on two classical stiff problems with published references.
+//!
+//! Error norms (all against a reference solution):
+//! - **final**: the largest absolute difference of the position states (m) at the end time;
+//! - **trajectory L2**: the RMS over the samples (every 0.1 ms) of the particle's y and the
+//!   measured deflection ζ_z, in m.
+//!
+//! The reference is the same model with Rodas4 at `rtol = 1e-12` (the finest tolerance at which
+//! the quasi-static scenes still integrate cleanly in double precision), cross-checked against
+//! TR-BDF2 at `rtol = 1e-10`; the report prints their difference.
+
+use std::time::Instant;
+
+use crate::physics::integrate::test_problems::{Robertson, VanDerPol};
+use crate::physics::integrate::{Integrator, Method, NoEvents, Options, Problem};
+use crate::physics::pushing::PushModel;
+use crate::push_run::{PushRun, run_push};
+
+/// One method at one tolerance.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Point {
+    /// Problem name.
+    pub problem: String,
+    /// Method.
+    pub method: Method,
+    /// Relative tolerance.
+    pub rtol: f64,
+    /// Final-time error (problem units; m for the push).
+    pub final_error: f64,
+    /// Trajectory L2 error (m; NaN for the reference problems).
+    pub trajectory_error: f64,
+    /// The integrator's own estimate: the sum of its accepted local error estimates times the
+    /// tolerance scale (a bound-like figure to compare with `final_error`).
+    pub estimated_error: f64,
+    /// Median wall time of the repetitions (s).
+    pub wall_time: f64,
+    /// Accepted steps.
+    pub steps: u64,
+    /// Rejected steps.
+    pub rejected: u64,
+    /// Why the run failed, if it did.
+    pub failure: Option<String>,
+}
+
+/// Tolerances of the report.
+pub const TOLERANCES: [f64; 9] = [1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10];
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[v.len() / 2]
+}
+
+fn position_rows(model: &PushModel) -> Vec<usize> {
+    let m = model.mass_diagonal();
+    let l = &model.layout;
+    let mut rows = vec![l.zeta_y.pos, l.zeta_z.pos, l.particle_y.pos];
+    rows.extend(l.particle_z.map(|s| s.pos));
+    rows.extend(l.stage.map(|s| s.pos));
+    let _ = m;
+    rows
+}
+
+/// Differences of two runs of the same model: (final, trajectory L2).
+pub fn push_errors(model: &PushModel, run: &PushRun, reference: &PushRun) -> (f64, f64) {
+    let fin = position_rows(model).into_iter().map(|i| (run.final_state[i] - reference.final_state[i]).abs()).fold(0.0, f64::max);
+    let n = run.trace.len().min(reference.trace.len());
+    let sum: f64 = run.trace[..n]
+        .iter()
+        .zip(&reference.trace[..n])
+        .map(|(a, b)| (a.particle_y - b.particle_y).powi(2) + (a.zeta_z - b.zeta_z).powi(2))
+        .sum();
+    (fin, (sum / (2 * n.max(1)) as f64).sqrt())
+}
+
+/// The push reference and its cross-check difference (final-time, m).
+pub fn push_reference(model: &PushModel, duration: f64) -> Result<(PushRun, f64), String> {
+    let r = run_push(model.clone(), Method::Rodas4, Options::with_rtol(1e-12), duration, 1e-4).map_err(|e| format!("reference (rodas4, rtol 1e-12): {e}"))?;
+    let c = run_push(model.clone(), Method::TrBdf2, Options::with_rtol(1e-10), duration, 1e-4).map_err(|e| format!("cross-check (trbdf2, rtol 1e-10): {e}"))?;
+    let (fin, _) = push_errors(model, &c, &r);
+    Ok((r, fin))
+}
+
+/// Work-precision points of the push for every method × tolerance, `reps` repetitions each.
+pub fn push_points(name: &str, model: &PushModel, duration: f64, reference: &PushRun, reps: usize, max_steps: u64) -> Vec<Point> {
+    let mut out = Vec::new();
+    for method in Method::ALL {
+        for rtol in TOLERANCES {
+            let opts = Options { max_steps, ..Options::with_rtol(rtol) };
+            let mut times = Vec::new();
+            let mut last = None;
+            for _ in 0..reps.max(1) {
+                let start = Instant::now();
+                let r = run_push(model.clone(), method, opts, duration, 1e-4);
+                times.push(start.elapsed().as_secs_f64());
+                last = Some(r);
+            }
+            let point = match last.expect("at least one repetition") {
+                Ok(run) => {
+                    let (fin, traj) = push_errors(model, &run, reference);
+                    Point {
+                        problem: name.into(),
+                        method,
+                        rtol,
+                        final_error: fin,
+                        trajectory_error: traj,
+                        estimated_error: run.stats.error_sum * rtol * 1e-9,
+                        wall_time: median(times),
+                        steps: run.stats.steps,
+                        rejected: run.stats.rejected,
+                        failure: None,
+                    }
+                }
+                Err(e) => Point { problem: name.into(), method, rtol, final_error: f64::NAN, trajectory_error: f64::NAN, estimated_error: f64::NAN, wall_time: median(times), steps: 0, rejected: 0, failure: Some(e.to_string()) },
+            };
+            out.push(point);
+        }
+    }
+    out
+}
+
+fn reference_problem<P: Problem>(name: &str, p: &P, y0: &[f64], t_end: f64, reference: &[f64], reps: usize, max_steps: u64) -> Vec<Point> {
+    let mut out = Vec::new();
+    for method in Method::ALL {
+        for rtol in TOLERANCES {
+            let opts = Options { max_steps, ..Options::with_rtol(rtol) };
+            let mut times = Vec::new();
+            let mut result = None;
+            for _ in 0..reps.max(1) {
+                let mut it = Integrator::new(method, opts);
+                let mut y = y0.to_vec();
+                let mut t = 0.0;
+                let start = Instant::now();
+                let r = it.advance(p, &NoEvents, &mut t, &mut y, t_end);
+                times.push(start.elapsed().as_secs_f64());
+                result = Some((r, y));
+            }
+            let (r, y) = result.expect("at least one repetition");
+            let point = match r {
+                Ok((_, st)) => Point {
+                    problem: name.into(),
+                    method,
+                    rtol,
+                    final_error: y.iter().zip(reference).map(|(a, b)| ((a - b) / b.abs().max(1e-300)).abs()).fold(0.0, f64::max),
+                    trajectory_error: f64::NAN,
+                    estimated_error: st.error_sum * rtol,
+                    wall_time: median(times),
+                    steps: st.steps,
+                    rejected: st.rejected,
+                    failure: None,
+                },
+                Err(e) => Point { problem: name.into(), method, rtol, final_error: f64::NAN, trajectory_error: f64::NAN, estimated_error: f64::NAN, wall_time: median(times), steps: 0, rejected: 0, failure: Some(e.to_string()) },
+            };
+            out.push(point);
+        }
+    }
+    out
+}
+
+/// Van der Pol (ε = 1e-6, t = 2) and Robertson (t = 1e11) against their published references;
+/// the final error is the largest relative error of a component.
+pub fn classical_points(reps: usize, max_steps: u64) -> Vec<Point> {
+    let mut out = reference_problem("van-der-pol", &VanDerPol { eps: 1e-6 }, &VanDerPol::Y0, VanDerPol::T_END, &VanDerPol::REFERENCE, reps, max_steps);
+    out.extend(reference_problem("robertson", &Robertson, &Robertson::Y0, Robertson::T_END, &Robertson::REFERENCE, reps, max_steps));
+    out
+}

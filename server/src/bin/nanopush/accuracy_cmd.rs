@@ -1,0 +1,190 @@
+//! `nanopush accuracy`: error against run time.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use clap::Args;
+use nanopush::accuracy::{Point, classical_points, push_errors, push_points, push_reference};
+use nanopush::physics::integrate::{Method, Options};
+use nanopush::physics::pushing::{Dof, PushModel};
+use nanopush::push_run::run_push;
+use nanopush_proto::accuracy::{AccuracyPoint, AccuracyReport, QuasiStaticCost};
+use plotters::prelude::*;
+
+/// Arguments of `nanopush accuracy`.
+#[derive(Args, Debug)]
+pub struct AccuracyArgs {
+    /// Scene file (TOML); the embedded paper scene when absent.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Simulated push (s), in (0, 1].
+    #[arg(long, default_value_t = 0.02)]
+    duration: f64,
+    /// Repetitions per point (median wall time), in [1, 50].
+    #[arg(long, default_value_t = 3)]
+    reps: usize,
+    /// Where to write accuracy.csv and the SVG plots.
+    #[arg(long, default_value = "out/accuracy")]
+    out: PathBuf,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    json: bool,
+    /// Skip the full-dynamics comparison (it resolves nanosecond modes and takes a while).
+    #[arg(long)]
+    no_full_model: bool,
+}
+
+fn to_proto(p: &Point) -> AccuracyPoint {
+    let opt = |v: f64| v.is_finite().then_some(v);
+    AccuracyPoint {
+        problem: p.problem.clone(),
+        method: p.method.name().into(),
+        rtol: p.rtol,
+        final_error: opt(p.final_error),
+        trajectory_error: opt(p.trajectory_error),
+        estimated_error: opt(p.estimated_error),
+        wall_time: p.wall_time,
+        steps: p.steps,
+        rejected: p.rejected,
+        failure: p.failure.clone(),
+    }
+}
+
+fn plot(path: &Path, title: &str, unit: &str, points: &[&Point]) -> anyhow::Result<()> {
+    let ok: Vec<&&Point> = points.iter().filter(|p| p.final_error.is_finite() && p.final_error > 0.0 && p.wall_time > 0.0).collect();
+    if ok.is_empty() {
+        return Ok(());
+    }
+    let (tmin, tmax) = ok.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| (a.min(p.wall_time), b.max(p.wall_time)));
+    let (emin, emax) = ok.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| (a.min(p.final_error), b.max(p.final_error)));
+    let root = SVGBackend::new(path, (800, 560)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 22))
+        .margin(12)
+        .x_label_area_size(48)
+        .y_label_area_size(80)
+        .build_cartesian_2d((tmin * 0.7..tmax * 1.4).log_scale(), (emin * 0.3..emax * 3.0).log_scale())?;
+    chart.configure_mesh().x_desc("wall time (s), median").y_desc(format!("final error ({unit})")).x_label_formatter(&|v| format!("{v:.0e}")).y_label_formatter(&|v| format!("{v:.0e}")).draw()?;
+    for (i, m) in Method::ALL.into_iter().enumerate() {
+        let color = Palette99::pick(i).to_rgba();
+        let series: Vec<(f64, f64)> = ok.iter().filter(|p| p.method == m).map(|p| (p.wall_time, p.final_error)).collect();
+        if series.is_empty() {
+            continue;
+        }
+        chart.draw_series(LineSeries::new(series.clone(), color.stroke_width(2)))?.label(m.name()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        chart.draw_series(series.iter().map(|&(x, y)| Circle::new((x, y), 4, color.filled())))?;
+    }
+    chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+    root.present()?;
+    Ok(())
+}
+
+fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
+    let tmp = path.with_extension("partial");
+    std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("renaming to {}", path.display()))?;
+    Ok(())
+}
+
+/// Runs `nanopush accuracy`.
+pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
+    if !(a.duration.is_finite() && a.duration > 0.0 && a.duration <= 1.0) {
+        bail!("--duration {} s is out of range; allowed: (0, 1] s", a.duration);
+    }
+    if !(1..=50).contains(&a.reps) {
+        bail!("--reps {} is out of range; allowed: [1, 50]", a.reps);
+    }
+    let scene = crate::load_scene(a.scene.as_ref())?;
+    let model = PushModel::new(scene.push_params());
+    let max_steps = 2_000_000;
+    let (reference, crosscheck) = push_reference(&model, a.duration).map_err(anyhow::Error::msg)?;
+    let mut points = push_points("push", &model, a.duration, &reference, a.reps, max_steps);
+    points.extend(classical_points(a.reps, max_steps));
+
+    // The cost of the quasi-static reduction: the same scene with every DOF dynamic, over a
+    // short window (its nanosecond modes are resolved), against the reduced model's reference.
+    let qs = if a.no_full_model {
+        None
+    } else {
+        let window = a.duration.min(2e-3);
+        let mut full = model.p;
+        full.dofs.particle_y = Dof::Dynamic;
+        full.dofs.particle_z = Dof::Dynamic;
+        full.dofs.particle_rotation = Dof::Dynamic;
+        full.dofs.cantilever = Dof::Dynamic;
+        let full_model = PushModel::new(full);
+        let start = std::time::Instant::now();
+        let reduced = run_push(model.clone(), Method::Rodas4, Options::with_rtol(1e-6), window, window).context("reduced model")?;
+        let reduced_time = start.elapsed().as_secs_f64();
+        let start = std::time::Instant::now();
+        let fr = run_push(full_model, Method::Rodas4, Options { max_steps, ..Options::with_rtol(1e-6) }, window, window);
+        let full_time = start.elapsed().as_secs_f64();
+        Some(match fr {
+            Ok(f) => {
+                let d = (f.final_particle_y() - reduced.final_particle_y()).abs().max((f.final_zeta_z() - reduced.final_zeta_z()).abs());
+                QuasiStaticCost { duration: window, final_difference: Some(d), reduced_wall_time: reduced_time, full_wall_time: full_time, full_steps: f.stats.steps, failure: None }
+            }
+            Err(e) => QuasiStaticCost { duration: window, final_difference: None, reduced_wall_time: reduced_time, full_wall_time: full_time, full_steps: 0, failure: Some(e.to_string()) },
+        })
+    };
+    let _ = push_errors;
+
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let mut csv = String::from("problem,method,rtol,final_error,trajectory_error,estimated_error,wall_time_s,steps,rejected,failure\n");
+    for p in &points {
+        writeln!(csv, "{},{},{:e},{:e},{:e},{:e},{:e},{},{},{}", p.problem, p.method.name(), p.rtol, p.final_error, p.trajectory_error, p.estimated_error, p.wall_time, p.steps, p.rejected, p.failure.clone().unwrap_or_default().replace(',', ";"))?;
+    }
+    write_atomic(&a.out.join("accuracy.csv"), &csv)?;
+    for (problem, unit) in [("push", "m"), ("van-der-pol", "relative"), ("robertson", "relative")] {
+        let pts: Vec<&Point> = points.iter().filter(|p| p.problem == problem).collect();
+        let title = if problem == "push" { format!("{}: error vs run time", scene.file.name) } else { format!("{problem}: error vs run time") };
+        plot(&a.out.join(format!("{problem}.svg")), &title, unit, &pts).with_context(|| format!("plotting {problem}"))?;
+    }
+
+    let report = AccuracyReport {
+        schema: "nanopush.accuracy".into(),
+        version: nanopush_proto::VERSION,
+        scene: scene.file.name.clone(),
+        duration: a.duration,
+        reference_crosscheck: crosscheck,
+        repetitions: a.reps,
+        points: points.iter().map(to_proto).collect(),
+        quasi_static_cost: qs,
+    };
+    let mut out = String::new();
+    if a.json {
+        writeln!(out, "{}", serde_json::to_string(&report)?)?;
+        return Ok(out);
+    }
+    writeln!(out, "Work-precision of scene \"{}\" ({} s push) and two classical stiff problems", report.scene, a.duration)?;
+    writeln!(out, "Reference: rodas4 at rtol 1e-12; cross-check trbdf2 at rtol 1e-10 differs by {:.3e} m at the end.", crosscheck)?;
+    writeln!(out, "Errors: push in m (final: largest position error; traj: RMS of particle y and ζ_z over samples), classical problems relative.")?;
+    writeln!(out, "{:<12} {:<15} {:>7} {:>11} {:>11} {:>11} {:>11} {:>8} {:>6}", "problem", "method", "rtol", "final", "traj", "estimate", "time/s", "steps", "rej")?;
+    for p in &points {
+        writeln!(
+            out,
+            "{:<12} {:<15} {:>7.0e} {:>11.3e} {:>11.3e} {:>11.3e} {:>11.3e} {:>8} {:>6}{}",
+            p.problem,
+            p.method.name(),
+            p.rtol,
+            p.final_error,
+            p.trajectory_error,
+            p.estimated_error,
+            p.wall_time,
+            p.steps,
+            p.rejected,
+            p.failure.as_ref().map(|f| format!("  FAILED: {f}")).unwrap_or_default()
+        )?;
+    }
+    if let Some(q) = &report.quasi_static_cost {
+        match (&q.final_difference, &q.failure) {
+            (Some(d), _) => writeln!(out, "Quasi-static reduction over {} s: differs from the full 12-state model by {:.3e} m; {:.3e} s against {:.3e} s ({} steps) for the full model.", q.duration, d, q.reduced_wall_time, q.full_wall_time, q.full_steps)?,
+            (None, Some(f)) => writeln!(out, "Quasi-static reduction: the full model failed over {} s: {f}", q.duration)?,
+            _ => {}
+        }
+    }
+    writeln!(out, "Wrote {}/accuracy.csv and push.svg, van-der-pol.svg, robertson.svg.", a.out.display())?;
+    Ok(out)
+}
