@@ -63,7 +63,10 @@ fn position_rows(model: &PushModel) -> Vec<usize> {
 
 /// Differences of two runs of the same model: (final, trajectory L2).
 pub fn push_errors(model: &PushModel, run: &PushRun, reference: &PushRun) -> (f64, f64) {
-    let fin = position_rows(model).into_iter().map(|i| (run.final_state[i] - reference.final_state[i]).abs()).fold(0.0, f64::max);
+    let fin = position_rows(model)
+        .into_iter()
+        .map(|i| (run.final_state[i] - reference.final_state[i]).abs())
+        .fold(0.0, f64::max);
     let n = run.trace.len().min(reference.trace.len());
     let sum: f64 = run.trace[..n]
         .iter()
@@ -75,18 +78,36 @@ pub fn push_errors(model: &PushModel, run: &PushRun, reference: &PushRun) -> (f6
 
 /// The push reference and its cross-check difference (final-time, m).
 pub fn push_reference(model: &PushModel, duration: f64) -> Result<(PushRun, f64), String> {
-    let r = run_push(model.clone(), Method::Rodas4, Options::with_rtol(1e-12), duration, 1e-4).map_err(|e| format!("reference (rodas4, rtol 1e-12): {e}"))?;
-    let c = run_push(model.clone(), Method::TrBdf2, Options::with_rtol(1e-10), duration, 1e-4).map_err(|e| format!("cross-check (trbdf2, rtol 1e-10): {e}"))?;
+    let r = run_push(model.clone(), Method::Rodas4, Options::with_rtol(1e-12), duration, 1e-4)
+        .map_err(|e| format!("reference (rodas4, rtol 1e-12): {e}"))?;
+    let c = run_push(model.clone(), Method::TrBdf2, Options::with_rtol(1e-10), duration, 1e-4)
+        .map_err(|e| format!("cross-check (trbdf2, rtol 1e-10): {e}"))?;
     let (fin, _) = push_errors(model, &c, &r);
     Ok((r, fin))
 }
 
+/// The report's tolerances down to `min_rtol`.
+pub fn tolerances(min_rtol: f64) -> impl Iterator<Item = f64> {
+    TOLERANCES.into_iter().filter(move |&t| t >= min_rtol * (1.0 - 1e-9))
+}
+
 /// Work-precision points of the push for every method × tolerance, `reps` repetitions each.
-pub fn push_points(name: &str, model: &PushModel, duration: f64, reference: &PushRun, reps: usize, max_steps: u64) -> Vec<Point> {
+pub fn push_points(
+    name: &str,
+    model: &PushModel,
+    duration: f64,
+    reference: &PushRun,
+    reps: usize,
+    max_steps: u64,
+    min_rtol: f64,
+) -> Vec<Point> {
     let mut out = Vec::new();
     for method in Method::ALL {
-        for rtol in TOLERANCES {
-            let opts = Options { max_steps, ..Options::with_rtol(rtol) };
+        for rtol in tolerances(min_rtol) {
+            let opts = Options {
+                max_steps,
+                ..Options::with_rtol(rtol)
+            };
             let mut times = Vec::new();
             let mut last = None;
             for _ in 0..reps.max(1) {
@@ -111,7 +132,18 @@ pub fn push_points(name: &str, model: &PushModel, duration: f64, reference: &Pus
                         failure: None,
                     }
                 }
-                Err(e) => Point { problem: name.into(), method, rtol, final_error: f64::NAN, trajectory_error: f64::NAN, estimated_error: f64::NAN, wall_time: median(times), steps: 0, rejected: 0, failure: Some(e.to_string()) },
+                Err(e) => Point {
+                    problem: name.into(),
+                    method,
+                    rtol,
+                    final_error: f64::NAN,
+                    trajectory_error: f64::NAN,
+                    estimated_error: f64::NAN,
+                    wall_time: median(times),
+                    steps: 0,
+                    rejected: 0,
+                    failure: Some(e.to_string()),
+                },
             };
             out.push(point);
         }
@@ -119,11 +151,24 @@ pub fn push_points(name: &str, model: &PushModel, duration: f64, reference: &Pus
     out
 }
 
-fn reference_problem<P: Problem>(name: &str, p: &P, y0: &[f64], t_end: f64, reference: &[f64], reps: usize, max_steps: u64) -> Vec<Point> {
+#[allow(clippy::too_many_arguments)]
+fn reference_problem<P: Problem>(
+    name: &str,
+    p: &P,
+    y0: &[f64],
+    t_end: f64,
+    reference: &[f64],
+    reps: usize,
+    max_steps: u64,
+    min_rtol: f64,
+) -> Vec<Point> {
     let mut out = Vec::new();
     for method in Method::ALL {
-        for rtol in TOLERANCES {
-            let opts = Options { max_steps, ..Options::with_rtol(rtol) };
+        for rtol in tolerances(min_rtol) {
+            let opts = Options {
+                max_steps,
+                ..Options::with_rtol(rtol)
+            };
             let mut times = Vec::new();
             let mut result = None;
             for _ in 0..reps.max(1) {
@@ -141,7 +186,11 @@ fn reference_problem<P: Problem>(name: &str, p: &P, y0: &[f64], t_end: f64, refe
                     problem: name.into(),
                     method,
                     rtol,
-                    final_error: y.iter().zip(reference).map(|(a, b)| ((a - b) / b.abs().max(1e-300)).abs()).fold(0.0, f64::max),
+                    final_error: y
+                        .iter()
+                        .zip(reference)
+                        .map(|(a, b)| ((a - b) / b.abs().max(1e-300)).abs())
+                        .fold(0.0, f64::max),
                     trajectory_error: f64::NAN,
                     estimated_error: st.error_sum * rtol,
                     wall_time: median(times),
@@ -149,7 +198,18 @@ fn reference_problem<P: Problem>(name: &str, p: &P, y0: &[f64], t_end: f64, refe
                     rejected: st.rejected,
                     failure: None,
                 },
-                Err(e) => Point { problem: name.into(), method, rtol, final_error: f64::NAN, trajectory_error: f64::NAN, estimated_error: f64::NAN, wall_time: median(times), steps: 0, rejected: 0, failure: Some(e.to_string()) },
+                Err(e) => Point {
+                    problem: name.into(),
+                    method,
+                    rtol,
+                    final_error: f64::NAN,
+                    trajectory_error: f64::NAN,
+                    estimated_error: f64::NAN,
+                    wall_time: median(times),
+                    steps: 0,
+                    rejected: 0,
+                    failure: Some(e.to_string()),
+                },
             };
             out.push(point);
         }
@@ -159,8 +219,26 @@ fn reference_problem<P: Problem>(name: &str, p: &P, y0: &[f64], t_end: f64, refe
 
 /// Van der Pol (ε = 1e-6, t = 2) and Robertson (t = 1e11) against their published references;
 /// the final error is the largest relative error of a component.
-pub fn classical_points(reps: usize, max_steps: u64) -> Vec<Point> {
-    let mut out = reference_problem("van-der-pol", &VanDerPol { eps: 1e-6 }, &VanDerPol::Y0, VanDerPol::T_END, &VanDerPol::REFERENCE, reps, max_steps);
-    out.extend(reference_problem("robertson", &Robertson, &Robertson::Y0, Robertson::T_END, &Robertson::REFERENCE, reps, max_steps));
+pub fn classical_points(reps: usize, max_steps: u64, min_rtol: f64) -> Vec<Point> {
+    let mut out = reference_problem(
+        "van-der-pol",
+        &VanDerPol { eps: 1e-6 },
+        &VanDerPol::Y0,
+        VanDerPol::T_END,
+        &VanDerPol::REFERENCE,
+        reps,
+        max_steps,
+        min_rtol,
+    );
+    out.extend(reference_problem(
+        "robertson",
+        &Robertson,
+        &Robertson::Y0,
+        Robertson::T_END,
+        &Robertson::REFERENCE,
+        reps,
+        max_steps,
+        min_rtol,
+    ));
     out
 }

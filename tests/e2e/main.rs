@@ -2,3 +2,4 @@
 
 mod haptic;
 mod model;
+mod simulate;

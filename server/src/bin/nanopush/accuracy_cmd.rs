@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nanopush::accuracy::{Point, classical_points, push_errors, push_points, push_reference};
+use nanopush::accuracy::{Point, classical_points, push_points, push_reference};
 use nanopush::physics::integrate::{Method, Options};
 use nanopush::physics::pushing::{Dof, PushModel};
 use nanopush::push_run::run_push;
@@ -33,6 +33,9 @@ pub struct AccuracyArgs {
     /// Skip the full-dynamics comparison (it resolves nanosecond modes and takes a while).
     #[arg(long)]
     no_full_model: bool,
+    /// Finest tolerance of the sweep (1e-2 down to this), in [1e-10, 1e-2].
+    #[arg(long, default_value_t = 1e-10)]
+    min_rtol: f64,
 }
 
 fn to_proto(p: &Point) -> AccuracyPoint {
@@ -52,12 +55,19 @@ fn to_proto(p: &Point) -> AccuracyPoint {
 }
 
 fn plot(path: &Path, title: &str, unit: &str, points: &[&Point]) -> anyhow::Result<()> {
-    let ok: Vec<&&Point> = points.iter().filter(|p| p.final_error.is_finite() && p.final_error > 0.0 && p.wall_time > 0.0).collect();
+    let ok: Vec<&&Point> = points
+        .iter()
+        .filter(|p| p.final_error.is_finite() && p.final_error > 0.0 && p.wall_time > 0.0)
+        .collect();
     if ok.is_empty() {
         return Ok(());
     }
-    let (tmin, tmax) = ok.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| (a.min(p.wall_time), b.max(p.wall_time)));
-    let (emin, emax) = ok.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| (a.min(p.final_error), b.max(p.final_error)));
+    let (tmin, tmax) = ok.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
+        (a.min(p.wall_time), b.max(p.wall_time))
+    });
+    let (emin, emax) = ok.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
+        (a.min(p.final_error), b.max(p.final_error))
+    });
     let root = SVGBackend::new(path, (800, 560)).into_drawing_area();
     root.fill(&WHITE)?;
     let mut chart = ChartBuilder::on(&root)
@@ -65,18 +75,38 @@ fn plot(path: &Path, title: &str, unit: &str, points: &[&Point]) -> anyhow::Resu
         .margin(12)
         .x_label_area_size(48)
         .y_label_area_size(80)
-        .build_cartesian_2d((tmin * 0.7..tmax * 1.4).log_scale(), (emin * 0.3..emax * 3.0).log_scale())?;
-    chart.configure_mesh().x_desc("wall time (s), median").y_desc(format!("final error ({unit})")).x_label_formatter(&|v| format!("{v:.0e}")).y_label_formatter(&|v| format!("{v:.0e}")).draw()?;
+        .build_cartesian_2d(
+            (tmin * 0.7..tmax * 1.4).log_scale(),
+            (emin * 0.3..emax * 3.0).log_scale(),
+        )?;
+    chart
+        .configure_mesh()
+        .x_desc("wall time (s), median")
+        .y_desc(format!("final error ({unit})"))
+        .x_label_formatter(&|v| format!("{v:.0e}"))
+        .y_label_formatter(&|v| format!("{v:.0e}"))
+        .draw()?;
     for (i, m) in Method::ALL.into_iter().enumerate() {
         let color = Palette99::pick(i).to_rgba();
-        let series: Vec<(f64, f64)> = ok.iter().filter(|p| p.method == m).map(|p| (p.wall_time, p.final_error)).collect();
+        let series: Vec<(f64, f64)> = ok
+            .iter()
+            .filter(|p| p.method == m)
+            .map(|p| (p.wall_time, p.final_error))
+            .collect();
         if series.is_empty() {
             continue;
         }
-        chart.draw_series(LineSeries::new(series.clone(), color.stroke_width(2)))?.label(m.name()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        chart
+            .draw_series(LineSeries::new(series.clone(), color.stroke_width(2)))?
+            .label(m.name())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
         chart.draw_series(series.iter().map(|&(x, y)| Circle::new((x, y), 4, color.filled())))?;
     }
-    chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
     root.present()?;
     Ok(())
 }
@@ -96,12 +126,15 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     if !(1..=50).contains(&a.reps) {
         bail!("--reps {} is out of range; allowed: [1, 50]", a.reps);
     }
+    if !(a.min_rtol.is_finite() && (1e-10..=1e-2).contains(&a.min_rtol)) {
+        bail!("--min-rtol {} is out of range; allowed: [1e-10, 1e-2]", a.min_rtol);
+    }
     let scene = crate::load_scene(a.scene.as_ref())?;
     let model = PushModel::new(scene.push_params());
     let max_steps = 2_000_000;
     let (reference, crosscheck) = push_reference(&model, a.duration).map_err(anyhow::Error::msg)?;
-    let mut points = push_points("push", &model, a.duration, &reference, a.reps, max_steps);
-    points.extend(classical_points(a.reps, max_steps));
+    let mut points = push_points("push", &model, a.duration, &reference, a.reps, max_steps, a.min_rtol);
+    points.extend(classical_points(a.reps, max_steps, a.min_rtol));
 
     // The cost of the quasi-static reduction: the same scene with every DOF dynamic, over a
     // short window (its nanosecond modes are resolved), against the reduced model's reference.
@@ -116,31 +149,76 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
         full.dofs.cantilever = Dof::Dynamic;
         let full_model = PushModel::new(full);
         let start = std::time::Instant::now();
-        let reduced = run_push(model.clone(), Method::Rodas4, Options::with_rtol(1e-6), window, window).context("reduced model")?;
+        let reduced = run_push(model.clone(), Method::Rodas4, Options::with_rtol(1e-6), window, window)
+            .context("reduced model")?;
         let reduced_time = start.elapsed().as_secs_f64();
         let start = std::time::Instant::now();
-        let fr = run_push(full_model, Method::Rodas4, Options { max_steps, ..Options::with_rtol(1e-6) }, window, window);
+        let fr = run_push(
+            full_model,
+            Method::Rodas4,
+            Options {
+                max_steps,
+                ..Options::with_rtol(1e-6)
+            },
+            window,
+            window,
+        );
         let full_time = start.elapsed().as_secs_f64();
         Some(match fr {
             Ok(f) => {
-                let d = (f.final_particle_y() - reduced.final_particle_y()).abs().max((f.final_zeta_z() - reduced.final_zeta_z()).abs());
-                QuasiStaticCost { duration: window, final_difference: Some(d), reduced_wall_time: reduced_time, full_wall_time: full_time, full_steps: f.stats.steps, failure: None }
+                let d = (f.final_particle_y() - reduced.final_particle_y())
+                    .abs()
+                    .max((f.final_zeta_z() - reduced.final_zeta_z()).abs());
+                QuasiStaticCost {
+                    duration: window,
+                    final_difference: Some(d),
+                    reduced_wall_time: reduced_time,
+                    full_wall_time: full_time,
+                    full_steps: f.stats.steps,
+                    failure: None,
+                }
             }
-            Err(e) => QuasiStaticCost { duration: window, final_difference: None, reduced_wall_time: reduced_time, full_wall_time: full_time, full_steps: 0, failure: Some(e.to_string()) },
+            Err(e) => QuasiStaticCost {
+                duration: window,
+                final_difference: None,
+                reduced_wall_time: reduced_time,
+                full_wall_time: full_time,
+                full_steps: 0,
+                failure: Some(e.to_string()),
+            },
         })
     };
-    let _ = push_errors;
 
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    let mut csv = String::from("problem,method,rtol,final_error,trajectory_error,estimated_error,wall_time_s,steps,rejected,failure\n");
+    let mut csv = String::from(
+        "problem,method,rtol,final_error,trajectory_error,estimated_error,wall_time_s,steps,rejected,failure\n",
+    );
     for p in &points {
-        writeln!(csv, "{},{},{:e},{:e},{:e},{:e},{:e},{},{},{}", p.problem, p.method.name(), p.rtol, p.final_error, p.trajectory_error, p.estimated_error, p.wall_time, p.steps, p.rejected, p.failure.clone().unwrap_or_default().replace(',', ";"))?;
+        writeln!(
+            csv,
+            "{},{},{:e},{:e},{:e},{:e},{:e},{},{},{}",
+            p.problem,
+            p.method.name(),
+            p.rtol,
+            p.final_error,
+            p.trajectory_error,
+            p.estimated_error,
+            p.wall_time,
+            p.steps,
+            p.rejected,
+            p.failure.clone().unwrap_or_default().replace(',', ";")
+        )?;
     }
     write_atomic(&a.out.join("accuracy.csv"), &csv)?;
     for (problem, unit) in [("push", "m"), ("van-der-pol", "relative"), ("robertson", "relative")] {
         let pts: Vec<&Point> = points.iter().filter(|p| p.problem == problem).collect();
-        let title = if problem == "push" { format!("{}: error vs run time", scene.file.name) } else { format!("{problem}: error vs run time") };
-        plot(&a.out.join(format!("{problem}.svg")), &title, unit, &pts).with_context(|| format!("plotting {problem}"))?;
+        let title = if problem == "push" {
+            format!("{}: error vs run time", scene.file.name)
+        } else {
+            format!("{problem}: error vs run time")
+        };
+        plot(&a.out.join(format!("{problem}.svg")), &title, unit, &pts)
+            .with_context(|| format!("plotting {problem}"))?;
     }
 
     let report = AccuracyReport {
@@ -158,10 +236,25 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
         writeln!(out, "{}", serde_json::to_string(&report)?)?;
         return Ok(out);
     }
-    writeln!(out, "Work-precision of scene \"{}\" ({} s push) and two classical stiff problems", report.scene, a.duration)?;
-    writeln!(out, "Reference: rodas4 at rtol 1e-12; cross-check trbdf2 at rtol 1e-10 differs by {:.3e} m at the end.", crosscheck)?;
-    writeln!(out, "Errors: push in m (final: largest position error; traj: RMS of particle y and ζ_z over samples), classical problems relative.")?;
-    writeln!(out, "{:<12} {:<15} {:>7} {:>11} {:>11} {:>11} {:>11} {:>8} {:>6}", "problem", "method", "rtol", "final", "traj", "estimate", "time/s", "steps", "rej")?;
+    writeln!(
+        out,
+        "Work-precision of scene \"{}\" ({} s push) and two classical stiff problems",
+        report.scene, a.duration
+    )?;
+    writeln!(
+        out,
+        "Reference: rodas4 at rtol 1e-12; cross-check trbdf2 at rtol 1e-10 differs by {:.3e} m at the end.",
+        crosscheck
+    )?;
+    writeln!(
+        out,
+        "Errors: push in m (final: largest position error; traj: RMS of particle y and ζ_z over samples), classical problems relative."
+    )?;
+    writeln!(
+        out,
+        "{:<12} {:<15} {:>7} {:>11} {:>11} {:>11} {:>11} {:>8} {:>6}",
+        "problem", "method", "rtol", "final", "traj", "estimate", "time/s", "steps", "rej"
+    )?;
     for p in &points {
         writeln!(
             out,
@@ -180,11 +273,23 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     }
     if let Some(q) = &report.quasi_static_cost {
         match (&q.final_difference, &q.failure) {
-            (Some(d), _) => writeln!(out, "Quasi-static reduction over {} s: differs from the full 12-state model by {:.3e} m; {:.3e} s against {:.3e} s ({} steps) for the full model.", q.duration, d, q.reduced_wall_time, q.full_wall_time, q.full_steps)?,
-            (None, Some(f)) => writeln!(out, "Quasi-static reduction: the full model failed over {} s: {f}", q.duration)?,
+            (Some(d), _) => writeln!(
+                out,
+                "Quasi-static reduction over {} s: differs from the full 12-state model by {:.3e} m; {:.3e} s against {:.3e} s ({} steps) for the full model.",
+                q.duration, d, q.reduced_wall_time, q.full_wall_time, q.full_steps
+            )?,
+            (None, Some(f)) => writeln!(
+                out,
+                "Quasi-static reduction: the full model failed over {} s: {f}",
+                q.duration
+            )?,
             _ => {}
         }
     }
-    writeln!(out, "Wrote {}/accuracy.csv and push.svg, van-der-pol.svg, robertson.svg.", a.out.display())?;
+    writeln!(
+        out,
+        "Wrote {}/accuracy.csv and push.svg, van-der-pol.svg, robertson.svg.",
+        a.out.display()
+    )?;
     Ok(out)
 }
