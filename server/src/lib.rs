@@ -6,6 +6,7 @@
 //!   assembled from it;
 //! - [`report`]: the derived quantities printed by `nanopush model`;
 //! - [`accuracy`]: the work-precision report (`nanopush accuracy`);
+//! - [`extremes`]: the stability grid (`nanopush accuracy --extremes`);
 //! - [`push_run`]: a push at constant speed, sampled into a trace (`nanopush simulate`).
 //!
 //! ```
@@ -16,6 +17,7 @@
 #![deny(missing_docs)]
 
 pub mod accuracy;
+pub mod extremes;
 pub mod physics;
 pub mod push_run;
 pub mod report;

@@ -36,6 +36,124 @@ pub struct AccuracyArgs {
     /// Finest tolerance of the sweep (1e-2 down to this), in [1e-10, 1e-2].
     #[arg(long, default_value_t = 1e-10)]
     min_rtol: f64,
+    /// Run the stability grid over extreme parameters instead (see `extremes` in the library).
+    #[arg(long)]
+    extremes: bool,
+    /// With --extremes: the reduced grid (sweep end points and two corners).
+    #[arg(long)]
+    reduced: bool,
+}
+
+fn extremes(a: &AccuracyArgs) -> anyhow::Result<String> {
+    use nanopush::extremes::{grid, run_case};
+    let scene = crate::load_scene(a.scene.as_ref())?;
+    let cases = grid(&scene, a.reduced);
+    let start = std::time::Instant::now();
+    let results: Vec<_> = cases.iter().map(|c| run_case(&scene, c, 1e-5)).collect();
+    let total = start.elapsed().as_secs_f64();
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let mut csv = String::from(
+        "radius_nm,stiffness_n_per_m,humidity,mu_as,tilt_deg,contact_angle_deg,speed_um_per_s,finite_and_bounded,steps,rejected,error_m,wall_time_s,outcome,diagnoses\n",
+    );
+    for r in &results {
+        let c = &r.case;
+        writeln!(
+            csv,
+            "{},{},{},{},{},{},{},{},{},{},{:e},{:e},{},{}",
+            c.radius_nm,
+            c.stiffness_n_per_m,
+            c.humidity,
+            c.mu_as,
+            c.tilt_deg,
+            c.contact_angle_deg,
+            c.speed_um_per_s,
+            r.finite_and_bounded,
+            r.steps,
+            r.rejected,
+            r.error,
+            r.wall_time,
+            r.outcome.replace(',', ";"),
+            r.diagnoses.join("; ").replace(',', ";")
+        )?;
+    }
+    write_atomic(&a.out.join("extremes.csv"), &csv)?;
+    let bad = results.iter().filter(|r| !r.finite_and_bounded).count();
+    let mut out = String::new();
+    if a.json {
+        let rows: Vec<serde_json::Value> = results
+            .iter()
+            .map(|r| {
+                let c = &r.case;
+                serde_json::json!({
+                    "radius_nm": c.radius_nm, "stiffness_n_per_m": c.stiffness_n_per_m, "humidity": c.humidity, "mu_as": c.mu_as,
+                    "tilt_deg": c.tilt_deg, "contact_angle_deg": c.contact_angle_deg, "speed_um_per_s": c.speed_um_per_s,
+                    "finite_and_bounded": r.finite_and_bounded, "outcome": r.outcome, "diagnoses": r.diagnoses,
+                    "steps": r.steps, "rejected": r.rejected, "error": if r.error.is_finite() { Some(r.error) } else { None }, "wall_time": r.wall_time,
+                })
+            })
+            .collect();
+        writeln!(
+            out,
+            "{}",
+            serde_json::json!({"schema": "nanopush.extremes", "version": nanopush_proto::VERSION, "scene": scene.file.name, "cases": rows.len(), "not_finite_or_unbounded": bad, "wall_time": total, "results": rows})
+        )?;
+        return Ok(out);
+    }
+    writeln!(
+        out,
+        "Stability grid around scene \"{}\": {} cases, {} not finite or unbounded, {:.2} s",
+        scene.file.name,
+        results.len(),
+        bad,
+        total
+    )?;
+    let header = format!(
+        "  {:>8} {:>6} {:>5} {:>5} {:>5} {:>5} {:>8} {:>7} {:>5} {:>10}  outcome",
+        "Ra/nm", "kc", "RH", "mu", "alpha", "beta", "V/um/s", "steps", "rej", "error/m"
+    );
+    let row = |r: &nanopush::extremes::CaseResult| {
+        let c = &r.case;
+        format!(
+            "  {:>8} {:>6} {:>5} {:>5} {:>5} {:>5} {:>8} {:>7} {:>5} {:>10.2e}  {}{}",
+            c.radius_nm,
+            c.stiffness_n_per_m,
+            c.humidity,
+            c.mu_as,
+            c.tilt_deg,
+            c.contact_angle_deg,
+            c.speed_um_per_s,
+            r.steps,
+            r.rejected,
+            r.error,
+            r.outcome,
+            if r.diagnoses.is_empty() {
+                String::new()
+            } else {
+                format!(" [{}]", r.diagnoses.join("; "))
+            }
+        )
+    };
+    for (title, key) in [("most steps", 0), ("most rejections", 1), ("largest error", 2)] {
+        let mut sorted: Vec<_> = results.iter().collect();
+        sorted.sort_by(|x, y| match key {
+            0 => y.steps.cmp(&x.steps),
+            1 => y.rejected.cmp(&x.rejected),
+            _ => y.error.total_cmp(&x.error),
+        });
+        writeln!(out, "Worst cases, {title}:")?;
+        writeln!(out, "{header}")?;
+        for r in sorted.iter().take(5) {
+            writeln!(out, "{}", row(r))?;
+        }
+    }
+    if bad > 0 {
+        writeln!(out, "Not finite or unbounded:")?;
+        for r in results.iter().filter(|r| !r.finite_and_bounded) {
+            writeln!(out, "{}", row(r))?;
+        }
+    }
+    writeln!(out, "Wrote {}/extremes.csv.", a.out.display())?;
+    Ok(out)
 }
 
 fn to_proto(p: &Point) -> AccuracyPoint {
@@ -120,6 +238,9 @@ fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
 
 /// Runs `nanopush accuracy`.
 pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
+    if a.extremes {
+        return extremes(a);
+    }
     if !(a.duration.is_finite() && a.duration > 0.0 && a.duration <= 1.0) {
         bail!("--duration {} s is out of range; allowed: (0, 1] s", a.duration);
     }

@@ -243,7 +243,9 @@ impl Integrator {
                 );
                 let mut first: Option<(usize, f64)> = None;
                 for k in 0..ne {
-                    if g0[k] > 0.0 && g1[k] <= 0.0 {
+                    // A crossing from positive to non-positive, or from exactly zero (a mode that
+                    // starts on its boundary, e.g. a static limit of zero) to negative.
+                    if (g0[k] > 0.0 && g1[k] <= 0.0) || (g0[k] == 0.0 && g1[k] < 0.0) {
                         let theta = self.locate(p, events, k, *t, h, g0[k], g1[k]);
                         if first.is_none_or(|(_, th)| theta < th) {
                             first = Some((k, theta));
@@ -279,6 +281,9 @@ impl Integrator {
     #[allow(clippy::too_many_arguments)]
     fn locate<P: Problem, E: Events>(&self, p: &P, events: &E, k: usize, t: f64, h: f64, ga: f64, gb: f64) -> f64 {
         let n = p.len();
+        if ga == 0.0 {
+            return 0.0;
+        }
         let (mut a, mut b) = (0.0f64, 1.0f64);
         let (mut fa, mut fb) = (ga, gb);
         let mut side = 0i32;

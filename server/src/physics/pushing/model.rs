@@ -175,7 +175,17 @@ impl PushModel {
         let z_fixed = -p.jkr_as.indentation_from_load(-lr_as).unwrap_or(0.0);
         let (sa, ca) = p.cantilever.tilt.sin_cos();
         let (sb, cb) = p.beta.sin_cos();
-        let d = p.r_t + p.r_a + a0;
+        // The tip starts in contact, indented by the JKR overlap under the tip-particle
+        // attraction (at least 0.01 nm): exactly at the contact point both the Hertz stiffness
+        // and the cut-off attraction's gradient vanish, which would leave the quasi-static rows
+        // without a usable Jacobian.
+        let meniscus = match &p.interactions.tip_particle.capillary {
+            Some(c) if c.possible() => Meniscus::Formed,
+            _ => Meniscus::Absent,
+        };
+        let lr_ta: f64 = p.interactions.tip_particle_force(a0, meniscus);
+        let overlap = p.jkr_ta.indentation_from_load(-lr_ta).unwrap_or(0.0).max(0.01e-9);
+        let d = p.r_t + p.r_a + a0 - overlap;
         let base = (-d * cb, p.r_a + a0 + z_fixed + d * sb);
         let kk = p.cantilever.stiffness_yz();
         PushModel {
@@ -207,9 +217,10 @@ impl PushModel {
         self.layout.len == 0
     }
 
-    /// Initial state: particle at rest at its equilibrium indentation, tip touching it at `β`
-    /// (gap `a₀`, no elastic load), cantilever undeflected, stage at 0. Quasi-static rows are not
-    /// yet balanced: see [`Self::equilibrate`].
+    /// Initial state: particle at rest at its equilibrium indentation, tip touching it at `β`,
+    /// indented by the JKR overlap that balances the tip-particle attraction, cantilever
+    /// undeflected, stage at 0. Quasi-static rows are not yet balanced: see
+    /// [`Self::equilibrate`].
     pub fn initial_state(&self) -> [f64; MAX_STATES] {
         let mut x = [0.0; MAX_STATES];
         if let Some(z) = self.layout.particle_z {

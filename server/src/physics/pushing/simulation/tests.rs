@@ -48,7 +48,21 @@ fn paper_scene_runs_a_few_ticks() {
 fn tight_tolerance_does_not_collapse_the_step() {
     let mut sim = Simulation::new(scene("paper-default.toml"), Method::Rodas4, Options::with_rtol(1e-10));
     for k in 1..=2000 {
-        sim.advance_to(k as f64 * 1e-6).unwrap_or_else(|e| panic!("at {} ms: {e}", k as f64 * 1e-3));
+        sim.advance_to(k as f64 * 1e-6)
+            .unwrap_or_else(|e| panic!("at {} ms: {e}", k as f64 * 1e-3));
     }
     assert!(sim.total.steps < 20_000, "{} steps for 2 ms", sim.total.steps);
+}
+
+#[test]
+fn frictionless_substrate_slides_at_once() {
+    // μ_as = 0: the static limit is zero, so the substrate contact starts on its switching
+    // boundary; the first push must make it slip (an event from exactly zero to negative).
+    let mut p = scene("minimal.toml").p;
+    p.mu_as_s = 0.0;
+    p.mu_as_k = 0.0;
+    let mut sim = Simulation::new(PushModel::new(p), Method::Rodas4, Options::with_rtol(1e-6));
+    sim.advance_to(2e-3).unwrap();
+    let t = sim.shearing_time.expect("slides");
+    assert!(t < 1e-4, "slid only at {t:e} s");
 }

@@ -1,0 +1,287 @@
+//! Numerical stability on stiff and extreme cases: a grid over the parameters that make the
+//! pushing problem hard, each case pushed a fixed distance and checked to end finite and bounded,
+//! with a result or a diagnosis.
+//!
+//! The grid varies, around the scene: particle radius 5 nm .. 5 µm, cantilever `k_c`
+//! 0.1 .. 50 N/m, humidity 0 .. 0.95, `μ_as` 0 .. 1.5 (through the paper's unstable band
+//! 0.6-0.7), tilt `α` 0 .. 60°, contact angle `β` 5 .. 80°, stage speed 1 nm/s .. 100 µm/s.
+//! The full grid is every one-at-a-time sweep (7 values each) plus every corner of the box
+//! (2⁷ = 128 combinations of the extremes); the reduced grid (for the tests) is the sweeps with
+//! their end points only plus the two extreme corners.
+//!
+//! "Bounded" means every state finite, and the particle and the tip displaced by no more than the
+//! stage travel plus 1 µm.
+
+use std::time::Instant;
+
+use crate::physics::friction;
+use crate::physics::integrate::{Method, Options};
+use crate::physics::pushing::PushModel;
+use crate::push_run::run_push;
+use crate::scene::Scene;
+
+/// One parameter set (user units, as in the scene file).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Case {
+    /// Particle radius (nm).
+    pub radius_nm: f64,
+    /// Cantilever stiffness (N/m).
+    pub stiffness_n_per_m: f64,
+    /// Relative humidity.
+    pub humidity: f64,
+    /// Static particle-substrate friction (the kinetic one is 2/3 of it).
+    pub mu_as: f64,
+    /// Tilt α (degrees).
+    pub tilt_deg: f64,
+    /// Contact angle β (degrees).
+    pub contact_angle_deg: f64,
+    /// Stage speed (µm/s).
+    pub speed_um_per_s: f64,
+}
+
+/// What happened to one case.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CaseResult {
+    /// The case.
+    pub case: Case,
+    /// Every state finite and displacements bounded at the end.
+    pub finite_and_bounded: bool,
+    /// The result (`slip after 3.2 ms`, `rolls`, `sticks`) or the diagnosis.
+    pub outcome: String,
+    /// Diagnoses from the feasibility conditions (Eq 8, 9, 16), possibly several.
+    pub diagnoses: Vec<String>,
+    /// Accepted steps.
+    pub steps: u64,
+    /// Rejected steps.
+    pub rejected: u64,
+    /// Difference of the final particle y from a rerun at rtol/100 (m).
+    pub error: f64,
+    /// Wall time (s).
+    pub wall_time: f64,
+}
+
+const RADII: [f64; 7] = [5.0, 14.0, 50.0, 250.0, 1000.0, 2500.0, 5000.0];
+const STIFFNESS: [f64; 7] = [0.1, 0.5, 2.0, 8.0, 15.0, 30.0, 50.0];
+const HUMIDITY: [f64; 7] = [0.0, 0.2, 0.4, 0.6, 0.73, 0.85, 0.95];
+const MU: [f64; 7] = [0.0, 0.3, 0.6, 0.65, 0.7, 1.0, 1.5];
+const TILT: [f64; 7] = [0.0, 5.0, 15.0, 25.0, 35.0, 45.0, 60.0];
+const BETA: [f64; 7] = [5.0, 15.0, 30.0, 45.0, 60.0, 70.0, 80.0];
+const SPEED: [f64; 7] = [0.001, 0.01, 0.1, 1.0, 10.0, 50.0, 100.0];
+
+fn base(scene: &Scene) -> Case {
+    let f = &scene.file;
+    Case {
+        radius_nm: scene.pushed_particle().radius_nm,
+        stiffness_n_per_m: f.cantilever.stiffness_n_per_m,
+        humidity: f.environment.relative_humidity,
+        mu_as: f.friction.particle_substrate_static,
+        tilt_deg: f.cantilever.tilt_deg,
+        contact_angle_deg: f.push.contact_angle_deg,
+        speed_um_per_s: f.push.speed_um_per_s,
+    }
+}
+
+/// The grid around a scene: one-at-a-time sweeps and corners (see the module doc).
+pub fn grid(scene: &Scene, reduced: bool) -> Vec<Case> {
+    let b = base(scene);
+    let pick = |v: &[f64; 7]| -> Vec<f64> { if reduced { vec![v[0], v[6]] } else { v.to_vec() } };
+    let mut cases = Vec::new();
+    for r in pick(&RADII) {
+        cases.push(Case { radius_nm: r, ..b });
+    }
+    for k in pick(&STIFFNESS) {
+        cases.push(Case {
+            stiffness_n_per_m: k,
+            ..b
+        });
+    }
+    for h in pick(&HUMIDITY) {
+        cases.push(Case { humidity: h, ..b });
+    }
+    for m in if reduced {
+        vec![MU[0], MU[3], MU[6]]
+    } else {
+        MU.to_vec()
+    } {
+        cases.push(Case { mu_as: m, ..b });
+    }
+    for a in pick(&TILT) {
+        cases.push(Case { tilt_deg: a, ..b });
+    }
+    for be in pick(&BETA) {
+        cases.push(Case {
+            contact_angle_deg: be,
+            ..b
+        });
+    }
+    for v in pick(&SPEED) {
+        cases.push(Case { speed_um_per_s: v, ..b });
+    }
+    let corners: Vec<u32> = if reduced { vec![0, 127] } else { (0..128).collect() };
+    for bits in corners {
+        let e = |i: u32, v: &[f64; 7]| if bits & (1 << i) != 0 { v[6] } else { v[0] };
+        cases.push(Case {
+            radius_nm: e(0, &RADII),
+            stiffness_n_per_m: e(1, &STIFFNESS),
+            humidity: e(2, &HUMIDITY),
+            mu_as: e(3, &MU),
+            tilt_deg: e(4, &TILT),
+            contact_angle_deg: e(5, &BETA),
+            speed_um_per_s: e(6, &SPEED),
+        });
+    }
+    cases
+}
+
+/// The scene with a case's parameters (validated like any scene).
+pub fn scene_for(scene: &Scene, c: &Case) -> Result<Scene, String> {
+    let mut f = scene.file.clone();
+    let id = f.push.particle_id;
+    for p in f.particles.iter_mut().filter(|p| p.id == id) {
+        p.radius_nm = c.radius_nm;
+    }
+    f.cantilever.stiffness_n_per_m = c.stiffness_n_per_m;
+    f.environment.relative_humidity = c.humidity;
+    f.friction.particle_substrate_static = c.mu_as;
+    f.friction.particle_substrate_kinetic = c.mu_as * 2.0 / 3.0;
+    f.cantilever.tilt_deg = c.tilt_deg;
+    f.push.contact_angle_deg = c.contact_angle_deg;
+    f.push.speed_um_per_s = c.speed_um_per_s;
+    let text = toml::to_string(&f).map_err(|e| e.to_string())?;
+    Scene::parse("<extreme case>", &text).map_err(|e| e.to_string())
+}
+
+/// Pushes a case 20 nm (at most 30 s of simulated time) and checks it.
+pub fn run_case(scene: &Scene, c: &Case, rtol: f64) -> CaseResult {
+    let start = Instant::now();
+    let mut r = CaseResult {
+        case: *c,
+        finite_and_bounded: false,
+        outcome: String::new(),
+        diagnoses: Vec::new(),
+        steps: 0,
+        rejected: 0,
+        error: f64::NAN,
+        wall_time: 0.0,
+    };
+    let s = match scene_for(scene, c) {
+        Ok(s) => s,
+        Err(e) => {
+            r.outcome = format!("rejected scene: {e}");
+            r.wall_time = start.elapsed().as_secs_f64();
+            return r;
+        }
+    };
+    let p = s.push_params();
+    let cant = &p.cantilever;
+    let fz = friction::feasibility(p.mu_as_s, p.r_a, p.r_t, p.beta, cant.k_y(), cant.k_z(), cant.tilt);
+    if p.mu_as_s > fz.upper {
+        r.diagnoses.push(format!(
+            "infeasible: μ_as {} above the Eq 16 bound {:.3}",
+            p.mu_as_s, fz.upper
+        ));
+    }
+    if p.mu_as_s < fz.lower {
+        r.diagnoses.push(format!(
+            "μ_as {} below the Eq 9 bound {:.3}: the push is unreliable",
+            p.mu_as_s, fz.lower
+        ));
+    }
+    if !friction::no_sticking_to_tip(p.r_a, p.r_eff(), p.beta) {
+        r.diagnoses.push("particle sticks to the tip (Eq 8)".into());
+    }
+    if p.interactions.tip_particle.capillary.is_some_and(|cap| !cap.possible()) {
+        r.diagnoses.push("no meniscus: too dry for capillary forces".into());
+    }
+    let travel = 20e-9;
+    let duration = (travel / p.speed).min(30.0);
+    let model = PushModel::new(p);
+    let run = run_push(
+        model.clone(),
+        Method::Rodas4,
+        Options::with_rtol(rtol),
+        duration,
+        duration / 20.0,
+    );
+    match run {
+        Err(e) => r.outcome = format!("integration failed: {e}"),
+        Ok(run) => {
+            r.steps = run.stats.steps;
+            r.rejected = run.stats.rejected;
+            let bound = p.speed * duration + 1e-6;
+            let l = &model.layout;
+            let finite = run.final_state.iter().all(|v| v.is_finite())
+                && run
+                    .trace
+                    .iter()
+                    .all(|t| t.normal_ta.is_finite() && t.friction_as.is_finite());
+            let bounded = run.final_state[l.particle_y.pos].abs() <= bound
+                && run.final_state[l.zeta_y.pos].abs() <= bound
+                && run.final_state[l.zeta_z.pos].abs() <= bound;
+            r.finite_and_bounded = finite && bounded;
+            r.outcome = match (run.shearing_time, run.final_phase) {
+                (Some(t), ph) => format!("slides after {:.3e} s, ends in {ph}", t),
+                (None, "roll") => "rolls (the tip contact slips first)".into(),
+                (None, ph) => format!("never slides on the substrate, ends in {ph}"),
+            };
+            if !r.finite_and_bounded {
+                r.outcome = format!("UNBOUNDED: {}", r.outcome);
+            }
+            if let Ok(fine) = run_push(
+                model,
+                Method::Rodas4,
+                Options::with_rtol(rtol * 1e-2),
+                duration,
+                duration,
+            ) {
+                r.error = (run.final_particle_y() - fine.final_particle_y()).abs();
+            }
+        }
+    }
+    r.wall_time = start.elapsed().as_secs_f64();
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reduced_extreme_grid_is_finite_and_bounded() {
+        let scene = Scene::default_scene();
+        let cases = grid(&scene, true);
+        assert_eq!(cases.len(), 7 * 2 + 1 + 2);
+        let mut failures = Vec::new();
+        for c in &cases {
+            let r = run_case(&scene, c, 1e-5);
+            if !r.finite_and_bounded {
+                failures.push(format!("{c:?}: {} {:?}", r.outcome, r.diagnoses));
+            }
+        }
+        assert!(
+            failures.is_empty(),
+            "{} cases failed:\n{}",
+            failures.len(),
+            failures.join("\n")
+        );
+    }
+
+    #[test]
+    fn infeasible_friction_is_diagnosed() {
+        let scene = Scene::default_scene();
+        let c = Case {
+            mu_as: 1.5,
+            tilt_deg: 60.0,
+            ..base(&scene)
+        };
+        let r = run_case(&scene, &c, 1e-5);
+        // At α = 60° the Eq 16 bound is (k_y cot α + k_z tan α)/(k_y − k_z) ≈ 0.59.
+        assert!(r.diagnoses.iter().any(|d| d.contains("Eq 16")), "{:?}", r.diagnoses);
+        assert!(r.finite_and_bounded);
+    }
+
+    #[test]
+    fn full_grid_size() {
+        assert_eq!(grid(&Scene::default_scene(), false).len(), 7 * 7 + 128);
+    }
+}
