@@ -124,7 +124,7 @@ impl Simulation {
         let n = model.len();
         model.equilibrate(0.0, &mut x[..n], &mode);
         let scale = Self::scales(&model);
-        Simulation {
+        let mut sim = Simulation {
             integrator: Integrator::new(method, opts),
             model,
             mode,
@@ -134,7 +134,55 @@ impl Simulation {
             shearing_time: None,
             scale,
             max_switches: 10_000,
+        };
+        sim.enforce_mode();
+        sim
+    }
+
+    /// Events fire when a switching function crosses zero; one that is already negative when a
+    /// mode starts (after the quasi-static rows settle, say) would never cross. Apply those
+    /// switches at once: stick → slip where the friction demand exceeds the static limit, and the
+    /// meniscus and contact switches. Slip → stick is left to the events (at rest the slip rate
+    /// is zero, which is not a reason to stick). Returns how many switches it applied.
+    fn enforce_mode(&mut self) -> u32 {
+        let n = self.model.len();
+        let mut applied = 0;
+        for _ in 0..4 {
+            let sw = self.model.switching(self.t, &self.x[..n], &self.mode);
+            let stick_violated =
+                |t: Tangential, g: Option<f64>| matches!(t, Tangential::Stick { .. }) && g.is_some_and(|g| g < 0.0);
+            let kind = if stick_violated(self.mode.substrate, sw.substrate) {
+                SwitchKind::Substrate
+            } else if stick_violated(self.mode.tip, sw.tip) {
+                SwitchKind::Tip
+            } else if sw.meniscus.is_some_and(|g| g < 0.0) {
+                SwitchKind::Meniscus
+            } else if sw.tip_contact.is_some_and(|g| g < 0.0) {
+                SwitchKind::TipContact
+            } else {
+                break;
+            };
+            self.switch(kind);
+            applied += 1;
         }
+        applied
+    }
+
+    /// Applies one switch at the current state.
+    fn switch(&mut self, kind: SwitchKind) {
+        let n = self.model.len();
+        let before = self.mode;
+        self.mode = self.model.transition(self.t, &self.x[..n], &self.mode, kind);
+        if kind == SwitchKind::Substrate
+            && self.shearing_time.is_none()
+            && matches!(before.substrate, Tangential::Stick { .. })
+        {
+            self.shearing_time = Some(self.t);
+        }
+        // A switch may change a force discontinuously (meniscus, contact): balance the
+        // quasi-static rows again and restart the step-size history.
+        self.model.equilibrate(self.t, &mut self.x[..n], &self.mode);
+        self.integrator.reset_step();
     }
 
     /// Typical magnitudes of the states, for the absolute tolerance: 1 nm for positions and
@@ -197,19 +245,8 @@ impl Simulation {
                 Outcome::Reached => break,
                 Outcome::Event { index } => {
                     let kind = SWITCHES[index.min(MAX_EVENTS - 1).min(SWITCHES.len() - 1)];
-                    let before = self.mode;
-                    self.mode = self.model.transition(self.t, &self.x[..n], &self.mode, kind);
-                    if kind == SwitchKind::Substrate
-                        && self.shearing_time.is_none()
-                        && matches!(before.substrate, Tangential::Stick { .. })
-                    {
-                        self.shearing_time = Some(self.t);
-                    }
-                    // A switch may change a force discontinuously (meniscus, contact): balance the
-                    // quasi-static rows again and restart the step-size history.
-                    self.model.equilibrate(self.t, &mut self.x[..n], &self.mode);
-                    self.integrator.reset_step();
-                    report.switches += 1;
+                    self.switch(kind);
+                    report.switches += 1 + self.enforce_mode();
                     if report.switches > self.max_switches {
                         return Err(SimulationError::Chattering {
                             count: report.switches,
