@@ -59,6 +59,10 @@ fn parts(c: &mut Criterion) {
         group.bench_function(format!("{scene}/jacobian"), |b| {
             b.iter(|| m.jacobian(black_box(t), black_box(&x[..n]), &mode, &mut j))
         });
+        let mut ft = [0.0; 12];
+        group.bench_function(format!("{scene}/derivatives"), |b| {
+            b.iter(|| m.derivatives(black_box(t), black_box(&x[..n]), &mode, &mut f, &mut ft, &mut j))
+        });
         group.bench_function(format!("{scene}/switching"), |b| {
             b.iter(|| black_box(m.switching(black_box(t), &x[..n], &mode)))
         });

@@ -140,9 +140,7 @@ impl Integrator {
                 w.ft[..n].copy_from_slice(&w.ft_next[..n]);
                 w.jac[..n * n].copy_from_slice(&w.jac_next[..n * n]);
             } else {
-                p.rhs(*t, &w.y0[..n], &mut w.f0[..n]);
-                p.time_derivative(*t, &w.y0[..n], &mut w.ft[..n]);
-                p.jacobian(*t, &w.y0[..n], &mut w.jac[..n * n]);
+                p.derivatives(*t, &w.y0[..n], &mut w.f0[..n], &mut w.ft[..n], &mut w.jac[..n * n]);
                 st.rhs_evals += 1;
                 st.jac_evals += 1;
             }
@@ -223,9 +221,13 @@ impl Integrator {
             // The next step's start data, evaluated once here so the events can use it too.
             {
                 let w = &mut self.work;
-                p.rhs(t1, &w.y1[..n], &mut w.f_next[..n]);
-                p.time_derivative(t1, &w.y1[..n], &mut w.ft_next[..n]);
-                p.jacobian(t1, &w.y1[..n], &mut w.jac_next[..n * n]);
+                p.derivatives(
+                    t1,
+                    &w.y1[..n],
+                    &mut w.f_next[..n],
+                    &mut w.ft_next[..n],
+                    &mut w.jac_next[..n * n],
+                );
                 st.rhs_evals += 1;
                 st.jac_evals += 1;
             }

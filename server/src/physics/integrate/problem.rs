@@ -24,6 +24,12 @@ pub trait Problem {
     fn time_derivative(&self, _t: f64, _y: &[f64], out: &mut [f64]) {
         out[..self.len()].fill(0.0);
     }
+    /// `f`, `∂f/∂t` and `J` together (a problem that can compute them in one pass overrides it).
+    fn derivatives(&self, t: f64, y: &[f64], f: &mut [f64], ft: &mut [f64], jac: &mut [f64]) {
+        self.rhs(t, y, f);
+        self.time_derivative(t, y, ft);
+        self.jacobian(t, y, jac);
+    }
     /// Typical magnitude of component `i`: the absolute tolerance is `atol · scale(i)`.
     fn scale(&self, _i: usize) -> f64 {
         1.0

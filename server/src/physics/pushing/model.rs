@@ -46,7 +46,7 @@ use crate::physics::forces::capillary::Meniscus;
 use crate::physics::integrate::linalg::Lu;
 use crate::physics::pushing::layout::{Layout, MAX_STATES};
 use crate::physics::pushing::params::PushParams;
-use crate::physics::real::{Dual, Real};
+use crate::physics::real::{Dual, DualN, Real};
 
 /// State of one frictional contact.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -163,6 +163,7 @@ pub struct PushModel {
     b_c: f64,
     z_fixed: f64,
     adhesion_as: f64,
+    mass: [f64; MAX_STATES],
 }
 
 impl PushModel {
@@ -197,6 +198,7 @@ impl PushModel {
             b_c: p.cantilever.damping(),
             z_fixed,
             adhesion_as: p.adhesion_as(),
+            mass: layout.mass_diagonal(),
             p,
         }
     }
@@ -258,9 +260,9 @@ impl PushModel {
         }
     }
 
-    /// The diagonal mass matrix of `M x' = f`.
+    /// The diagonal mass matrix of `M x' = f` (computed once, with the layout).
     pub fn mass_diagonal(&self) -> [f64; MAX_STATES] {
-        self.layout.mass_diagonal()
+        self.mass
     }
 
     /// The right-hand side `f(t, x)` for the given mode; writes `out[..len]`.
@@ -298,6 +300,41 @@ impl PushModel {
                 jac[j * n + i] = f[i].eps;
             }
             xd[j].eps = 0.0;
+        }
+    }
+
+    /// `f`, `∂f/∂t` and the Jacobian (column-major) in one pass: the model evaluated once on
+    /// multi-lane dual numbers, one lane per state plus one for time. Equal to [`Self::rhs`],
+    /// [`Self::time_derivative`] and [`Self::jacobian`], at about a third of their cost.
+    pub fn derivatives(&self, t: f64, x: &[f64], mode: &Mode, f: &mut [f64], ft: &mut [f64], jac: &mut [f64]) {
+        match self.len() {
+            0..=4 => self.derivatives_n::<5>(t, x, mode, f, ft, jac),
+            5..=8 => self.derivatives_n::<9>(t, x, mode, f, ft, jac),
+            _ => self.derivatives_n::<13>(t, x, mode, f, ft, jac),
+        }
+    }
+
+    fn derivatives_n<const N: usize>(
+        &self,
+        t: f64,
+        x: &[f64],
+        mode: &Mode,
+        f: &mut [f64],
+        ft: &mut [f64],
+        jac: &mut [f64],
+    ) {
+        let n = self.len();
+        let mut xd = [DualN::<N>::constant(0.0); MAX_STATES];
+        for j in 0..n {
+            xd[j] = DualN::seed(x[j], j);
+        }
+        let (out, _) = self.eval(DualN::seed(t, N - 1), &xd[..n], mode);
+        for i in 0..n {
+            f[i] = out[i].re;
+            ft[i] = out[i].eps[N - 1];
+            for j in 0..n {
+                jac[j * n + i] = out[i].eps[j];
+            }
         }
     }
 

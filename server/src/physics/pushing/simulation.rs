@@ -33,6 +33,9 @@ impl Problem for InMode<'_> {
     fn scale(&self, i: usize) -> f64 {
         self.scale[i]
     }
+    fn derivatives(&self, t: f64, y: &[f64], f: &mut [f64], ft: &mut [f64], jac: &mut [f64]) {
+        self.model.derivatives(t, y, &self.mode, f, ft, jac);
+    }
 }
 
 const SWITCHES: [SwitchKind; 4] = [

@@ -456,3 +456,22 @@ fn dofs_struct_roundtrip() {
     };
     assert_eq!(Layout::new(&d).len, 4);
 }
+
+#[test]
+fn one_pass_derivatives_equal_the_separate_ones() {
+    for m in [full(), quasi()] {
+        for mode in modes(&m) {
+            let n = m.len();
+            let x = perturbed(&m);
+            let (mut f, mut ft, mut j) = ([0.0; 12], [0.0; 12], [0.0; 144]);
+            let (mut f2, mut ft2, mut j2) = ([0.0; 12], [0.0; 12], [0.0; 144]);
+            m.derivatives(1e-4, &x, &mode, &mut f, &mut ft, &mut j);
+            m.rhs(1e-4, &x, &mode, &mut f2);
+            m.time_derivative(1e-4, &x, &mode, &mut ft2);
+            m.jacobian(1e-4, &x, &mode, &mut j2);
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * a.abs().max(b.abs()) + 1e-300;
+            assert!((0..n).all(|i| close(f[i], f2[i]) && close(ft[i], ft2[i])));
+            assert!((0..n * n).all(|i| close(j[i], j2[i])), "Jacobians differ");
+        }
+    }
+}
