@@ -16,7 +16,8 @@ pub struct AccuracyPoint {
     pub final_error: Option<f64>,
     /// Trajectory L2 error of the push (m); `null` for the classical problems.
     pub trajectory_error: Option<f64>,
-    /// The integrator's accumulated local error estimate in the same units.
+    /// The error estimated without the reference: the difference from the same method at the
+    /// next, 10× finer tolerance (same units); `null` at the finest tolerance.
     pub estimated_error: Option<f64>,
     /// Median wall time (s).
     pub wall_time: f64,

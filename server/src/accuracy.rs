@@ -30,9 +30,14 @@ pub struct Point {
     pub final_error: f64,
     /// Trajectory L2 error (m; NaN for the reference problems).
     pub trajectory_error: f64,
-    /// The integrator's own estimate: the sum of its accepted local error estimates times the
-    /// tolerance scale (a bound-like figure to compare with `final_error`).
+    /// The error estimated without the reference: the difference from the same method's run at
+    /// the next (10× finer) tolerance, in the units of `final_error`; NaN at the finest
+    /// tolerance. It tracks `final_error` when the method converges in proportion to its
+    /// tolerance.
     pub estimated_error: f64,
+    /// The values the final error is measured on (positions for the push, the state for the
+    /// classical problems), for the estimate.
+    pub final_values: Vec<f64>,
     /// Median wall time of the repetitions (s).
     pub wall_time: f64,
     /// Accepted steps.
@@ -125,7 +130,8 @@ pub fn push_points(
                         rtol,
                         final_error: fin,
                         trajectory_error: traj,
-                        estimated_error: run.stats.error_sum * rtol * 1e-9,
+                        estimated_error: f64::NAN,
+                        final_values: position_rows(model).into_iter().map(|i| run.final_state[i]).collect(),
                         wall_time: median(times),
                         steps: run.stats.steps,
                         rejected: run.stats.rejected,
@@ -139,6 +145,7 @@ pub fn push_points(
                     final_error: f64::NAN,
                     trajectory_error: f64::NAN,
                     estimated_error: f64::NAN,
+                    final_values: Vec::new(),
                     wall_time: median(times),
                     steps: 0,
                     rejected: 0,
@@ -192,7 +199,8 @@ fn reference_problem<P: Problem>(
                         .map(|(a, b)| ((a - b) / b.abs().max(1e-300)).abs())
                         .fold(0.0, f64::max),
                     trajectory_error: f64::NAN,
-                    estimated_error: st.error_sum * rtol,
+                    estimated_error: f64::NAN,
+                    final_values: y.clone(),
                     wall_time: median(times),
                     steps: st.steps,
                     rejected: st.rejected,
@@ -205,6 +213,7 @@ fn reference_problem<P: Problem>(
                     final_error: f64::NAN,
                     trajectory_error: f64::NAN,
                     estimated_error: f64::NAN,
+                    final_values: Vec::new(),
                     wall_time: median(times),
                     steps: 0,
                     rejected: 0,
@@ -241,4 +250,47 @@ pub fn classical_points(reps: usize, max_steps: u64, min_rtol: f64) -> Vec<Point
         min_rtol,
     ));
     out
+}
+
+/// Fills `estimated_error` of every point from the same problem and method's next finer
+/// tolerance: `|values(rtol) − values(rtol/10)|` (largest component; relative to the reference
+/// magnitude for the classical problems, like their `final_error`).
+pub fn estimate_errors(points: &mut [Point], relative_to: impl Fn(&str) -> Option<Vec<f64>>) {
+    let n = points.len();
+    for i in 0..n {
+        let (problem, method, rtol) = (points[i].problem.clone(), points[i].method, points[i].rtol);
+        let finer = (0..n).find(|&j| {
+            points[j].problem == problem
+                && points[j].method == method
+                && (points[j].rtol - rtol * 0.1).abs() < 1e-3 * rtol * 0.1
+        });
+        let Some(j) = finer else { continue };
+        let (a, b) = (&points[i].final_values, &points[j].final_values);
+        if a.is_empty() || b.len() != a.len() {
+            continue;
+        }
+        let scale = relative_to(&problem);
+        let est = a
+            .iter()
+            .zip(b)
+            .enumerate()
+            .map(|(k, (x, y))| {
+                let d = (x - y).abs();
+                match &scale {
+                    Some(s) => d / s[k].abs().max(1e-300),
+                    None => d,
+                }
+            })
+            .fold(0.0, f64::max);
+        points[i].estimated_error = est;
+    }
+}
+
+/// The reference values the classical problems' errors are relative to.
+pub fn classical_reference(problem: &str) -> Option<Vec<f64>> {
+    match problem {
+        "van-der-pol" => Some(VanDerPol::REFERENCE.to_vec()),
+        "robertson" => Some(Robertson::REFERENCE.to_vec()),
+        _ => None,
+    }
 }

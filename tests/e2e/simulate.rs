@@ -107,6 +107,19 @@ fn accuracy_report_writes_table_csv_and_plots() {
         .map(|p| p["final_error"].as_f64().unwrap())
         .collect();
     assert!(rob.windows(2).all(|w| w[1] < w[0]), "{rob:?}");
+    // The estimate (difference from the next finer tolerance) tracks the true error.
+    for p in points
+        .iter()
+        .filter(|p| p["problem"] == "robertson" && p["method"] == "rodas4")
+    {
+        if let Some(est) = p["estimated_error"].as_f64() {
+            let err = p["final_error"].as_f64().unwrap();
+            assert!(
+                est / err > 1.0 / 3.0 && est / err < 3.0,
+                "estimate {est:e} vs error {err:e}"
+            );
+        }
+    }
     for f in ["accuracy.csv", "push.svg", "van-der-pol.svg", "robertson.svg"] {
         let p = dir.join(f);
         assert!(p.exists() && std::fs::metadata(&p).unwrap().len() > 100, "{f} missing");

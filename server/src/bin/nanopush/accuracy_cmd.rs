@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nanopush::accuracy::{Point, classical_points, push_points, push_reference};
+use nanopush::accuracy::{Point, classical_points, classical_reference, estimate_errors, push_points, push_reference};
 use nanopush::physics::integrate::{Method, Options};
 use nanopush::physics::pushing::{Dof, PushModel};
 use nanopush::push_run::run_push;
@@ -256,6 +256,7 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     let (reference, crosscheck) = push_reference(&model, a.duration).map_err(anyhow::Error::msg)?;
     let mut points = push_points("push", &model, a.duration, &reference, a.reps, max_steps, a.min_rtol);
     points.extend(classical_points(a.reps, max_steps, a.min_rtol));
+    estimate_errors(&mut points, classical_reference);
 
     // The cost of the quasi-static reduction: the same scene with every DOF dynamic, over a
     // short window (its nanosecond modes are resolved), against the reduced model's reference.
