@@ -80,6 +80,9 @@ impl Jkr {
     /// Smallest contact radius of the stable branch under displacement control, where
     /// `dδ/da = 0`: `a_min = (πwR²/(6K))^{1/3}` (0 for Hertz).
     pub fn min_stable_radius(&self) -> f64 {
+        if self.work == 0.0 {
+            return 0.0;
+        }
         (std::f64::consts::PI * self.work * self.radius * self.radius / (6.0 * self.modulus)).cbrt()
     }
 

@@ -30,14 +30,14 @@ impl Lu {
     pub fn factor(&mut self, n: usize, a: &[f64]) -> bool {
         self.n = n;
         self.a[..n * n].copy_from_slice(&a[..n * n]);
-        let m = &mut self.a;
+        let m = &mut self.a[..n * n];
         for k in 0..n {
-            let mut p = k;
-            let mut best = m[k * n + k].abs();
-            for i in k + 1..n {
-                let v = m[k * n + i].abs();
-                if v > best {
-                    best = v;
+            // Pivot: the largest entry of column k at or below the diagonal.
+            let col_k = &m[k * n..k * n + n];
+            let (mut p, mut best) = (k, col_k[k].abs());
+            for (i, v) in col_k.iter().enumerate().skip(k + 1) {
+                if v.abs() > best {
+                    best = v.abs();
                     p = i;
                 }
             }
@@ -50,15 +50,19 @@ impl Lu {
                     m.swap(j * n + k, j * n + p);
                 }
             }
-            let inv = 1.0 / m[k * n + k];
-            for i in k + 1..n {
-                m[k * n + i] *= inv;
+            // Multipliers, then the rank-1 update of the trailing columns.
+            let (left, right) = m.split_at_mut((k + 1) * n);
+            let col_k = &mut left[k * n..];
+            let inv = 1.0 / col_k[k];
+            for l in &mut col_k[k + 1..] {
+                *l *= inv;
             }
-            for j in k + 1..n {
-                let f = m[j * n + k];
+            let lk = &col_k[k + 1..];
+            for col_j in right.chunks_exact_mut(n) {
+                let f = col_j[k];
                 if f != 0.0 {
-                    for i in k + 1..n {
-                        m[j * n + i] -= m[k * n + i] * f;
+                    for (c, &l) in col_j[k + 1..].iter_mut().zip(lk) {
+                        *c -= l * f;
                     }
                 }
             }
@@ -66,26 +70,28 @@ impl Lu {
         true
     }
 
-    /// Solves `A x = b` in place.
+    /// Solves `A x = b` in place (forward and back substitution over column slices).
     pub fn solve(&self, b: &mut [f64]) {
         let n = self.n;
-        let m = &self.a;
+        let b = &mut b[..n];
         for k in 0..n {
             b.swap(k, self.piv[k]);
         }
         for j in 0..n {
             let bj = b[j];
             if bj != 0.0 {
-                for i in j + 1..n {
-                    b[i] -= m[j * n + i] * bj;
+                let col = &self.a[j * n + j + 1..j * n + n];
+                for (bi, &l) in b[j + 1..].iter_mut().zip(col) {
+                    *bi -= l * bj;
                 }
             }
         }
         for j in (0..n).rev() {
-            b[j] /= m[j * n + j];
+            let col = &self.a[j * n..j * n + j + 1];
+            b[j] /= col[j];
             let bj = b[j];
-            for i in 0..j {
-                b[i] -= m[j * n + i] * bj;
+            for (bi, &u) in b[..j].iter_mut().zip(&col[..j]) {
+                *bi -= u * bj;
             }
         }
     }
