@@ -6,6 +6,8 @@
 //!   assembled from it;
 //! - [`report`]: the derived quantities printed by `nanopush model`;
 //! - [`accuracy`]: the work-precision report (`nanopush accuracy`);
+//! - [`peers`]: peer solvers from crates.io (diffsol, russell_ode) on the report's classical
+//!   problems, for comparison at equal error;
 //! - [`push_run`]: a push at constant speed, sampled into a trace (`nanopush simulate`).
 //!
 //! ```
@@ -16,6 +18,7 @@
 #![deny(missing_docs)]
 
 pub mod accuracy;
+pub mod peers;
 pub mod physics;
 pub mod push_run;
 pub mod report;
