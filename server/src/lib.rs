@@ -7,6 +7,8 @@
 //! - [`report`]: the derived quantities printed by `nanopush model`;
 //! - [`accuracy`]: the work-precision report (`nanopush accuracy`);
 //! - [`extremes`]: the stability grid (`nanopush accuracy --extremes`);
+//! - [`peers`]: peer solvers from crates.io (diffsol, russell_ode) on the report's classical
+//!   problems, for comparison at equal error;
 //! - [`push_run`]: a push at constant speed, sampled into a trace (`nanopush simulate`).
 //!
 //! ```
@@ -18,6 +20,7 @@
 
 pub mod accuracy;
 pub mod extremes;
+pub mod peers;
 pub mod physics;
 pub mod push_run;
 pub mod report;
