@@ -66,4 +66,25 @@ pub struct AccuracyReport {
     pub points: Vec<AccuracyPoint>,
     /// The cost of the quasi-static reduction.
     pub quasi_static_cost: Option<QuasiStaticCost>,
+    /// Our default method against the best peer solver at equal error.
+    pub equal_error: Vec<EqualError>,
+}
+
+/// Time to reach an error, for our default method and the fastest peer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EqualError {
+    /// Problem.
+    pub problem: String,
+    /// Target error (relative).
+    pub error: f64,
+    /// Our default method.
+    pub ours: String,
+    /// Its least wall time over the tolerances that reached the target (s); `null` if none did.
+    pub ours_time: Option<f64>,
+    /// The fastest peer that reached the target.
+    pub best_peer: Option<String>,
+    /// Its wall time (s).
+    pub best_peer_time: Option<f64>,
+    /// `best_peer_time / ours_time`: above 1 means ours is faster.
+    pub ratio: Option<f64>,
 }

@@ -42,10 +42,11 @@ pub struct SimulateReport {
     /// Mode switches (events).
     pub events: u64,
     /// Estimated global error of the final particle y (m): the difference from a rerun at
-    /// `rtol/100` with the same method.
-    pub estimated_error_y: f64,
+    /// `rtol/100` (at least 1e-12) with the same method and sampling; `null` when the rerun
+    /// failed (below double precision's reach).
+    pub estimated_error_y: Option<f64>,
     /// Estimated global error of the final ζ_z (m), likewise.
-    pub estimated_error_zeta_z: f64,
+    pub estimated_error_zeta_z: Option<f64>,
     /// Wall time of the run (s), the rerun excluded.
     pub wall_time: f64,
     /// Simulated time per wall time.

@@ -6,10 +6,11 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use clap::Args;
 use nanopush::accuracy::{Point, classical_points, classical_reference, estimate_errors, push_points, push_reference};
+use nanopush::peers::{PeerPoint, SOLVERS, peer_points};
 use nanopush::physics::integrate::{Method, Options};
 use nanopush::physics::pushing::{Dof, PushModel};
 use nanopush::push_run::run_push;
-use nanopush_proto::accuracy::{AccuracyPoint, AccuracyReport, QuasiStaticCost};
+use nanopush_proto::accuracy::{AccuracyPoint, AccuracyReport, EqualError, QuasiStaticCost};
 use plotters::prelude::*;
 
 /// Arguments of `nanopush accuracy`.
@@ -172,21 +173,25 @@ fn to_proto(p: &Point) -> AccuracyPoint {
     }
 }
 
-fn plot(path: &Path, title: &str, unit: &str, points: &[&Point]) -> anyhow::Result<()> {
-    let ok: Vec<&&Point> = points
+fn plot(path: &Path, title: &str, unit: &str, points: &[&AccuracyPoint]) -> anyhow::Result<()> {
+    let ok: Vec<(&str, f64, f64)> = points
         .iter()
-        .filter(|p| p.final_error.is_finite() && p.final_error > 0.0 && p.wall_time > 0.0)
+        .filter_map(|p| {
+            p.final_error
+                .filter(|e| *e > 0.0 && p.wall_time > 0.0)
+                .map(|e| (p.method.as_str(), p.wall_time, e))
+        })
         .collect();
     if ok.is_empty() {
         return Ok(());
     }
-    let (tmin, tmax) = ok.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
-        (a.min(p.wall_time), b.max(p.wall_time))
-    });
-    let (emin, emax) = ok.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
-        (a.min(p.final_error), b.max(p.final_error))
-    });
-    let root = SVGBackend::new(path, (800, 560)).into_drawing_area();
+    let (tmin, tmax) = ok
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    let (emin, emax) = ok
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(a, b), p| (a.min(p.2), b.max(p.2)));
+    let root = SVGBackend::new(path, (860, 580)).into_drawing_area();
     root.fill(&WHITE)?;
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 22))
@@ -204,19 +209,18 @@ fn plot(path: &Path, title: &str, unit: &str, points: &[&Point]) -> anyhow::Resu
         .x_label_formatter(&|v| format!("{v:.0e}"))
         .y_label_formatter(&|v| format!("{v:.0e}"))
         .draw()?;
-    for (i, m) in Method::ALL.into_iter().enumerate() {
-        let color = Palette99::pick(i).to_rgba();
-        let series: Vec<(f64, f64)> = ok
-            .iter()
-            .filter(|p| p.method == m)
-            .map(|p| (p.wall_time, p.final_error))
-            .collect();
-        if series.is_empty() {
-            continue;
+    let mut names: Vec<&str> = Vec::new();
+    for p in &ok {
+        if !names.contains(&p.0) {
+            names.push(p.0);
         }
+    }
+    for (i, name) in names.into_iter().enumerate() {
+        let color = Palette99::pick(i).to_rgba();
+        let series: Vec<(f64, f64)> = ok.iter().filter(|p| p.0 == name).map(|p| (p.1, p.2)).collect();
         chart
             .draw_series(LineSeries::new(series.clone(), color.stroke_width(2)))?
-            .label(m.name())
+            .label(name.to_string())
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
         chart.draw_series(series.iter().map(|&(x, y)| Circle::new((x, y), 4, color.filled())))?;
     }
@@ -227,6 +231,57 @@ fn plot(path: &Path, title: &str, unit: &str, points: &[&Point]) -> anyhow::Resu
         .draw()?;
     root.present()?;
     Ok(())
+}
+
+fn peer_to_proto(p: &PeerPoint) -> AccuracyPoint {
+    AccuracyPoint {
+        problem: p.problem.clone(),
+        method: p.solver.clone(),
+        rtol: p.rtol,
+        final_error: p.final_error.is_finite().then_some(p.final_error),
+        trajectory_error: None,
+        estimated_error: None,
+        wall_time: p.wall_time,
+        steps: p.steps,
+        rejected: 0,
+        failure: p.failure.clone(),
+    }
+}
+
+/// Least wall time at which `method` reached `error` on `problem`.
+fn time_to(rows: &[AccuracyPoint], problem: &str, method: &str, error: f64) -> Option<f64> {
+    rows.iter()
+        .filter(|p| p.problem == problem && p.method == method && p.final_error.is_some_and(|e| e <= error))
+        .map(|p| p.wall_time)
+        .min_by(|a, b| a.total_cmp(b))
+}
+
+fn equal_error(rows: &[AccuracyPoint]) -> Vec<EqualError> {
+    let ours = Method::Rodas4.name();
+    let mut out = Vec::new();
+    for problem in ["van-der-pol", "robertson"] {
+        for error in [1e-4, 1e-6, 1e-8] {
+            let ours_time = time_to(rows, problem, ours, error);
+            let best = SOLVERS
+                .iter()
+                .filter_map(|s| time_to(rows, problem, s, error).map(|t| (s.to_string(), t)))
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            let ratio = match (&best, ours_time) {
+                (Some((_, bt)), Some(ot)) => Some(bt / ot),
+                _ => None,
+            };
+            out.push(EqualError {
+                problem: problem.into(),
+                error,
+                ours: ours.into(),
+                ours_time,
+                best_peer: best.as_ref().map(|b| b.0.clone()),
+                best_peer_time: best.map(|b| b.1),
+                ratio,
+            });
+        }
+    }
+    out
 }
 
 fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
@@ -257,13 +312,16 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     let mut points = push_points("push", &model, a.duration, &reference, a.reps, max_steps, a.min_rtol);
     points.extend(classical_points(a.reps, max_steps, a.min_rtol));
     estimate_errors(&mut points, classical_reference);
+    let mut rows: Vec<AccuracyPoint> = points.iter().map(to_proto).collect();
+    rows.extend(peer_points(a.reps, a.min_rtol).iter().map(peer_to_proto));
+    let equal = equal_error(&rows);
 
     // The cost of the quasi-static reduction: the same scene with every DOF dynamic, over a
     // short window (its nanosecond modes are resolved), against the reduced model's reference.
     let qs = if a.no_full_model {
         None
     } else {
-        let window = a.duration.min(2e-3);
+        let window = a.duration;
         let mut full = model.p;
         full.dofs.particle_y = Dof::Dynamic;
         full.dofs.particle_z = Dof::Dynamic;
@@ -315,16 +373,17 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     let mut csv = String::from(
         "problem,method,rtol,final_error,trajectory_error,estimated_error,wall_time_s,steps,rejected,failure\n",
     );
-    for p in &points {
+    let num = |v: Option<f64>| v.map_or("NaN".to_string(), |v| format!("{v:e}"));
+    for p in &rows {
         writeln!(
             csv,
-            "{},{},{:e},{:e},{:e},{:e},{:e},{},{},{}",
+            "{},{},{:e},{},{},{},{:e},{},{},{}",
             p.problem,
-            p.method.name(),
+            p.method,
             p.rtol,
-            p.final_error,
-            p.trajectory_error,
-            p.estimated_error,
+            num(p.final_error),
+            num(p.trajectory_error),
+            num(p.estimated_error),
             p.wall_time,
             p.steps,
             p.rejected,
@@ -333,7 +392,7 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     }
     write_atomic(&a.out.join("accuracy.csv"), &csv)?;
     for (problem, unit) in [("push", "m"), ("van-der-pol", "relative"), ("robertson", "relative")] {
-        let pts: Vec<&Point> = points.iter().filter(|p| p.problem == problem).collect();
+        let pts: Vec<&AccuracyPoint> = rows.iter().filter(|p| p.problem == problem).collect();
         let title = if problem == "push" {
             format!("{}: error vs run time", scene.file.name)
         } else {
@@ -350,8 +409,9 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
         duration: a.duration,
         reference_crosscheck: crosscheck,
         repetitions: a.reps,
-        points: points.iter().map(to_proto).collect(),
+        points: rows.clone(),
         quasi_static_cost: qs,
+        equal_error: equal,
     };
     let mut out = String::new();
     if a.json {
@@ -374,23 +434,40 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     )?;
     writeln!(
         out,
-        "{:<12} {:<15} {:>7} {:>11} {:>11} {:>11} {:>11} {:>8} {:>6}",
+        "{:<12} {:<17} {:>7} {:>11} {:>11} {:>11} {:>11} {:>8} {:>6}",
         "problem", "method", "rtol", "final", "traj", "estimate", "time/s", "steps", "rej"
     )?;
-    for p in &points {
+    let num = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3e}"));
+    for p in &rows {
         writeln!(
             out,
-            "{:<12} {:<15} {:>7.0e} {:>11.3e} {:>11.3e} {:>11.3e} {:>11.3e} {:>8} {:>6}{}",
+            "{:<12} {:<17} {:>7.0e} {:>11} {:>11} {:>11} {:>11.3e} {:>8} {:>6}{}",
             p.problem,
-            p.method.name(),
+            p.method,
             p.rtol,
-            p.final_error,
-            p.trajectory_error,
-            p.estimated_error,
+            num(p.final_error),
+            num(p.trajectory_error),
+            num(p.estimated_error),
             p.wall_time,
             p.steps,
             p.rejected,
             p.failure.as_ref().map(|f| format!("  FAILED: {f}")).unwrap_or_default()
+        )?;
+    }
+    writeln!(
+        out,
+        "Time to reach an error, our default (rodas4) against the fastest peer:"
+    )?;
+    for e in &report.equal_error {
+        writeln!(
+            out,
+            "  {:<12} error ≤ {:.0e}: rodas4 {} s, {} {} s, ratio {}",
+            e.problem,
+            e.error,
+            num(e.ours_time),
+            e.best_peer.as_deref().unwrap_or("no peer"),
+            num(e.best_peer_time),
+            e.ratio.map_or("-".into(), |r| format!("{r:.2}"))
         )?;
     }
     if let Some(q) = &report.quasi_static_cost {

@@ -111,15 +111,16 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<String> {
     let speed = model.p.speed;
     let run = run_push(model.clone(), method, Options::with_rtol(a.rtol), a.duration, a.sample)
         .context("simulating the push")?;
-    // The estimated global error: a rerun at a hundredth of the tolerance.
+    // The estimated global error: a rerun at a hundredth of the tolerance (not below 1e-12,
+    // where double precision runs out), with the same sampling.
     let fine = run_push(
         model,
         method,
-        Options::with_rtol((a.rtol * 1e-2).max(1e-13)),
+        Options::with_rtol((a.rtol * 1e-2).max(1e-12)),
         a.duration,
-        a.duration,
+        a.sample,
     )
-    .context("simulating the reference push at rtol/100")?;
+    .ok();
     if let Some(path) = &a.out {
         write_trace(path, &run)?;
     }
@@ -142,8 +143,10 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<String> {
         jacobians: st.jac_evals,
         factorizations: st.factorizations,
         events: st.events,
-        estimated_error_y: (run.final_particle_y() - fine.final_particle_y()).abs(),
-        estimated_error_zeta_z: (run.final_zeta_z() - fine.final_zeta_z()).abs(),
+        estimated_error_y: fine
+            .as_ref()
+            .map(|f| (run.final_particle_y() - f.final_particle_y()).abs()),
+        estimated_error_zeta_z: fine.as_ref().map(|f| (run.final_zeta_z() - f.final_zeta_z()).abs()),
         wall_time: st.wall_time,
         real_time_factor: a.duration / st.wall_time.max(1e-12),
         trace_rows: if a.out.is_some() { run.trace.len() } else { 0 },
@@ -175,8 +178,14 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<String> {
         ("steps / rejected", format!("{} / {}", r.steps, r.rejected)),
         ("Jacobians / LUs", format!("{} / {}", r.jacobians, r.factorizations)),
         ("mode switches", r.events.to_string()),
-        ("est. global error y", eng(r.estimated_error_y, "m")),
-        ("est. global error ζ_z", eng(r.estimated_error_zeta_z, "m")),
+        (
+            "est. global error y",
+            r.estimated_error_y.map_or("unavailable".into(), |e| eng(e, "m")),
+        ),
+        (
+            "est. global error ζ_z",
+            r.estimated_error_zeta_z.map_or("unavailable".into(), |e| eng(e, "m")),
+        ),
         ("wall time", eng(r.wall_time, "s")),
         ("real-time factor", format!("{:.1}", r.real_time_factor)),
     ];

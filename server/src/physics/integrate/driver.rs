@@ -17,8 +17,7 @@ pub const MAX_EVENTS: usize = 8;
 /// control loop calling it once per tick does not restart from a tiny step.
 #[derive(Debug, Clone)]
 pub struct Integrator {
-    /// The method.
-    pub method: Method,
+    method: Method,
     /// Tolerances and limits.
     pub opts: Options,
     h: f64,
@@ -56,6 +55,11 @@ impl Integrator {
         self.h_old = 0.0;
         self.err_old = 1.0;
         self.cached_at = None;
+    }
+
+    /// The method (fixed at construction: its workspace is built for it).
+    pub fn method(&self) -> Method {
+        self.method
     }
 
     /// The step size the next step will try (s).
@@ -144,6 +148,7 @@ impl Integrator {
                 st.rhs_evals += 1;
                 st.jac_evals += 1;
             }
+            w.rtol = self.opts.rtol;
             for i in 0..n {
                 w.abs_tol[i] = self.opts.atol * p.scale(i);
                 w.scale[i] = w.abs_tol[i] + self.opts.rtol * w.y0[i].abs();
@@ -247,11 +252,12 @@ impl Integrator {
                 for k in 0..ne {
                     // A crossing from positive to non-positive, or from exactly zero (a mode that
                     // starts on its boundary, e.g. a static limit of zero) to negative.
-                    if (g0[k] > 0.0 && g1[k] <= 0.0) || (g0[k] == 0.0 && g1[k] < 0.0) {
-                        let theta = self.locate(p, events, k, *t, h, g0[k], g1[k]);
-                        if first.is_none_or(|(_, th)| theta < th) {
-                            first = Some((k, theta));
-                        }
+                    let crossed = (g0[k] > 0.0 && g1[k] <= 0.0) || (g0[k] == 0.0 && g1[k] < 0.0);
+                    if crossed
+                        && let Some(theta) = self.locate(p, events, k, *t, h, g0[k], g1[k])
+                        && first.is_none_or(|(_, th)| theta < th)
+                    {
+                        first = Some((k, theta));
                     }
                 }
                 if let Some((k, theta)) = first {
@@ -279,12 +285,22 @@ impl Integrator {
     }
 
     /// Illinois (modified regula falsi) on `θ ↦ g_k(t + θh, y(θ))` with the dense output, to
-    /// `event_tol` in time. Returns the right end of the final bracket (`g ≤ 0` there).
+    /// `event_tol` in time. Returns the right end of the final bracket (`g ≤ 0` there), or
+    /// `None` when the function stops applying (NaN) inside the step: then it did not cross.
     #[allow(clippy::too_many_arguments)]
-    fn locate<P: Problem, E: Events>(&self, p: &P, events: &E, k: usize, t: f64, h: f64, ga: f64, gb: f64) -> f64 {
+    fn locate<P: Problem, E: Events>(
+        &self,
+        p: &P,
+        events: &E,
+        k: usize,
+        t: f64,
+        h: f64,
+        ga: f64,
+        gb: f64,
+    ) -> Option<f64> {
         let n = p.len();
         if ga == 0.0 {
-            return 0.0;
+            return Some(0.0);
         }
         let (mut a, mut b) = (0.0f64, 1.0f64);
         let (mut fa, mut fb) = (ga, gb);
@@ -303,10 +319,7 @@ impl Integrator {
             events.eval(t + c * h, &ys[..n], &mut g);
             let fc = g[k];
             if fc.is_nan() {
-                // The function stopped applying inside the bracket: bisect towards it.
-                b = c;
-                fb = -0.0;
-                continue;
+                return None;
             }
             if fc > 0.0 {
                 a = c;
@@ -324,6 +337,6 @@ impl Integrator {
                 side = 1;
             }
         }
-        b
+        Some(b)
     }
 }

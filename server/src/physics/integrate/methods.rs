@@ -90,6 +90,8 @@ pub(crate) struct Work {
     pub scale: Vector,
     /// The absolute part alone, `atol·scaleᵢ`.
     pub abs_tol: Vector,
+    /// The relative tolerance (for the Newton rounding floor).
+    pub rtol: f64,
     // Dense output: Rodas4 uses (cont3, cont4); TR-BDF2 the stage at γh; implicit Euler none.
     cont3: Vector,
     cont4: Vector,
@@ -201,6 +203,7 @@ impl Work {
             tmp2: [0.0; MAX_DIM],
             scale: [1.0; MAX_DIM],
             abs_tol: [1.0; MAX_DIM],
+            rtol: 1e-6,
             cont3: [0.0; MAX_DIM],
             cont4: [0.0; MAX_DIM],
             method,
@@ -312,7 +315,12 @@ impl Work {
             if !norm.is_finite() {
                 return Err(StepFailure::Newton);
             }
-            if norm < 1e-3 || (iter > 0 && norm < 1e-2 && norm < 0.5 * prev) {
+            // Converged when the update is far below the tolerance (or, contracting at rate θ,
+            // the remaining error θ/(1−θ)·norm is), or when it is down at the rounding floor of the
+            // state that the tolerance cannot see below (Hairer & Wanner IV.8).
+            let theta = if iter > 0 { norm / prev } else { 0.5 };
+            let floor = 1e2 * f64::EPSILON / self.rtol.max(1e-300);
+            if norm < 1e-3 || norm < floor || (iter > 0 && theta < 1.0 && theta / (1.0 - theta) * norm < 0.03) {
                 p.rhs(ts, &y[..n], &mut fy[..n]);
                 self.rhs_evals += 1;
                 return Ok(());

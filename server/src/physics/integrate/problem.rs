@@ -112,8 +112,8 @@ pub struct Stats {
     pub factorizations: u64,
     /// Largest weighted local error estimate of an accepted step (1 = at tolerance).
     pub max_local_error: f64,
-    /// Sum of the accepted local error estimates in the problem's units, RMS-weighted: a
-    /// (pessimistic) estimate of the global error after the call.
+    /// Sum of the accepted steps' weighted local error norms (dimensionless, 1 = at
+    /// tolerance): a crude upper bound on the global error in units of the tolerance.
     pub error_sum: f64,
     /// Events located.
     pub events: u64,

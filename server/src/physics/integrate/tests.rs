@@ -222,3 +222,26 @@ fn too_large_and_non_finite_are_errors() {
     assert!(r.is_err(), "{r:?}");
     assert!(y[0].is_finite() && y[0] <= 2.0 && t < 10.0);
 }
+
+/// A switching function that starts exactly at zero and goes negative fires at once (a mode
+/// that starts on its boundary, e.g. a static friction limit of zero).
+struct Height;
+impl Events for Height {
+    fn count(&self) -> usize {
+        1
+    }
+    fn eval(&self, _t: f64, y: &[f64], out: &mut [f64]) {
+        out[0] = y[0] - 1.0;
+    }
+}
+
+#[test]
+fn crossing_from_exactly_zero_fires_at_once() {
+    let mut it = Integrator::new(Method::Rodas4, Options::with_rtol(1e-9));
+    let mut y = [1.0, 0.0];
+    let mut t = 0.0;
+    let (o, st) = it.advance(&Falling, &Height, &mut t, &mut y, 1.0).unwrap();
+    assert_eq!(o, Outcome::Event { index: 0 });
+    assert_eq!(st.events, 1);
+    assert!(t < 1e-6, "fired at {t}");
+}

@@ -403,8 +403,8 @@ impl PushModel {
     }
 
     /// The mode after the switch whose function crossed zero, keeping forces continuous: a contact
-    /// that starts to slip slips along its stretch; one that sticks again is anchored so that the
-    /// spring force equals the kinetic friction it had.
+    /// that starts to slip slips against the friction force it was holding (spring and damping);
+    /// one that sticks again is anchored so that the spring force equals the kinetic friction.
     pub fn transition(&self, t: f64, x: &[f64], mode: &Mode, which: SwitchKind) -> Mode {
         let pr = self.probe(t, x, mode);
         let p = &self.p;
@@ -412,8 +412,9 @@ impl PushModel {
         match which {
             SwitchKind::Substrate => {
                 m.substrate = match mode.substrate {
-                    Tangential::Stick { anchor } => Tangential::Slip {
-                        direction: sign(pr.contact_as - anchor),
+                    // The contact slips against the friction it was holding (spring and damping).
+                    Tangential::Stick { .. } => Tangential::Slip {
+                        direction: -sign(pr.friction_as),
                     },
                     Tangential::Slip { direction } => Tangential::Stick {
                         anchor: pr.contact_as - direction * p.mu_as_k * pr.load_as.max(0.0) / p.k_as_t,
@@ -422,8 +423,8 @@ impl PushModel {
             }
             SwitchKind::Tip => {
                 m.tip = match mode.tip {
-                    Tangential::Stick { anchor } => Tangential::Slip {
-                        direction: sign(pr.contact_ta - anchor),
+                    Tangential::Stick { .. } => Tangential::Slip {
+                        direction: -sign(pr.friction_ta),
                     },
                     Tangential::Slip { direction } => Tangential::Stick {
                         anchor: pr.contact_ta - direction * p.mu_ta_k * pr.load_ta.max(0.0) / p.k_ta_t,

@@ -144,9 +144,10 @@ impl Simulation {
 
     /// Events fire when a switching function crosses zero; one that is already negative when a
     /// mode starts (after the quasi-static rows settle, say) would never cross. Apply those
-    /// switches at once: stick → slip where the friction demand exceeds the static limit, and the
-    /// meniscus and contact switches. Slip → stick is left to the events (at rest the slip rate
-    /// is zero, which is not a reason to stick). Returns how many switches it applied.
+    /// switches at once: stick → slip where the friction demand exceeds the static limit, slip →
+    /// stick where the slip runs against its kinetic friction (by more than 1 nm/s: at rest the
+    /// slip rate is zero, which is no reason to stick), and the meniscus and contact switches.
+    /// Returns how many switches it applied (at most 4).
     fn enforce_mode(&mut self) -> u32 {
         let n = self.model.len();
         let mut applied = 0;
@@ -154,9 +155,15 @@ impl Simulation {
             let sw = self.model.switching(self.t, &self.x[..n], &self.mode);
             let stick_violated =
                 |t: Tangential, g: Option<f64>| matches!(t, Tangential::Stick { .. }) && g.is_some_and(|g| g < 0.0);
-            let kind = if stick_violated(self.mode.substrate, sw.substrate) {
+            // A slipping contact whose slip runs against its friction (direction·rate below
+            // −1 nm/s, beyond noise) would be pushed by friction: it sticks.
+            let slip_reversed =
+                |t: Tangential, g: Option<f64>| matches!(t, Tangential::Slip { .. }) && g.is_some_and(|g| g < -1e-9);
+            let kind = if stick_violated(self.mode.substrate, sw.substrate)
+                || slip_reversed(self.mode.substrate, sw.substrate)
+            {
                 SwitchKind::Substrate
-            } else if stick_violated(self.mode.tip, sw.tip) {
+            } else if stick_violated(self.mode.tip, sw.tip) || slip_reversed(self.mode.tip, sw.tip) {
                 SwitchKind::Tip
             } else if sw.meniscus.is_some_and(|g| g < 0.0) {
                 SwitchKind::Meniscus
@@ -222,7 +229,7 @@ impl Simulation {
 
     /// The integration method.
     pub fn method(&self) -> Method {
-        self.integrator.method
+        self.integrator.method()
     }
 
     /// The friction phase now.
