@@ -281,6 +281,25 @@ mod tests {
     }
 
     #[test]
+    fn frictionless_soft_lever_corner_does_not_chatter() {
+        // Regression: with μ = 0 a slip "against" its (zero) friction was switched back to stick,
+        // which a zero static limit turned into slip again, 10000 times at t = 0.
+        let scene = Scene::default_scene();
+        let c = Case {
+            radius_nm: 5000.0,
+            stiffness_n_per_m: 0.1,
+            humidity: 0.0,
+            mu_as: 0.0,
+            tilt_deg: 0.0,
+            contact_angle_deg: 80.0,
+            speed_um_per_s: 100.0,
+        };
+        let r = run_case(&scene, &c, 1e-5);
+        assert!(r.finite_and_bounded, "{} {:?}", r.outcome, r.diagnoses);
+        assert!(r.outcome.starts_with("slides"), "{}", r.outcome);
+    }
+
+    #[test]
     fn full_grid_size() {
         assert_eq!(grid(&Scene::default_scene(), false).len(), 7 * 7 + 128);
     }

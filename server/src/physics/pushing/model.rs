@@ -362,7 +362,39 @@ impl PushModel {
 
     /// [`Self::switching`] with the contact rates `(ṡ_as, ξ̇)` already known.
     pub fn switching_with(&self, t: f64, x: &[f64], mode: &Mode, rates: Option<(f64, f64)>) -> Switching {
-        let pr = self.probe(t, x, mode);
+        self.switching_from(&self.probe(t, x, mode), mode, rates)
+    }
+
+    /// The switching functions along a known `ẋ`: one dual evaluation gives the probe and the
+    /// contact rates together (what the integrator uses at the end of each step).
+    pub fn switching_along(&self, t: f64, x: &[f64], mode: &Mode, xdot: &[f64]) -> Switching {
+        let n = self.len();
+        let mut xd = [Dual::default(); MAX_STATES];
+        for i in 0..n {
+            xd[i] = Dual::new(x[i], xdot[i]);
+        }
+        let (_, pd) = self.eval(Dual::var(t), &xd[..n], mode);
+        let re = |d: Dual| d.re;
+        let pr = Probe {
+            gap: re(pd.gap),
+            normal_ta: re(pd.normal_ta),
+            friction_ta: re(pd.friction_ta),
+            load_ta: re(pd.load_ta),
+            friction_as: re(pd.friction_as),
+            load_as: re(pd.load_as),
+            contact_as: re(pd.contact_as),
+            contact_ta: re(pd.contact_ta),
+            slip_rate_as: re(pd.slip_rate_as),
+            slip_rate_ta: re(pd.slip_rate_ta),
+            zeta_z: re(pd.zeta_z),
+            zeta_y: re(pd.zeta_y),
+            stage: re(pd.stage),
+            stage_accel: re(pd.stage_accel),
+        };
+        self.switching_from(&pr, mode, Some((pd.contact_as.eps, pd.contact_ta.eps)))
+    }
+
+    fn switching_from(&self, pr: &Probe<f64>, mode: &Mode, rates: Option<(f64, f64)>) -> Switching {
         let p = &self.p;
         let a0 = p.interactions.a0;
         let tangential = |t: Tangential, mu_s: f64, load: f64, force: f64, rate: Option<f64>| match t {

@@ -53,15 +53,13 @@ impl Events for InMode<'_> {
         write_switching(self.model.switching(t, y, &self.mode), out);
     }
     fn eval_at_step(&self, t: f64, y: &[f64], f: &[f64], ft: &[f64], jac: &[f64], out: &mut [f64]) {
-        let rates = if PushModel::slipping(&self.mode) {
-            let mut xdot = [0.0; MAX_STATES];
-            self.model
-                .state_rate_from(f, ft, jac, &mut xdot)
-                .then(|| self.model.contact_rates_along(t, y, &self.mode, &xdot))
+        let mut xdot = [0.0; MAX_STATES];
+        let sw = if PushModel::slipping(&self.mode) && self.model.state_rate_from(f, ft, jac, &mut xdot) {
+            self.model.switching_along(t, y, &self.mode, &xdot[..self.model.len()])
         } else {
-            None
+            self.model.switching_with(t, y, &self.mode, None)
         };
-        write_switching(self.model.switching_with(t, y, &self.mode, rates), out);
+        write_switching(sw, out);
     }
 }
 
@@ -151,19 +149,28 @@ impl Simulation {
     fn enforce_mode(&mut self) -> u32 {
         let n = self.model.len();
         let mut applied = 0;
+        // A contact switched to slip here is not switched back in the same call (no ping-pong),
+        // and a slip with zero kinetic friction never "runs against" it.
+        let (mut fresh_as, mut fresh_ta) = (false, false);
+        let (mu_as_k, mu_ta_k) = (self.model.p.mu_as_k, self.model.p.mu_ta_k);
         for _ in 0..4 {
             let sw = self.model.switching(self.t, &self.x[..n], &self.mode);
             let stick_violated =
                 |t: Tangential, g: Option<f64>| matches!(t, Tangential::Stick { .. }) && g.is_some_and(|g| g < 0.0);
             // A slipping contact whose slip runs against its friction (direction·rate below
             // −1 nm/s, beyond noise) would be pushed by friction: it sticks.
-            let slip_reversed =
-                |t: Tangential, g: Option<f64>| matches!(t, Tangential::Slip { .. }) && g.is_some_and(|g| g < -1e-9);
-            let kind = if stick_violated(self.mode.substrate, sw.substrate)
-                || slip_reversed(self.mode.substrate, sw.substrate)
-            {
+            let slip_reversed = |t: Tangential, g: Option<f64>, fresh: bool, mu_k: f64| {
+                !fresh && mu_k > 0.0 && matches!(t, Tangential::Slip { .. }) && g.is_some_and(|g| g < -1e-9)
+            };
+            let kind = if stick_violated(self.mode.substrate, sw.substrate) {
+                fresh_as = true;
                 SwitchKind::Substrate
-            } else if stick_violated(self.mode.tip, sw.tip) || slip_reversed(self.mode.tip, sw.tip) {
+            } else if slip_reversed(self.mode.substrate, sw.substrate, fresh_as, mu_as_k) {
+                SwitchKind::Substrate
+            } else if stick_violated(self.mode.tip, sw.tip) {
+                fresh_ta = true;
+                SwitchKind::Tip
+            } else if slip_reversed(self.mode.tip, sw.tip, fresh_ta, mu_ta_k) {
                 SwitchKind::Tip
             } else if sw.meniscus.is_some_and(|g| g < 0.0) {
                 SwitchKind::Meniscus

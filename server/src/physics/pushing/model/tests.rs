@@ -475,3 +475,18 @@ fn one_pass_derivatives_equal_the_separate_ones() {
         }
     }
 }
+
+#[test]
+fn switching_along_equals_switching_with_rates() {
+    let m = quasi();
+    let mode = Mode {
+        substrate: Tangential::Slip { direction: 1.0 },
+        ..m.initial_mode()
+    };
+    let x = perturbed(&m);
+    let mut xdot = [0.0; 12];
+    assert!(m.state_rate(1e-4, &x, &mode, &mut xdot));
+    let a = m.switching_along(1e-4, &x, &mode, &xdot[..m.len()]);
+    let b = m.switching(1e-4, &x, &mode);
+    assert_eq!(a, b);
+}
