@@ -48,6 +48,25 @@ pub struct Point {
     pub failure: Option<String>,
 }
 
+impl Point {
+    /// A run that failed: no errors, the failure's message.
+    fn failed(problem: &str, method: Method, rtol: f64, wall_time: f64, failure: String) -> Point {
+        Point {
+            problem: problem.into(),
+            method,
+            rtol,
+            final_error: f64::NAN,
+            trajectory_error: f64::NAN,
+            estimated_error: f64::NAN,
+            final_values: Vec::new(),
+            wall_time,
+            steps: 0,
+            rejected: 0,
+            failure: Some(failure),
+        }
+    }
+}
+
 /// Tolerances of the report.
 pub const TOLERANCES: [f64; 9] = [1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10];
 
@@ -138,19 +157,7 @@ pub fn push_points(
                         failure: None,
                     }
                 }
-                Err(e) => Point {
-                    problem: name.into(),
-                    method,
-                    rtol,
-                    final_error: f64::NAN,
-                    trajectory_error: f64::NAN,
-                    estimated_error: f64::NAN,
-                    final_values: Vec::new(),
-                    wall_time: median(times),
-                    steps: 0,
-                    rejected: 0,
-                    failure: Some(e.to_string()),
-                },
+                Err(e) => Point::failed(name, method, rtol, median(times), e.to_string()),
             };
             out.push(point);
         }
@@ -206,19 +213,7 @@ fn reference_problem<P: Problem>(
                     rejected: st.rejected,
                     failure: None,
                 },
-                Err(e) => Point {
-                    problem: name.into(),
-                    method,
-                    rtol,
-                    final_error: f64::NAN,
-                    trajectory_error: f64::NAN,
-                    estimated_error: f64::NAN,
-                    final_values: Vec::new(),
-                    wall_time: median(times),
-                    steps: 0,
-                    rejected: 0,
-                    failure: Some(e.to_string()),
-                },
+                Err(e) => Point::failed(name, method, rtol, median(times), e.to_string()),
             };
             out.push(point);
         }

@@ -479,20 +479,26 @@ impl PushModel {
         m
     }
 
+    /// The indices of the algebraic (zero-mass) rows, and how many there are.
+    fn algebraic_rows(&self) -> ([usize; MAX_STATES], usize) {
+        let mut alg = [0usize; MAX_STATES];
+        let mut m = 0;
+        for (i, &mass) in self.mass[..self.len()].iter().enumerate() {
+            if mass == 0.0 {
+                alg[m] = i;
+                m += 1;
+            }
+        }
+        (alg, m)
+    }
+
     /// Balances the quasi-static (algebraic) rows by Newton's method, holding the differential
     /// states fixed: a consistent initial value for the DAE, and again after an event changes
     /// a force discontinuously. Returns the final residual norm (m). No allocation.
     pub fn equilibrate(&self, t: f64, x: &mut [f64], mode: &Mode) -> f64 {
         let n = self.len();
         let mass = self.mass_diagonal();
-        let mut alg = [0usize; MAX_STATES];
-        let mut m = 0;
-        for i in 0..n {
-            if mass[i] == 0.0 {
-                alg[m] = i;
-                m += 1;
-            }
-        }
+        let (alg, m) = self.algebraic_rows();
         let mut f = [0.0; MAX_STATES];
         let mut jac = [0.0; MAX_STATES * MAX_STATES];
         let mut res = 0.0;
@@ -542,14 +548,7 @@ impl PushModel {
         let n = self.len();
         let mass = self.mass_diagonal();
         out[..n].copy_from_slice(&f[..n]);
-        let mut alg = [0usize; MAX_STATES];
-        let mut m = 0;
-        for i in 0..n {
-            if mass[i] == 0.0 {
-                alg[m] = i;
-                m += 1;
-            }
-        }
+        let (alg, m) = self.algebraic_rows();
         if m == 0 {
             return true;
         }
