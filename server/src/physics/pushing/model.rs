@@ -497,7 +497,6 @@ impl PushModel {
     /// a force discontinuously. Returns the final residual norm (m). No allocation.
     pub fn equilibrate(&self, t: f64, x: &mut [f64], mode: &Mode) -> f64 {
         let n = self.len();
-        let mass = self.mass_diagonal();
         let (alg, m) = self.algebraic_rows();
         let mut f = [0.0; MAX_STATES];
         let mut jac = [0.0; MAX_STATES * MAX_STATES];
