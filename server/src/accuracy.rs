@@ -70,9 +70,25 @@ impl Point {
 /// Tolerances of the report.
 pub const TOLERANCES: [f64; 9] = [1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10];
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(|a, b| a.total_cmp(b));
-    v[v.len() / 2]
+/// Runs `f` `reps` times (at least once): its last result and the median wall time (s).
+pub fn timed<R>(reps: usize, mut f: impl FnMut() -> R) -> (R, f64) {
+    let mut times = Vec::with_capacity(reps.max(1));
+    let mut last = None;
+    for _ in 0..reps.max(1) {
+        let start = Instant::now();
+        last = Some(f());
+        times.push(start.elapsed().as_secs_f64());
+    }
+    times.sort_by(|a, b| a.total_cmp(b));
+    (last.expect("at least one repetition"), times[times.len() / 2])
+}
+
+/// The largest relative component error of `y` against `reference`.
+pub fn max_relative_error(y: &[f64], reference: &[f64]) -> f64 {
+    y.iter()
+        .zip(reference)
+        .map(|(a, b)| ((a - b) / b.abs().max(1e-300)).abs())
+        .fold(0.0, f64::max)
 }
 
 fn position_rows(model: &PushModel) -> Vec<usize> {
@@ -132,15 +148,8 @@ pub fn push_points(
                 max_steps,
                 ..Options::with_rtol(rtol)
             };
-            let mut times = Vec::new();
-            let mut last = None;
-            for _ in 0..reps.max(1) {
-                let start = Instant::now();
-                let r = run_push(model.clone(), method, opts, duration, 1e-4);
-                times.push(start.elapsed().as_secs_f64());
-                last = Some(r);
-            }
-            let point = match last.expect("at least one repetition") {
+            let (last, wall) = timed(reps, || run_push(model.clone(), method, opts, duration, 1e-4));
+            let point = match last {
                 Ok(run) => {
                     let (fin, traj) = push_errors(model, &run, reference);
                     Point {
@@ -151,13 +160,13 @@ pub fn push_points(
                         trajectory_error: traj,
                         estimated_error: f64::NAN,
                         final_values: position_rows(model).into_iter().map(|i| run.final_state[i]).collect(),
-                        wall_time: median(times),
+                        wall_time: wall,
                         steps: run.stats.steps,
                         rejected: run.stats.rejected,
                         failure: None,
                     }
                 }
-                Err(e) => Point::failed(name, method, rtol, median(times), e.to_string()),
+                Err(e) => Point::failed(name, method, rtol, wall, e.to_string()),
             };
             out.push(point);
         }
@@ -183,37 +192,27 @@ fn reference_problem<P: Problem>(
                 max_steps,
                 ..Options::with_rtol(rtol)
             };
-            let mut times = Vec::new();
-            let mut result = None;
-            for _ in 0..reps.max(1) {
+            let ((r, y), wall) = timed(reps, || {
                 let mut it = Integrator::new(method, opts);
                 let mut y = y0.to_vec();
                 let mut t = 0.0;
-                let start = Instant::now();
-                let r = it.advance(p, &NoEvents, &mut t, &mut y, t_end);
-                times.push(start.elapsed().as_secs_f64());
-                result = Some((r, y));
-            }
-            let (r, y) = result.expect("at least one repetition");
+                (it.advance(p, &NoEvents, &mut t, &mut y, t_end), y)
+            });
             let point = match r {
                 Ok((_, st)) => Point {
                     problem: name.into(),
                     method,
                     rtol,
-                    final_error: y
-                        .iter()
-                        .zip(reference)
-                        .map(|(a, b)| ((a - b) / b.abs().max(1e-300)).abs())
-                        .fold(0.0, f64::max),
+                    final_error: max_relative_error(&y, reference),
                     trajectory_error: f64::NAN,
                     estimated_error: f64::NAN,
                     final_values: y.clone(),
-                    wall_time: median(times),
+                    wall_time: wall,
                     steps: st.steps,
                     rejected: st.rejected,
                     failure: None,
                 },
-                Err(e) => Point::failed(name, method, rtol, median(times), e.to_string()),
+                Err(e) => Point::failed(name, method, rtol, wall, e.to_string()),
             };
             out.push(point);
         }

@@ -24,7 +24,6 @@
 
 use std::cell::RefCell;
 use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::time::Instant;
 
 use diffsol::{
     NalgebraContext, NalgebraLU, NalgebraMat, NalgebraVec, OdeBuilder, OdeEquationsImplicit, OdeSolverMethod,
@@ -34,7 +33,7 @@ use russell_lab::Vector;
 use russell_ode::{Method as RussellMethod, NoArgs, OdeSolver, Params, System};
 use russell_sparse::{CooMatrix, Sym};
 
-use crate::accuracy::tolerances;
+use crate::accuracy::{max_relative_error, timed, tolerances};
 use crate::physics::integrate::test_problems::{Robertson, VanDerPol};
 use crate::physics::integrate::{MAX_DIM, Problem};
 
@@ -272,11 +271,6 @@ fn run_peer<P: Problem + Sync>(p: &P, peer: Peer, y0: &[f64], t_end: f64, rtol: 
     })
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(|a, b| a.total_cmp(b));
-    v[v.len() / 2]
-}
-
 #[allow(clippy::too_many_arguments)]
 fn problem_points<P: Problem + Sync>(
     name: &str,
@@ -290,23 +284,9 @@ fn problem_points<P: Problem + Sync>(
 ) {
     for peer in Peer::ALL {
         for rtol in tolerances(min_rtol) {
-            let mut times = Vec::new();
-            let mut result = None;
-            for _ in 0..reps.max(1) {
-                let start = Instant::now();
-                let r = run_peer(p, peer, y0, t_end, rtol);
-                times.push(start.elapsed().as_secs_f64());
-                result = Some(r);
-            }
-            let (final_error, steps, failure) = match result.expect("at least one repetition") {
-                Ok((y, steps)) => {
-                    let err = y
-                        .iter()
-                        .zip(reference)
-                        .map(|(a, b)| ((a - b) / b.abs().max(1e-300)).abs())
-                        .fold(0.0, f64::max);
-                    (err, steps, None)
-                }
+            let (result, wall) = timed(reps, || run_peer(p, peer, y0, t_end, rtol));
+            let (final_error, steps, failure) = match result {
+                Ok((y, steps)) => (max_relative_error(&y, reference), steps, None),
                 Err(e) => (f64::NAN, 0, Some(e)),
             };
             out.push(PeerPoint {
@@ -314,7 +294,7 @@ fn problem_points<P: Problem + Sync>(
                 solver: peer.name().into(),
                 rtol,
                 final_error,
-                wall_time: median(times),
+                wall_time: wall,
                 steps,
                 failure,
             });
