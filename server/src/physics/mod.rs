@@ -14,6 +14,7 @@ pub mod real;
 pub mod sensor;
 pub mod shearing;
 pub mod stage;
+pub mod topography;
 
 /// Interatomic cut-off distance `a₀` (m): contact separation of two surfaces (Israelachvili,
 /// *Intermolecular and Surface Forces*), where the van der Waals laws are evaluated at contact.

@@ -1,5 +1,9 @@
 //! The piezoresistive deflection sensor (Sec 4): only `ζ_z` is measurable, as a voltage.
 
+use rand::SeedableRng;
+use rand::rngs::SmallRng;
+use rand_distr::{Distribution, Normal};
+
 /// A linear piezoresistive readout of `ζ_z`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sensor {
@@ -23,9 +27,87 @@ impl Sensor {
     }
 }
 
+/// The instrument's readout of the sensor at the 1 kHz sampling: the linear reading plus white
+/// noise (Gaussian, `noise_rms`) and a periodic perturbation `A sin(2πft)` (the hardware and
+/// environment noise of Fig 15). Seeded, so a run is reproducible.
+#[derive(Debug, Clone)]
+pub struct Readout {
+    /// The sensor.
+    pub sensor: Sensor,
+    /// Perturbation amplitude `A` (V).
+    pub perturbation: f64,
+    /// Perturbation frequency `f` (Hz).
+    pub perturbation_hz: f64,
+    rng: SmallRng,
+    normal: Option<Normal<f64>>,
+}
+
+impl Readout {
+    /// A readout with the given perturbation and noise seed.
+    pub fn new(sensor: Sensor, perturbation: f64, perturbation_hz: f64, seed: u64) -> Readout {
+        Readout {
+            normal: (sensor.noise_rms > 0.0).then(|| Normal::new(0.0, sensor.noise_rms).expect("finite σ > 0")),
+            sensor,
+            perturbation,
+            perturbation_hz,
+            rng: SmallRng::seed_from_u64(seed),
+        }
+    }
+
+    /// A noiseless, unperturbed readout (for tests and the model's own predictions).
+    pub fn ideal(sensor: Sensor) -> Readout {
+        Readout::new(
+            Sensor {
+                noise_rms: 0.0,
+                ..sensor
+            },
+            0.0,
+            50.0,
+            0,
+        )
+    }
+
+    /// The reading (V) of deflection `ζ_z` (m) at time `t` (s).
+    pub fn read(&mut self, t: f64, zeta_z: f64) -> f64 {
+        let mut u = self.sensor.volts(zeta_z);
+        if self.perturbation != 0.0 {
+            u += self.perturbation * (std::f64::consts::TAU * self.perturbation_hz * t).sin();
+        }
+        if let Some(n) = &self.normal {
+            u += n.sample(&mut self.rng);
+        }
+        u
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn readout_noise_and_perturbation() {
+        let s = Sensor {
+            baseline: -0.2,
+            gain: -0.05e9,
+            noise_rms: 0.005,
+        };
+        let mut r = Readout::new(s, 0.02, 50.0, 3);
+        let n = 20_000;
+        let (mut sum, mut sum2) = (0.0, 0.0);
+        for k in 0..n {
+            let t = k as f64 * 1e-3;
+            let e = r.read(t, 0.0) - s.volts(0.0) - 0.02 * (std::f64::consts::TAU * 50.0 * t).sin();
+            sum += e;
+            sum2 += e * e;
+        }
+        let mean = sum / n as f64;
+        let rms = (sum2 / n as f64 - mean * mean).sqrt();
+        // 20 000 samples: the mean within 4σ/√n, the RMS within 3 %.
+        assert!(mean.abs() < 4.0 * 0.005 / (n as f64).sqrt(), "mean {mean}");
+        assert!((rms - 0.005).abs() < 0.00015, "rms {rms}");
+        let mut ideal = Readout::ideal(s);
+        assert_eq!(ideal.read(0.123, 1e-9), s.volts(1e-9));
+    }
 
     #[test]
     fn reading_round_trip() {

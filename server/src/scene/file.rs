@@ -83,6 +83,29 @@ pub struct SubstrateFile {
     pub poisson_ratio: f64,
     /// Hamaker constant across vacuum (zJ).
     pub hamaker_zj: f64,
+    /// Tilt of the substrate plane along x (mrad): its height rises `tilt·x` (Fig 15's drift).
+    #[serde(default)]
+    pub tilt_x_mrad: f64,
+    /// Tilt along y (mrad).
+    #[serde(default)]
+    pub tilt_y_mrad: f64,
+    /// RMS roughness (nm): a sum of sinusoids of random direction and phase (0 = flat).
+    #[serde(default)]
+    pub roughness_rms_nm: f64,
+    /// Typical wavelength of the roughness (µm).
+    #[serde(default = "default_roughness_wavelength_um")]
+    pub roughness_wavelength_um: f64,
+    /// Seed of the roughness pattern.
+    #[serde(default = "default_seed")]
+    pub roughness_seed: u64,
+}
+
+fn default_roughness_wavelength_um() -> f64 {
+    5.0
+}
+
+fn default_seed() -> u64 {
+    1
 }
 
 /// `[[particles]]`.
@@ -184,6 +207,19 @@ pub struct SensorFile {
     pub gain_v_per_nm: f64,
     /// White noise, RMS (mV).
     pub noise_rms_mv: f64,
+    /// Amplitude of the periodic perturbation (mV): hardware and environment noise (Fig 15).
+    #[serde(default)]
+    pub perturbation_mv: f64,
+    /// Frequency of the periodic perturbation (Hz).
+    #[serde(default = "default_perturbation_hz")]
+    pub perturbation_hz: f64,
+    /// Seed of the readout noise.
+    #[serde(default = "default_seed")]
+    pub noise_seed: u64,
+}
+
+fn default_perturbation_hz() -> f64 {
+    50.0
 }
 
 /// How a degree of freedom enters the model.

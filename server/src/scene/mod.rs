@@ -21,8 +21,9 @@ use crate::physics::forces::electrostatic::Electrostatic;
 use crate::physics::forces::vdw::combined_hamaker;
 use crate::physics::friction;
 use crate::physics::pushing::{Dof, Dofs, Interactions, LongRange, PushParams};
-use crate::physics::sensor::Sensor;
+use crate::physics::sensor::{Readout, Sensor};
 use crate::physics::stage::Stage;
+use crate::physics::topography::Topography;
 use file::{DofFile, ParticleFile};
 
 /// The embedded default scene (the paper's Section 5).
@@ -142,6 +143,24 @@ impl Scene {
             gain: s.gain_v_per_nm / NM,
             noise_rms: s.noise_rms_mv * 1e-3,
         }
+    }
+
+    /// The sensor readout: noise, periodic perturbation, seed.
+    pub fn readout(&self) -> Readout {
+        let s = &self.file.sensor;
+        Readout::new(self.sensor(), s.perturbation_mv * 1e-3, s.perturbation_hz, s.noise_seed)
+    }
+
+    /// The substrate's topography (tilt and roughness).
+    pub fn topography(&self) -> Topography {
+        let s = &self.file.substrate;
+        Topography::new(
+            s.tilt_x_mrad * 1e-3,
+            s.tilt_y_mrad * 1e-3,
+            s.roughness_rms_nm * NM,
+            s.roughness_wavelength_um * UM,
+            s.roughness_seed,
+        )
     }
 
     /// The pushing model's parameters for the pushed particle, converted to SI once.

@@ -131,6 +131,19 @@ pub fn validate(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
     c("substrate.youngs_modulus_gpa", s.substrate.youngs_modulus_gpa, MODULUS)?;
     c("substrate.poisson_ratio", s.substrate.poisson_ratio, POISSON)?;
     c("substrate.hamaker_zj", s.substrate.hamaker_zj, HAMAKER)?;
+    let tilt = Range::closed(-100.0, 100.0, "mrad");
+    c("substrate.tilt_x_mrad", s.substrate.tilt_x_mrad, tilt)?;
+    c("substrate.tilt_y_mrad", s.substrate.tilt_y_mrad, tilt)?;
+    c(
+        "substrate.roughness_rms_nm",
+        s.substrate.roughness_rms_nm,
+        Range::closed(0.0, 100.0, "nm"),
+    )?;
+    c(
+        "substrate.roughness_wavelength_um",
+        s.substrate.roughness_wavelength_um,
+        Range::closed(0.1, 1000.0, "µm"),
+    )?;
 
     c(
         "stage.resonance_hz",
@@ -297,6 +310,16 @@ pub fn validate(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
         "sensor.noise_rms_mv",
         s.sensor.noise_rms_mv,
         Range::closed(0.0, 1000.0, "mV"),
+    )?;
+    c(
+        "sensor.perturbation_mv",
+        s.sensor.perturbation_mv,
+        Range::closed(0.0, 1000.0, "mV"),
+    )?;
+    c(
+        "sensor.perturbation_hz",
+        s.sensor.perturbation_hz,
+        Range::open_closed(0.0, 500.0, "Hz (below the 1 kHz sampling's Nyquist limit)"),
     )?;
 
     let ph = &s.physics;
