@@ -19,7 +19,9 @@
 #![deny(missing_docs)]
 
 pub mod accuracy;
+pub mod control;
 pub mod extremes;
+pub mod instrument;
 pub mod peers;
 pub mod physics;
 pub mod push_run;

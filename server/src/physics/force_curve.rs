@@ -69,7 +69,49 @@ struct Contact {
     contact: bool,
 }
 
+/// The tip's state over the sample, carried from one piezo position to the next: the force
+/// curve's hysteresis (meniscus, contact) lives here.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TipTrack {
+    state: Contact,
+    gap: f64,
+}
+
+impl TipTrack {
+    /// A tip far from the sample at piezo distance `d` (m): no meniscus, no contact.
+    pub fn far(d: f64) -> TipTrack {
+        TipTrack {
+            state: Contact {
+                meniscus: Meniscus::Absent,
+                contact: false,
+            },
+            gap: d,
+        }
+    }
+
+    /// Whether the tip touches the sample.
+    pub fn in_contact(&self) -> bool {
+        self.state.contact
+    }
+}
+
 impl TipSample {
+    /// Moves the tip's piezo to distance `d` (m) from where `track` left it and returns the
+    /// equilibrium reached: the tip follows its equilibrium quasi-statically and jumps at a
+    /// fold (snap-in, pull-off), re-settling until the contact state agrees with the gap.
+    pub fn track(&self, track: &mut TipTrack, d: f64) -> CurvePoint {
+        for _ in 0..8 {
+            let h_new = self.settle(track.state, track.gap, d);
+            let s_new = self.state_at(track.state, h_new);
+            track.gap = h_new;
+            if s_new == track.state {
+                break;
+            }
+            track.state = s_new;
+        }
+        self.point(track.state, track.gap, d)
+    }
+
     /// The contact state after moving monotonically from state `s` to gap `h`.
     fn state_at(&self, s: Contact, h: f64) -> Contact {
         let meniscus = match &self.long_range.capillary {
@@ -149,31 +191,17 @@ impl TipSample {
     /// needs a long way out before the adhesion lets go), in `steps` equal steps each way.
     pub fn curve(&self, d_far: f64, d_near: f64, d_retract: f64, steps: usize) -> ForceCurve {
         let steps = steps.max(2);
-        let mut s = Contact {
-            meniscus: Meniscus::Absent,
-            contact: false,
-        };
-        let mut h = d_far;
+        let mut track = TipTrack::far(d_far);
         let mut approach = Vec::with_capacity(steps + 1);
         let mut retraction = Vec::with_capacity(steps + 1);
-        let sweep = |from: f64, to: f64, out: &mut Vec<CurvePoint>, s: &mut Contact, h: &mut f64| {
+        let sweep = |from: f64, to: f64, out: &mut Vec<CurvePoint>, track: &mut TipTrack| {
             for k in 0..=steps {
                 let d = from + (to - from) * k as f64 / steps as f64;
-                // Re-settle until the contact state is consistent with the position.
-                for _ in 0..8 {
-                    let h_new = self.settle(*s, *h, d);
-                    let s_new = self.state_at(*s, h_new);
-                    *h = h_new;
-                    if s_new == *s {
-                        break;
-                    }
-                    *s = s_new;
-                }
-                out.push(self.point(*s, *h, d));
+                out.push(self.track(track, d));
             }
         };
-        sweep(d_far, d_near, &mut approach, &mut s, &mut h);
-        sweep(d_near, d_retract.max(d_far), &mut retraction, &mut s, &mut h);
+        sweep(d_far, d_near, &mut approach, &mut track);
+        sweep(d_near, d_retract.max(d_far), &mut retraction, &mut track);
 
         // Contact made on approach, broken on retraction: the piezo distance of the first point
         // past the change.

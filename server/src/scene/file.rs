@@ -33,6 +33,9 @@ pub struct SceneFile {
     pub sensor: SensorFile,
     /// Which physics the scene includes.
     pub physics: PhysicsFile,
+    /// `[strategy]`: the manipulation strategy of Sec 2.1 (defaults when absent).
+    #[serde(default)]
+    pub strategy: StrategyFile,
 }
 
 /// `[tip]`.
@@ -254,4 +257,84 @@ pub struct PhysicsFile {
     pub cantilever: DofFile,
     /// Stage: `dynamic` (Eq 13) or `off` (ideal, constant speed).
     pub stage: DofFile,
+}
+
+/// How force-controlled pushing closes its loops (Sec 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum ControlFile {
+    /// xy-position control (Fig 6): the push stops when the Eq 19 estimate of the particle's
+    /// position reaches the target.
+    #[default]
+    Xy,
+    /// z-position control: the tip height is regulated to hold `ζ_z` at the push set point; the
+    /// stage travels the commanded distance.
+    Z,
+    /// Both.
+    Xyz,
+}
+
+/// `[strategy]`: the auto-parking, contact detection, push and retract of Sec 2.1, with the
+/// limits that end a run safely. Defaults are the paper's (Sec 5) where it gives them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StrategyFile {
+    /// Tip apex height above the substrate at the start (A), unknown to the controller (µm).
+    pub start_height_um: f64,
+    /// Speed of the z approach of auto-parking and of the retraction (µm/s).
+    pub approach_speed_um_per_s: f64,
+    /// Speed of moves between pushes, at the start height (µm/s).
+    pub travel_speed_um_per_s: f64,
+    /// Deflection change that means the tip touched the substrate during auto-parking (mV).
+    pub substrate_threshold_mv: f64,
+    /// Step of the contact search `Δ` (µm); the paper: 0.1.
+    pub step_um: f64,
+    /// Pause after each step of the contact search, while the deflection is read (ms).
+    pub dwell_ms: f64,
+    /// Contact set point `ζ_set` (V); the paper: −1.5.
+    pub set_point_v: f64,
+    /// Where the contact search starts: this far behind the point of contact (µm).
+    pub approach_distance_um: f64,
+    /// Longest contact search before "no contact within range" (µm).
+    pub search_range_um: f64,
+    /// Safety limit on the reading (V): beyond it (on the set point's side of the baseline) the
+    /// tip retracts at once.
+    pub safety_limit_v: f64,
+    /// "Particle lost": the deflection fell back within this of the baseline (mV) during a push.
+    pub lost_threshold_mv: f64,
+    /// Longest single push (µm); a longer move is planned as several pushes.
+    pub max_push_um: f64,
+    /// Clearance kept between a pushed particle and the others when planning (µm).
+    pub clearance_um: f64,
+    /// Longest time any one phase may take before it fails with a time-out (s).
+    pub phase_timeout_s: f64,
+    /// How the push closes its loops.
+    pub control: ControlFile,
+    /// Proportional gain of the z force loop (nm of height per V of error per tick).
+    pub z_gain_nm_per_v: f64,
+}
+
+impl Default for StrategyFile {
+    /// The paper's values where it gives them (Δ = 0.1 µm, ζ_set = −1.5 V, Sec 5), else
+    /// conservative ones for the paper's 1 µm particles.
+    fn default() -> StrategyFile {
+        StrategyFile {
+            start_height_um: 3.0,
+            approach_speed_um_per_s: 1.0,
+            travel_speed_um_per_s: 10.0,
+            substrate_threshold_mv: 150.0,
+            step_um: 0.1,
+            dwell_ms: 5.0,
+            set_point_v: -1.5,
+            approach_distance_um: 4.25,
+            search_range_um: 10.0,
+            safety_limit_v: -4.0,
+            lost_threshold_mv: 60.0,
+            max_push_um: 20.0,
+            clearance_um: 0.5,
+            phase_timeout_s: 120.0,
+            control: ControlFile::Xy,
+            z_gain_nm_per_v: 2.0,
+        }
+    }
 }

@@ -165,8 +165,12 @@ impl Scene {
 
     /// The pushing model's parameters for the pushed particle, converted to SI once.
     pub fn push_params(&self) -> PushParams {
+        self.push_params_for(self.pushed_particle())
+    }
+
+    /// The pushing model's parameters for any particle of the scene (its radius, material).
+    pub fn push_params_for(&self, part: &ParticleFile) -> PushParams {
         let f = &self.file;
-        let part = self.pushed_particle();
         let (tip, sub, env, ph) = (&f.tip, &f.substrate, &f.environment, &f.physics);
         let a0 = self.a0();
         let r_t = tip.radius_nm * NM;

@@ -311,6 +311,7 @@ pub fn validate(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
         s.sensor.noise_rms_mv,
         Range::closed(0.0, 1000.0, "mV"),
     )?;
+    validate_strategy(origin, s)?;
     c(
         "sensor.perturbation_mv",
         s.sensor.perturbation_mv,
@@ -391,4 +392,96 @@ mod tests {
         assert_eq!(Range::open_closed(0.0, 5.0, "nm").to_string(), "(0, 5] nm");
         assert_eq!(Range::closed_open(0.0, 1.0, "").to_string(), "[0, 1)");
     }
+}
+
+/// `[strategy]`: every number in range, and the set point and safety limit on the side of the
+/// baseline a push deflects to (`ζ_z > 0`, so the reading moves along the gain's sign).
+fn validate_strategy(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
+    let c = |field: &str, v: f64, r: Range| check(origin, &format!("strategy.{field}"), v, r);
+    let st = &s.strategy;
+    c(
+        "start_height_um",
+        st.start_height_um,
+        Range::open_closed(0.0, 50.0, "µm"),
+    )?;
+    c(
+        "approach_speed_um_per_s",
+        st.approach_speed_um_per_s,
+        Range::closed(0.01, 20.0, "µm/s"),
+    )?;
+    c(
+        "travel_speed_um_per_s",
+        st.travel_speed_um_per_s,
+        Range::closed(0.01, 100.0, "µm/s"),
+    )?;
+    c(
+        "substrate_threshold_mv",
+        st.substrate_threshold_mv,
+        Range::closed(1.0, 5000.0, "mV"),
+    )?;
+    c("step_um", st.step_um, Range::closed(0.001, 10.0, "µm"))?;
+    c("dwell_ms", st.dwell_ms, Range::closed(0.0, 1000.0, "ms"))?;
+    c("set_point_v", st.set_point_v, Range::closed(-10.0, 10.0, "V"))?;
+    c(
+        "approach_distance_um",
+        st.approach_distance_um,
+        Range::closed(0.0, 50.0, "µm"),
+    )?;
+    c(
+        "search_range_um",
+        st.search_range_um,
+        Range::open_closed(0.0, 100.0, "µm"),
+    )?;
+    c("safety_limit_v", st.safety_limit_v, Range::closed(-10.0, 10.0, "V"))?;
+    c(
+        "lost_threshold_mv",
+        st.lost_threshold_mv,
+        Range::closed(1.0, 5000.0, "mV"),
+    )?;
+    c("max_push_um", st.max_push_um, Range::open_closed(0.0, 100.0, "µm"))?;
+    c("clearance_um", st.clearance_um, Range::closed(0.0, 10.0, "µm"))?;
+    c(
+        "phase_timeout_s",
+        st.phase_timeout_s,
+        Range::open_closed(0.0, 3600.0, "s"),
+    )?;
+    c("z_gain_nm_per_v", st.z_gain_nm_per_v, Range::closed(0.0, 100.0, "nm/V"))?;
+    // A push bends the lever up (ζ_z > 0): the reading moves from the baseline along the gain.
+    let dir = s.sensor.gain_v_per_nm.signum();
+    let base = s.sensor.baseline_v;
+    let set = (st.set_point_v - base) * dir;
+    let safety = (st.safety_limit_v - base) * dir;
+    let side = if dir < 0.0 { "below" } else { "above" };
+    if set <= 0.0 {
+        return Err(SceneError::Inconsistent {
+            origin: origin.into(),
+            field: "strategy.set_point_v".into(),
+            message: format!(
+                "{} V must be {side} the baseline {base} V: a push deflects the reading that way (sensor.gain_v_per_nm = {})",
+                st.set_point_v, s.sensor.gain_v_per_nm
+            ),
+        });
+    }
+    if safety <= set {
+        return Err(SceneError::Inconsistent {
+            origin: origin.into(),
+            field: "strategy.safety_limit_v".into(),
+            message: format!(
+                "{} V must lie beyond the set point {} V (further {side} the baseline {base} V)",
+                st.safety_limit_v, st.set_point_v
+            ),
+        });
+    }
+    let tallest = s.particles.iter().map(|p| 2.0 * p.radius_nm * 1e-3).fold(0.0, f64::max);
+    if st.start_height_um <= tallest {
+        return Err(SceneError::Inconsistent {
+            origin: origin.into(),
+            field: "strategy.start_height_um".into(),
+            message: format!(
+                "{} µm must clear the tallest particle ({tallest} µm) so moves at the start height never touch one",
+                st.start_height_um
+            ),
+        });
+    }
+    Ok(())
 }

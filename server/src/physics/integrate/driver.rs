@@ -57,6 +57,13 @@ impl Integrator {
         self.cached_at = None;
     }
 
+    /// Forgets the derivatives kept from the last call but keeps the step size: for a problem
+    /// whose forcing changed at the current time while the state stayed continuous (a new
+    /// control segment), where the step-size history is still a good guess.
+    pub fn forget_derivatives(&mut self) {
+        self.cached_at = None;
+    }
+
     /// The method (fixed at construction: its workspace is built for it).
     pub fn method(&self) -> Method {
         self.method

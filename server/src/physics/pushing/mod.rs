@@ -8,7 +8,7 @@ pub mod simulation;
 pub mod steady;
 
 pub use layout::{Layout, MAX_STATES};
-pub use model::{FrictionPhase, Mode, Probe, PushModel, SwitchKind, Switching, Tangential};
+pub use model::{Drive, FrictionPhase, Mode, Probe, PushModel, SwitchKind, Switching, Tangential};
 pub use params::{Dof, Dofs, Interactions, LongRange, PushParams};
 pub use simulation::{Simulation, SimulationError, TickReport};
 pub use steady::{SteadyInputs, SteadyState, steady_state};

@@ -149,6 +149,70 @@ pub struct Switching {
     pub tip_contact: Option<f64>,
 }
 
+/// How the instrument drives the tip base during one control tick: the stage reference along the
+/// push `y_ref(t) = y₀ + v_y (t − t₀)` (Eq 13's commanded position; the stage itself when it is
+/// ideal) and the base height above the particle's substrate `z(t) = z₀ + v_z (t − t₀)` relative to
+/// the contact height (z-position control, and the substrate's topography under a moving
+/// particle). Piecewise linear in time: the controller sets a new segment at each tick, so the
+/// reference is continuous and the integrator sees a smooth problem inside a tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Drive {
+    /// Start of the segment `t₀` (s).
+    pub t0: f64,
+    /// Stage reference at `t₀` (m).
+    pub y0: f64,
+    /// Stage reference rate (m/s).
+    pub vy: f64,
+    /// Base height offset at `t₀` (m, positive up).
+    pub z0: f64,
+    /// Base height rate (m/s).
+    pub vz: f64,
+}
+
+impl Drive {
+    /// The paper's constant-speed push: `y_ref = V t`, fixed height.
+    pub fn constant_speed(speed: f64) -> Drive {
+        Drive {
+            t0: 0.0,
+            y0: 0.0,
+            vy: speed,
+            z0: 0.0,
+            vz: 0.0,
+        }
+    }
+
+    /// The segment from `(y_ref(t), z(t))` at time `t` to the targets `(y1, z1)` at `t1 > t`.
+    pub fn ramp_to(&self, t: f64, t1: f64, y1: f64, z1: f64) -> Drive {
+        let (y, z) = (self.y_at(t), self.z_at(t));
+        let dt = t1 - t;
+        Drive {
+            t0: t,
+            y0: y,
+            vy: (y1 - y) / dt,
+            z0: z,
+            vz: (z1 - z) / dt,
+        }
+    }
+
+    /// Stage reference `y_ref(t)` (m).
+    pub fn y_at(&self, t: f64) -> f64 {
+        self.y0 + self.vy * (t - self.t0)
+    }
+
+    /// Base height offset `z(t)` (m).
+    pub fn z_at(&self, t: f64) -> f64 {
+        self.z0 + self.vz * (t - self.t0)
+    }
+
+    fn y<T: Real>(&self, t: T) -> T {
+        (t - self.t0) * self.vy + self.y0
+    }
+
+    fn z<T: Real>(&self, t: T) -> T {
+        (t - self.t0) * self.vz + self.z0
+    }
+}
+
 /// The assembled pushing model for one scene: parameters, layout and precomputed constants.
 #[derive(Debug, Clone)]
 pub struct PushModel {
@@ -164,6 +228,9 @@ pub struct PushModel {
     z_fixed: f64,
     adhesion_as: f64,
     mass: [f64; MAX_STATES],
+    /// The tip base's drive (stage reference and height); [`Drive::constant_speed`] at `V` unless
+    /// a controller sets it.
+    pub drive: Drive,
 }
 
 impl PushModel {
@@ -199,6 +266,7 @@ impl PushModel {
             z_fixed,
             adhesion_as: p.adhesion_as(),
             mass: layout.mass_diagonal(),
+            drive: Drive::constant_speed(p.speed),
             p,
         }
     }
@@ -271,7 +339,7 @@ impl PushModel {
         out[..self.len()].copy_from_slice(&f[..self.len()]);
     }
 
-    /// `∂f/∂t` at `(t, x)` (the stage command `Vt` is the only explicit time dependence), by
+    /// `∂f/∂t` at `(t, x)` (the drive `y_ref(t)`, `z(t)` is the only explicit time dependence), by
     /// one dual evaluation with `t` as the active variable.
     pub fn time_derivative(&self, t: f64, x: &[f64], mode: &Mode, out: &mut [f64]) {
         let n = self.len();
@@ -612,7 +680,7 @@ impl PushModel {
         // Stage (Eq 13, or ideal at speed V).
         let (s, s_dot) = match l.stage {
             Some(st) => (x[st.pos], vel(st.vel)),
-            None => (t * p.speed, T::cst(p.speed)),
+            None => (self.drive.y(t), T::cst(self.drive.vy)),
         };
         // Cantilever deflection in its own axes, and its rate.
         let (zy, zz) = (x[l.zeta_y.pos], x[l.zeta_z.pos]);
@@ -632,9 +700,9 @@ impl PushModel {
         // Tip centre: base + R(α)ζ, with y' = (cos α, −sin α), z' = (sin α, cos α).
         let (sa, ca) = self.rot;
         let tip_y = s + self.base.0 + zy * ca + zz * sa;
-        let tip_z = T::cst(self.base.1) - zy * sa + zz * ca;
+        let tip_z = self.drive.z(t) + self.base.1 - zy * sa + zz * ca;
         let tip_vy = s_dot + zy_d * ca + zz_d * sa;
-        let tip_vz = -(zy_d * sa) + zz_d * ca;
+        let tip_vz = -(zy_d * sa) + zz_d * ca + self.drive.vz;
         let pa_z = z + (p.r_a + a0);
 
         // Line of centres, tip → particle.
@@ -700,7 +768,7 @@ impl PushModel {
         let stage_accel = match l.stage {
             Some(_) => {
                 let w = p.stage.omega();
-                (t * p.speed + friction_as / p.stage.stiffness() - s) * (w * w) - s_dot * (w / p.stage.q_y)
+                (self.drive.y(t) + friction_as / p.stage.stiffness() - s) * (w * w) - s_dot * (w / p.stage.q_y)
             }
             None => zero,
         };

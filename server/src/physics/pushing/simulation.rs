@@ -5,7 +5,7 @@ use crate::physics::integrate::{
     Events, IntegrateError, Integrator, MAX_EVENTS, Method, Options, Outcome, Problem, Stats,
 };
 use crate::physics::pushing::layout::MAX_STATES;
-use crate::physics::pushing::model::{FrictionPhase, Mode, PushModel, SwitchKind, Tangential};
+use crate::physics::pushing::model::{Drive, FrictionPhase, Mode, PushModel, SwitchKind, Tangential};
 
 /// The model in one mode, as the integrator sees it.
 struct InMode<'a> {
@@ -232,6 +232,20 @@ impl Simulation {
             }
         }
         s
+    }
+
+    /// Sets the tip base's drive from now on (a new control segment). The state is continuous;
+    /// derivatives cached by the integrator are dropped, and switches the new drive makes due at
+    /// once (a slip now running against its friction, say) are applied. Returns how many.
+    pub fn set_drive(&mut self, drive: Drive) -> u32 {
+        if drive == self.model.drive {
+            return 0;
+        }
+        self.model.drive = drive;
+        self.integrator.forget_derivatives();
+        let n = self.model.len();
+        self.model.equilibrate(self.t, &mut self.x[..n], &self.mode);
+        self.enforce_mode()
     }
 
     /// The integration method.

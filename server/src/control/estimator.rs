@@ -1,0 +1,297 @@
+//! The particle-position feedback `H_xy` of Eq 19 (Sec 3, Fig 6):
+//!
+//! ```text
+//! H_xy = (x_s, y_s)   if t ≤ t*     (the particle has not left its place on the substrate)
+//!        (x°, y°)     otherwise     (the settling position, estimated from the model)
+//! ```
+//!
+//! Only the instrument's measurements enter: the stage position and the deflection reading.
+//! `t*`, the particle-substrate separation, is the peak of `ζ_z` (detected in real time: the
+//! smoothed reading falls from its running maximum by more than a noise-proof margin). After
+//! `t*` the particle trails the tip by the settled offset `δ° = s − y` that the pushing model
+//! predicts (Fig 7); when the model's motion is periodic (stick-slip) the mean over its period
+//! is used, as the paper says. Before `t*` the particle sits where the contact found it (in our
+//! frame the tip moves over a fixed substrate, so "the stage position" of the paper, whose stage
+//! carries the particle, becomes "no displacement").
+
+use crate::instrument::RELEASE_GAP;
+use crate::physics::integrate::{Method, Options};
+use crate::physics::pushing::{PushModel, PushParams, Simulation, SimulationError};
+use crate::push_run::run_push;
+
+/// What the model predicts for a push at constant speed, for the estimator.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PushPrediction {
+    /// Settled lag of the particle behind the tip's travel, `δ° = s − y` (m), mean over the
+    /// settled tail.
+    pub settle_offset: f64,
+    /// Peak-to-peak of `s − y` over the tail (m): 0 for a steady push, the stick-slip amplitude
+    /// for a periodic one.
+    pub periodic_amplitude: f64,
+    /// Tip travel from the first touch until `ζ_z` reaches `deflection` (m).
+    pub travel_to_deflection: Option<f64>,
+    /// Peak `ζ_z` before the separation (m).
+    pub peak_deflection: f64,
+    /// Settled mean `ζ_z` (m).
+    pub settled_deflection: f64,
+    /// Friction phase at the end (`slip`, `roll`, `stick`).
+    pub phase: &'static str,
+    /// Particle displacement along the push while the tip stops, backs off and lifts (m).
+    pub retract_shift: f64,
+}
+
+/// The retraction part of [`predict`].
+fn predict_retract(model: PushModel, duration: f64, plan: RetractPlan) -> Result<f64, SimulationError> {
+    let beta = model.p.beta;
+    let mut sim = Simulation::new(model, Method::Rodas4, Options::with_rtol(1e-6));
+    sim.advance_to(duration)?;
+    let y_of = |sim: &Simulation| sim.x[sim.model.layout.particle_y.pos];
+    let y0 = y_of(&sim);
+    let (sb, cb) = beta.sin_cos();
+    let tick = 1e-3;
+    let mut t = duration;
+    // Stop: the reference halts where it is.
+    let (mut yr, mut zr) = (sim.model.drive.y_at(t), sim.model.drive.z_at(t));
+    let hold_end = t + plan.hold;
+    let back_end = hold_end + plan.back_off / plan.speed;
+    // Lift until released, at most 2 µm.
+    let lift_end = back_end + 2e-6 / plan.speed;
+    while t < lift_end {
+        let t1 = t + tick;
+        if t1 > hold_end {
+            let dt = t1 - t.max(hold_end);
+            if t1 <= back_end {
+                yr -= cb * plan.speed * dt;
+                zr += sb * plan.speed * dt;
+            } else {
+                zr += plan.speed * dt;
+            }
+        }
+        let drive = sim.model.drive.ramp_to(t, t1, yr, zr);
+        sim.set_drive(drive);
+        if sim.advance_to(t1).is_err() && zr > 0.0 {
+            // The fold of the pull-off: the tip snaps free (see `instrument::Afm`).
+            break;
+        }
+        t = t1;
+        let n = sim.model.len();
+        let probe = sim.model.probe(sim.t, &sim.x[..n], &sim.mode);
+        if !sim.mode.tip_contact && probe.gap > RELEASE_GAP {
+            break;
+        }
+    }
+    Ok(y_of(&sim) - y0)
+}
+
+/// How the strategy ends a push (D → E), for the model to predict what it does to the particle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RetractPlan {
+    /// Dwell with the stage stopped (s).
+    pub hold: f64,
+    /// Back-off distance along the line of centres (m).
+    pub back_off: f64,
+    /// Speed of the back-off and the lift (m/s).
+    pub speed: f64,
+}
+
+/// Runs the pushing model from the first touch at the push speed for `duration` (s) and
+/// extracts the estimator's constants; `deflection` is the set point's `ζ_z` (m). Then, from
+/// that settled push, it stops, backs off and lifts the tip as `retract` says until the tip lets
+/// go, and reports how far that moved the particle: a free rolling particle follows an adhesive
+/// tip until the pull-off, and xy-position control pushes that much further (or less).
+pub fn predict(
+    params: PushParams,
+    duration: f64,
+    deflection: f64,
+    retract: RetractPlan,
+) -> Result<PushPrediction, SimulationError> {
+    let model = PushModel::new(params);
+    let run = run_push(model.clone(), Method::Rodas4, Options::with_rtol(1e-6), duration, 1e-4)?;
+    let retract_shift = predict_retract(model, duration, retract)?;
+    let n = run.trace.len();
+    let tail = &run.trace[n / 2..];
+    let lag = |r: &crate::push_run::TraceRow| r.stage_y - r.particle_y;
+    let mean = tail.iter().map(lag).sum::<f64>() / tail.len() as f64;
+    let (lo, hi) = tail
+        .iter()
+        .map(lag)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+    let travel_to_deflection = run.trace.iter().find(|r| r.zeta_z >= deflection).map(|r| r.stage_y);
+    let peak = run.trace.iter().map(|r| r.zeta_z).fold(f64::NEG_INFINITY, f64::max);
+    let settled = tail.iter().map(|r| r.zeta_z).sum::<f64>() / tail.len() as f64;
+    Ok(PushPrediction {
+        retract_shift,
+        settle_offset: mean,
+        periodic_amplitude: hi - lo,
+        travel_to_deflection,
+        peak_deflection: peak,
+        settled_deflection: settled,
+        phase: run.final_phase,
+    })
+}
+
+/// Samples in the detector's moving mean.
+const WINDOW: usize = 4;
+
+/// Real-time detection of `t*` as the peak of the deflection reading.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PeakDetector {
+    window: [f64; WINDOW],
+    filled: usize,
+    next: usize,
+    max: f64,
+    max_t: f64,
+    margin: f64,
+    /// The detected `t*` (s) and the peak reading (deflection side, V).
+    pub peak: Option<(f64, f64)>,
+}
+
+impl PeakDetector {
+    /// A detector that declares the peak once the 8-sample moving mean of the deflection
+    /// signal (V, positive = the push's side) falls `margin` (V) below its running maximum.
+    pub fn new(margin: f64) -> PeakDetector {
+        PeakDetector {
+            window: [0.0; WINDOW],
+            filled: 0,
+            next: 0,
+            max: f64::NEG_INFINITY,
+            max_t: 0.0,
+            margin,
+            peak: None,
+        }
+    }
+
+    /// Feeds one sample; returns `t*` when this sample reveals the peak.
+    pub fn feed(&mut self, t: f64, signal: f64) -> Option<f64> {
+        if self.peak.is_some() {
+            return None;
+        }
+        if self.filled == 0 {
+            // The push starts from the contact search's stop: its level is the first maximum.
+            self.window = [signal; WINDOW];
+        }
+        self.window[self.next] = signal;
+        self.next = (self.next + 1) % WINDOW;
+        self.filled = (self.filled + 1).min(WINDOW);
+        let mean = self.window.iter().sum::<f64>() / self.window.len() as f64;
+        if mean > self.max {
+            self.max = mean;
+            // The moving mean lags the samples by half its window.
+            self.max_t = t;
+        } else if mean < self.max - self.margin {
+            self.peak = Some((self.max_t, self.max));
+            return Some(self.max_t);
+        }
+        None
+    }
+}
+
+/// The estimator of Eq 19 during one push.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Hxy {
+    /// The model's prediction.
+    pub prediction: PushPrediction,
+    /// Tip travel from the first touch to where the contact search stopped (m): the model's
+    /// travel to the set point.
+    pub travel_at_contact: f64,
+    /// The `t*` detector.
+    pub detector: PeakDetector,
+}
+
+impl Hxy {
+    /// An estimator for a push whose contact search stopped at the set point.
+    pub fn new(prediction: PushPrediction, margin: f64) -> Hxy {
+        Hxy {
+            travel_at_contact: prediction.travel_to_deflection.unwrap_or(0.0),
+            prediction,
+            detector: PeakDetector::new(margin),
+        }
+    }
+
+    /// Feeds a reading; `travel` is the stage's travel along the push since the contact search
+    /// stopped (m). Returns the estimated particle displacement along the push (m): 0 up to `t*`,
+    /// then the travel since the first touch less the settled lag `δ°`.
+    pub fn update(&mut self, t: f64, signal: f64, travel: f64) -> f64 {
+        self.detector.feed(t, signal);
+        self.estimate(travel)
+    }
+
+    /// The estimated displacement (m) at which the push must stop so that the particle ends
+    /// `distance` from its start once the tip has retracted.
+    pub fn stop_at(&self, distance: f64) -> f64 {
+        distance - self.prediction.retract_shift
+    }
+
+    /// The estimate for a travel (m), without feeding a sample.
+    pub fn estimate(&self, travel: f64) -> f64 {
+        if self.detector.peak.is_none() {
+            return 0.0;
+        }
+        (self.travel_at_contact + travel - self.prediction.settle_offset).max(0.0)
+    }
+
+    /// Whether `t*` has been detected.
+    pub fn separated(&self) -> bool {
+        self.detector.peak.is_some()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Scene;
+
+    #[test]
+    fn peak_detector_finds_the_peak_of_a_noisy_rise_and_fall() {
+        // A ramp to 1 V at t = 50 ms, then a drop to 0.5 V, with ±5 mV alternating "noise".
+        let mut d = PeakDetector::new(0.05);
+        let mut found = None;
+        for k in 0..200 {
+            let t = k as f64 * 1e-3;
+            let s = if k <= 50 { k as f64 / 50.0 } else { 0.5 } + if k % 2 == 0 { 0.005 } else { -0.005 };
+            if let Some(ts) = d.feed(t, s) {
+                found = Some((k, ts));
+                break;
+            }
+        }
+        let (k, ts) = found.expect("peak found");
+        // Declared within a window after the drop; t* at the top of the ramp (moving mean).
+        assert!((51..=60).contains(&k), "declared at sample {k}");
+        assert!((ts - 0.051).abs() <= 0.004, "t* = {ts}");
+    }
+
+    #[test]
+    fn no_peak_on_a_monotone_rise() {
+        let mut d = PeakDetector::new(0.05);
+        for k in 0..500 {
+            assert!(d.feed(k as f64 * 1e-3, k as f64 * 1e-3).is_none());
+        }
+    }
+
+    #[test]
+    fn the_model_prediction_of_the_default_push() {
+        // Default scene: the particle rolls once the tip contact slips (about 5 ms at 1 µm/s);
+        // from then on it trails the tip by a constant lag.
+        let scene = Scene::default_scene();
+        let plan = RetractPlan {
+            hold: 0.05,
+            back_off: 100e-9,
+            speed: 1e-6,
+        };
+        let p = predict(scene.push_params(), 0.05, 1.0e-9, plan).unwrap();
+        assert_eq!(p.phase, "roll");
+        assert!(
+            p.periodic_amplitude < 1e-10,
+            "steady, not periodic: {:e}",
+            p.periodic_amplitude
+        );
+        assert!(
+            p.settle_offset > 0.0 && p.settle_offset < 20e-9,
+            "δ° = {:e}",
+            p.settle_offset
+        );
+        assert!(p.peak_deflection > p.settled_deflection);
+        let s = p.travel_to_deflection.unwrap();
+        assert!(s > 0.0 && s < p.settle_offset + 5e-9, "travel to 1 nm: {s:e}");
+    }
+}

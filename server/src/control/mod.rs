@@ -1,0 +1,11 @@
+//! Control: the manipulation strategy of Sec 2.1 and the force-controlled pushing of Sec 3.
+
+pub mod estimator;
+pub mod plan;
+mod run;
+pub mod strategy;
+
+pub use estimator::{Hxy, PeakDetector, PushPrediction, RetractPlan, predict};
+pub use plan::{Leg, Obstacle, PlanError, Planner};
+pub use run::{PushRequest, RunError, RunRow, StrategyRun, push_once};
+pub use strategy::{Control, Failure, Phase, PushTask, Strategy, StrategyParams, Summary};

@@ -1,0 +1,224 @@
+//! 2-D positioning (the paper's goal) with straight pushes: a target one push cannot reach gets
+//! a plan of several. A leg is never longer than the longest single push, and a leg's swept
+//! corridor (the particle's width plus the clearance, plus the tip's approach run behind it) must
+//! not touch another particle; when the straight line is blocked the plan goes around the
+//! blocking particle through one side-step waypoint.
+
+/// A particle the plan must keep clear of (m).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Obstacle {
+    /// Centre x (m).
+    pub x: f64,
+    /// Centre y (m).
+    pub y: f64,
+    /// Radius (m).
+    pub radius: f64,
+}
+
+/// One straight push of a plan.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Leg {
+    /// Where the particle starts (m).
+    pub from: (f64, f64),
+    /// Where it should end (m).
+    pub to: (f64, f64),
+}
+
+impl Leg {
+    /// Length (m).
+    pub fn length(&self) -> f64 {
+        (self.to.0 - self.from.0).hypot(self.to.1 - self.from.1)
+    }
+
+    /// Unit direction (`(1, 0)` for a zero-length leg).
+    pub fn direction(&self) -> (f64, f64) {
+        let l = self.length();
+        if l == 0.0 {
+            (1.0, 0.0)
+        } else {
+            ((self.to.0 - self.from.0) / l, (self.to.1 - self.from.1) / l)
+        }
+    }
+}
+
+/// Why no plan exists.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlanError {
+    /// Neither the straight line nor a detour around the blocking particle is clear.
+    #[error(
+        "no clear path from ({:.2}, {:.2}) µm to ({:.2}, {:.2}) µm: blocked by the particle at ({:.2}, {:.2}) µm",
+        .from.0 * 1e6, .from.1 * 1e6, .to.0 * 1e6, .to.1 * 1e6, .blocker.0 * 1e6, .blocker.1 * 1e6
+    )]
+    Blocked {
+        /// Start (m).
+        from: (f64, f64),
+        /// Target (m).
+        to: (f64, f64),
+        /// The blocking particle's centre (m).
+        blocker: (f64, f64),
+    },
+    /// The target lies outside the stage range.
+    #[error("target ({:.2}, {:.2}) µm is outside the stage range [0, {:.1}] µm", .0.0 * 1e6, .0.1 * 1e6, .1 * 1e6)]
+    OutOfRange((f64, f64), f64),
+}
+
+/// The planner's settings (m).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Planner {
+    /// Radius of the pushed particle.
+    pub radius: f64,
+    /// Longest single push.
+    pub max_push: f64,
+    /// Clearance to keep from other particles.
+    pub clearance: f64,
+    /// Run-up behind the particle that the tip needs (the contact search's start).
+    pub run_up: f64,
+    /// Stage range `[0, range]` in x and y.
+    pub range: f64,
+}
+
+impl Planner {
+    /// The first obstacle whose distance to the swept segment (extended backwards by the
+    /// run-up, where the tip travels at parking height) is below the two radii plus clearance.
+    fn blocker(&self, from: (f64, f64), to: (f64, f64), obstacles: &[Obstacle]) -> Option<Obstacle> {
+        let leg = Leg { from, to };
+        let d = leg.direction();
+        let start = (from.0 - d.0 * self.run_up, from.1 - d.1 * self.run_up);
+        let len = leg.length() + self.run_up;
+        obstacles.iter().copied().find(|o| {
+            let (rx, ry) = (o.x - start.0, o.y - start.1);
+            let s = (rx * d.0 + ry * d.1).clamp(0.0, len);
+            let dist = (rx - s * d.0).hypot(ry - s * d.1);
+            dist < self.radius + o.radius + self.clearance
+        })
+    }
+
+    /// Splits a clear segment into equal legs no longer than the longest push.
+    fn split(&self, from: (f64, f64), to: (f64, f64), out: &mut Vec<Leg>) {
+        let len = (to.0 - from.0).hypot(to.1 - from.1);
+        let n = (len / self.max_push).ceil().max(1.0) as usize;
+        for k in 0..n {
+            let a = k as f64 / n as f64;
+            let b = (k + 1) as f64 / n as f64;
+            out.push(Leg {
+                from: (from.0 + a * (to.0 - from.0), from.1 + a * (to.1 - from.1)),
+                to: (from.0 + b * (to.0 - from.0), from.1 + b * (to.1 - from.1)),
+            });
+        }
+    }
+
+    /// The legs that take a particle from `from` to `to` avoiding `obstacles` (the other
+    /// particles).
+    pub fn plan(&self, from: (f64, f64), to: (f64, f64), obstacles: &[Obstacle]) -> Result<Vec<Leg>, PlanError> {
+        let inside = |p: (f64, f64)| (0.0..=self.range).contains(&p.0) && (0.0..=self.range).contains(&p.1);
+        if !inside(to) {
+            return Err(PlanError::OutOfRange(to, self.range));
+        }
+        let mut legs = Vec::new();
+        let Some(b) = self.blocker(from, to, obstacles) else {
+            self.split(from, to, &mut legs);
+            return Ok(legs);
+        };
+        // Side-step: a waypoint beside the blocker, on the side the line passes, far enough
+        // for both legs to clear it; try that side first, then the other.
+        let d = Leg { from, to }.direction();
+        let normal = (-d.1, d.0);
+        let side = ((b.x - from.0) * normal.0 + (b.y - from.1) * normal.1).signum();
+        let offset = 2.0 * (self.radius + b.radius + self.clearance);
+        for sign in [-side, side] {
+            let sign = if sign == 0.0 { 1.0 } else { sign };
+            let w = (b.x + sign * normal.0 * offset, b.y + sign * normal.1 * offset);
+            if inside(w) && self.blocker(from, w, obstacles).is_none() && self.blocker(w, to, obstacles).is_none() {
+                self.split(from, w, &mut legs);
+                self.split(w, to, &mut legs);
+                return Ok(legs);
+            }
+        }
+        Err(PlanError::Blocked {
+            from,
+            to,
+            blocker: (b.x, b.y),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const UM: f64 = 1e-6;
+
+    fn planner() -> Planner {
+        Planner {
+            radius: 0.5 * UM,
+            max_push: 12.0 * UM,
+            clearance: 0.5 * UM,
+            run_up: 5.0 * UM,
+            range: 100.0 * UM,
+        }
+    }
+
+    fn clear_of(legs: &[Leg], o: &Obstacle, p: &Planner) -> bool {
+        legs.iter().all(|l| p.blocker(l.from, l.to, &[*o]).is_none())
+    }
+
+    #[test]
+    fn a_short_clear_move_is_one_leg() {
+        let legs = planner()
+            .plan((40.0 * UM, 30.0 * UM), (45.0 * UM, 30.0 * UM), &[])
+            .unwrap();
+        assert_eq!(legs.len(), 1);
+        assert!((legs[0].length() - 5.0 * UM).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_long_move_is_split_into_equal_legs_within_the_longest_push() {
+        let p = planner();
+        let legs = p.plan((10.0 * UM, 10.0 * UM), (40.0 * UM, 50.0 * UM), &[]).unwrap();
+        // 50 µm in legs of at most 12 µm: 5 legs of 10 µm, end to end.
+        assert_eq!(legs.len(), 5);
+        for w in legs.windows(2) {
+            assert_eq!(w[0].to, w[1].from);
+        }
+        assert!(legs.iter().all(|l| (l.length() - 10.0 * UM).abs() < 1e-9));
+        assert_eq!(legs.last().unwrap().to, (40.0 * UM, 50.0 * UM));
+    }
+
+    #[test]
+    fn a_blocked_line_goes_around_the_blocker() {
+        let p = planner();
+        let o = Obstacle {
+            x: 50.0 * UM,
+            y: 30.2 * UM,
+            radius: 0.5 * UM,
+        };
+        let (from, to) = ((40.0 * UM, 30.0 * UM), (60.0 * UM, 30.0 * UM));
+        assert!(p.blocker(from, to, &[o]).is_some());
+        let legs = p.plan(from, to, &[o]).unwrap();
+        assert!(legs.len() >= 2);
+        assert!(clear_of(&legs, &o, &p));
+        assert_eq!(legs.first().unwrap().from, from);
+        assert_eq!(legs.last().unwrap().to, to);
+    }
+
+    #[test]
+    fn targets_outside_the_stage_and_walled_in_paths_are_refused() {
+        let p = planner();
+        let e = p
+            .plan((40.0 * UM, 30.0 * UM), (140.0 * UM, 30.0 * UM), &[])
+            .unwrap_err();
+        assert!(e.to_string().contains("outside the stage range"), "{e}");
+        // A wall of particles across the whole path, 3 µm apart.
+        let wall: Vec<Obstacle> = (0..=33)
+            .map(|k| Obstacle {
+                x: 50.0 * UM,
+                y: k as f64 * 3.0 * UM,
+                radius: 0.5 * UM,
+            })
+            .collect();
+        let e = p
+            .plan((40.0 * UM, 30.0 * UM), (60.0 * UM, 30.0 * UM), &wall)
+            .unwrap_err();
+        assert!(matches!(e, PlanError::Blocked { .. }), "{e}");
+    }
+}

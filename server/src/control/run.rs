@@ -1,0 +1,217 @@
+//! Runs the strategy against the simulated instrument tick by tick, recording a trace: what
+//! `nanopush push` does, and what the server's loop will do one tick at a time.
+
+use crate::control::estimator::{Hxy, PushPrediction, RetractPlan, predict};
+use crate::control::strategy::{BACK_OFF, Control, HOLD, PushTask, Strategy, StrategyParams, Summary};
+use crate::instrument::{Afm, AfmError};
+use crate::physics::pushing::SimulationError;
+use crate::scene::Scene;
+use crate::scene::file::ControlFile;
+
+/// One tick of a strategy run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RunRow {
+    /// Time (s).
+    pub t: f64,
+    /// Phase name.
+    pub phase: &'static str,
+    /// Stage position (m).
+    pub stage: [f64; 3],
+    /// Reading (V).
+    pub volts: f64,
+    /// The controller's estimate of the particle's displacement along the push (m).
+    pub estimate: f64,
+    /// Hidden: the pushed particle's true centre (m), for comparison only.
+    pub particle: (f64, f64),
+    /// Hidden: friction phase of the push model, or `free`.
+    pub contact: &'static str,
+}
+
+/// A finished strategy run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StrategyRun {
+    /// The strategy's own account.
+    pub summary: Summary,
+    /// The model's prediction the estimator used.
+    pub prediction: PushPrediction,
+    /// Every tick.
+    pub trace: Vec<RunRow>,
+    /// The task.
+    pub task: PushTask,
+    /// Hidden: the particle's true centre before and after (m).
+    pub particle_before: (f64, f64),
+    /// Hidden: after.
+    pub particle_after: (f64, f64),
+    /// The tip's final stage position (m).
+    pub final_stage: [f64; 3],
+    /// Whether the tip ended retracted (off every surface).
+    pub retracted: bool,
+}
+
+impl StrategyRun {
+    /// True displacement of the particle along the push direction (m).
+    pub fn true_distance(&self) -> f64 {
+        let d = self.task.direction;
+        (self.particle_after.0 - self.particle_before.0) * d.0 + (self.particle_after.1 - self.particle_before.1) * d.1
+    }
+}
+
+/// Why a run could not be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RunError {
+    /// The instrument simulation failed.
+    #[error(transparent)]
+    Afm(#[from] AfmError),
+    /// The model prediction for the estimator failed.
+    #[error("model prediction for the estimator failed: {0}")]
+    Predict(#[from] SimulationError),
+    /// The run exceeded its tick budget (a bug: every phase has a time-out).
+    #[error("the run did not finish within {0} ticks")]
+    Budget(u64),
+    /// No such particle in the instrument.
+    #[error("no particle with id {0}")]
+    NoParticle(u32),
+}
+
+impl Scene {
+    /// The strategy settings of the scene (`[strategy]`, `[sensor]`, `[push]`), SI.
+    pub fn strategy_params(&self, tick: f64) -> StrategyParams {
+        let f = &self.file;
+        let st = &f.strategy;
+        StrategyParams {
+            tick,
+            start_height: st.start_height_um * 1e-6,
+            approach_speed: st.approach_speed_um_per_s * 1e-6,
+            travel_speed: st.travel_speed_um_per_s * 1e-6,
+            substrate_threshold: st.substrate_threshold_mv * 1e-3,
+            step: st.step_um * 1e-6,
+            dwell_ticks: (st.dwell_ms * 1e-3 / tick).round() as u32,
+            speed: f.push.speed_um_per_s * 1e-6,
+            baseline: f.sensor.baseline_v,
+            polarity: f.sensor.gain_v_per_nm.signum(),
+            set_point: st.set_point_v,
+            safety_limit: st.safety_limit_v,
+            lost_threshold: st.lost_threshold_mv * 1e-3,
+            noise: f.sensor.noise_rms_mv * 1e-3,
+            search_range: st.search_range_um * 1e-6,
+            timeout: st.phase_timeout_s,
+            control: match st.control {
+                ControlFile::Xy => Control::Xy,
+                ControlFile::Z => Control::Z,
+                ControlFile::Xyz => Control::Xyz,
+            },
+            z_gain: st.z_gain_nm_per_v * 1e-9,
+        }
+    }
+}
+
+/// One push as the operator asks for it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PushRequest {
+    /// Particle id.
+    pub id: u32,
+    /// Estimated centre (m), from a scan.
+    pub particle: (f64, f64),
+    /// Estimated radius (m), from a scan.
+    pub radius: f64,
+    /// Unit push direction in the plane.
+    pub direction: (f64, f64),
+    /// Distance to push (m).
+    pub distance: f64,
+}
+
+/// Pushes one particle: the controller knows it only by the request's estimated centre and
+/// radius; it is pushed the requested distance along the unit direction. The model
+/// prediction for the estimator uses the scene's parameters with the estimated radius. The
+/// instrument `afm` carries the truth; its tip must be at the start height.
+pub fn push_once(
+    scene: &Scene,
+    afm: &mut Afm,
+    request: &PushRequest,
+    params: StrategyParams,
+) -> Result<StrategyRun, RunError> {
+    let PushRequest {
+        id,
+        particle,
+        radius,
+        direction,
+        distance,
+    } = *request;
+    let f = &scene.file;
+    let part = f
+        .particles
+        .iter()
+        .find(|p| p.id == id)
+        .ok_or(RunError::NoParticle(id))?;
+    let index = afm
+        .particles()
+        .iter()
+        .position(|p| p.id == id)
+        .ok_or(RunError::NoParticle(id))?;
+    let mut model = scene.push_params_for(part);
+    model.r_a = radius;
+    model.interactions.r_a = radius;
+    let sensor = scene.sensor();
+    let set_deflection = sensor.deflection(params.set_point);
+    // Long enough to pass the separation and settle: 40 nm of travel, at least 20 ms.
+    let duration = (40e-9 / params.speed).max(0.02);
+    let retract = RetractPlan {
+        hold: HOLD,
+        back_off: BACK_OFF,
+        speed: params.approach_speed,
+    };
+    let prediction = predict(model, duration, set_deflection, retract)?;
+    // The drop at t* that the model predicts, in volts; a third of it (at least 4σ of the noise)
+    // tells the peak from noise and from the stage's ringing.
+    let drop = (prediction.peak_deflection - prediction.settled_deflection) * sensor.gain.abs();
+    let margin = (4.0 * params.noise).max(drop / 3.0);
+    let hxy = Hxy::new(prediction, margin.max(1e-4));
+    let task = PushTask {
+        particle,
+        radius,
+        direction,
+        distance,
+        beta: model.beta,
+        tip_radius: model.r_t,
+        approach_distance: f.strategy.approach_distance_um * 1e-6,
+    };
+    let before = afm.particles()[index];
+    let first = afm.read();
+    let mut strategy = Strategy::new(params, task, hxy, &first);
+    let mut reading = first;
+    let mut trace = Vec::new();
+    let budget = ((8.0 * params.timeout) / params.tick) as u64 + 1000;
+    let mut ticks = 0u64;
+    while !strategy.done() {
+        ticks += 1;
+        if ticks > budget {
+            return Err(RunError::Budget(budget));
+        }
+        let target = strategy.tick(&reading);
+        let phase = strategy.phase.name();
+        let estimate = strategy.summary.estimated_distance;
+        reading = afm.step(target)?;
+        let p = afm.particles()[index];
+        trace.push(RunRow {
+            t: reading.t,
+            phase,
+            stage: reading.stage,
+            volts: reading.volts,
+            estimate,
+            particle: (p.x, p.y),
+            contact: afm.truth().phase,
+        });
+    }
+    let after = afm.particles()[index];
+    let truth = afm.truth();
+    Ok(StrategyRun {
+        summary: strategy.summary,
+        prediction,
+        trace,
+        task,
+        particle_before: (before.x, before.y),
+        particle_after: (after.x, after.y),
+        final_stage: reading.stage,
+        retracted: truth.pushing.is_none() && !truth.on_substrate,
+    })
+}

@@ -1,0 +1,582 @@
+//! The manipulation strategy of Sec 2.1 as an explicit state machine (Fig 2):
+//!
+//! - travel at the start height to the point the push starts from;
+//! - A → B *auto-parking*: approach in z until the deflection detects the substrate (its height
+//!   is not known beforehand), then retract to the parking height that gives the contact angle
+//!   `β` on the particle;
+//! - B → C *auto particle contact detection*: move in steps `Δ` at speed `V` until the reading
+//!   reaches `ζ_set`, then stop;
+//! - C → D *push* the requested distance at constant `V` under force control (Sec 3: the
+//!   Eq 19 feedback [`Hxy`], optionally with the tip height regulated on `ζ_z`);
+//! - D → E *retract* to the start height.
+//!
+//! Every phase has a time-out and every failure a typed reason; a failed run always ends with
+//! the tip retracted. The strategy sees only what the instrument measures ([`Reading`]: stage
+//! position, deflection in volts), never the simulator's state.
+
+use crate::control::estimator::Hxy;
+use crate::instrument::Reading;
+
+/// How far the tip backs off along the line of centres before it lifts (m).
+pub const BACK_OFF: f64 = 100e-9;
+
+/// How long the stage stays stopped at the end of a push before the retraction (s).
+pub const HOLD: f64 = 0.05;
+
+/// How the push closes its loops (Sec 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Control {
+    /// xy-position control: stop when the Eq 19 estimate reaches the distance.
+    Xy,
+    /// z-position control: hold the deflection by moving the tip height; stop on stage travel.
+    Z,
+    /// Both.
+    Xyz,
+}
+
+/// The strategy's settings, SI.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StrategyParams {
+    /// Control tick (s).
+    pub tick: f64,
+    /// Tip height above the (unknown) substrate to retract to (m): the start height.
+    pub start_height: f64,
+    /// z approach and retract speed (m/s).
+    pub approach_speed: f64,
+    /// Speed of travel moves (m/s).
+    pub travel_speed: f64,
+    /// Reading change that means the substrate was touched (V).
+    pub substrate_threshold: f64,
+    /// Contact-search step `Δ` (m).
+    pub step: f64,
+    /// Ticks of dwell after each step.
+    pub dwell_ticks: u32,
+    /// Push and contact-search speed `V` (m/s).
+    pub speed: f64,
+    /// Reading at zero deflection (V).
+    pub baseline: f64,
+    /// +1 when a push (ζ_z > 0) raises the reading, −1 when it lowers it (the gain's sign).
+    pub polarity: f64,
+    /// `ζ_set` (V).
+    pub set_point: f64,
+    /// Safety limit (V).
+    pub safety_limit: f64,
+    /// Distance from the baseline under which a pushed particle counts as lost (V).
+    pub lost_threshold: f64,
+    /// Readout noise RMS (V), for margins.
+    pub noise: f64,
+    /// Longest contact search (m).
+    pub search_range: f64,
+    /// Longest any phase may take (s).
+    pub timeout: f64,
+    /// Loop closure.
+    pub control: Control,
+    /// z-loop gain (m of height per V of error, per tick).
+    pub z_gain: f64,
+}
+
+impl StrategyParams {
+    /// The reading as a deflection signal (V): positive on the push's side of the baseline.
+    pub fn signal(&self, volts: f64) -> f64 {
+        (volts - self.baseline) * self.polarity
+    }
+}
+
+/// One push, as the operator asks for it, with what the controller knows of the particle (from
+/// a scan: its estimated centre and radius).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PushTask {
+    /// Estimated particle centre (m).
+    pub particle: (f64, f64),
+    /// Estimated particle radius (m).
+    pub radius: f64,
+    /// Unit push direction in the plane.
+    pub direction: (f64, f64),
+    /// Distance to push (m).
+    pub distance: f64,
+    /// Contact angle to aim for, `β` (rad).
+    pub beta: f64,
+    /// Tip radius (m).
+    pub tip_radius: f64,
+    /// Distance behind the contact point where the search starts (m).
+    pub approach_distance: f64,
+}
+
+impl PushTask {
+    /// Horizontal distance between the tip's and the particle's centres at contact,
+    /// `(Rₐ + Rₜ) cos β` (m).
+    pub fn contact_reach(&self) -> f64 {
+        (self.radius + self.tip_radius) * self.beta.cos()
+    }
+
+    /// Tip apex height above the substrate that puts the contact at `β`:
+    /// `h = Rₐ − Rₜ + (Rₐ + Rₜ) sin β` (m).
+    pub fn parking_height(&self) -> f64 {
+        self.radius - self.tip_radius + (self.radius + self.tip_radius) * self.beta.sin()
+    }
+
+    /// Where the contact search starts (xy, m).
+    pub fn search_start(&self) -> (f64, f64) {
+        let back = self.contact_reach() + self.approach_distance;
+        (
+            self.particle.0 - self.direction.0 * back,
+            self.particle.1 - self.direction.1 * back,
+        )
+    }
+}
+
+/// Why a run failed. Each ends with the tip retracted.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum Failure {
+    /// The z approach went further than the start height plus margin without touching.
+    #[error("no substrate found within {range_um:.2} µm of z approach")]
+    NoSubstrate {
+        /// Approach travelled (µm).
+        range_um: f64,
+    },
+    /// The contact search travelled its whole range without reaching the set point.
+    #[error("no contact within range: {travel_um:.2} µm searched ({steps} steps) without reaching ζ_set")]
+    NoContact {
+        /// Search travel (µm).
+        travel_um: f64,
+        /// Steps made.
+        steps: u32,
+    },
+    /// The deflection fell back to the baseline during the push: the tip lost the particle.
+    #[error("particle lost after {travel_um:.3} µm of push: the deflection fell back to the baseline")]
+    ParticleLost {
+        /// Push travel (µm).
+        travel_um: f64,
+    },
+    /// The deflection went beyond the safety limit: emergency retract.
+    #[error("deflection {volts:.3} V beyond the safety limit {limit:.3} V in phase {phase}: emergency retract")]
+    DeflectionLimit {
+        /// Reading (V).
+        volts: f64,
+        /// Limit (V).
+        limit: f64,
+        /// Phase it happened in.
+        phase: &'static str,
+    },
+    /// The push travelled well past its distance without a separation (`t*`) being seen.
+    #[error("no particle-substrate separation (t*) seen after {travel_um:.3} µm of push")]
+    NoSeparation {
+        /// Push travel (µm).
+        travel_um: f64,
+    },
+    /// A phase took longer than its time-out.
+    #[error("time-out: phase {phase} took more than {timeout_s} s")]
+    Timeout {
+        /// Phase.
+        phase: &'static str,
+        /// Limit (s).
+        timeout_s: f64,
+    },
+}
+
+/// The phases of Fig 2.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Phase {
+    /// Travel at the start height to the search start.
+    Travel,
+    /// A → B: z approach until the substrate is detected.
+    Park,
+    /// B: retract to the parking height above the detected substrate.
+    ToParkingHeight {
+        /// Target stage z (m).
+        z: f64,
+    },
+    /// B → C: steps `Δ` at `V` until the set point.
+    ContactSearch {
+        /// Steps begun (1-based).
+        step: u32,
+        /// Travel within the current step (m).
+        in_step: f64,
+        /// Dwell ticks left after the step.
+        dwell: u32,
+    },
+    /// C → D: push under force control.
+    Push {
+        /// Stage position when the push began (contact stop).
+        from: [f64; 3],
+    },
+    /// D: the stage stopped at the end of the push; let the particle settle.
+    Hold {
+        /// Ticks left.
+        ticks: u32,
+    },
+    /// D → E, first part: back away from the particle along the line of centres, so the
+    /// adhesion (meniscus, JKR) pulls through the particle's centre and cannot roll it back.
+    BackOff {
+        /// Stage target (m).
+        goal: [f64; 3],
+    },
+    /// D → E (or after a failure): retract to the start height.
+    Retract,
+    /// E: finished.
+    Done,
+}
+
+impl Phase {
+    /// Name for traces.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Phase::Travel => "travel",
+            Phase::Park => "park",
+            Phase::ToParkingHeight { .. } => "to_parking_height",
+            Phase::ContactSearch { .. } => "contact_search",
+            Phase::Push { .. } => "push",
+            Phase::Hold { .. } => "hold",
+            Phase::BackOff { .. } => "back_off",
+            Phase::Retract => "retract",
+            Phase::Done => "done",
+        }
+    }
+}
+
+/// One step of the contact search, as Fig 9 plots it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SearchStep {
+    /// Step number (1-based).
+    pub step: u32,
+    /// Reading at the end of the step (mean over the dwell), V.
+    pub volts: f64,
+}
+
+/// The strategy's result.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Summary {
+    /// Failure, if any (the tip is retracted either way).
+    pub failure: Option<Failure>,
+    /// Detected substrate height at the parking point (stage z, m).
+    pub substrate_z: Option<f64>,
+    /// Step at which the set point was reached.
+    pub contact_step: Option<u32>,
+    /// Stage position where the contact search stopped (m).
+    pub contact_stage: Option<[f64; 3]>,
+    /// Detected `t*` (s).
+    pub t_star: Option<f64>,
+    /// Estimated particle displacement at the end of the push (m).
+    pub estimated_distance: f64,
+    /// Stage travel of the push (m).
+    pub push_travel: f64,
+    /// Fig 9: the reading after each contact-search step.
+    pub search: Vec<SearchStep>,
+    /// Estimated particle centre at the end (m).
+    pub estimated_particle: (f64, f64),
+}
+
+/// The state machine.
+#[derive(Debug, Clone)]
+pub struct Strategy {
+    /// Settings.
+    pub params: StrategyParams,
+    /// The push.
+    pub task: PushTask,
+    /// Phase now.
+    pub phase: Phase,
+    phase_start: f64,
+    target: [f64; 3],
+    hxy: Hxy,
+    /// Result so far.
+    pub summary: Summary,
+    dwell_sum: f64,
+    lost_count: u32,
+    z_hold: Option<f64>,
+    retract_z: f64,
+}
+
+impl Strategy {
+    /// A strategy for `task`, starting from the stage position of `first` (the tip at the start
+    /// height), with the Eq 19 estimator `hxy` from the pushing model.
+    pub fn new(params: StrategyParams, task: PushTask, hxy: Hxy, first: &Reading) -> Strategy {
+        Strategy {
+            params,
+            task,
+            phase: Phase::Travel,
+            phase_start: first.t,
+            target: first.stage,
+            hxy,
+            summary: Summary {
+                failure: None,
+                substrate_z: None,
+                contact_step: None,
+                contact_stage: None,
+                t_star: None,
+                estimated_distance: 0.0,
+                push_travel: 0.0,
+                search: Vec::new(),
+                estimated_particle: task.particle,
+            },
+            dwell_sum: 0.0,
+            lost_count: 0,
+            z_hold: None,
+            retract_z: first.stage[2],
+        }
+    }
+
+    /// Whether the run is over.
+    pub fn done(&self) -> bool {
+        self.phase == Phase::Done
+    }
+
+    fn enter(&mut self, phase: Phase, t: f64) {
+        self.phase = phase;
+        self.phase_start = t;
+    }
+
+    fn fail(&mut self, failure: Failure, t: f64) {
+        if self.summary.failure.is_none() {
+            self.summary.failure = Some(failure);
+        }
+        // A tip that may touch the particle backs off first; an emergency goes straight up.
+        let touching = matches!(self.phase, Phase::Push { .. } | Phase::Hold { .. })
+            && !matches!(failure, Failure::DeflectionLimit { .. });
+        if touching {
+            let goal = self.back_off_goal();
+            self.enter(Phase::BackOff { goal }, t);
+        } else {
+            self.enter(Phase::Retract, t);
+        }
+    }
+
+    /// 100 nm back along the line of centres from the tip to the particle, `(−cos β, sin β)`
+    /// in the push frame.
+    fn back_off_goal(&self) -> [f64; 3] {
+        let (s, c) = self.task.beta.sin_cos();
+        let d = self.task.direction;
+        [
+            self.target[0] - d.0 * c * BACK_OFF,
+            self.target[1] - d.1 * c * BACK_OFF,
+            self.target[2] + s * BACK_OFF,
+        ]
+    }
+
+    /// Moves the target toward `goal` by at most `speed·tick`; true when it got there.
+    fn move_toward(&mut self, goal: [f64; 3], speed: f64) -> bool {
+        let max = speed * self.params.tick;
+        let d: [f64; 3] = std::array::from_fn(|i| goal[i] - self.target[i]);
+        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        if len <= max {
+            self.target = goal;
+            true
+        } else {
+            for (t, di) in self.target.iter_mut().zip(d) {
+                *t += di * max / len;
+            }
+            false
+        }
+    }
+
+    /// One control tick: takes the newest reading, returns the stage target for the end of the
+    /// next tick.
+    pub fn tick(&mut self, r: &Reading) -> [f64; 3] {
+        let p = self.params;
+        let sig = p.signal(r.volts);
+        // Safety first, in every phase that can touch something.
+        let limit = p.signal(p.safety_limit);
+        if sig > limit && !matches!(self.phase, Phase::Retract | Phase::BackOff { .. } | Phase::Done) {
+            let phase = self.phase.name();
+            self.fail(
+                Failure::DeflectionLimit {
+                    volts: r.volts,
+                    limit: p.safety_limit,
+                    phase,
+                },
+                r.t,
+            );
+        }
+        if r.t - self.phase_start > p.timeout && !matches!(self.phase, Phase::Done) {
+            let phase = self.phase.name();
+            if matches!(self.phase, Phase::Retract | Phase::BackOff { .. }) {
+                // A retract that cannot finish has nothing left to do: stop where it is.
+                self.enter(Phase::Done, r.t);
+            } else {
+                self.fail(
+                    Failure::Timeout {
+                        phase,
+                        timeout_s: p.timeout,
+                    },
+                    r.t,
+                );
+            }
+        }
+        match self.phase.clone() {
+            Phase::Travel => {
+                let (x, y) = self.task.search_start();
+                if self.move_toward([x, y, self.target[2]], p.travel_speed) {
+                    self.enter(Phase::Park, r.t);
+                }
+            }
+            Phase::Park => {
+                if sig.abs() > p.substrate_threshold {
+                    let zs = r.stage[2];
+                    self.summary.substrate_z = Some(zs);
+                    self.retract_z = zs + p.start_height;
+                    let z = zs + self.task.parking_height();
+                    self.enter(Phase::ToParkingHeight { z }, r.t);
+                } else if self.retract_z - self.target[2] > 2.0 * p.start_height {
+                    let range_um = (self.retract_z - self.target[2]) * 1e6;
+                    self.fail(Failure::NoSubstrate { range_um }, r.t);
+                } else {
+                    self.target[2] -= p.approach_speed * p.tick;
+                }
+            }
+            Phase::ToParkingHeight { z } => {
+                if self.move_toward([self.target[0], self.target[1], z], p.approach_speed) {
+                    self.enter(
+                        Phase::ContactSearch {
+                            step: 1,
+                            in_step: 0.0,
+                            dwell: 0,
+                        },
+                        r.t,
+                    );
+                }
+            }
+            Phase::ContactSearch { step, in_step, dwell } => self.contact_search(r, sig, step, in_step, dwell),
+            Phase::Push { from } => self.push(r, sig, from),
+            Phase::Hold { ticks } => {
+                if ticks == 0 {
+                    let goal = self.back_off_goal();
+                    self.enter(Phase::BackOff { goal }, r.t);
+                } else {
+                    self.phase = Phase::Hold { ticks: ticks - 1 };
+                }
+            }
+            Phase::BackOff { goal } => {
+                if self.move_toward(goal, p.approach_speed) {
+                    self.enter(Phase::Retract, r.t);
+                }
+            }
+            Phase::Retract => {
+                let goal = [self.target[0], self.target[1], self.retract_z.max(self.target[2])];
+                let speed = if self.summary.failure.is_some() {
+                    p.travel_speed.max(p.approach_speed)
+                } else {
+                    p.approach_speed
+                };
+                if self.move_toward(goal, speed) {
+                    self.enter(Phase::Done, r.t);
+                }
+            }
+            Phase::Done => {}
+        }
+        self.target
+    }
+
+    fn contact_search(&mut self, r: &Reading, sig: f64, step: u32, in_step: f64, dwell: u32) {
+        let p = self.params;
+        let set = p.signal(p.set_point);
+        if sig >= set {
+            // C: stop where we are.
+            self.summary.contact_step = Some(step);
+            self.summary.contact_stage = Some(r.stage);
+            self.summary.search.push(SearchStep { step, volts: r.volts });
+            self.target = r.stage;
+            self.enter(Phase::Push { from: r.stage }, r.t);
+            return;
+        }
+        let travelled = (step - 1) as f64 * p.step + in_step;
+        if travelled >= p.search_range {
+            self.fail(
+                Failure::NoContact {
+                    travel_um: travelled * 1e6,
+                    steps: step,
+                },
+                r.t,
+            );
+            return;
+        }
+        let d = self.task.direction;
+        if in_step < p.step {
+            let ds = (p.speed * p.tick).min(p.step - in_step);
+            self.target[0] += d.0 * ds;
+            self.target[1] += d.1 * ds;
+            self.phase = Phase::ContactSearch {
+                step,
+                in_step: in_step + ds,
+                dwell: 0,
+            };
+        } else if dwell < p.dwell_ticks {
+            self.dwell_sum += r.volts;
+            self.phase = Phase::ContactSearch {
+                step,
+                in_step,
+                dwell: dwell + 1,
+            };
+        } else {
+            let volts = if p.dwell_ticks > 0 {
+                self.dwell_sum / p.dwell_ticks as f64
+            } else {
+                r.volts
+            };
+            self.dwell_sum = 0.0;
+            self.summary.search.push(SearchStep { step, volts });
+            self.phase = Phase::ContactSearch {
+                step: step + 1,
+                in_step: 0.0,
+                dwell: 0,
+            };
+        }
+    }
+
+    fn push(&mut self, r: &Reading, sig: f64, from: [f64; 3]) {
+        let p = self.params;
+        let d = self.task.direction;
+        let travel = (r.stage[0] - from[0]) * d.0 + (r.stage[1] - from[1]) * d.1;
+        let est = self.hxy.update(r.t, sig, travel);
+        if self.summary.t_star.is_none() {
+            self.summary.t_star = self.hxy.detector.peak.map(|(t, _)| t);
+        }
+        self.summary.estimated_distance = est;
+        self.summary.push_travel = travel;
+        self.summary.estimated_particle = (self.task.particle.0 + d.0 * est, self.task.particle.1 + d.1 * est);
+        // Lost: after the separation the deflection must stay off the baseline.
+        if self.hxy.separated() && sig < p.lost_threshold {
+            self.lost_count += 1;
+            if self.lost_count >= 5 {
+                self.fail(
+                    Failure::ParticleLost {
+                        travel_um: travel * 1e6,
+                    },
+                    r.t,
+                );
+                return;
+            }
+        } else {
+            self.lost_count = 0;
+        }
+        let z_loop = matches!(p.control, Control::Z | Control::Xyz);
+        let xy_loop = matches!(p.control, Control::Xy | Control::Xyz);
+        let finished = if xy_loop {
+            est >= self.hxy.stop_at(self.task.distance)
+        } else {
+            travel >= self.task.distance
+        };
+        let overshoot = self.task.distance + self.hxy.prediction.settle_offset + 2e-6;
+        if !self.hxy.separated() && travel > overshoot {
+            self.fail(
+                Failure::NoSeparation {
+                    travel_um: travel * 1e6,
+                },
+                r.t,
+            );
+            return;
+        }
+        if finished {
+            self.summary.estimated_distance = if xy_loop { est } else { travel };
+            let hold = (HOLD / p.tick).round() as u32;
+            self.enter(Phase::Hold { ticks: hold }, r.t);
+            return;
+        }
+        self.target[0] += d.0 * p.speed * p.tick;
+        self.target[1] += d.1 * p.speed * p.tick;
+        if z_loop && self.hxy.separated() {
+            // Hold the deflection at its level just after t*: a reading above it (the tip pressed
+            // harder, e.g. a substrate rising under the particle) raises the tip.
+            let reference = *self.z_hold.get_or_insert(sig);
+            self.target[2] += p.z_gain * (sig - reference);
+        }
+    }
+}

@@ -1,0 +1,353 @@
+//! The simulated AFM: the hidden truth behind the instrument. It owns the stage, the tip over
+//! the substrate and the particles, and answers each control tick with what the real instrument
+//! would measure — the deflection reading in volts and the stage position — and nothing else.
+//!
+//! Free of particles the tip follows the tip-substrate force curve (Fig 3,
+//! [`TipSample::track`]). When the tip's sphere touches a particle the Eq 17 pushing model takes
+//! over in the frame of the push (Sec 2.5): its `y` axis is the stage's direction of travel at the
+//! moment of contact, the contact angle `β` is the one the geometry gives there, and each tick
+//! drives the model with the stage's travel along that axis and the tip base's height over the
+//! substrate under the particle (so tilt and roughness change `β` as the particle moves, Fig 15).
+//! The contact ends when the tip lets go of the particle (JKR pull-off, meniscus rupture, or a
+//! gap that opened by more than [`RELEASE_GAP`]).
+//!
+//! Simplifications, stated: the push is one-dimensional along the direction of travel (the
+//! lateral instability of pushing a sphere off-centre is left out); outside a push the stage
+//! follows its command exactly (Eq 13 acts inside the push model, where its load matters).
+
+use crate::physics::force_curve::{TipSample, TipTrack};
+use crate::physics::integrate::{Method, Options};
+use crate::physics::pushing::{Drive, PushModel, PushParams, Simulation, SimulationError};
+use crate::physics::sensor::Readout;
+use crate::physics::topography::Topography;
+
+/// A gap (m) beyond which a tip that no longer touches the particle has let go of it.
+pub const RELEASE_GAP: f64 = 20e-9;
+
+/// Contact angles the pushing model accepts (rad): the tip must meet the particle above its
+/// equator and below its top.
+const BETA_RANGE: (f64, f64) = (1.0 * std::f64::consts::PI / 180.0, 85.0 * std::f64::consts::PI / 180.0);
+
+/// A particle lying on the substrate (SI).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Particle {
+    /// Identifier (from the scene).
+    pub id: u32,
+    /// Centre x (m).
+    pub x: f64,
+    /// Centre y (m).
+    pub y: f64,
+    /// Radius (m).
+    pub radius: f64,
+}
+
+/// What the instrument measures at the end of a tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reading {
+    /// Time (s).
+    pub t: f64,
+    /// Deflection reading (V): the only force measurement (Sec 4).
+    pub volts: f64,
+    /// Stage position: tip apex x, y and the height of the undeflected apex (m), from the
+    /// closed-loop stage's own sensors.
+    pub stage: [f64; 3],
+}
+
+/// Hidden state, for traces and tests only: the controller never sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Truth {
+    /// Deflection `ζ_z` (m).
+    pub zeta_z: f64,
+    /// The particle being pushed, if any.
+    pub pushing: Option<u32>,
+    /// Friction phase of the push (`stick`, `slip`, `roll`) or `free`.
+    pub phase: &'static str,
+    /// Tip touching the substrate.
+    pub on_substrate: bool,
+}
+
+/// Why the simulated instrument could not go on.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum AfmError {
+    /// A command was not finite.
+    #[error("stage command {0:?} is not finite")]
+    NotFinite([f64; 3]),
+    /// The pushing model failed.
+    #[error("push simulation of particle {id} failed at t = {t:.6} s: {source}")]
+    Push {
+        /// Particle.
+        id: u32,
+        /// Time (s).
+        t: f64,
+        /// Cause.
+        source: SimulationError,
+    },
+}
+
+/// A push in progress: the Eq 17 model in the frame of the push.
+#[derive(Debug, Clone)]
+struct Contact {
+    sim: Simulation,
+    index: usize,
+    /// Unit push direction in the plane.
+    dir: (f64, f64),
+    /// Stage xy at the moment of contact.
+    stage0: (f64, f64),
+    /// Stage z at contact.
+    z0: f64,
+    /// Particle centre at contact.
+    particle0: (f64, f64),
+    /// Substrate height under the particle at contact.
+    zs0: f64,
+}
+
+/// The simulated instrument.
+#[derive(Debug, Clone)]
+pub struct Afm {
+    tip: TipSample,
+    readout: Readout,
+    topography: Topography,
+    particles: Vec<Particle>,
+    params: Vec<PushParams>,
+    method: Method,
+    options: Options,
+    stage: [f64; 3],
+    range: f64,
+    t: f64,
+    tick: f64,
+    free: TipTrack,
+    zeta_z: f64,
+    contact: Option<Contact>,
+    r_t: f64,
+}
+
+impl Afm {
+    /// An instrument with its tip at `stage` (m), one tick of `tick` seconds, particles with the
+    /// pushing parameters of each (same order), a stage range `[0, range]` in x and y.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        tip: TipSample,
+        readout: Readout,
+        topography: Topography,
+        particles: Vec<(Particle, PushParams)>,
+        stage: [f64; 3],
+        range: f64,
+        tick: f64,
+    ) -> Afm {
+        let (particles, params) = particles.into_iter().unzip();
+        let mut afm = Afm {
+            r_t: tip.r_t,
+            tip,
+            readout,
+            topography,
+            particles,
+            params,
+            method: Method::Rodas4,
+            options: Options::with_rtol(1e-6),
+            stage,
+            range,
+            t: 0.0,
+            tick,
+            free: TipTrack::far(1.0),
+            zeta_z: 0.0,
+            contact: None,
+        };
+        let d = afm.piezo_distance();
+        afm.free = TipTrack::far(d);
+        afm.zeta_z = afm.tip.track(&mut afm.free, d).deflection;
+        afm
+    }
+
+    /// The particles where they are now.
+    pub fn particles(&self) -> &[Particle] {
+        &self.particles
+    }
+
+    /// The substrate's topography.
+    pub fn topography(&self) -> &Topography {
+        &self.topography
+    }
+
+    /// The tick (s).
+    pub fn tick(&self) -> f64 {
+        self.tick
+    }
+
+    /// Time now (s).
+    pub fn time(&self) -> f64 {
+        self.t
+    }
+
+    /// The hidden state now.
+    pub fn truth(&self) -> Truth {
+        Truth {
+            zeta_z: self.zeta_z,
+            pushing: self.contact.as_ref().map(|c| self.particles[c.index].id),
+            phase: self.contact.as_ref().map_or("free", |c| c.sim.phase().as_str()),
+            on_substrate: self.contact.is_none() && self.free.in_contact(),
+        }
+    }
+
+    /// A reading of the instrument now (noise drawn anew).
+    pub fn read(&mut self) -> Reading {
+        Reading {
+            t: self.t,
+            volts: self.readout.read(self.t, self.zeta_z),
+            stage: self.stage,
+        }
+    }
+
+    fn piezo_distance(&self) -> f64 {
+        self.stage[2] - self.topography.height(self.stage[0], self.stage[1])
+    }
+
+    /// Advances one tick with the stage moving in a straight line to `target` (m), clamped to
+    /// the stage's range, and returns the reading at the end of the tick.
+    pub fn step(&mut self, target: [f64; 3]) -> Result<Reading, AfmError> {
+        if target.iter().any(|v| !v.is_finite()) {
+            return Err(AfmError::NotFinite(target));
+        }
+        let target = [
+            target[0].clamp(0.0, self.range),
+            target[1].clamp(0.0, self.range),
+            target[2],
+        ];
+        let t1 = self.t + self.tick;
+        if self.contact.is_none() {
+            self.find_contact(target);
+        }
+        match self.contact.take() {
+            Some(c) => self.step_contact(c, target, t1)?,
+            None => {
+                self.stage = target;
+                self.t = t1;
+                let d = self.piezo_distance();
+                self.zeta_z = self.tip.track(&mut self.free, d).deflection;
+            }
+        }
+        Ok(self.read())
+    }
+
+    /// Whether the tip's sphere meets a particle on the way to `target`; if so, starts the push
+    /// model at the first touch (found by bisection along the path) with the contact angle the
+    /// geometry gives there.
+    fn find_contact(&mut self, target: [f64; 3]) {
+        let from = self.stage;
+        let at = |s: f64| -> [f64; 3] { std::array::from_fn(|i| from[i] + s * (target[i] - from[i])) };
+        let mut best: Option<(f64, usize)> = None;
+        for (i, p) in self.particles.iter().enumerate() {
+            let gap = |q: [f64; 3]| self.sphere_gap(q, p);
+            if gap(target) > 0.0 {
+                continue;
+            }
+            let (mut lo, mut hi) = (0.0, 1.0);
+            if gap(from) <= 0.0 {
+                hi = 0.0;
+            } else {
+                for _ in 0..60 {
+                    let mid = 0.5 * (lo + hi);
+                    if gap(at(mid)) > 0.0 {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+            }
+            if best.is_none_or(|(s, _)| hi < s) {
+                best = Some((hi, i));
+            }
+        }
+        let Some((s, index)) = best else { return };
+        let touch = at(s);
+        let p = self.particles[index];
+        // Direction of travel in the plane; a purely vertical move meets the particle from above
+        // (the push frame then points from the tip to the particle centre).
+        let (mut dx, mut dy) = (target[0] - from[0], target[1] - from[1]);
+        let mut len = dx.hypot(dy);
+        if len < 1e-15 {
+            (dx, dy) = (p.x - touch[0], p.y - touch[1]);
+            len = dx.hypot(dy).max(1e-15);
+        }
+        let dir = (dx / len, dy / len);
+        let zs = self.topography.height(p.x, p.y);
+        let rise = (touch[2] + self.r_t) - (zs + p.radius);
+        let beta = (rise / (self.r_t + p.radius))
+            .clamp(-1.0, 1.0)
+            .asin()
+            .clamp(BETA_RANGE.0, BETA_RANGE.1);
+        let mut params = self.params[index];
+        params.beta = beta;
+        let mut model = PushModel::new(params);
+        model.drive = Drive {
+            t0: self.t,
+            y0: 0.0,
+            vy: 0.0,
+            z0: 0.0,
+            vz: 0.0,
+        };
+        let mut sim = Simulation::new(model, self.method, self.options);
+        sim.t = self.t;
+        self.contact = Some(Contact {
+            sim,
+            index,
+            dir,
+            stage0: (touch[0], touch[1]),
+            z0: touch[2],
+            particle0: (p.x, p.y),
+            zs0: zs,
+        });
+    }
+
+    /// Gap between the tip's sphere (undeflected) at stage position `q` and particle `p` (m).
+    fn sphere_gap(&self, q: [f64; 3], p: &Particle) -> f64 {
+        let zs = self.topography.height(p.x, p.y);
+        let dz = (q[2] + self.r_t) - (zs + p.radius);
+        ((q[0] - p.x).powi(2) + (q[1] - p.y).powi(2) + dz * dz).sqrt() - (self.r_t + p.radius)
+    }
+
+    fn step_contact(&mut self, mut c: Contact, target: [f64; 3], t1: f64) -> Result<(), AfmError> {
+        let travel = (target[0] - c.stage0.0) * c.dir.0 + (target[1] - c.stage0.1) * c.dir.1;
+        let y_now = c.sim.x[c.sim.model.layout.particle_y.pos];
+        let (px, py) = (c.particle0.0 + c.dir.0 * y_now, c.particle0.1 + c.dir.1 * y_now);
+        let lift = (target[2] - c.z0) - (self.topography.height(px, py) - c.zs0);
+        let drive = c.sim.model.drive.ramp_to(self.t, t1, travel, lift);
+        c.sim.set_drive(drive);
+        let id = self.particles[c.index].id;
+        if let Err(source) = c.sim.advance_to(t1) {
+            // Lifting the tip off the particle ends at a fold of the quasi-static balance (the
+            // JKR and meniscus pull-off): the equilibrium the integrator follows vanishes and the
+            // tip snaps free, as on the force curve's retraction. Anything else is a failure.
+            if drive.vz > 0.0 {
+                self.release(target, t1);
+                return Ok(());
+            }
+            return Err(AfmError::Push { id, t: self.t, source });
+        }
+        let n = c.sim.model.len();
+        let probe = c.sim.model.probe(c.sim.t, &c.sim.x[..n], &c.sim.mode);
+        let y = c.sim.x[c.sim.model.layout.particle_y.pos];
+        let p = &mut self.particles[c.index];
+        p.x = c.particle0.0 + c.dir.0 * y;
+        p.y = c.particle0.1 + c.dir.1 * y;
+        self.stage = target;
+        self.t = t1;
+        self.zeta_z = probe.zeta_z;
+        let released = !c.sim.mode.tip_contact && probe.gap > RELEASE_GAP;
+        if released {
+            self.release(target, t1);
+        } else {
+            self.contact = Some(c);
+        }
+        Ok(())
+    }
+
+    /// Ends a push: the particle stays where it is, the tip is free at `target`.
+    fn release(&mut self, target: [f64; 3], t1: f64) {
+        self.contact = None;
+        self.stage = target;
+        self.t = t1;
+        let d = self.piezo_distance();
+        self.free = TipTrack::far(d.max(self.tip.a0 * 10.0));
+        self.zeta_z = self.tip.track(&mut self.free, d).deflection;
+    }
+}
