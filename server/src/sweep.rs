@@ -261,15 +261,17 @@ pub fn grid(from: f64, to: f64, steps: usize) -> Vec<f64> {
     (0..steps).map(|i| grid_value(from, to, steps, i)).collect()
 }
 
-/// The `i`-th value of [`grid`].
+/// The `i`-th value of [`grid`], rounded to 12 significant digits (so a step of 0.1 prints as
+/// 0.4, not 0.3999999999999999); the ends are exactly `from` and `to`.
 pub fn grid_value(from: f64, to: f64, steps: usize, i: usize) -> f64 {
-    if steps <= 1 {
+    if steps <= 1 || i == 0 {
         return from;
     }
-    if i + 1 == steps {
+    if i + 1 >= steps {
         return to;
     }
-    from + (to - from) * i as f64 / (steps - 1) as f64
+    let v = from + (to - from) * i as f64 / (steps - 1) as f64;
+    format!("{v:.11e}").parse().unwrap_or(v)
 }
 
 /// A shard `i/n` of a sweep (`0 ≤ i < n`).
