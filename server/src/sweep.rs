@@ -491,7 +491,13 @@ pub fn compute_point(base: &Scene, param: Param, index: usize, value: f64, opts:
         params.dofs.particle_rotation = Dof::Off;
     }
     let run = catch_unwind(AssertUnwindSafe(|| {
-        run_push(PushModel::new(params), opts.method, Options::with_rtol(opts.rtol), opts.duration, opts.sample)
+        run_push(
+            PushModel::new(params),
+            opts.method,
+            Options::with_rtol(opts.rtol),
+            opts.duration,
+            opts.sample,
+        )
     }));
     let dynamic = match run {
         Ok(Ok(run)) => Ok(Settled::from_run(&run, opts.tail)),

@@ -11,7 +11,18 @@ fn temp_dir(name: &str) -> std::path::PathBuf {
 }
 
 const SWEEP: [&str; 12] = [
-    "sweep", "--param", "beta", "--from", "10", "--to", "60", "--steps", "7", "--duration", "0.02", "--pure-sliding",
+    "sweep",
+    "--param",
+    "beta",
+    "--from",
+    "10",
+    "--to",
+    "60",
+    "--steps",
+    "7",
+    "--duration",
+    "0.02",
+    "--pure-sliding",
 ];
 
 #[test]
@@ -26,13 +37,20 @@ fn shard_csvs_concatenate_to_the_unsharded_csv_byte_for_byte() {
     let mut joined = Vec::new();
     for i in 0..3 {
         let shard = format!("{i}/3");
-        let o = run("nanopush", &[&SWEEP[..], &["--out", out, "--shard", &shard]].concat(), None);
+        let o = run(
+            "nanopush",
+            &[&SWEEP[..], &["--out", out, "--shard", &shard]].concat(),
+            None,
+        );
         assert!(o.status.success(), "{}", text(&o).1);
         let part = std::fs::read(dir.join(format!("sweep-beta.shard-{i}-of-3.csv"))).unwrap();
         assert!(i == 0 || !part.starts_with(b"index,"), "only shard 0 writes the header");
         joined.extend(part);
     }
-    assert_eq!(String::from_utf8(joined).unwrap(), String::from_utf8(expected.clone()).unwrap());
+    assert_eq!(
+        String::from_utf8(joined).unwrap(),
+        String::from_utf8(expected.clone()).unwrap()
+    );
     let csv = String::from_utf8(expected).unwrap();
     assert_eq!(csv.lines().count(), 8);
     // The rows are the global indices in order, and the point that fails is a row, not a gap.
@@ -48,7 +66,20 @@ fn shard_csvs_concatenate_to_the_unsharded_csv_byte_for_byte() {
 fn json_summary_names_the_trend_and_the_flags() {
     let o = run(
         "nanopush",
-        &["sweep", "--param", "mu_as", "--from", "0.3", "--to", "1.5", "--steps", "5", "--duration", "0.02", "--json"],
+        &[
+            "sweep",
+            "--param",
+            "mu_as",
+            "--from",
+            "0.3",
+            "--to",
+            "1.5",
+            "--steps",
+            "5",
+            "--duration",
+            "0.02",
+            "--json",
+        ],
         None,
     );
     let (out, err) = text(&o);
@@ -70,12 +101,34 @@ fn json_summary_names_the_trend_and_the_flags() {
 #[test]
 fn bad_arguments_exit_2_naming_the_value_and_the_allowed_range() {
     let cases: [(&[&str], &str); 6] = [
-        (&["--param", "gamma", "--from", "0", "--to", "1", "--steps", "2"], "--param gamma: unknown; allowed: alpha [0, 75] deg (α), beta [1, 89] deg (β), mu_as [0, 5] (μ_as^s), radius [2, 10000] nm (Rₐ)"),
-        (&["--param", "alpha", "--from", "30", "--to", "10", "--steps", "3"], "--from must not be above --to"),
-        (&["--param", "alpha", "--from", "0", "--to", "10", "--steps", "0"], "--steps 0 is out of range; allowed: [1, 100000]"),
-        (&["--param", "alpha", "--from", "0", "--to", "10", "--steps", "3", "--shard", "3/2"], "--shard 3/2: shard index 3 is out of range; allowed: 0 to 1"),
-        (&["--param", "alpha", "--from", "0", "--to", "80", "--steps", "3"], "--to 80 is out of range for alpha; allowed: [0, 75] deg"),
-        (&["--param", "radius", "--from", "100", "--to", "200", "--steps", "3", "--shard", "0/0"], "the shard count must be at least 1"),
+        (
+            &["--param", "gamma", "--from", "0", "--to", "1", "--steps", "2"],
+            "--param gamma: unknown; allowed: alpha [0, 75] deg (α), beta [1, 89] deg (β), mu_as [0, 5] (μ_as^s), radius [2, 10000] nm (Rₐ)",
+        ),
+        (
+            &["--param", "alpha", "--from", "30", "--to", "10", "--steps", "3"],
+            "--from must not be above --to",
+        ),
+        (
+            &["--param", "alpha", "--from", "0", "--to", "10", "--steps", "0"],
+            "--steps 0 is out of range; allowed: [1, 100000]",
+        ),
+        (
+            &[
+                "--param", "alpha", "--from", "0", "--to", "10", "--steps", "3", "--shard", "3/2",
+            ],
+            "--shard 3/2: shard index 3 is out of range; allowed: 0 to 1",
+        ),
+        (
+            &["--param", "alpha", "--from", "0", "--to", "80", "--steps", "3"],
+            "--to 80 is out of range for alpha; allowed: [0, 75] deg",
+        ),
+        (
+            &[
+                "--param", "radius", "--from", "100", "--to", "200", "--steps", "3", "--shard", "0/0",
+            ],
+            "the shard count must be at least 1",
+        ),
     ];
     for (args, message) in cases {
         let o = run("nanopush", &[&["sweep"][..], args].concat(), None);
@@ -92,7 +145,15 @@ fn simulate_plot_draws_fig7() {
     let svg = dir.join("fig7.svg");
     let o = run(
         "nanopush",
-        &["simulate", "--duration", "0.02", "--sample", "1e-3", "--plot", svg.to_str().unwrap()],
+        &[
+            "simulate",
+            "--duration",
+            "0.02",
+            "--sample",
+            "1e-3",
+            "--plot",
+            svg.to_str().unwrap(),
+        ],
         None,
     );
     assert!(o.status.success(), "{}", text(&o).1);

@@ -11,7 +11,13 @@ fn parse_names_and_lists_ranges_on_error() {
         assert_eq!(Param::parse(p.name()), Ok(p));
     }
     let e = Param::parse("gamma").unwrap_err().to_string();
-    for needle in ["gamma", "alpha [0, 75] deg", "beta [1, 89] deg", "mu_as [0, 5]", "radius [2, 10000] nm"] {
+    for needle in [
+        "gamma",
+        "alpha [0, 75] deg",
+        "beta [1, 89] deg",
+        "mu_as [0, 5]",
+        "radius [2, 10000] nm",
+    ] {
         assert!(e.contains(needle), "{e}");
     }
 }
@@ -115,7 +121,9 @@ fn shard_parse_rejects_what_a_scheduler_should_not_send() {
 fn default_point_agrees_with_eq18_of_the_model_report() {
     // The sweep's Eq 18 at the paper's α = 15° is `nanopush model`'s steady state.
     let b = base();
-    let report = model_report(&b).steady_state.expect("Eq 18 has a steady state in the paper scene");
+    let report = model_report(&b)
+        .steady_state
+        .expect("Eq 18 has a steady state in the paper scene");
     let opts = PointOptions {
         duration: 0.05,
         ..PointOptions::default()
@@ -137,7 +145,10 @@ fn an_invalid_value_is_a_failed_row_not_a_panic() {
     let e = p.dynamic.as_ref().unwrap_err();
     assert!(e.contains("push.contact_angle_deg = 95 is out of range"), "{e}");
     let row = csv_row(&p);
-    assert!(row.starts_with("0,95,,,,,,,,,,,,\"scene <default scene> with beta = 95: "), "{row}");
+    assert!(
+        row.starts_with("0,95,,,,,,,,,,,,\"scene <default scene> with beta = 95: "),
+        "{row}"
+    );
 }
 
 #[test]
@@ -163,7 +174,10 @@ fn sliding_at(param: Param, value: f64) -> Settled {
     };
     let p = compute_point(&base(), param, 0, value, &opts);
     let d = p.dynamic.expect("the push runs");
-    assert!(!d.stuck && !d.unstable && d.phase == "slip", "{param:?} = {value}: {d:?}");
+    assert!(
+        !d.stuck && !d.unstable && d.phase == "slip",
+        "{param:?} = {value}: {d:?}"
+    );
     d
 }
 
@@ -171,10 +185,17 @@ fn sliding_at(param: Param, value: f64) -> Settled {
 fn fig10_eq18_y_and_zeta_z_grow_with_alpha_up_to_its_pole() {
     // "within a limited range of α, ζz and y increase with the increased angle": Eq 18's y and
     // |ζz| grow from 0° to the pole of its linear system near 18.6°, then change sign.
-    let ys: Vec<SteadyState> = [0.0, 5.0, 10.0, 15.0, 18.0].map(|a| eq18_at(Param::Alpha, a).unwrap()).to_vec();
+    let ys: Vec<SteadyState> = [0.0, 5.0, 10.0, 15.0, 18.0]
+        .map(|a| eq18_at(Param::Alpha, a).unwrap())
+        .to_vec();
     for w in ys.windows(2) {
         assert!(w[1].y > w[0].y, "y: {} then {}", w[0].y, w[1].y);
-        assert!(w[1].zeta_z < w[0].zeta_z && w[1].zeta_z < 0.0, "ζz: {} then {}", w[0].zeta_z, w[1].zeta_z);
+        assert!(
+            w[1].zeta_z < w[0].zeta_z && w[1].zeta_z < 0.0,
+            "ζz: {} then {}",
+            w[0].zeta_z,
+            w[1].zeta_z
+        );
     }
     let past = eq18_at(Param::Alpha, 19.0).unwrap();
     assert!(past.y < 0.0 && past.zeta_z > 0.0, "{past:?}");

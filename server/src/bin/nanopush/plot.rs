@@ -45,7 +45,11 @@ fn bounds(values: impl Iterator<Item = f64>) -> (f64, f64) {
     if !lo.is_finite() {
         return (0.0, 1.0);
     }
-    let pad = if hi > lo { 0.06 * (hi - lo) } else { 0.05 * lo.abs().max(1e-3) };
+    let pad = if hi > lo {
+        0.06 * (hi - lo)
+    } else {
+        0.05 * lo.abs().max(1e-3)
+    };
     (lo - pad, hi + pad)
 }
 
@@ -86,13 +90,15 @@ pub fn stacked(path: &Path, title: &str, x_desc: &str, panels: &[Panel]) -> anyh
                 Mark::Cross => chart.draw_series(pts.into_iter().map(|p| Cross::new(p, 4, color.stroke_width(2))))?,
             };
             let mark = s.mark;
-            drawn.label(s.label.clone()).legend(move |(x, y)| -> DynElement<'static, SVGBackend, (i32, i32)> {
-                match mark {
-                    Mark::Line => PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)).into_dyn(),
-                    Mark::Circle => Circle::new((x + 10, y), 4, color.stroke_width(2)).into_dyn(),
-                    Mark::Cross => Cross::new((x + 10, y), 4, color.stroke_width(2)).into_dyn(),
-                }
-            });
+            drawn
+                .label(s.label.clone())
+                .legend(move |(x, y)| -> DynElement<'static, SVGBackend, (i32, i32)> {
+                    match mark {
+                        Mark::Line => PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)).into_dyn(),
+                        Mark::Circle => Circle::new((x + 10, y), 4, color.stroke_width(2)).into_dyn(),
+                        Mark::Cross => Cross::new((x + 10, y), 4, color.stroke_width(2)).into_dyn(),
+                    }
+                });
             chart.draw_series(
                 s.bars
                     .iter()

@@ -127,7 +127,9 @@ fn plot_settling(path: &std::path::Path, scene: &str, run: &PushRun) -> anyhow::
         },
         Panel {
             y_desc: "s − particle y (nm)".into(),
-            series: vec![series("particle offset behind the stage", 2, |r| r.stage_y - r.particle_y)],
+            series: vec![series("particle offset behind the stage", 2, |r| {
+                r.stage_y - r.particle_y
+            })],
         },
     ];
     stacked(

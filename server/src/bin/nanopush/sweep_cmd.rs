@@ -196,7 +196,10 @@ fn plot(path: &Path, param: Param, scene: &str, pure_sliding: bool, points: &[Sw
     } else {
         "Eq 17, free rotation"
     };
-    let panel = |name: &str, mark: Mark, eq: fn(&(f64, f64, f64)) -> f64, get: fn(&nanopush::sweep::Settled) -> nanopush::sweep::TailStats| Panel {
+    let panel = |name: &str,
+                 mark: Mark,
+                 eq: fn(&(f64, f64, f64)) -> f64,
+                 get: fn(&nanopush::sweep::Settled) -> nanopush::sweep::TailStats| Panel {
         y_desc: format!("{name} (nm)"),
         series: vec![
             Series {
@@ -236,7 +239,11 @@ fn plot(path: &Path, param: Param, scene: &str, pure_sliding: bool, points: &[Sw
     ];
     stacked(
         path,
-        &format!("Fig {}: settled y ('o') and ζ_z ('x') against {} — {scene}", param.figure(), param.symbol()),
+        &format!(
+            "Fig {}: settled y ('o') and ζ_z ('x') against {} — {scene}",
+            param.figure(),
+            param.symbol()
+        ),
         &format!("{}{unit}", param.symbol()),
         &panels,
     )
@@ -300,9 +307,8 @@ pub fn run(a: &SweepArgs) -> anyhow::Result<String> {
     }
 
     let all: Vec<&SweepPoint> = points.iter().collect();
-    let values = |f: &dyn Fn(&SweepPoint) -> bool| -> Vec<f64> {
-        points.iter().filter(|p| f(p)).map(|p| p.value).collect()
-    };
+    let values =
+        |f: &dyn Fn(&SweepPoint) -> bool| -> Vec<f64> { points.iter().filter(|p| f(p)).map(|p| p.value).collect() };
     let report = SweepReport {
         schema: "nanopush.sweep".into(),
         version: nanopush_proto::VERSION,
@@ -358,9 +364,21 @@ pub fn run(a: &SweepArgs) -> anyhow::Result<String> {
     writeln!(
         out,
         "Fig {}: sweep of {} from {} to {} {u} in {} points (shard {}/{}: {} points from index {}) on scene \"{}\"",
-        r.figure, param.symbol(), r.from, r.to, r.steps, r.shard, r.shards, r.points, r.first_index, r.scene
+        r.figure,
+        param.symbol(),
+        r.from,
+        r.to,
+        r.steps,
+        r.shard,
+        r.shards,
+        r.points,
+        r.first_index,
+        r.scene
     )?;
-    for (name, s) in [("Eq 18 (pure sliding)", &r.eq18), ("dynamic model, settled", &r.dynamic)] {
+    for (name, s) in [
+        ("Eq 18 (pure sliding)", &r.eq18),
+        ("dynamic model, settled", &r.dynamic),
+    ] {
         let opt = |v: Option<f64>| v.map_or("-".into(), |v| eng(v, "m"));
         writeln!(
             out,
