@@ -17,6 +17,7 @@
 pub mod accuracy;
 pub mod model;
 pub mod simulate;
+pub mod sweep;
 
 /// Version of every document in this crate; bumped on any incompatible change.
 pub const VERSION: u32 = 1;

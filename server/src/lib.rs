@@ -10,6 +10,7 @@
 //! - [`peers`]: peer solvers from crates.io (diffsol, russell_ode) on the report's classical
 //!   problems, for comparison at equal error;
 //! - [`push_run`]: a push at constant speed, sampled into a trace (`nanopush simulate`).
+//! - [`sweep`]: the parameter sweeps of Figs 10-13 (`nanopush sweep`).
 //!
 //! ```
 //! let scene = nanopush::scene::Scene::default_scene();
@@ -27,3 +28,4 @@ pub mod physics;
 pub mod push_run;
 pub mod report;
 pub mod scene;
+pub mod sweep;

@@ -3,3 +3,4 @@
 mod haptic;
 mod model;
 mod simulate;
+mod sweep;

@@ -71,6 +71,11 @@ impl Scene {
             origin: origin.into(),
             message: e.to_string().trim_end().to_string(),
         })?;
+        Scene::from_file(origin, file)
+    }
+
+    /// Validates a scene that is already parsed (e.g. a sweep's copy with one field changed).
+    pub fn from_file(origin: &str, file: SceneFile) -> Result<Scene, SceneError> {
         validate::validate(origin, &file)?;
         let mut scene = Scene {
             file,

@@ -2,7 +2,9 @@
 
 mod accuracy_cmd;
 mod model_cmd;
+mod plot;
 mod simulate_cmd;
+mod sweep_cmd;
 mod units;
 
 use std::path::PathBuf;
@@ -28,6 +30,8 @@ enum Command {
     Simulate(simulate_cmd::SimulateArgs),
     /// Error against run time for each method and tolerance (work-precision report).
     Accuracy(accuracy_cmd::AccuracyArgs),
+    /// The settled particle y and ζ_z against α, β, μ_as^s or Rₐ (Figs 10-13), in parallel.
+    Sweep(sweep_cmd::SweepArgs),
 }
 
 /// Loads `--scene FILE`, or the embedded default scene; prints its warnings to stderr.
@@ -62,6 +66,7 @@ fn main() -> ExitCode {
         Command::Model(args) => model_cmd::run(&args),
         Command::Simulate(args) => simulate_cmd::run(&args),
         Command::Accuracy(args) => accuracy_cmd::run(&args),
+        Command::Sweep(args) => sweep_cmd::run(&args),
     };
     match result {
         Ok(text) => print_stdout(&text),

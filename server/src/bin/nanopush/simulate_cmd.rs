@@ -34,6 +34,10 @@ pub struct SimulateArgs {
     /// Write the trace (CSV) here.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Draw Fig 7 here (SVG): stage travel and particle y against time, and the particle's
+    /// offset behind the stage settling.
+    #[arg(long)]
+    plot: Option<PathBuf>,
     /// Print one JSON object (SI units) instead of a table.
     #[arg(long)]
     json: bool,
@@ -103,6 +107,39 @@ fn write_trace(path: &PathBuf, run: &PushRun) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Fig 7: the settling of the particle's y during pushing.
+fn plot_settling(path: &std::path::Path, scene: &str, run: &PushRun) -> anyhow::Result<()> {
+    use crate::plot::{Mark, Panel, Series, stacked};
+    let series = |label: &str, color, f: fn(&nanopush::push_run::TraceRow) -> f64| Series {
+        label: label.into(),
+        points: run.trace.iter().map(|r| (r.t * 1e3, f(r) * 1e9)).collect(),
+        mark: Mark::Line,
+        color,
+        bars: Vec::new(),
+    };
+    let panels = [
+        Panel {
+            y_desc: "travel (nm)".into(),
+            series: vec![
+                series("stage s", 0, |r| r.stage_y),
+                series("particle y", 1, |r| r.particle_y),
+            ],
+        },
+        Panel {
+            y_desc: "s − particle y (nm)".into(),
+            series: vec![series("particle offset behind the stage", 2, |r| {
+                r.stage_y - r.particle_y
+            })],
+        },
+    ];
+    stacked(
+        path,
+        &format!("Fig 7: settling of the particle's y during pushing — {scene}"),
+        "t (ms)",
+        &panels,
+    )
+}
+
 /// Runs `nanopush simulate`; returns what to print on stdout.
 pub fn run(a: &SimulateArgs) -> anyhow::Result<String> {
     let method = check(a)?;
@@ -123,6 +160,9 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<String> {
     .ok();
     if let Some(path) = &a.out {
         write_trace(path, &run)?;
+    }
+    if let Some(path) = &a.plot {
+        plot_settling(path, &scene.file.name, &run).with_context(|| format!("drawing {}", path.display()))?;
     }
     let st = &run.stats;
     let report = SimulateReport {
