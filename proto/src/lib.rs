@@ -16,6 +16,7 @@
 
 pub mod accuracy;
 pub mod model;
+pub mod push;
 pub mod simulate;
 pub mod sweep;
 

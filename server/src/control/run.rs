@@ -118,6 +118,8 @@ pub struct PushRequest {
     pub direction: (f64, f64),
     /// Distance to push (m).
     pub distance: f64,
+    /// A brief stop during the push: at this push travel (m), for this long (s).
+    pub pause: Option<(f64, f64)>,
 }
 
 /// Pushes one particle: the controller knows it only by the request's estimated centre and
@@ -136,6 +138,7 @@ pub fn push_once(
         radius,
         direction,
         distance,
+        pause,
     } = *request;
     let f = &scene.file;
     let part = f
@@ -174,6 +177,7 @@ pub fn push_once(
         beta: model.beta,
         tip_radius: model.r_t,
         approach_distance: f.strategy.approach_distance_um * 1e-6,
+        pause: pause.map(|(at, secs)| (at, (secs / params.tick).round() as u32)),
     };
     let before = afm.particles()[index];
     let first = afm.read();

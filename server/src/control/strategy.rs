@@ -100,6 +100,9 @@ pub struct PushTask {
     pub tip_radius: f64,
     /// Distance behind the contact point where the search starts (m).
     pub approach_distance: f64,
+    /// A brief stop during the push (Fig 15: "a short stop interval"): at this push travel
+    /// (m), for this many ticks.
+    pub pause: Option<(f64, u32)>,
 }
 
 impl PushTask {
@@ -284,6 +287,7 @@ pub struct Strategy {
     lost_count: u32,
     z_hold: Option<f64>,
     retract_z: f64,
+    pause_left: Option<u32>,
 }
 
 impl Strategy {
@@ -312,6 +316,7 @@ impl Strategy {
             lost_count: 0,
             z_hold: None,
             retract_z: first.stage[2],
+            pause_left: None,
         }
     }
 
@@ -568,6 +573,18 @@ impl Strategy {
             self.summary.estimated_distance = if xy_loop { est } else { travel };
             let hold = (HOLD / p.tick).round() as u32;
             self.enter(Phase::Hold { ticks: hold }, r.t);
+            return;
+        }
+        if let Some((at, ticks)) = self.task.pause
+            && travel >= at
+            && self.pause_left.is_none()
+        {
+            self.pause_left = Some(ticks);
+        }
+        if let Some(left) = self.pause_left
+            && left > 0
+        {
+            self.pause_left = Some(left - 1);
             return;
         }
         self.target[0] += d.0 * p.speed * p.tick;

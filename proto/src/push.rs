@@ -1,0 +1,75 @@
+//! `nanopush push --json`: one manipulation run (Sec 2.1 strategy, Sec 3 force control), SI.
+
+use serde::{Deserialize, Serialize};
+
+/// A particle located in a scan.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LocatedParticle {
+    /// Centre x (m).
+    pub x: f64,
+    /// Centre y (m).
+    pub y: f64,
+    /// Radius estimated from the scan, corrected for tip dilation (m).
+    pub radius: f64,
+}
+
+/// One straight push of a run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LegReport {
+    /// Where the controller believed the particle was (m).
+    pub from: [f64; 2],
+    /// Where it was asked to go (m).
+    pub to: [f64; 2],
+    /// `ok`, or the failure's code (`no_substrate`, `no_contact`, `particle_lost`,
+    /// `deflection_limit`, `no_separation`, `timeout`).
+    pub outcome: String,
+    /// The failure in words, if any.
+    pub failure: Option<String>,
+    /// Contact-search step at which `ζ_set` was reached (Fig 9).
+    pub contact_step: Option<u32>,
+    /// Detected particle-substrate separation `t*` (s).
+    pub t_star: Option<f64>,
+    /// The controller's estimate of the distance pushed (m).
+    pub estimated_distance: f64,
+    /// The distance the particle really moved along the push (m), from the simulator.
+    pub true_distance: f64,
+    /// Stage travel during the push (m).
+    pub push_travel: f64,
+    /// Model prediction used by the estimator: settled lag `δ° = s − y` (m).
+    pub settle_offset: f64,
+    /// Model prediction: particle shift during the retraction (m).
+    pub retract_shift: f64,
+    /// The tip ended retracted.
+    pub retracted: bool,
+}
+
+/// The whole run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PushReport {
+    /// `"push"`.
+    pub schema: String,
+    /// [`crate::VERSION`].
+    pub version: u32,
+    /// Scene name.
+    pub scene: String,
+    /// Particle id.
+    pub particle: u32,
+    /// Loop closure: `xy`, `z` or `xyz`.
+    pub control: String,
+    /// The particle as the first scan located it.
+    pub located_before: LocatedParticle,
+    /// The particle as the scan after the run located it (None if not found).
+    pub located_after: Option<LocatedParticle>,
+    /// Target position (m).
+    pub target: [f64; 2],
+    /// Legs, in order; the run stops at the first failed leg.
+    pub legs: Vec<LegReport>,
+    /// The particle's true final position (m), from the simulator.
+    pub final_position: [f64; 2],
+    /// Distance between the true final position and the target (m).
+    pub final_error: f64,
+    /// Simulated time (s).
+    pub simulated_time: f64,
+    /// Wall time (s).
+    pub wall_time: f64,
+}
