@@ -9,7 +9,9 @@
 //! - [`extremes`]: the stability grid (`nanopush accuracy --extremes`);
 //! - [`peers`]: peer solvers from crates.io (diffsol, russell_ode) on the report's classical
 //!   problems, for comparison at equal error;
-//! - [`push_run`]: a push at constant speed, sampled into a trace (`nanopush simulate`).
+//! - [`push_run`]: a push at constant speed, sampled into a trace (`nanopush simulate`);
+//! - [`scan`]: tapping-mode scans (tip dilation, raster, GSF/PNG) and particle localization
+//!   (`nanopush scan`).
 //!
 //! ```
 //! let scene = nanopush::scene::Scene::default_scene();
@@ -24,4 +26,5 @@ pub mod peers;
 pub mod physics;
 pub mod push_run;
 pub mod report;
+pub mod scan;
 pub mod scene;
