@@ -16,6 +16,7 @@
 
 pub mod accuracy;
 pub mod model;
+pub mod scan;
 pub mod simulate;
 
 /// Version of every document in this crate; bumped on any incompatible change.

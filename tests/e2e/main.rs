@@ -2,4 +2,5 @@
 
 mod haptic;
 mod model;
+mod scan;
 mod simulate;

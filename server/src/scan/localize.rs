@@ -18,8 +18,12 @@
 //!    base width is pixel-limited: the image meets the substrate at a kink, which interpolation
 //!    between pixels rounds off outward by up to a pixel; at half height both neighbours of the
 //!    crossing lie on the flank.)
-//! 5. Centre: the sphere's image is symmetric about its centre, so the apex lies over it; the
-//!    centre's height is `level + Rₐ`.
+//! 5. Fit: the centre and radius of the sphere whose exact tip image
+//!    ([`Tip::sphere_image_height`]) best fits the blob's pixels on the local substrate plane
+//!    (least squares, Nelder-Mead from the apex and `H/2`). This is the estimate: with only a
+//!    few pixels across the apex the height alone is biased by where the pixels fall (7 % for a
+//!    0.5 µm particle at 390 nm pixels), the fit uses every pixel of the blob. The sphere's
+//!    image is symmetric about its centre; the centre's height is `level + Rₐ`.
 
 use super::image::HeightImage;
 use super::tip::Tip;
@@ -81,8 +85,11 @@ pub struct Located {
     pub expected_width: f64,
     /// Apparent width at half height (mean over 16 radial profiles).
     pub half_height_width: f64,
-    /// Radius from the height, `H/2`: the estimate.
+    /// The estimate: radius of the sphere whose tip image best fits the blob's pixels (least
+    /// squares, with the centre).
     pub radius: f64,
+    /// Radius from the apparent height alone, `H/2`.
+    pub radius_from_height: f64,
     /// Radius from the half-height width, inverting the tip model (the cross-check).
     pub radius_from_width: Option<f64>,
 }
@@ -306,6 +313,41 @@ fn measure(img: &HeightImage, tip: &Tip, lv: &Level, i: usize, j: usize) -> Loca
     };
     let base_width = mean_width(cut);
     let half_height_width = mean_width(0.5 * height);
+    // Model fit: centre and radius of the sphere whose tip image best matches the pixels of
+    // the blob, on the local substrate plane.
+    let reach = 0.5 * base_width.max(pitch) / pitch + 1.0;
+    let mut pixels = Vec::new();
+    for ii in (row - reach).floor().max(0.0) as usize..=((row + reach).ceil() as usize).min(img.yres - 1) {
+        for jj in (col - reach).floor().max(0.0) as usize..=((col + reach).ceil() as usize).min(img.xres - 1) {
+            if (ii as f64 - row).hypot(jj as f64 - col) <= reach {
+                let local = lv.at(ii as f64, jj as f64) + offset;
+                pixels.push((ii as f64, jj as f64, img.at(ii, jj) - local));
+            }
+        }
+    }
+    let (dx, dy) = (img.dx(), img.dy());
+    let cost = |v: &[f64; 3]| -> f64 {
+        let (r0, c0, ra) = (v[0], v[1], v[2] * radius);
+        if ra <= 0.0 {
+            return f64::INFINITY;
+        }
+        pixels
+            .iter()
+            .map(|&(r, c, z)| {
+                let d = ((c - c0) * dx).hypot((r - r0) * dy);
+                let m = tip.sphere_image_height(ra, d).max(0.0);
+                (z - m).powi(2)
+            })
+            .sum()
+    };
+    let fit = nelder_mead(cost, [row, col, 1.0], [0.3, 0.3, 0.03]);
+    let (row_fit, col_fit, ra_fit) = (fit[0], fit[1], fit[2] * radius);
+    // Trust the fit only where it stays on this blob (within a pixel of the apex).
+    let (row, col, radius) = if (row_fit - row).hypot(col_fit - col) <= 1.0 && ra_fit > 0.0 {
+        (row_fit, col_fit, ra_fit)
+    } else {
+        (row, col, radius)
+    };
     Located {
         x: img.x_at(col),
         y: img.y_at(row),
@@ -317,8 +359,60 @@ fn measure(img: &HeightImage, tip: &Tip, lv: &Level, i: usize, j: usize) -> Loca
         expected_width: tip.sphere_base_width(radius),
         half_height_width,
         radius,
+        radius_from_height: 0.5 * height,
         radius_from_width: tip.radius_from_width(half_height_width, 0.5),
     }
+}
+
+/// Nelder-Mead minimisation of `f` from `x0` with initial steps `step` (Lagarias et al., SIAM
+/// J. Optim. 9, 112 (1998): reflection 1, expansion 2, contraction ½, shrink ½), 400 steps at
+/// most or until the simplex's values agree to 1e-12 relative.
+fn nelder_mead(f: impl Fn(&[f64; 3]) -> f64, x0: [f64; 3], step: [f64; 3]) -> [f64; 3] {
+    let mut pts: Vec<([f64; 3], f64)> = (0..4)
+        .map(|k| {
+            let mut p = x0;
+            if k > 0 {
+                p[k - 1] += step[k - 1];
+            }
+            (p, f(&p))
+        })
+        .collect();
+    let along = |a: &[f64; 3], b: &[f64; 3], t: f64| -> [f64; 3] { std::array::from_fn(|k| a[k] + t * (b[k] - a[k])) };
+    for _ in 0..400 {
+        pts.sort_by(|a, b| a.1.total_cmp(&b.1));
+        if (pts[3].1 - pts[0].1).abs() <= 1e-12 * pts[0].1.abs() + 1e-300 {
+            break;
+        }
+        let centroid: [f64; 3] = std::array::from_fn(|k| (pts[0].0[k] + pts[1].0[k] + pts[2].0[k]) / 3.0);
+        let worst = pts[3].0;
+        let refl = along(&centroid, &worst, -1.0);
+        let fr = f(&refl);
+        if fr < pts[0].1 {
+            let exp = along(&centroid, &worst, -2.0);
+            let fe = f(&exp);
+            pts[3] = if fe < fr { (exp, fe) } else { (refl, fr) };
+        } else if fr < pts[2].1 {
+            pts[3] = (refl, fr);
+        } else {
+            let con = if fr < pts[3].1 {
+                along(&centroid, &worst, -0.5)
+            } else {
+                along(&centroid, &worst, 0.5)
+            };
+            let fc = f(&con);
+            if fc < fr.min(pts[3].1) {
+                pts[3] = (con, fc);
+            } else {
+                let best = pts[0].0;
+                for p in pts.iter_mut().skip(1) {
+                    p.0 = along(&best, &p.0, 0.5);
+                    p.1 = f(&p.0);
+                }
+            }
+        }
+    }
+    pts.sort_by(|a, b| a.1.total_cmp(&b.1));
+    pts[0].0
 }
 
 /// The particle nearest the click `(x, y)` (m) within `search_radius` (m) of it.

@@ -173,11 +173,12 @@ fn shipped_particles_are_localized_within_a_pixel_and_a_percent() {
             let (ex, ey) = ((l.x - sp.x).abs(), (l.y - sp.y).abs());
             let er = (l.radius - sp.r).abs() / sp.r;
             eprintln!(
-                "{name}: error x {:.1} nm, y {:.1} nm (pixel {:.1} nm), radius {:.3} %, width {:.0} nm (model {:.0} nm), radius from width {:.1} nm",
+                "{name}: error x {:.3} nm, y {:.3} nm (pixel {:.1} nm), radius {:.4} % (H/2: {:.3} %), base width {:.0} nm (model {:.0} nm), radius from width {:.1} nm",
                 ex / NM,
                 ey / NM,
                 p.pixel() / NM,
                 er * 100.0,
+                (l.radius_from_height / sp.r - 1.0) * 100.0,
                 l.base_width / NM,
                 l.expected_width / NM,
                 l.radius_from_width.unwrap() / NM

@@ -2,6 +2,7 @@
 
 mod accuracy_cmd;
 mod model_cmd;
+mod scan_cmd;
 mod simulate_cmd;
 mod units;
 
@@ -28,6 +29,8 @@ enum Command {
     Simulate(simulate_cmd::SimulateArgs),
     /// Error against run time for each method and tolerance (work-precision report).
     Accuracy(accuracy_cmd::AccuracyArgs),
+    /// Tapping-mode scan of the scene: a height image (GSF + PNG) and the particles located in it.
+    Scan(scan_cmd::ScanArgs),
 }
 
 /// Loads `--scene FILE`, or the embedded default scene; prints its warnings to stderr.
@@ -62,6 +65,7 @@ fn main() -> ExitCode {
         Command::Model(args) => model_cmd::run(&args),
         Command::Simulate(args) => simulate_cmd::run(&args),
         Command::Accuracy(args) => accuracy_cmd::run(&args),
+        Command::Scan(args) => scan_cmd::run(&args),
     };
     match result {
         Ok(text) => print_stdout(&text),
