@@ -52,7 +52,7 @@ impl Tip {
     /// Height above the substrate of the image of a sphere of radius `ra` resting on a flat
     /// substrate, at lateral distance `d` from its centre (m), where the tip touches the sphere:
     /// `2Rₐ − P'(d)` with `P'` the profile of [`Tip::grown`]`(ra)` (derivation in
-    /// [`super::dilation::sphere_image`]). Negative where the tip touches the substrate instead.
+    /// [`crate::scan::sphere_image`]). Negative where the tip touches the substrate instead.
     pub fn sphere_image_height(&self, ra: f64, d: f64) -> f64 {
         2.0 * ra - self.grown(ra).profile(d)
     }
