@@ -17,6 +17,7 @@
 pub mod accuracy;
 pub mod model;
 pub mod push;
+pub mod scan;
 pub mod simulate;
 pub mod sweep;
 

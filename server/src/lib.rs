@@ -9,8 +9,13 @@
 //! - [`extremes`]: the stability grid (`nanopush accuracy --extremes`);
 //! - [`peers`]: peer solvers from crates.io (diffsol, russell_ode) on the report's classical
 //!   problems, for comparison at equal error;
-//! - [`push_run`]: a push at constant speed, sampled into a trace (`nanopush simulate`).
-//! - [`sweep`]: the parameter sweeps of Figs 10-13 (`nanopush sweep`).
+//! - [`push_run`]: a push at constant speed, sampled into a trace (`nanopush simulate`);
+//! - [`sweep`]: the parameter sweeps of Figs 10-13 (`nanopush sweep`);
+//! - [`scan`]: tapping-mode scans (tip dilation, raster, GSF/PNG) and particle localization
+//!   (`nanopush scan`);
+//! - [`instrument`]: the simulated AFM (stage, tip, substrate, particles) behind the controller;
+//! - [`control`]: the strategy of Sec 2.1, the Eq 19 estimator and multi-push planning
+//!   (`nanopush push`).
 //!
 //! ```
 //! let scene = nanopush::scene::Scene::default_scene();
@@ -27,5 +32,6 @@ pub mod peers;
 pub mod physics;
 pub mod push_run;
 pub mod report;
+pub mod scan;
 pub mod scene;
 pub mod sweep;

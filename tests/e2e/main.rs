@@ -2,5 +2,6 @@
 
 mod haptic;
 mod model;
+mod scan;
 mod simulate;
 mod sweep;

@@ -36,6 +36,9 @@ pub struct SceneFile {
     /// `[strategy]`: the manipulation strategy of Sec 2.1 (defaults when absent).
     #[serde(default)]
     pub strategy: StrategyFile,
+    /// Tapping-mode scans (optional: [`ScanFile::default`] when absent).
+    #[serde(default)]
+    pub scan: ScanFile,
 }
 
 /// `[tip]`.
@@ -335,6 +338,63 @@ impl Default for StrategyFile {
             phase_timeout_s: 120.0,
             control: ControlFile::Xy,
             z_gain_nm_per_v: 2.0,
+        }
+    }
+}
+
+/// `[scan]`: tapping-mode scans of the scene (`nanopush scan`). Optional; every field has a
+/// default, listed in [`ScanFile::default`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ScanFile {
+    /// Centre of the scanned square, x (µm).
+    pub centre_x_um: f64,
+    /// Centre of the scanned square, y (µm).
+    pub centre_y_um: f64,
+    /// Side of the scanned square (µm).
+    pub size_um: f64,
+    /// Pixels per line and lines per frame.
+    pub pixels: u32,
+    /// Lines per second (Hz).
+    pub line_rate_hz: f64,
+    /// RMS of the height noise (nm).
+    pub noise_rms_nm: f64,
+    /// Seed of the height noise.
+    pub noise_seed: u64,
+    /// Drift of the tip relative to the sample along x (nm/s).
+    pub drift_x_nm_per_s: f64,
+    /// Drift along y (nm/s).
+    pub drift_y_nm_per_s: f64,
+    /// Drift of the recorded height (nm/s).
+    pub drift_z_nm_per_s: f64,
+    /// Piezo hysteresis: width of the loop as a percentage of the scan size.
+    pub hysteresis_percent: f64,
+    /// Half-angle of the tip's cone above its spherical apex (degrees).
+    pub tip_half_angle_deg: f64,
+}
+
+impl Default for ScanFile {
+    /// - centre (50, 50) µm, size 50 µm: the middle half of the paper's 100 µm stage (Sec 2.4);
+    /// - 256 × 256 pixels at 1 line/s: a usual tapping-mode image;
+    /// - noise 0.2 nm RMS, seed 1: tapping-mode z noise is 0.05-0.3 nm on commercial AFMs;
+    /// - no drift and no hysteresis: a closed-loop stage after warm-up (the paper's P-762.3L
+    ///   quotes 0.1 % hysteresis, `hysteresis_percent = 0.1`);
+    /// - cone half-angle 20°: etched silicon tapping tips (e.g. NanoWorld Pointprobe NCH: 20-25°
+    ///   along the cantilever, 10° at the apex).
+    fn default() -> ScanFile {
+        ScanFile {
+            centre_x_um: 50.0,
+            centre_y_um: 50.0,
+            size_um: 50.0,
+            pixels: 256,
+            line_rate_hz: 1.0,
+            noise_rms_nm: 0.2,
+            noise_seed: 1,
+            drift_x_nm_per_s: 0.0,
+            drift_y_nm_per_s: 0.0,
+            drift_z_nm_per_s: 0.0,
+            hysteresis_percent: 0.0,
+            tip_half_angle_deg: 20.0,
         }
     }
 }

@@ -11,7 +11,7 @@ mod validate;
 
 pub use error::{SceneError, SceneWarning};
 pub use file::SceneFile;
-pub use validate::Range;
+pub use validate::{MAX_SCAN_PIXELS, MIN_SCAN_PIXELS, Range};
 
 use crate::physics::cantilever::Cantilever;
 use crate::physics::contact::jkr::{Jkr, contact_modulus};

@@ -323,6 +323,8 @@ pub fn validate(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
         Range::open_closed(0.0, 500.0, "Hz (below the 1 kHz sampling's Nyquist limit)"),
     )?;
 
+    validate_scan(origin, s)?;
+
     let ph = &s.physics;
     // Across the water layer the Hamaker combining rule (Sec 2.2.1) is attractive only when every
     // body's constant exceeds the medium's; the model's van der Waals laws are attractive.
@@ -372,6 +374,49 @@ pub fn validate(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
     )?;
     dof("physics.cantilever", ph.cantilever, &[Dynamic, QuasiStatic])?;
     dof("physics.stage", ph.stage, &[Dynamic, Off])?;
+    Ok(())
+}
+
+/// Largest image side (pixels) a scene may ask for.
+pub const MAX_SCAN_PIXELS: u32 = 4096;
+/// Smallest image side (pixels).
+pub const MIN_SCAN_PIXELS: u32 = 8;
+
+/// `[scan]`: each value in range, and the scanned square inside the stage's travel.
+fn validate_scan(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
+    let c = |field: &str, v: f64, r: Range| check(origin, field, v, r);
+    let sc = &s.scan;
+    let travel = s.stage.range_um;
+    c(
+        "scan.size_um",
+        sc.size_um,
+        Range::open_closed(0.0, travel, "µm (the stage range)"),
+    )?;
+    let half = 0.5 * sc.size_um;
+    let centre = Range::closed(half, travel - half, "µm (the square must stay within the stage range)");
+    c("scan.centre_x_um", sc.centre_x_um, centre)?;
+    c("scan.centre_y_um", sc.centre_y_um, centre)?;
+    c(
+        "scan.pixels",
+        sc.pixels as f64,
+        Range::closed(MIN_SCAN_PIXELS as f64, MAX_SCAN_PIXELS as f64, "pixels"),
+    )?;
+    c("scan.line_rate_hz", sc.line_rate_hz, Range::closed(0.01, 100.0, "Hz"))?;
+    c("scan.noise_rms_nm", sc.noise_rms_nm, Range::closed(0.0, 100.0, "nm"))?;
+    let drift = Range::closed(-100.0, 100.0, "nm/s");
+    c("scan.drift_x_nm_per_s", sc.drift_x_nm_per_s, drift)?;
+    c("scan.drift_y_nm_per_s", sc.drift_y_nm_per_s, drift)?;
+    c("scan.drift_z_nm_per_s", sc.drift_z_nm_per_s, drift)?;
+    c(
+        "scan.hysteresis_percent",
+        sc.hysteresis_percent,
+        Range::closed(0.0, 20.0, "%"),
+    )?;
+    c(
+        "scan.tip_half_angle_deg",
+        sc.tip_half_angle_deg,
+        Range::closed(0.0, 60.0, "degrees"),
+    )?;
     Ok(())
 }
 

@@ -3,6 +3,7 @@
 mod accuracy_cmd;
 mod model_cmd;
 mod plot;
+mod scan_cmd;
 mod simulate_cmd;
 mod sweep_cmd;
 mod units;
@@ -32,6 +33,8 @@ enum Command {
     Accuracy(accuracy_cmd::AccuracyArgs),
     /// The settled particle y and ζ_z against α, β, μ_as^s or Rₐ (Figs 10-13), in parallel.
     Sweep(sweep_cmd::SweepArgs),
+    /// Tapping-mode scan of the scene: a height image (GSF + PNG) and the particles located in it.
+    Scan(scan_cmd::ScanArgs),
 }
 
 /// Loads `--scene FILE`, or the embedded default scene; prints its warnings to stderr.
@@ -67,6 +70,7 @@ fn main() -> ExitCode {
         Command::Simulate(args) => simulate_cmd::run(&args),
         Command::Accuracy(args) => accuracy_cmd::run(&args),
         Command::Sweep(args) => sweep_cmd::run(&args),
+        Command::Scan(args) => scan_cmd::run(&args),
     };
     match result {
         Ok(text) => print_stdout(&text),

@@ -1,0 +1,272 @@
+//! Scans against geometry, and localization of the shipped scenes' particles.
+
+use super::*;
+use crate::physics::topography::Topography;
+use crate::scene::Scene;
+
+const NM: f64 = 1e-9;
+const UM: f64 = 1e-6;
+
+fn tip() -> Tip {
+    Tip {
+        radius: 30.0 * NM,
+        half_angle: 20f64.to_radians(),
+    }
+}
+
+fn one_sphere(r: f64) -> Surface {
+    Surface {
+        topography: Topography::flat(),
+        spheres: vec![Sphere {
+            x: 5.0 * UM,
+            y: 5.0 * UM,
+            r,
+        }],
+    }
+}
+
+fn quiet(size: f64, pixels: usize) -> ScanParams {
+    ScanParams {
+        centre_x: 5.0 * UM,
+        centre_y: 5.0 * UM,
+        size,
+        pixels,
+        noise_rms: 0.0,
+        ..ScanParams::default()
+    }
+}
+
+fn scene(name: &str) -> Scene {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../scenes/{name}.toml"));
+    Scene::from_path(&path).unwrap()
+}
+
+/// The reference: a sphere on a flat substrate appears 2Rₐ high (the apex touches its top) and
+/// `Tip::sphere_base_width` wide (4 sqrt(Rₐ Rₜ) on the apex sphere, the cone's flank beyond).
+#[test]
+fn scanned_sphere_has_the_height_and_width_geometry_predicts() {
+    for (ra, size, n) in [(10.0 * NM, 0.2 * UM, 201), (500.0 * NM, 3.0 * UM, 301)] {
+        let t = tip();
+        let img = scan(&one_sphere(ra), t, quiet(size, n));
+        let mid = n / 2; // the sphere's centre is the centre pixel's centre (n odd)
+        assert!(
+            (img.at(mid, mid) - 2.0 * ra).abs() < 1e-6 * ra,
+            "apex {:e}",
+            img.at(mid, mid)
+        );
+        let dx = img.dx();
+        let inside = (0..n).filter(|&j| img.at(mid, j) > 0.0).count() as f64 * dx;
+        let w = t.sphere_base_width(ra);
+        assert!((inside - w).abs() <= 2.0 * dx, "Rₐ = {ra:e}: {inside:e} vs {w:e}");
+        assert_eq!(t.apex_only(ra), ra < 100.0 * NM, "the two regimes are both covered");
+    }
+}
+
+#[test]
+fn lines_stream_one_by_one_and_make_the_frame() {
+    let s = Surface::from_scene(&Scene::default_scene());
+    let before = s.clone();
+    let p = ScanParams {
+        size: 4.0 * UM,
+        pixels: 32,
+        ..ScanParams::default()
+    };
+    let mut sc = Scanner::new(&s, tip(), p);
+    let first = sc.next_line().unwrap();
+    assert_eq!((first.index, first.heights.len()), (0, 32));
+    let rest: Vec<ScanLine> = sc.collect();
+    assert_eq!(rest.len(), 31);
+    assert!((rest[30].t - 31.0 / p.line_rate).abs() < 1e-12);
+    let frame = scan(&s, tip(), p);
+    assert_eq!(&frame.data[..32], &first.heights[..]);
+    assert_eq!(&frame.data[32 * 31..], &rest[30].heights[..]);
+    // Same seed, same image; the partial finish covers the remaining rows only.
+    assert_eq!(frame, scan(&s, tip(), p));
+    let mut sc = Scanner::new(&s, tip(), p);
+    sc.next_line();
+    let tail = sc.finish();
+    assert_eq!((tail.yres, &tail.data[..]), (31, &frame.data[32..]));
+    assert!((tail.y_offset - (frame.y_offset + p.pixel())).abs() < 1e-18);
+    // Tapping never moves particles.
+    assert_eq!(s, before);
+}
+
+#[test]
+fn scene_defaults_match_scan_params_defaults() {
+    let sc = Scene::default_scene();
+    assert_eq!(ScanParams::from_scene(&sc), ScanParams::default());
+    assert_eq!(sc.file.scan, crate::scene::file::ScanFile::default());
+    // The values the field docs state.
+    let p = ScanParams::default();
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
+    assert!(close(p.centre_x, 50.0 * UM) && close(p.centre_y, 50.0 * UM) && close(p.size, 50.0 * UM));
+    assert_eq!((p.pixels, p.line_rate, p.noise_seed), (256, 1.0, 1));
+    assert!(close(p.noise_rms, 0.2 * NM));
+    assert_eq!((p.drift_x, p.drift_y, p.drift_z, p.hysteresis), (0.0, 0.0, 0.0, 0.0));
+    let t = Tip::from_scene(&sc);
+    assert!((t.radius - 30.0 * NM).abs() < 1e-20 && (t.half_angle - 20f64.to_radians()).abs() < 1e-15);
+}
+
+/// The apex of the row through the sphere: the pixel of the highest height.
+fn apex_col(img: &HeightImage, row: usize) -> usize {
+    (0..img.xres)
+        .max_by(|&a, &b| img.at(row, a).total_cmp(&img.at(row, b)))
+        .unwrap()
+}
+
+#[test]
+fn drift_and_hysteresis_shift_the_image_as_modelled() {
+    let s = one_sphere(200.0 * NM);
+    let base = quiet(4.0 * UM, 101); // 39.6 nm pixels, sphere at the centre
+    let mid = 50;
+    assert_eq!(apex_col(&scan(&s, tip(), base), mid), mid);
+    // x drift of 2 nm/s: at the middle row's apex, t = (50 + 0.25)/1 Hz, the tip has moved
+    // +100.5 nm, so the sphere appears 100.5 nm (2.5 pixels) to the left.
+    let drift = ScanParams {
+        drift_x: 2.0 * NM,
+        ..base
+    };
+    let img = scan(&s, tip(), drift);
+    assert_eq!(mid - apex_col(&img, mid), 3, "round(100.5/39.6) = 3 pixels");
+    // Hysteresis 5 %: mid-sweep the tip lags by hS/2 = 100 nm in x and y: the sphere appears
+    // 100 nm (2.5 pixels) later in both.
+    let hyst = ScanParams {
+        hysteresis: 0.05,
+        ..base
+    };
+    let img = scan(&s, tip(), hyst);
+    let rows: Vec<f64> = (0..101).map(|i| img.at(i, apex_col(&img, i))).collect();
+    let top_row = (0..101).max_by(|&a, &b| rows[a].total_cmp(&rows[b])).unwrap();
+    let lag_px = 0.05 * 4.0 * UM / 2.0 / img.dx();
+    assert!(
+        (top_row as f64 - (mid as f64 + lag_px)).abs() <= 0.5 + 1e-9,
+        "row {top_row}"
+    );
+    assert!((apex_col(&img, top_row) as f64 - (mid as f64 + lag_px)).abs() <= 0.5 + 1e-9);
+    // z drift: the substrate rises by v_z per line.
+    let dz = ScanParams {
+        drift_z: 0.5 * NM,
+        ..base
+    };
+    let img = scan(&s, tip(), dz);
+    assert!((img.at(100, 0) - img.at(0, 0) - 100.0 * 0.5 * NM).abs() < 1e-12);
+}
+
+/// Localization of every particle of the two shipped particle scenes, noise on (0.2 nm RMS):
+/// within a pixel laterally, 1 % in radius (measured: see the README).
+#[test]
+fn shipped_particles_are_localized_within_a_pixel_and_a_percent() {
+    for name in ["paper-default", "gold-latex-500nm"] {
+        let sc = scene(name);
+        let (s, t, p) = (
+            Surface::from_scene(&sc),
+            Tip::from_scene(&sc),
+            ScanParams::from_scene(&sc),
+        );
+        assert!(p.noise_rms > 0.0);
+        let img = scan(&s, t, p);
+        let found = find_particles(&img, &t);
+        assert_eq!(found.len(), s.spheres.len(), "{name}: {found:?}");
+        for sp in &s.spheres {
+            // A click half a particle away.
+            let l = localize(&img, &t, sp.x + 0.5 * sp.r, sp.y - 0.3 * sp.r, 2.0 * UM).unwrap();
+            let (ex, ey) = ((l.x - sp.x).abs(), (l.y - sp.y).abs());
+            let er = (l.radius - sp.r).abs() / sp.r;
+            eprintln!(
+                "{name}: error x {:.3} nm, y {:.3} nm (pixel {:.1} nm), radius {:.4} % (H/2: {:.3} %), base width {:.0} nm (model {:.0} nm), radius from width {:.1} nm",
+                ex / NM,
+                ey / NM,
+                p.pixel() / NM,
+                er * 100.0,
+                (l.radius_from_height / sp.r - 1.0) * 100.0,
+                l.base_width / NM,
+                l.expected_width / NM,
+                l.radius_from_width.unwrap() / NM
+            );
+            assert!(ex <= p.pixel() && ey <= p.pixel(), "{name}: {l:?}");
+            assert!(er < 0.01, "{name}: radius {:e} vs {:e}", l.radius, sp.r);
+            assert!((l.z - (s.centre_z(sp))).abs() < 0.01 * sp.r);
+            // The width cross-checks: the base within two pixels of the model (pixel-limited),
+            // the radius from the half-height width within 5 %.
+            assert!((l.base_width - l.expected_width).abs() < 2.0 * p.pixel(), "{l:?}");
+            let rw = l.radius_from_width.unwrap();
+            assert!((rw - sp.r).abs() < 0.05 * sp.r, "{name}: radius from width {rw:e}");
+            assert!(found.iter().any(|f| (f.x - l.x).hypot(f.y - l.y) < 1e-12));
+        }
+    }
+}
+
+/// On a tilted, rough substrate with a small particle in the apex regime (Rₐ = 7 nm, the
+/// gold-14nm scene's), the local level still gives the height, and the width cross-check gives
+/// the radius back.
+#[test]
+fn small_particle_on_a_tilted_rough_substrate() {
+    let t = tip();
+    let s = Surface {
+        topography: Topography::new(5e-3, -3e-3, 0.5 * NM, 5.0 * UM, 4),
+        spheres: vec![Sphere {
+            x: 5.02 * UM,
+            y: 4.97 * UM,
+            r: 7.0 * NM,
+        }],
+    };
+    let p = ScanParams {
+        size: 0.5 * UM,
+        pixels: 128,
+        ..quiet(0.5 * UM, 128)
+    };
+    let p = ScanParams {
+        noise_rms: 0.2 * NM,
+        ..p
+    };
+    let img = scan(&s, t, p);
+    let l = localize(&img, &t, 5.0 * UM, 5.0 * UM, 0.1 * UM).unwrap();
+    let sp = s.spheres[0];
+    eprintln!("small: {l:?}, pixel {:.2} nm", p.pixel() / NM);
+    assert!((l.x - sp.x).abs() <= p.pixel() && (l.y - sp.y).abs() <= p.pixel());
+    assert!((l.radius - sp.r).abs() < 0.05 * sp.r, "{:e}", l.radius);
+    let rw = l.radius_from_width.unwrap();
+    assert!((rw - sp.r).abs() < 0.05 * sp.r, "radius from width {rw:e}");
+    assert!(
+        (l.base_width - 4.0 * (sp.r * t.radius).sqrt()).abs() < 2.0 * p.pixel(),
+        "{l:?}"
+    );
+}
+
+#[test]
+fn no_blob_near_the_click_is_a_typed_error_naming_the_distance() {
+    let t = tip();
+    let img = scan(&one_sphere(100.0 * NM), t, quiet(4.0 * UM, 64));
+    let e = localize(&img, &t, 3.5 * UM, 3.5 * UM, 0.5 * UM).unwrap_err();
+    assert!(matches!(e, LocateError::NoBlob { searched, .. } if searched == 0.5 * UM));
+    assert!(e.to_string().contains("within 5e-7 m"), "{e}");
+    let e = localize(&img, &t, 20.0 * UM, 5.0 * UM, 0.5 * UM).unwrap_err();
+    assert!(matches!(e, LocateError::OutsideImage { .. }), "{e}");
+    // The same click with a search radius that reaches the particle finds it.
+    assert!(localize(&img, &t, 3.5 * UM, 3.5 * UM, 2.5 * UM).is_ok());
+}
+
+fn with_scan(section: &str) -> Result<Scene, crate::scene::SceneError> {
+    let text = format!("{}\n[scan]\n{section}\n", crate::scene::DEFAULT_SCENE);
+    Scene::parse("test.toml", &text)
+}
+
+#[test]
+fn scan_section_is_optional_and_validated() {
+    let s = with_scan("pixels = 64\nhysteresis_percent = 0.1").unwrap();
+    assert_eq!(s.file.scan.pixels, 64);
+    assert_eq!(s.file.scan.size_um, 50.0, "unset fields keep their defaults");
+    for (line, field, allowed) in [
+        ("pixels = 0", "scan.pixels", "[8, 4096] pixels"),
+        ("size_um = 0", "scan.size_um", "(0, 100] µm"),
+        ("centre_x_um = 90", "scan.centre_x_um", "[25, 75] µm"),
+        ("tip_half_angle_deg = 75", "scan.tip_half_angle_deg", "[0, 60] degrees"),
+        ("noise_rms_nm = -1", "scan.noise_rms_nm", "[0, 100] nm"),
+        ("line_rate_hz = nan", "scan.line_rate_hz", "[0.01, 100] Hz"),
+    ] {
+        let e = with_scan(line).unwrap_err().to_string();
+        assert!(e.contains(field) && e.contains(allowed), "{line}: {e}");
+    }
+    let e = with_scan("pixel = 64").unwrap_err().to_string();
+    assert!(e.contains("unknown field `pixel`"), "{e}");
+}
