@@ -2,6 +2,7 @@
 
 mod haptic;
 mod model;
+mod push;
 mod scan;
 mod simulate;
 mod sweep;

@@ -570,7 +570,10 @@ impl Strategy {
             return;
         }
         if finished {
-            self.summary.estimated_distance = if xy_loop { est } else { travel };
+            // What the particle will have moved once the tip has retracted (the model's drag).
+            let end = if xy_loop { est } else { travel } + self.hxy.prediction.retract_shift;
+            self.summary.estimated_distance = end;
+            self.summary.estimated_particle = (self.task.particle.0 + d.0 * end, self.task.particle.1 + d.1 * end);
             let hold = (HOLD / p.tick).round() as u32;
             self.enter(Phase::Hold { ticks: hold }, r.t);
             return;
@@ -590,10 +593,12 @@ impl Strategy {
         self.target[0] += d.0 * p.speed * p.tick;
         self.target[1] += d.1 * p.speed * p.tick;
         if z_loop && self.hxy.separated() {
-            // Hold the deflection at its level just after t*: a reading above it (the tip pressed
-            // harder, e.g. a substrate rising under the particle) raises the tip.
+            // Hold the deflection at its level just after t*. The tip meets the particle above
+            // its equator: raising it moves the contact up toward the top, which turns more of
+            // the push force into the vertical load that bends the lever (ζ_z grows with β, as
+            // Eq 18 and Fig 11 show), so a reading below the reference raises the tip.
             let reference = *self.z_hold.get_or_insert(sig);
-            self.target[2] += p.z_gain * (sig - reference);
+            self.target[2] -= p.z_gain * (sig - reference);
         }
     }
 }

@@ -330,6 +330,13 @@ impl Scene {
                 fz.lower, fz.lower, fz.upper
             )));
         }
+        let tallest = f.particles.iter().map(|p| 2.0 * p.radius_nm * 1e-3).fold(0.0, f64::max);
+        if f.strategy.start_height_um <= tallest {
+            w.push(SceneWarning(format!(
+                "strategy.start_height_um = {} µm does not clear the tallest particle ({tallest} µm): moves at the start height would run into it",
+                f.strategy.start_height_um
+            )));
+        }
         if f.physics.electrostatic && kelvin_radius(f.environment.relative_humidity) < self.a0() {
             w.push(SceneWarning(format!(
                 "physics.electrostatic is on, but at environment.relative_humidity = {} there is no meniscus, so the shared area S = 4πR r₁ of Eq 4 is zero and the electrostatic force vanishes",

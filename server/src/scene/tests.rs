@@ -192,7 +192,7 @@ fn dof_choices_are_checked() {
 
 #[test]
 fn zero_sensor_gain() {
-    let e = err("gain_v_per_nm = -0.05", "gain_v_per_nm = 0.0");
+    let e = err("gain_v_per_nm = -0.8", "gain_v_per_nm = 0.0");
     assert!(e.contains("sensor.gain_v_per_nm = 0"), "{e}");
 }
 
@@ -262,4 +262,28 @@ fn tangential_stiffness_and_damping_by_hand() {
     assert!((p.k_as_t - 5995.0).abs() < 1.0, "{}", p.k_as_t);
     // b_as = 2ζ sqrt(k_as* mₐ) with ζ = 0.05.
     assert!((p.b_as - 0.1 * (5994.88 * 4.3982e-15f64).sqrt()).abs() < 1e-3 * p.b_as);
+}
+
+#[test]
+fn strategy_values_are_checked_against_the_sensor() {
+    // A push lowers the reading (negative gain): a set point above the −0.2 V baseline is never
+    // reached.
+    let e = err("[physics]", "[strategy]\nset_point_v = 0.5\n\n[physics]");
+    assert!(
+        e.contains("strategy.set_point_v") && e.contains("below the baseline -0.2 V"),
+        "{e}"
+    );
+    let e = err("[physics]", "[strategy]\nsafety_limit_v = -1.0\n\n[physics]");
+    assert!(
+        e.contains("strategy.safety_limit_v") && e.contains("beyond the set point -1.5 V"),
+        "{e}"
+    );
+    let e = err("[physics]", "[strategy]\nstep_um = 0.0\n\n[physics]");
+    assert!(e.contains("strategy.step_um") && e.contains("[0.001, 10] µm"), "{e}");
+    let e = err("[physics]", "[strategy]\nsearch_rang_um = 5.0\n\n[physics]");
+    assert!(e.contains("search_rang_um"), "{e}");
+    // The defaults are the paper's Δ and ζ_set.
+    let s = Scene::default_scene();
+    assert_eq!(s.file.strategy.step_um, 0.1);
+    assert_eq!(s.file.strategy.set_point_v, -1.5);
 }

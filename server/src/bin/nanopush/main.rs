@@ -3,6 +3,7 @@
 mod accuracy_cmd;
 mod model_cmd;
 mod plot;
+mod push_cmd;
 mod scan_cmd;
 mod simulate_cmd;
 mod sweep_cmd;
@@ -35,6 +36,9 @@ enum Command {
     Sweep(sweep_cmd::SweepArgs),
     /// Tapping-mode scan of the scene: a height image (GSF + PNG) and the particles located in it.
     Scan(scan_cmd::ScanArgs),
+    /// One manipulation (Sec 2.1, Sec 3): scan, locate, plan, park, detect contact, push under
+    /// force control, retract; the traces of Figs 9 and 15.
+    Push(push_cmd::PushArgs),
 }
 
 /// Loads `--scene FILE`, or the embedded default scene; prints its warnings to stderr.
@@ -71,6 +75,7 @@ fn main() -> ExitCode {
         Command::Accuracy(args) => accuracy_cmd::run(&args),
         Command::Sweep(args) => sweep_cmd::run(&args),
         Command::Scan(args) => scan_cmd::run(&args),
+        Command::Push(args) => push_cmd::run(&args),
     };
     match result {
         Ok(text) => print_stdout(&text),

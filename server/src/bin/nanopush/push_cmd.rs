@@ -1,0 +1,516 @@
+//! `nanopush push`: one full manipulation — scan, locate, plan, then for each leg the Sec 2.1
+//! strategy (park, contact detection, force-controlled push, retract) — and the traces of
+//! Figs 9 and 15.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use clap::Args;
+use nanopush::control::{Failure, Obstacle, Planner, PushRequest, RunRow, StrategyRun, push_once};
+use nanopush::instrument::Afm;
+use nanopush::scan::{HeightImage, Located, ScanParams, Sphere, Surface, Tip, find_particles, localize, scan};
+use nanopush::scene::Scene;
+use nanopush::scene::file::ControlFile;
+use nanopush_proto::push::{LegReport, LocatedParticle, PushReport};
+
+use crate::plot::{Mark, Panel, Series, stacked};
+
+/// Arguments of `nanopush push`.
+#[derive(Args, Debug)]
+pub struct PushArgs {
+    /// Scene file (TOML); the embedded paper scene when absent.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Particle to push (its id); the scene's `push.particle_id` when absent.
+    #[arg(long)]
+    particle: Option<u32>,
+    /// Distance to push (µm), in (0, 100]; with `--direction-deg`.
+    #[arg(long, value_name = "D")]
+    distance_um: Option<f64>,
+    /// Direction of the push in the plane (degrees from +x), in [-360, 360].
+    #[arg(long, default_value_t = 0.0)]
+    direction_deg: f64,
+    /// Target position instead of a distance (µm), e.g. `--to-um 60,45`: planned as several
+    /// pushes when one cannot reach it.
+    #[arg(long, value_name = "X_UM,Y_UM")]
+    to_um: Option<String>,
+    /// Loop closure: xy, z or xyz; the scene's `strategy.control` when absent.
+    #[arg(long)]
+    control: Option<String>,
+    /// A brief stop during the (first) push at this travel (µm), as in Fig 15.
+    #[arg(long, value_name = "UM")]
+    pause_at_um: Option<f64>,
+    /// Length of that stop (ms), in (0, 10000].
+    #[arg(long, default_value_t = 500.0)]
+    pause_ms: f64,
+    /// Write the traces and figures here: contact.csv/svg (Fig 9), push.csv/svg (Fig 15),
+    /// scan-before/after.gsf/png and summary.json.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Print one JSON object (SI units) instead of a summary.
+    #[arg(long)]
+    json: bool,
+}
+
+const UM: f64 = 1e-6;
+const TICK: f64 = 1e-3;
+
+fn parse_point(s: &str) -> anyhow::Result<(f64, f64)> {
+    let parsed = s.split_once(',').and_then(|(x, y)| {
+        let (x, y) = (x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?);
+        (x.is_finite() && y.is_finite()).then_some((x, y))
+    });
+    parsed.with_context(|| format!("--to-um {s:?}: expected X_UM,Y_UM, two numbers in µm such as 60,45"))
+}
+
+/// What the operator asked for, checked.
+struct Request {
+    id: u32,
+    target: Target,
+    control: ControlFile,
+    pause: Option<(f64, f64)>,
+}
+
+enum Target {
+    Distance { distance: f64, direction: (f64, f64) },
+    Point((f64, f64)),
+}
+
+fn check(a: &PushArgs, scene: &Scene) -> anyhow::Result<Request> {
+    let f = &scene.file;
+    let id = a.particle.unwrap_or(f.push.particle_id);
+    if !f.particles.iter().any(|p| p.id == id) {
+        let ids: Vec<String> = f.particles.iter().map(|p| p.id.to_string()).collect();
+        bail!(
+            "--particle {id}: no such particle; ids in the scene: {}",
+            ids.join(", ")
+        );
+    }
+    let range = f.stage.range_um;
+    let target = match (a.distance_um, &a.to_um) {
+        (Some(_), Some(_)) => bail!("give either --distance-um or --to-um, not both"),
+        (None, None) => bail!("give --distance-um D (with --direction-deg) or --to-um X_UM,Y_UM"),
+        (Some(d), None) => {
+            if !(d.is_finite() && d > 0.0 && d <= range) {
+                bail!("--distance-um {d} is out of range; allowed: (0, {range}] µm (the stage range)");
+            }
+            if !(a.direction_deg.is_finite() && (-360.0..=360.0).contains(&a.direction_deg)) {
+                bail!(
+                    "--direction-deg {} is out of range; allowed: [-360, 360] degrees",
+                    a.direction_deg
+                );
+            }
+            let th = a.direction_deg.to_radians();
+            Target::Distance {
+                distance: d * UM,
+                direction: (th.cos(), th.sin()),
+            }
+        }
+        (None, Some(s)) => {
+            let (x, y) = parse_point(s)?;
+            if !((0.0..=range).contains(&x) && (0.0..=range).contains(&y)) {
+                bail!("--to-um {x},{y} is outside the stage; allowed: [0, {range}] µm in x and y");
+            }
+            Target::Point((x * UM, y * UM))
+        }
+    };
+    let control = match a.control.as_deref() {
+        None => f.strategy.control,
+        Some("xy") => ControlFile::Xy,
+        Some("z") => ControlFile::Z,
+        Some("xyz") => ControlFile::Xyz,
+        Some(other) => bail!("--control {other}: unknown; allowed: xy, z, xyz"),
+    };
+    let pause = match a.pause_at_um {
+        None => None,
+        Some(at) => {
+            if !(at.is_finite() && at > 0.0 && at <= range) {
+                bail!("--pause-at-um {at} is out of range; allowed: (0, {range}] µm");
+            }
+            if !(a.pause_ms.is_finite() && a.pause_ms > 0.0 && a.pause_ms <= 10_000.0) {
+                bail!("--pause-ms {} is out of range; allowed: (0, 10000] ms", a.pause_ms);
+            }
+            Some((at * UM, a.pause_ms * 1e-3))
+        }
+    };
+    Ok(Request {
+        id,
+        target,
+        control,
+        pause,
+    })
+}
+
+fn surface_of(afm: &Afm) -> Surface {
+    Surface {
+        topography: afm.topography().clone(),
+        spheres: afm
+            .particles()
+            .iter()
+            .map(|p| Sphere {
+                x: p.x,
+                y: p.y,
+                r: p.radius,
+            })
+            .collect(),
+    }
+}
+
+/// A local scan around `(x, y)` (m) and the particle located nearest to it.
+fn locate_near(
+    afm: &Afm,
+    tip: Tip,
+    base: ScanParams,
+    x: f64,
+    y: f64,
+    radius_hint: f64,
+) -> (HeightImage, Option<Located>) {
+    let size = (12.0 * radius_hint).clamp(4.0 * UM, 20.0 * UM);
+    let params = ScanParams {
+        centre_x: x,
+        centre_y: y,
+        size,
+        pixels: 128,
+        ..base
+    };
+    let img = scan(&surface_of(afm), tip, params);
+    let located = localize(&img, &tip, x, y, 0.25 * size).ok();
+    (img, located)
+}
+
+fn located(l: &Located) -> LocatedParticle {
+    LocatedParticle {
+        x: l.x,
+        y: l.y,
+        radius: l.radius,
+    }
+}
+
+fn failure_code(f: &Failure) -> &'static str {
+    match f {
+        Failure::NoSubstrate { .. } => "no_substrate",
+        Failure::NoContact { .. } => "no_contact",
+        Failure::ParticleLost { .. } => "particle_lost",
+        Failure::DeflectionLimit { .. } => "deflection_limit",
+        Failure::NoSeparation { .. } => "no_separation",
+        Failure::Timeout { .. } => "timeout",
+    }
+}
+
+fn leg_report(run: &StrategyRun, from: (f64, f64), to: (f64, f64)) -> LegReport {
+    let s = &run.summary;
+    LegReport {
+        from: [from.0, from.1],
+        to: [to.0, to.1],
+        outcome: s.failure.as_ref().map_or("ok", failure_code).into(),
+        failure: s.failure.as_ref().map(|f| f.to_string()),
+        contact_step: s.contact_step,
+        t_star: s.t_star,
+        estimated_distance: s.estimated_distance,
+        true_distance: run.true_distance(),
+        push_travel: s.push_travel,
+        settle_offset: run.prediction.settle_offset,
+        retract_shift: run.prediction.retract_shift,
+        retracted: run.retracted,
+    }
+}
+
+/// Runs the command.
+pub fn run(a: &PushArgs) -> anyhow::Result<String> {
+    let scene = crate::load_scene(a.scene.as_ref())?;
+    let req = check(a, &scene)?;
+    let wall = std::time::Instant::now();
+    let mut scene = scene;
+    scene.file.strategy.control = req.control;
+    let f = &scene.file;
+    let part = f.particles.iter().find(|p| p.id == req.id).expect("checked");
+    let click = (part.x_um * UM, part.y_um * UM);
+    let tip = Tip::from_scene(&scene);
+    let base = ScanParams::from_scene(&scene);
+
+    // The operator's view: a scan of the scene's region, and a local scan at the click.
+    let start = (click.0 - 8.0 * UM, click.1);
+    let mut afm = Afm::from_scene(&scene, start.0.max(0.0), start.1, TICK);
+    let overview = scan(&surface_of(&afm), tip, base);
+    let (before_img, before) = locate_near(&afm, tip, base, click.0, click.1, part.radius_nm * 1e-9);
+    let before = before.with_context(|| {
+        format!(
+            "particle {} not found in a scan near ({:.2}, {:.2}) µm",
+            req.id, part.x_um, part.y_um
+        )
+    })?;
+    let from = (before.x, before.y);
+    let radius = before.radius;
+    let target = match req.target {
+        Target::Distance { distance, direction } => (from.0 + direction.0 * distance, from.1 + direction.1 * distance),
+        Target::Point(p) => p,
+    };
+    // Other particles, as the overview scan shows them.
+    let obstacles: Vec<Obstacle> = find_particles(&overview, &tip)
+        .iter()
+        .filter(|l| (l.x - from.0).hypot(l.y - from.1) > radius)
+        .map(|l| Obstacle {
+            x: l.x,
+            y: l.y,
+            radius: l.radius,
+        })
+        .collect();
+    let st = &f.strategy;
+    let planner = Planner {
+        radius,
+        max_push: st.max_push_um * UM,
+        clearance: st.clearance_um * UM,
+        run_up: st.approach_distance_um * UM + 2.0 * radius,
+        range: f.stage.range_um * UM,
+    };
+    let legs = planner.plan(from, target, &obstacles)?;
+    let params = scene.strategy_params(TICK);
+
+    let mut reports = Vec::new();
+    let mut runs = Vec::new();
+    let mut estimate = from;
+    for (k, leg) in legs.iter().enumerate() {
+        let request = PushRequest {
+            id: req.id,
+            particle: estimate,
+            radius,
+            direction: leg.direction(),
+            distance: leg.length(),
+            pause: if k == 0 { req.pause } else { None },
+        };
+        let run = push_once(&scene, &mut afm, &request, params)?;
+        reports.push(leg_report(&run, estimate, leg.to));
+        estimate = run.summary.estimated_particle;
+        let failed = run.summary.failure.is_some();
+        runs.push(run);
+        if failed {
+            break;
+        }
+    }
+    let (after_img, after) = locate_near(&afm, tip, base, estimate.0, estimate.1, radius);
+    let truth = afm
+        .particles()
+        .iter()
+        .find(|p| p.id == req.id)
+        .expect("the particle exists");
+    let report = PushReport {
+        schema: "push".into(),
+        version: nanopush_proto::VERSION,
+        scene: f.name.clone(),
+        particle: req.id,
+        control: match req.control {
+            ControlFile::Xy => "xy",
+            ControlFile::Z => "z",
+            ControlFile::Xyz => "xyz",
+        }
+        .into(),
+        located_before: located(&before),
+        located_after: after.as_ref().map(located),
+        target: [target.0, target.1],
+        legs: reports,
+        final_position: [truth.x, truth.y],
+        final_error: (truth.x - target.0).hypot(truth.y - target.1),
+        simulated_time: afm.time(),
+        wall_time: wall.elapsed().as_secs_f64(),
+    };
+    if let Some(dir) = &a.out {
+        write_outputs(dir, &scene, &runs, &report, &before_img, &after_img)?;
+    }
+    if a.json {
+        return Ok(serde_json::to_string_pretty(&report)? + "\n");
+    }
+    Ok(text(&report, &runs))
+}
+
+fn text(r: &PushReport, runs: &[StrategyRun]) -> String {
+    let mut s = String::new();
+    let um = |v: f64| v / UM;
+    let _ = writeln!(
+        s,
+        "Push of particle {} in scene {:?} ({} control)",
+        r.particle, r.scene, r.control
+    );
+    let b = &r.located_before;
+    let _ = writeln!(
+        s,
+        "  located at ({:.3}, {:.3}) µm, radius {:.1} nm (scan)",
+        um(b.x),
+        um(b.y),
+        b.radius * 1e9
+    );
+    let _ = writeln!(
+        s,
+        "  target ({:.3}, {:.3}) µm in {} leg(s)",
+        um(r.target[0]),
+        um(r.target[1]),
+        r.legs.len()
+    );
+    for (k, (l, run)) in r.legs.iter().zip(runs).enumerate() {
+        let _ = writeln!(
+            s,
+            "  leg {}: {} | contact at step {} | t* {} | estimated {:.3} µm, true {:.3} µm (error {:+.1} nm) | retracted {}",
+            k + 1,
+            l.failure.as_deref().unwrap_or("ok"),
+            l.contact_step.map_or("-".into(), |v| v.to_string()),
+            l.t_star.map_or("-".into(), |t| format!("{t:.3} s")),
+            um(l.estimated_distance),
+            um(l.true_distance),
+            (l.true_distance - (run.task.distance)) * 1e9,
+            l.retracted,
+        );
+    }
+    let _ = writeln!(
+        s,
+        "  final position ({:.3}, {:.3}) µm: {:.1} nm from the target",
+        um(r.final_position[0]),
+        um(r.final_position[1]),
+        r.final_error * 1e9
+    );
+    if let Some(a) = &r.located_after {
+        let _ = writeln!(s, "  scan after: ({:.3}, {:.3}) µm", um(a.x), um(a.y));
+    }
+    let _ = writeln!(
+        s,
+        "  simulated {:.2} s in {:.2} s of wall time",
+        r.simulated_time, r.wall_time
+    );
+    s
+}
+
+fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".partial");
+    let tmp = PathBuf::from(tmp);
+    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("renaming to {}", path.display()))
+}
+
+fn trace_csv(runs: &[StrategyRun]) -> String {
+    let mut s = String::from(
+        "leg,t_s,phase,stage_x_um,stage_y_um,stage_z_um,volts,estimate_um,particle_x_um,particle_y_um,contact\n",
+    );
+    for (k, run) in runs.iter().enumerate() {
+        for r in &run.trace {
+            let RunRow {
+                t,
+                phase,
+                stage,
+                volts,
+                estimate,
+                particle,
+                contact,
+            } = *r;
+            let _ = writeln!(
+                s,
+                "{},{t:.4},{phase},{:.6},{:.6},{:.6},{volts:.5},{:.6},{:.6},{:.6},{contact}",
+                k + 1,
+                stage[0] / UM,
+                stage[1] / UM,
+                stage[2] / UM,
+                estimate / UM,
+                particle.0 / UM,
+                particle.1 / UM,
+            );
+        }
+    }
+    s
+}
+
+fn write_outputs(
+    dir: &Path,
+    scene: &Scene,
+    runs: &[StrategyRun],
+    report: &PushReport,
+    before: &HeightImage,
+    after: &HeightImage,
+) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    // Fig 9: the reading after each contact-search step of the first leg.
+    if let Some(first) = runs.first() {
+        let mut csv = String::from("step,volts\n");
+        for st in &first.summary.search {
+            let _ = writeln!(csv, "{},{:.5}", st.step, st.volts);
+        }
+        write_atomic(&dir.join("contact.csv"), csv.as_bytes())?;
+        let pts: Vec<(f64, f64)> = first.summary.search.iter().map(|s| (s.step as f64, s.volts)).collect();
+        let set = scene.file.strategy.set_point_v;
+        let (x0, x1) = (pts.first().map_or(0.0, |p| p.0), pts.last().map_or(1.0, |p| p.0));
+        stacked(
+            &dir.join("contact.svg"),
+            "Automatic contact detection (Fig 9)",
+            "step of Δ",
+            &[Panel {
+                y_desc: "deflection reading (V)".into(),
+                series: vec![
+                    Series {
+                        label: "reading after each step".into(),
+                        points: pts,
+                        mark: Mark::Circle,
+                        color: 0,
+                        bars: vec![],
+                    },
+                    Series {
+                        label: format!("ζ_set = {set} V"),
+                        points: vec![(x0, set), (x1, set)],
+                        mark: Mark::Line,
+                        color: 1,
+                        bars: vec![],
+                    },
+                ],
+            }],
+        )?;
+    }
+    write_atomic(&dir.join("push.csv"), trace_csv(runs).as_bytes())?;
+    // Fig 15: the reading against the stage position along the push, while pushing.
+    let mut reading = Vec::new();
+    let mut particle = Vec::new();
+    for run in runs {
+        let d = run.task.direction;
+        for r in run.trace.iter().filter(|r| r.phase == "push") {
+            let along = (r.stage[0] * d.0 + r.stage[1] * d.1) / UM;
+            reading.push((along, r.volts));
+            particle.push((along, (r.particle.0 * d.0 + r.particle.1 * d.1) / UM));
+        }
+    }
+    stacked(
+        &dir.join("push.svg"),
+        "Deflection during pushing (Fig 15)",
+        "stage position along the push (µm)",
+        &[
+            Panel {
+                y_desc: "deflection reading (V)".into(),
+                series: vec![Series {
+                    label: "reading".into(),
+                    points: reading,
+                    mark: Mark::Line,
+                    color: 0,
+                    bars: vec![],
+                }],
+            },
+            Panel {
+                y_desc: "particle position (µm, simulator)".into(),
+                series: vec![Series {
+                    label: "particle".into(),
+                    points: particle,
+                    mark: Mark::Line,
+                    color: 2,
+                    bars: vec![],
+                }],
+            },
+        ],
+    )?;
+    for (name, img) in [("scan-before", before), ("scan-after", after)] {
+        let mut gsf = Vec::new();
+        nanopush::scan::write_gsf(&mut gsf, img, name)?;
+        write_atomic(&dir.join(format!("{name}.gsf")), &gsf)?;
+        let mut png = Vec::new();
+        nanopush::scan::write_png(&mut png, img)?;
+        write_atomic(&dir.join(format!("{name}.png")), &png)?;
+    }
+    write_atomic(
+        &dir.join("summary.json"),
+        (serde_json::to_string_pretty(report)? + "\n").as_bytes(),
+    )?;
+    Ok(())
+}

@@ -1,0 +1,253 @@
+//! The strategy against the simulated instrument: contact detection in the paper's geometry, the
+//! distance pushed, and every failure path ending retracted with its reason.
+
+use super::*;
+use crate::instrument::Afm;
+use crate::scene::Scene;
+
+const UM: f64 = 1e-6;
+
+/// The gold-latex scene (Figs 9, 14, 15: 0.5 µm particles, V = 2 µm/s, Δ = 0.1 µm), with
+/// `edit` applied to its text.
+fn scene(edit: &[(&str, &str)]) -> Scene {
+    let mut text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/gold-latex-500nm.toml"))
+        .expect("the gold-latex scene is in scenes/");
+    for (from, to) in edit {
+        assert!(text.contains(from), "scene text has {from:?}");
+        text = text.replacen(from, to, 1);
+    }
+    Scene::parse("gold-latex (test)", &text).expect("valid scene")
+}
+
+/// Pushes particle 1 along +x by `distance`, the controller knowing the particle at `offset`
+/// from its true centre.
+fn push(scene: &Scene, distance: f64, offset: (f64, f64)) -> StrategyRun {
+    let p = scene.pushed_particle();
+    let (x, y, r) = (p.x_um * UM, p.y_um * UM, p.radius_nm * 1e-9);
+    let mut afm = Afm::from_scene(scene, x - 6.0 * UM, y, 1e-3);
+    let request = PushRequest {
+        id: p.id,
+        particle: (x + offset.0, y + offset.1),
+        radius: r,
+        direction: (1.0, 0.0),
+        distance,
+        pause: None,
+    };
+    push_once(scene, &mut afm, &request, scene.strategy_params(1e-3)).expect("the run completes")
+}
+
+fn assert_retracted(run: &StrategyRun) {
+    assert!(run.retracted, "tip not retracted: {:?}", run.summary.failure);
+    let last = run.trace.last().unwrap();
+    assert_eq!(last.phase, "done");
+    // Back at the start height above the detected substrate (or the starting height).
+    let start = run.trace.first().unwrap().stage[2];
+    assert!(last.stage[2] >= start - 1e-9 || run.summary.substrate_z.is_some_and(|z| last.stage[2] > z + 2.9 * UM));
+}
+
+#[test]
+fn contact_detection_finds_the_particle_at_the_step_geometry_predicts() {
+    // Fig 9: Δ = 0.1 µm at 2 µm/s from 4.25 µm behind the contact point.
+    let s = scene(&[]);
+    let run = push(&s, 1.0 * UM, (0.0, 0.0));
+    assert_eq!(run.summary.failure, None);
+    let step = run.summary.contact_step.expect("contact found");
+    // Geometry: the tip meets the sphere where the centres are R + Rₜ apart; the tip centre sits
+    // at the parking height above the detected substrate, the particle's at R above the true one.
+    let task = run.task;
+    let zs = run.summary.substrate_z.unwrap();
+    let p = s.pushed_particle();
+    let (px, py) = (p.x_um * UM, p.y_um * UM);
+    let topo = s.topography();
+    let dz = (zs + task.parking_height() + task.tip_radius) - (topo.height(px, py) + task.radius);
+    let reach = ((task.radius + task.tip_radius).powi(2) - dz * dz).sqrt();
+    let (sx, _) = task.search_start();
+    let to_touch = (px - reach) - sx;
+    let to_set = run.prediction.travel_to_deflection.unwrap();
+    let params = s.strategy_params(1e-3);
+    let expected = ((to_touch + to_set) / params.step).ceil() as u32;
+    assert_eq!(step, expected, "touch after {:.4} µm", to_touch / UM);
+    // "around the 43th step of motion the particle contacts" (Sec 5).
+    assert!((42..=44).contains(&step), "step {step}");
+    // Before the contact the reading sits on the no-deflection line, −0.2 V (Fig 9).
+    for st in &run.summary.search[..run.summary.search.len() - 1] {
+        // (±20 mV of periodic perturbation and 5 mV of noise in this scene.)
+        assert!((st.volts + 0.2).abs() < 0.035, "step {} reads {}", st.step, st.volts);
+    }
+    assert!(run.summary.search.last().unwrap().volts <= -1.5);
+    assert_retracted(&run);
+}
+
+#[test]
+fn the_particle_ends_within_tolerance_of_the_commanded_distance() {
+    // Tolerance 25 nm: the stop is resolved to one tick of travel (2 nm at 2 µm/s), the
+    // estimator's settled lag and retraction drag come from the model of a flat substrate while
+    // this one is tilted (6 mrad: β changes by ~1° per µm), and the readout is noisy.
+    let s = scene(&[]);
+    let run = push(&s, 3.0 * UM, (0.0, 0.0));
+    assert_eq!(run.summary.failure, None);
+    let err = run.true_distance() - 3.0 * UM;
+    assert!(err.abs() < 25e-9, "error {:.1} nm", err * 1e9);
+    assert!(run.summary.t_star.is_some());
+    // The estimate the controller reports agrees with the truth as well.
+    assert!((run.summary.estimated_distance - run.true_distance()).abs() < 25e-9);
+    assert_retracted(&run);
+}
+
+#[test]
+fn missing_the_particle_fails_with_no_contact_and_retracts() {
+    // The operator's estimate is 1.5 µm off to the side: the tip passes the particle by.
+    let s = scene(&[]);
+    let mut f = s.file.clone();
+    f.strategy.search_range_um = 6.0;
+    let s = Scene::from_file("gold-latex (short search)", f).unwrap();
+    let run = push(&s, 1.0 * UM, (0.0, 1.5 * UM));
+    assert!(
+        matches!(run.summary.failure, Some(Failure::NoContact { steps, .. }) if steps >= 60),
+        "{:?}",
+        run.summary.failure
+    );
+    assert_eq!(run.true_distance(), 0.0);
+    assert_retracted(&run);
+}
+
+#[test]
+fn a_deflection_beyond_the_safety_limit_retracts_at_once() {
+    // A safety limit just past the set point: the stick-phase peak when the push resumes
+    // (5 nm, −2.2 V at −0.4 V/nm) goes beyond it.
+    let s = scene(&[]);
+    let mut f = s.file.clone();
+    f.strategy.safety_limit_v = -1.7;
+    let s = Scene::from_file("gold-latex (safety)", f).unwrap();
+    let run = push(&s, 2.0 * UM, (0.0, 0.0));
+    match run.summary.failure {
+        Some(Failure::DeflectionLimit { volts, limit, phase }) => {
+            assert!(volts < limit && limit == -1.7);
+            assert_eq!(phase, "push");
+        }
+        other => panic!("expected a deflection-limit failure, got {other:?}"),
+    }
+    assert!(
+        !run.trace.iter().any(|r| r.phase == "back_off"),
+        "an emergency goes straight up"
+    );
+    assert_retracted(&run);
+}
+
+#[test]
+fn a_phase_over_its_time_out_fails_and_retracts() {
+    let s = scene(&[]);
+    let mut f = s.file.clone();
+    // Parking takes ~3.7 s; a search from 8 µm behind the contact, 80 steps of 55 ms, ~4.4 s.
+    f.strategy.phase_timeout_s = 4.0;
+    f.strategy.approach_distance_um = 8.0;
+    let s = Scene::from_file("gold-latex (time-out)", f).unwrap();
+    let run = push(&s, 1.0 * UM, (0.0, 0.0));
+    assert!(
+        matches!(
+            run.summary.failure,
+            Some(Failure::Timeout {
+                phase: "contact_search",
+                ..
+            })
+        ),
+        "{:?}",
+        run.summary.failure
+    );
+    assert_retracted(&run);
+}
+
+#[test]
+fn no_substrate_within_range_fails_and_retracts() {
+    // The controller believes the tip starts 3 µm up and searches twice that far; the tip is
+    // really 9 µm up.
+    let s = scene(&[]);
+    let mut f = s.file.clone();
+    f.strategy.start_height_um = 9.0;
+    let high = Scene::from_file("gold-latex (high start)", f).unwrap();
+    let p = s.pushed_particle();
+    let (x, y) = (p.x_um * UM, p.y_um * UM);
+    let mut afm = Afm::from_scene(&high, x - 6.0 * UM, y, 1e-3);
+    let request = PushRequest {
+        id: p.id,
+        particle: (x, y),
+        radius: p.radius_nm * 1e-9,
+        direction: (1.0, 0.0),
+        distance: 1.0 * UM,
+        pause: None,
+    };
+    let run = push_once(&s, &mut afm, &request, s.strategy_params(1e-3)).unwrap();
+    assert!(
+        matches!(run.summary.failure, Some(Failure::NoSubstrate { range_um }) if range_um > 6.0),
+        "{:?}",
+        run.summary.failure
+    );
+    assert!(run.retracted);
+    assert!(
+        (run.final_stage[2] - run.trace[0].stage[2]).abs() < 1e-9,
+        "back at the start height"
+    );
+}
+
+#[test]
+fn a_particle_lost_on_a_rising_substrate_fails_and_retracts() {
+    // The substrate rises 60 nm per µm along the push: the particle climbs while the tip keeps
+    // its parking height, the contact slides down to the particle's equator, and the deflection
+    // falls back to the baseline before the 10 µm are done.
+    let s = scene(&[]);
+    let mut f = s.file.clone();
+    f.substrate.tilt_x_mrad = 60.0;
+    f.strategy.approach_distance_um = 0.3;
+    let s = Scene::from_file("gold-latex (steep)", f).unwrap();
+    let run = push(&s, 10.0 * UM, (0.0, 0.0));
+    match run.summary.failure {
+        Some(Failure::ParticleLost { travel_um }) => assert!(travel_um > 1.0 && travel_um < 10.0, "{travel_um}"),
+        other => panic!("expected the particle lost, got {other:?}"),
+    }
+    assert!(run.summary.t_star.is_some(), "it was pushed before it was lost");
+    assert!(run.true_distance() > 1.0 * UM);
+    assert_retracted(&run);
+}
+
+/// Drift of the reading over a push: the mean of the last 200 samples while rolling less the
+/// mean of the first 200 (V).
+fn reading_drift(run: &StrategyRun) -> f64 {
+    let v: Vec<f64> = run
+        .trace
+        .iter()
+        .filter(|r| r.phase == "push" && r.contact == "roll")
+        .map(|r| r.volts)
+        .collect();
+    assert!(v.len() > 1000, "{} rolling samples", v.len());
+    let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
+    mean(&v[v.len() - 200..]) - mean(&v[..200])
+}
+
+#[test]
+fn z_position_control_holds_the_force_on_a_tilted_substrate() {
+    // The scene's substrate rises 6 nm per µm: with the height fixed the reading drifts toward
+    // the baseline as the particle climbs (Fig 15); the z loop holds it.
+    let base = scene(&[]);
+    let run_with = |control: crate::scene::file::ControlFile| {
+        let mut f = base.file.clone();
+        f.strategy.control = control;
+        let s = Scene::from_file("gold-latex (control)", f).unwrap();
+        push(&s, 6.0 * UM, (0.0, 0.0))
+    };
+    let xy = run_with(crate::scene::file::ControlFile::Xy);
+    let xyz = run_with(crate::scene::file::ControlFile::Xyz);
+    let (d_xy, d_xyz) = (reading_drift(&xy), reading_drift(&xyz));
+    assert!(
+        d_xy > 0.08,
+        "open-loop height: the reading rises toward −0.2 V by {d_xy:.3} V"
+    );
+    assert!(
+        d_xyz.abs() < 0.3 * d_xy,
+        "z loop: drift {d_xyz:.3} V against {d_xy:.3} V"
+    );
+    for run in [&xy, &xyz] {
+        assert_eq!(run.summary.failure, None);
+        let err = run.true_distance() - 6.0 * UM;
+        assert!(err.abs() < 25e-9, "error {:.1} nm", err * 1e9);
+    }
+}
