@@ -15,11 +15,13 @@
 #![deny(missing_docs)]
 
 pub mod accuracy;
+pub mod haptic;
 pub mod model;
 pub mod push;
 pub mod scan;
 pub mod simulate;
 pub mod sweep;
+pub mod ws;
 
 /// Version of every document in this crate; bumped on any incompatible change.
 pub const VERSION: u32 = 1;

@@ -1,0 +1,410 @@
+//! The WebSocket protocol of `nanopush serve` (`/ws`): JSON text frames for commands, replies,
+//! events and telemetry; binary frames for scan lines ([`ScanLineHeader`]). Documented for
+//! clients in `proto/README.md`.
+//!
+//! Every client message is an object with a `type`; a command may carry an `id` (u32) that its
+//! reply (`ok` or `error`) echoes. Values are in the units their names carry (`_um`, `_deg`) on
+//! the way in, and SI in telemetry, as every nanopush document.
+
+use serde::{Deserialize, Serialize};
+
+/// Protocol version, sent in `welcome`; bumped on any incompatible change.
+pub const WS_VERSION: u32 = 1;
+
+/// The streams a client can subscribe to. Nothing is produced for a stream no client wants.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stream {
+    /// `telemetry` at about 60 Hz: tip position, reading, phase.
+    Tip,
+    /// `scan_start`, binary scan lines as they complete, `scan_done`.
+    Scan,
+}
+
+/// A client → server message.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ClientMessage {
+    /// Choose the streams to receive (replaces the previous choice).
+    Subscribe {
+        /// Command id, echoed in the reply.
+        #[serde(default)]
+        id: Option<u32>,
+        /// Streams wanted.
+        streams: Vec<Stream>,
+    },
+    /// Ask for the control lease (operators only; one holder at a time).
+    TakeLease {
+        /// Command id.
+        #[serde(default)]
+        id: Option<u32>,
+    },
+    /// Give the lease back.
+    ReleaseLease {
+        /// Command id.
+        #[serde(default)]
+        id: Option<u32>,
+    },
+    /// Push a particle: a distance along a direction, or to a target (then planned as several
+    /// pushes if needed). Needs the lease.
+    Push {
+        /// Command id.
+        #[serde(default)]
+        id: Option<u32>,
+        /// Particle id, as the scene names it.
+        particle: u32,
+        /// Distance (µm), with `direction_deg`.
+        #[serde(default)]
+        distance_um: Option<f64>,
+        /// Direction in the plane (degrees from +x).
+        #[serde(default)]
+        direction_deg: Option<f64>,
+        /// Target x (µm), with `to_y_um`, instead of a distance.
+        #[serde(default)]
+        to_x_um: Option<f64>,
+        /// Target y (µm).
+        #[serde(default)]
+        to_y_um: Option<f64>,
+    },
+    /// A tapping-mode scan of a square region (the scene's `[scan]` where left out). Needs the
+    /// lease.
+    Scan {
+        /// Command id.
+        #[serde(default)]
+        id: Option<u32>,
+        /// Centre x (µm).
+        #[serde(default)]
+        centre_x_um: Option<f64>,
+        /// Centre y (µm).
+        #[serde(default)]
+        centre_y_um: Option<f64>,
+        /// Side (µm).
+        #[serde(default)]
+        size_um: Option<f64>,
+        /// Pixels per line and lines.
+        #[serde(default)]
+        pixels: Option<u32>,
+    },
+    /// Abort what runs now: the tip retracts. Needs the lease.
+    Stop {
+        /// Command id.
+        #[serde(default)]
+        id: Option<u32>,
+    },
+    /// Liveness check; answered with `ok`.
+    Ping {
+        /// Command id.
+        #[serde(default)]
+        id: Option<u32>,
+    },
+}
+
+impl ClientMessage {
+    /// The command id, if any.
+    pub fn id(&self) -> Option<u32> {
+        match self {
+            ClientMessage::Subscribe { id, .. }
+            | ClientMessage::TakeLease { id }
+            | ClientMessage::ReleaseLease { id }
+            | ClientMessage::Push { id, .. }
+            | ClientMessage::Scan { id, .. }
+            | ClientMessage::Stop { id }
+            | ClientMessage::Ping { id } => *id,
+        }
+    }
+}
+
+/// A client's role, from its token.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Role {
+    /// Watches; cannot command.
+    Viewer,
+    /// May take the lease and command.
+    Operator,
+}
+
+/// Why a message was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ErrorCode {
+    /// Not JSON, or not a known message shape.
+    Malformed,
+    /// Larger than the server's message limit.
+    TooLarge,
+    /// More messages per second than allowed; this one was dropped.
+    RateLimited,
+    /// A viewer sent a command.
+    Forbidden,
+    /// The command needs the lease, which this client does not hold.
+    NoLease,
+    /// Another operator holds the lease.
+    LeaseHeld,
+    /// A number is not finite.
+    NotFinite,
+    /// A number is outside its allowed range.
+    OutOfRange,
+    /// No particle with that id.
+    UnknownParticle,
+    /// Something runs already (a push or a scan); stop it first.
+    Busy,
+    /// The request is inconsistent (both a distance and a target, say).
+    Invalid,
+    /// The server is shutting down.
+    ShuttingDown,
+}
+
+/// Tip telemetry (SI).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Telemetry {
+    /// Server time since start (s).
+    pub t: f64,
+    /// Stage position: tip x, y and the undeflected apex height (m).
+    pub stage: [f64; 3],
+    /// Deflection reading (V).
+    pub volts: f64,
+    /// Strategy phase (`idle` when nothing runs, `scanning` during a scan).
+    pub phase: String,
+    /// The pushed particle's estimated centre (m), while a push runs.
+    pub estimate: Option<[f64; 2]>,
+}
+
+/// A server → client text message.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum ServerMessage {
+    /// First message on a connection.
+    Welcome {
+        /// [`WS_VERSION`].
+        version: u32,
+        /// This connection's id.
+        client: u32,
+        /// Its role.
+        role: Role,
+        /// Who holds the lease now.
+        lease: Option<u32>,
+        /// Scene name.
+        scene: String,
+        /// Control loop rate (Hz).
+        tick_hz: f64,
+    },
+    /// A command was accepted.
+    Ok {
+        /// Its id.
+        id: Option<u32>,
+    },
+    /// A message was refused.
+    Error {
+        /// The command's id, when it could be read.
+        id: Option<u32>,
+        /// Why.
+        code: ErrorCode,
+        /// In words, naming the field and the allowed range.
+        message: String,
+    },
+    /// Tip telemetry (stream `tip`).
+    Telemetry(Telemetry),
+    /// This client was too slow and skipped `skipped` messages.
+    Lagged {
+        /// Messages skipped.
+        skipped: u64,
+    },
+    /// The lease changed hands (to everyone).
+    Lease {
+        /// Holder now.
+        holder: Option<u32>,
+    },
+    /// A push ended (to everyone).
+    RunDone {
+        /// Particle.
+        particle: u32,
+        /// `ok` or the failure code.
+        outcome: String,
+        /// The failure in words.
+        failure: Option<String>,
+        /// Estimated final centre (m).
+        estimate: [f64; 2],
+        /// Name of its record under `/api/records`.
+        record: Option<String>,
+    },
+    /// A scan starts (stream `scan`); binary line frames follow.
+    ScanStart {
+        /// Scan id.
+        scan: u32,
+        /// Pixels per line.
+        xres: u32,
+        /// Lines.
+        yres: u32,
+        /// Left edge (m).
+        x_offset: f64,
+        /// Bottom edge (m).
+        y_offset: f64,
+        /// Width (m).
+        x_real: f64,
+        /// Height (m).
+        y_real: f64,
+    },
+    /// A scan ended (stream `scan`).
+    ScanDone {
+        /// Scan id.
+        scan: u32,
+        /// Name of its record.
+        record: Option<String>,
+    },
+    /// The server is shutting down; the connection closes next.
+    Shutdown {
+        /// Why.
+        reason: String,
+    },
+}
+
+/// The header of a binary scan-line frame, little-endian, 32 bytes, followed by `xres` f32
+/// heights (m), left to right:
+///
+/// | offset | type | field |
+/// |---|---|---|
+/// | 0 | `[u8; 4]` | magic `NPSL` |
+/// | 4 | u16 | version (1) |
+/// | 6 | u16 | reserved (0) |
+/// | 8 | u32 | scan id |
+/// | 12 | u32 | line index (0 = first, bottom) |
+/// | 16 | u32 | xres |
+/// | 20 | u32 | yres |
+/// | 24 | f64 | line y (m) |
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScanLineHeader {
+    /// Scan id.
+    pub scan: u32,
+    /// Line index.
+    pub line: u32,
+    /// Pixels per line.
+    pub xres: u32,
+    /// Lines.
+    pub yres: u32,
+    /// Line y (m).
+    pub y: f64,
+}
+
+/// Magic of a scan-line frame.
+pub const SCAN_LINE_MAGIC: [u8; 4] = *b"NPSL";
+/// Header length (bytes).
+pub const SCAN_LINE_HEADER_LEN: usize = 32;
+
+/// Why a binary frame could not be decoded.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum FrameError {
+    /// Shorter than its header or its declared data.
+    Short(usize),
+    /// Not a scan line.
+    BadMagic,
+    /// A version this decoder does not know.
+    Version(u16),
+}
+
+impl ScanLineHeader {
+    /// Encodes the header and `heights` into one frame.
+    pub fn encode(&self, heights: &[f32]) -> Vec<u8> {
+        let mut b = Vec::with_capacity(SCAN_LINE_HEADER_LEN + 4 * heights.len());
+        b.extend_from_slice(&SCAN_LINE_MAGIC);
+        b.extend_from_slice(&1u16.to_le_bytes());
+        b.extend_from_slice(&0u16.to_le_bytes());
+        for v in [self.scan, self.line, self.xres, self.yres] {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        b.extend_from_slice(&self.y.to_le_bytes());
+        for h in heights {
+            b.extend_from_slice(&h.to_le_bytes());
+        }
+        b
+    }
+
+    /// Decodes a frame into its header and heights.
+    pub fn decode(b: &[u8]) -> Result<(ScanLineHeader, Vec<f32>), FrameError> {
+        if b.len() < SCAN_LINE_HEADER_LEN {
+            return Err(FrameError::Short(b.len()));
+        }
+        if b[..4] != SCAN_LINE_MAGIC {
+            return Err(FrameError::BadMagic);
+        }
+        let version = u16::from_le_bytes([b[4], b[5]]);
+        if version != 1 {
+            return Err(FrameError::Version(version));
+        }
+        let u = |k: usize| u32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]]);
+        let h = ScanLineHeader {
+            scan: u(8),
+            line: u(12),
+            xres: u(16),
+            yres: u(20),
+            y: f64::from_le_bytes(b[24..32].try_into().expect("8 bytes")),
+        };
+        let need = SCAN_LINE_HEADER_LEN + 4 * h.xres as usize;
+        if b.len() != need {
+            return Err(FrameError::Short(b.len()));
+        }
+        let heights = b[SCAN_LINE_HEADER_LEN..]
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        Ok((h, heights))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn client_messages_parse_from_their_documented_json() {
+        let m: ClientMessage = serde_json::from_str(r#"{"type":"push","id":7,"particle":1,"distance_um":2.5,"direction_deg":90}"#).unwrap();
+        assert_eq!(m.id(), Some(7));
+        assert!(matches!(m, ClientMessage::Push { particle: 1, distance_um: Some(d), .. } if d == 2.5));
+        let m: ClientMessage = serde_json::from_str(r#"{"type":"subscribe","streams":["tip","scan"]}"#).unwrap();
+        assert_eq!(m, ClientMessage::Subscribe { id: None, streams: vec![Stream::Tip, Stream::Scan] });
+        assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"push","particle":1,"bogus":1}"#).is_err());
+        assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"fly"}"#).is_err());
+    }
+
+    #[test]
+    fn server_messages_serialize_with_a_type_tag() {
+        let s = serde_json::to_string(&ServerMessage::Error {
+            id: Some(3),
+            code: ErrorCode::OutOfRange,
+            message: "x".into(),
+        })
+        .unwrap();
+        assert_eq!(s, r#"{"type":"error","id":3,"code":"out_of_range","message":"x"}"#);
+        let t = serde_json::to_string(&ServerMessage::Telemetry(Telemetry {
+            t: 1.0,
+            stage: [0.0; 3],
+            volts: -0.2,
+            phase: "idle".into(),
+            estimate: None,
+        }))
+        .unwrap();
+        assert!(t.starts_with(r#"{"type":"telemetry","t":1.0"#), "{t}");
+    }
+
+    #[test]
+    fn scan_line_frames_round_trip_and_reject_bad_input() {
+        let h = ScanLineHeader {
+            scan: 2,
+            line: 5,
+            xres: 3,
+            yres: 8,
+            y: 1.5e-6,
+        };
+        let f = h.encode(&[1.0, 2.0, 3.0]);
+        assert_eq!(f.len(), SCAN_LINE_HEADER_LEN + 12);
+        assert_eq!(&f[..4], b"NPSL");
+        assert_eq!(ScanLineHeader::decode(&f).unwrap(), (h, vec![1.0, 2.0, 3.0]));
+        assert_eq!(ScanLineHeader::decode(&f[..20]), Err(FrameError::Short(20)));
+        assert_eq!(ScanLineHeader::decode(&f[..40]), Err(FrameError::Short(40)));
+        let mut bad = f.clone();
+        bad[0] = b'X';
+        assert_eq!(ScanLineHeader::decode(&bad), Err(FrameError::BadMagic));
+        let mut v2 = f;
+        v2[4] = 2;
+        assert_eq!(ScanLineHeader::decode(&v2), Err(FrameError::Version(2)));
+    }
+}
