@@ -1,7 +1,7 @@
 # nanopush: the two commands a new user needs are `make run` and `make test`.
 CARGO ?= cargo
 
-.PHONY: run test setup build release fmt-check clippy unit clean
+.PHONY: run test setup build release fmt-check clippy unit web-test clean
 
 ## make run: build (release) and run the main job on the embedded default scene.
 run: release
@@ -28,8 +28,12 @@ clippy:
 unit: build
 	$(CARGO) test --workspace
 
+## The browser client's tests (web/: node --test on the protocol module).
+web-test:
+	cd web && npm ci --no-audit --no-fund && npm test
+
 ## make test: set up, then formatting, lints with -D warnings, and every test.
-test: setup fmt-check clippy unit
+test: setup fmt-check clippy unit web-test
 
 clean:
 	$(CARGO) clean

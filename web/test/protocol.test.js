@@ -1,0 +1,311 @@
+// node --test: the protocol module against the bytes and messages of proto/README.md.
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import {
+  decodeScanLine, encodeScanLine, FrameError, commands, encodeCommand, wsUrl, backoffMs,
+  Session, controlState, sceneParticles, WS_VERSION,
+} from '../src/protocol.js';
+
+// The frame `ScanLineHeader { scan: 2, line: 5, xres: 3, yres: 8, y: 1.5e-6 }.encode(&[1.0, 2.0,
+// 3.0])` of proto/src/ws.rs, written out byte by byte.
+function handFrame() {
+  const bytes = [
+    0x4e, 0x50, 0x53, 0x4c, // "NPSL"
+    0x01, 0x00, // version 1
+    0x00, 0x00, // reserved
+    0x02, 0x00, 0x00, 0x00, // scan 2
+    0x05, 0x00, 0x00, 0x00, // line 5
+    0x03, 0x00, 0x00, 0x00, // xres 3
+    0x08, 0x00, 0x00, 0x00, // yres 8
+    // 1.5e-6 as f64 LE: 0x3EB92A737110E454
+    0x54, 0xe4, 0x10, 0x71, 0x73, 0x2a, 0xb9, 0x3e,
+    0x00, 0x00, 0x80, 0x3f, // 1.0f32
+    0x00, 0x00, 0x00, 0x40, // 2.0f32
+    0x00, 0x00, 0x40, 0x40, // 3.0f32
+  ];
+  return new Uint8Array(bytes);
+}
+
+test('decodes a scan line built by hand, byte by byte', () => {
+  const f = decodeScanLine(handFrame().buffer);
+  assert.equal(f.scan, 2);
+  assert.equal(f.line, 5);
+  assert.equal(f.xres, 3);
+  assert.equal(f.yres, 8);
+  assert.equal(f.y, 1.5e-6);
+  assert.deepEqual([...f.heights], [1, 2, 3]);
+  assert.ok(f.heights instanceof Float32Array);
+});
+
+test('decodes from a typed array that is a view into a larger buffer (Node Buffer)', () => {
+  const inner = handFrame();
+  const big = new Uint8Array(inner.length + 7);
+  big.set(inner, 5);
+  const f = decodeScanLine(big.subarray(5, 5 + inner.length));
+  assert.equal(f.line, 5);
+  assert.deepEqual([...f.heights], [1, 2, 3]);
+});
+
+test('the JS encoder makes the same bytes as the Rust encoder', () => {
+  const b = new Uint8Array(encodeScanLine({ scan: 2, line: 5, xres: 3, yres: 8, y: 1.5e-6 }, [1, 2, 3]));
+  assert.deepEqual([...b], [...handFrame()]);
+});
+
+test('rejects short frames, a bad magic, another version and a wrong length', () => {
+  const f = handFrame();
+  const err = (buf, reason, re) => assert.throws(() => decodeScanLine(buf), (e) => {
+    assert.ok(e instanceof FrameError, `FrameError, got ${e}`);
+    assert.equal(e.reason, reason);
+    assert.match(e.message, re);
+    return true;
+  });
+  err(f.slice(0, 20), 'short', /20 bytes, shorter than the 32-byte header/);
+  err(f.slice(0, 0), 'short', /0 bytes/);
+  err(f.slice(0, 40), 'short', /40 bytes, xres 3 needs 44/);
+  const long = new Uint8Array(48);
+  long.set(f);
+  err(long, 'short', /48 bytes, xres 3 needs 44/);
+  const bad = f.slice();
+  bad[0] = 'X'.charCodeAt(0);
+  err(bad, 'magic', /bad magic "XPSL"/);
+  const v2 = f.slice();
+  v2[4] = 2;
+  err(v2, 'version', /version 2/);
+  assert.throws(() => decodeScanLine('NPSL'), TypeError);
+});
+
+test('command builders make the documented JSON and refuse out-of-range values', () => {
+  assert.equal(encodeCommand(commands.subscribe(['tip', 'scan'])), '{"type":"subscribe","streams":["tip","scan"]}');
+  assert.equal(encodeCommand(commands.takeLease(3)), '{"type":"take_lease","id":3}');
+  assert.equal(encodeCommand(commands.releaseLease()), '{"type":"release_lease"}');
+  assert.deepEqual(JSON.parse(encodeCommand(commands.pushBy(1, 2.5, 90, 7))),
+    { type: 'push', id: 7, particle: 1, distance_um: 2.5, direction_deg: 90 });
+  assert.deepEqual(commands.pushTo(2, 30, 40.5), { type: 'push', particle: 2, to_x_um: 30, to_y_um: 40.5 });
+  assert.deepEqual(commands.scan({ centreXUm: 50, centreYUm: 45, sizeUm: 10, pixels: 128 }),
+    { type: 'scan', centre_x_um: 50, centre_y_um: 45, size_um: 10, pixels: 128 });
+  assert.deepEqual(commands.scan(), { type: 'scan' }); // the scene's defaults
+  assert.deepEqual(commands.scan({ pixels: 64 }), { type: 'scan', pixels: 64 });
+  assert.deepEqual(commands.stop(9), { type: 'stop', id: 9 });
+  assert.deepEqual(commands.ping(), { type: 'ping' });
+
+  assert.throws(() => commands.subscribe(['tip', 'video']), /unknown stream "video"/);
+  assert.throws(() => commands.pushBy(1, 0, 0), /distance_um must be in \(0, 100\]/);
+  assert.throws(() => commands.pushBy(1, 101, 0), /distance_um/);
+  assert.throws(() => commands.pushBy(1, 5, 361), /direction_deg must be in \[-360, 360\]/);
+  assert.throws(() => commands.pushBy(1, NaN, 0), /distance_um must be a finite number/);
+  assert.throws(() => commands.pushBy(1.5, 1, 0), /particle/);
+  assert.throws(() => commands.pushTo(1, -1, 5), /to_x_um must be in \[0, 100\]/);
+  assert.throws(() => commands.pushTo(1, 5, 60, undefined, 50), /to_y_um must be in \[0, 50\]/);
+  assert.throws(() => commands.scan({ pixels: 7 }), /pixels must be an integer in \[8, 512\]/);
+  assert.throws(() => commands.scan({ pixels: 64.5 }), /pixels/);
+  assert.throws(() => commands.scan({ sizeUm: 0 }), /size_um/);
+  assert.throws(() => commands.stop(-1), /id must be a u32/);
+  assert.throws(() => encodeCommand({}), TypeError);
+});
+
+test('the WebSocket URL carries the page token; without one the page is a viewer', () => {
+  assert.equal(wsUrl({ protocol: 'http:', host: '127.0.0.1:8080', search: '?token=abc%2Bd' }), 'ws://127.0.0.1:8080/ws?token=abc%2Bd');
+  assert.equal(wsUrl({ protocol: 'http:', host: 'localhost:9', search: '' }), 'ws://localhost:9/ws');
+  assert.equal(wsUrl({ protocol: 'https:', host: 'h', search: '?x=1&token=t' }), 'wss://h/ws?token=t');
+});
+
+test('reconnect backoff doubles from 0.5 s and stops at 15 s', () => {
+  assert.deepEqual([1, 2, 3, 4, 5, 6, 7, 10].map((n) => backoffMs(n)), [500, 1000, 2000, 4000, 8000, 15000, 15000, 15000]);
+});
+
+test('session: welcome, lease changes and who may command', () => {
+  const s = new Session();
+  assert.equal(controlState(s.state).push.enabled, false);
+  assert.match(controlState(s.state).push.why, /Not connected/);
+  s.connecting();
+  s.opened();
+  s.apply('{"type":"welcome","version":1,"client":4,"role":"operator","lease":null,"scene":"gold","tick_hz":1000}');
+  assert.equal(s.state.client, 4);
+  assert.equal(s.state.role, 'operator');
+  assert.equal(s.state.tickHz, 1000);
+  assert.equal(s.hasLease, false);
+  let c = controlState(s.state);
+  assert.equal(c.takeLease.enabled, true);
+  assert.equal(c.push.enabled, false);
+  assert.equal(c.push.why, 'Take the lease first');
+
+  assert.deepEqual(s.apply({ type: 'lease', holder: 4 }), { kind: 'lease' });
+  assert.equal(s.hasLease, true);
+  c = controlState(s.state);
+  assert.equal(c.push.enabled, true);
+  assert.equal(c.scan.enabled, true);
+  assert.equal(c.stop.enabled, true);
+  assert.equal(c.takeLease.enabled, false);
+  assert.equal(c.releaseLease.enabled, true);
+
+  s.apply({ type: 'lease', holder: 9 });
+  assert.equal(s.hasLease, false);
+  c = controlState(s.state);
+  assert.equal(c.push.why, 'Client 9 holds the lease');
+  assert.equal(c.takeLease.enabled, false);
+
+  s.apply({ type: 'lease', holder: null });
+  assert.equal(s.state.lease, null);
+
+  // A viewer may not command, and is told why.
+  const v = new Session();
+  v.opened();
+  v.apply({ type: 'welcome', version: 1, client: 5, role: 'viewer', lease: 4, scene: 'x', tick_hz: 1000 });
+  c = controlState(v.state);
+  for (const k of ['takeLease', 'releaseLease', 'push', 'scan', 'stop']) {
+    assert.equal(c[k].enabled, false, k);
+    assert.match(c[k].why, /Viewer connection/);
+  }
+  assert.equal(v.state.lease, 4);
+
+  // Closing forgets what the server said and fails the pending commands.
+  const id = s.issue(commands.takeLease()).id;
+  s.closed(1, 500);
+  assert.equal(s.state.connection, 'closed');
+  assert.deepEqual(s.state.reconnect, { attempt: 1, delayMs: 500 });
+  assert.equal(s.state.client, null);
+  assert.equal(s.state.commands.get(id).status, 'error');
+  assert.equal(s.state.commands.get(id).code, 'disconnected');
+});
+
+test('session: a welcome of another protocol version is logged', () => {
+  const s = new Session();
+  s.apply({ type: 'welcome', version: WS_VERSION + 1, client: 1, role: 'viewer', lease: null, scene: 's', tick_hz: 1000 });
+  assert.equal(s.state.lastError.code, 'version');
+});
+
+test('session: replies are matched to their commands by id; errors are kept in a log', () => {
+  const s = new Session();
+  s.apply({ type: 'welcome', version: 1, client: 1, role: 'operator', lease: null, scene: 's', tick_hz: 1000 });
+  const a = s.issue(commands.takeLease());
+  const b = s.issue(commands.pushBy(1, 5, 0));
+  const c = s.issue(commands.scan({ pixels: 64 }));
+  assert.deepEqual([a.id, b.id, c.id], [1, 2, 3]);
+  assert.equal(b.distance_um, 5);
+  assert.equal(s.state.commands.get(2).status, 'pending');
+
+  const r = s.apply({ type: 'ok', id: 1 });
+  assert.equal(r.kind, 'reply');
+  assert.equal(r.command.type, 'take_lease');
+  assert.equal(s.state.commands.get(1).status, 'ok');
+
+  s.apply({ type: 'error', id: 2, code: 'no_lease', message: 'push needs the lease' });
+  const cmd = s.state.commands.get(2);
+  assert.equal(cmd.status, 'error');
+  assert.equal(cmd.code, 'no_lease');
+  assert.equal(s.state.lastError.code, 'no_lease');
+  assert.equal(s.state.lastError.command, 'push');
+  assert.equal(s.state.lastError.id, 2);
+
+  // An error with no id (a malformed message) is logged too.
+  s.apply({ type: 'error', id: null, code: 'malformed', message: 'not JSON' });
+  s.apply('{not json');
+  s.apply({ no: 'type' });
+  assert.deepEqual(s.state.errors.map((e) => e.code), ['no_lease', 'malformed', 'client_parse', 'client_parse']);
+  assert.equal(s.state.commands.get(3).status, 'pending');
+
+  // The log keeps the newest 50.
+  for (let i = 0; i < 60; i++) s.apply({ type: 'error', id: null, code: 'rate_limited', message: `n${i}` });
+  assert.equal(s.state.errors.length, 50);
+  assert.equal(s.state.errors.at(-1).message, 'n59');
+  assert.equal(s.state.lastError.message, 'n59');
+
+  // Unknown message types are tolerated.
+  assert.deepEqual(s.apply({ type: 'future_thing' }), { kind: 'unknown', type: 'future_thing' });
+});
+
+test('session: lagged messages are counted; telemetry keeps a 10 s trace', () => {
+  const s = new Session();
+  s.apply({ type: 'lagged', skipped: 12 });
+  s.apply({ type: 'lagged', skipped: 3 });
+  assert.deepEqual(s.state.lagged, { events: 2, skipped: 15 });
+
+  for (let i = 0; i <= 1200; i++) {
+    const t = i / 60;
+    s.apply({ type: 'telemetry', t, stage: [1e-6, 2e-6, 3e-9 * i], volts: -0.2 - i * 1e-3, phase: i < 1200 ? 'approach' : 'idle', estimate: null });
+  }
+  assert.equal(s.state.telemetryCount, 1201);
+  assert.equal(s.state.phase, 'idle');
+  assert.equal(s.state.tip.stage[0], 1e-6);
+  const tr = s.state.trace;
+  assert.equal(tr.t.length, tr.volts.length);
+  assert.equal(tr.t.length, tr.z.length);
+  assert.equal(tr.t.at(-1), 20);
+  assert.ok(tr.t[0] >= 10 - 1e-9, `oldest ${tr.t[0]}`);
+  assert.ok(tr.t.length >= 600 && tr.t.length <= 601, `${tr.t.length} samples`);
+  assert.ok(Math.abs(tr.volts.at(-1) - (-0.2 - 1.2)) < 1e-12);
+
+  // A server restart (time going back) starts the trace again.
+  s.apply({ type: 'telemetry', t: 0.5, stage: [0, 0, 0], volts: 0, phase: 'idle', estimate: [1e-6, 1e-6] });
+  assert.deepEqual(s.state.trace.t, [0.5]);
+  assert.deepEqual(s.state.tip.estimate, [1e-6, 1e-6]);
+});
+
+test('session: a scan assembles its binary lines into the height array', () => {
+  const s = new Session();
+  const start = { type: 'scan_start', scan: 7, xres: 4, yres: 3, x_offset: 45e-6, y_offset: 40e-6, x_real: 10e-6, y_real: 10e-6 };
+  assert.equal(s.apply(start).kind, 'scan_start');
+  const sc = s.state.scan;
+  assert.equal(sc.heights.length, 12);
+  const line = (n, hs, scan = 7, xres = 4, yres = 3) => encodeScanLine({ scan, line: n, xres, yres, y: 40e-6 + n * 5e-6 }, hs);
+
+  // Lines may arrive in any order.
+  assert.deepEqual(s.apply(line(2, [9, 10, 11, 12])), { kind: 'scan_line', line: 2, y: 50e-6 });
+  s.apply(line(0, [1, 2, 3, 4]));
+  assert.equal(sc.lines, 2);
+  assert.deepEqual([...sc.received], [1, 0, 1]);
+  assert.equal(sc.min, 1);
+  assert.equal(sc.max, 12);
+  s.apply(new Uint8Array(line(1, [5, 6, 7, 8])));
+  assert.deepEqual([...sc.heights], [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12]);
+  assert.equal(sc.lines, 3);
+  // A repeated line replaces, and is not counted twice.
+  s.apply(line(1, [5, 6, 7, -1]));
+  assert.equal(sc.lines, 3);
+  assert.equal(sc.heights[7], -1);
+  assert.equal(sc.min, -1);
+
+  // Lines of another scan are ignored; lines that do not fit are logged.
+  assert.equal(s.apply(line(0, [0, 0, 0, 0], 6)).kind, 'stray_line');
+  assert.equal(s.state.strayLines, 1);
+  assert.equal(s.apply(line(0, [0, 0, 0], 7, 3, 3)).kind, 'error');
+  assert.match(s.state.lastError.message, /3×3 does not fit the scan's 4×3/);
+  assert.equal(s.apply(line(3, [0, 0, 0, 0])).kind, 'error');
+  const bad = new Uint8Array(line(0, [0, 0, 0, 0]));
+  bad[0] = 0;
+  assert.equal(s.apply(bad).kind, 'error');
+  assert.equal(s.state.lastError.code, 'client_frame');
+  assert.match(s.state.lastError.message, /bad magic/);
+  assert.equal(sc.heights[0], 1, 'a bad frame changes nothing');
+
+  assert.deepEqual(s.apply({ type: 'scan_done', scan: 7, record: 'scan-7.gsf' }), { kind: 'scan_done', record: 'scan-7.gsf' });
+  assert.equal(sc.done, true);
+  assert.equal(sc.record, 'scan-7.gsf');
+
+  // A new scan replaces the old one.
+  s.apply({ ...start, scan: 8, xres: 8, yres: 8 });
+  assert.equal(s.state.scan.id, 8);
+  assert.equal(s.state.scan.lines, 0);
+  assert.equal(s.state.scan.heights.length, 64);
+  assert.equal(s.apply({ ...start, scan: 9, xres: 0 }).kind, 'error');
+  assert.equal(s.state.scan, null);
+});
+
+test('session: the scene gives particles in metres; run_done moves the pushed one', () => {
+  const scene = { name: 'g', particles: [{ id: 1, radius_nm: 500, x_um: 70, y_um: 45, material: 'latex' }, { id: 2, radius_nm: 7, x_um: 10, y_um: 20 }], stage: { range_um: 80 } };
+  assert.deepEqual(sceneParticles(scene)[0], { id: 1, material: 'latex', radius: 500e-9, x: 70e-6, y: 45e-6 });
+  assert.deepEqual(sceneParticles({}), []);
+  const s = new Session();
+  s.setScene(scene);
+  assert.equal(s.state.particles.length, 2);
+  assert.equal(s.state.stageRange, 80e-6);
+  const r = s.apply({ type: 'run_done', particle: 2, outcome: 'ok', failure: null, estimate: [12e-6, 21e-6], record: 'push-1.csv' });
+  assert.equal(r.kind, 'run_done');
+  assert.deepEqual([s.state.particles[1].x, s.state.particles[1].y], [12e-6, 21e-6]);
+  assert.deepEqual([s.state.particles[0].x, s.state.particles[0].y], [70e-6, 45e-6]);
+  assert.equal(s.state.runs.length, 1);
+  s.apply({ type: 'run_done', particle: 1, outcome: 'no_contact', failure: 'no contact within 10 µm', estimate: [70e-6, 45e-6], record: null });
+  assert.equal(s.state.runs.at(-1).outcome, 'no_contact');
+  s.apply({ type: 'shutdown', reason: 'SIGTERM' });
+  assert.equal(s.state.shutdown, 'SIGTERM');
+});
