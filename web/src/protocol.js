@@ -330,7 +330,7 @@ export class Session {
           c.code = null;
           c.message = null;
         }
-        return { kind: 'reply', id: msg.id ?? null, command: c ?? null };
+        return { kind: 'reply', ok: true, id: msg.id ?? null, command: c ?? null };
       }
       case 'error': {
         const c = msg.id != null ? s.commands.get(msg.id) : undefined;
@@ -340,7 +340,7 @@ export class Session {
           c.message = msg.message;
         }
         this.logError(msg.code, msg.message, msg.id);
-        return { kind: 'reply', id: msg.id ?? null, command: c ?? null };
+        return { kind: 'reply', ok: false, id: msg.id ?? null, command: c ?? null };
       }
       case 'telemetry': {
         s.tip = { t: msg.t, stage: msg.stage, volts: msg.volts, phase: msg.phase, estimate: msg.estimate ?? null };

@@ -186,10 +186,11 @@ test('session: replies are matched to their commands by id; errors are kept in a
 
   const r = s.apply({ type: 'ok', id: 1 });
   assert.equal(r.kind, 'reply');
+  assert.equal(r.ok, true);
   assert.equal(r.command.type, 'take_lease');
   assert.equal(s.state.commands.get(1).status, 'ok');
 
-  s.apply({ type: 'error', id: 2, code: 'no_lease', message: 'push needs the lease' });
+  assert.equal(s.apply({ type: 'error', id: 2, code: 'no_lease', message: 'push needs the lease' }).ok, false);
   const cmd = s.state.commands.get(2);
   assert.equal(cmd.status, 'error');
   assert.equal(cmd.code, 'no_lease');
