@@ -97,12 +97,12 @@ function send(msg) {
     return null;
   }
   const m = session.issue(msg);
-  ws.send(encodeCommand(m));
   const out = replyEl[m.type];
   if (out) {
     lastIdByOutput.set(out, m.id);
     showReply(out, 'pending', `#${m.id} sent…`);
   }
+  ws.send(encodeCommand(m));
   return m;
 }
 
@@ -133,6 +133,8 @@ function onMessage(data) {
         view.frameScan();
         scanFramed = true;
       }
+      view.updateParticles(st.particles, selected);
+      updatePreview();
       renderLegend();
       return;
     case 'scan_line':

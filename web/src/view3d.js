@@ -105,6 +105,8 @@ export class View3D {
         this.dirty = false;
         this.renderer.render(this.scene, this.camera);
         this.labels.render(this.scene, this.camera);
+        this.colourFull = false;
+        this.posFull = false;
       }
       requestAnimationFrame(loop);
     };
@@ -199,7 +201,7 @@ export class View3D {
       m.position.set(p.x * UM, p.y * UM, m.userData.rUm);
       const sel = p.id === selectedId;
       m.material.color.set(sel ? 0xffe08a : 0xe6c35c);
-      m.material.opacity = sel ? 0.6 : 0.4;
+      m.material.opacity = (sel ? 0.6 : 0.4) * (this.scanMesh ? 0.5 : 1);
       m.children[0].element.classList.toggle('selected', sel);
     }
     this.requestRender();
@@ -241,6 +243,8 @@ export class View3D {
     mesh.userData = { wUm, hUm, xres, yres, scanId: scan.id };
     this.scanMesh = mesh;
     this.zGroup.add(mesh);
+    this.posFull = true;
+    this.colourFull = true;
     this.colourRange = null;
 
     const x0 = scan.x_offset * UM;
@@ -277,7 +281,9 @@ export class View3D {
       const h = scan.heights[line * xres + i];
       arr[3 * (row * xres + i) + 2] = Number.isFinite(h) ? h * UM : 0;
     }
-    pos.addUpdateRange(row * xres * 3, xres * 3);
+    // Upload just this row, unless a full upload is pending (a new scan) until the next render:
+    // a range added now would narrow it.
+    if (!this.posFull) pos.addUpdateRange(row * xres * 3, xres * 3);
     pos.needsUpdate = true;
 
     // Colour by height: recolour everything when the range grows by more than 2 %.
@@ -291,9 +297,15 @@ export class View3D {
     } else {
       this.colourRow(scan, line);
       const col = geom.getAttribute('color');
-      col.addUpdateRange(row * xres * 3, xres * 3);
+      // A full upload pending (after a recolour) must not be narrowed to this row.
+      if (!this.colourFull) col.addUpdateRange(row * xres * 3, xres * 3);
       col.needsUpdate = true;
     }
+
+    // Keep the substrate and grid below the scan, so they do not show through its low parts.
+    const floor = Math.min(0, lo * UM) - 0.002 * Math.max(mesh.userData.wUm, 1e-3);
+    this.substrate.position.z = floor;
+    if (this.grid) this.grid.position.z = floor;
 
     // Draw the quads between contiguous received lines from the bottom.
     let k = 0;
@@ -327,6 +339,7 @@ export class View3D {
     const col = this.scanMesh.geometry.getAttribute('color');
     col.clearUpdateRanges();
     col.needsUpdate = true;
+    this.colourFull = true;
   }
 
   /** The colour scale now in use (m), for the legend. */
