@@ -1,11 +1,16 @@
 # nanopush: the two commands a new user needs are `make run` and `make test`.
 CARGO ?= cargo
 
-.PHONY: run test setup build release fmt-check clippy unit web-test clean
+.PHONY: run web test setup build release fmt-check clippy unit web-test clean
 
-## make run: build (release) and run the main job on the embedded default scene.
-run: release
-	./target/release/nanopush model
+## make run: build (release), install the web client's packages, and start the teleoperation
+## server on the embedded default scene; it prints the URL to open (with the operator token).
+run: release web
+	./target/release/nanopush serve
+
+## The web client's packages (three, uPlot) from npm, once.
+web:
+	@test -d web/node_modules || (cd web && npm ci --no-audit --no-fund)
 
 release:
 	$(CARGO) build --release --workspace --bins

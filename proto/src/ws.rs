@@ -356,11 +356,19 @@ mod tests {
 
     #[test]
     fn client_messages_parse_from_their_documented_json() {
-        let m: ClientMessage = serde_json::from_str(r#"{"type":"push","id":7,"particle":1,"distance_um":2.5,"direction_deg":90}"#).unwrap();
+        let m: ClientMessage =
+            serde_json::from_str(r#"{"type":"push","id":7,"particle":1,"distance_um":2.5,"direction_deg":90}"#)
+                .unwrap();
         assert_eq!(m.id(), Some(7));
         assert!(matches!(m, ClientMessage::Push { particle: 1, distance_um: Some(d), .. } if d == 2.5));
         let m: ClientMessage = serde_json::from_str(r#"{"type":"subscribe","streams":["tip","scan"]}"#).unwrap();
-        assert_eq!(m, ClientMessage::Subscribe { id: None, streams: vec![Stream::Tip, Stream::Scan] });
+        assert_eq!(
+            m,
+            ClientMessage::Subscribe {
+                id: None,
+                streams: vec![Stream::Tip, Stream::Scan]
+            }
+        );
         assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"push","particle":1,"bogus":1}"#).is_err());
         assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"fly"}"#).is_err());
     }

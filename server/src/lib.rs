@@ -34,4 +34,5 @@ pub mod push_run;
 pub mod report;
 pub mod scan;
 pub mod scene;
+pub mod serve;
 pub mod sweep;

@@ -4,5 +4,6 @@ mod haptic;
 mod model;
 mod push;
 mod scan;
+mod serve;
 mod simulate;
 mod sweep;

@@ -32,6 +32,8 @@ pub struct PushPrediction {
     pub travel_to_deflection: Option<f64>,
     /// Peak `ζ_z` before the separation (m).
     pub peak_deflection: f64,
+    /// Tip travel from the first touch to the peak of `ζ_z`, the separation `t*` (m).
+    pub travel_to_peak: f64,
     /// Settled mean `ζ_z` (m).
     pub settled_deflection: f64,
     /// Friction phase at the end (`slip`, `roll`, `stick`).
@@ -117,7 +119,12 @@ pub fn predict(
         .map(lag)
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
     let travel_to_deflection = run.trace.iter().find(|r| r.zeta_z >= deflection).map(|r| r.stage_y);
-    let peak = run.trace.iter().map(|r| r.zeta_z).fold(f64::NEG_INFINITY, f64::max);
+    let peak_row = run
+        .trace
+        .iter()
+        .max_by(|a, b| a.zeta_z.total_cmp(&b.zeta_z))
+        .expect("a push trace has rows");
+    let (peak, travel_to_peak) = (peak_row.zeta_z, peak_row.stage_y);
     let settled = tail.iter().map(|r| r.zeta_z).sum::<f64>() / tail.len() as f64;
     Ok(PushPrediction {
         retract_shift,
@@ -125,6 +132,7 @@ pub fn predict(
         periodic_amplitude: hi - lo,
         travel_to_deflection,
         peak_deflection: peak,
+        travel_to_peak,
         settled_deflection: settled,
         phase: run.final_phase,
     })
@@ -159,6 +167,11 @@ impl PeakDetector {
             margin,
             peak: None,
         }
+    }
+
+    /// The moving mean now (V).
+    pub fn mean(&self) -> f64 {
+        self.window.iter().sum::<f64>() / WINDOW as f64
     }
 
     /// Feeds one sample; returns `t*` when this sample reveals the peak.
@@ -196,13 +209,17 @@ pub struct Hxy {
     pub travel_at_contact: f64,
     /// The `t*` detector.
     pub detector: PeakDetector,
+    /// The settled reading the model predicts, as a deflection signal (V).
+    pub settled_signal: f64,
 }
 
 impl Hxy {
     /// An estimator for a push whose contact search stopped at the set point.
-    pub fn new(prediction: PushPrediction, margin: f64) -> Hxy {
+    /// `gain` (V/m, magnitude) turns the model's settled deflection into a reading.
+    pub fn new(prediction: PushPrediction, margin: f64, gain: f64) -> Hxy {
         Hxy {
             travel_at_contact: prediction.travel_to_deflection.unwrap_or(0.0),
+            settled_signal: prediction.settled_deflection * gain.abs(),
             prediction,
             detector: PeakDetector::new(margin),
         }
@@ -211,8 +228,19 @@ impl Hxy {
     /// Feeds a reading; `travel` is the stage's travel along the push since the contact search
     /// stopped (m). Returns the estimated particle displacement along the push (m): 0 up to `t*`,
     /// then the travel since the first touch less the settled lag `δ°`.
+    ///
+    /// When the contact search stopped past the peak (a fast search: the whole stick phase fits
+    /// in a tick or two), no peak is left to see; then `t*` is taken where the travel since the
+    /// touch has passed the model's travel to the peak (plus 10 nm) and the reading has settled
+    /// within the margin of the model's settled level.
     pub fn update(&mut self, t: f64, signal: f64, travel: f64) -> f64 {
-        self.detector.feed(t, signal);
+        if self.detector.feed(t, signal).is_none() && self.detector.peak.is_none() {
+            let past_peak = self.travel_at_contact + travel > self.prediction.travel_to_peak + 10e-9;
+            let settled = (self.detector.mean() - self.settled_signal).abs() < self.detector.margin;
+            if past_peak && settled && self.detector.filled >= WINDOW {
+                self.detector.peak = Some((t, signal));
+            }
+        }
         self.estimate(travel)
     }
 

@@ -7,7 +7,7 @@ pub mod strategy;
 
 pub use estimator::{Hxy, PeakDetector, PushPrediction, RetractPlan, predict};
 pub use plan::{Leg, Obstacle, PlanError, Planner};
-pub use run::{PushRequest, RunError, RunRow, StrategyRun, push_once};
+pub use run::{Prepared, PushRequest, RunError, RunRow, StrategyRun, push_once};
 pub use strategy::{Control, Failure, Phase, PushTask, Strategy, StrategyParams, Summary};
 
 #[cfg(test)]

@@ -122,6 +122,84 @@ pub struct PushRequest {
     pub pause: Option<(f64, f64)>,
 }
 
+/// What the controller computes once for a particle before pushing it: the model's prediction
+/// for the Eq 19 estimator (with the particle's radius as a scan estimated it) and the contact
+/// geometry. Reused for every leg of a planned move.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Prepared {
+    /// The model's prediction.
+    pub prediction: PushPrediction,
+    /// The `t*` detector's margin (V).
+    pub margin: f64,
+    /// Contact angle aimed for (rad).
+    pub beta: f64,
+    /// Tip radius (m).
+    pub tip_radius: f64,
+    /// Estimated particle radius (m).
+    pub radius: f64,
+    /// Run-up behind the contact point (m).
+    pub approach_distance: f64,
+    /// Sensor gain (V/m).
+    pub gain: f64,
+}
+
+impl Prepared {
+    /// The model prediction for particle `id` of `scene` with estimated radius `radius` (m).
+    pub fn new(scene: &Scene, id: u32, radius: f64, params: &StrategyParams) -> Result<Prepared, RunError> {
+        let f = &scene.file;
+        let part = f
+            .particles
+            .iter()
+            .find(|p| p.id == id)
+            .ok_or(RunError::NoParticle(id))?;
+        let mut model = scene.push_params_for(part);
+        model.r_a = radius;
+        model.interactions.r_a = radius;
+        let sensor = scene.sensor();
+        let set_deflection = sensor.deflection(params.set_point);
+        // Long enough to pass the separation and settle: 40 nm of travel, at least 20 ms.
+        let duration = (40e-9 / params.speed).max(0.02);
+        let retract = RetractPlan {
+            hold: HOLD,
+            back_off: BACK_OFF,
+            speed: params.approach_speed,
+        };
+        let prediction = predict(model, duration, set_deflection, retract)?;
+        // The drop at t* that the model predicts, in volts; a third of it (at least 4σ of the
+        // noise) tells the peak from noise and from the stage's ringing.
+        let drop = (prediction.peak_deflection - prediction.settled_deflection) * sensor.gain.abs();
+        let margin = (4.0 * params.noise).max(drop / 3.0).max(1e-4);
+        Ok(Prepared {
+            prediction,
+            margin,
+            beta: model.beta,
+            tip_radius: model.r_t,
+            radius,
+            approach_distance: f.strategy.approach_distance_um * 1e-6,
+            gain: sensor.gain,
+        })
+    }
+
+    /// A fresh estimator for one push.
+    pub fn hxy(&self) -> Hxy {
+        Hxy::new(self.prediction, self.margin, self.gain)
+    }
+
+    /// The task of one push.
+    pub fn task(&self, request: &PushRequest, tick: f64) -> PushTask {
+        PushTask {
+            particle: request.particle,
+            radius: self.radius,
+            direction: request.direction,
+            distance: request.distance,
+            beta: self.beta,
+            tip_radius: self.tip_radius,
+            approach_distance: self.approach_distance,
+            pause: request.pause.map(|(at, secs)| (at, (secs / tick).round() as u32)),
+        }
+    }
+}
+
 /// Pushes one particle: the controller knows it only by the request's estimated centre and
 /// radius; it is pushed the requested distance along the unit direction. The model
 /// prediction for the estimator uses the scene's parameters with the estimated radius. The
@@ -132,53 +210,16 @@ pub fn push_once(
     request: &PushRequest,
     params: StrategyParams,
 ) -> Result<StrategyRun, RunError> {
-    let PushRequest {
-        id,
-        particle,
-        radius,
-        direction,
-        distance,
-        pause,
-    } = *request;
-    let f = &scene.file;
-    let part = f
-        .particles
-        .iter()
-        .find(|p| p.id == id)
-        .ok_or(RunError::NoParticle(id))?;
+    let id = request.id;
     let index = afm
         .particles()
         .iter()
         .position(|p| p.id == id)
         .ok_or(RunError::NoParticle(id))?;
-    let mut model = scene.push_params_for(part);
-    model.r_a = radius;
-    model.interactions.r_a = radius;
-    let sensor = scene.sensor();
-    let set_deflection = sensor.deflection(params.set_point);
-    // Long enough to pass the separation and settle: 40 nm of travel, at least 20 ms.
-    let duration = (40e-9 / params.speed).max(0.02);
-    let retract = RetractPlan {
-        hold: HOLD,
-        back_off: BACK_OFF,
-        speed: params.approach_speed,
-    };
-    let prediction = predict(model, duration, set_deflection, retract)?;
-    // The drop at t* that the model predicts, in volts; a third of it (at least 4σ of the noise)
-    // tells the peak from noise and from the stage's ringing.
-    let drop = (prediction.peak_deflection - prediction.settled_deflection) * sensor.gain.abs();
-    let margin = (4.0 * params.noise).max(drop / 3.0);
-    let hxy = Hxy::new(prediction, margin.max(1e-4));
-    let task = PushTask {
-        particle,
-        radius,
-        direction,
-        distance,
-        beta: model.beta,
-        tip_radius: model.r_t,
-        approach_distance: f.strategy.approach_distance_um * 1e-6,
-        pause: pause.map(|(at, secs)| (at, (secs / params.tick).round() as u32)),
-    };
+    let prepared = Prepared::new(scene, id, request.radius, &params)?;
+    let prediction = prepared.prediction;
+    let hxy = prepared.hxy();
+    let task = prepared.task(request, params.tick);
     let before = afm.particles()[index];
     let first = afm.read();
     let mut strategy = Strategy::new(params, task, hxy, &first);

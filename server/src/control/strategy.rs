@@ -23,6 +23,9 @@ pub const BACK_OFF: f64 = 100e-9;
 /// How long the stage stays stopped at the end of a push before the retraction (s).
 pub const HOLD: f64 = 0.05;
 
+/// Samples after `t*` averaged into the z loop's reference.
+const Z_REFERENCE_SAMPLES: u32 = 20;
+
 /// How the push closes its loops (Sec 3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Control {
@@ -167,6 +170,12 @@ pub enum Failure {
         /// Push travel (µm).
         travel_um: f64,
     },
+    /// The operator (or a shutdown) stopped the run.
+    #[error("stopped: {reason}")]
+    Stopped {
+        /// Who or what stopped it.
+        reason: &'static str,
+    },
     /// A phase took longer than its time-out.
     #[error("time-out: phase {phase} took more than {timeout_s} s")]
     Timeout {
@@ -175,6 +184,21 @@ pub enum Failure {
         /// Limit (s).
         timeout_s: f64,
     },
+}
+
+impl Failure {
+    /// The failure's code in reports and the WebSocket protocol.
+    pub fn code(&self) -> &'static str {
+        match self {
+            Failure::NoSubstrate { .. } => "no_substrate",
+            Failure::NoContact { .. } => "no_contact",
+            Failure::ParticleLost { .. } => "particle_lost",
+            Failure::DeflectionLimit { .. } => "deflection_limit",
+            Failure::NoSeparation { .. } => "no_separation",
+            Failure::Stopped { .. } => "stopped",
+            Failure::Timeout { .. } => "timeout",
+        }
+    }
 }
 
 /// The phases of Fig 2.
@@ -285,7 +309,8 @@ pub struct Strategy {
     pub summary: Summary,
     dwell_sum: f64,
     lost_count: u32,
-    z_hold: Option<f64>,
+    moving_contact: u32,
+    z_hold: (f64, u32),
     retract_z: f64,
     pause_left: Option<u32>,
 }
@@ -314,10 +339,20 @@ impl Strategy {
             },
             dwell_sum: 0.0,
             lost_count: 0,
-            z_hold: None,
+            moving_contact: 0,
+            z_hold: (0.0, 0),
             retract_z: first.stage[2],
             pause_left: None,
         }
+    }
+
+    /// Stops the run now: the tip backs off if it may touch the particle, then retracts (at the
+    /// travel speed). No effect once retracting.
+    pub fn abort(&mut self, reason: &'static str, t: f64) {
+        if matches!(self.phase, Phase::BackOff { .. } | Phase::Retract | Phase::Done) {
+            return;
+        }
+        self.fail(Failure::Stopped { reason }, t);
     }
 
     /// Whether the run is over.
@@ -473,12 +508,18 @@ impl Strategy {
     fn contact_search(&mut self, r: &Reading, sig: f64, step: u32, in_step: f64, dwell: u32) {
         let p = self.params;
         let set = p.signal(p.set_point);
-        if sig >= set {
+        // A fast search can step over the whole stick phase between two samples, and the
+        // particle then rolls ahead of the tip below the set point: a deflection held above half
+        // the set point for three samples is a contact too.
+        self.moving_contact = if sig >= 0.5 * set { self.moving_contact + 1 } else { 0 };
+        if sig >= set || self.moving_contact >= 3 {
             // C: stop where we are.
             self.summary.contact_step = Some(step);
             self.summary.contact_stage = Some(r.stage);
             self.summary.search.push(SearchStep { step, volts: r.volts });
             self.target = r.stage;
+            // The stop's reading is the push's first sample: the peak may be this one.
+            self.hxy.update(r.t, sig, 0.0);
             self.enter(Phase::Push { from: r.stage }, r.t);
             return;
         }
@@ -597,8 +638,16 @@ impl Strategy {
             // its equator: raising it moves the contact up toward the top, which turns more of
             // the push force into the vertical load that bends the lever (ζ_z grows with β, as
             // Eq 18 and Fig 11 show), so a reading below the reference raises the tip.
-            let reference = *self.z_hold.get_or_insert(sig);
-            self.target[2] -= p.z_gain * (sig - reference);
+            // The reference is the mean of the first 20 samples after t*, past the stage's
+            // ringing at the separation.
+            let (sum, n) = &mut self.z_hold;
+            if *n < Z_REFERENCE_SAMPLES {
+                *sum += sig;
+                *n += 1;
+            } else {
+                let reference = *sum / *n as f64;
+                self.target[2] -= p.z_gain * (sig - reference);
+            }
         }
     }
 }

@@ -318,6 +318,11 @@ impl Afm {
             // JKR and meniscus pull-off): the equilibrium the integrator follows vanishes and the
             // tip snaps free, as on the force curve's retraction. Anything else is a failure.
             if drive.vz > 0.0 {
+                // The particle stays where the balance vanished.
+                let y = c.sim.x[c.sim.model.layout.particle_y.pos];
+                let p = &mut self.particles[c.index];
+                p.x = c.particle0.0 + c.dir.0 * y;
+                p.y = c.particle0.1 + c.dir.1 * y;
                 self.release(target, t1);
                 return Ok(());
             }

@@ -5,6 +5,7 @@ mod model_cmd;
 mod plot;
 mod push_cmd;
 mod scan_cmd;
+mod serve_cmd;
 mod simulate_cmd;
 mod sweep_cmd;
 mod units;
@@ -39,6 +40,8 @@ enum Command {
     /// One manipulation (Sec 2.1, Sec 3): scan, locate, plan, park, detect contact, push under
     /// force control, retract; the traces of Figs 9 and 15.
     Push(push_cmd::PushArgs),
+    /// The teleoperation server: the 1 kHz control loop, the WebSocket protocol, the web client.
+    Serve(serve_cmd::ServeArgs),
 }
 
 /// Loads `--scene FILE`, or the embedded default scene; prints its warnings to stderr.
@@ -76,6 +79,7 @@ fn main() -> ExitCode {
         Command::Sweep(args) => sweep_cmd::run(&args),
         Command::Scan(args) => scan_cmd::run(&args),
         Command::Push(args) => push_cmd::run(&args),
+        Command::Serve(args) => serve_cmd::run(&args),
     };
     match result {
         Ok(text) => print_stdout(&text),

@@ -187,23 +187,12 @@ fn located(l: &Located) -> LocatedParticle {
     }
 }
 
-fn failure_code(f: &Failure) -> &'static str {
-    match f {
-        Failure::NoSubstrate { .. } => "no_substrate",
-        Failure::NoContact { .. } => "no_contact",
-        Failure::ParticleLost { .. } => "particle_lost",
-        Failure::DeflectionLimit { .. } => "deflection_limit",
-        Failure::NoSeparation { .. } => "no_separation",
-        Failure::Timeout { .. } => "timeout",
-    }
-}
-
 fn leg_report(run: &StrategyRun, from: (f64, f64), to: (f64, f64)) -> LegReport {
     let s = &run.summary;
     LegReport {
         from: [from.0, from.1],
         to: [to.0, to.1],
-        outcome: s.failure.as_ref().map_or("ok", failure_code).into(),
+        outcome: s.failure.as_ref().map_or("ok", Failure::code).into(),
         failure: s.failure.as_ref().map(|f| f.to_string()),
         contact_step: s.contact_step,
         t_star: s.t_star,

@@ -1,0 +1,171 @@
+//! `nanopush serve`: the teleoperation server.
+
+use std::io::{Read as _, Write as _};
+use std::net::{IpAddr, SocketAddr};
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::Args;
+use nanopush::serve::app::ServeConfig;
+use nanopush::serve::control_loop::LoopConfig;
+
+/// Arguments of `nanopush serve`.
+#[derive(Args, Debug)]
+pub struct ServeArgs {
+    /// Scene file (TOML); the embedded paper scene when absent.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Address to bind; loopback by default (anything else exposes the instrument).
+    #[arg(long, default_value = "127.0.0.1")]
+    bind: IpAddr,
+    /// Port (0: any free port).
+    #[arg(long, default_value_t = 8080)]
+    port: u16,
+    /// Control loop rate (Hz), in [100, 10000].
+    #[arg(long, default_value_t = 1000.0)]
+    rate_hz: f64,
+    /// Operator token (else NANOPUSH_OPERATOR_TOKEN, else generated and printed in the URL).
+    #[arg(long)]
+    operator_token: Option<String>,
+    /// Viewer token; when absent viewers need none.
+    #[arg(long)]
+    viewer_token: Option<String>,
+    /// Another browser origin allowed to connect (repeatable), e.g. http://lab-display:3000.
+    #[arg(long)]
+    allow_origin: Vec<String>,
+    /// Largest client message (bytes), in [256, 1048576].
+    #[arg(long, default_value_t = 4096)]
+    max_message_bytes: usize,
+    /// Messages per second per connection, in [1, 10000].
+    #[arg(long, default_value_t = 50.0)]
+    max_rate: f64,
+    /// Most clients at once, in [1, 100000].
+    #[arg(long, default_value_t = 1000)]
+    max_clients: u64,
+    /// Directory of the records (push traces, scans).
+    #[arg(long, default_value = "records")]
+    data_dir: PathBuf,
+    /// Directory of the web client; `web/` of this workspace when absent.
+    #[arg(long)]
+    web_dir: Option<PathBuf>,
+    /// Scan line rate (lines per second), in [0.1, 1000].
+    #[arg(long, default_value_t = 32.0)]
+    scan_line_hz: f64,
+    /// Telemetry rate to browsers (Hz), in [1, 1000].
+    #[arg(long, default_value_t = 60.0)]
+    telemetry_hz: f64,
+    /// Do not ask for SCHED_FIFO and CPU affinity.
+    #[arg(long)]
+    no_realtime: bool,
+    /// CPU core for the control loop (default: the last one).
+    #[arg(long)]
+    cpu: Option<usize>,
+    /// Do not open the iceoryx2 haptic link.
+    #[arg(long)]
+    no_haptic: bool,
+}
+
+fn in_range(name: &str, v: f64, lo: f64, hi: f64, unit: &str) -> anyhow::Result<()> {
+    if !(v.is_finite() && v >= lo && v <= hi) {
+        bail!("{name} {v} is out of range; allowed: [{lo}, {hi}]{unit}");
+    }
+    Ok(())
+}
+
+/// 128 random bits as hex, from the kernel.
+fn random_token() -> anyhow::Result<String> {
+    let mut b = [0u8; 16];
+    std::fs::File::open("/dev/urandom")
+        .and_then(|mut f| f.read_exact(&mut b))
+        .context("reading /dev/urandom for the operator token")?;
+    Ok(b.iter().map(|x| format!("{x:02x}")).collect())
+}
+
+/// Runs the server until SIGINT or SIGTERM.
+pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
+    in_range("--rate-hz", a.rate_hz, 100.0, 10_000.0, " Hz")?;
+    in_range(
+        "--max-message-bytes",
+        a.max_message_bytes as f64,
+        256.0,
+        1_048_576.0,
+        " bytes",
+    )?;
+    in_range("--max-rate", a.max_rate, 1.0, 10_000.0, " messages/s")?;
+    in_range("--max-clients", a.max_clients as f64, 1.0, 100_000.0, "")?;
+    in_range("--scan-line-hz", a.scan_line_hz, 0.1, 1000.0, " Hz")?;
+    in_range("--telemetry-hz", a.telemetry_hz, 1.0, 1000.0, " Hz")?;
+    let scene = crate::load_scene(a.scene.as_ref())?;
+    let operator_token = match a
+        .operator_token
+        .clone()
+        .or_else(|| std::env::var("NANOPUSH_OPERATOR_TOKEN").ok())
+    {
+        Some(t) if t.len() >= 8 => t,
+        Some(_) => bail!("the operator token must be at least 8 characters"),
+        None => random_token()?,
+    };
+    let web_dir = a.web_dir.clone().unwrap_or_else(|| {
+        let here = PathBuf::from("web");
+        if here.join("index.html").exists() {
+            here
+        } else {
+            PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../web"))
+        }
+    });
+    let cfg = ServeConfig {
+        operator_token,
+        viewer_token: a.viewer_token.clone(),
+        allow_origins: a.allow_origin.clone(),
+        max_message_bytes: a.max_message_bytes,
+        max_rate: a.max_rate,
+        max_clients: a.max_clients,
+        data_dir: a.data_dir.clone(),
+        web_dir,
+        scan_line_hz: a.scan_line_hz,
+        telemetry_hz: a.telemetry_hz,
+    };
+    let loop_cfg = LoopConfig {
+        rate_hz: a.rate_hz,
+        realtime: !a.no_realtime,
+        cpu: a.cpu,
+        haptic: !a.no_haptic,
+    };
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info,iceoryx2=warn".into()),
+        )
+        .try_init()
+        .ok();
+    let bind = SocketAddr::new(a.bind, a.port);
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the tokio runtime")?;
+    rt.block_on(async move {
+        let shutdown = async {
+            let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+                .expect("installing the SIGTERM handler");
+            tokio::select! {
+                _ = tokio::signal::ctrl_c() => tracing::info!("SIGINT"),
+                _ = term.recv() => tracing::info!("SIGTERM"),
+            }
+        };
+        nanopush::serve::run(
+            scene,
+            cfg,
+            loop_cfg,
+            bind,
+            |s| {
+                let mut out = std::io::stdout().lock();
+                let _ = writeln!(out, "nanopush serve: listening on {}", s.addr);
+                let _ = writeln!(out, "open {}", s.url);
+                let _ = out.flush();
+            },
+            shutdown,
+        )
+        .await
+    })?;
+    Ok(String::new())
+}

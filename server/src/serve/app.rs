@@ -1,0 +1,890 @@
+//! The network side: axum routes, the WebSocket sessions (roles, lease, limits, validation),
+//! telemetry decimation, scans, and the graceful shutdown.
+
+use std::collections::HashSet;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering::Relaxed};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use axum::Router;
+use axum::body::Bytes;
+use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
+use axum::extract::{ConnectInfo, Path as UrlPath, Query, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use axum::routing::get;
+use futures_util::{SinkExt, StreamExt};
+use nanopush_proto::ws::{
+    ClientMessage, ErrorCode, Role, ScanLineHeader, ServerMessage, Stream as WsStream, Telemetry, WS_VERSION,
+};
+use tokio::sync::{broadcast, mpsc, watch};
+
+use crate::control::{Obstacle, Planner, Prepared, StrategyParams};
+use crate::scan::{ScanParams, Scanner, Sphere, Surface, Tip, find_particles, localize, scan, write_gsf};
+use crate::scene::Scene;
+use crate::serve::control_loop::{LoopCommand, LoopEvent, PushJob, Shared};
+use crate::serve::metrics::{NetMetrics, render};
+use crate::serve::records::{self, write_atomic};
+use crate::serve::validate::{PushTarget, Refusal, number, push_target};
+
+/// Server settings.
+#[derive(Debug, Clone)]
+pub struct ServeConfig {
+    /// Operator token.
+    pub operator_token: String,
+    /// Viewer token (None: viewers need none).
+    pub viewer_token: Option<String>,
+    /// Extra allowed browser origins.
+    pub allow_origins: Vec<String>,
+    /// Largest client message (bytes).
+    pub max_message_bytes: usize,
+    /// Messages per second per connection.
+    pub max_rate: f64,
+    /// Most clients at once.
+    pub max_clients: u64,
+    /// Record directory.
+    pub data_dir: PathBuf,
+    /// Static files of the web client.
+    pub web_dir: PathBuf,
+    /// Scan line rate (Hz).
+    pub scan_line_hz: f64,
+    /// Telemetry rate to browsers (Hz).
+    pub telemetry_hz: f64,
+}
+
+/// Everything the handlers share.
+pub struct AppState {
+    /// Settings.
+    pub cfg: ServeConfig,
+    /// The scene.
+    pub scene: Scene,
+    /// The loop's shared state.
+    pub shared: Arc<Shared>,
+    /// Network counters.
+    pub net: NetMetrics,
+    /// Strategy settings (for push preparation).
+    pub params: StrategyParams,
+    /// Lease holder.
+    pub lease: Mutex<Option<u32>>,
+    next_client: AtomicU32,
+    next_scan: AtomicU32,
+    /// Clients subscribed to `tip`.
+    pub tip_subscribers: AtomicU64,
+    /// Clients subscribed to `scan`.
+    pub scan_subscribers: AtomicU64,
+    /// Telemetry, serialized once per frame.
+    pub telemetry: broadcast::Sender<Utf8Bytes>,
+    /// Events for everyone (lease, run_done, shutdown).
+    pub events: broadcast::Sender<Utf8Bytes>,
+    /// Scan stream (text and binary frames).
+    pub scans: broadcast::Sender<Message>,
+    /// A scan runs.
+    pub scanning: AtomicBool,
+    /// Ask a running scan to stop.
+    pub scan_cancel: AtomicBool,
+    /// Shutdown signal for sessions and tasks.
+    pub shutdown: watch::Sender<bool>,
+    /// Bound address (for the Origin check).
+    pub addr: Mutex<Option<SocketAddr>>,
+}
+
+impl AppState {
+    /// The state of a server.
+    pub fn new(cfg: ServeConfig, scene: Scene, shared: Arc<Shared>, params: StrategyParams) -> AppState {
+        AppState {
+            cfg,
+            scene,
+            shared,
+            net: NetMetrics::default(),
+            params,
+            lease: Mutex::new(None),
+            next_client: AtomicU32::new(1),
+            next_scan: AtomicU32::new(1),
+            tip_subscribers: AtomicU64::new(0),
+            scan_subscribers: AtomicU64::new(0),
+            telemetry: broadcast::channel(64).0,
+            events: broadcast::channel(256).0,
+            scans: broadcast::channel(1024).0,
+            scanning: AtomicBool::new(false),
+            scan_cancel: AtomicBool::new(false),
+            shutdown: watch::channel(false).0,
+            addr: Mutex::new(None),
+        }
+    }
+
+    fn broadcast_event(&self, m: &ServerMessage) {
+        if let Ok(s) = serde_json::to_string(m) {
+            let _ = self.events.send(s.into());
+        }
+    }
+
+    fn lease_holder(&self) -> Option<u32> {
+        *self.lease.lock().expect("lease lock")
+    }
+}
+
+/// The router.
+pub fn router(state: Arc<AppState>) -> Router {
+    let web = tower_http::services::ServeDir::new(&state.cfg.web_dir).append_index_html_on_directories(true);
+    Router::new()
+        .route("/ws", get(ws_upgrade))
+        .route("/api/status", get(status))
+        .route("/api/scene", get(scene_json))
+        .route("/api/records", get(records_list))
+        .route("/api/records/{name}", get(record_get))
+        .route("/metrics", get(metrics))
+        .fallback_service(web)
+        .with_state(state)
+}
+
+async fn status(State(st): State<Arc<AppState>>) -> Response {
+    let snap = st.shared.snapshot.lock().map(|s| s.clone());
+    let Ok(s) = snap else {
+        return StatusCode::INTERNAL_SERVER_ERROR.into_response();
+    };
+    let m = &st.shared.metrics;
+    let body = serde_json::json!({
+        "scene": st.scene.file.name,
+        "uptime_s": st.shared.start.elapsed().as_secs_f64(),
+        "clients": st.net.clients.load(Relaxed),
+        "lease": st.lease_holder(),
+        "phase": s.phase,
+        "stage": s.stage,
+        "volts": s.volts,
+        "busy": st.shared.busy.load(Relaxed) || st.scanning.load(Relaxed),
+        "loop": {
+            "ticks": m.ticks.load(Relaxed),
+            "overruns": m.overruns.load(Relaxed),
+            "realtime": m.realtime.load(Relaxed) == 1,
+            "period_error_p50_bound_s": m.period_error.quantile_bound(0.5),
+            "period_error_p99_bound_s": m.period_error.quantile_bound(0.99),
+            "period_error_max_s": m.period_error.max(),
+        },
+        "telemetry_sent": st.net.sent.load(Relaxed),
+        "dropped_frames": st.net.dropped_frames.load(Relaxed),
+    });
+    axum::Json(body).into_response()
+}
+
+async fn scene_json(State(st): State<Arc<AppState>>) -> Response {
+    axum::Json(&st.scene.file).into_response()
+}
+
+async fn records_list(State(st): State<Arc<AppState>>) -> Response {
+    match records::list(&st.cfg.data_dir) {
+        Ok(l) => axum::Json(l).into_response(),
+        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("listing records: {e}")).into_response(),
+    }
+}
+
+async fn record_get(State(st): State<Arc<AppState>>, UrlPath(name): UrlPath<String>) -> Response {
+    if !records::valid_name(&name) {
+        return (
+            StatusCode::BAD_REQUEST,
+            "a record name is letters, digits, '-', '_' and '.', with no path",
+        )
+            .into_response();
+    }
+    match tokio::fs::read(st.cfg.data_dir.join(&name)).await {
+        Ok(bytes) => {
+            let ctype = match name.rsplit('.').next() {
+                Some("json") => "application/json",
+                Some("csv") => "text/csv",
+                _ => "application/octet-stream",
+            };
+            (
+                [
+                    (header::CONTENT_TYPE, ctype.to_string()),
+                    (header::CONTENT_DISPOSITION, format!("attachment; filename=\"{name}\"")),
+                ],
+                bytes,
+            )
+                .into_response()
+        }
+        Err(_) => (StatusCode::NOT_FOUND, format!("no record named {name}")).into_response(),
+    }
+}
+
+async fn metrics(State(st): State<Arc<AppState>>) -> Response {
+    (
+        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        render(&st.shared.metrics, &st.net, st.shared.now_ns()),
+    )
+        .into_response()
+}
+
+#[derive(Debug, serde::Deserialize)]
+struct WsQuery {
+    token: Option<String>,
+}
+
+/// Whether a browser origin may connect: the server's own addresses, or one allowed by flag.
+fn origin_allowed(st: &AppState, origin: &str) -> bool {
+    if st.cfg.allow_origins.iter().any(|o| o == origin) {
+        return true;
+    }
+    let Some(addr) = *st.addr.lock().expect("addr lock") else {
+        return false;
+    };
+    let port = addr.port();
+    [
+        format!("http://127.0.0.1:{port}"),
+        format!("http://localhost:{port}"),
+        format!("http://{addr}"),
+    ]
+    .iter()
+    .any(|o| o == origin)
+}
+
+async fn ws_upgrade(
+    State(st): State<Arc<AppState>>,
+    ConnectInfo(peer): ConnectInfo<SocketAddr>,
+    Query(q): Query<WsQuery>,
+    headers: HeaderMap,
+    ws: WebSocketUpgrade,
+) -> Response {
+    if *st.shutdown.borrow() {
+        return (StatusCode::SERVICE_UNAVAILABLE, "shutting down").into_response();
+    }
+    if let Some(origin) = headers.get(header::ORIGIN) {
+        let ok = origin.to_str().map(|o| origin_allowed(&st, o)).unwrap_or(false);
+        if !ok {
+            return (StatusCode::FORBIDDEN, "origin not allowed; see --allow-origin").into_response();
+        }
+    }
+    let role = match q.token.as_deref() {
+        Some(t) if t == st.cfg.operator_token => Role::Operator,
+        Some(t) if st.cfg.viewer_token.as_deref() == Some(t) => Role::Viewer,
+        None if st.cfg.viewer_token.is_none() => Role::Viewer,
+        _ => return (StatusCode::UNAUTHORIZED, "invalid or missing token").into_response(),
+    };
+    if st.net.clients.load(Relaxed) >= st.cfg.max_clients {
+        return (StatusCode::SERVICE_UNAVAILABLE, "too many clients (--max-clients)").into_response();
+    }
+    // A hard cap well above the protocol's limit: larger messages are refused with a typed error
+    // by the session; only absurd ones (over 16× the limit) close the connection.
+    let cap = (st.cfg.max_message_bytes * 16).max(64 * 1024);
+    ws.max_message_size(cap)
+        .max_frame_size(cap)
+        .on_upgrade(move |socket| session(st, socket, role, peer))
+}
+
+/// Per-connection state for message handling.
+struct Client {
+    id: u32,
+    role: Role,
+    streams: HashSet<WsStream>,
+    tokens: f64,
+    last: Instant,
+}
+
+/// One WebSocket connection: a receive loop handling commands, and a send loop merging replies,
+/// events, telemetry and scans (a slow client skips telemetry and is told how many frames).
+async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketAddr) {
+    st.net.clients.fetch_add(1, Relaxed);
+    let id = st.next_client.fetch_add(1, Relaxed);
+    tracing::info!("client {id} ({role:?}) connected from {peer}");
+    let (mut sink, mut stream) = socket.split();
+    let (reply_tx, mut reply_rx) = mpsc::channel::<Utf8Bytes>(64);
+    let (streams_tx, mut streams_rx) = watch::channel(HashSet::<WsStream>::new());
+    let welcome = ServerMessage::Welcome {
+        version: WS_VERSION,
+        client: id,
+        role,
+        lease: st.lease_holder(),
+        scene: st.scene.file.name.clone(),
+        tick_hz: 1.0 / st.params.tick,
+    };
+    let _ = reply_tx.try_send(to_text(&welcome));
+
+    let send_state = st.clone();
+    let mut send = tokio::spawn(async move {
+        let st = send_state;
+        let mut events = st.events.subscribe();
+        let mut telemetry = st.telemetry.subscribe();
+        let mut scans = st.scans.subscribe();
+        let mut shutdown = st.shutdown.subscribe();
+        let mut wants = HashSet::new();
+        loop {
+            let msg = tokio::select! {
+                r = reply_rx.recv() => match r {
+                    Some(m) => Message::Text(m),
+                    None => break,
+                },
+                r = events.recv() => match r {
+                    Ok(m) => Message::Text(m),
+                    Err(broadcast::error::RecvError::Lagged(n)) => lagged(&st, n),
+                    Err(broadcast::error::RecvError::Closed) => break,
+                },
+                r = telemetry.recv(), if wants.contains(&WsStream::Tip) => match r {
+                    Ok(m) => {
+                        st.net.sent.fetch_add(1, Relaxed);
+                        Message::Text(m)
+                    }
+                    Err(broadcast::error::RecvError::Lagged(n)) => lagged(&st, n),
+                    Err(broadcast::error::RecvError::Closed) => break,
+                },
+                r = scans.recv(), if wants.contains(&WsStream::Scan) => match r {
+                    Ok(m) => m,
+                    Err(broadcast::error::RecvError::Lagged(n)) => lagged(&st, n),
+                    Err(broadcast::error::RecvError::Closed) => break,
+                },
+                r = streams_rx.changed() => {
+                    if r.is_err() {
+                        break;
+                    }
+                    wants = streams_rx.borrow_and_update().clone();
+                    // Drop what queued before the subscription.
+                    telemetry = telemetry.resubscribe();
+                    scans = scans.resubscribe();
+                    continue;
+                }
+                _ = shutdown.changed() => {
+                    let bye = to_text(&ServerMessage::Shutdown { reason: "server shutting down".into() });
+                    let _ = sink.send(Message::Text(bye)).await;
+                    let _ = sink
+                        .send(Message::Close(Some(CloseFrame { code: 1001, reason: "server shutting down".into() })))
+                        .await;
+                    break;
+                }
+            };
+            if sink.send(msg).await.is_err() {
+                break;
+            }
+        }
+    });
+
+    let mut client = Client {
+        id,
+        role,
+        streams: HashSet::new(),
+        tokens: st.cfg.max_rate,
+        last: Instant::now(),
+    };
+    let mut recv_shutdown = st.shutdown.subscribe();
+    loop {
+        let next = tokio::select! {
+            m = stream.next() => m,
+            _ = recv_shutdown.changed() => break,
+            _ = &mut send => break,
+        };
+        let Some(Ok(msg)) = next else { break };
+        let text = match msg {
+            Message::Text(t) => t,
+            Message::Binary(b) => {
+                reply(
+                    &st,
+                    &reply_tx,
+                    None,
+                    ErrorCode::Malformed,
+                    format!("binary frames ({} bytes) are not commands; send JSON text", b.len()),
+                );
+                continue;
+            }
+            Message::Close(_) => break,
+            _ => continue,
+        };
+        // Rate limit: a token bucket of `max_rate` per second, burst `max_rate`.
+        let now = Instant::now();
+        client.tokens =
+            (client.tokens + now.duration_since(client.last).as_secs_f64() * st.cfg.max_rate).min(st.cfg.max_rate);
+        client.last = now;
+        if client.tokens < 1.0 {
+            reply(
+                &st,
+                &reply_tx,
+                None,
+                ErrorCode::RateLimited,
+                format!(
+                    "more than {} messages per second; this one was dropped",
+                    st.cfg.max_rate
+                ),
+            );
+            continue;
+        }
+        client.tokens -= 1.0;
+        if text.len() > st.cfg.max_message_bytes {
+            reply(
+                &st,
+                &reply_tx,
+                None,
+                ErrorCode::TooLarge,
+                format!(
+                    "message of {} bytes; allowed: at most {} bytes",
+                    text.len(),
+                    st.cfg.max_message_bytes
+                ),
+            );
+            continue;
+        }
+        let parsed: ClientMessage = match serde_json::from_str(text.as_str()) {
+            Ok(m) => m,
+            Err(e) => {
+                reply(
+                    &st,
+                    &reply_tx,
+                    None,
+                    ErrorCode::Malformed,
+                    format!("not a valid command: {e}"),
+                );
+                continue;
+            }
+        };
+        let cid = parsed.id();
+        match handle(&st, &mut client, parsed) {
+            Ok(()) => {
+                let _ = reply_tx.try_send(to_text(&ServerMessage::Ok { id: cid }));
+                let _ = streams_tx.send(client.streams.clone());
+            }
+            Err(r) => reply(&st, &reply_tx, cid, r.code, r.message),
+        }
+    }
+    // Disconnected: the lease goes with it.
+    {
+        let mut lease = st.lease.lock().expect("lease lock");
+        if *lease == Some(id) {
+            *lease = None;
+            drop(lease);
+            st.broadcast_event(&ServerMessage::Lease { holder: None });
+        }
+    }
+    for s in &client.streams {
+        counter(&st, *s).fetch_sub(1, Relaxed);
+    }
+    drop(reply_tx);
+    let _ = tokio::time::timeout(Duration::from_secs(2), send).await;
+    st.net.clients.fetch_sub(1, Relaxed);
+    tracing::info!("client {id} disconnected");
+}
+
+fn lagged(st: &AppState, n: u64) -> Message {
+    st.net.dropped_frames.fetch_add(n, Relaxed);
+    Message::Text(to_text(&ServerMessage::Lagged { skipped: n }))
+}
+
+fn to_text(m: &ServerMessage) -> Utf8Bytes {
+    serde_json::to_string(m).unwrap_or_else(|_| "{}".into()).into()
+}
+
+fn reply(st: &AppState, tx: &mpsc::Sender<Utf8Bytes>, id: Option<u32>, code: ErrorCode, message: String) {
+    st.net.refused.fetch_add(1, Relaxed);
+    let _ = tx.try_send(to_text(&ServerMessage::Error { id, code, message }));
+}
+
+fn counter(st: &AppState, s: WsStream) -> &AtomicU64 {
+    match s {
+        WsStream::Tip => &st.tip_subscribers,
+        WsStream::Scan => &st.scan_subscribers,
+    }
+}
+
+fn require_lease(st: &AppState, c: &Client) -> Result<(), Refusal> {
+    if c.role != Role::Operator {
+        return Err(Refusal::new(
+            ErrorCode::Forbidden,
+            "viewers cannot command; connect with the operator token",
+        ));
+    }
+    if st.lease_holder() != Some(c.id) {
+        return Err(Refusal::new(
+            ErrorCode::NoLease,
+            "this command needs the control lease: send take_lease first",
+        ));
+    }
+    if *st.shutdown.borrow() {
+        return Err(Refusal::new(ErrorCode::ShuttingDown, "the server is shutting down"));
+    }
+    Ok(())
+}
+
+fn busy(st: &AppState) -> Result<(), Refusal> {
+    if st.shared.busy.load(Relaxed) {
+        return Err(Refusal::new(ErrorCode::Busy, "a push is running; send stop first"));
+    }
+    if st.scanning.load(Relaxed) {
+        return Err(Refusal::new(ErrorCode::Busy, "a scan is running; send stop first"));
+    }
+    Ok(())
+}
+
+/// Handles one valid-JSON command.
+fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<(), Refusal> {
+    match msg {
+        ClientMessage::Ping { .. } => Ok(()),
+        ClientMessage::Subscribe { streams, .. } => {
+            let new: HashSet<WsStream> = streams.into_iter().collect();
+            for s in c.streams.difference(&new) {
+                counter(st, *s).fetch_sub(1, Relaxed);
+            }
+            for s in new.difference(&c.streams) {
+                counter(st, *s).fetch_add(1, Relaxed);
+            }
+            c.streams = new;
+            Ok(())
+        }
+        ClientMessage::TakeLease { .. } => {
+            if c.role != Role::Operator {
+                return Err(Refusal::new(
+                    ErrorCode::Forbidden,
+                    "viewers cannot take the lease; connect with the operator token",
+                ));
+            }
+            let mut lease = st.lease.lock().expect("lease lock");
+            match *lease {
+                Some(h) if h == c.id => Ok(()),
+                Some(h) => Err(Refusal::new(
+                    ErrorCode::LeaseHeld,
+                    format!("client {h} holds the lease"),
+                )),
+                None => {
+                    *lease = Some(c.id);
+                    drop(lease);
+                    st.broadcast_event(&ServerMessage::Lease { holder: Some(c.id) });
+                    Ok(())
+                }
+            }
+        }
+        ClientMessage::ReleaseLease { .. } => {
+            let mut lease = st.lease.lock().expect("lease lock");
+            if *lease != Some(c.id) {
+                return Err(Refusal::new(ErrorCode::NoLease, "this client does not hold the lease"));
+            }
+            *lease = None;
+            drop(lease);
+            st.broadcast_event(&ServerMessage::Lease { holder: None });
+            Ok(())
+        }
+        ClientMessage::Stop { .. } => {
+            require_lease(st, c)?;
+            st.scan_cancel.store(true, Relaxed);
+            if st.shared.commands.push(LoopCommand::Stop).is_err() {
+                st.shared.metrics.dropped_commands.fetch_add(1, Relaxed);
+                return Err(Refusal::new(
+                    ErrorCode::Busy,
+                    "the control loop's command queue is full; try again",
+                ));
+            }
+            Ok(())
+        }
+        ClientMessage::Push {
+            particle,
+            distance_um,
+            direction_deg,
+            to_x_um,
+            to_y_um,
+            ..
+        } => {
+            require_lease(st, c)?;
+            let f = &st.scene.file;
+            let range = f.stage.range_um;
+            let target = push_target(distance_um, direction_deg, to_x_um, to_y_um, range)?;
+            if !f.particles.iter().any(|p| p.id == particle) {
+                let ids: Vec<String> = f.particles.iter().map(|p| p.id.to_string()).collect();
+                return Err(Refusal::new(
+                    ErrorCode::UnknownParticle,
+                    format!("particle = {particle}: no such particle; ids: {}", ids.join(", ")),
+                ));
+            }
+            busy(st)?;
+            st.shared.busy.store(true, Relaxed);
+            let st2 = st.clone();
+            tokio::task::spawn_blocking(move || prepare_push(&st2, particle, target));
+            Ok(())
+        }
+        ClientMessage::Scan {
+            centre_x_um,
+            centre_y_um,
+            size_um,
+            pixels,
+            ..
+        } => {
+            require_lease(st, c)?;
+            let f = &st.scene.file;
+            let range = f.stage.range_um;
+            let base = ScanParams::from_scene(&st.scene);
+            let size = number("size_um", size_um.unwrap_or(base.size * 1e6), 0.0, range, true, "µm")? * 1e-6;
+            let cx = number(
+                "centre_x_um",
+                centre_x_um.unwrap_or(base.centre_x * 1e6),
+                0.0,
+                range,
+                false,
+                "µm",
+            )? * 1e-6;
+            let cy = number(
+                "centre_y_um",
+                centre_y_um.unwrap_or(base.centre_y * 1e6),
+                0.0,
+                range,
+                false,
+                "µm",
+            )? * 1e-6;
+            let px = number(
+                "pixels",
+                pixels.map_or(base.pixels.min(256) as f64, f64::from),
+                8.0,
+                512.0,
+                false,
+                "",
+            )? as usize;
+            if cx - size / 2.0 < 0.0
+                || cy - size / 2.0 < 0.0
+                || cx + size / 2.0 > range * 1e-6
+                || cy + size / 2.0 > range * 1e-6
+            {
+                return Err(Refusal::new(
+                    ErrorCode::OutOfRange,
+                    format!(
+                        "the scan square (centre ({}, {}) µm, side {} µm) must lie within the stage, [0, {range}] µm",
+                        cx * 1e6,
+                        cy * 1e6,
+                        size * 1e6
+                    ),
+                ));
+            }
+            busy(st)?;
+            st.scanning.store(true, Relaxed);
+            st.scan_cancel.store(false, Relaxed);
+            let params = ScanParams {
+                centre_x: cx,
+                centre_y: cy,
+                size,
+                pixels: px,
+                line_rate: st.cfg.scan_line_hz,
+                ..base
+            };
+            let st2 = st.clone();
+            std::thread::spawn(move || run_scan(&st2, params));
+            Ok(())
+        }
+    }
+}
+
+/// The sample as it is now (the loop's snapshot of the particles).
+fn surface_now(st: &AppState) -> Surface {
+    let particles = st
+        .shared
+        .snapshot
+        .lock()
+        .map(|s| s.particles.clone())
+        .unwrap_or_default();
+    Surface {
+        topography: st.scene.topography(),
+        spheres: particles.iter().map(|&(_, x, y, r)| Sphere { x, y, r }).collect(),
+    }
+}
+
+fn run_done_failed(st: &AppState, particle: u32, outcome: &str, failure: String) {
+    st.shared.busy.store(false, Relaxed);
+    st.broadcast_event(&ServerMessage::RunDone {
+        particle,
+        outcome: outcome.into(),
+        failure: Some(failure),
+        estimate: [f64::NAN, f64::NAN],
+        record: None,
+    });
+}
+
+/// Off the loop: locate the particle in a quick local scan, plan, predict; then hand the job
+/// to the loop.
+fn prepare_push(st: &AppState, particle: u32, target: PushTarget) {
+    let f = &st.scene.file;
+    let Some(part) = f.particles.iter().find(|p| p.id == particle) else {
+        return;
+    };
+    let tip = Tip::from_scene(&st.scene);
+    let surface = surface_now(st);
+    let nominal = st
+        .shared
+        .snapshot
+        .lock()
+        .ok()
+        .and_then(|s| s.particles.iter().find(|p| p.0 == particle).map(|p| (p.1, p.2)))
+        .unwrap_or((part.x_um * 1e-6, part.y_um * 1e-6));
+    let radius_hint = part.radius_nm * 1e-9;
+    let size = (12.0 * radius_hint).clamp(4e-6, 20e-6);
+    let base = ScanParams::from_scene(&st.scene);
+    let local = ScanParams {
+        centre_x: nominal.0,
+        centre_y: nominal.1,
+        size,
+        pixels: 128,
+        ..base
+    };
+    let img = scan(&surface, tip, local);
+    let located = match localize(&img, &tip, nominal.0, nominal.1, 0.25 * size) {
+        Ok(l) => l,
+        Err(e) => {
+            return run_done_failed(
+                st,
+                particle,
+                "plan",
+                format!("particle {particle} not found in a scan: {e}"),
+            );
+        }
+    };
+    let from = (located.x, located.y);
+    let to = match target {
+        PushTarget::Distance { distance, direction } => {
+            (from.0 + direction.0 * distance, from.1 + direction.1 * distance)
+        }
+        PushTarget::Point(p) => p,
+    };
+    let range = f.stage.range_um * 1e-6;
+    let overview = ScanParams {
+        centre_x: range / 2.0,
+        centre_y: range / 2.0,
+        size: range,
+        pixels: 128,
+        ..base
+    };
+    let obstacles: Vec<Obstacle> = find_particles(&scan(&surface, tip, overview), &tip)
+        .iter()
+        .filter(|l| (l.x - from.0).hypot(l.y - from.1) > located.radius.max(1e-6))
+        .map(|l| Obstacle {
+            x: l.x,
+            y: l.y,
+            radius: l.radius,
+        })
+        .collect();
+    let planner = Planner {
+        radius: located.radius,
+        max_push: f.strategy.max_push_um * 1e-6,
+        clearance: f.strategy.clearance_um * 1e-6,
+        run_up: f.strategy.approach_distance_um * 1e-6 + 2.0 * located.radius,
+        range,
+    };
+    let legs = match planner.plan(from, to, &obstacles) {
+        Ok(l) => l,
+        Err(e) => return run_done_failed(st, particle, "plan", e.to_string()),
+    };
+    let prepared = match Prepared::new(&st.scene, particle, located.radius, &st.params) {
+        Ok(p) => p,
+        Err(e) => return run_done_failed(st, particle, "error", e.to_string()),
+    };
+    let run = st.shared.runs.fetch_add(1, Relaxed) + 1;
+    let job = PushJob {
+        run,
+        particle,
+        legs,
+        prepared,
+    };
+    if st.shared.commands.push(LoopCommand::Push(Box::new(job))).is_err() {
+        st.shared.metrics.dropped_commands.fetch_add(1, Relaxed);
+        run_done_failed(st, particle, "error", "the control loop's command queue is full".into());
+    }
+}
+
+/// A scan on its own thread: lines at the scan line rate to the `scan` stream, then the GSF
+/// record. Tapping never moves particles: it images a snapshot of the sample.
+fn run_scan(st: &AppState, params: ScanParams) {
+    let scan_id = st.next_scan.fetch_add(1, Relaxed);
+    let surface = surface_now(st);
+    let tip = Tip::from_scene(&st.scene);
+    let img0 = params.empty_image();
+    let producing = st.scan_subscribers.load(Relaxed) > 0;
+    let send_text = |m: &ServerMessage| {
+        if st.scan_subscribers.load(Relaxed) > 0 {
+            let _ = st.scans.send(Message::Text(to_text(m)));
+        }
+    };
+    send_text(&ServerMessage::ScanStart {
+        scan: scan_id,
+        xres: img0.xres as u32,
+        yres: img0.yres as u32,
+        x_offset: img0.x_offset,
+        y_offset: img0.y_offset,
+        x_real: img0.x_real,
+        y_real: img0.y_real,
+    });
+    let _ = producing;
+    let mut scanner = Scanner::new(&surface, tip, params);
+    let line_period = Duration::from_secs_f64(1.0 / params.line_rate);
+    let mut next = Instant::now();
+    let mut cancelled = false;
+    while let Some(line) = scanner.next_line() {
+        if st.scan_cancel.load(Relaxed) || *st.shutdown.borrow() {
+            cancelled = true;
+            break;
+        }
+        if st.scan_subscribers.load(Relaxed) > 0 {
+            let heights: Vec<f32> = line.heights.iter().map(|&h| h as f32).collect();
+            let h = ScanLineHeader {
+                scan: scan_id,
+                line: line.index as u32,
+                xres: heights.len() as u32,
+                yres: params.pixels as u32,
+                y: line.y,
+            };
+            let _ = st.scans.send(Message::Binary(Bytes::from(h.encode(&heights))));
+        }
+        next += line_period;
+        let now = Instant::now();
+        if next > now {
+            std::thread::sleep(next - now);
+        }
+    }
+    let mut record = None;
+    if !cancelled {
+        let img = scanner.finish();
+        let stem = format!("scan-{}-{scan_id}", records::unix_now());
+        let mut gsf = Vec::new();
+        if write_gsf(&mut gsf, &img, &stem).is_ok() && std::fs::create_dir_all(&st.cfg.data_dir).is_ok() {
+            let gsf_name = format!("{stem}.gsf");
+            let summary = serde_json::json!({
+                "schema": "scan-record",
+                "scan": scan_id,
+                "gsf": gsf_name,
+                "xres": img.xres, "yres": img.yres,
+                "x_offset": img.x_offset, "y_offset": img.y_offset,
+                "x_real": img.x_real, "y_real": img.y_real,
+                "z_range": img.z_range(),
+                "particles": find_particles(&img, &tip).iter().map(|l| serde_json::json!({"x": l.x, "y": l.y, "radius": l.radius})).collect::<Vec<_>>(),
+            });
+            let json_name = format!("{stem}.json");
+            let ok = write_atomic(&st.cfg.data_dir.join(&gsf_name), &gsf)
+                .and_then(|()| write_atomic(&st.cfg.data_dir.join(&json_name), summary.to_string().as_bytes()));
+            match ok {
+                Ok(()) => record = Some(gsf_name),
+                Err(e) => tracing::error!("records: scan {scan_id}: {e}"),
+            }
+        }
+    }
+    send_text(&ServerMessage::ScanDone { scan: scan_id, record });
+    st.scanning.store(false, Relaxed);
+}
+
+/// Telemetry at `telemetry_hz`, produced only while someone subscribes to `tip`; and loop
+/// events forwarded to everyone.
+pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiver<(LoopEvent, Option<String>)>) {
+    let mut tick = tokio::time::interval(Duration::from_secs_f64(1.0 / st.cfg.telemetry_hz));
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let mut shutdown = st.shutdown.subscribe();
+    loop {
+        tokio::select! {
+            _ = tick.tick() => {
+                if st.tip_subscribers.load(Relaxed) == 0 {
+                    continue;
+                }
+                let s = match st.shared.snapshot.lock() {
+                    Ok(s) => Telemetry { t: s.t, stage: s.stage, volts: s.volts, phase: if st.scanning.load(Relaxed) && s.phase == "idle" { "scanning".into() } else { s.phase.into() }, estimate: s.estimate },
+                    Err(_) => continue,
+                };
+                let _ = st.telemetry.send(to_text(&ServerMessage::Telemetry(s)));
+            }
+            e = events.recv() => {
+                let Some((LoopEvent::RunDone { particle, outcome, failure, estimate, .. }, record)) = e else { break };
+                st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate, record });
+            }
+            _ = shutdown.changed() => {
+                // Forward what the recorder still finishes (the aborted run's record).
+                while let Some((LoopEvent::RunDone { particle, outcome, failure, estimate, .. }, record)) = events.recv().await {
+                    st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate, record });
+                }
+                break;
+            }
+        }
+    }
+}

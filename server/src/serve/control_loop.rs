@@ -1,0 +1,532 @@
+//! The control loop: a dedicated OS thread stepping the instrument at 1 kHz (up to 10 kHz) on an
+//! absolute-deadline schedule — sleep until shortly before the deadline, then spin
+//! (spin_sleep) — with SCHED_FIFO and CPU affinity when the system grants them (logged fallback
+//! when not). Tokio's timer rounds to the millisecond, which is why this is not a task.
+//!
+//! Each tick, in order, each phase timed:
+//! 1. *control*: take pending commands (a bounded lock-free queue, never blocking) and the
+//!    newest haptic sample; tick the strategy of the running push, if any;
+//! 2. *physics*: advance the instrument one tick to the strategy's stage target;
+//! 3. *publish*: the force to the haptic bridge (iceoryx2), the telemetry snapshot (a
+//!    `try_lock`: skipped, never waited for, if a reader holds it), the trace row to the
+//!    recorder (a bounded lock-free queue).
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::Relaxed};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use crossbeam_queue::ArrayQueue;
+use nanopush_proto::haptic::{FORCE_FEEDBACK_SERVICE, ForceFeedback, HAPTIC_STATE_SERVICE, HapticState};
+
+use crate::control::{Leg, Prepared, PushRequest, Strategy, StrategyParams};
+use crate::instrument::{Afm, Reading};
+use crate::physics::sensor::Sensor;
+use crate::serve::metrics::LoopMetrics;
+
+/// A push prepared off the loop (localization, model prediction, plan), ready to run.
+#[derive(Debug, Clone)]
+pub struct PushJob {
+    /// Run number (for the record's name).
+    pub run: u64,
+    /// Particle id.
+    pub particle: u32,
+    /// The legs, in order.
+    pub legs: Vec<Leg>,
+    /// The model prediction and geometry.
+    pub prepared: Prepared,
+}
+
+/// What the network side asks of the loop.
+#[derive(Debug)]
+pub enum LoopCommand {
+    /// Start a push.
+    Push(Box<PushJob>),
+    /// Stop the running push: the tip retracts.
+    Stop,
+    /// Finish: stop any push, retract, release the haptic force, end the thread.
+    Shutdown,
+}
+
+/// What the loop reports back.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LoopEvent {
+    /// A push ended.
+    RunDone {
+        /// Run number.
+        run: u64,
+        /// Particle.
+        particle: u32,
+        /// `ok` or a failure code.
+        outcome: &'static str,
+        /// The failure in words.
+        failure: Option<String>,
+        /// Estimated final centre (m).
+        estimate: [f64; 2],
+        /// True final centre (m), from the simulator, for the record.
+        truth: [f64; 2],
+        /// Legs run.
+        legs: usize,
+    },
+}
+
+/// One trace row for the recorder.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RecordMsg {
+    /// A push begins.
+    Begin {
+        /// Run number.
+        run: u64,
+        /// Particle.
+        particle: u32,
+    },
+    /// One tick of it.
+    Row {
+        /// Leg (1-based).
+        leg: u32,
+        /// Time (s).
+        t: f64,
+        /// Phase.
+        phase: &'static str,
+        /// Stage (m).
+        stage: [f64; 3],
+        /// Reading (V).
+        volts: f64,
+        /// Estimated displacement of this leg (m).
+        estimate: f64,
+    },
+    /// It ended (its summary follows as a [`LoopEvent::RunDone`]).
+    End {
+        /// Run number.
+        run: u64,
+    },
+}
+
+/// The latest state, for telemetry.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Snapshot {
+    /// Loop time (s).
+    pub t: f64,
+    /// Stage (m).
+    pub stage: [f64; 3],
+    /// Reading (V).
+    pub volts: f64,
+    /// Phase (`idle` when nothing runs).
+    pub phase: &'static str,
+    /// Estimated particle centre during a push (m).
+    pub estimate: Option<[f64; 2]>,
+    /// The particles where they are (id, x, y, radius; m) — the sample, which scans image.
+    pub particles: Vec<(u32, f64, f64, f64)>,
+    /// Ticks so far.
+    pub tick: u64,
+}
+
+/// State shared between the loop thread and the network side.
+#[derive(Debug)]
+pub struct Shared {
+    /// Commands in.
+    pub commands: ArrayQueue<LoopCommand>,
+    /// Events out.
+    pub events: ArrayQueue<LoopEvent>,
+    /// Trace rows out.
+    pub records: ArrayQueue<RecordMsg>,
+    /// Latest state.
+    pub snapshot: Mutex<Snapshot>,
+    /// Counters.
+    pub metrics: LoopMetrics,
+    /// A push runs (or was accepted and not yet finished).
+    pub busy: AtomicBool,
+    /// The loop thread ended.
+    pub finished: AtomicBool,
+    /// Start of the server (for ages and telemetry time).
+    pub start: Instant,
+    /// Runs started.
+    pub runs: AtomicU64,
+}
+
+impl Shared {
+    /// Shared state with the given queue capacities.
+    pub fn new(afm: &Afm) -> Shared {
+        let particles = afm.particles().iter().map(|p| (p.id, p.x, p.y, p.radius)).collect();
+        Shared {
+            commands: ArrayQueue::new(64),
+            events: ArrayQueue::new(64),
+            records: ArrayQueue::new(1 << 16),
+            snapshot: Mutex::new(Snapshot {
+                t: 0.0,
+                stage: [0.0; 3],
+                volts: 0.0,
+                phase: "idle",
+                estimate: None,
+                particles,
+                tick: 0,
+            }),
+            metrics: LoopMetrics::default(),
+            busy: AtomicBool::new(false),
+            finished: AtomicBool::new(false),
+            start: Instant::now(),
+            runs: AtomicU64::new(0),
+        }
+    }
+
+    /// Nanoseconds since start.
+    pub fn now_ns(&self) -> u64 {
+        self.start.elapsed().as_nanos() as u64
+    }
+}
+
+/// Loop settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoopConfig {
+    /// Tick rate (Hz), 1 kHz by default, at most 10 kHz.
+    pub rate_hz: f64,
+    /// Ask for SCHED_FIFO and affinity.
+    pub realtime: bool,
+    /// CPU to pin to (None: the last one).
+    pub cpu: Option<usize>,
+    /// Connect the haptic link over iceoryx2.
+    pub haptic: bool,
+}
+
+/// Asks for SCHED_FIFO priority 50 and pins the thread to `cpu`; logs what was granted.
+fn make_realtime(cpu: Option<usize>) -> bool {
+    // SAFETY: plain libc calls on the calling thread with valid, initialized arguments.
+    unsafe {
+        let ncpu = libc::sysconf(libc::_SC_NPROCESSORS_ONLN).max(1) as usize;
+        let cpu = cpu.unwrap_or(ncpu - 1).min(ncpu - 1);
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        libc::CPU_SET(cpu, &mut set);
+        if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
+            tracing::warn!(
+                "control loop: CPU affinity to core {cpu} refused ({}); running unpinned",
+                std::io::Error::last_os_error()
+            );
+        } else {
+            tracing::info!("control loop: pinned to core {cpu}");
+        }
+        let param = libc::sched_param { sched_priority: 50 };
+        if libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) != 0 {
+            tracing::warn!(
+                "control loop: SCHED_FIFO refused ({}); running SCHED_OTHER with spin-sleep only",
+                std::io::Error::last_os_error()
+            );
+            false
+        } else {
+            tracing::info!("control loop: SCHED_FIFO priority 50");
+            true
+        }
+    }
+}
+
+/// The haptic link's two ports; absent when iceoryx2 could not be set up.
+struct HapticLink {
+    _node: iceoryx2::node::Node<iceoryx2::service::ipc::Service>,
+    publisher: iceoryx2::port::publisher::Publisher<iceoryx2::service::ipc::Service, ForceFeedback, ()>,
+    subscriber: iceoryx2::port::subscriber::Subscriber<iceoryx2::service::ipc::Service, HapticState, ()>,
+}
+
+impl HapticLink {
+    fn open() -> Result<HapticLink, Box<dyn std::error::Error>> {
+        use iceoryx2::prelude::*;
+        let node = NodeBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()?;
+        let force = node
+            .service_builder(&FORCE_FEEDBACK_SERVICE.try_into()?)
+            .publish_subscribe::<ForceFeedback>()
+            .open_or_create()?;
+        let state = node
+            .service_builder(&HAPTIC_STATE_SERVICE.try_into()?)
+            .publish_subscribe::<HapticState>()
+            .open_or_create()?;
+        Ok(HapticLink {
+            publisher: force.publisher_builder().create()?,
+            subscriber: state.subscriber_builder().create()?,
+            _node: node,
+        })
+    }
+
+    fn publish(&self, f: ForceFeedback) {
+        if let Ok(sample) = self.publisher.loan_uninit() {
+            let _ = sample.write_payload(f).send();
+        }
+    }
+
+    /// Drains the subscriber; the newest sample, if any arrived.
+    fn newest(&self) -> Option<HapticState> {
+        let mut last = None;
+        while let Ok(Some(s)) = self.subscriber.receive() {
+            last = Some(*s);
+        }
+        last
+    }
+}
+
+/// A push in progress.
+struct Active {
+    job: Box<PushJob>,
+    leg: usize,
+    strategy: Strategy,
+    estimate: (f64, f64),
+    stop: bool,
+}
+
+/// Everything the loop owns.
+pub struct ControlLoop {
+    afm: Afm,
+    params: StrategyParams,
+    sensor: Sensor,
+    k_z: f64,
+    target: [f64; 3],
+    active: Option<Active>,
+    shutting_down: bool,
+}
+
+impl ControlLoop {
+    /// A loop over `afm` with the scene's strategy settings; `k_z` (N/m) turns the measured
+    /// deflection into the force sent to the haptic bridge.
+    pub fn new(afm: Afm, params: StrategyParams, sensor: Sensor, k_z: f64) -> ControlLoop {
+        let target = afm.clone().read().stage;
+        ControlLoop {
+            afm,
+            params,
+            sensor,
+            k_z,
+            target,
+            active: None,
+            shutting_down: false,
+        }
+    }
+
+    fn start_leg(&mut self, job: Box<PushJob>, leg: usize, estimate: (f64, f64), reading: &Reading) -> Active {
+        let l = job.legs[leg];
+        let request = PushRequest {
+            id: job.particle,
+            particle: estimate,
+            radius: job.prepared.radius,
+            direction: l.direction(),
+            distance: l.length(),
+            pause: None,
+        };
+        let task = job.prepared.task(&request, self.params.tick);
+        let strategy = Strategy::new(self.params, task, job.prepared.hxy(), reading);
+        Active {
+            job,
+            leg,
+            strategy,
+            estimate,
+            stop: false,
+        }
+    }
+
+    fn finish(&mut self, shared: &Shared, a: Active, outcome: &'static str, failure: Option<String>) {
+        let truth = self
+            .afm
+            .particles()
+            .iter()
+            .find(|p| p.id == a.job.particle)
+            .map_or([f64::NAN; 2], |p| [p.x, p.y]);
+        let _ = shared.records.push(RecordMsg::End { run: a.job.run });
+        let _ = shared.events.push(LoopEvent::RunDone {
+            run: a.job.run,
+            particle: a.job.particle,
+            outcome,
+            failure,
+            estimate: [a.estimate.0, a.estimate.1],
+            truth,
+            legs: a.leg + 1,
+        });
+        shared.busy.store(false, Relaxed);
+    }
+
+    /// The control phase of one tick: commands, then the strategy. Returns the stage target.
+    fn control(&mut self, shared: &Shared, reading: &Reading) -> [f64; 3] {
+        while let Some(cmd) = shared.commands.pop() {
+            match cmd {
+                LoopCommand::Push(job) => {
+                    if self.active.is_some() || self.shutting_down {
+                        shared.metrics.dropped_commands.fetch_add(1, Relaxed);
+                        continue;
+                    }
+                    let _ = shared.records.push(RecordMsg::Begin {
+                        run: job.run,
+                        particle: job.particle,
+                    });
+                    let start = job.legs.first().map_or((0.0, 0.0), |l| l.from);
+                    let a = self.start_leg(job, 0, start, reading);
+                    self.active = Some(a);
+                }
+                LoopCommand::Stop => {
+                    if let Some(a) = &mut self.active {
+                        a.stop = true;
+                        a.strategy.abort("stop requested by the operator", reading.t);
+                    }
+                }
+                LoopCommand::Shutdown => {
+                    self.shutting_down = true;
+                    if let Some(a) = &mut self.active {
+                        a.stop = true;
+                        a.strategy.abort("server shutting down", reading.t);
+                    }
+                }
+            }
+        }
+        if let Some(mut a) = self.active.take() {
+            self.target = a.strategy.tick(reading);
+            if !a.strategy.done() {
+                self.active = Some(a);
+            } else {
+                a.estimate = a.strategy.summary.estimated_particle;
+                let failure = a.strategy.summary.failure;
+                let last = a.leg + 1 == a.job.legs.len();
+                match failure {
+                    Some(f) => self.finish(shared, a, f.code(), Some(f.to_string())),
+                    None if last || a.stop => self.finish(shared, a, "ok", None),
+                    None => {
+                        let (job, leg, est) = (a.job, a.leg + 1, a.estimate);
+                        self.active = Some(self.start_leg(job, leg, est, reading));
+                    }
+                }
+            }
+        }
+        self.target
+    }
+
+    /// Runs the loop on this thread until shutdown (see the module docs).
+    pub fn run(mut self, shared: Arc<Shared>, cfg: LoopConfig) {
+        let rt = cfg.realtime && make_realtime(cfg.cpu);
+        shared.metrics.realtime.store(rt as u64, Relaxed);
+        let haptic = if cfg.haptic {
+            match HapticLink::open() {
+                Ok(h) => Some(h),
+                Err(e) => {
+                    tracing::warn!("haptic link (iceoryx2) unavailable: {e}; running without force feedback");
+                    None
+                }
+            }
+        } else {
+            None
+        };
+        let period = Duration::from_secs_f64(1.0 / cfg.rate_hz);
+        let sleeper = spin_sleep::SpinSleeper::default();
+        let mut reading = self.afm.read();
+        let mut deadline = Instant::now() + period;
+        let mut tick: u64 = 0;
+        loop {
+            let now = Instant::now();
+            if deadline > now {
+                sleeper.sleep(deadline - now);
+            }
+            let woke = Instant::now();
+            let m = &shared.metrics;
+            m.period_error
+                .record(woke.saturating_duration_since(deadline).as_secs_f64());
+
+            // Control.
+            if let Some(h) = &haptic
+                && h.newest().is_some()
+            {
+                m.haptic_samples.fetch_add(1, Relaxed);
+                m.haptic_last_ns.store(shared.now_ns(), Relaxed);
+            }
+            let target = self.control(&shared, &reading);
+            let t_control = Instant::now();
+            m.control.record((t_control - woke).as_secs_f64());
+
+            // Physics.
+            match self.afm.step(target) {
+                Ok(r) => reading = r,
+                Err(e) => {
+                    tracing::error!("instrument step failed: {e}");
+                    if let Some(a) = self.active.take() {
+                        self.finish(&shared, a, "error", Some(e.to_string()));
+                    }
+                    reading = self.afm.read();
+                    self.target = reading.stage;
+                }
+            }
+            let t_physics = Instant::now();
+            m.physics.record((t_physics - t_control).as_secs_f64());
+
+            // Publish.
+            let deflection = self.sensor.deflection(reading.volts);
+            if let Some(h) = &haptic {
+                h.publish(ForceFeedback {
+                    seq: tick,
+                    time_ns: shared.now_ns(),
+                    force: self.k_z * deflection,
+                    tip_z: reading.stage[2],
+                    active: 1,
+                    reserved: 0,
+                });
+            }
+            let phase_name = match &self.active {
+                Some(a) => a.strategy.phase.name(),
+                None => "idle",
+            };
+            if let Some(a) = &self.active {
+                let row = RecordMsg::Row {
+                    leg: a.leg as u32 + 1,
+                    t: reading.t,
+                    phase: phase_name,
+                    stage: reading.stage,
+                    volts: reading.volts,
+                    estimate: a.strategy.summary.estimated_distance,
+                };
+                if shared.records.push(row).is_err() {
+                    m.dropped_rows.fetch_add(1, Relaxed);
+                }
+            }
+            if let Ok(mut s) = shared.snapshot.try_lock() {
+                s.t = reading.t;
+                s.stage = reading.stage;
+                s.volts = reading.volts;
+                s.phase = phase_name;
+                s.estimate = self.active.as_ref().map(|a| {
+                    [
+                        a.strategy.summary.estimated_particle.0,
+                        a.strategy.summary.estimated_particle.1,
+                    ]
+                });
+                s.tick = tick;
+                for (slot, p) in s.particles.iter_mut().zip(self.afm.particles()) {
+                    *slot = (p.id, p.x, p.y, p.radius);
+                }
+            }
+            m.publish.record(t_physics.elapsed().as_secs_f64());
+            m.ticks.fetch_add(1, Relaxed);
+            tick += 1;
+
+            deadline += period;
+            let done = Instant::now();
+            if done > deadline {
+                m.overruns.fetch_add(1, Relaxed);
+                // Keep the absolute schedule, but never try to catch up more than one tick.
+                if done > deadline + period {
+                    deadline = done + period;
+                }
+            }
+            if self.shutting_down && self.active.is_none() {
+                break;
+            }
+        }
+        if let Some(h) = &haptic {
+            h.publish(ForceFeedback {
+                seq: tick,
+                time_ns: shared.now_ns(),
+                force: 0.0,
+                tip_z: reading.stage[2],
+                active: 0,
+                reserved: 0,
+            });
+        }
+        if let Ok(mut s) = shared.snapshot.lock() {
+            s.phase = "stopped";
+            s.stage = reading.stage;
+        }
+        shared.finished.store(true, Relaxed);
+        tracing::info!(
+            "control loop ended after {tick} ticks; tip at z = {:.3} µm",
+            reading.stage[2] * 1e6
+        );
+    }
+}

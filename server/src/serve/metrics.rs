@@ -1,0 +1,262 @@
+//! Loop metrics, summed lock-free in the control loop and rendered as Prometheus text by a
+//! non-real-time thread: fixed-bucket histograms of atomic counters (no allocation, no lock).
+
+use std::fmt::Write as _;
+use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+
+/// Bucket upper bounds (s) of the period-error and compute-time histograms: 0.5 µs to 10 ms.
+pub const BUCKETS: [f64; 20] = [
+    0.5e-6, 1e-6, 2e-6, 3e-6, 5e-6, 7.5e-6, 10e-6, 15e-6, 20e-6, 30e-6, 50e-6, 75e-6, 100e-6, 200e-6, 500e-6, 1e-3,
+    2e-3, 5e-3, 10e-3, 100e-3,
+];
+
+/// A histogram of non-negative seconds with [`BUCKETS`].
+#[derive(Debug, Default)]
+pub struct Histogram {
+    counts: [AtomicU64; BUCKETS.len() + 1],
+    sum_ns: AtomicU64,
+    max_ns: AtomicU64,
+}
+
+impl Histogram {
+    /// Records one value (s); negative values count as 0.
+    pub fn record(&self, seconds: f64) {
+        let v = seconds.max(0.0);
+        let i = BUCKETS.iter().position(|&b| v <= b).unwrap_or(BUCKETS.len());
+        self.counts[i].fetch_add(1, Relaxed);
+        let ns = (v * 1e9) as u64;
+        self.sum_ns.fetch_add(ns, Relaxed);
+        self.max_ns.fetch_max(ns, Relaxed);
+    }
+
+    /// Number of values.
+    pub fn count(&self) -> u64 {
+        self.counts.iter().map(|c| c.load(Relaxed)).sum()
+    }
+
+    /// Largest value (s).
+    pub fn max(&self) -> f64 {
+        self.max_ns.load(Relaxed) as f64 * 1e-9
+    }
+
+    /// The upper bound of the bucket holding quantile `q` (s): a bound, at bucket resolution.
+    pub fn quantile_bound(&self, q: f64) -> f64 {
+        let counts: Vec<u64> = self.counts.iter().map(|c| c.load(Relaxed)).collect();
+        let total: u64 = counts.iter().sum();
+        if total == 0 {
+            return 0.0;
+        }
+        let target = (q * total as f64).ceil().max(1.0) as u64;
+        let mut acc = 0;
+        for (i, c) in counts.iter().enumerate() {
+            acc += c;
+            if acc >= target {
+                return BUCKETS.get(i).copied().unwrap_or_else(|| self.max());
+            }
+        }
+        self.max()
+    }
+
+    /// Appends the histogram in Prometheus text format.
+    fn render(&self, out: &mut String, name: &str, help: &str, header: bool, label: Option<(&str, &str)>) {
+        let lbl = |extra: &str| match (label, extra.is_empty()) {
+            (Some((k, v)), true) => format!("{{{k}=\"{v}\"}}"),
+            (Some((k, v)), false) => format!("{{{k}=\"{v}\",{extra}}}"),
+            (None, true) => String::new(),
+            (None, false) => format!("{{{extra}}}"),
+        };
+        if header {
+            let _ = writeln!(out, "# HELP {name} {help}");
+            let _ = writeln!(out, "# TYPE {name} histogram");
+        }
+        let mut acc = 0;
+        for (i, b) in BUCKETS.iter().enumerate() {
+            acc += self.counts[i].load(Relaxed);
+            let _ = writeln!(out, "{name}_bucket{} {acc}", lbl(&format!("le=\"{b:e}\"")));
+        }
+        acc += self.counts[BUCKETS.len()].load(Relaxed);
+        let _ = writeln!(out, "{name}_bucket{} {acc}", lbl("le=\"+Inf\""));
+        let _ = writeln!(
+            out,
+            "{name}_sum{} {:e}",
+            lbl(""),
+            self.sum_ns.load(Relaxed) as f64 * 1e-9
+        );
+        let _ = writeln!(out, "{name}_count{} {acc}", lbl(""));
+    }
+}
+
+/// Everything the loop counts.
+#[derive(Debug, Default)]
+pub struct LoopMetrics {
+    /// Lateness of each tick's start after its deadline (s).
+    pub period_error: Histogram,
+    /// Compute time of the physics phase (instrument step) (s).
+    pub physics: Histogram,
+    /// Compute time of the control phase (strategy, commands) (s).
+    pub control: Histogram,
+    /// Compute time of the publish phase (haptic, telemetry, recording) (s).
+    pub publish: Histogram,
+    /// Ticks run.
+    pub ticks: AtomicU64,
+    /// Ticks whose work ended after the next deadline.
+    pub overruns: AtomicU64,
+    /// Commands dropped because the loop's queue was full.
+    pub dropped_commands: AtomicU64,
+    /// Trace rows dropped because the recorder's queue was full (should stay 0).
+    pub dropped_rows: AtomicU64,
+    /// Last haptic sample's receive time, ns since start (0 = never).
+    pub haptic_last_ns: AtomicU64,
+    /// Haptic samples received.
+    pub haptic_samples: AtomicU64,
+    /// 1 when SCHED_FIFO was granted.
+    pub realtime: AtomicU64,
+}
+
+/// Gauges and counters the network side keeps.
+#[derive(Debug, Default)]
+pub struct NetMetrics {
+    /// Connected WebSocket clients.
+    pub clients: AtomicU64,
+    /// Telemetry frames clients skipped (broadcast lag), summed.
+    pub dropped_frames: AtomicU64,
+    /// Messages refused with an error.
+    pub refused: AtomicU64,
+    /// Telemetry messages sent, summed over clients.
+    pub sent: AtomicU64,
+}
+
+/// Renders both sets as a Prometheus exposition; `now_ns` is the time since start.
+pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64) -> String {
+    let mut s = String::with_capacity(8192);
+    l.period_error.render(
+        &mut s,
+        "nanopush_loop_period_error_seconds",
+        "Lateness of each control tick after its absolute deadline.",
+        true,
+        None,
+    );
+    let name = "nanopush_loop_compute_seconds";
+    let help = "Compute time per control tick, by phase.";
+    l.physics.render(&mut s, name, help, true, Some(("phase", "physics")));
+    l.control.render(&mut s, name, help, false, Some(("phase", "control")));
+    l.publish.render(&mut s, name, help, false, Some(("phase", "publish")));
+    let counter = |s: &mut String, name: &str, help: &str, v: u64| {
+        let _ = writeln!(s, "# HELP {name} {help}");
+        let _ = writeln!(s, "# TYPE {name} counter");
+        let _ = writeln!(s, "{name} {v}");
+    };
+    let gauge = |s: &mut String, name: &str, help: &str, v: f64| {
+        let _ = writeln!(s, "# HELP {name} {help}");
+        let _ = writeln!(s, "# TYPE {name} gauge");
+        let _ = writeln!(s, "{name} {v}");
+    };
+    counter(
+        &mut s,
+        "nanopush_loop_ticks_total",
+        "Control ticks run.",
+        l.ticks.load(Relaxed),
+    );
+    counter(
+        &mut s,
+        "nanopush_loop_overruns_total",
+        "Ticks whose work ended after the next deadline.",
+        l.overruns.load(Relaxed),
+    );
+    counter(
+        &mut s,
+        "nanopush_loop_dropped_commands_total",
+        "Commands dropped because the loop's queue was full.",
+        l.dropped_commands.load(Relaxed),
+    );
+    counter(
+        &mut s,
+        "nanopush_record_dropped_rows_total",
+        "Trace rows dropped because the recorder fell behind.",
+        l.dropped_rows.load(Relaxed),
+    );
+    gauge(
+        &mut s,
+        "nanopush_loop_realtime",
+        "1 when the loop thread runs SCHED_FIFO.",
+        l.realtime.load(Relaxed) as f64,
+    );
+    let last = l.haptic_last_ns.load(Relaxed);
+    let age = if last == 0 {
+        -1.0
+    } else {
+        now_ns.saturating_sub(last) as f64 * 1e-9
+    };
+    gauge(
+        &mut s,
+        "nanopush_haptic_link_age_seconds",
+        "Time since the last haptic sample (-1 when none has arrived).",
+        age,
+    );
+    counter(
+        &mut s,
+        "nanopush_haptic_samples_total",
+        "Haptic samples received.",
+        l.haptic_samples.load(Relaxed),
+    );
+    gauge(
+        &mut s,
+        "nanopush_clients",
+        "Connected WebSocket clients.",
+        n.clients.load(Relaxed) as f64,
+    );
+    counter(
+        &mut s,
+        "nanopush_dropped_frames_total",
+        "Telemetry frames slow clients skipped.",
+        n.dropped_frames.load(Relaxed),
+    );
+    counter(
+        &mut s,
+        "nanopush_refused_messages_total",
+        "Client messages answered with an error.",
+        n.refused.load(Relaxed),
+    );
+    counter(
+        &mut s,
+        "nanopush_telemetry_sent_total",
+        "Telemetry messages sent, summed over clients.",
+        n.sent.load(Relaxed),
+    );
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn histogram_buckets_are_cumulative_and_quantiles_bound_the_values() {
+        let h = Histogram::default();
+        for v in [0.2e-6, 0.8e-6, 4e-6, 4e-6, 12e-6, 0.5] {
+            h.record(v);
+        }
+        assert_eq!(h.count(), 6);
+        assert_eq!(h.quantile_bound(0.5), 5e-6);
+        assert_eq!(h.quantile_bound(0.8), 15e-6);
+        assert!((h.max() - 0.5).abs() < 1e-9);
+        let mut s = String::new();
+        h.render(&mut s, "x_seconds", "help", true, None);
+        assert!(s.contains("x_seconds_bucket{le=\"5e-6\"} 4\n"), "{s}");
+        assert!(s.contains("x_seconds_bucket{le=\"+Inf\"} 6\n"));
+        assert!(s.contains("x_seconds_count 6\n"));
+    }
+
+    #[test]
+    fn the_exposition_names_every_family_once() {
+        let l = LoopMetrics::default();
+        l.physics.record(3e-6);
+        let text = render(&l, &NetMetrics::default(), 1);
+        assert_eq!(
+            text.matches("# TYPE nanopush_loop_compute_seconds histogram").count(),
+            1
+        );
+        assert!(text.contains("nanopush_loop_compute_seconds_bucket{phase=\"physics\",le=\"3e-6\"} 1"));
+        assert!(text.contains("nanopush_haptic_link_age_seconds -1"));
+    }
+}

@@ -1,0 +1,125 @@
+//! `nanopush serve`: the teleoperation server — the 1 kHz control loop on its own thread, the
+//! WebSocket protocol of `proto/README.md`, roles and the control lease, metrics, recording.
+
+pub mod app;
+pub mod control_loop;
+pub mod metrics;
+pub mod records;
+pub mod validate;
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::Ordering::Relaxed;
+use std::time::{Duration, Instant};
+
+use crate::instrument::Afm;
+use crate::scene::Scene;
+use app::{AppState, ServeConfig};
+use control_loop::{ControlLoop, LoopCommand, LoopConfig, Shared};
+
+/// Why the server could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum ServeError {
+    /// Binding or serving failed.
+    #[error("{context}: {source}")]
+    Io {
+        /// What was being done.
+        context: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+}
+
+/// A running server's address and the operator's URL.
+#[derive(Debug, Clone)]
+pub struct Started {
+    /// Bound address.
+    pub addr: SocketAddr,
+    /// `http://ADDR/?token=TOKEN`.
+    pub url: String,
+}
+
+/// Runs the server until `shutdown` resolves: the control loop thread, the recorder thread and
+/// the HTTP/WebSocket side. `started` is called once the socket is bound. On shutdown the loop
+/// stops any push and retracts the tip, the haptic force is released, records are finished and
+/// flushed, then every client gets a `shutdown` message and its socket is closed.
+pub async fn run(
+    scene: Scene,
+    cfg: ServeConfig,
+    loop_cfg: LoopConfig,
+    bind: SocketAddr,
+    started: impl FnOnce(&Started),
+    shutdown: impl std::future::Future<Output = ()> + Send + 'static,
+) -> Result<(), ServeError> {
+    let tick = 1.0 / loop_cfg.rate_hz;
+    let params = scene.strategy_params(tick);
+    let base = crate::scan::ScanParams::from_scene(&scene);
+    let afm = Afm::from_scene(&scene, base.centre_x, base.centre_y, tick);
+    let shared = Arc::new(Shared::new(&afm));
+    let sensor = scene.sensor();
+    let k_z = scene.file.cantilever.stiffness_n_per_m;
+    let control = ControlLoop::new(afm, params, sensor, k_z);
+    let loop_shared = shared.clone();
+    let loop_thread = std::thread::Builder::new()
+        .name("control-loop".into())
+        .spawn(move || control.run(loop_shared, loop_cfg))
+        .map_err(|source| ServeError::Io {
+            context: "starting the control loop thread".into(),
+            source,
+        })?;
+    let (ev_tx, ev_rx) = tokio::sync::mpsc::unbounded_channel();
+    let rec_shared = shared.clone();
+    let dir = cfg.data_dir.clone();
+    let recorder = std::thread::Builder::new()
+        .name("recorder".into())
+        .spawn(move || records::run_recorder(rec_shared, dir, ev_tx))
+        .map_err(|source| ServeError::Io {
+            context: "starting the recorder thread".into(),
+            source,
+        })?;
+
+    let state = Arc::new(AppState::new(cfg, scene, shared.clone(), params));
+    let listener = tokio::net::TcpListener::bind(bind)
+        .await
+        .map_err(|source| ServeError::Io {
+            context: format!("binding {bind}"),
+            source,
+        })?;
+    let addr = listener.local_addr().map_err(|source| ServeError::Io {
+        context: "reading the bound address".into(),
+        source,
+    })?;
+    *state.addr.lock().expect("addr lock") = Some(addr);
+    let url = format!("http://{addr}/?token={}", state.cfg.operator_token);
+    started(&Started { addr, url });
+    let telemetry = tokio::spawn(app::telemetry_task(state.clone(), ev_rx));
+
+    let st = state.clone();
+    let graceful = async move {
+        shutdown.await;
+        tracing::info!("shutting down: stopping the loop and retracting the tip");
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while st.shared.commands.push(LoopCommand::Shutdown).is_err() && Instant::now() < deadline {
+            tokio::time::sleep(Duration::from_millis(1)).await;
+        }
+        while !st.shared.finished.load(Relaxed) && Instant::now() < deadline {
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+        st.scan_cancel.store(true, Relaxed);
+        let _ = tokio::task::spawn_blocking(move || {
+            let _ = recorder.join();
+            let _ = loop_thread.join();
+        })
+        .await;
+        // Let the last run_done reach the clients, then close every session.
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        let _ = st.shutdown.send(true);
+    };
+    let app = app::router(state.clone()).into_make_service_with_connect_info::<SocketAddr>();
+    let served = axum::serve(listener, app).with_graceful_shutdown(graceful).await;
+    let _ = tokio::time::timeout(Duration::from_secs(2), telemetry).await;
+    served.map_err(|source| ServeError::Io {
+        context: "serving".into(),
+        source,
+    })
+}

@@ -1,0 +1,283 @@
+//! Recording: every push and every scan is saved in the data directory — push trace CSV and
+//! JSON summary, scan GSF and JSON summary — each written to a `.partial` file and renamed, so a
+//! crash never leaves a partial record under a record's name.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::Ordering::Relaxed;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use serde::Serialize;
+
+use crate::serve::control_loop::{LoopEvent, RecordMsg, Shared};
+
+/// Seconds since the Unix epoch.
+pub fn unix_now() -> u64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs())
+}
+
+/// Writes `bytes` to `path` through `path.partial` and a rename.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let tmp = partial(path);
+    {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+    }
+    std::fs::rename(&tmp, path)
+}
+
+fn partial(path: &Path) -> PathBuf {
+    let mut s = path.as_os_str().to_owned();
+    s.push(".partial");
+    PathBuf::from(s)
+}
+
+/// One entry of `/api/records`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RecordEntry {
+    /// File name.
+    pub name: String,
+    /// `push` or `scan`.
+    pub kind: String,
+    /// Size (bytes).
+    pub bytes: u64,
+    /// Last modification (Unix seconds).
+    pub modified: u64,
+}
+
+/// Whether `name` is a record's file name: letters, digits, `-`, `_`, `.`; no path.
+pub fn valid_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= 128
+        && !name.starts_with('.')
+        && !name.ends_with(".partial")
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+}
+
+/// The finished records in `dir`, newest first.
+pub fn list(dir: &Path) -> std::io::Result<Vec<RecordEntry>> {
+    let mut out = Vec::new();
+    let rd = match std::fs::read_dir(dir) {
+        Ok(rd) => rd,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(out),
+        Err(e) => return Err(e),
+    };
+    for e in rd.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if !valid_name(&name) {
+            continue;
+        }
+        let Ok(meta) = e.metadata() else { continue };
+        if !meta.is_file() {
+            continue;
+        }
+        let kind = name.split('-').next().unwrap_or("").to_string();
+        let modified = meta
+            .modified()
+            .ok()
+            .and_then(|m| m.duration_since(UNIX_EPOCH).ok())
+            .map_or(0, |d| d.as_secs());
+        out.push(RecordEntry {
+            name,
+            kind,
+            bytes: meta.len(),
+            modified,
+        });
+    }
+    out.sort_by(|a, b| b.modified.cmp(&a.modified).then(b.name.cmp(&a.name)));
+    Ok(out)
+}
+
+/// The JSON summary of a push record.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PushSummary {
+    /// `"push-record"`.
+    pub schema: &'static str,
+    /// Run number.
+    pub run: u64,
+    /// Particle id.
+    pub particle: u32,
+    /// `ok` or the failure code.
+    pub outcome: String,
+    /// The failure in words.
+    pub failure: Option<String>,
+    /// Legs run.
+    pub legs: usize,
+    /// Estimated final centre (m).
+    pub estimate: [f64; 2],
+    /// True final centre (m), from the simulator.
+    pub truth: [f64; 2],
+    /// Trace rows written.
+    pub rows: u64,
+    /// The trace file.
+    pub trace: String,
+}
+
+struct Open {
+    run: u64,
+    particle: u32,
+    name: String,
+    file: std::io::BufWriter<std::fs::File>,
+    rows: u64,
+}
+
+/// Drains the loop's trace rows and events, writes the records, and forwards each event with
+/// its record's name. Ends when the loop has finished and everything is written.
+pub fn run_recorder(
+    shared: Arc<Shared>,
+    dir: PathBuf,
+    out: tokio::sync::mpsc::UnboundedSender<(LoopEvent, Option<String>)>,
+) {
+    if let Err(e) = std::fs::create_dir_all(&dir) {
+        tracing::error!("records: cannot create {}: {e}", dir.display());
+    }
+    let mut open: Option<Open> = None;
+    let mut done: Vec<(u64, String, u64)> = Vec::new();
+    loop {
+        let finished = shared.finished.load(Relaxed);
+        let mut events = Vec::new();
+        while let Some(e) = shared.events.pop() {
+            events.push(e);
+        }
+        while let Some(msg) = shared.records.pop() {
+            handle(&dir, msg, &mut open, &mut done);
+        }
+        for e in events {
+            let LoopEvent::RunDone {
+                run,
+                particle,
+                outcome,
+                ref failure,
+                estimate,
+                truth,
+                legs,
+            } = e;
+            let mut record = None;
+            if let Some(pos) = done.iter().position(|d| d.0 == run) {
+                let (_, trace, rows) = done.remove(pos);
+                let stem = trace.trim_end_matches(".csv").to_string();
+                let summary = PushSummary {
+                    schema: "push-record",
+                    run,
+                    particle,
+                    outcome: outcome.into(),
+                    failure: failure.clone(),
+                    legs,
+                    estimate,
+                    truth,
+                    rows,
+                    trace,
+                };
+                let json = format!("{stem}.json");
+                match serde_json::to_vec_pretty(&summary).map_err(std::io::Error::other) {
+                    Ok(bytes) => match write_atomic(&dir.join(&json), &bytes) {
+                        Ok(()) => record = Some(json),
+                        Err(e) => tracing::error!("records: writing {json}: {e}"),
+                    },
+                    Err(e) => tracing::error!("records: {e}"),
+                }
+            }
+            let _ = out.send((e, record));
+        }
+        if finished && shared.records.is_empty() && shared.events.is_empty() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    if let Some(o) = open.take() {
+        // The loop ended inside a run (it always sends End first; this is a safety net).
+        finish(&dir, o, &mut done);
+    }
+}
+
+fn handle(dir: &Path, msg: RecordMsg, open: &mut Option<Open>, done: &mut Vec<(u64, String, u64)>) {
+    match msg {
+        RecordMsg::Begin { run, particle } => {
+            if let Some(o) = open.take() {
+                finish(dir, o, done);
+            }
+            let name = format!("push-{}-r{run}-p{particle}.csv", unix_now());
+            match std::fs::File::create(partial(&dir.join(&name))) {
+                Ok(f) => {
+                    let mut file = std::io::BufWriter::new(f);
+                    let _ = writeln!(file, "leg,t_s,phase,stage_x_m,stage_y_m,stage_z_m,volts,estimate_m");
+                    *open = Some(Open {
+                        run,
+                        particle,
+                        name,
+                        file,
+                        rows: 0,
+                    });
+                }
+                Err(e) => tracing::error!("records: creating {name}: {e}"),
+            }
+        }
+        RecordMsg::Row {
+            leg,
+            t,
+            phase,
+            stage,
+            volts,
+            estimate,
+        } => {
+            if let Some(o) = open {
+                let _ = writeln!(
+                    o.file,
+                    "{leg},{t:.4},{phase},{:e},{:e},{:e},{volts:.5},{estimate:e}",
+                    stage[0], stage[1], stage[2]
+                );
+                o.rows += 1;
+            }
+        }
+        RecordMsg::End { run } => {
+            if let Some(o) = open.take() {
+                if o.run == run {
+                    finish(dir, o, done);
+                } else {
+                    *open = Some(o);
+                }
+            }
+        }
+    }
+}
+
+fn finish(dir: &Path, mut o: Open, done: &mut Vec<(u64, String, u64)>) {
+    let path = dir.join(&o.name);
+    let ok = o.file.flush().and_then(|()| o.file.get_ref().sync_all());
+    match ok.and_then(|()| std::fs::rename(partial(&path), &path)) {
+        Ok(()) => done.push((o.run, o.name, o.rows)),
+        Err(e) => tracing::error!("records: finishing {} (particle {}): {e}", o.name, o.particle),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn record_names_are_plain_file_names() {
+        assert!(valid_name("push-1700000000-r1-p1.csv"));
+        assert!(valid_name("scan-1700000000-3.gsf"));
+        for bad in ["", "../etc/passwd", "a/b", ".hidden", "x.csv.partial", "a b", "é"] {
+            assert!(!valid_name(bad), "{bad}");
+        }
+    }
+
+    #[test]
+    fn atomic_writes_leave_no_partial_file_and_lists_skip_partials() {
+        let dir = std::env::temp_dir().join(format!("nanopush-records-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        write_atomic(&dir.join("scan-1-1.json"), b"{}").unwrap();
+        std::fs::write(dir.join("push-2-r1-p1.csv.partial"), b"half").unwrap();
+        let l = list(&dir).unwrap();
+        assert_eq!(l.len(), 1);
+        assert_eq!(l[0].name, "scan-1-1.json");
+        assert_eq!(l[0].kind, "scan");
+        assert_eq!(l[0].bytes, 2);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,142 @@
+//! Checks of client commands: finite numbers, ranges, known particles. Each refusal is a typed
+//! error naming the field, the value and the allowed range.
+
+use nanopush_proto::ws::ErrorCode;
+
+/// A refused command.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Refusal {
+    /// Why, as a code.
+    pub code: ErrorCode,
+    /// In words.
+    pub message: String,
+}
+
+impl Refusal {
+    /// A refusal.
+    pub fn new(code: ErrorCode, message: impl Into<String>) -> Refusal {
+        Refusal {
+            code,
+            message: message.into(),
+        }
+    }
+}
+
+/// Checks `value` of `field` against `[lo, hi]` (or `(lo, hi]` when `lo_open`), with `unit`.
+pub fn number(field: &str, value: f64, lo: f64, hi: f64, lo_open: bool, unit: &str) -> Result<f64, Refusal> {
+    let range = format!("{}{lo}, {hi}] {unit}", if lo_open { "(" } else { "[" });
+    if !value.is_finite() {
+        return Err(Refusal::new(
+            ErrorCode::NotFinite,
+            format!("{field} = {value} is not a finite number; allowed: {range}"),
+        ));
+    }
+    let above_lo = if lo_open { value > lo } else { value >= lo };
+    if !above_lo || value > hi {
+        return Err(Refusal::new(
+            ErrorCode::OutOfRange,
+            format!("{field} = {value} is out of range; allowed: {range}"),
+        ));
+    }
+    Ok(value)
+}
+
+/// What a valid push asks for (SI).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PushTarget {
+    /// A distance (m) along a unit direction.
+    Distance {
+        /// Distance (m).
+        distance: f64,
+        /// Unit direction.
+        direction: (f64, f64),
+    },
+    /// A target point (m).
+    Point((f64, f64)),
+}
+
+/// Checks a push's numbers; `range_um` is the stage range.
+pub fn push_target(
+    distance_um: Option<f64>,
+    direction_deg: Option<f64>,
+    to_x_um: Option<f64>,
+    to_y_um: Option<f64>,
+    range_um: f64,
+) -> Result<PushTarget, Refusal> {
+    match (distance_um, to_x_um, to_y_um) {
+        (Some(d), None, None) => {
+            let d = number("distance_um", d, 0.0, range_um, true, "µm")?;
+            let deg = number(
+                "direction_deg",
+                direction_deg.unwrap_or(0.0),
+                -360.0,
+                360.0,
+                false,
+                "degrees",
+            )?;
+            let th = deg.to_radians();
+            Ok(PushTarget::Distance {
+                distance: d * 1e-6,
+                direction: (th.cos(), th.sin()),
+            })
+        }
+        (None, Some(x), Some(y)) => {
+            if direction_deg.is_some() {
+                return Err(Refusal::new(
+                    ErrorCode::Invalid,
+                    "direction_deg goes with distance_um, not with a target point",
+                ));
+            }
+            let x = number("to_x_um", x, 0.0, range_um, false, "µm")?;
+            let y = number("to_y_um", y, 0.0, range_um, false, "µm")?;
+            Ok(PushTarget::Point((x * 1e-6, y * 1e-6)))
+        }
+        _ => Err(Refusal::new(
+            ErrorCode::Invalid,
+            "give either distance_um (with direction_deg) or both to_x_um and to_y_um",
+        )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_are_checked_for_finiteness_and_range() {
+        assert_eq!(number("d", 1.0, 0.0, 100.0, true, "µm"), Ok(1.0));
+        let e = number("distance_um", f64::NAN, 0.0, 100.0, true, "µm").unwrap_err();
+        assert_eq!(e.code, ErrorCode::NotFinite);
+        assert!(e.message.contains("allowed: (0, 100] µm"), "{}", e.message);
+        let e = number("distance_um", 0.0, 0.0, 100.0, true, "µm").unwrap_err();
+        assert_eq!(e.code, ErrorCode::OutOfRange);
+        let e = number("x", 101.0, 0.0, 100.0, false, "µm").unwrap_err();
+        assert!(e.message.contains("x = 101 is out of range; allowed: [0, 100] µm"));
+    }
+
+    #[test]
+    fn a_push_is_a_distance_or_a_point_never_both() {
+        assert!(matches!(
+            push_target(Some(2.0), Some(90.0), None, None, 100.0),
+            Ok(PushTarget::Distance { distance, direction }) if (distance - 2e-6).abs() < 1e-18 && direction.1 > 0.99
+        ));
+        assert!(matches!(
+            push_target(None, None, Some(5.0), Some(6.0), 100.0),
+            Ok(PushTarget::Point(_))
+        ));
+        for bad in [
+            push_target(Some(1.0), None, Some(1.0), Some(1.0), 100.0),
+            push_target(None, None, Some(1.0), None, 100.0),
+            push_target(None, Some(3.0), Some(1.0), Some(1.0), 100.0),
+            push_target(None, None, None, None, 100.0),
+        ] {
+            assert_eq!(bad.unwrap_err().code, ErrorCode::Invalid);
+        }
+        assert_eq!(
+            push_target(Some(1.0), Some(f64::INFINITY), None, None, 100.0)
+                .unwrap_err()
+                .code,
+            ErrorCode::NotFinite
+        );
+    }
+}

@@ -1,0 +1,487 @@
+//! `nanopush serve` end to end: the real binary on a free port, driven over WebSockets with
+//! tokio-tungstenite — telemetry, a push that moves a particle, roles, the lease, bad input, the
+//! metrics exposition, and a SIGTERM in the middle of a push.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use futures_util::{SinkExt, StreamExt};
+use nanopush_e2e::{bin, workspace};
+use serde_json::{Value, json};
+use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+
+const TOKEN: &str = "e2e-operator-token";
+
+/// A server on a free port, killed on drop.
+struct Server {
+    child: Child,
+    addr: String,
+    dir: PathBuf,
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        if std::thread::panicking() {
+            // Show the server's log with the failure.
+            let log = std::fs::read_to_string(self.dir.join("server.log")).unwrap_or_default();
+            eprintln!("--- server log ---\n{log}");
+        }
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// The gold-latex scene made quick for a test: a low start height, fast approaches and travel, a
+/// short run-up and a level substrate (the push itself at the paper's 2 µm/s), so a whole push
+/// takes a few seconds of real time.
+fn fast_scene(dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(workspace().join("scenes/gold-latex-500nm.toml")).unwrap();
+    let text = text.replacen("tilt_x_mrad = 6.0", "tilt_x_mrad = 0.0", 1).replacen(
+        "roughness_rms_nm = 0.5",
+        "roughness_rms_nm = 0.0",
+        1,
+    );
+    let text = format!(
+        "{text}\n[strategy]\nstart_height_um = 1.2\napproach_speed_um_per_s = 5.0\ntravel_speed_um_per_s = 40.0\napproach_distance_um = 0.3\ndwell_ms = 2.0\n\n[scan]\ncentre_x_um = 40.0\ncentre_y_um = 32.0\nsize_um = 16.0\npixels = 32\n"
+    );
+    let path = dir.join("fast.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn start(tag: &str, extra: &[&str]) -> Server {
+    let dir = std::env::temp_dir().join(format!("nanopush-e2e-serve-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = fast_scene(&dir);
+    let records = dir.join("records");
+    let mut child = Command::new(bin("nanopush"))
+        .current_dir(workspace())
+        .args([
+            "serve",
+            "--port",
+            "0",
+            "--no-haptic",
+            "--operator-token",
+            TOKEN,
+            "--scene",
+        ])
+        .arg(&scene)
+        .arg("--data-dir")
+        .arg(&records)
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(std::fs::File::create(dir.join("server.log")).unwrap())
+        .spawn()
+        .expect("starting nanopush serve");
+    let out = child.stdout.take().unwrap();
+    let mut lines = BufReader::new(out).lines();
+    let first = lines.next().expect("a first line").unwrap();
+    let addr = first
+        .strip_prefix("nanopush serve: listening on ")
+        .unwrap_or_else(|| panic!("unexpected first line {first:?}"))
+        .to_string();
+    std::thread::spawn(move || for _ in lines {});
+    Server { child, addr, dir }
+}
+
+/// A plain HTTP/1.1 GET: status and body.
+fn http_get(addr: &str, path: &str) -> (u16, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    write!(s, "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n").unwrap();
+    let mut buf = Vec::new();
+    s.read_to_end(&mut buf).unwrap();
+    let head_end = buf.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
+    let head = String::from_utf8_lossy(&buf[..head_end]).to_string();
+    let status = head.split_whitespace().nth(1).unwrap().parse().unwrap();
+    let mut body = buf[head_end + 4..].to_vec();
+    if head.to_ascii_lowercase().contains("transfer-encoding: chunked") {
+        body = dechunk(&body);
+    }
+    (status, body)
+}
+
+fn dechunk(mut b: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    while let Some(eol) = b.windows(2).position(|w| w == b"\r\n") {
+        let n = usize::from_str_radix(std::str::from_utf8(&b[..eol]).unwrap().trim(), 16).unwrap();
+        if n == 0 {
+            break;
+        }
+        out.extend_from_slice(&b[eol + 2..eol + 2 + n]);
+        b = &b[eol + 4 + n..];
+    }
+    out
+}
+
+type Ws = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+async fn connect(addr: &str, token: Option<&str>) -> Ws {
+    let url = match token {
+        Some(t) => format!("ws://{addr}/ws?token={t}"),
+        None => format!("ws://{addr}/ws"),
+    };
+    let (ws, _) = tokio_tungstenite::connect_async(url.into_client_request().unwrap())
+        .await
+        .expect("upgrade");
+    ws
+}
+
+async fn send(ws: &mut Ws, v: Value) {
+    ws.send(Message::Text(v.to_string().into())).await.unwrap();
+}
+
+/// The next JSON message that satisfies `pred`, within `secs`.
+async fn until(ws: &mut Ws, secs: f64, pred: impl Fn(&Value) -> bool) -> Value {
+    let deadline = Instant::now() + Duration::from_secs_f64(secs);
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let msg = tokio::time::timeout(left, ws.next())
+            .await
+            .unwrap_or_else(|_| panic!("no matching message within {secs} s"))
+            .expect("socket open")
+            .expect("a frame");
+        if let Message::Text(t) = msg {
+            let v: Value = serde_json::from_str(&t).unwrap();
+            if pred(&v) {
+                return v;
+            }
+        }
+    }
+}
+
+fn is(v: &Value, ty: &str) -> bool {
+    v["type"] == ty
+}
+
+/// The reply (ok or error) to command `id`.
+async fn reply(ws: &mut Ws, id: u32) -> Value {
+    until(ws, 10.0, |v| (is(v, "ok") || is(v, "error")) && v["id"] == id).await
+}
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap()
+}
+
+#[test]
+fn a_viewer_receives_telemetry_and_cannot_command() {
+    let srv = start("viewer", &[]);
+    runtime().block_on(async {
+        let mut v = connect(&srv.addr, None).await;
+        let w = until(&mut v, 5.0, |m| is(m, "welcome")).await;
+        assert_eq!(w["role"], "viewer");
+        assert_eq!(w["tick_hz"], 1000.0);
+        send(&mut v, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
+        assert_eq!(reply(&mut v, 1).await["type"], "ok");
+        let mut n = 0;
+        let t0 = Instant::now();
+        while n < 20 {
+            let m = until(&mut v, 5.0, |m| is(m, "telemetry")).await;
+            assert!(m["volts"].as_f64().unwrap().is_finite());
+            assert_eq!(m["stage"].as_array().unwrap().len(), 3);
+            n += 1;
+        }
+        // About 60 Hz: 20 frames in 0.2-1.5 s.
+        let dt = t0.elapsed().as_secs_f64();
+        assert!((0.15..1.5).contains(&dt), "20 frames in {dt} s");
+        for (id, cmd) in [
+            (2, json!({"type": "take_lease", "id": 2})),
+            (3, json!({"type": "push", "id": 3, "particle": 1, "distance_um": 1.0})),
+        ] {
+            send(&mut v, cmd).await;
+            let r = reply(&mut v, id).await;
+            assert_eq!(r["code"], "forbidden", "{r}");
+        }
+    });
+}
+
+#[test]
+fn an_operator_pushes_a_particle_and_sees_it_move() {
+    let srv = start("push", &[]);
+    runtime().block_on(async {
+        let mut op = connect(&srv.addr, Some(TOKEN)).await;
+        assert_eq!(until(&mut op, 5.0, |m| is(m, "welcome")).await["role"], "operator");
+        send(&mut op, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
+        send(&mut op, json!({"type": "take_lease", "id": 2})).await;
+        assert_eq!(reply(&mut op, 2).await["type"], "ok");
+        send(
+            &mut op,
+            json!({"type": "push", "id": 3, "particle": 1, "distance_um": 1.0, "direction_deg": 0.0}),
+        )
+        .await;
+        assert_eq!(reply(&mut op, 3).await["type"], "ok");
+        // While it runs the telemetry shows the strategy's phases and the estimate.
+        let pushing = until(&mut op, 20.0, |m| is(m, "telemetry") && m["phase"] == "push").await;
+        assert!(pushing["estimate"].is_array());
+        let done = until(&mut op, 30.0, |m| is(m, "run_done")).await;
+        assert_eq!(done["outcome"], "ok", "{done}");
+        let est = done["estimate"].as_array().unwrap();
+        assert!((est[0].as_f64().unwrap() - 41e-6).abs() < 50e-9, "{done}");
+        // The record: the trace and the summary, with the particle's true displacement.
+        let name = done["record"].as_str().expect("a record").to_string();
+        let (status, body) = http_get(&srv.addr, &format!("/api/records/{name}"));
+        assert_eq!(status, 200);
+        let summary: Value = serde_json::from_slice(&body).unwrap();
+        let truth = summary["truth"].as_array().unwrap();
+        let moved = truth[0].as_f64().unwrap() - 40e-6;
+        assert!((moved - 1e-6).abs() < 30e-9, "moved {moved:e} m");
+        let (status, body) = http_get(
+            &srv.addr,
+            &format!("/api/records/{}", summary["trace"].as_str().unwrap()),
+        );
+        assert_eq!(status, 200);
+        let csv = String::from_utf8(body).unwrap();
+        assert!(
+            csv.lines().count() as u64 > 1000 && csv.lines().count() as u64 == summary["rows"].as_u64().unwrap() + 1
+        );
+        let (_, list) = http_get(&srv.addr, "/api/records");
+        let list: Value = serde_json::from_slice(&list).unwrap();
+        assert_eq!(list.as_array().unwrap().len(), 2, "{list}");
+    });
+}
+
+#[test]
+fn bad_messages_get_typed_errors_and_the_server_lives_on() {
+    let srv = start("bad", &["--max-message-bytes", "1024"]);
+    runtime().block_on(async {
+        let mut op = connect(&srv.addr, Some(TOKEN)).await;
+        until(&mut op, 5.0, |m| is(m, "welcome")).await;
+        let cases: Vec<(String, &str)> = vec![
+            ("{not json".into(), "malformed"),
+            (r#"{"type":"fly"}"#.into(), "malformed"),
+            (r#"{"type":"push","particle":1,"distance_um":NaN}"#.into(), "malformed"),
+            (
+                format!(r#"{{"type":"ping","pad":"{}"}}"#, "x".repeat(2000)),
+                "too_large",
+            ),
+            (
+                r#"{"type":"push","id":9,"particle":1,"distance_um":1.0}"#.into(),
+                "no_lease",
+            ),
+        ];
+        for (text, code) in cases {
+            op.send(Message::Text(text.clone().into())).await.unwrap();
+            let e = until(&mut op, 5.0, |m| is(m, "error")).await;
+            assert_eq!(e["code"], code, "{text:.60}: {e}");
+        }
+        op.send(Message::Binary(vec![1, 2, 3].into())).await.unwrap();
+        assert_eq!(until(&mut op, 5.0, |m| is(m, "error")).await["code"], "malformed");
+        send(&mut op, json!({"type": "take_lease", "id": 1})).await;
+        assert_eq!(reply(&mut op, 1).await["type"], "ok");
+        for (id, cmd, code, words) in [
+            (
+                2,
+                json!({"type": "push", "id": 2, "particle": 1, "distance_um": 500.0}),
+                "out_of_range",
+                "allowed: (0, 100] µm",
+            ),
+            (
+                3,
+                json!({"type": "push", "id": 3, "particle": 1, "distance_um": 1e308, "direction_deg": 0}),
+                "out_of_range",
+                "distance_um",
+            ),
+            (
+                4,
+                json!({"type": "push", "id": 4, "particle": 1, "distance_um": 1.0, "direction_deg": 1e3}),
+                "out_of_range",
+                "[-360, 360]",
+            ),
+            (
+                5,
+                json!({"type": "push", "id": 5, "particle": 77, "distance_um": 1.0}),
+                "unknown_particle",
+                "ids: 1, 2, 3",
+            ),
+            (
+                6,
+                json!({"type": "push", "id": 6, "particle": 1, "distance_um": 1.0, "to_x_um": 3.0, "to_y_um": 3.0}),
+                "invalid",
+                "either",
+            ),
+            (
+                7,
+                json!({"type": "push", "id": 7, "particle": 1, "to_x_um": -1.0, "to_y_um": 3.0}),
+                "out_of_range",
+                "to_x_um",
+            ),
+            (
+                8,
+                json!({"type": "scan", "id": 8, "pixels": 4}),
+                "out_of_range",
+                "pixels",
+            ),
+            (
+                9,
+                json!({"type": "scan", "id": 9, "centre_x_um": 1.0, "size_um": 10.0}),
+                "out_of_range",
+                "within the stage",
+            ),
+        ] {
+            send(&mut op, cmd).await;
+            let r = reply(&mut op, id).await;
+            assert_eq!(r["code"], code, "{r}");
+            assert!(r["message"].as_str().unwrap().contains(words), "{r}");
+        }
+        // Rate limit: 50 messages per second; a burst of 80 pings sees some refused.
+        for _ in 0..80 {
+            send(&mut op, json!({"type": "ping"})).await;
+        }
+        let limited = until(&mut op, 5.0, |m| is(m, "error") && m["code"] == "rate_limited").await;
+        assert!(limited["message"].as_str().unwrap().contains("50"));
+        tokio::time::sleep(Duration::from_millis(1100)).await;
+        send(&mut op, json!({"type": "ping", "id": 99})).await;
+        assert_eq!(reply(&mut op, 99).await["type"], "ok");
+    });
+    let (status, body) = http_get(&srv.addr, "/api/status");
+    assert_eq!(status, 200);
+    let s: Value = serde_json::from_slice(&body).unwrap();
+    assert!(s["loop"]["ticks"].as_u64().unwrap() > 100);
+}
+
+#[test]
+fn two_operators_contend_and_exactly_one_holds_the_lease() {
+    let srv = start("lease", &[]);
+    runtime().block_on(async {
+        let mut a = connect(&srv.addr, Some(TOKEN)).await;
+        let mut b = connect(&srv.addr, Some(TOKEN)).await;
+        let ida = until(&mut a, 5.0, |m| is(m, "welcome")).await["client"]
+            .as_u64()
+            .unwrap();
+        until(&mut b, 5.0, |m| is(m, "welcome")).await;
+        send(&mut a, json!({"type": "take_lease", "id": 1})).await;
+        let ra = reply(&mut a, 1).await;
+        assert_eq!(ra["type"], "ok");
+        // Everyone sees who holds it.
+        let seen = until(&mut b, 5.0, |m| is(m, "lease")).await;
+        assert_eq!(seen["holder"].as_u64(), Some(ida));
+        send(&mut b, json!({"type": "take_lease", "id": 1})).await;
+        let rb = reply(&mut b, 1).await;
+        assert_eq!(rb["code"], "lease_held", "{rb}");
+        // B cannot release what it does not hold, nor push.
+        send(&mut b, json!({"type": "release_lease", "id": 2})).await;
+        assert_eq!(reply(&mut b, 2).await["code"], "no_lease");
+        // A leaves: the lease is free, and B takes it.
+        a.close(None).await.unwrap();
+        drop(a);
+        let freed = until(&mut b, 5.0, |m| is(m, "lease") && m["holder"].is_null()).await;
+        assert!(freed["holder"].is_null());
+        send(&mut b, json!({"type": "take_lease", "id": 3})).await;
+        assert_eq!(reply(&mut b, 3).await["type"], "ok");
+    });
+}
+
+#[test]
+fn origins_and_tokens_are_checked_at_the_upgrade() {
+    let srv = start("origin", &["--viewer-token", "viewer-secret"]);
+    runtime().block_on(async {
+        let url = format!("ws://{}/ws?token={TOKEN}", srv.addr);
+        let mut req = url.clone().into_client_request().unwrap();
+        req.headers_mut()
+            .insert("Origin", "http://evil.example".parse().unwrap());
+        let e = tokio_tungstenite::connect_async(req).await.unwrap_err();
+        assert!(e.to_string().contains("403"), "{e}");
+        let mut req = url.into_client_request().unwrap();
+        let own = format!("http://{}", srv.addr);
+        req.headers_mut().insert("Origin", own.parse().unwrap());
+        assert!(tokio_tungstenite::connect_async(req).await.is_ok());
+        // With a viewer token set, a viewer without it (or with a wrong one) is refused.
+        for url in [
+            format!("ws://{}/ws", srv.addr),
+            format!("ws://{}/ws?token=nope", srv.addr),
+        ] {
+            let e = tokio_tungstenite::connect_async(url).await.unwrap_err();
+            assert!(e.to_string().contains("401"), "{e}");
+        }
+        let mut v = connect(&srv.addr, Some("viewer-secret")).await;
+        assert_eq!(until(&mut v, 5.0, |m| is(m, "welcome")).await["role"], "viewer");
+    });
+}
+
+#[test]
+fn metrics_pass_promtool() {
+    let srv = start("metrics", &[]);
+    std::thread::sleep(Duration::from_millis(300));
+    let (status, body) = http_get(&srv.addr, "/metrics");
+    assert_eq!(status, 200);
+    let text = String::from_utf8(body).unwrap();
+    for family in [
+        "nanopush_loop_period_error_seconds_bucket",
+        "nanopush_loop_compute_seconds_bucket{phase=\"physics\"",
+        "nanopush_loop_overruns_total",
+        "nanopush_haptic_link_age_seconds",
+        "nanopush_clients",
+        "nanopush_dropped_frames_total",
+    ] {
+        assert!(text.contains(family), "missing {family}");
+    }
+    let mut child = Command::new("promtool")
+        .args(["check", "metrics"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("promtool (Debian package prometheus; `make test` installs it)");
+    child.stdin.take().unwrap().write_all(text.as_bytes()).unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "promtool: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn sigterm_mid_push_retracts_the_tip_and_completes_every_record() {
+    let mut srv = start("sigterm", &[]);
+    let records = srv.dir.join("records");
+    runtime().block_on(async {
+        let mut op = connect(&srv.addr, Some(TOKEN)).await;
+        until(&mut op, 5.0, |m| is(m, "welcome")).await;
+        send(&mut op, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
+        send(&mut op, json!({"type": "take_lease", "id": 2})).await;
+        assert_eq!(reply(&mut op, 2).await["type"], "ok");
+        send(
+            &mut op,
+            json!({"type": "push", "id": 3, "particle": 1, "distance_um": 5.0}),
+        )
+        .await;
+        assert_eq!(reply(&mut op, 3).await["type"], "ok");
+        until(&mut op, 20.0, |m| is(m, "telemetry") && m["phase"] == "push").await;
+        // SAFETY: sending a signal to our own child process.
+        unsafe { libc::kill(srv.child.id() as i32, libc::SIGTERM) };
+        let done = until(&mut op, 20.0, |m| is(m, "run_done")).await;
+        assert_eq!(done["outcome"], "stopped", "{done}");
+        until(&mut op, 20.0, |m| is(m, "shutdown")).await;
+    });
+    let status = srv.child.wait().unwrap();
+    assert!(status.success(), "exit {status:?}");
+    let names: Vec<String> = std::fs::read_dir(&records)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(names.iter().all(|n| !n.ends_with(".partial")), "{names:?}");
+    let json_name = names.iter().find(|n| n.ends_with(".json")).expect("a summary");
+    let summary: Value = serde_json::from_slice(&std::fs::read(records.join(json_name)).unwrap()).unwrap();
+    assert_eq!(summary["outcome"], "stopped");
+    let csv = std::fs::read_to_string(records.join(summary["trace"].as_str().unwrap())).unwrap();
+    assert_eq!(csv.lines().count() as u64, summary["rows"].as_u64().unwrap() + 1);
+    // The tip ended retracted: the last rows climb back to the start height above the substrate
+    // that parking detected (the first z minus ~1.2 µm, plus 1.2 µm).
+    let z = |line: &str| line.split(',').nth(5).unwrap().parse::<f64>().unwrap();
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    let start_z = z(rows[0]);
+    let end_z = z(rows.last().unwrap());
+    let last_phase = rows.last().unwrap().split(',').nth(2).unwrap();
+    assert!(matches!(last_phase, "retract" | "done"), "{last_phase}");
+    assert!((end_z - start_z).abs() < 20e-9, "start z {start_z:e}, end z {end_z:e}");
+}
