@@ -141,88 +141,86 @@ pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64) -> String {
     l.physics.render(&mut s, name, help, true, Some(("phase", "physics")));
     l.control.render(&mut s, name, help, false, Some(("phase", "control")));
     l.publish.render(&mut s, name, help, false, Some(("phase", "publish")));
-    let counter = |s: &mut String, name: &str, help: &str, v: u64| {
-        let _ = writeln!(s, "# HELP {name} {help}");
-        let _ = writeln!(s, "# TYPE {name} counter");
-        let _ = writeln!(s, "{name} {v}");
-    };
-    let gauge = |s: &mut String, name: &str, help: &str, v: f64| {
-        let _ = writeln!(s, "# HELP {name} {help}");
-        let _ = writeln!(s, "# TYPE {name} gauge");
-        let _ = writeln!(s, "{name} {v}");
-    };
-    counter(
-        &mut s,
-        "nanopush_loop_ticks_total",
-        "Control ticks run.",
-        l.ticks.load(Relaxed),
-    );
-    counter(
-        &mut s,
-        "nanopush_loop_overruns_total",
-        "Ticks whose work ended after the next deadline.",
-        l.overruns.load(Relaxed),
-    );
-    counter(
-        &mut s,
-        "nanopush_loop_dropped_commands_total",
-        "Commands dropped because the loop's queue was full.",
-        l.dropped_commands.load(Relaxed),
-    );
-    counter(
-        &mut s,
-        "nanopush_record_dropped_rows_total",
-        "Trace rows dropped because the recorder fell behind.",
-        l.dropped_rows.load(Relaxed),
-    );
-    gauge(
-        &mut s,
-        "nanopush_loop_realtime",
-        "1 when the loop thread runs SCHED_FIFO.",
-        l.realtime.load(Relaxed) as f64,
-    );
     let last = l.haptic_last_ns.load(Relaxed);
     let age = if last == 0 {
         -1.0
     } else {
         now_ns.saturating_sub(last) as f64 * 1e-9
     };
-    gauge(
-        &mut s,
-        "nanopush_haptic_link_age_seconds",
-        "Time since the last haptic sample (-1 when none has arrived).",
-        age,
-    );
-    counter(
-        &mut s,
-        "nanopush_haptic_samples_total",
-        "Haptic samples received.",
-        l.haptic_samples.load(Relaxed),
-    );
-    gauge(
-        &mut s,
-        "nanopush_clients",
-        "Connected WebSocket clients.",
-        n.clients.load(Relaxed) as f64,
-    );
-    counter(
-        &mut s,
-        "nanopush_dropped_frames_total",
-        "Telemetry frames slow clients skipped.",
-        n.dropped_frames.load(Relaxed),
-    );
-    counter(
-        &mut s,
-        "nanopush_refused_messages_total",
-        "Client messages answered with an error.",
-        n.refused.load(Relaxed),
-    );
-    counter(
-        &mut s,
-        "nanopush_telemetry_sent_total",
-        "Telemetry messages sent, summed over clients.",
-        n.sent.load(Relaxed),
-    );
+    // (name, help, type, value)
+    let scalars: [(&str, &str, &str, f64); 11] = [
+        (
+            "nanopush_loop_ticks_total",
+            "Control ticks run.",
+            "counter",
+            l.ticks.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_loop_overruns_total",
+            "Ticks whose work ended after the next deadline.",
+            "counter",
+            l.overruns.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_loop_dropped_commands_total",
+            "Commands dropped because the loop's queue was full.",
+            "counter",
+            l.dropped_commands.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_record_dropped_rows_total",
+            "Trace rows dropped because the recorder fell behind.",
+            "counter",
+            l.dropped_rows.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_loop_realtime",
+            "1 when the loop thread runs SCHED_FIFO.",
+            "gauge",
+            l.realtime.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_haptic_link_age_seconds",
+            "Time since the last haptic sample (-1 when none has arrived).",
+            "gauge",
+            age,
+        ),
+        (
+            "nanopush_haptic_samples_total",
+            "Haptic samples received.",
+            "counter",
+            l.haptic_samples.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_clients",
+            "Connected WebSocket clients.",
+            "gauge",
+            n.clients.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_dropped_frames_total",
+            "Telemetry frames slow clients skipped.",
+            "counter",
+            n.dropped_frames.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_refused_messages_total",
+            "Client messages answered with an error.",
+            "counter",
+            n.refused.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_telemetry_sent_total",
+            "Telemetry messages sent, summed over clients.",
+            "counter",
+            n.sent.load(Relaxed) as f64,
+        ),
+    ];
+    for (name, help, kind, v) in scalars {
+        let _ = writeln!(s, "# HELP {name} {help}");
+        let _ = writeln!(s, "# TYPE {name} {kind}");
+        let _ = writeln!(s, "{name} {v}");
+    }
     s
 }
 

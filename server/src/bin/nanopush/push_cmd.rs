@@ -56,14 +56,6 @@ pub struct PushArgs {
 const UM: f64 = 1e-6;
 const TICK: f64 = 1e-3;
 
-fn parse_point(s: &str) -> anyhow::Result<(f64, f64)> {
-    let parsed = s.split_once(',').and_then(|(x, y)| {
-        let (x, y) = (x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?);
-        (x.is_finite() && y.is_finite()).then_some((x, y))
-    });
-    parsed.with_context(|| format!("--to-um {s:?}: expected X_UM,Y_UM, two numbers in µm such as 60,45"))
-}
-
 /// What the operator asked for, checked.
 struct Request {
     id: u32,
@@ -108,7 +100,7 @@ fn check(a: &PushArgs, scene: &Scene) -> anyhow::Result<Request> {
             }
         }
         (None, Some(s)) => {
-            let (x, y) = parse_point(s)?;
+            let (x, y) = crate::units::parse_point_um("--to-um", s, "60,45")?;
             if !((0.0..=range).contains(&x) && (0.0..=range).contains(&y)) {
                 bail!("--to-um {x},{y} is outside the stage; allowed: [0, {range}] µm in x and y");
             }

@@ -41,15 +41,6 @@ pub struct ScanArgs {
 
 const UM: f64 = 1e-6;
 
-/// `--locate X_UM,Y_UM` as two finite numbers (µm).
-fn parse_point(s: &str) -> anyhow::Result<(f64, f64)> {
-    let parsed = s.split_once(',').and_then(|(x, y)| {
-        let (x, y) = (x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?);
-        (x.is_finite() && y.is_finite()).then_some((x, y))
-    });
-    parsed.with_context(|| format!("--locate {s:?}: expected X_UM,Y_UM, two numbers in µm such as 50,50"))
-}
-
 /// Writes through a temporary file renamed into place, so a failure never leaves a partial file
 /// under the requested name.
 fn write_atomic(
@@ -94,7 +85,11 @@ pub fn run(a: &ScanArgs) -> anyhow::Result<String> {
             a.out.display()
         );
     }
-    let point = a.locate.as_deref().map(parse_point).transpose()?;
+    let point = a
+        .locate
+        .as_deref()
+        .map(|p| crate::units::parse_point_um("--locate", p, "50,50"))
+        .transpose()?;
     let scene = crate::load_scene(a.scene.as_ref())?;
     let mut p = ScanParams::from_scene(&scene);
     if let Some(n) = a.size {
