@@ -30,6 +30,16 @@ pub fn eng(value: f64, unit: &str) -> String {
     format!("{:.4} {prefix}{unit}", value / scale)
 }
 
+/// A `X_UM,Y_UM` argument of flag `flag` as two finite numbers (µm); `example` shows the form.
+pub fn parse_point_um(flag: &str, s: &str, example: &str) -> anyhow::Result<(f64, f64)> {
+    use anyhow::Context as _;
+    let parsed = s.split_once(',').and_then(|(x, y)| {
+        let (x, y) = (x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?);
+        (x.is_finite() && y.is_finite()).then_some((x, y))
+    });
+    parsed.with_context(|| format!("{flag} {s:?}: expected X_UM,Y_UM, two numbers in µm such as {example}"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::eng;
@@ -41,14 +51,4 @@ mod tests {
         assert_eq!(eng(-904.8e-9, "N"), "-904.8000 nN");
         assert_eq!(eng(0.0, "m"), "0 m");
     }
-}
-
-/// A `X_UM,Y_UM` argument of flag `flag` as two finite numbers (µm); `example` shows the form.
-pub fn parse_point_um(flag: &str, s: &str, example: &str) -> anyhow::Result<(f64, f64)> {
-    use anyhow::Context as _;
-    let parsed = s.split_once(',').and_then(|(x, y)| {
-        let (x, y) = (x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?);
-        (x.is_finite() && y.is_finite()).then_some((x, y))
-    });
-    parsed.with_context(|| format!("{flag} {s:?}: expected X_UM,Y_UM, two numbers in µm such as {example}"))
 }
