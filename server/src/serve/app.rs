@@ -364,11 +364,19 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
         last: Instant::now(),
     };
     let mut recv_shutdown = st.shutdown.subscribe();
+    let mut send_done = false;
+    let mut shutting_down = false;
     loop {
         let next = tokio::select! {
             m = stream.next() => m,
-            _ = recv_shutdown.changed() => break,
-            _ = &mut send => break,
+            _ = recv_shutdown.changed() => {
+                shutting_down = true;
+                break;
+            }
+            _ = &mut send => {
+                send_done = true;
+                break;
+            }
         };
         let Some(Ok(msg)) = next else { break };
         let text = match msg {
@@ -453,8 +461,17 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
     for s in &client.streams {
         counter(&st, *s).fetch_sub(1, Relaxed);
     }
+    // On shutdown the send task says `shutdown` and closes before the reply queue goes (else it
+    // could see the queue closed first and end silently); on a disconnect the closed queue is
+    // what ends it. (A finished JoinHandle must not be polled again.)
+    if shutting_down && !send_done {
+        let _ = tokio::time::timeout(Duration::from_secs(2), &mut send).await;
+        send_done = true;
+    }
     drop(reply_tx);
-    let _ = tokio::time::timeout(Duration::from_secs(2), send).await;
+    if !send_done {
+        let _ = tokio::time::timeout(Duration::from_secs(2), send).await;
+    }
     st.net.clients.fetch_sub(1, Relaxed);
     tracing::info!("client {id} disconnected");
 }

@@ -111,9 +111,15 @@ pub async fn run(
             let _ = loop_thread.join();
         })
         .await;
-        // Let the last run_done reach the clients, then close every session.
+        // Let the last run_done reach the clients, then close every session, and wait for them:
+        // axum's graceful shutdown does not track upgraded (WebSocket) connections, so without
+        // this wait the process could exit before a session has sent its `shutdown` and close.
         tokio::time::sleep(Duration::from_millis(100)).await;
         let _ = st.shutdown.send(true);
+        let closing = Instant::now() + Duration::from_secs(5);
+        while st.net.clients.load(Relaxed) > 0 && Instant::now() < closing {
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
     };
     let app = app::router(state.clone()).into_make_service_with_connect_info::<SocketAddr>();
     let served = axum::serve(listener, app).with_graceful_shutdown(graceful).await;

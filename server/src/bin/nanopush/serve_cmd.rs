@@ -81,6 +81,19 @@ fn random_token() -> anyhow::Result<String> {
     Ok(b.iter().map(|x| format!("{x:02x}")).collect())
 }
 
+/// Restricts the calling thread to every CPU but `cpu` (best effort: a refusal leaves it as is).
+fn avoid_cpu(cpu: usize, ncpu: usize) {
+    // SAFETY: a zeroed cpu_set_t is a valid empty set; CPU_SET and sched_setaffinity act on the
+    // calling thread with a set of the size we pass.
+    unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        for c in (0..ncpu).filter(|&c| c != cpu) {
+            libc::CPU_SET(c, &mut set);
+        }
+        libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
+    }
+}
+
 /// Runs the server until SIGINT or SIGTERM.
 pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
     in_range("--rate-hz", a.rate_hz, 100.0, 10_000.0, " Hz")?;
@@ -139,8 +152,17 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         .try_init()
         .ok();
     let bind = SocketAddr::new(a.bind, a.port);
+    // The network side stays off the control loop's core when there is another one.
+    let ncpu = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let loop_cpu = a.cpu.unwrap_or(ncpu - 1).min(ncpu - 1);
+    let realtime = !a.no_realtime;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
+        .on_thread_start(move || {
+            if realtime && ncpu > 1 {
+                avoid_cpu(loop_cpu, ncpu);
+            }
+        })
         .build()
         .context("starting the tokio runtime")?;
     rt.block_on(async move {
