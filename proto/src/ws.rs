@@ -222,8 +222,8 @@ pub enum ServerMessage {
         outcome: String,
         /// The failure in words.
         failure: Option<String>,
-        /// Estimated final centre (m).
-        estimate: [f64; 2],
+        /// Estimated final centre (m); null when the push never started (no plan, not found).
+        estimate: Option<[f64; 2]>,
         /// Name of its record under `/api/records`.
         record: Option<String>,
     },

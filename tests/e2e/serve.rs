@@ -369,6 +369,12 @@ fn two_operators_contend_and_exactly_one_holds_the_lease() {
         // B cannot release what it does not hold, nor push.
         send(&mut b, json!({"type": "release_lease", "id": 2})).await;
         assert_eq!(reply(&mut b, 2).await["code"], "no_lease");
+        send(
+            &mut b,
+            json!({"type": "push", "id": 4, "particle": 1, "distance_um": 1.0}),
+        )
+        .await;
+        assert_eq!(reply(&mut b, 4).await["code"], "no_lease");
         // A leaves: the lease is free, and B takes it.
         a.close(None).await.unwrap();
         drop(a);
@@ -404,6 +410,18 @@ fn origins_and_tokens_are_checked_at_the_upgrade() {
         let mut v = connect(&srv.addr, Some("viewer-secret")).await;
         assert_eq!(until(&mut v, 5.0, |m| is(m, "welcome")).await["role"], "viewer");
     });
+    // The JSON API needs the token too, and a foreign Host name is refused (DNS rebinding).
+    assert_eq!(http_get(&srv.addr, "/api/records").0, 401);
+    assert_eq!(http_get(&srv.addr, "/api/records?token=viewer-secret").0, 200);
+    let mut s = TcpStream::connect(&srv.addr).unwrap();
+    write!(
+        s,
+        "GET /api/status?token=viewer-secret HTTP/1.1\r\nHost: evil.example:80\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut buf = String::new();
+    s.read_to_string(&mut buf).unwrap();
+    assert!(buf.starts_with("HTTP/1.1 421"), "{buf:.40}");
 }
 
 #[test]
@@ -484,4 +502,65 @@ fn sigterm_mid_push_retracts_the_tip_and_completes_every_record() {
     let last_phase = rows.last().unwrap().split(',').nth(2).unwrap();
     assert!(matches!(last_phase, "retract" | "done"), "{last_phase}");
     assert!((end_z - start_z).abs() < 20e-9, "start z {start_z:e}, end z {end_z:e}");
+}
+
+#[test]
+fn a_scan_streams_its_lines_and_records_a_complete_gsf() {
+    let srv = start("scan", &["--scan-line-hz", "200"]);
+    runtime().block_on(async {
+        let mut op = connect(&srv.addr, Some(TOKEN)).await;
+        until(&mut op, 5.0, |m| is(m, "welcome")).await;
+        send(&mut op, json!({"type": "subscribe", "id": 1, "streams": ["scan"]})).await;
+        send(&mut op, json!({"type": "take_lease", "id": 2})).await;
+        assert_eq!(reply(&mut op, 2).await["type"], "ok");
+        send(
+            &mut op,
+            json!({"type": "scan", "id": 3, "centre_x_um": 40.0, "centre_y_um": 30.0, "size_um": 4.0, "pixels": 16}),
+        )
+        .await;
+        let start = until(&mut op, 10.0, |m| is(m, "scan_start")).await;
+        assert_eq!(start["xres"], 16);
+        // Sixteen binary lines, in order, each 32 + 16·4 bytes, then scan_done.
+        let mut lines = 0u32;
+        let mut top = f32::MIN;
+        let done = loop {
+            let msg = tokio::time::timeout(Duration::from_secs(10), op.next())
+                .await
+                .unwrap()
+                .unwrap()
+                .unwrap();
+            match msg {
+                Message::Binary(b) => {
+                    assert_eq!(&b[..4], b"NPSL");
+                    assert_eq!(b.len(), 32 + 16 * 4);
+                    assert_eq!(u32::from_le_bytes(b[12..16].try_into().unwrap()), lines);
+                    for c in b[32..].chunks_exact(4) {
+                        top = top.max(f32::from_le_bytes(c.try_into().unwrap()));
+                    }
+                    lines += 1;
+                }
+                Message::Text(t) => {
+                    let v: Value = serde_json::from_str(&t).unwrap();
+                    if is(&v, "scan_done") {
+                        break v;
+                    }
+                }
+                _ => {}
+            }
+        };
+        assert_eq!(lines, 16);
+        // The 0.5 µm particle appears 1 µm high (within the pixel grid's sampling of its top).
+        assert!((0.9e-6..1.05e-6).contains(&(top as f64)), "top {top}");
+        let name = done["record"].as_str().expect("a record").to_string();
+        let (status, gsf) = http_get(&srv.addr, &format!("/api/records/{name}"));
+        assert_eq!(status, 200);
+        let nul = gsf.iter().position(|&c| c == 0).unwrap();
+        let header = String::from_utf8_lossy(&gsf[..nul]).to_string();
+        assert!(header.contains("XRes = 16") && header.contains("YRes = 16"), "{header}");
+        let data = gsf.len() - gsf[nul..].iter().position(|&c| c != 0).map_or(gsf.len() - nul, |k| k) - nul;
+        assert_eq!(data, 16 * 16 * 4, "data bytes after the header");
+        // A stop during a scan cancels it; the lease holder may scan again afterwards.
+        send(&mut op, json!({"type": "ping", "id": 4})).await;
+        assert_eq!(reply(&mut op, 4).await["type"], "ok");
+    });
 }

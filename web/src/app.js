@@ -1,6 +1,6 @@
 // The Nano Visulator page: a view of the protocol Session (src/protocol.js), a 3D view
 // (src/view3d.js) and strip charts (src/charts.js), wired to `nanopush serve`'s WebSocket.
-import { Session, commands, encodeCommand, wsUrl, backoffMs, controlState, STREAMS } from './protocol.js';
+import { Session, commands, encodeCommand, wsUrl, apiUrl, backoffMs, controlState, STREAMS } from './protocol.js';
 import { View3D, formatLength } from './view3d.js';
 import { Charts } from './charts.js';
 import { viridisCss } from './colormap.js';
@@ -194,7 +194,7 @@ async function loadScene() {
     return;
   }
   try {
-    const r = await fetch('/api/scene');
+    const r = await fetch(apiUrl('/api/scene', location));
     if (!r.ok) throw new Error(`HTTP ${r.status}`);
     applyScene(await r.json());
   } catch (e) {
@@ -255,7 +255,7 @@ async function refreshRecords() {
     return;
   }
   try {
-    const r = await fetch('/api/records');
+    const r = await fetch(apiUrl('/api/records', location));
     if (!r.ok) throw new Error(`HTTP ${r.status}`);
     const list = await r.json();
     if (!list.length) {
@@ -266,7 +266,7 @@ async function refreshRecords() {
     body.replaceChildren(...list.map((rec) => {
       const tr = document.createElement('tr');
       const a = document.createElement('a');
-      a.href = `/api/records/${encodeURIComponent(rec.name)}`;
+      a.href = apiUrl(`/api/records/${encodeURIComponent(rec.name)}`, location);
       a.download = rec.name;
       a.textContent = rec.name;
       const cells = [a, rec.kind ?? '', formatBytes(rec.bytes), formatTime(rec.modified)];

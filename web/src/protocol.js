@@ -167,6 +167,13 @@ export function wsUrl(loc) {
   return `${proto}//${loc.host}/ws` + (token ? `?token=${encodeURIComponent(token)}` : '');
 }
 
+/** An HTTP API path with the page's `?token=` passed on (a server with a viewer token needs it). */
+export function apiUrl(path, loc) {
+  const token = new URLSearchParams(loc.search || '').get('token');
+  if (!token) return path;
+  return path + (path.includes('?') ? '&' : '?') + `token=${encodeURIComponent(token)}`;
+}
+
 /** Reconnect delay (ms) for the n-th attempt (1-based): 0.5 s doubling to 15 s at most. */
 export function backoffMs(attempt, baseMs = 500, maxMs = 15000) {
   const n = Math.max(1, attempt);

@@ -2,7 +2,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import {
-  decodeScanLine, encodeScanLine, FrameError, commands, encodeCommand, wsUrl, backoffMs,
+  decodeScanLine, encodeScanLine, FrameError, commands, encodeCommand, wsUrl, apiUrl, backoffMs,
   Session, controlState, sceneParticles, WS_VERSION,
 } from '../src/protocol.js';
 
@@ -309,4 +309,10 @@ test('session: the scene gives particles in metres; run_done moves the pushed on
   assert.equal(s.state.runs.at(-1).outcome, 'no_contact');
   s.apply({ type: 'shutdown', reason: 'SIGTERM' });
   assert.equal(s.state.shutdown, 'SIGTERM');
+});
+
+test('apiUrl passes the page token on to the JSON API', () => {
+  assert.equal(apiUrl('/api/scene', { search: '?token=abc%2Bd' }), '/api/scene?token=abc%2Bd');
+  assert.equal(apiUrl('/api/records/x.csv', { search: '' }), '/api/records/x.csv');
+  assert.equal(apiUrl('/api/records?a=1', { search: '?token=t' }), '/api/records?a=1&token=t');
 });

@@ -155,7 +155,7 @@ pub struct PeakDetector {
 }
 
 impl PeakDetector {
-    /// A detector that declares the peak once the 8-sample moving mean of the deflection
+    /// A detector that declares the peak once the 4-sample moving mean of the deflection
     /// signal (V, positive = the push's side) falls `margin` (V) below its running maximum.
     pub fn new(margin: f64) -> PeakDetector {
         PeakDetector {

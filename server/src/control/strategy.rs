@@ -428,8 +428,17 @@ impl Strategy {
         }
         if r.t - self.phase_start > p.timeout && !matches!(self.phase, Phase::Done) {
             let phase = self.phase.name();
-            if matches!(self.phase, Phase::Retract | Phase::BackOff { .. }) {
-                // A retract that cannot finish has nothing left to do: stop where it is.
+            if matches!(self.phase, Phase::BackOff { .. }) {
+                // Backing off cannot finish: lift anyway.
+                self.enter(Phase::Retract, r.t);
+            } else if self.phase == Phase::Retract {
+                // A retract that cannot finish has nothing left to do: stop where it is, and say so.
+                if self.summary.failure.is_none() {
+                    self.summary.failure = Some(Failure::Timeout {
+                        phase,
+                        timeout_s: p.timeout,
+                    });
+                }
                 self.enter(Phase::Done, r.t);
             } else {
                 self.fail(

@@ -88,6 +88,13 @@ pub struct AppState {
     pub shutdown: watch::Sender<bool>,
     /// Bound address (for the Origin check).
     pub addr: Mutex<Option<SocketAddr>>,
+    /// Where the controller believes each particle is (m): the scene's positions, then each
+    /// push's final estimate. A push starts its local scan here (the operator's "click").
+    pub estimates: Mutex<std::collections::HashMap<u32, (f64, f64)>>,
+    /// Shutdown has begun: commands are refused from now on.
+    pub stopping: AtomicBool,
+    /// Bumped by every `stop`: a push still being prepared when it changes is dropped.
+    pub generation: AtomicU64,
 }
 
 impl AppState {
@@ -95,7 +102,6 @@ impl AppState {
     pub fn new(cfg: ServeConfig, scene: Scene, shared: Arc<Shared>, params: StrategyParams) -> AppState {
         AppState {
             cfg,
-            scene,
             shared,
             net: NetMetrics::default(),
             params,
@@ -111,6 +117,26 @@ impl AppState {
             scan_cancel: AtomicBool::new(false),
             shutdown: watch::channel(false).0,
             addr: Mutex::new(None),
+            estimates: Mutex::new(
+                scene
+                    .file
+                    .particles
+                    .iter()
+                    .map(|p| (p.id, (p.x_um * 1e-6, p.y_um * 1e-6)))
+                    .collect(),
+            ),
+            stopping: AtomicBool::new(false),
+            generation: AtomicU64::new(0),
+            scene,
+        }
+    }
+
+    /// Records where a particle is believed to be after a push.
+    fn remember(&self, particle: u32, estimate: [f64; 2]) {
+        if estimate.iter().all(|v| v.is_finite())
+            && let Ok(mut e) = self.estimates.lock()
+        {
+            e.insert(particle, (estimate[0], estimate[1]));
         }
     }
 
@@ -136,7 +162,48 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/records/{name}", get(record_get))
         .route("/metrics", get(metrics))
         .fallback_service(web)
+        .layer(axum::middleware::from_fn_with_state(state.clone(), guard))
         .with_state(state)
+}
+
+/// Every request: when the server listens on loopback, the `Host` must name loopback (a page on
+/// another site that rebinds its DNS name to 127.0.0.1 is refused); with `--viewer-token`, the
+/// JSON API needs `?token=` (the viewer's or the operator's). `/metrics` stays open for a local
+/// Prometheus, as is usual.
+async fn guard(State(st): State<Arc<AppState>>, req: axum::extract::Request, next: axum::middleware::Next) -> Response {
+    let addr = *st.addr.lock().expect("addr lock");
+    if let Some(addr) = addr.filter(|a| a.ip().is_loopback()) {
+        let host = req
+            .headers()
+            .get(header::HOST)
+            .and_then(|h| h.to_str().ok())
+            .unwrap_or("");
+        let port = addr.port();
+        let ok = [
+            format!("127.0.0.1:{port}"),
+            format!("localhost:{port}"),
+            format!("[::1]:{port}"),
+            addr.to_string(),
+        ]
+        .iter()
+        .any(|h| h == host);
+        if !ok {
+            return (StatusCode::MISDIRECTED_REQUEST, "Host must name this loopback server").into_response();
+        }
+    }
+    if let Some(viewer) = st.cfg.viewer_token.as_deref()
+        && req.uri().path().starts_with("/api/")
+    {
+        let token = req
+            .uri()
+            .query()
+            .and_then(|q| q.split('&').find_map(|kv| kv.strip_prefix("token=")))
+            .unwrap_or("");
+        if token != viewer && token != st.cfg.operator_token {
+            return (StatusCode::UNAUTHORIZED, "this API needs ?token= (viewer or operator)").into_response();
+        }
+    }
+    next.run(req).await
 }
 
 async fn status(State(st): State<Arc<AppState>>) -> Response {
@@ -379,22 +446,14 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
             }
         };
         let Some(Ok(msg)) = next else { break };
-        let text = match msg {
-            Message::Text(t) => t,
-            Message::Binary(b) => {
-                reply(
-                    &st,
-                    &reply_tx,
-                    None,
-                    ErrorCode::Malformed,
-                    format!("binary frames ({} bytes) are not commands; send JSON text", b.len()),
-                );
-                continue;
-            }
-            Message::Close(_) => break,
-            _ => continue,
-        };
-        // Rate limit: a token bucket of `max_rate` per second, burst `max_rate`.
+        if matches!(msg, Message::Close(_)) {
+            break;
+        }
+        if !matches!(msg, Message::Text(_) | Message::Binary(_)) {
+            continue;
+        }
+        // Rate limit (every data frame counts): a token bucket of `max_rate` per second, burst
+        // `max_rate`.
         let now = Instant::now();
         client.tokens =
             (client.tokens + now.duration_since(client.last).as_secs_f64() * st.cfg.max_rate).min(st.cfg.max_rate);
@@ -413,6 +472,21 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
             continue;
         }
         client.tokens -= 1.0;
+        let text = match msg {
+            Message::Text(t) => t,
+            Message::Binary(b) => {
+                reply(
+                    &st,
+                    &reply_tx,
+                    None,
+                    ErrorCode::Malformed,
+                    format!("binary frames ({} bytes) are not commands; send JSON text", b.len()),
+                );
+                continue;
+            }
+            Message::Close(_) => break,
+            _ => continue,
+        };
         if text.len() > st.cfg.max_message_bytes {
             reply(
                 &st,
@@ -444,7 +518,15 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
         match handle(&st, &mut client, parsed) {
             Ok(()) => {
                 let _ = reply_tx.try_send(to_text(&ServerMessage::Ok { id: cid }));
-                let _ = streams_tx.send(client.streams.clone());
+                // Only a changed subscription wakes the sender (it resubscribes, dropping queued
+                // frames of the streams it did not want).
+                streams_tx.send_if_modified(|cur| {
+                    let changed = *cur != client.streams;
+                    if changed {
+                        cur.clone_from(&client.streams);
+                    }
+                    changed
+                });
             }
             Err(r) => reply(&st, &reply_tx, cid, r.code, r.message),
         }
@@ -465,12 +547,15 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
     // could see the queue closed first and end silently); on a disconnect the closed queue is
     // what ends it. (A finished JoinHandle must not be polled again.)
     if shutting_down && !send_done {
-        let _ = tokio::time::timeout(Duration::from_secs(2), &mut send).await;
+        if tokio::time::timeout(Duration::from_secs(2), &mut send).await.is_err() {
+            send.abort();
+        }
         send_done = true;
     }
     drop(reply_tx);
-    if !send_done {
-        let _ = tokio::time::timeout(Duration::from_secs(2), send).await;
+    if !send_done && tokio::time::timeout(Duration::from_secs(2), &mut send).await.is_err() {
+        // A peer that stopped reading: do not leave its sender behind.
+        send.abort();
     }
     st.net.clients.fetch_sub(1, Relaxed);
     tracing::info!("client {id} disconnected");
@@ -510,7 +595,7 @@ fn require_lease(st: &AppState, c: &Client) -> Result<(), Refusal> {
             "this command needs the control lease: send take_lease first",
         ));
     }
-    if *st.shutdown.borrow() {
+    if st.stopping.load(Relaxed) || *st.shutdown.borrow() {
         return Err(Refusal::new(ErrorCode::ShuttingDown, "the server is shutting down"));
     }
     Ok(())
@@ -576,6 +661,7 @@ fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<(), 
         ClientMessage::Stop { .. } => {
             require_lease(st, c)?;
             st.scan_cancel.store(true, Relaxed);
+            st.generation.fetch_add(1, Relaxed);
             if st.shared.commands.push(LoopCommand::Stop).is_err() {
                 st.shared.metrics.dropped_commands.fetch_add(1, Relaxed);
                 return Err(Refusal::new(
@@ -607,7 +693,20 @@ fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<(), 
             busy(st)?;
             st.shared.busy.store(true, Relaxed);
             let st2 = st.clone();
-            tokio::task::spawn_blocking(move || prepare_push(&st2, particle, target));
+            let generation = st.generation.load(Relaxed);
+            tokio::task::spawn_blocking(move || {
+                let prepared = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    prepare_push(&st2, particle, target, generation)
+                }));
+                if prepared.is_err() {
+                    run_done_failed(
+                        &st2,
+                        particle,
+                        "error",
+                        "preparing the push failed (internal error)".into(),
+                    );
+                }
+            });
             Ok(())
         }
         ClientMessage::Scan {
@@ -673,7 +772,12 @@ fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<(), 
                 ..base
             };
             let st2 = st.clone();
-            std::thread::spawn(move || run_scan(&st2, params));
+            std::thread::spawn(move || {
+                if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_scan(&st2, params))).is_err() {
+                    tracing::error!("scan failed (internal error)");
+                    st2.scanning.store(false, Relaxed);
+                }
+            });
             Ok(())
         }
     }
@@ -699,14 +803,14 @@ fn run_done_failed(st: &AppState, particle: u32, outcome: &str, failure: String)
         particle,
         outcome: outcome.into(),
         failure: Some(failure),
-        estimate: [f64::NAN, f64::NAN],
+        estimate: None,
         record: None,
     });
 }
 
 /// Off the loop: locate the particle in a quick local scan, plan, predict; then hand the job
 /// to the loop.
-fn prepare_push(st: &AppState, particle: u32, target: PushTarget) {
+fn prepare_push(st: &AppState, particle: u32, target: PushTarget, generation: u64) {
     let f = &st.scene.file;
     let Some(part) = f.particles.iter().find(|p| p.id == particle) else {
         return;
@@ -714,11 +818,10 @@ fn prepare_push(st: &AppState, particle: u32, target: PushTarget) {
     let tip = Tip::from_scene(&st.scene);
     let surface = surface_now(st);
     let nominal = st
-        .shared
-        .snapshot
+        .estimates
         .lock()
         .ok()
-        .and_then(|s| s.particles.iter().find(|p| p.0 == particle).map(|p| (p.1, p.2)))
+        .and_then(|e| e.get(&particle).copied())
         .unwrap_or((part.x_um * 1e-6, part.y_um * 1e-6));
     let radius_hint = part.radius_nm * 1e-9;
     let size = (12.0 * radius_hint).clamp(4e-6, 20e-6);
@@ -749,6 +852,19 @@ fn prepare_push(st: &AppState, particle: u32, target: PushTarget) {
         }
         PushTarget::Point(p) => p,
     };
+    if (to.0 - from.0).hypot(to.1 - from.1) < 10e-9 {
+        // Already there (within 10 nm): nothing to push.
+        st.remember(particle, [from.0, from.1]);
+        st.shared.busy.store(false, Relaxed);
+        st.broadcast_event(&ServerMessage::RunDone {
+            particle,
+            outcome: "ok".into(),
+            failure: None,
+            estimate: Some([from.0, from.1]),
+            record: None,
+        });
+        return;
+    }
     let range = f.stage.range_um * 1e-6;
     let overview = ScanParams {
         centre_x: range / 2.0,
@@ -781,6 +897,9 @@ fn prepare_push(st: &AppState, particle: u32, target: PushTarget) {
         Ok(p) => p,
         Err(e) => return run_done_failed(st, particle, "error", e.to_string()),
     };
+    if st.generation.load(Relaxed) != generation || st.stopping.load(Relaxed) {
+        return run_done_failed(st, particle, "stopped", "stopped before the push began".into());
+    }
     let run = st.shared.runs.fetch_add(1, Relaxed) + 1;
     let job = PushJob {
         run,
@@ -801,7 +920,6 @@ fn run_scan(st: &AppState, params: ScanParams) {
     let surface = surface_now(st);
     let tip = Tip::from_scene(&st.scene);
     let img0 = params.empty_image();
-    let producing = st.scan_subscribers.load(Relaxed) > 0;
     let send_text = |m: &ServerMessage| {
         if st.scan_subscribers.load(Relaxed) > 0 {
             let _ = st.scans.send(Message::Text(to_text(m)));
@@ -816,13 +934,14 @@ fn run_scan(st: &AppState, params: ScanParams) {
         x_real: img0.x_real,
         y_real: img0.y_real,
     });
-    let _ = producing;
+    let mut img = img0;
     let mut scanner = Scanner::new(&surface, tip, params);
     let line_period = Duration::from_secs_f64(1.0 / params.line_rate);
     let mut next = Instant::now();
     let mut cancelled = false;
     while let Some(line) = scanner.next_line() {
-        if st.scan_cancel.load(Relaxed) || *st.shutdown.borrow() {
+        img.data.extend_from_slice(&line.heights);
+        if st.scan_cancel.load(Relaxed) || st.stopping.load(Relaxed) {
             cancelled = true;
             break;
         }
@@ -845,7 +964,6 @@ fn run_scan(st: &AppState, params: ScanParams) {
     }
     let mut record = None;
     if !cancelled {
-        let img = scanner.finish();
         let stem = format!("scan-{}-{scan_id}", records::unix_now());
         let mut gsf = Vec::new();
         if write_gsf(&mut gsf, &img, &stem).is_ok() && std::fs::create_dir_all(&st.cfg.data_dir).is_ok() {
@@ -893,12 +1011,13 @@ pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiv
             }
             e = events.recv() => {
                 let Some((LoopEvent::RunDone { particle, outcome, failure, estimate, .. }, record)) = e else { break };
-                st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate, record });
+                st.remember(particle, estimate);
+                st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record });
             }
             _ = shutdown.changed() => {
                 // Forward what the recorder still finishes (the aborted run's record).
                 while let Some((LoopEvent::RunDone { particle, outcome, failure, estimate, .. }, record)) = events.recv().await {
-                    st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate, record });
+                    st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record });
                 }
                 break;
             }

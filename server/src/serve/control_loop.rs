@@ -270,6 +270,15 @@ struct Active {
     stop: bool,
 }
 
+/// Marks the loop finished when dropped.
+struct Finished<'a>(&'a Shared);
+
+impl Drop for Finished<'_> {
+    fn drop(&mut self) {
+        self.0.finished.store(true, std::sync::atomic::Ordering::Release);
+    }
+}
+
 /// Everything the loop owns.
 pub struct ControlLoop {
     afm: Afm,
@@ -298,7 +307,11 @@ impl ControlLoop {
     }
 
     fn start_leg(&mut self, job: Box<PushJob>, leg: usize, estimate: (f64, f64), reading: &Reading) -> Active {
-        let l = job.legs[leg];
+        // Each leg starts from where the particle is believed to be, so errors do not add up.
+        let l = Leg {
+            from: estimate,
+            to: job.legs[leg].to,
+        };
         let request = PushRequest {
             id: job.particle,
             particle: estimate,
@@ -380,7 +393,8 @@ impl ControlLoop {
                 let last = a.leg + 1 == a.job.legs.len();
                 match failure {
                     Some(f) => self.finish(shared, a, f.code(), Some(f.to_string())),
-                    None if last || a.stop => self.finish(shared, a, "ok", None),
+                    None if a.stop => self.finish(shared, a, "stopped", Some("stopped between legs".into())),
+                    None if last => self.finish(shared, a, "ok", None),
                     None => {
                         let (job, leg, est) = (a.job, a.leg + 1, a.estimate);
                         self.active = Some(self.start_leg(job, leg, est, reading));
@@ -411,6 +425,9 @@ impl ControlLoop {
         let mut reading = self.afm.read();
         let mut deadline = Instant::now() + period;
         let mut tick: u64 = 0;
+        let mut instrument_failed = false;
+        // However the thread ends (even by a panic), the recorder and the shutdown must learn it.
+        let _finished = Finished(&shared);
         loop {
             let now = Instant::now();
             if deadline > now {
@@ -436,12 +453,19 @@ impl ControlLoop {
             match self.afm.step(target) {
                 Ok(r) => reading = r,
                 Err(e) => {
-                    tracing::error!("instrument step failed: {e}");
-                    if let Some(a) = self.active.take() {
-                        self.finish(&shared, a, "error", Some(e.to_string()));
+                    // The push model failed; the instrument dropped the contact, so the tip is
+                    // free. A running push is stopped and retracts like any other failure.
+                    if !instrument_failed {
+                        tracing::error!("instrument step failed: {e}; stopping the push and retracting");
                     }
+                    instrument_failed = true;
                     reading = self.afm.read();
-                    self.target = reading.stage;
+                    if let Some(a) = &mut self.active {
+                        a.stop = true;
+                        a.strategy.abort("the push simulation failed", reading.t);
+                    } else {
+                        self.target = reading.stage;
+                    }
                 }
             }
             let t_physics = Instant::now();
@@ -523,7 +547,6 @@ impl ControlLoop {
             s.phase = "stopped";
             s.stage = reading.stage;
         }
-        shared.finished.store(true, Relaxed);
         tracing::info!(
             "control loop ended after {tick} ticks; tip at z = {:.3} µm",
             reading.stage[2] * 1e6

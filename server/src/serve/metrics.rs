@@ -199,7 +199,7 @@ pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64) -> String {
         ),
         (
             "nanopush_dropped_frames_total",
-            "Telemetry frames slow clients skipped.",
+            "Frames (telemetry, events, scan lines) slow clients skipped.",
             "counter",
             n.dropped_frames.load(Relaxed) as f64,
         ),

@@ -98,14 +98,20 @@ pub async fn run(
     let graceful = async move {
         shutdown.await;
         tracing::info!("shutting down: stopping the loop and retracting the tip");
+        // From now on commands are refused and a push still being prepared is dropped.
+        st.stopping.store(true, Relaxed);
         let deadline = Instant::now() + Duration::from_secs(20);
         while st.shared.commands.push(LoopCommand::Shutdown).is_err() && Instant::now() < deadline {
             tokio::time::sleep(Duration::from_millis(1)).await;
         }
-        while !st.shared.finished.load(Relaxed) && Instant::now() < deadline {
+        while !st.shared.finished.load(std::sync::atomic::Ordering::Acquire) && Instant::now() < deadline {
             tokio::time::sleep(Duration::from_millis(5)).await;
         }
         st.scan_cancel.store(true, Relaxed);
+        // A scan being written finishes its record (rename) before the process ends.
+        while st.scanning.load(Relaxed) && Instant::now() < deadline {
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
         let _ = tokio::task::spawn_blocking(move || {
             let _ = recorder.join();
             let _ = loop_thread.join();

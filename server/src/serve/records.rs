@@ -5,7 +5,6 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::Ordering::Relaxed;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use serde::Serialize;
@@ -138,7 +137,7 @@ pub fn run_recorder(
     let mut open: Option<Open> = None;
     let mut done: Vec<(u64, String, u64)> = Vec::new();
     loop {
-        let finished = shared.finished.load(Relaxed);
+        let finished = shared.finished.load(std::sync::atomic::Ordering::Acquire);
         let mut events = Vec::new();
         while let Some(e) = shared.events.pop() {
             events.push(e);

@@ -251,7 +251,16 @@ pub fn run(a: &PushArgs) -> anyhow::Result<String> {
     let mut reports = Vec::new();
     let mut runs = Vec::new();
     let mut estimate = from;
-    for (k, leg) in legs.iter().enumerate() {
+    for (k, planned) in legs.iter().enumerate() {
+        // Each leg starts from where the particle is believed to be, so errors do not add up;
+        // a leg shorter than 10 nm is already done.
+        let leg = nanopush::control::Leg {
+            from: estimate,
+            to: planned.to,
+        };
+        if leg.length() < 10e-9 {
+            continue;
+        }
         let request = PushRequest {
             id: req.id,
             particle: estimate,
