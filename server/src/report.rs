@@ -31,22 +31,7 @@ pub fn model_report(scene: &Scene) -> ModelReport {
         .tip_particle
         .capillary
         .map_or(0.0, |cap| cap.kelvin_radius);
-    let steady = steady_state(
-        &SteadyInputs {
-            k_y: c.k_y(),
-            k_z: c.k_z(),
-            k_yz: c.k_yz(),
-            alpha: c.tilt,
-            beta: p.beta,
-            mu_as_k: p.mu_as_k,
-            mu_ta_k: p.mu_ta_k,
-            adhesion_as: p.adhesion_as(),
-            adhesion_ta: p.adhesion_ta(),
-            attraction_as: p.attraction_as(),
-            r_a: p.r_a,
-        },
-        &p.jkr_as,
-    );
+    let steady = steady_state(&SteadyInputs::from_params(&p), &p.jkr_as);
     ModelReport {
         schema: "nanopush.model".into(),
         version: nanopush_proto::VERSION,

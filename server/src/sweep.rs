@@ -452,23 +452,7 @@ pub struct SweepPoint {
 
 /// Eq 18 for a scene's parameters (the inputs `nanopush model` uses).
 pub fn eq18(p: &PushParams) -> Result<SteadyState, SteadyError> {
-    let c = &p.cantilever;
-    steady_state(
-        &SteadyInputs {
-            k_y: c.k_y(),
-            k_z: c.k_z(),
-            k_yz: c.k_yz(),
-            alpha: c.tilt,
-            beta: p.beta,
-            mu_as_k: p.mu_as_k,
-            mu_ta_k: p.mu_ta_k,
-            adhesion_as: p.adhesion_as(),
-            adhesion_ta: p.adhesion_ta(),
-            attraction_as: p.attraction_as(),
-            r_a: p.r_a,
-        },
-        &p.jkr_as,
-    )
+    steady_state(&SteadyInputs::from_params(p), &p.jkr_as)
 }
 
 /// Computes point `index` (value `value`) of a sweep of `param` over `base`. Never panics: an

@@ -44,12 +44,7 @@ pub struct SimulateArgs {
 }
 
 fn check(a: &SimulateArgs) -> anyhow::Result<Method> {
-    let method = Method::parse(&a.method).with_context(|| {
-        format!(
-            "--method {}: unknown; allowed: rodas4, trbdf2, implicit-euler",
-            a.method
-        )
-    })?;
+    let method = crate::units::parse_method(&a.method)?;
     if !(a.duration.is_finite() && a.duration > 0.0 && a.duration <= 100.0) {
         bail!("--duration {} s is out of range; allowed: (0, 100] s", a.duration);
     }

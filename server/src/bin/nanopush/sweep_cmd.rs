@@ -9,7 +9,6 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use nanopush::physics::integrate::Method;
 use nanopush::sweep::{Param, PointOptions, Shard, SweepPoint, compute_point, csv_header, csv_row, grid_value};
 use nanopush_proto::sweep::{FailedPoint, SeriesSummary, SweepReport};
 use rayon::prelude::*;
@@ -71,12 +70,7 @@ fn check(a: &SweepArgs) -> anyhow::Result<(Param, Shard, PointOptions)> {
     let param = Param::parse(&a.param)?;
     param.check_bounds(a.from, a.to, a.steps)?;
     let shard = Shard::parse(&a.shard)?;
-    let method = Method::parse(&a.method).with_context(|| {
-        format!(
-            "--method {}: unknown; allowed: rodas4, trbdf2, implicit-euler",
-            a.method
-        )
-    })?;
+    let method = crate::units::parse_method(&a.method)?;
     if !(a.duration.is_finite() && a.duration > 0.0 && a.duration <= 100.0) {
         bail!("--duration {} s is out of range; allowed: (0, 100] s", a.duration);
     }

@@ -40,6 +40,13 @@ pub fn parse_point_um(flag: &str, s: &str, example: &str) -> anyhow::Result<(f64
     parsed.with_context(|| format!("{flag} {s:?}: expected X_UM,Y_UM, two numbers in µm such as {example}"))
 }
 
+/// `--method NAME` as an integration method, with the allowed names in the error.
+pub fn parse_method(name: &str) -> anyhow::Result<nanopush::physics::integrate::Method> {
+    use anyhow::Context as _;
+    nanopush::physics::integrate::Method::parse(name)
+        .with_context(|| format!("--method {name}: unknown; allowed: rodas4, trbdf2, implicit-euler"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::eng;

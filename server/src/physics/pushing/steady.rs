@@ -47,6 +47,26 @@ pub struct SteadyInputs {
     pub r_a: f64,
 }
 
+impl SteadyInputs {
+    /// The inputs for a scene's pushing parameters (what `nanopush model` and the sweeps use).
+    pub fn from_params(p: &crate::physics::pushing::PushParams) -> SteadyInputs {
+        let c = &p.cantilever;
+        SteadyInputs {
+            k_y: c.k_y(),
+            k_z: c.k_z(),
+            k_yz: c.k_yz(),
+            alpha: c.tilt,
+            beta: p.beta,
+            mu_as_k: p.mu_as_k,
+            mu_ta_k: p.mu_ta_k,
+            adhesion_as: p.adhesion_as(),
+            adhesion_ta: p.adhesion_ta(),
+            attraction_as: p.attraction_as(),
+            r_a: p.r_a,
+        }
+    }
+}
+
 /// The steady state of Eq 18.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SteadyState {
