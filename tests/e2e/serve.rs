@@ -493,14 +493,14 @@ fn sigterm_mid_push_retracts_the_tip_and_completes_every_record() {
     assert_eq!(summary["outcome"], "stopped");
     let csv = std::fs::read_to_string(records.join(summary["trace"].as_str().unwrap())).unwrap();
     assert_eq!(csv.lines().count() as u64, summary["rows"].as_u64().unwrap() + 1);
-    // The tip ended retracted: the last rows climb back to the start height above the substrate
-    // that parking detected (the first z minus ~1.2 µm, plus 1.2 µm).
+    // The tip ended retracted: the last row, the final tick, is back at the start height above
+    // the substrate that parking detected (the level substrate: where it started).
     let z = |line: &str| line.split(',').nth(5).unwrap().parse::<f64>().unwrap();
     let rows: Vec<&str> = csv.lines().skip(1).collect();
     let start_z = z(rows[0]);
     let end_z = z(rows.last().unwrap());
     let last_phase = rows.last().unwrap().split(',').nth(2).unwrap();
-    assert!(matches!(last_phase, "retract" | "done"), "{last_phase}");
+    assert_eq!(last_phase, "done", "the record ends with the final tick");
     assert!((end_z - start_z).abs() < 20e-9, "start z {start_z:e}, end z {end_z:e}");
 }
 
@@ -562,5 +562,37 @@ fn a_scan_streams_its_lines_and_records_a_complete_gsf() {
         // A stop during a scan cancels it; the lease holder may scan again afterwards.
         send(&mut op, json!({"type": "ping", "id": 4})).await;
         assert_eq!(reply(&mut op, 4).await["type"], "ok");
+    });
+}
+
+#[test]
+fn clients_beyond_the_cap_are_refused_and_a_place_frees_when_one_leaves() {
+    let srv = start("cap", &["--max-clients", "2"]);
+    runtime().block_on(async {
+        let mut a = connect(&srv.addr, None).await;
+        let mut b = connect(&srv.addr, None).await;
+        until(&mut a, 5.0, |m| is(m, "welcome")).await;
+        until(&mut b, 5.0, |m| is(m, "welcome")).await;
+        let e = tokio_tungstenite::connect_async(format!("ws://{}/ws", srv.addr))
+            .await
+            .unwrap_err();
+        assert!(e.to_string().contains("503"), "{e}");
+        a.close(None).await.unwrap();
+        drop(a);
+        // The place frees once the session has ended.
+        let deadline = Instant::now() + Duration::from_secs(5);
+        loop {
+            match tokio_tungstenite::connect_async(format!("ws://{}/ws", srv.addr)).await {
+                Ok((mut c, _)) => {
+                    until(&mut c, 5.0, |m| is(m, "welcome")).await;
+                    break;
+                }
+                Err(e) if Instant::now() < deadline => {
+                    assert!(e.to_string().contains("503"), "{e}");
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                }
+                Err(e) => panic!("no place freed: {e}"),
+            }
+        }
     });
 }

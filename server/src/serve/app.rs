@@ -327,14 +327,21 @@ async fn ws_upgrade(
         None if st.cfg.viewer_token.is_none() => Role::Viewer,
         _ => return (StatusCode::UNAUTHORIZED, "invalid or missing token").into_response(),
     };
-    if st.net.clients.load(Relaxed) >= st.cfg.max_clients {
+    // Counted here, atomically, so simultaneous upgrades cannot pass the cap together; the
+    // session (or a failed upgrade) gives the place back.
+    if st.net.clients.fetch_add(1, Relaxed) >= st.cfg.max_clients {
+        st.net.clients.fetch_sub(1, Relaxed);
         return (StatusCode::SERVICE_UNAVAILABLE, "too many clients (--max-clients)").into_response();
     }
+    let failed = st.clone();
     // A hard cap well above the protocol's limit: larger messages are refused with a typed error
     // by the session; only absurd ones (over 16× the limit) close the connection.
     let cap = (st.cfg.max_message_bytes * 16).max(64 * 1024);
     ws.max_message_size(cap)
         .max_frame_size(cap)
+        .on_failed_upgrade(move |_| {
+            failed.net.clients.fetch_sub(1, Relaxed);
+        })
         .on_upgrade(move |socket| session(st, socket, role, peer))
 }
 
@@ -350,7 +357,6 @@ struct Client {
 /// One WebSocket connection: a receive loop handling commands, and a send loop merging replies,
 /// events, telemetry and scans (a slow client skips telemetry and is told how many frames).
 async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketAddr) {
-    st.net.clients.fetch_add(1, Relaxed);
     let id = st.next_client.fetch_add(1, Relaxed);
     tracing::info!("client {id} ({role:?}) connected from {peer}");
     let (mut sink, mut stream) = socket.split();

@@ -287,6 +287,7 @@ pub struct ControlLoop {
     k_z: f64,
     target: [f64; 3],
     active: Option<Active>,
+    ending: Option<(Active, &'static str, Option<String>)>,
     shutting_down: bool,
 }
 
@@ -302,6 +303,7 @@ impl ControlLoop {
             k_z,
             target,
             active: None,
+            ending: None,
             shutting_down: false,
         }
     }
@@ -391,10 +393,11 @@ impl ControlLoop {
                 a.estimate = a.strategy.summary.estimated_particle;
                 let failure = a.strategy.summary.failure;
                 let last = a.leg + 1 == a.job.legs.len();
+                // The run ends after this tick's physics, so its record holds the final tick.
                 match failure {
-                    Some(f) => self.finish(shared, a, f.code(), Some(f.to_string())),
-                    None if a.stop => self.finish(shared, a, "stopped", Some("stopped between legs".into())),
-                    None if last => self.finish(shared, a, "ok", None),
+                    Some(f) => self.ending = Some((a, f.code(), Some(f.to_string()))),
+                    None if a.stop => self.ending = Some((a, "stopped", Some("stopped between legs".into()))),
+                    None if last => self.ending = Some((a, "ok", None)),
                     None => {
                         let (job, leg, est) = (a.job, a.leg + 1, a.estimate);
                         self.active = Some(self.start_leg(job, leg, est, reading));
@@ -499,6 +502,20 @@ impl ControlLoop {
                 if shared.records.push(row).is_err() {
                     m.dropped_rows.fetch_add(1, Relaxed);
                 }
+            }
+            if let Some((a, outcome, failure)) = self.ending.take() {
+                let row = RecordMsg::Row {
+                    leg: a.leg as u32 + 1,
+                    t: reading.t,
+                    phase: "done",
+                    stage: reading.stage,
+                    volts: reading.volts,
+                    estimate: a.strategy.summary.estimated_distance,
+                };
+                if shared.records.push(row).is_err() {
+                    m.dropped_rows.fetch_add(1, Relaxed);
+                }
+                self.finish(&shared, a, outcome, failure);
             }
             if let Ok(mut s) = shared.snapshot.try_lock() {
                 s.t = reading.t;
