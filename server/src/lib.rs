@@ -5,6 +5,7 @@
 //! - [`scene`]: the TOML scene format (units in field names), its validation, and the SI model
 //!   assembled from it;
 //! - [`report`]: the derived quantities printed by `nanopush model`;
+//! - [`files`]: result files written atomically (temporary name, then rename);
 //! - [`accuracy`]: the work-precision report (`nanopush accuracy`);
 //! - [`extremes`]: the stability grid (`nanopush accuracy --extremes`);
 //! - [`peers`]: peer solvers from crates.io (diffsol, russell_ode) on the report's classical
@@ -27,6 +28,7 @@
 pub mod accuracy;
 pub mod control;
 pub mod extremes;
+pub mod files;
 pub mod instrument;
 pub mod peers;
 pub mod physics;

@@ -77,7 +77,7 @@ fn extremes(a: &AccuracyArgs) -> anyhow::Result<String> {
             r.diagnoses.join("; ").replace(',', ";")
         )?;
     }
-    write_atomic(&a.out.join("extremes.csv"), &csv)?;
+    crate::units::write_file(&a.out.join("extremes.csv"), &csv)?;
     let bad = results.iter().filter(|r| !r.finite_and_bounded).count();
     let mut out = String::new();
     if a.json {
@@ -284,13 +284,6 @@ fn equal_error(rows: &[AccuracyPoint]) -> Vec<EqualError> {
     out
 }
 
-fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
-    let tmp = path.with_extension("partial");
-    std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming to {}", path.display()))?;
-    Ok(())
-}
-
 /// Runs `nanopush accuracy`.
 pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     if a.extremes {
@@ -390,7 +383,7 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
             p.failure.clone().unwrap_or_default().replace(',', ";")
         )?;
     }
-    write_atomic(&a.out.join("accuracy.csv"), &csv)?;
+    crate::units::write_file(&a.out.join("accuracy.csv"), &csv)?;
     for (problem, unit) in [("push", "m"), ("van-der-pol", "relative"), ("robertson", "relative")] {
         let pts: Vec<&AccuracyPoint> = rows.iter().filter(|p| p.problem == problem).collect();
         let title = if problem == "push" {

@@ -368,14 +368,6 @@ fn text(r: &PushReport, runs: &[StrategyRun]) -> String {
     s
 }
 
-fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".partial");
-    let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming to {}", path.display()))
-}
-
 fn trace_csv(runs: &[StrategyRun]) -> String {
     let mut s = String::from(
         "leg,t_s,phase,stage_x_um,stage_y_um,stage_z_um,volts,estimate_um,particle_x_um,particle_y_um,contact\n",
@@ -422,7 +414,7 @@ fn write_outputs(
         for st in &first.summary.search {
             let _ = writeln!(csv, "{},{:.5}", st.step, st.volts);
         }
-        write_atomic(&dir.join("contact.csv"), csv.as_bytes())?;
+        crate::units::write_file(&dir.join("contact.csv"), csv.as_bytes())?;
         let pts: Vec<(f64, f64)> = first.summary.search.iter().map(|s| (s.step as f64, s.volts)).collect();
         let set = scene.file.strategy.set_point_v;
         let (x0, x1) = (pts.first().map_or(0.0, |p| p.0), pts.last().map_or(1.0, |p| p.0));
@@ -451,7 +443,7 @@ fn write_outputs(
             }],
         )?;
     }
-    write_atomic(&dir.join("push.csv"), trace_csv(runs).as_bytes())?;
+    crate::units::write_file(&dir.join("push.csv"), trace_csv(runs).as_bytes())?;
     // Fig 15: the reading against the stage position along the push, while pushing.
     let mut reading = Vec::new();
     let mut particle = Vec::new();
@@ -493,12 +485,12 @@ fn write_outputs(
     for (name, img) in [("scan-before", before), ("scan-after", after)] {
         let mut gsf = Vec::new();
         nanopush::scan::write_gsf(&mut gsf, img, name)?;
-        write_atomic(&dir.join(format!("{name}.gsf")), &gsf)?;
+        crate::units::write_file(&dir.join(format!("{name}.gsf")), &gsf)?;
         let mut png = Vec::new();
         nanopush::scan::write_png(&mut png, img)?;
-        write_atomic(&dir.join(format!("{name}.png")), &png)?;
+        crate::units::write_file(&dir.join(format!("{name}.png")), &png)?;
     }
-    write_atomic(
+    crate::units::write_file(
         &dir.join("summary.json"),
         (serde_json::to_string_pretty(report)? + "\n").as_bytes(),
     )?;

@@ -1,8 +1,7 @@
 //! `nanopush scan`.
 
 use std::fmt::Write as _;
-use std::io::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args;
@@ -40,24 +39,6 @@ pub struct ScanArgs {
 }
 
 const UM: f64 = 1e-6;
-
-/// Writes through a temporary file renamed into place, so a failure never leaves a partial file
-/// under the requested name.
-fn write_atomic(
-    path: &Path,
-    f: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> anyhow::Result<()>,
-) -> anyhow::Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".partial");
-    let tmp = PathBuf::from(tmp);
-    {
-        let file = std::fs::File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
-        let mut w = std::io::BufWriter::new(file);
-        f(&mut w)?;
-        w.flush().with_context(|| format!("writing {}", tmp.display()))?;
-    }
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
-}
 
 fn to_proto(l: &Located) -> LocatedParticle {
     LocatedParticle {
@@ -120,9 +101,13 @@ pub fn run(a: &ScanArgs) -> anyhow::Result<String> {
         img.data.extend_from_slice(&line.heights);
     }
     let title = format!("nanopush scan of {}", scene.file.name);
-    write_atomic(&a.out, |w| Ok(write_gsf(w, &img, &title)?))?;
+    let mut gsf = Vec::new();
+    write_gsf(&mut gsf, &img, &title)?;
+    crate::units::write_file(&a.out, &gsf)?;
     let png_path = a.out.with_extension("png");
-    write_atomic(&png_path, |w| Ok(write_png(w, &img)?))?;
+    let mut png = Vec::new();
+    write_png(&mut png, &img)?;
+    crate::units::write_file(&png_path, &png)?;
 
     let search = a.search_um * UM;
     let located = match point {

@@ -1,7 +1,6 @@
 //! `nanopush simulate`.
 
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
@@ -67,39 +66,30 @@ fn check(a: &SimulateArgs) -> anyhow::Result<Method> {
     Ok(method)
 }
 
-/// Writes the trace CSV through a temporary file renamed into place, so a failure never leaves
-/// a partial file under the requested name.
-fn write_trace(path: &PathBuf, run: &PushRun) -> anyhow::Result<()> {
-    let tmp = path.with_extension("csv.partial");
-    {
-        let file = std::fs::File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
-        let mut w = std::io::BufWriter::new(file);
+/// Writes the trace CSV (atomically: see [`crate::units::write_file`]).
+fn write_trace(path: &std::path::Path, run: &PushRun) -> anyhow::Result<()> {
+    let mut w = String::from(
+        "t_s,stage_y_m,particle_y_m,particle_z_m,theta_rad,zeta_y_m,zeta_z_m,normal_ta_n,friction_ta_n,load_as_n,friction_as_n,phase\n",
+    );
+    for r in &run.trace {
         writeln!(
             w,
-            "t_s,stage_y_m,particle_y_m,particle_z_m,theta_rad,zeta_y_m,zeta_z_m,normal_ta_n,friction_ta_n,load_as_n,friction_as_n,phase"
+            "{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{}",
+            r.t,
+            r.stage_y,
+            r.particle_y,
+            r.particle_z,
+            r.theta,
+            r.zeta_y,
+            r.zeta_z,
+            r.normal_ta,
+            r.friction_ta,
+            r.load_as,
+            r.friction_as,
+            r.phase
         )?;
-        for r in &run.trace {
-            writeln!(
-                w,
-                "{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{}",
-                r.t,
-                r.stage_y,
-                r.particle_y,
-                r.particle_z,
-                r.theta,
-                r.zeta_y,
-                r.zeta_z,
-                r.normal_ta,
-                r.friction_ta,
-                r.load_as,
-                r.friction_as,
-                r.phase
-            )?;
-        }
-        w.flush()?;
     }
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))?;
-    Ok(())
+    crate::units::write_file(path, w)
 }
 
 /// Fig 7: the settling of the particle's y during pushing.

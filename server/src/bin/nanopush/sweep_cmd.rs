@@ -162,15 +162,6 @@ fn summary(points: &[&SweepPoint], pick: impl Fn(&SweepPoint) -> Option<(f64, f6
     }
 }
 
-/// Writes through a temporary file renamed into place, so a failure never leaves a partial file
-/// under the requested name.
-fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
-    let tmp = path.with_extension("partial");
-    std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming to {}", path.display()))?;
-    Ok(())
-}
-
 fn plot(path: &Path, param: Param, scene: &str, pure_sliding: bool, points: &[SweepPoint]) -> anyhow::Result<()> {
     let nm = 1e9;
     let unit = match param.unit() {
@@ -290,7 +281,7 @@ pub fn run(a: &SweepArgs) -> anyhow::Result<String> {
                 shard.count
             ))
         };
-        write_atomic(&path, &csv)?;
+        crate::units::write_file(&path, &csv)?;
         csv_path = Some(path.display().to_string());
         if shard.count == 1 {
             let svg = dir.join(format!("sweep-{}.svg", param.name()));

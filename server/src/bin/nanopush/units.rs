@@ -47,6 +47,12 @@ pub fn parse_method(name: &str) -> anyhow::Result<nanopush::physics::integrate::
         .with_context(|| format!("--method {name}: unknown; allowed: rodas4, trbdf2, implicit-euler"))
 }
 
+/// [`nanopush::files::write_atomic`] with the path in the error.
+pub fn write_file(path: &std::path::Path, bytes: impl AsRef<[u8]>) -> anyhow::Result<()> {
+    use anyhow::Context as _;
+    nanopush::files::write_atomic(path, bytes.as_ref()).with_context(|| format!("writing {}", path.display()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::eng;
