@@ -1,6 +1,7 @@
 //! Control: the manipulation strategy of Sec 2.1 and the force-controlled pushing of Sec 3.
 
 pub mod estimator;
+pub mod move_plan;
 pub mod plan;
 mod run;
 pub mod strategy;
@@ -12,3 +13,4 @@ pub use strategy::{Control, Failure, Phase, PushTask, Strategy, StrategyParams, 
 
 #[cfg(test)]
 mod tests;
+pub use move_plan::{MoveError, MovePlan, MoveTarget, locate_near, plan_move};

@@ -2,6 +2,8 @@
 //! `nanopush push` does, and what the server's loop will do one tick at a time.
 
 use crate::control::estimator::{Hxy, PushPrediction, RetractPlan, predict};
+use crate::control::move_plan::DONE_WITHIN;
+use crate::control::plan::Leg;
 use crate::control::strategy::{BACK_OFF, Control, HOLD, PushTask, Strategy, StrategyParams, Summary};
 use crate::instrument::{Afm, AfmError};
 use crate::physics::pushing::SimulationError;
@@ -185,6 +187,27 @@ impl Prepared {
         Hxy::new(self.prediction, self.margin, self.gain)
     }
 
+    /// The push from where the particle is believed to be (`estimate`) to `to`, or `None` when it
+    /// is already within [`DONE_WITHIN`]: each leg of a move starts from the latest estimate, so
+    /// errors do not add up.
+    pub fn request(
+        &self,
+        id: u32,
+        estimate: (f64, f64),
+        to: (f64, f64),
+        pause: Option<(f64, f64)>,
+    ) -> Option<PushRequest> {
+        let leg = Leg { from: estimate, to };
+        (leg.length() >= DONE_WITHIN).then(|| PushRequest {
+            id,
+            particle: estimate,
+            radius: self.radius,
+            direction: leg.direction(),
+            distance: leg.length(),
+            pause,
+        })
+    }
+
     /// The task of one push.
     pub fn task(&self, request: &PushRequest, tick: f64) -> PushTask {
         PushTask {
@@ -210,53 +233,60 @@ pub fn push_once(
     request: &PushRequest,
     params: StrategyParams,
 ) -> Result<StrategyRun, RunError> {
-    let id = request.id;
-    let index = afm
-        .particles()
-        .iter()
-        .position(|p| p.id == id)
-        .ok_or(RunError::NoParticle(id))?;
-    let prepared = Prepared::new(scene, id, request.radius, &params)?;
-    let prediction = prepared.prediction;
-    let hxy = prepared.hxy();
-    let task = prepared.task(request, params.tick);
-    let before = afm.particles()[index];
-    let first = afm.read();
-    let mut strategy = Strategy::new(params, task, hxy, &first);
-    let mut reading = first;
-    let mut trace = Vec::new();
-    let budget = ((8.0 * params.timeout) / params.tick) as u64 + 1000;
-    let mut ticks = 0u64;
-    while !strategy.done() {
-        ticks += 1;
-        if ticks > budget {
-            return Err(RunError::Budget(budget));
+    Prepared::new(scene, request.id, request.radius, &params)?.run(afm, request, params)
+}
+
+impl Prepared {
+    /// Runs one push with this preparation (the model prediction is computed once per move,
+    /// not per leg) against the instrument, tick by tick, recording a trace.
+    pub fn run(&self, afm: &mut Afm, request: &PushRequest, params: StrategyParams) -> Result<StrategyRun, RunError> {
+        let id = request.id;
+        let index = afm
+            .particles()
+            .iter()
+            .position(|p| p.id == id)
+            .ok_or(RunError::NoParticle(id))?;
+        let prediction = self.prediction;
+        let hxy = self.hxy();
+        let task = self.task(request, params.tick);
+        let before = afm.particles()[index];
+        let first = afm.read();
+        let mut strategy = Strategy::new(params, task, hxy, &first);
+        let mut reading = first;
+        let mut trace = Vec::new();
+        let budget = ((8.0 * params.timeout) / params.tick) as u64 + 1000;
+        let mut ticks = 0u64;
+        while !strategy.done() {
+            ticks += 1;
+            if ticks > budget {
+                return Err(RunError::Budget(budget));
+            }
+            let target = strategy.tick(&reading);
+            let phase = strategy.phase.name();
+            let estimate = strategy.summary.estimated_distance;
+            reading = afm.step(target)?;
+            let p = afm.particles()[index];
+            trace.push(RunRow {
+                t: reading.t,
+                phase,
+                stage: reading.stage,
+                volts: reading.volts,
+                estimate,
+                particle: (p.x, p.y),
+                contact: afm.truth().phase,
+            });
         }
-        let target = strategy.tick(&reading);
-        let phase = strategy.phase.name();
-        let estimate = strategy.summary.estimated_distance;
-        reading = afm.step(target)?;
-        let p = afm.particles()[index];
-        trace.push(RunRow {
-            t: reading.t,
-            phase,
-            stage: reading.stage,
-            volts: reading.volts,
-            estimate,
-            particle: (p.x, p.y),
-            contact: afm.truth().phase,
-        });
+        let after = afm.particles()[index];
+        let truth = afm.truth();
+        Ok(StrategyRun {
+            summary: strategy.summary,
+            prediction,
+            trace,
+            task,
+            particle_before: (before.x, before.y),
+            particle_after: (after.x, after.y),
+            final_stage: reading.stage,
+            retracted: truth.pushing.is_none() && !truth.on_substrate,
+        })
     }
-    let after = afm.particles()[index];
-    let truth = afm.truth();
-    Ok(StrategyRun {
-        summary: strategy.summary,
-        prediction,
-        trace,
-        task,
-        particle_before: (before.x, before.y),
-        particle_after: (after.x, after.y),
-        final_stage: reading.stage,
-        retracted: truth.pushing.is_none() && !truth.on_substrate,
-    })
 }

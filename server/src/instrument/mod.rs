@@ -4,9 +4,26 @@ mod afm;
 
 pub use afm::{Afm, AfmError, Particle, RELEASE_GAP, Reading, Truth};
 
+use crate::scan::{Sphere, Surface};
 use crate::scene::Scene;
 
 impl Afm {
+    /// The sample as it is now, for scans (tapping never moves it).
+    pub fn surface(&self) -> Surface {
+        Surface {
+            topography: self.topography().clone(),
+            spheres: self
+                .particles()
+                .iter()
+                .map(|p| Sphere {
+                    x: p.x,
+                    y: p.y,
+                    r: p.radius,
+                })
+                .collect(),
+        }
+    }
+
     /// The instrument of a scene: every particle with its own pushing parameters, the tip at
     /// `(x, y)` (m) and the strategy's start height above the substrate there, ticking at
     /// `tick` seconds.

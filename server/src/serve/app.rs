@@ -21,13 +21,13 @@ use nanopush_proto::ws::{
 };
 use tokio::sync::{broadcast, mpsc, watch};
 
-use crate::control::{Obstacle, Planner, Prepared, StrategyParams};
-use crate::scan::{ScanParams, Scanner, Sphere, Surface, Tip, find_particles, localize, scan, write_gsf};
+use crate::control::{MoveTarget, Prepared, StrategyParams, plan_move};
+use crate::scan::{ScanParams, Scanner, Sphere, Surface, Tip, find_particles, write_gsf};
 use crate::scene::Scene;
 use crate::serve::control_loop::{LoopCommand, LoopEvent, PushJob, Shared};
 use crate::serve::metrics::{NetMetrics, render};
 use crate::serve::records::{self, write_atomic};
-use crate::serve::validate::{PushTarget, Refusal, number, push_target};
+use crate::serve::validate::{Refusal, number, push_target};
 
 /// Server settings.
 #[derive(Debug, Clone)]
@@ -816,89 +816,35 @@ fn run_done_failed(st: &AppState, particle: u32, outcome: &str, failure: String)
 
 /// Off the loop: locate the particle in a quick local scan, plan, predict; then hand the job
 /// to the loop.
-fn prepare_push(st: &AppState, particle: u32, target: PushTarget, generation: u64) {
+fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, generation: u64) {
     let f = &st.scene.file;
     let Some(part) = f.particles.iter().find(|p| p.id == particle) else {
         return;
     };
-    let tip = Tip::from_scene(&st.scene);
-    let surface = surface_now(st);
     let nominal = st
         .estimates
         .lock()
         .ok()
         .and_then(|e| e.get(&particle).copied())
         .unwrap_or((part.x_um * 1e-6, part.y_um * 1e-6));
-    let radius_hint = part.radius_nm * 1e-9;
-    let size = (12.0 * radius_hint).clamp(4e-6, 20e-6);
-    let base = ScanParams::from_scene(&st.scene);
-    let local = ScanParams {
-        centre_x: nominal.0,
-        centre_y: nominal.1,
-        size,
-        pixels: 128,
-        ..base
+    let plan = match plan_move(&st.scene, &surface_now(st), nominal, part.radius_nm * 1e-9, target) {
+        Ok(p) => p,
+        Err(e) => return run_done_failed(st, particle, "plan", format!("particle {particle}: {e}")),
     };
-    let img = scan(&surface, tip, local);
-    let located = match localize(&img, &tip, nominal.0, nominal.1, 0.25 * size) {
-        Ok(l) => l,
-        Err(e) => {
-            return run_done_failed(
-                st,
-                particle,
-                "plan",
-                format!("particle {particle} not found in a scan: {e}"),
-            );
-        }
-    };
-    let from = (located.x, located.y);
-    let to = match target {
-        PushTarget::Distance { distance, direction } => {
-            (from.0 + direction.0 * distance, from.1 + direction.1 * distance)
-        }
-        PushTarget::Point(p) => p,
-    };
-    if (to.0 - from.0).hypot(to.1 - from.1) < 10e-9 {
+    let (located, legs) = (plan.located, plan.legs);
+    if legs.is_empty() {
         // Already there (within 10 nm): nothing to push.
-        st.remember(particle, [from.0, from.1]);
+        st.remember(particle, [located.x, located.y]);
         st.shared.busy.store(false, Relaxed);
         st.broadcast_event(&ServerMessage::RunDone {
             particle,
             outcome: "ok".into(),
             failure: None,
-            estimate: Some([from.0, from.1]),
+            estimate: Some([located.x, located.y]),
             record: None,
         });
         return;
     }
-    let range = f.stage.range_um * 1e-6;
-    let overview = ScanParams {
-        centre_x: range / 2.0,
-        centre_y: range / 2.0,
-        size: range,
-        pixels: 128,
-        ..base
-    };
-    let obstacles: Vec<Obstacle> = find_particles(&scan(&surface, tip, overview), &tip)
-        .iter()
-        .filter(|l| (l.x - from.0).hypot(l.y - from.1) > located.radius.max(1e-6))
-        .map(|l| Obstacle {
-            x: l.x,
-            y: l.y,
-            radius: l.radius,
-        })
-        .collect();
-    let planner = Planner {
-        radius: located.radius,
-        max_push: f.strategy.max_push_um * 1e-6,
-        clearance: f.strategy.clearance_um * 1e-6,
-        run_up: f.strategy.approach_distance_um * 1e-6 + 2.0 * located.radius,
-        range,
-    };
-    let legs = match planner.plan(from, to, &obstacles) {
-        Ok(l) => l,
-        Err(e) => return run_done_failed(st, particle, "plan", e.to_string()),
-    };
     let prepared = match Prepared::new(&st.scene, particle, located.radius, &st.params) {
         Ok(p) => p,
         Err(e) => return run_done_failed(st, particle, "error", e.to_string()),

@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use crossbeam_queue::ArrayQueue;
 use nanopush_proto::haptic::{FORCE_FEEDBACK_SERVICE, ForceFeedback, HAPTIC_STATE_SERVICE, HapticState};
 
-use crate::control::{Leg, Prepared, PushRequest, Strategy, StrategyParams};
+use crate::control::{Leg, Prepared, Strategy, StrategyParams};
 use crate::instrument::{Afm, Reading};
 use crate::physics::sensor::Sensor;
 use crate::serve::metrics::LoopMetrics;
@@ -266,8 +266,18 @@ struct Active {
     job: Box<PushJob>,
     leg: usize,
     strategy: Strategy,
-    estimate: (f64, f64),
     stop: bool,
+}
+
+/// A push that ends after this tick's physics.
+struct Ending {
+    job: Box<PushJob>,
+    leg: usize,
+    estimate: (f64, f64),
+    /// Estimated distance of the last leg (m), for the final trace row.
+    distance: f64,
+    outcome: &'static str,
+    failure: Option<String>,
 }
 
 /// Marks the loop finished when dropped.
@@ -287,7 +297,7 @@ pub struct ControlLoop {
     k_z: f64,
     target: [f64; 3],
     active: Option<Active>,
-    ending: Option<(Active, &'static str, Option<String>)>,
+    ending: Option<Ending>,
     shutting_down: bool,
 }
 
@@ -308,47 +318,55 @@ impl ControlLoop {
         }
     }
 
-    fn start_leg(&mut self, job: Box<PushJob>, leg: usize, estimate: (f64, f64), reading: &Reading) -> Active {
-        // Each leg starts from where the particle is believed to be, so errors do not add up.
-        let l = Leg {
-            from: estimate,
-            to: job.legs[leg].to,
-        };
-        let request = PushRequest {
-            id: job.particle,
-            particle: estimate,
-            radius: job.prepared.radius,
-            direction: l.direction(),
-            distance: l.length(),
-            pause: None,
-        };
-        let task = job.prepared.task(&request, self.params.tick);
-        let strategy = Strategy::new(self.params, task, job.prepared.hxy(), reading);
-        Active {
-            job,
-            leg,
-            strategy,
-            estimate,
-            stop: false,
+    /// Starts the leg after `a`'s and returns this tick's stage target.
+    fn next_then(&mut self, a: Active, estimate: (f64, f64), distance: f64, reading: &Reading) -> [f64; 3] {
+        self.next_leg(a.job, a.leg + 1, estimate, distance, reading);
+        self.target
+    }
+
+    /// Starts leg `leg` of `job` from where the particle is believed to be (`estimate`); a leg
+    /// that is already done (within 10 nm) ends the run there.
+    fn next_leg(&mut self, job: Box<PushJob>, leg: usize, estimate: (f64, f64), distance: f64, reading: &Reading) {
+        match job.prepared.request(job.particle, estimate, job.legs[leg].to, None) {
+            Some(request) => {
+                let task = job.prepared.task(&request, self.params.tick);
+                let strategy = Strategy::new(self.params, task, job.prepared.hxy(), reading);
+                self.active = Some(Active {
+                    job,
+                    leg,
+                    strategy,
+                    stop: false,
+                });
+            }
+            None => {
+                self.ending = Some(Ending {
+                    job,
+                    leg,
+                    estimate,
+                    distance,
+                    outcome: "ok",
+                    failure: None,
+                })
+            }
         }
     }
 
-    fn finish(&mut self, shared: &Shared, a: Active, outcome: &'static str, failure: Option<String>) {
+    fn finish(&mut self, shared: &Shared, e: Ending) {
         let truth = self
             .afm
             .particles()
             .iter()
-            .find(|p| p.id == a.job.particle)
+            .find(|p| p.id == e.job.particle)
             .map_or([f64::NAN; 2], |p| [p.x, p.y]);
-        let _ = shared.records.push(RecordMsg::End { run: a.job.run });
+        let _ = shared.records.push(RecordMsg::End { run: e.job.run });
         let _ = shared.events.push(LoopEvent::RunDone {
-            run: a.job.run,
-            particle: a.job.particle,
-            outcome,
-            failure,
-            estimate: [a.estimate.0, a.estimate.1],
+            run: e.job.run,
+            particle: e.job.particle,
+            outcome: e.outcome,
+            failure: e.failure,
+            estimate: [e.estimate.0, e.estimate.1],
             truth,
-            legs: a.leg + 1,
+            legs: e.leg + 1,
         });
         shared.busy.store(false, Relaxed);
     }
@@ -367,8 +385,7 @@ impl ControlLoop {
                         particle: job.particle,
                     });
                     let start = job.legs.first().map_or((0.0, 0.0), |l| l.from);
-                    let a = self.start_leg(job, 0, start, reading);
-                    self.active = Some(a);
+                    self.next_leg(job, 0, start, 0.0, reading);
                 }
                 LoopCommand::Stop => {
                     if let Some(a) = &mut self.active {
@@ -390,19 +407,25 @@ impl ControlLoop {
             if !a.strategy.done() {
                 self.active = Some(a);
             } else {
-                a.estimate = a.strategy.summary.estimated_particle;
+                let estimate = a.strategy.summary.estimated_particle;
+                let distance = a.strategy.summary.estimated_distance;
                 let failure = a.strategy.summary.failure;
                 let last = a.leg + 1 == a.job.legs.len();
                 // The run ends after this tick's physics, so its record holds the final tick.
-                match failure {
-                    Some(f) => self.ending = Some((a, f.code(), Some(f.to_string()))),
-                    None if a.stop => self.ending = Some((a, "stopped", Some("stopped between legs".into()))),
-                    None if last => self.ending = Some((a, "ok", None)),
-                    None => {
-                        let (job, leg, est) = (a.job, a.leg + 1, a.estimate);
-                        self.active = Some(self.start_leg(job, leg, est, reading));
-                    }
-                }
+                let (outcome, failure) = match failure {
+                    Some(f) => (f.code(), Some(f.to_string())),
+                    None if a.stop => ("stopped", Some("stopped between legs".into())),
+                    None if last => ("ok", None),
+                    None => return self.next_then(a, estimate, distance, reading),
+                };
+                self.ending = Some(Ending {
+                    job: a.job,
+                    leg: a.leg,
+                    estimate,
+                    distance,
+                    outcome,
+                    failure,
+                });
             }
         }
         self.target
@@ -503,19 +526,19 @@ impl ControlLoop {
                     m.dropped_rows.fetch_add(1, Relaxed);
                 }
             }
-            if let Some((a, outcome, failure)) = self.ending.take() {
+            if let Some(e) = self.ending.take() {
                 let row = RecordMsg::Row {
-                    leg: a.leg as u32 + 1,
+                    leg: e.leg as u32 + 1,
                     t: reading.t,
                     phase: "done",
                     stage: reading.stage,
                     volts: reading.volts,
-                    estimate: a.strategy.summary.estimated_distance,
+                    estimate: e.distance,
                 };
                 if shared.records.push(row).is_err() {
                     m.dropped_rows.fetch_add(1, Relaxed);
                 }
-                self.finish(&shared, a, outcome, failure);
+                self.finish(&shared, e);
             }
             if let Ok(mut s) = shared.snapshot.try_lock() {
                 s.t = reading.t;

@@ -3,6 +3,8 @@
 
 use nanopush_proto::ws::ErrorCode;
 
+use crate::control::MoveTarget;
+
 /// A refused command.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Refusal {
@@ -41,20 +43,6 @@ pub fn number(field: &str, value: f64, lo: f64, hi: f64, lo_open: bool, unit: &s
     Ok(value)
 }
 
-/// What a valid push asks for (SI).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum PushTarget {
-    /// A distance (m) along a unit direction.
-    Distance {
-        /// Distance (m).
-        distance: f64,
-        /// Unit direction.
-        direction: (f64, f64),
-    },
-    /// A target point (m).
-    Point((f64, f64)),
-}
-
 /// Checks a push's numbers; `range_um` is the stage range.
 pub fn push_target(
     distance_um: Option<f64>,
@@ -62,7 +50,7 @@ pub fn push_target(
     to_x_um: Option<f64>,
     to_y_um: Option<f64>,
     range_um: f64,
-) -> Result<PushTarget, Refusal> {
+) -> Result<MoveTarget, Refusal> {
     match (distance_um, to_x_um, to_y_um) {
         (Some(d), None, None) => {
             let d = number("distance_um", d, 0.0, range_um, true, "µm")?;
@@ -75,7 +63,7 @@ pub fn push_target(
                 "degrees",
             )?;
             let th = deg.to_radians();
-            Ok(PushTarget::Distance {
+            Ok(MoveTarget::Distance {
                 distance: d * 1e-6,
                 direction: (th.cos(), th.sin()),
             })
@@ -89,7 +77,7 @@ pub fn push_target(
             }
             let x = number("to_x_um", x, 0.0, range_um, false, "µm")?;
             let y = number("to_y_um", y, 0.0, range_um, false, "µm")?;
-            Ok(PushTarget::Point((x * 1e-6, y * 1e-6)))
+            Ok(MoveTarget::Point((x * 1e-6, y * 1e-6)))
         }
         _ => Err(Refusal::new(
             ErrorCode::Invalid,
@@ -118,11 +106,11 @@ mod tests {
     fn a_push_is_a_distance_or_a_point_never_both() {
         assert!(matches!(
             push_target(Some(2.0), Some(90.0), None, None, 100.0),
-            Ok(PushTarget::Distance { distance, direction }) if (distance - 2e-6).abs() < 1e-18 && direction.1 > 0.99
+            Ok(MoveTarget::Distance { distance, direction }) if (distance - 2e-6).abs() < 1e-18 && direction.1 > 0.99
         ));
         assert!(matches!(
             push_target(None, None, Some(5.0), Some(6.0), 100.0),
-            Ok(PushTarget::Point(_))
+            Ok(MoveTarget::Point(_))
         ));
         for bad in [
             push_target(Some(1.0), None, Some(1.0), Some(1.0), 100.0),

@@ -7,9 +7,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nanopush::control::{Failure, Obstacle, Planner, PushRequest, RunRow, StrategyRun, push_once};
+use nanopush::control::{Failure, MoveTarget, Prepared, RunRow, StrategyRun, locate_near, plan_move};
 use nanopush::instrument::Afm;
-use nanopush::scan::{HeightImage, Located, ScanParams, Sphere, Surface, Tip, find_particles, localize, scan};
+use nanopush::scan::{HeightImage, Located, ScanParams, Tip};
 use nanopush::scene::Scene;
 use nanopush::scene::file::ControlFile;
 use nanopush_proto::push::{LegReport, LocatedParticle, PushReport};
@@ -59,14 +59,9 @@ const TICK: f64 = 1e-3;
 /// What the operator asked for, checked.
 struct Request {
     id: u32,
-    target: Target,
+    target: MoveTarget,
     control: ControlFile,
     pause: Option<(f64, f64)>,
-}
-
-enum Target {
-    Distance { distance: f64, direction: (f64, f64) },
-    Point((f64, f64)),
 }
 
 fn check(a: &PushArgs, scene: &Scene) -> anyhow::Result<Request> {
@@ -94,7 +89,7 @@ fn check(a: &PushArgs, scene: &Scene) -> anyhow::Result<Request> {
                 );
             }
             let th = a.direction_deg.to_radians();
-            Target::Distance {
+            MoveTarget::Distance {
                 distance: d * UM,
                 direction: (th.cos(), th.sin()),
             }
@@ -104,7 +99,7 @@ fn check(a: &PushArgs, scene: &Scene) -> anyhow::Result<Request> {
             if !((0.0..=range).contains(&x) && (0.0..=range).contains(&y)) {
                 bail!("--to-um {x},{y} is outside the stage; allowed: [0, {range}] µm in x and y");
             }
-            Target::Point((x * UM, y * UM))
+            MoveTarget::Point((x * UM, y * UM))
         }
     };
     let control = match a.control.as_deref() {
@@ -132,43 +127,6 @@ fn check(a: &PushArgs, scene: &Scene) -> anyhow::Result<Request> {
         control,
         pause,
     })
-}
-
-fn surface_of(afm: &Afm) -> Surface {
-    Surface {
-        topography: afm.topography().clone(),
-        spheres: afm
-            .particles()
-            .iter()
-            .map(|p| Sphere {
-                x: p.x,
-                y: p.y,
-                r: p.radius,
-            })
-            .collect(),
-    }
-}
-
-/// A local scan around `(x, y)` (m) and the particle located nearest to it.
-fn locate_near(
-    afm: &Afm,
-    tip: Tip,
-    base: ScanParams,
-    x: f64,
-    y: f64,
-    radius_hint: f64,
-) -> (HeightImage, Option<Located>) {
-    let size = (12.0 * radius_hint).clamp(4.0 * UM, 20.0 * UM);
-    let params = ScanParams {
-        centre_x: x,
-        centre_y: y,
-        size,
-        pixels: 128,
-        ..base
-    };
-    let img = scan(&surface_of(afm), tip, params);
-    let located = localize(&img, &tip, x, y, 0.25 * size).ok();
-    (img, located)
 }
 
 fn located(l: &Located) -> LocatedParticle {
@@ -207,69 +165,25 @@ pub fn run(a: &PushArgs) -> anyhow::Result<String> {
     let f = &scene.file;
     let part = f.particles.iter().find(|p| p.id == req.id).expect("checked");
     let click = (part.x_um * UM, part.y_um * UM);
-    let tip = Tip::from_scene(&scene);
-    let base = ScanParams::from_scene(&scene);
 
-    // The operator's view: a scan of the scene's region, and a local scan at the click.
+    // The operator's view: a local scan at the click, and the scene's overview for the plan.
     let start = (click.0 - 8.0 * UM, click.1);
     let mut afm = Afm::from_scene(&scene, start.0.max(0.0), start.1, TICK);
-    let overview = scan(&surface_of(&afm), tip, base);
-    let (before_img, before) = locate_near(&afm, tip, base, click.0, click.1, part.radius_nm * 1e-9);
-    let before = before.with_context(|| {
-        format!(
-            "particle {} not found in a scan near ({:.2}, {:.2}) µm",
-            req.id, part.x_um, part.y_um
-        )
-    })?;
-    let from = (before.x, before.y);
-    let radius = before.radius;
-    let target = match req.target {
-        Target::Distance { distance, direction } => (from.0 + direction.0 * distance, from.1 + direction.1 * distance),
-        Target::Point(p) => p,
-    };
-    // Other particles, as the overview scan shows them.
-    let obstacles: Vec<Obstacle> = find_particles(&overview, &tip)
-        .iter()
-        .filter(|l| (l.x - from.0).hypot(l.y - from.1) > radius)
-        .map(|l| Obstacle {
-            x: l.x,
-            y: l.y,
-            radius: l.radius,
-        })
-        .collect();
-    let st = &f.strategy;
-    let planner = Planner {
-        radius,
-        max_push: st.max_push_um * UM,
-        clearance: st.clearance_um * UM,
-        run_up: st.approach_distance_um * UM + 2.0 * radius,
-        range: f.stage.range_um * UM,
-    };
-    let legs = planner.plan(from, target, &obstacles)?;
+    let plan = plan_move(&scene, &afm.surface(), click, part.radius_nm * 1e-9, req.target)?;
+    let (before_img, before) = (plan.local, plan.located);
+    let (from, radius, target) = ((before.x, before.y), before.radius, plan.target);
     let params = scene.strategy_params(TICK);
+    let prepared = Prepared::new(&scene, req.id, radius, &params)?;
 
     let mut reports = Vec::new();
     let mut runs = Vec::new();
     let mut estimate = from;
-    for (k, planned) in legs.iter().enumerate() {
-        // Each leg starts from where the particle is believed to be, so errors do not add up;
-        // a leg shorter than 10 nm is already done.
-        let leg = nanopush::control::Leg {
-            from: estimate,
-            to: planned.to,
-        };
-        if leg.length() < 10e-9 {
+    for (k, leg) in plan.legs.iter().enumerate() {
+        let pause = if k == 0 { req.pause } else { None };
+        let Some(request) = prepared.request(req.id, estimate, leg.to, pause) else {
             continue;
-        }
-        let request = PushRequest {
-            id: req.id,
-            particle: estimate,
-            radius,
-            direction: leg.direction(),
-            distance: leg.length(),
-            pause: if k == 0 { req.pause } else { None },
         };
-        let run = push_once(&scene, &mut afm, &request, params)?;
+        let run = prepared.run(&mut afm, &request, params)?;
         reports.push(leg_report(&run, estimate, leg.to));
         estimate = run.summary.estimated_particle;
         let failed = run.summary.failure.is_some();
@@ -278,7 +192,14 @@ pub fn run(a: &PushArgs) -> anyhow::Result<String> {
             break;
         }
     }
-    let (after_img, after) = locate_near(&afm, tip, base, estimate.0, estimate.1, radius);
+    let (after_img, after) = locate_near(
+        &afm.surface(),
+        Tip::from_scene(&scene),
+        ScanParams::from_scene(&scene),
+        estimate,
+        radius,
+    );
+    let after = after.ok();
     let truth = afm
         .particles()
         .iter()

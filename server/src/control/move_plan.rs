@@ -1,0 +1,177 @@
+//! The operator's side of a move, before any push: find the particle in a local scan near
+//! where it is believed to be (Sec 4: the operator works from scanned images), and plan the legs
+//! around the other particles the scene's overview scan shows. Used by `nanopush push` and by
+//! the server alike.
+
+use crate::control::plan::{Leg, Obstacle, PlanError, Planner};
+use crate::scan::{HeightImage, LocateError, Located, ScanParams, Surface, Tip, find_particles, localize, scan};
+use crate::scene::Scene;
+
+/// Shorter than this (m) a move is already done.
+pub const DONE_WITHIN: f64 = 10e-9;
+
+/// Where the operator wants the particle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MoveTarget {
+    /// A distance (m) along a unit direction from where the particle is found.
+    Distance {
+        /// Distance (m).
+        distance: f64,
+        /// Unit direction.
+        direction: (f64, f64),
+    },
+    /// A point (m).
+    Point((f64, f64)),
+}
+
+impl MoveTarget {
+    /// The target point for a particle found at `from`.
+    pub fn point(&self, from: (f64, f64)) -> (f64, f64) {
+        match *self {
+            MoveTarget::Distance { distance, direction } => {
+                (from.0 + direction.0 * distance, from.1 + direction.1 * distance)
+            }
+            MoveTarget::Point(p) => p,
+        }
+    }
+}
+
+/// Why a move cannot be planned.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MoveError {
+    /// The local scan shows no particle near the believed position.
+    #[error("particle not found in a scan near ({:.3}, {:.3}) µm: {source}", .near.0 * 1e6, .near.1 * 1e6)]
+    NotFound {
+        /// Where it was looked for (m).
+        near: (f64, f64),
+        /// Why.
+        source: LocateError,
+    },
+    /// No path.
+    #[error(transparent)]
+    Plan(#[from] PlanError),
+}
+
+/// A planned move.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MovePlan {
+    /// The local scan.
+    pub local: HeightImage,
+    /// The particle as the local scan shows it.
+    pub located: Located,
+    /// The target point (m).
+    pub target: (f64, f64),
+    /// The legs; empty when the particle is already within [`DONE_WITHIN`] of the target.
+    pub legs: Vec<Leg>,
+}
+
+/// A 128-pixel local scan around `near` (m), 12 radii wide (4-20 µm), and the particle nearest
+/// to `near` in it.
+pub fn locate_near(
+    surface: &Surface,
+    tip: Tip,
+    base: ScanParams,
+    near: (f64, f64),
+    radius_hint: f64,
+) -> (HeightImage, Result<Located, LocateError>) {
+    let size = (12.0 * radius_hint).clamp(4e-6, 20e-6);
+    let params = ScanParams {
+        centre_x: near.0,
+        centre_y: near.1,
+        size,
+        pixels: 128,
+        ..base
+    };
+    let img = scan(surface, tip, params);
+    let located = localize(&img, &tip, near.0, near.1, 0.25 * size);
+    (img, located)
+}
+
+/// Locates the particle believed at `near` (radius about `radius_hint`) and plans its move to
+/// `target` around the other particles of the scene's overview scan (`[scan]`), with the
+/// strategy's longest push and clearance.
+pub fn plan_move(
+    scene: &Scene,
+    surface: &Surface,
+    near: (f64, f64),
+    radius_hint: f64,
+    target: MoveTarget,
+) -> Result<MovePlan, MoveError> {
+    let tip = Tip::from_scene(scene);
+    let base = ScanParams::from_scene(scene);
+    let (local, located) = locate_near(surface, tip, base, near, radius_hint);
+    let located = located.map_err(|source| MoveError::NotFound { near, source })?;
+    let from = (located.x, located.y);
+    let to = target.point(from);
+    if (to.0 - from.0).hypot(to.1 - from.1) < DONE_WITHIN {
+        return Ok(MovePlan {
+            local,
+            located,
+            target: to,
+            legs: Vec::new(),
+        });
+    }
+    // The particle itself shows in the overview too, within a pixel or two of where the local
+    // scan found it: it is not an obstacle.
+    let own = (2.0 * located.radius).max(2.0 * base.pixel());
+    let obstacles: Vec<Obstacle> = find_particles(&scan(surface, tip, base), &tip)
+        .iter()
+        .filter(|l| (l.x - from.0).hypot(l.y - from.1) > own)
+        .map(|l| Obstacle {
+            x: l.x,
+            y: l.y,
+            radius: l.radius,
+        })
+        .collect();
+    let st = &scene.file.strategy;
+    let planner = Planner {
+        radius: located.radius,
+        max_push: st.max_push_um * 1e-6,
+        clearance: st.clearance_um * 1e-6,
+        run_up: st.approach_distance_um * 1e-6 + 2.0 * located.radius,
+        range: scene.file.stage.range_um * 1e-6,
+    };
+    let legs = planner.plan(from, to, &obstacles)?;
+    Ok(MovePlan {
+        local,
+        located,
+        target: to,
+        legs,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_particle_is_found_and_a_long_move_split() {
+        let scene = Scene::default_scene();
+        let surface = Surface::from_scene(&scene);
+        let p = scene.pushed_particle();
+        let near = (p.x_um * 1e-6 + 0.3e-6, p.y_um * 1e-6 - 0.2e-6);
+        let target = MoveTarget::Distance {
+            distance: 30e-6,
+            direction: (0.0, 1.0),
+        };
+        let plan = plan_move(&scene, &surface, near, 1e-6, target).unwrap();
+        assert!((plan.located.x - p.x_um * 1e-6).abs() < 50e-9);
+        assert!((plan.located.radius - 1e-6).abs() < 0.05e-6);
+        // 30 µm with pushes of at most 20 µm: two legs, ending at the target.
+        assert_eq!(plan.legs.len(), 2);
+        assert_eq!(plan.legs.last().unwrap().to, plan.target);
+        // Already there: no legs.
+        let here = plan_move(
+            &scene,
+            &surface,
+            near,
+            1e-6,
+            MoveTarget::Point((plan.located.x, plan.located.y)),
+        )
+        .unwrap();
+        assert!(here.legs.is_empty());
+        // Nothing near a point of bare substrate.
+        let e = plan_move(&scene, &surface, (20e-6, 20e-6), 1e-6, target).unwrap_err();
+        assert!(matches!(e, MoveError::NotFound { .. }), "{e}");
+    }
+}
