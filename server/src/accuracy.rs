@@ -141,6 +141,36 @@ pub fn push_points(
     max_steps: u64,
     min_rtol: f64,
 ) -> Vec<Point> {
+    each_method_and_tolerance(min_rtol, max_steps, |method, rtol, opts| {
+        let (last, wall) = timed(reps, || run_push(model.clone(), method, opts, duration, 1e-4));
+        match last {
+            Ok(run) => {
+                let (fin, traj) = push_errors(model, &run, reference);
+                Point {
+                    problem: name.into(),
+                    method,
+                    rtol,
+                    final_error: fin,
+                    trajectory_error: traj,
+                    estimated_error: f64::NAN,
+                    final_values: position_rows(model).into_iter().map(|i| run.final_state[i]).collect(),
+                    wall_time: wall,
+                    steps: run.stats.steps,
+                    rejected: run.stats.rejected,
+                    failure: None,
+                }
+            }
+            Err(e) => Point::failed(name, method, rtol, wall, e.to_string()),
+        }
+    })
+}
+
+/// One point per method and tolerance (down to `min_rtol`), with at most `max_steps` steps.
+fn each_method_and_tolerance(
+    min_rtol: f64,
+    max_steps: u64,
+    mut point: impl FnMut(Method, f64, Options) -> Point,
+) -> Vec<Point> {
     let mut out = Vec::new();
     for method in Method::ALL {
         for rtol in tolerances(min_rtol) {
@@ -148,27 +178,7 @@ pub fn push_points(
                 max_steps,
                 ..Options::with_rtol(rtol)
             };
-            let (last, wall) = timed(reps, || run_push(model.clone(), method, opts, duration, 1e-4));
-            let point = match last {
-                Ok(run) => {
-                    let (fin, traj) = push_errors(model, &run, reference);
-                    Point {
-                        problem: name.into(),
-                        method,
-                        rtol,
-                        final_error: fin,
-                        trajectory_error: traj,
-                        estimated_error: f64::NAN,
-                        final_values: position_rows(model).into_iter().map(|i| run.final_state[i]).collect(),
-                        wall_time: wall,
-                        steps: run.stats.steps,
-                        rejected: run.stats.rejected,
-                        failure: None,
-                    }
-                }
-                Err(e) => Point::failed(name, method, rtol, wall, e.to_string()),
-            };
-            out.push(point);
+            out.push(point(method, rtol, opts));
         }
     }
     out
@@ -185,39 +195,30 @@ fn reference_problem<P: Problem>(
     max_steps: u64,
     min_rtol: f64,
 ) -> Vec<Point> {
-    let mut out = Vec::new();
-    for method in Method::ALL {
-        for rtol in tolerances(min_rtol) {
-            let opts = Options {
-                max_steps,
-                ..Options::with_rtol(rtol)
-            };
-            let ((r, y), wall) = timed(reps, || {
-                let mut it = Integrator::new(method, opts);
-                let mut y = y0.to_vec();
-                let mut t = 0.0;
-                (it.advance(p, &NoEvents, &mut t, &mut y, t_end), y)
-            });
-            let point = match r {
-                Ok((_, st)) => Point {
-                    problem: name.into(),
-                    method,
-                    rtol,
-                    final_error: max_relative_error(&y, reference),
-                    trajectory_error: f64::NAN,
-                    estimated_error: f64::NAN,
-                    final_values: y.clone(),
-                    wall_time: wall,
-                    steps: st.steps,
-                    rejected: st.rejected,
-                    failure: None,
-                },
-                Err(e) => Point::failed(name, method, rtol, wall, e.to_string()),
-            };
-            out.push(point);
+    each_method_and_tolerance(min_rtol, max_steps, |method, rtol, opts| {
+        let ((r, y), wall) = timed(reps, || {
+            let mut it = Integrator::new(method, opts);
+            let mut y = y0.to_vec();
+            let mut t = 0.0;
+            (it.advance(p, &NoEvents, &mut t, &mut y, t_end), y)
+        });
+        match r {
+            Ok((_, st)) => Point {
+                problem: name.into(),
+                method,
+                rtol,
+                final_error: max_relative_error(&y, reference),
+                trajectory_error: f64::NAN,
+                estimated_error: f64::NAN,
+                final_values: y.clone(),
+                wall_time: wall,
+                steps: st.steps,
+                rejected: st.rejected,
+                failure: None,
+            },
+            Err(e) => Point::failed(name, method, rtol, wall, e.to_string()),
         }
-    }
-    out
+    })
 }
 
 /// Van der Pol (ε = 1e-6, t = 2) and Robertson (t = 1e11) against their published references;
