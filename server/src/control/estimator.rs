@@ -14,9 +14,8 @@
 //! frame the tip moves over a fixed substrate, so "the stage position" of the paper, whose stage
 //! carries the particle, becomes "no displacement").
 
-use crate::instrument::RELEASE_GAP;
 use crate::physics::integrate::{Method, Options};
-use crate::physics::pushing::{PushModel, PushParams, Simulation, SimulationError};
+use crate::physics::pushing::{Advance, PushModel, PushParams, Simulation, SimulationError};
 use crate::push_run::run_push;
 
 /// What the model predicts for a push at constant speed, for the estimator.
@@ -71,16 +70,10 @@ fn predict_retract(model: PushModel, duration: f64, plan: RetractPlan) -> Result
         }
         let drive = sim.model.drive.ramp_to(t, t1, yr, zr);
         sim.set_drive(drive);
-        if sim.advance_to(t1).is_err() && zr > 0.0 {
-            // The fold of the pull-off: the tip snaps free (see `instrument::Afm`).
+        if sim.advance_or_release(t1)? == Advance::Released {
             break;
         }
         t = t1;
-        let n = sim.model.len();
-        let probe = sim.model.probe(sim.t, &sim.x[..n], &sim.mode);
-        if !sim.mode.tip_contact && probe.gap > RELEASE_GAP {
-            break;
-        }
     }
     Ok(y_of(&sim) - y0)
 }

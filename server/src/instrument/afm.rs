@@ -17,12 +17,10 @@
 
 use crate::physics::force_curve::{TipSample, TipTrack};
 use crate::physics::integrate::{Method, Options};
-use crate::physics::pushing::{Drive, PushModel, PushParams, Simulation, SimulationError};
+pub use crate::physics::pushing::RELEASE_GAP;
+use crate::physics::pushing::{Advance, Drive, PushModel, PushParams, Simulation, SimulationError};
 use crate::physics::sensor::Readout;
 use crate::physics::topography::Topography;
-
-/// A gap (m) beyond which a tip that no longer touches the particle has let go of it.
-pub const RELEASE_GAP: f64 = 20e-9;
 
 /// Contact angles the pushing model accepts (rad): the tip must meet the particle above its
 /// equator and below its top.
@@ -313,23 +311,14 @@ impl Afm {
         let drive = c.sim.model.drive.ramp_to(self.t, t1, travel, lift);
         c.sim.set_drive(drive);
         let id = self.particles[c.index].id;
-        if let Err(source) = c.sim.advance_to(t1) {
-            // Lifting the tip off the particle ends at a fold of the quasi-static balance (the
-            // JKR and meniscus pull-off): the equilibrium the integrator follows vanishes and the
-            // tip snaps free, as on the force curve's retraction. Anything else is a failure.
-            if drive.vz > 0.0 {
-                // The particle stays where the balance vanished.
-                let y = c.sim.x[c.sim.model.layout.particle_y.pos];
-                let p = &mut self.particles[c.index];
-                p.x = c.particle0.0 + c.dir.0 * y;
-                p.y = c.particle0.1 + c.dir.1 * y;
-                self.release(target, t1);
-                return Ok(());
-            }
-            return Err(AfmError::Push { id, t: self.t, source });
-        }
+        let advance = c
+            .sim
+            .advance_or_release(t1)
+            .map_err(|source| AfmError::Push { id, t: self.t, source })?;
         let n = c.sim.model.len();
         let probe = c.sim.model.probe(c.sim.t, &c.sim.x[..n], &c.sim.mode);
+        // The particle stays where the push model leaves it (at a pull-off: where the balance
+        // vanished).
         let y = c.sim.x[c.sim.model.layout.particle_y.pos];
         let p = &mut self.particles[c.index];
         p.x = c.particle0.0 + c.dir.0 * y;
@@ -337,8 +326,7 @@ impl Afm {
         self.stage = target;
         self.t = t1;
         self.zeta_z = probe.zeta_z;
-        let released = !c.sim.mode.tip_contact && probe.gap > RELEASE_GAP;
-        if released {
+        if advance == Advance::Released {
             self.release(target, t1);
         } else {
             self.contact = Some(c);

@@ -10,5 +10,5 @@ pub mod steady;
 pub use layout::{Layout, MAX_STATES};
 pub use model::{Drive, FrictionPhase, Mode, Probe, PushModel, SwitchKind, Switching, Tangential};
 pub use params::{Dof, Dofs, Interactions, LongRange, PushParams};
-pub use simulation::{Simulation, SimulationError, TickReport};
+pub use simulation::{Advance, RELEASE_GAP, Simulation, SimulationError, TickReport};
 pub use steady::{SteadyInputs, SteadyState, steady_state};

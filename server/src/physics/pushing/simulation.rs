@@ -69,6 +69,21 @@ fn write_switching(s: crate::physics::pushing::Switching, out: &mut [f64]) {
     }
 }
 
+/// A gap (m) beyond which a tip that no longer touches the particle has let go of it.
+pub const RELEASE_GAP: f64 = 20e-9;
+
+/// How a call of [`Simulation::advance_or_release`] ended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Advance {
+    /// The tip still holds the particle at the end time.
+    Holding,
+    /// The tip let go: its contact broke and the gap opened beyond [`RELEASE_GAP`], or, while
+    /// lifting, the quasi-static balance reached the fold of the pull-off (the JKR and meniscus
+    /// equilibrium the integrator follows vanishes, and the tip snaps free, as on the force
+    /// curve's retraction). The state is where the balance vanished.
+    Released,
+}
+
 /// What one call of [`Simulation::advance_to`] did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct TickReport {
@@ -246,6 +261,25 @@ impl Simulation {
         let n = self.model.len();
         self.model.equilibrate(self.t, &mut self.x[..n], &self.mode);
         self.enforce_mode()
+    }
+
+    /// Advances to `t_end` like [`Self::advance_to`], and tells whether the tip let go of the
+    /// particle (see [`Advance::Released`]). A failure while the drive is not lifting is an error.
+    pub fn advance_or_release(&mut self, t_end: f64) -> Result<Advance, SimulationError> {
+        let lifting = self.model.drive.vz > 0.0;
+        match self.advance_to(t_end) {
+            Err(_) if lifting => Ok(Advance::Released),
+            Err(e) => Err(e),
+            Ok(_) => {
+                let n = self.model.len();
+                let gap = self.model.probe(self.t, &self.x[..n], &self.mode).gap;
+                Ok(if !self.mode.tip_contact && gap > RELEASE_GAP {
+                    Advance::Released
+                } else {
+                    Advance::Holding
+                })
+            }
+        }
     }
 
     /// The integration method.
