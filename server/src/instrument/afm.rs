@@ -171,6 +171,11 @@ impl Afm {
         self.tick
     }
 
+    /// The stage position now (m).
+    pub fn stage(&self) -> [f64; 3] {
+        self.stage
+    }
+
     /// Time now (s).
     pub fn time(&self) -> f64 {
         self.t

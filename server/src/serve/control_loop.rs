@@ -305,7 +305,7 @@ impl ControlLoop {
     /// A loop over `afm` with the scene's strategy settings; `k_z` (N/m) turns the measured
     /// deflection into the force sent to the haptic bridge.
     pub fn new(afm: Afm, params: StrategyParams, sensor: Sensor, k_z: f64) -> ControlLoop {
-        let target = afm.clone().read().stage;
+        let target = afm.stage();
         ControlLoop {
             afm,
             params,
