@@ -87,7 +87,12 @@ fn sample(sim: &Simulation) -> TraceRow {
     }
 }
 
-/// Pushes for `duration` seconds at the scene's speed, sampling every `dt`.
+/// Most samples a trace may hold (~100 bytes each: 200 MB): a trace is sized by
+/// `duration / dt`, both from the user, and is refused above this, never allocated.
+pub const MAX_SAMPLES: u64 = 2_000_000;
+
+/// Pushes for `duration` seconds at the scene's speed, sampling every `dt`; at most
+/// [`MAX_SAMPLES`] samples, with no limit on the integrator's steps.
 pub fn run_push(
     model: PushModel,
     method: Method,
@@ -95,12 +100,40 @@ pub fn run_push(
     duration: f64,
     dt: f64,
 ) -> Result<PushRun, SimulationError> {
+    run_push_within(model, method, opts, duration, dt, u64::MAX)
+}
+
+/// [`run_push`] that fails with [`SimulationError::Budget`] once the integrator has taken more
+/// than `max_steps` accepted steps: the bound on time for work done on behalf of a client.
+pub fn run_push_within(
+    model: PushModel,
+    method: Method,
+    opts: Options,
+    duration: f64,
+    dt: f64,
+    max_steps: u64,
+) -> Result<PushRun, SimulationError> {
     let mut sim = Simulation::new(model, method, opts);
-    let steps = (duration / dt).round().max(1.0) as usize;
+    let samples = (duration / dt).round().max(1.0);
+    if !(samples <= MAX_SAMPLES as f64) {
+        return Err(SimulationError::Budget {
+            what: "trace samples",
+            limit: MAX_SAMPLES,
+            t: 0.0,
+        });
+    }
+    let steps = samples as usize;
     let mut trace = Vec::with_capacity(steps + 1);
     trace.push(sample(&sim));
     for k in 1..=steps {
         sim.advance_to(duration * k as f64 / steps as f64)?;
+        if sim.total.steps > max_steps {
+            return Err(SimulationError::Budget {
+                what: "integrator steps",
+                limit: max_steps,
+                t: sim.t,
+            });
+        }
         trace.push(sample(&sim));
     }
     let n = sim.model.len();

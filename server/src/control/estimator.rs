@@ -16,7 +16,7 @@
 
 use crate::physics::integrate::{Method, Options};
 use crate::physics::pushing::{Advance, PushModel, PushParams, Simulation, SimulationError};
-use crate::push_run::run_push;
+use crate::push_run::run_push_within;
 
 /// What the model predicts for a push at constant speed, for the estimator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -41,11 +41,41 @@ pub struct PushPrediction {
     pub retract_shift: f64,
 }
 
+/// Samples of the model push the estimator reads its constants from, whatever the push's
+/// duration: a slow stage lengthens the push, never the trace (10 pm of travel per sample over
+/// the 40 nm the prediction runs).
+pub const PREDICTION_SAMPLES: f64 = 4000.0;
+
+/// Integrator steps a prediction may take (push and retraction each): the default scene needs
+/// ~10³, the stiffest valid scenes ~10⁵; 2·10⁶ is ~10 s of work on one core.
+pub const PREDICTION_STEPS: u64 = 2_000_000;
+
+/// The sampling step of a prediction of `duration` (s): 0.1 ms, or longer so that there are
+/// at most [`PREDICTION_SAMPLES`].
+fn sample_step(duration: f64) -> f64 {
+    (duration / PREDICTION_SAMPLES).max(1e-4)
+}
+
 /// The retraction part of [`predict`].
 fn predict_retract(model: PushModel, duration: f64, plan: RetractPlan) -> Result<f64, SimulationError> {
     let beta = model.p.beta;
     let mut sim = Simulation::new(model, Method::Rodas4, Options::with_rtol(1e-6));
-    sim.advance_to(duration)?;
+    let over = |sim: &Simulation| {
+        (sim.total.steps > PREDICTION_STEPS).then_some(SimulationError::Budget {
+            what: "integrator steps",
+            limit: PREDICTION_STEPS,
+            t: sim.t,
+        })
+    };
+    // In the prediction's sample steps, so that the step budget is checked while the push
+    // runs, not after.
+    let pieces = (duration / sample_step(duration)).round().max(1.0) as u32;
+    for k in 1..=pieces {
+        sim.advance_to(duration * f64::from(k) / f64::from(pieces))?;
+        if let Some(e) = over(&sim) {
+            return Err(e);
+        }
+    }
     let y_of = |sim: &Simulation| sim.x[sim.model.layout.particle_y.pos];
     let y0 = y_of(&sim);
     let (sb, cb) = beta.sin_cos();
@@ -72,6 +102,9 @@ fn predict_retract(model: PushModel, duration: f64, plan: RetractPlan) -> Result
         sim.set_drive(drive);
         if sim.advance_or_release(t1)? == Advance::Released {
             break;
+        }
+        if let Some(e) = over(&sim) {
+            return Err(e);
         }
         t = t1;
     }
@@ -101,7 +134,14 @@ pub fn predict(
     retract: RetractPlan,
 ) -> Result<PushPrediction, SimulationError> {
     let model = PushModel::new(params);
-    let run = run_push(model.clone(), Method::Rodas4, Options::with_rtol(1e-6), duration, 1e-4)?;
+    let run = run_push_within(
+        model.clone(),
+        Method::Rodas4,
+        Options::with_rtol(1e-6),
+        duration,
+        sample_step(duration),
+        PREDICTION_STEPS,
+    )?;
     let retract_shift = predict_retract(model, duration, retract)?;
     let n = run.trace.len();
     let tail = &run.trace[n / 2..];

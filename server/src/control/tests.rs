@@ -251,3 +251,20 @@ fn z_position_control_holds_the_force_on_a_tilted_substrate() {
         assert!(err.abs() < 25e-9, "error {:.1} nm", err * 1e9);
     }
 }
+
+/// Issue 13.1: `push.speed_um_per_s = 1e-6` is valid, and the estimator's model prediction
+/// sized its trace by duration / sample (41.6 GB) and aborted the process. The prediction is
+/// bounded by design: a fixed number of samples whatever the speed, and a step budget.
+#[test]
+fn a_slow_push_prediction_is_bounded_in_memory_and_time() {
+    for speed in ["1e-6", "1e-4"] {
+        let s = scene(&[("speed_um_per_s = 2.0", &format!("speed_um_per_s = {speed}"))]);
+        let p = s.pushed_particle();
+        let params = s.strategy_params(1e-3);
+        // Either a prediction, or a clear error naming the budget: never an abort.
+        match Prepared::new(&s, p.id, p.radius_nm * 1e-9, &params) {
+            Ok(prep) => assert!(prep.prediction.settle_offset.is_finite()),
+            Err(e) => assert!(e.to_string().contains("budget"), "{e}"),
+        }
+    }
+}

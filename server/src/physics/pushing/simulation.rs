@@ -108,6 +108,20 @@ pub enum SimulationError {
         /// Time reached.
         t: f64,
     },
+    /// A run went over the work it was allowed (integrator steps or trace samples): what a
+    /// caller bounds so that no scene, however slow its stage, costs unbounded memory or time.
+    #[error(
+        "{what} over its budget of {limit} before t = {t:e} s (a very slow stage or a very long push: \
+         raise push.speed_um_per_s or shorten the push)"
+    )]
+    Budget {
+        /// What ran over: `integrator steps` or `trace samples`.
+        what: &'static str,
+        /// The budget.
+        limit: u64,
+        /// Time reached (s).
+        t: f64,
+    },
 }
 
 /// A push in progress.
