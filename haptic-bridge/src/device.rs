@@ -105,6 +105,27 @@ pub trait Device: Send {
     }
 }
 
+impl Device for Box<dyn Device> {
+    fn spec(&self) -> DeviceSpec {
+        (**self).spec()
+    }
+    fn read(&mut self, dt: f64) -> Result<DeviceSample, DeviceError> {
+        (**self).read(dt)
+    }
+    fn write_force(&mut self, force: f64) -> Result<(), DeviceError> {
+        (**self).write_force(force)
+    }
+    fn observe(&mut self, link: &LinkView) {
+        (**self).observe(link)
+    }
+    fn finished(&self) -> bool {
+        (**self).finished()
+    }
+    fn close(&mut self) -> Result<(), DeviceError> {
+        (**self).close()
+    }
+}
+
 /// What the bridge knows of the server, for [`Device::observe`].
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct LinkView {

@@ -2,8 +2,19 @@
 //! and feels the tip-sample force (Sec 4 of the paper: "bilateral force feedback").
 //!
 //! - [`device`]: the device trait every backend implements (open, read, write force, limits);
+//! - [`sim`] and [`operator`]: the simulated handle and the hand that holds it;
+//! - [`passivity`]: the time-domain passivity observer and controller at the port;
+//! - [`bridge`]: one device cycle (read, local model, passivity, clamp, write, publish), and
+//!   [`link`], its iceoryx2 ports;
+//! - [`latency`]: an allocation-free latency histogram;
 //! - [`scaling`]: the bilateral scaling between the nano world and the hand.
 #![deny(missing_docs)]
 
+pub mod bridge;
 pub mod device;
+pub mod latency;
+pub mod link;
+pub mod operator;
+pub mod passivity;
 pub mod scaling;
+pub mod sim;

@@ -1,8 +1,18 @@
 //! `nanopush-haptic`: the 1-DOF haptic bridge.
 //!
-//! `nanopush-haptic render` reads a force curve (`nanopush model --force-curve --json`) on
-//! stdin and prints, for each point, the handle position and the force the operator's hand
-//! would feel under the chosen scaling: the way to choose gains before a session.
+//! `nanopush-haptic --device sim|serial:PATH|none [--operator SCRIPT] [--duration S] [--trace
+//! PATH.csv]` runs a device at its own rate (1 kHz default, up to 4 kHz): each cycle it reads the
+//! handle, publishes its state to `nanopush serve` over iceoryx2, renders the server's newest
+//! force (its local linear model, through the passivity controller and the device's clamp), and
+//! writes the force. It exits 0 when a finite operator script ends, when `--duration` has passed,
+//! or on SIGINT/SIGTERM (the force is zeroed first).
+//!
+//! `nanopush-haptic render` reads a force curve (`nanopush model --force-curve --json`) on stdin
+//! and prints what the operator would feel under a scaling; `nanopush-haptic bench-transport`
+//! measures the iceoryx2 link's one-way and round-trip latency between two processes.
+
+mod bench;
+mod run;
 
 use std::io::Read;
 use std::process::ExitCode;
@@ -14,10 +24,12 @@ use nanopush_proto::model::ForceCurveReport;
 
 /// The nanopush 1-DOF haptic bridge.
 #[derive(Parser, Debug)]
-#[command(name = "nanopush-haptic", version, about)]
+#[command(name = "nanopush-haptic", version, about, args_conflicts_with_subcommands = true)]
 struct Cli {
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
+    #[command(flatten)]
+    run: run::RunArgs,
 }
 
 #[derive(Subcommand, Debug)]
@@ -34,6 +46,8 @@ enum Command {
         #[arg(long, default_value_t = 3.0)]
         peak_n: f64,
     },
+    /// Measure the iceoryx2 link between two processes (one-way and round trip).
+    BenchTransport(bench::BenchArgs),
 }
 
 fn render(nm_per_mm: f64, n_per_nn: f64, peak_n: f64) -> anyhow::Result<String> {
@@ -66,28 +80,32 @@ fn render(nm_per_mm: f64, n_per_nn: f64, peak_n: f64) -> anyhow::Result<String> 
     Ok(out)
 }
 
+fn print(text: &str) -> ExitCode {
+    use std::io::Write;
+    let mut o = std::io::stdout().lock();
+    match o.write_all(text.as_bytes()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Render {
+        Some(Command::Render {
             nm_per_mm,
             n_per_nn,
             peak_n,
-        } => render(nm_per_mm, n_per_nn, peak_n),
+        }) => render(nm_per_mm, n_per_nn, peak_n),
+        Some(Command::BenchTransport(a)) => bench::run(&a),
+        None => run::run(&cli.run),
     };
     match result {
-        Ok(text) => {
-            use std::io::Write;
-            let mut o = std::io::stdout().lock();
-            match o.write_all(text.as_bytes()) {
-                Ok(()) => ExitCode::SUCCESS,
-                Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => ExitCode::SUCCESS,
-                Err(e) => {
-                    eprintln!("error: {e}");
-                    ExitCode::from(2)
-                }
-            }
-        }
+        Ok(text) => print(&text),
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::from(2)

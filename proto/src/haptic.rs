@@ -1,5 +1,10 @@
 //! The iceoryx2 payloads of the haptic link between `nanopush serve` and the 1-DOF haptic bridge
-//! (`nanopush-haptic`): plain `#[repr(C)]` data, no heap, one definition for both processes.
+//! (`nanopush-haptic`): plain `#[repr(C)]` data, no heap, one definition for both processes, and
+//! the one iceoryx2 configuration both sides build in code (so neither searches for a config file
+//! nor prints "No config file was loaded").
+//!
+//! Timing: both processes stamp samples with `CLOCK_MONOTONIC` ([`monotonic_ns`]), one clock for
+//! the whole machine, so an age or a latency is a plain difference across the two processes.
 
 use iceoryx2::prelude::ZeroCopySend;
 
@@ -7,37 +12,276 @@ use iceoryx2::prelude::ZeroCopySend;
 pub const HAPTIC_STATE_SERVICE: &str = "nanopush/haptic/state";
 /// Service the server publishes the force to render on.
 pub const FORCE_FEEDBACK_SERVICE: &str = "nanopush/haptic/force";
+/// Node name of a bridge (the server looks for it when it checks the link's liveness).
+pub const BRIDGE_NODE_NAME: &str = "nanopush-haptic";
+/// Node name of a server.
+pub const SERVER_NODE_NAME: &str = "nanopush-serve";
+/// Publishers each service allows: one bridge and one server at a time. A second bridge (or
+/// server) is refused when it creates its publisher.
+pub const MAX_PUBLISHERS: usize = 1;
+/// Subscribers each service allows (the peer, plus benchmark and diagnostic readers).
+pub const MAX_SUBSCRIBERS: usize = 4;
+/// Nodes each service allows.
+pub const MAX_NODES: usize = 8;
+/// A peer whose newest sample is older than this is silent (ns): 5 missed samples at 1 kHz.
+pub const STALE_NS: u64 = 5_000_000;
 
-/// The haptic handle's state, bridge → server, at the device rate.
+/// [`HapticState::flags`]: the bridge hears no server and renders zero force.
+pub const STATE_SERVER_SILENT: u32 = 1;
+/// [`HapticState::flags`]: the device reported a fault (its force is zeroed).
+pub const STATE_DEVICE_FAULT: u32 = 2;
+
+/// [`ForceFeedback::flags`]: haptic z-control is engaged (the hand moves the tip).
+pub const FORCE_ENGAGED: u32 = 1;
+/// [`ForceFeedback::flags`]: a push runs; the strategy owns z and the handle only feels.
+pub const FORCE_PUSHING: u32 = 2;
+/// [`ForceFeedback::flags`]: the clutch is in (the tip holds while the hand re-centres).
+pub const FORCE_CLUTCHED: u32 = 4;
+
+/// [`HapticState::device`]: the simulated handle and operator.
+pub const DEVICE_SIM: u32 = 1;
+/// [`HapticState::device`]: a serial device.
+pub const DEVICE_SERIAL: u32 = 2;
+
+/// The name of a [`HapticState::device`] code.
+pub fn device_name(code: u32) -> &'static str {
+    match code {
+        DEVICE_SIM => "sim",
+        DEVICE_SERIAL => "serial",
+        _ => "unknown",
+    }
+}
+
+/// The handle's state, bridge → server, every device cycle.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("nanopush::HapticState")]
+#[type_name("nanopush::HapticState2")]
 #[repr(C)]
 pub struct HapticState {
-    /// Sequence number (increments by one per sample).
+    /// Sequence number (increments by one per device cycle).
     pub seq: u64,
-    /// Bridge clock, monotonic (ns).
+    /// `CLOCK_MONOTONIC` when the handle was read (ns).
     pub time_ns: u64,
     /// Handle position (m), positive up.
     pub position: f64,
     /// Handle velocity (m/s).
     pub velocity: f64,
+    /// The force rendered in the previous cycle (N), positive up, after every clamp.
+    pub force: f64,
+    /// The device's force limit (N).
+    pub max_force: f64,
+    /// Damping the passivity controller adds now (N·s/m); 0 when it is idle.
+    pub pc_damping: f64,
+    /// Energy the operator has put into the teleoperator through the port (J), as the
+    /// passivity observer counts it.
+    pub port_energy: f64,
+    /// Newest end-to-end latency (ns): a device sample → the force the server computed from it,
+    /// back at the device; 0 when none is known yet.
+    pub latency_ns: u64,
+    /// Device samples dropped so far (non-finite or outside the travel).
+    pub dropped: u64,
+    /// The bridge's process id.
+    pub pid: u32,
+    /// Buttons: bit 0 engage, bit 1 clutch.
+    pub buttons: u32,
+    /// `STATE_*` bits.
+    pub flags: u32,
+    /// `DEVICE_*` code.
+    pub device: u32,
 }
 
-/// The force the bridge should render, server → bridge, every control tick.
+/// The force to render, server → bridge, every control tick: a local linear model of the
+/// environment at the hand (the UNC nanoManipulator's approach), rendered by the bridge at its
+/// own rate between server ticks:
+///
+/// ```text
+/// F(x) = force + stiffness · clamp(x − anchor, −half_range, +half_range)
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("nanopush::ForceFeedback")]
+#[type_name("nanopush::ForceFeedback2")]
 #[repr(C)]
 pub struct ForceFeedback {
     /// Sequence number (the server's tick count).
     pub seq: u64,
-    /// Server clock since start (ns).
+    /// `CLOCK_MONOTONIC` when the force was computed (ns).
     pub time_ns: u64,
-    /// Tip force `k_z ζ_z` (N), positive repulsive (pushing the tip up); the bridge scales it.
+    /// `seq` of the [`HapticState`] the force was computed from; `u64::MAX` when none.
+    pub state_seq: u64,
+    /// Force at the hand at `anchor` (N), positive up: scaled, ramped and saturated by the
+    /// server; the bridge clamps again to its device's limit.
     pub force: f64,
-    /// Tip height above the detected substrate (m), for the bridge's display.
+    /// `dF/dx` at the hand (N/m); ≤ 0 for a spring the hand presses into; 0 for a held force.
+    pub stiffness: f64,
+    /// Handle position the model is taken at (m).
+    pub anchor: f64,
+    /// Half-width of the handle range the model holds in (m).
+    pub half_range: f64,
+    /// The tip force `k_z ζ_z` from the measured deflection (N), positive repulsive.
+    pub tip_force: f64,
+    /// Tip height above the detected substrate (m); NaN when no substrate was detected yet.
     pub tip_z: f64,
-    /// 1 when the force is live, 0 to release the handle (start-up, shutdown).
+    /// Engagement ramp, 0 (no force) to 1 (full force).
+    pub gain: f64,
+    /// 1 when the force is live, 0 to release the handle (no server state, shutdown).
     pub active: u32,
-    /// Padding to a multiple of 8 bytes.
-    pub reserved: u32,
+    /// `FORCE_*` bits.
+    pub flags: u32,
+}
+
+impl ForceFeedback {
+    /// The force of the local model at handle position `x` (N), before the device's clamp;
+    /// zero when the force is not live or a number is not finite.
+    pub fn force_at(&self, x: f64) -> f64 {
+        if self.active == 0 {
+            return 0.0;
+        }
+        let dx = (x - self.anchor).clamp(-self.half_range.abs(), self.half_range.abs());
+        let f = self.force + if dx.is_finite() { self.stiffness * dx } else { 0.0 };
+        if f.is_finite() { f } else { 0.0 }
+    }
+}
+
+/// `CLOCK_MONOTONIC` now (ns): the clock both processes stamp samples with.
+pub fn monotonic_ns() -> u64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: clock_gettime writes the timespec we pass; CLOCK_MONOTONIC is always available on
+    // Linux.
+    unsafe {
+        libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts);
+    }
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
+/// The iceoryx2 configuration both processes use, built in code: iceoryx2's defaults (shared
+/// memory under `/dev/shm`, node records under `/tmp/iceoryx2`, dead nodes cleaned up when a node
+/// is created or dropped). Passing it to `NodeBuilder::config` skips iceoryx2's config-file
+/// search and its "No config file was loaded" warning.
+pub fn ipc_config() -> iceoryx2::config::Config {
+    iceoryx2::config::Config::default()
+}
+
+/// An iceoryx2 node of the haptic link.
+pub type IpcNode = iceoryx2::node::Node<iceoryx2::service::ipc::Service>;
+/// A service of the haptic link carrying `T`.
+pub type IpcService<T> = iceoryx2::service::port_factory::publish_subscribe::PortFactory<
+    iceoryx2::service::ipc::Service,
+    T,
+    (),
+>;
+
+/// Why the haptic link could not be set up.
+#[derive(Debug)]
+pub struct LinkSetupError(pub String);
+
+impl std::fmt::Display for LinkSetupError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for LinkSetupError {}
+
+/// A node named `name` with the [`ipc_config`], that leaves the process's signals alone
+/// (`SignalHandlingMode::Disabled`: the host decides what SIGINT and SIGTERM do). Creating a node
+/// removes the resources of nodes whose processes died (iceoryx2's default
+/// `cleanup_dead_nodes_on_creation`), so a bridge or server killed with SIGKILL leaves nothing
+/// that blocks the next one.
+pub fn ipc_node(name: &str) -> Result<IpcNode, LinkSetupError> {
+    use iceoryx2::prelude::*;
+    let node_name: NodeName = name
+        .try_into()
+        .map_err(|e| LinkSetupError(format!("node name {name:?}: {e:?}")))?;
+    let node = NodeBuilder::new()
+        .config(&ipc_config())
+        .name(&node_name)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(|e| LinkSetupError(format!("iceoryx2 node {name}: {e:?}")))?;
+    let _ = node.try_cleanup_dead_nodes();
+    Ok(node)
+}
+
+fn service<T>(node: &IpcNode, name: &str) -> Result<IpcService<T>, LinkSetupError>
+where
+    T: std::fmt::Debug + ZeroCopySend + Copy + 'static,
+{
+    let service_name: iceoryx2::prelude::ServiceName = name
+        .try_into()
+        .map_err(|e| LinkSetupError(format!("service name {name:?}: {e:?}")))?;
+    node.service_builder(&service_name)
+        .publish_subscribe::<T>()
+        .max_publishers(MAX_PUBLISHERS)
+        .max_subscribers(MAX_SUBSCRIBERS)
+        .max_nodes(MAX_NODES)
+        .open_or_create()
+        .map_err(|e| LinkSetupError(format!("iceoryx2 service {name}: {e:?}")))
+}
+
+/// The bridge → server service ([`HAPTIC_STATE_SERVICE`]), with the same attributes on both
+/// sides.
+pub fn state_service(node: &IpcNode) -> Result<IpcService<HapticState>, LinkSetupError> {
+    service(node, HAPTIC_STATE_SERVICE)
+}
+
+/// The server → bridge service ([`FORCE_FEEDBACK_SERVICE`]).
+pub fn force_service(node: &IpcNode) -> Result<IpcService<ForceFeedback>, LinkSetupError> {
+    service(node, FORCE_FEEDBACK_SERVICE)
+}
+
+/// Whether a publisher creation failed because the service already has its one publisher (a
+/// live bridge, or a live server).
+pub fn is_publisher_taken(e: &iceoryx2::port::publisher::PublisherCreateError) -> bool {
+    matches!(e, iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers)
+}
+
+/// Live nodes named `name` (processes alive), after removing dead ones' resources.
+pub fn live_nodes(name: &str) -> usize {
+    use iceoryx2::node::NodeView;
+    use iceoryx2::prelude::*;
+    let mut n = 0;
+    let _ = Node::<ipc::Service>::list(&ipc_config(), |state| {
+        if let NodeState::Alive(view) = &state
+            && view.details().as_ref().is_some_and(|d| d.name().as_str() == name)
+        {
+            n += 1;
+        }
+        CallbackProgression::Continue
+    });
+    n
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn payloads_are_plain_data_of_a_stable_size() {
+        assert_eq!(std::mem::size_of::<HapticState>(), 10 * 8 + 4 * 4);
+        assert_eq!(std::mem::size_of::<ForceFeedback>(), 10 * 8 + 2 * 4);
+    }
+
+    #[test]
+    fn the_local_model_holds_within_its_range_and_is_zero_when_inactive() {
+        let f = ForceFeedback {
+            force: 0.5,
+            stiffness: -1000.0,
+            anchor: 0.01,
+            half_range: 0.001,
+            active: 1,
+            ..Default::default()
+        };
+        assert!((f.force_at(0.0095) - 1.0).abs() < 1e-12);
+        // Beyond the range the model's force holds at its edge.
+        assert!((f.force_at(0.0) - 1.5).abs() < 1e-12);
+        assert!((f.force_at(0.02) - (-0.5)).abs() < 1e-12);
+        assert_eq!(f.force_at(f64::NAN), 0.5);
+        assert_eq!(ForceFeedback { active: 0, ..f }.force_at(0.0095), 0.0);
+        assert_eq!(ForceFeedback { force: f64::INFINITY, ..f }.force_at(0.01), 0.0);
+    }
+
+    #[test]
+    fn the_monotonic_clock_advances() {
+        let a = monotonic_ns();
+        let b = monotonic_ns();
+        assert!(a > 0 && b >= a);
+    }
 }
