@@ -88,12 +88,7 @@ pub fn force_curve_report(scene: &Scene, steps: usize) -> ForceCurveReport {
     let lt = ts.long_range.capillary.map_or(0.0, |c| c.formation_gap);
     let d_far = (3.0 * lt).max(10e-9);
     // Enough travel into the sample to reach a repulsive load above the adhesion scale.
-    let adhesion: f64 = -ts.long_range.sphere_plane(
-        ts.r_t,
-        ts.a0,
-        crate::physics::forces::capillary::Meniscus::Formed,
-        ts.a0,
-    ) - ts.jkr.pull_off_load();
+    let adhesion = ts.adhesion();
     let d_near = -(2.0 * adhesion.max(1e-9) / ts.k_c);
     // Out again far enough for the adhesion to let go: its deflection is adhesion/k_c.
     let d_retract = d_far + 1.5 * adhesion.max(1e-9) / ts.k_c;

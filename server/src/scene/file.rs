@@ -39,6 +39,41 @@ pub struct SceneFile {
     /// Tapping-mode scans (optional: [`ScanFile::default`] when absent).
     #[serde(default)]
     pub scan: ScanFile,
+    /// `[haptic]`: haptic z-control from a 1-DOF handle (optional: [`HapticFile::default`]).
+    #[serde(default)]
+    pub haptic: HapticFile,
+}
+
+/// `[haptic]`: the bilateral scaling and limits of haptic z-control (`control/bilateral.rs`).
+/// Optional; every field has a default.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HapticFile {
+    /// Tip nanometres per handle millimetre (position scaling).
+    pub nm_per_mm: f64,
+    /// Force the hand feels at the scene's pull-off force (N): sets the force scaling.
+    pub pull_off_at_hand_n: f64,
+    /// Height above the detected surface the tip parks at when haptic z-control engages (nm).
+    pub park_gap_nm: f64,
+    /// Fastest the hand may move the tip's height (nm/s).
+    pub max_speed_nm_per_s: f64,
+    /// Highest the hand may take the tip above the detected surface (nm).
+    pub max_height_nm: f64,
+}
+
+impl Default for HapticFile {
+    /// 1 mm of handle = 10 nm of tip; the pull-off is felt as 1 N; the tip parks 100 nm above
+    /// the surface (10 mm of handle); the hand moves it at most 200 nm/s (20 mm/s of handle)
+    /// and at most 300 nm above the surface.
+    fn default() -> HapticFile {
+        HapticFile {
+            nm_per_mm: 10.0,
+            pull_off_at_hand_n: 1.0,
+            park_gap_nm: 100.0,
+            max_speed_nm_per_s: 200.0,
+            max_height_nm: 300.0,
+        }
+    }
 }
 
 /// `[tip]`.

@@ -324,6 +324,7 @@ pub fn validate(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
     )?;
 
     validate_scan(origin, s)?;
+    validate_haptic(origin, s)?;
 
     let ph = &s.physics;
     // Across the water layer the Hamaker combining rule (Sec 2.2.1) is attractive only when every
@@ -426,6 +427,22 @@ fn dof_name(d: DofFile) -> &'static str {
         DofFile::QuasiStatic => "quasi_static",
         DofFile::Off => "off",
     }
+}
+
+/// `[haptic]`: every number in range.
+fn validate_haptic(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
+    let c = |field: &str, v: f64, r: Range| check(origin, &format!("haptic.{field}"), v, r);
+    let h = &s.haptic;
+    c("nm_per_mm", h.nm_per_mm, Range::closed(0.01, 1000.0, "nm/mm"))?;
+    c("pull_off_at_hand_n", h.pull_off_at_hand_n, Range::closed(0.01, 10.0, "N"))?;
+    c("park_gap_nm", h.park_gap_nm, Range::closed(1.0, 10_000.0, "nm"))?;
+    c(
+        "max_speed_nm_per_s",
+        h.max_speed_nm_per_s,
+        Range::closed(1.0, 100_000.0, "nm/s"),
+    )?;
+    c("max_height_nm", h.max_height_nm, Range::closed(1.0, 50_000.0, "nm"))?;
+    Ok(())
 }
 
 /// `[strategy]`: every number in range, and the set point and safety limit on the side of the

@@ -1,0 +1,468 @@
+//! Haptic z-control (Sec 5, Fig 8: "real-time bilateral force feedback control"): the operator's
+//! 1-DOF handle sets the tip's height and the hand feels the tip-sample force, scaled.
+//!
+//! The law, each control tick (SI; `x` the handle position, positive up; `z` the stage height):
+//!
+//! ```text
+//! position:  z_des = z_a + g_p (x − x_a)                       (g_p = 1e-5: 1 mm → 10 nm)
+//!            z_ref ← clamp(z_des, z_lo, z_c + h_top), moved at most v_max·T per tick
+//! force:     F_tip = k_z ζ_z,  ζ_z = (V − V₀)/G                (Eqs 11-12: the measured deflection,
+//!                                                               with the sensor's noise)
+//!            F_hand = clamp(r · g_f · (F_tip + F_lim), ±F_dev)  (g_f: the scene's pull-off → 1 N)
+//! local model sent with it (rendered by the bridge at its rate between ticks):
+//!            dF_hand/dx = −r · g_f · k_z · g_p   while the tip touches (|ζ_z| > ζ_c), else 0
+//! ```
+//!
+//! `(x_a, z_a)` is the anchor, taken at the engagement and at every clutch release, so the tip
+//! never jumps when the hand is re-centred; `z_c` the height at which the surface was detected
+//! (the automatic approach below); `ζ_max` the deepest the lever may be pressed (80 % of the
+//! deflection at the strategy's safety limit): once `ζ_z ≥ ζ_max` the tip goes no lower (it backs
+//! off by the excess), and a hard floor `z_c − ζ_max − 20 nm` backs that up; `F_lim = k_z (z_lo −
+//! z_des)` is a virtual wall continuing the contact's stiffness where a limit holds the tip, so
+//! the hand feels the limit instead of a tip that stopped following; `r` the engagement ramp.
+//!
+//! Engagement, as CHAI3D and OpenHaptics do it: on `engage` the tip approaches the surface at the
+//! strategy's approach speed until the reading leaves the baseline (the substrate threshold),
+//! rises to `park_gap` above it, and waits until the force the hand would get has stayed below
+//! 0.2 N for 3 ticks; then `r` ramps 0 → 1 over 1 s. The same settle and ramp follow a clutch
+//! release and a new bridge after a lost link. While a push runs, the strategy owns z and the
+//! handle only feels the force; after it, the tip parks again. A lost link (no handle sample for
+//! 5 ms, decided by the caller) freezes z and retracts the tip to the parking height.
+//!
+//! The passivity of the port (energy the sampled loop generates) is watched and damped at the
+//! bridge, where the force actually rendered is known (`nanopush_haptic::passivity`).
+
+use nanopush_proto::haptic::{FORCE_CLUTCHED, FORCE_ENGAGED, FORCE_PUSHING, ForceFeedback, HapticState};
+
+use crate::scene::Scene;
+
+/// Button bit: the clutch is held.
+pub const BUTTON_CLUTCH: u32 = 2;
+/// Button bit: engage / release.
+pub const BUTTON_ENGAGE: u32 = 1;
+/// Hand force below which the forces may engage (N).
+pub const ENGAGE_FORCE: f64 = 0.2;
+/// Ticks the force must stay below [`ENGAGE_FORCE`].
+pub const ENGAGE_TICKS: u32 = 3;
+/// Duration of the force ramp (s).
+pub const RAMP: f64 = 1.0;
+/// The hard floor below the detected surface beyond the deflection limit (m): a backstop for a
+/// reading that never reaches the limit.
+pub const FLOOR_MARGIN: f64 = 20e-9;
+/// Half-width of the handle range a local model is sent for (m).
+pub const MODEL_HALF_RANGE: f64 = 0.5e-3;
+
+/// The settings of the law, SI.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BilateralParams {
+    /// Tip metres per handle metre (`g_p`).
+    pub position_gain: f64,
+    /// Hand newtons per tip newton (`g_f`).
+    pub force_gain: f64,
+    /// Height above the detected surface the tip parks at (m).
+    pub park_gap: f64,
+    /// Fastest the hand may move the tip's height (m/s).
+    pub max_speed: f64,
+    /// Speed of the automatic approach and retraction (m/s).
+    pub approach_speed: f64,
+    /// Deepest the lever may be pressed, as a deflection `ζ_max` (m).
+    pub max_indent: f64,
+    /// Highest the hand may take the tip above the detected surface (m).
+    pub max_height: f64,
+    /// Reading change that means the tip met the surface (V).
+    pub substrate_threshold: f64,
+    /// Reading at zero deflection (V).
+    pub baseline: f64,
+    /// Sensor gain (V/m).
+    pub sensor_gain: f64,
+    /// Deflection beyond which the tip is taken to touch the surface (m).
+    pub contact_deflection: f64,
+    /// Lever stiffness `k_z` (N/m).
+    pub k_z: f64,
+    /// Control tick (s).
+    pub tick: f64,
+    /// Longest the approach may search below its start (m).
+    pub search_depth: f64,
+}
+
+impl Scene {
+    /// The haptic z-control's settings from `[haptic]`, `[strategy]`, `[sensor]` and the lever,
+    /// for a control tick of `tick` seconds. The force scaling maps the tip's adhesion (the
+    /// pull-off scale, [`crate::physics::force_curve::TipSample::adhesion`]) to
+    /// `haptic.pull_off_at_hand_n`.
+    pub fn bilateral_params(&self, tick: f64) -> BilateralParams {
+        let f = &self.file;
+        let (h, st) = (&f.haptic, &f.strategy);
+        let sensor = self.sensor();
+        let ts = self.tip_sample();
+        let safety_deflection = ((st.safety_limit_v - sensor.baseline) / sensor.gain).abs();
+        BilateralParams {
+            position_gain: h.nm_per_mm * 1e-9 / 1e-3,
+            force_gain: h.pull_off_at_hand_n / ts.adhesion().max(1e-12),
+            park_gap: h.park_gap_nm * 1e-9,
+            max_speed: h.max_speed_nm_per_s * 1e-9,
+            approach_speed: st.approach_speed_um_per_s * 1e-6,
+            max_indent: 0.8 * safety_deflection,
+            max_height: h.max_height_nm * 1e-9,
+            substrate_threshold: st.substrate_threshold_mv * 1e-3,
+            baseline: sensor.baseline,
+            sensor_gain: sensor.gain,
+            contact_deflection: (5.0 * sensor.noise_rms / sensor.gain.abs()).max(0.2e-9),
+            k_z: ts.k_c,
+            tick,
+            search_depth: st.search_range_um * 1e-6 + st.start_height_um * 1e-6,
+        }
+    }
+}
+
+/// Where the haptic z-control is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Phase {
+    /// Not engaged: z is not the hand's; no force.
+    Off,
+    /// Looking for the surface below the tip.
+    Approach,
+    /// Rising to the parking height above the surface.
+    Park,
+    /// Parked; waiting for the force to stay small before engaging.
+    Settle {
+        /// Consecutive ticks with a small force.
+        small: u32,
+    },
+    /// The hand moves the tip; the force ramps in.
+    Ramp {
+        /// Ramp 0..1.
+        gain: f64,
+    },
+    /// The hand moves the tip with full force feedback.
+    Engaged,
+    /// The clutch is in: the tip holds, the hand re-centres, no force.
+    Clutched,
+    /// A push runs: the strategy owns z; the hand feels the force.
+    Pushing,
+    /// The link went down: the tip retracts to the parking height.
+    LinkLost,
+    /// Released: the tip goes back to the parking height, then off.
+    Retract,
+}
+
+impl Phase {
+    /// Name for status and telemetry.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Phase::Off => "off",
+            Phase::Approach => "approach",
+            Phase::Park => "park",
+            Phase::Settle { .. } => "settle",
+            Phase::Ramp { .. } => "ramp",
+            Phase::Engaged => "engaged",
+            Phase::Clutched => "clutched",
+            Phase::Pushing => "pushing",
+            Phase::LinkLost => "link_lost",
+            Phase::Retract => "retract",
+        }
+    }
+}
+
+/// Why an approach ended without a surface.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fault {
+    /// No surface within the search depth.
+    NoSurface,
+}
+
+/// What the law needs each tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Input {
+    /// The newest handle sample, `None` while the link is down.
+    pub handle: Option<HapticState>,
+    /// The stage position now (m).
+    pub stage: [f64; 3],
+    /// The deflection reading now (V).
+    pub volts: f64,
+    /// A push runs (the strategy owns z).
+    pub pushing: bool,
+}
+
+/// What the law decides each tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Output {
+    /// The stage target while the haptic control owns the tip; `None` otherwise.
+    pub target: Option<[f64; 3]>,
+    /// The force message for the bridge (without `seq`/`time_ns`).
+    pub feedback: ForceFeedback,
+}
+
+/// The haptic z-control's state.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Bilateral {
+    /// Settings (the scales may change at run time).
+    pub params: BilateralParams,
+    phase: Phase,
+    /// Stage height at which the surface was detected (m).
+    contact_z: Option<f64>,
+    /// Where the approach started (m).
+    approach_from: f64,
+    /// Stage xy held while the hand owns z.
+    xy: [f64; 2],
+    /// Anchor: handle position and stage height.
+    anchor: (f64, f64),
+    /// The height commanded (m).
+    z_ref: f64,
+    /// The last fault.
+    fault: Option<Fault>,
+    /// The engage button's previous state (edges toggle the engagement).
+    button_prev: bool,
+}
+
+impl Bilateral {
+    /// Off, with `params`.
+    pub fn new(params: BilateralParams) -> Bilateral {
+        Bilateral {
+            params,
+            phase: Phase::Off,
+            contact_z: None,
+            approach_from: 0.0,
+            xy: [0.0; 2],
+            anchor: (0.0, 0.0),
+            z_ref: 0.0,
+            fault: None,
+            button_prev: false,
+        }
+    }
+
+    /// Where it is.
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    /// Whether the hand owns (or will own) the tip: engaged in any way but off.
+    pub fn engaged(&self) -> bool {
+        self.phase != Phase::Off
+    }
+
+    /// The last fault, if any.
+    pub fn fault(&self) -> Option<Fault> {
+        self.fault
+    }
+
+    /// The detected surface height (m).
+    pub fn contact_z(&self) -> Option<f64> {
+        self.contact_z
+    }
+
+    /// Engages: approach, park, settle, ramp. The tip holds its xy at `stage`.
+    pub fn engage(&mut self, stage: [f64; 3]) {
+        if self.phase != Phase::Off {
+            return;
+        }
+        self.xy = [stage[0], stage[1]];
+        self.z_ref = stage[2];
+        self.approach_from = stage[2];
+        self.fault = None;
+        self.phase = Phase::Approach;
+    }
+
+    /// Releases: the tip goes back to the parking height (when a surface is known) and the
+    /// handle is let go.
+    pub fn release(&mut self) {
+        self.phase = match self.phase {
+            Phase::Off | Phase::Pushing | Phase::Approach => Phase::Off,
+            _ => Phase::Retract,
+        };
+    }
+
+    /// Re-centres: the anchor moves to the handle's position now, so the tip stays where it is
+    /// and the hand has its travel again (the one-shot form of the clutch).
+    pub fn recenter(&mut self, handle: f64) {
+        self.anchor = (handle, self.z_ref);
+    }
+
+    fn deflection(&self, volts: f64) -> f64 {
+        (volts - self.params.baseline) / self.params.sensor_gain
+    }
+
+    fn park_height(&self) -> Option<f64> {
+        self.contact_z.map(|z| z + self.params.park_gap)
+    }
+
+    /// Moves `z_ref` toward `to` at most `speed·tick`.
+    fn slew(&mut self, to: f64, speed: f64) -> bool {
+        let step = speed * self.params.tick;
+        let d = (to - self.z_ref).clamp(-step, step);
+        self.z_ref += d;
+        (to - self.z_ref).abs() < 1e-15
+    }
+
+    /// One control tick.
+    pub fn tick(&mut self, input: &Input) -> Output {
+        let p = self.params;
+        let was = self.phase;
+        let zeta = self.deflection(input.volts);
+        let tip_force = p.k_z * zeta;
+        let max_force = input.handle.map_or(0.0, |h| h.max_force.max(0.0));
+        let handle = input.handle;
+
+        // The engage button toggles the engagement (a rising edge).
+        let button = handle.is_some_and(|h| h.buttons & BUTTON_ENGAGE != 0);
+        if button && !self.button_prev {
+            if self.phase == Phase::Off {
+                self.engage(input.stage);
+            } else {
+                self.release();
+            }
+        }
+        self.button_prev = button;
+
+        // A push owns z: the hand only feels.
+        if input.pushing && self.phase != Phase::Off {
+            self.phase = Phase::Pushing;
+        } else if !input.pushing && self.phase == Phase::Pushing {
+            self.engage_after_push(input.stage);
+        }
+        // The link went down while the hand moved the tip.
+        if handle.is_none() && matches!(self.phase, Phase::Ramp { .. } | Phase::Engaged | Phase::Clutched | Phase::Settle { .. })
+        {
+            self.phase = Phase::LinkLost;
+        }
+
+        let mut limit_force = 0.0;
+        let mut gain = 0.0;
+        let mut flags = 0;
+        match self.phase {
+            Phase::Off | Phase::Pushing => {}
+            Phase::Approach => {
+                let met = (input.volts - p.baseline).abs() > p.substrate_threshold;
+                if met {
+                    self.contact_z = Some(input.stage[2]);
+                    self.phase = Phase::Park;
+                } else if self.approach_from - self.z_ref > p.search_depth {
+                    self.fault = Some(Fault::NoSurface);
+                    self.z_ref = self.approach_from;
+                    self.phase = Phase::Off;
+                } else {
+                    self.slew(f64::NEG_INFINITY, p.approach_speed);
+                }
+            }
+            Phase::Park => {
+                let park = self.park_height().unwrap_or(self.approach_from);
+                if self.slew(park, p.approach_speed) {
+                    self.phase = Phase::Settle { small: 0 };
+                }
+            }
+            Phase::LinkLost | Phase::Retract => {
+                // Up to the parking height (never down); then wait for the link, or stop.
+                let parked = match self.park_height() {
+                    Some(park) => self.slew(self.z_ref.max(park), p.approach_speed),
+                    None => true,
+                };
+                if parked && self.phase == Phase::Retract {
+                    self.phase = Phase::Off;
+                } else if parked && handle.is_some() {
+                    self.phase = Phase::Settle { small: 0 };
+                }
+            }
+            Phase::Settle { small } => {
+                let hand = (p.force_gain * tip_force).abs();
+                let small = if hand < ENGAGE_FORCE { small + 1 } else { 0 };
+                self.phase = Phase::Settle { small };
+                if small >= ENGAGE_TICKS
+                    && let Some(h) = handle
+                {
+                    self.anchor = (h.position, self.z_ref);
+                    self.phase = Phase::Ramp { gain: 0.0 };
+                }
+            }
+            Phase::Ramp { .. } | Phase::Engaged | Phase::Clutched => {
+                // The link is up here: a lost link moved these phases to LinkLost above.
+                if let Some(h) = handle {
+                    limit_force = self.follow(&h, zeta);
+                }
+            }
+        }
+        match self.phase {
+            Phase::Ramp { gain: g } => {
+                gain = g;
+                flags |= FORCE_ENGAGED;
+            }
+            Phase::Engaged => {
+                gain = 1.0;
+                flags |= FORCE_ENGAGED;
+            }
+            Phase::Clutched => flags |= FORCE_ENGAGED | FORCE_CLUTCHED,
+            Phase::Pushing => {
+                gain = 1.0;
+                flags |= FORCE_PUSHING;
+            }
+            _ => {}
+        }
+        let touching = zeta.abs() > p.contact_deflection;
+        let force = (gain * p.force_gain * (tip_force + limit_force)).clamp(-max_force, max_force);
+        // A retraction that ends this tick still moves the tip there.
+        let owns_z = !matches!(self.phase, Phase::Off | Phase::Pushing) || was == Phase::Retract;
+        let stiffness = if (touching || limit_force > 0.0) && self.phase != Phase::Pushing {
+            -gain * p.force_gain * p.k_z * p.position_gain
+        } else {
+            0.0
+        };
+        Output {
+            target: owns_z.then_some([self.xy[0], self.xy[1], self.z_ref]),
+            feedback: ForceFeedback {
+                seq: 0,
+                time_ns: 0,
+                state_seq: handle.map_or(u64::MAX, |h| h.seq),
+                force,
+                stiffness,
+                anchor: handle.map_or(0.0, |h| h.position),
+                half_range: MODEL_HALF_RANGE,
+                tip_force,
+                tip_z: self.contact_z.map_or(f64::NAN, |zc| input.stage[2] - zc),
+                gain,
+                active: u32::from(gain > 0.0 && handle.is_some()),
+                flags,
+            },
+        }
+    }
+
+    /// The hand moves the tip (ramp, engaged, clutch); returns the virtual wall's force at the
+    /// range limit (N, tip side).
+    fn follow(&mut self, h: &HapticState, zeta: f64) -> f64 {
+        let p = self.params;
+        let clutch = h.buttons & BUTTON_CLUTCH != 0;
+        if clutch {
+            self.phase = Phase::Clutched;
+        } else if self.phase == Phase::Clutched {
+            // Released: re-anchor where the hand is, ramp the force in again.
+            self.anchor = (h.position, self.z_ref);
+            self.phase = Phase::Ramp { gain: 0.0 };
+        }
+        if let Phase::Ramp { gain: g } = self.phase {
+            let g = (g + p.tick / RAMP).min(1.0);
+            self.phase = if g >= 1.0 { Phase::Engaged } else { Phase::Ramp { gain: g } };
+        }
+        if self.phase == Phase::Clutched {
+            return 0.0;
+        }
+        let z_des = self.anchor.1 + p.position_gain * (h.position - self.anchor.0);
+        let (mut lo, hi) = match self.contact_z {
+            Some(zc) => (zc - p.max_indent - FLOOR_MARGIN, zc + p.max_height),
+            None => (f64::NEG_INFINITY, f64::INFINITY),
+        };
+        // The force limit: once the lever is bent to the limit, the tip goes no deeper (and
+        // backs off by the excess).
+        if zeta >= p.max_indent {
+            lo = lo.max(self.z_ref + (zeta - p.max_indent));
+        }
+        self.slew(z_des.clamp(lo, hi), p.max_speed);
+        if z_des < lo { p.k_z * (lo - z_des) } else { 0.0 }
+    }
+
+    /// After a push the tip is wherever the strategy retracted it: approach and park again.
+    fn engage_after_push(&mut self, stage: [f64; 3]) {
+        self.phase = Phase::Off;
+        self.engage(stage);
+    }
+}
+
+#[cfg(test)]
+mod tests;
