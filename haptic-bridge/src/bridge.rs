@@ -139,6 +139,11 @@ impl<D: Device> Bridge<D> {
         self.link_up
     }
 
+    /// The newest force sample from a server, if any.
+    pub fn last_force(&self) -> Option<ForceFeedback> {
+        self.force
+    }
+
     fn believable(&self, s: &DeviceSample) -> bool {
         let [lo, hi] = self.spec.travel;
         s.position.is_finite()
@@ -173,13 +178,14 @@ impl<D: Device> Bridge<D> {
             }
             self.force = Some(f);
         }
-        let live = self
-            .force
-            .filter(|f| f.active != 0 && now_ns.saturating_sub(f.time_ns) <= STALE_NS);
-        if live.is_none() && self.link_up {
+        // A server is live while its newest sample is fresh; its force is live while it says so.
+        let fresh = self.force.filter(|f| now_ns.saturating_sub(f.time_ns) <= STALE_NS);
+        let live = fresh.filter(|f| f.active != 0);
+        if live.is_none() {
             self.pc.reset();
+            self.x_prev = None;
         }
-        self.link_up = live.is_some();
+        self.link_up = fresh.is_some();
         let mut row = CycleRow {
             t,
             tip_z: self.force.map_or(f64::NAN, |f| f.tip_z),
@@ -211,7 +217,7 @@ impl<D: Device> Bridge<D> {
             None => (0.0, 0.0),
         };
         self.x_prev = Some(s.position);
-        let out = if self.link_up {
+        let out = if live.is_some() {
             self.pc.step(env, s.velocity, dt, w_ref, max)
         } else {
             crate::passivity::PassivityOutput {

@@ -151,12 +151,26 @@ pub fn monotonic_ns() -> u64 {
     ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
 
+/// Environment variable naming the haptic link's namespace: processes with the same value (or
+/// none) find each other; different values keep two links on one machine apart (two
+/// instruments, or tests running side by side). Letters, digits, `-` and `_`, at most 32.
+pub const NAMESPACE_ENV: &str = "NANOPUSH_HAPTIC_NAMESPACE";
+
 /// The iceoryx2 configuration both processes use, built in code: iceoryx2's defaults (shared
 /// memory under `/dev/shm`, node records under `/tmp/iceoryx2`, dead nodes cleaned up when a node
-/// is created or dropped). Passing it to `NodeBuilder::config` skips iceoryx2's config-file
-/// search and its "No config file was loaded" warning.
+/// is created or dropped), with the file prefix `nanopush_` or `nanopush_<namespace>_` from
+/// [`NAMESPACE_ENV`]. Passing it to `NodeBuilder::config` skips iceoryx2's config-file search and
+/// its "No config file was loaded" warning.
 pub fn ipc_config() -> iceoryx2::config::Config {
-    iceoryx2::config::Config::default()
+    use iceoryx2::prelude::SemanticString;
+    let mut cfg = iceoryx2::config::Config::default();
+    let ns = std::env::var(NAMESPACE_ENV).unwrap_or_default();
+    let ok = ns.len() <= 32 && ns.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+    let prefix = if ns.is_empty() || !ok { "nanopush_".to_string() } else { format!("nanopush_{ns}_") };
+    if let Ok(p) = iceoryx2::prelude::FileName::new(prefix.as_bytes()) {
+        cfg.global.prefix = p;
+    }
+    cfg
 }
 
 /// An iceoryx2 node of the haptic link.

@@ -97,6 +97,36 @@ pub enum ClientMessage {
         #[serde(default)]
         id: Option<u32>,
     },
+    /// Haptic z-control from the 1-DOF handle. Needs the lease, and for `engage` a live haptic
+    /// link.
+    Haptic {
+        /// Command id.
+        #[serde(default)]
+        id: Option<u32>,
+        /// What to do.
+        action: HapticAction,
+        /// New position scale (tip nm per handle mm), with `scale`.
+        #[serde(default)]
+        nm_per_mm: Option<f64>,
+        /// New force scale: the force felt at the scene's pull-off (N), with `scale`.
+        #[serde(default)]
+        pull_off_at_hand_n: Option<f64>,
+    },
+}
+
+/// What a `haptic` command does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HapticAction {
+    /// Approach the surface, park above it, and give the tip's height to the hand (forces ramp
+    /// in over a second once they are small).
+    Engage,
+    /// Park the tip and let the handle go.
+    Release,
+    /// Re-centre: the tip stays, the handle's travel is centred on where the hand is.
+    Recenter,
+    /// Change the scales (`nm_per_mm`, `pull_off_at_hand_n`).
+    Scale,
 }
 
 impl ClientMessage {
@@ -109,7 +139,8 @@ impl ClientMessage {
             | ClientMessage::Push { id, .. }
             | ClientMessage::Scan { id, .. }
             | ClientMessage::Stop { id }
-            | ClientMessage::Ping { id } => *id,
+            | ClientMessage::Ping { id }
+            | ClientMessage::Haptic { id, .. } => *id,
         }
     }
 }
@@ -152,6 +183,8 @@ pub enum ErrorCode {
     Invalid,
     /// The server is shutting down.
     ShuttingDown,
+    /// What the command needs is not there (the haptic link is off or down).
+    Unavailable,
 }
 
 /// Tip telemetry (SI).
@@ -167,6 +200,27 @@ pub struct Telemetry {
     pub phase: String,
     /// The pushed particle's estimated centre (m), while a push runs.
     pub estimate: Option<[f64; 2]>,
+    /// The haptic link, when the server runs one (`--haptic sim|external`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub haptic: Option<HapticTelemetry>,
+}
+
+/// The haptic handle in telemetry (SI).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HapticTelemetry {
+    /// `up`, `down`.
+    pub link: String,
+    /// Haptic z-control phase: `off`, `approach`, `park`, `settle`, `ramp`, `engaged`,
+    /// `clutched`, `pushing`, `link_lost`, `retract`.
+    pub phase: String,
+    /// Handle position (m); null before the first sample.
+    pub handle_m: Option<f64>,
+    /// Force rendered at the hand (N); null before the first sample.
+    pub force_n: Option<f64>,
+    /// Tip force from the measured deflection (N), positive repulsive.
+    pub tip_force_n: f64,
+    /// Whether the passivity controller acted within the last 100 ms.
+    pub pc_active: bool,
 }
 
 /// A server → client text message.

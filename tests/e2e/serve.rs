@@ -66,7 +66,7 @@ fn start(tag: &str, extra: &[&str]) -> Server {
             "serve",
             "--port",
             "0",
-            "--no-haptic",
+            "--haptic", "none",
             "--operator-token",
             TOKEN,
             "--scene",

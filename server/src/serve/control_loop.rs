@@ -10,17 +10,24 @@
 //! 3. *publish*: the force to the haptic bridge (iceoryx2), the telemetry snapshot (a
 //!    `try_lock`: skipped, never waited for, if a reader holds it), the trace row to the
 //!    recorder (a bounded lock-free queue).
+//!
+//! Haptic z-control ([`crate::control::bilateral`]) runs in the control phase: the newest handle
+//! sample (rejected and counted if not believable), the link's watchdog (down after 4.5 ms
+//! without a sample: logged as "haptic link down", the tip retracts to its parking height), the
+//! law's stage target while the hand owns z (outside pushes), and the force with its local model
+//! published every tick.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::Relaxed};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use crossbeam_queue::ArrayQueue;
-use nanopush_proto::haptic::{FORCE_FEEDBACK_SERVICE, ForceFeedback, HAPTIC_STATE_SERVICE, HapticState};
+use nanopush_proto::haptic::{ForceFeedback, HapticState, monotonic_ns};
 
+use crate::control::bilateral::{Bilateral, BilateralParams, Input as HapticInput, Phase as HapticPhase};
 use crate::control::{Leg, Prepared, Strategy, StrategyParams};
 use crate::instrument::{Afm, Reading};
-use crate::physics::sensor::Sensor;
+use crate::serve::haptic::{DOWN_AFTER_NS, LINK_DOWN, LINK_UP, ServerLink, believable, phase_index};
 use crate::serve::metrics::LoopMetrics;
 
 /// A push prepared off the loop (localization, model prediction, plan), ready to run.
@@ -45,6 +52,26 @@ pub enum LoopCommand {
     Stop,
     /// Finish: stop any push, retract, release the haptic force, end the thread.
     Shutdown,
+    /// Haptic z-control.
+    Haptic(HapticCommand),
+}
+
+/// What the lease holder asks of haptic z-control.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum HapticCommand {
+    /// Approach, park, and give z to the hand.
+    Engage,
+    /// Park the tip and let the handle go.
+    Release,
+    /// Re-centre the handle: the tip stays, the hand gets its travel back.
+    Recenter,
+    /// New scales (each only when given).
+    Scale {
+        /// Tip metres per handle metre.
+        position_gain: Option<f64>,
+        /// Hand newtons per tip newton.
+        force_gain: Option<f64>,
+    },
 }
 
 /// What the loop reports back.
@@ -217,50 +244,6 @@ fn make_realtime(cpu: Option<usize>) -> bool {
     }
 }
 
-/// The haptic link's two ports; absent when iceoryx2 could not be set up.
-struct HapticLink {
-    _node: iceoryx2::node::Node<iceoryx2::service::ipc::Service>,
-    publisher: iceoryx2::port::publisher::Publisher<iceoryx2::service::ipc::Service, ForceFeedback, ()>,
-    subscriber: iceoryx2::port::subscriber::Subscriber<iceoryx2::service::ipc::Service, HapticState, ()>,
-}
-
-impl HapticLink {
-    fn open() -> Result<HapticLink, Box<dyn std::error::Error>> {
-        use iceoryx2::prelude::*;
-        let node = NodeBuilder::new()
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()?;
-        let force = node
-            .service_builder(&FORCE_FEEDBACK_SERVICE.try_into()?)
-            .publish_subscribe::<ForceFeedback>()
-            .open_or_create()?;
-        let state = node
-            .service_builder(&HAPTIC_STATE_SERVICE.try_into()?)
-            .publish_subscribe::<HapticState>()
-            .open_or_create()?;
-        Ok(HapticLink {
-            publisher: force.publisher_builder().create()?,
-            subscriber: state.subscriber_builder().create()?,
-            _node: node,
-        })
-    }
-
-    fn publish(&self, f: ForceFeedback) {
-        if let Ok(sample) = self.publisher.loan_uninit() {
-            let _ = sample.write_payload(f).send();
-        }
-    }
-
-    /// Drains the subscriber; the newest sample, if any arrived.
-    fn newest(&self) -> Option<HapticState> {
-        let mut last = None;
-        while let Ok(Some(s)) = self.subscriber.receive() {
-            last = Some(*s);
-        }
-        last
-    }
-}
-
 /// A push in progress.
 struct Active {
     job: Box<PushJob>,
@@ -293,8 +276,7 @@ impl Drop for Finished<'_> {
 pub struct ControlLoop {
     afm: Afm,
     params: StrategyParams,
-    sensor: Sensor,
-    k_z: f64,
+    bilateral: Bilateral,
     target: [f64; 3],
     active: Option<Active>,
     ending: Option<Ending>,
@@ -302,15 +284,13 @@ pub struct ControlLoop {
 }
 
 impl ControlLoop {
-    /// A loop over `afm` with the scene's strategy settings; `k_z` (N/m) turns the measured
-    /// deflection into the force sent to the haptic bridge.
-    pub fn new(afm: Afm, params: StrategyParams, sensor: Sensor, k_z: f64) -> ControlLoop {
+    /// A loop over `afm` with the scene's strategy settings and the haptic z-control's.
+    pub fn new(afm: Afm, params: StrategyParams, haptic: BilateralParams) -> ControlLoop {
         let target = afm.stage();
         ControlLoop {
             afm,
             params,
-            sensor,
-            k_z,
+            bilateral: Bilateral::new(haptic),
             target,
             active: None,
             ending: None,
@@ -395,11 +375,39 @@ impl ControlLoop {
                 }
                 LoopCommand::Shutdown => {
                     self.shutting_down = true;
+                    self.bilateral.release();
                     if let Some(a) = &mut self.active {
                         a.stop = true;
                         a.strategy.abort("server shutting down", reading.t);
                     }
                 }
+                LoopCommand::Haptic(h) => match h {
+                    HapticCommand::Engage if !self.shutting_down => self.bilateral.engage(reading.stage),
+                    HapticCommand::Engage => {}
+                    HapticCommand::Release => self.bilateral.release(),
+                    HapticCommand::Recenter => {
+                        let x = f64::from_bits(shared.metrics.haptic.handle_m.load(Relaxed));
+                        if x.is_finite() {
+                            self.bilateral.recenter(x);
+                        }
+                    }
+                    HapticCommand::Scale {
+                        position_gain,
+                        force_gain,
+                    } => {
+                        // Re-anchored where the hand is now, so the tip does not jump.
+                        if let Some(g) = position_gain {
+                            self.bilateral.params.position_gain = g;
+                            let x = f64::from_bits(shared.metrics.haptic.handle_m.load(Relaxed));
+                            if x.is_finite() {
+                                self.bilateral.recenter(x);
+                            }
+                        }
+                        if let Some(g) = force_gain {
+                            self.bilateral.params.force_gain = g;
+                        }
+                    }
+                },
             }
         }
         if let Some(mut a) = self.active.take() {
@@ -435,17 +443,22 @@ impl ControlLoop {
     pub fn run(mut self, shared: Arc<Shared>, cfg: LoopConfig) {
         let rt = cfg.realtime && make_realtime(cfg.cpu);
         shared.metrics.realtime.store(rt as u64, Relaxed);
+        let hm = &shared.metrics.haptic;
         let haptic = if cfg.haptic {
-            match HapticLink::open() {
+            hm.enabled.store(true, Relaxed);
+            hm.link.store(LINK_DOWN, Relaxed);
+            match ServerLink::open() {
                 Ok(h) => Some(h),
                 Err(e) => {
-                    tracing::warn!("haptic link (iceoryx2) unavailable: {e}; running without force feedback");
+                    tracing::error!("{e}; running without force feedback");
                     None
                 }
             }
         } else {
             None
         };
+        let mut handle: Option<HapticState> = None;
+        let (mut last_rx, mut last_latency, mut link_up) = (0u64, 0u64, false);
         let period = Duration::from_secs_f64(1.0 / cfg.rate_hz);
         let sleeper = spin_sleep::SpinSleeper::default();
         let mut reading = self.afm.read();
@@ -464,14 +477,55 @@ impl ControlLoop {
             m.period_error
                 .record(woke.saturating_duration_since(deadline).as_secs_f64());
 
-            // Control.
-            if let Some(h) = &haptic
-                && h.newest().is_some()
-            {
-                m.haptic_samples.fetch_add(1, Relaxed);
-                m.haptic_last_ns.store(shared.now_ns(), Relaxed);
+            // Control: the handle, the link's watchdog, commands and the strategy, the hand.
+            if let Some(h) = &haptic {
+                let now_ns = monotonic_ns();
+                if let (Some(s), _) = h.newest() {
+                    if believable(&s) {
+                        hm.sample(&s, now_ns);
+                        if s.latency_ns != 0 && s.latency_ns != last_latency {
+                            hm.latency.record(s.latency_ns as f64 * 1e-9);
+                            last_latency = s.latency_ns;
+                        }
+                        handle = Some(s);
+                        last_rx = now_ns;
+                    } else {
+                        hm.rejected_samples.fetch_add(1, Relaxed);
+                    }
+                }
+                let up = handle.is_some() && now_ns.saturating_sub(last_rx) < DOWN_AFTER_NS;
+                if up != link_up {
+                    let pid = handle.map_or(0, |s| s.pid);
+                    if up {
+                        tracing::info!(
+                            "haptic link up: {} bridge, pid {pid}",
+                            nanopush_proto::haptic::device_name(handle.map_or(0, |s| s.device))
+                        );
+                    } else {
+                        hm.link_downs.fetch_add(1, Relaxed);
+                        tracing::warn!(
+                            "haptic link down: no handle sample for {:.1} ms (bridge pid {pid}); z frozen, tip to its parking height",
+                            now_ns.saturating_sub(last_rx) as f64 * 1e-6
+                        );
+                    }
+                    hm.link.store(if up { LINK_UP } else { LINK_DOWN }, Relaxed);
+                    link_up = up;
+                }
             }
-            let target = self.control(&shared, &reading);
+            let mut target = self.control(&shared, &reading);
+            let hand = self.bilateral.tick(&HapticInput {
+                handle: if link_up { handle } else { None },
+                stage: reading.stage,
+                volts: reading.volts,
+                pushing: self.active.is_some(),
+            });
+            if let Some(t) = hand.target
+                && self.active.is_none()
+            {
+                self.target = t;
+                target = t;
+            }
+            hm.phase.store(phase_index(self.bilateral.phase().name()), Relaxed);
             let t_control = Instant::now();
             m.control.record((t_control - woke).as_secs_f64());
 
@@ -498,17 +552,14 @@ impl ControlLoop {
             m.physics.record((t_physics - t_control).as_secs_f64());
 
             // Publish.
-            let deflection = self.sensor.deflection(reading.volts);
             if let Some(h) = &haptic {
                 h.publish(ForceFeedback {
                     seq: tick,
-                    time_ns: shared.now_ns(),
-                    force: self.k_z * deflection,
-                    tip_z: reading.stage[2],
-                    active: 1,
-                    reserved: 0,
+                    time_ns: monotonic_ns(),
+                    ..hand.feedback
                 });
             }
+            hm.tip_force_n.store(hand.feedback.tip_force.to_bits(), Relaxed);
             let phase_name = match &self.active {
                 Some(a) => a.strategy.phase.name(),
                 None => "idle",
@@ -569,20 +620,22 @@ impl ControlLoop {
                     deadline = done + period;
                 }
             }
-            if self.shutting_down && self.active.is_none() {
+            // On shutdown, the push ends and the hand's tip is parked before the loop does.
+            if self.shutting_down && self.active.is_none() && self.bilateral.phase() == HapticPhase::Off {
                 break;
             }
         }
         if let Some(h) = &haptic {
             h.publish(ForceFeedback {
                 seq: tick,
-                time_ns: shared.now_ns(),
-                force: 0.0,
-                tip_z: reading.stage[2],
+                time_ns: monotonic_ns(),
+                state_seq: u64::MAX,
+                tip_z: f64::NAN,
                 active: 0,
-                reserved: 0,
+                ..ForceFeedback::default()
             });
         }
+        hm.link.store(LINK_DOWN, Relaxed);
         if let Ok(mut s) = shared.snapshot.lock() {
             s.phase = "stopped";
             s.stage = reading.stage;

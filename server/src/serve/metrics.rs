@@ -21,6 +21,9 @@ pub struct Histogram {
 impl Histogram {
     /// Records one value (s); negative values count as 0.
     pub fn record(&self, seconds: f64) {
+        if seconds.is_nan() {
+            return;
+        }
         let v = seconds.max(0.0);
         let i = BUCKETS.iter().position(|&b| v <= b).unwrap_or(BUCKETS.len());
         self.counts[i].fetch_add(1, Relaxed);
@@ -105,10 +108,8 @@ pub struct LoopMetrics {
     pub dropped_commands: AtomicU64,
     /// Trace rows dropped because the recorder's queue was full (should stay 0).
     pub dropped_rows: AtomicU64,
-    /// Last haptic sample's receive time, ns since start (0 = never).
-    pub haptic_last_ns: AtomicU64,
-    /// Haptic samples received.
-    pub haptic_samples: AtomicU64,
+    /// The haptic link.
+    pub haptic: crate::serve::haptic::HapticMetrics,
     /// 1 when SCHED_FIFO was granted.
     pub realtime: AtomicU64,
 }
@@ -126,7 +127,7 @@ pub struct NetMetrics {
     pub sent: AtomicU64,
 }
 
-/// Renders both sets as a Prometheus exposition; `now_ns` is the time since start.
+/// Renders both sets as a Prometheus exposition; `now_ns` is `CLOCK_MONOTONIC` now.
 pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64) -> String {
     let mut s = String::with_capacity(8192);
     l.period_error.render(
@@ -141,14 +142,22 @@ pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64) -> String {
     l.physics.render(&mut s, name, help, true, Some(("phase", "physics")));
     l.control.render(&mut s, name, help, false, Some(("phase", "control")));
     l.publish.render(&mut s, name, help, false, Some(("phase", "publish")));
-    let last = l.haptic_last_ns.load(Relaxed);
+    let h = &l.haptic;
+    h.latency.render(
+        &mut s,
+        "nanopush_haptic_latency_seconds",
+        "End-to-end haptic latency the bridge measured: a device sample to the force computed from it, back at the device.",
+        true,
+        None,
+    );
+    let last = h.last_ns.load(Relaxed);
     let age = if last == 0 {
         -1.0
     } else {
         now_ns.saturating_sub(last) as f64 * 1e-9
     };
     // (name, help, type, value)
-    let scalars: [(&str, &str, &str, f64); 11] = [
+    let scalars: [(&str, &str, &str, f64); 22] = [
         (
             "nanopush_loop_ticks_total",
             "Control ticks run.",
@@ -189,7 +198,73 @@ pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64) -> String {
             "nanopush_haptic_samples_total",
             "Haptic samples received.",
             "counter",
-            l.haptic_samples.load(Relaxed) as f64,
+            h.samples.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_haptic_link_up",
+            "1 while handle samples arrive (0 when down or off).",
+            "gauge",
+            (h.link_name() == "up") as u8 as f64,
+        ),
+        (
+            "nanopush_haptic_enabled",
+            "1 when the server runs with a haptic link (--haptic sim or external).",
+            "gauge",
+            h.enabled.load(Relaxed) as u8 as f64,
+        ),
+        (
+            "nanopush_haptic_engaged",
+            "1 while haptic z-control is engaged (any phase but off).",
+            "gauge",
+            (h.phase_name() != "off") as u8 as f64,
+        ),
+        (
+            "nanopush_haptic_handle_meters",
+            "Handle position.",
+            "gauge",
+            h.handle_m(),
+        ),
+        (
+            "nanopush_haptic_force_newtons",
+            "Force rendered at the hand.",
+            "gauge",
+            h.force_n(),
+        ),
+        (
+            "nanopush_haptic_pc_damping",
+            "Damping the passivity controller adds now (N s/m).",
+            "gauge",
+            h.pc_damping(),
+        ),
+        (
+            "nanopush_haptic_pc_active_samples_total",
+            "Handle samples with the passivity controller acting.",
+            "counter",
+            h.pc_active_samples.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_haptic_restarts_total",
+            "Restarts of the supervised bridge (--haptic sim).",
+            "counter",
+            h.restarts.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_haptic_dropped_samples_total",
+            "Device samples the bridge dropped (not finite, outside the travel).",
+            "counter",
+            h.dropped_samples.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_haptic_rejected_samples_total",
+            "Bridge samples the server rejected (not finite, out of range).",
+            "counter",
+            h.rejected_samples.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_haptic_link_downs_total",
+            "Times the haptic link went down.",
+            "counter",
+            h.link_downs.load(Relaxed) as f64,
         ),
         (
             "nanopush_clients",

@@ -3,6 +3,7 @@
 
 pub mod app;
 pub mod control_loop;
+pub mod haptic;
 pub mod metrics;
 pub mod records;
 pub mod validate;
@@ -56,9 +57,7 @@ pub async fn run(
     let base = crate::scan::ScanParams::from_scene(&scene);
     let afm = Afm::from_scene(&scene, base.centre_x, base.centre_y, tick);
     let shared = Arc::new(Shared::new(&afm));
-    let sensor = scene.sensor();
-    let k_z = scene.file.cantilever.stiffness_n_per_m;
-    let control = ControlLoop::new(afm, params, sensor, k_z);
+    let control = ControlLoop::new(afm, params, scene.bilateral_params(tick));
     let loop_shared = shared.clone();
     let loop_thread = std::thread::Builder::new()
         .name("control-loop".into())
@@ -78,6 +77,10 @@ pub async fn run(
             source,
         })?;
 
+    let supervisor = match &cfg.haptic {
+        haptic::HapticMode::Sim(bin) => Some(haptic::Supervisor::start(bin.clone(), shared.clone())),
+        _ => None,
+    };
     let state = Arc::new(AppState::new(cfg, scene, shared.clone(), params));
     let listener = tokio::net::TcpListener::bind(bind)
         .await
@@ -115,6 +118,10 @@ pub async fn run(
         let _ = tokio::task::spawn_blocking(move || {
             let _ = recorder.join();
             let _ = loop_thread.join();
+            // The loop has published zero force; now the simulated bridge goes, reaped.
+            if let Some(s) = supervisor {
+                s.shutdown();
+            }
         })
         .await;
         // Let the last run_done reach the clients, then close every session, and wait for them:

@@ -8,6 +8,7 @@ use anyhow::{Context, bail};
 use clap::Args;
 use nanopush::serve::app::ServeConfig;
 use nanopush::serve::control_loop::LoopConfig;
+use nanopush::serve::haptic::HapticMode;
 
 /// Arguments of `nanopush serve`.
 #[derive(Args, Debug)]
@@ -60,9 +61,14 @@ pub struct ServeArgs {
     /// CPU core for the control loop (default: the last one).
     #[arg(long)]
     cpu: Option<usize>,
-    /// Do not open the iceoryx2 haptic link.
+    /// The haptic link: `none` (default), `external` (wait for a bridge started separately,
+    /// e.g. `nanopush-haptic --device serial:/dev/ttyACM0`), or `sim` (run and supervise a
+    /// simulated bridge).
+    #[arg(long, default_value = "none", value_parser = ["none", "external", "sim"])]
+    haptic: String,
+    /// The bridge binary for `--haptic sim` (default: `nanopush-haptic` next to this binary).
     #[arg(long)]
-    no_haptic: bool,
+    haptic_bin: Option<PathBuf>,
 }
 
 fn in_range(name: &str, v: f64, lo: f64, hi: f64, unit: &str) -> anyhow::Result<()> {
@@ -92,6 +98,29 @@ fn avoid_cpu(cpu: usize, ncpu: usize) {
         }
         libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
     }
+}
+
+/// `--haptic` as the server runs it; `sim` needs the bridge binary.
+fn haptic_mode(a: &ServeArgs) -> anyhow::Result<HapticMode> {
+    Ok(match a.haptic.as_str() {
+        "sim" => {
+            let bin = match &a.haptic_bin {
+                Some(b) => b.clone(),
+                None => std::env::current_exe()
+                    .context("finding this executable")?
+                    .with_file_name("nanopush-haptic"),
+            };
+            if !bin.is_file() {
+                bail!(
+                    "--haptic sim: the bridge {} is missing (build it: cargo build --release -p nanopush-haptic, or give --haptic-bin)",
+                    bin.display()
+                );
+            }
+            HapticMode::Sim(bin)
+        }
+        "external" => HapticMode::External,
+        _ => HapticMode::None,
+    })
 }
 
 /// Runs the server until SIGINT or SIGTERM.
@@ -137,12 +166,13 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         web_dir,
         scan_line_hz: a.scan_line_hz,
         telemetry_hz: a.telemetry_hz,
+        haptic: haptic_mode(a)?,
     };
     let loop_cfg = LoopConfig {
         rate_hz: a.rate_hz,
         realtime: !a.no_realtime,
         cpu: a.cpu,
-        haptic: !a.no_haptic,
+        haptic: a.haptic != "none",
     };
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
