@@ -1,5 +1,5 @@
 //! The 1-DOF haptic device behind one trait, as CHAI3D's `cGenericHapticDevice` does: open (a
-//! constructor per backend, chosen by [`open`]), read the handle, write a force, know the limits.
+//! constructor per backend, chosen by `--device` as a [`DeviceKind`]), read the handle, write a force, know the limits.
 //!
 //! Sign conventions, SI, for every backend: the handle position is in metres, positive **up**
 //! (the tip's height follows it); the force is in newtons, positive **up** (a repulsive tip force,

@@ -3,6 +3,7 @@
 //!
 //! - [`device`]: the device trait every backend implements (open, read, write force, limits);
 //! - [`sim`] and [`operator`]: the simulated handle and the hand that holds it;
+//! - [`serial`]: the backend for a Hapkit-class device on a serial port, and its binary protocol;
 //! - [`passivity`]: the time-domain passivity observer and controller at the port;
 //! - [`bridge`]: one device cycle (read, local model, passivity, clamp, write, publish), and
 //!   [`link`], its iceoryx2 ports;
@@ -17,4 +18,5 @@ pub mod link;
 pub mod operator;
 pub mod passivity;
 pub mod scaling;
+pub mod serial;
 pub mod sim;

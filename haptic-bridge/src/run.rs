@@ -129,9 +129,8 @@ fn open_device(kind: &DeviceKind, operator: &str, period: f64) -> anyhow::Result
             Ok((Box::new(SimDevice::new(script, period)), DEVICE_SIM))
         }
         DeviceKind::Serial(path) => {
-            // SERIAL-WIRE
-            let _ = DEVICE_SERIAL;
-            bail!("serial {path}")
+            let dev = nanopush_haptic::serial::SerialDevice::open(path)?;
+            Ok((Box::new(dev), DEVICE_SERIAL))
         }
         DeviceKind::None => bail!("no device"),
     }

@@ -1,0 +1,615 @@
+//! The serial backend end to end over a pseudo-terminal: `SerialDevice` on the slave side, driven
+//! through the `Device` trait; on the master side a fake 1-DOF device in a thread, which speaks the
+//! protocol as the README documents it (its own parser and encoder, not the library's): it answers
+//! each force packet with a state packet, its handle moves under the force, and it zeroes the force
+//! after 10 ms without a valid force packet, like the firmware. Every wait is on a condition with a
+//! time-out, so the tests hold on a loaded machine.
+
+use std::ffi::CStr;
+use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use nanopush_haptic::device::{BUTTON_CLUTCH, BUTTON_ENGAGE, Device, DeviceError, DeviceSample};
+use nanopush_haptic::serial::{SerialDevice, SerialOptions, crc16};
+
+/// How long any condition may take before the test fails.
+const PATIENCE: Duration = Duration::from_secs(20);
+
+// The fake device's limits, as its info packet reports them.
+const MAX_FORCE_UN: i32 = 2_000_000;
+const TRAVEL_UM: [i32; 2] = [-30_000, 30_000];
+const STIFFNESS_MN_M: u32 = 300_000;
+const DAMPING_MNS_M: u32 = 1_200;
+const RATE_HZ: u16 = 1000;
+/// The firmware's host-silence time-out.
+const DEVICE_SILENCE: Duration = Duration::from_millis(10);
+
+/// A pseudo-terminal: the master for the fake device, the slave's path for `SerialDevice`. The
+/// slave stays open so the master never sees a hang-up between tests' steps.
+fn open_pty() -> (OwnedFd, OwnedFd, String) {
+    let (mut master, mut slave) = (-1, -1);
+    // SAFETY: out-pointers to two ints; no name buffer, default termios and window size.
+    let rc = unsafe {
+        libc::openpty(
+            &mut master,
+            &mut slave,
+            std::ptr::null_mut(),
+            std::ptr::null(),
+            std::ptr::null(),
+        )
+    };
+    assert_eq!(rc, 0, "openpty: {}", std::io::Error::last_os_error());
+    // SAFETY: both were just opened and are ours.
+    let (master, slave) = unsafe { (OwnedFd::from_raw_fd(master), OwnedFd::from_raw_fd(slave)) };
+    let mut name = [0 as libc::c_char; 256];
+    // SAFETY: the buffer is valid for its length.
+    let rc = unsafe { libc::ttyname_r(slave.as_raw_fd(), name.as_mut_ptr(), name.len()) };
+    assert_eq!(rc, 0, "ttyname_r failed");
+    // SAFETY: ttyname_r wrote a NUL-terminated string.
+    let path = unsafe { CStr::from_ptr(name.as_ptr()) }.to_str().unwrap().to_owned();
+    // SAFETY: plain fcntl on an open descriptor.
+    unsafe {
+        let flags = libc::fcntl(master.as_raw_fd(), libc::F_GETFL);
+        libc::fcntl(master.as_raw_fd(), libc::F_SETFL, flags | libc::O_NONBLOCK);
+    }
+    (master, slave, path)
+}
+
+/// What the fake device is and what it saw.
+struct World {
+    /// Every valid force packet: (seq, flags, force µN as sent).
+    received: Vec<(u16, u8, i32)>,
+    /// Report this (position µm, velocity µm/s) instead of the model's.
+    pose: Option<(i32, i32)>,
+    /// The handle model: position (m), velocity (m/s).
+    position: f64,
+    velocity: f64,
+    buttons: u8,
+    /// Force rendered (µN).
+    applied_un: i32,
+    active: bool,
+    /// The watchdog zeroed the force since the last state packet.
+    silent_latch: bool,
+    watchdog_trips: u32,
+    /// Answer nothing (still read).
+    mute: bool,
+    /// Corrupt this many of the next state packets.
+    corrupt: u32,
+    /// Send these bytes before the next state packet.
+    garbage: Vec<u8>,
+    /// Protocol version of the packets it sends.
+    version: u8,
+    seq: u16,
+}
+
+impl Default for World {
+    fn default() -> World {
+        World {
+            received: Vec::new(),
+            pose: None,
+            position: 0.0,
+            velocity: 0.0,
+            buttons: 0,
+            applied_un: 0,
+            active: false,
+            silent_latch: false,
+            watchdog_trips: 0,
+            mute: false,
+            corrupt: 0,
+            garbage: Vec::new(),
+            version: 1,
+            seq: 0,
+        }
+    }
+}
+
+impl World {
+    /// One millisecond of the handle under the rendered force: 50 g, 1 N·s/m, end stops.
+    fn step(&mut self) {
+        let (mass, damping, dt) = (0.05, 1.0, 1e-3);
+        let force = f64::from(self.applied_un) * 1e-6;
+        self.velocity += (force - damping * self.velocity) / mass * dt;
+        self.position += self.velocity * dt;
+        let stop = 0.029;
+        if self.position.abs() > stop {
+            self.position = stop.copysign(self.position);
+            self.velocity = 0.0;
+        }
+    }
+
+    fn next_seq(&mut self) -> u16 {
+        self.seq = self.seq.wrapping_add(1);
+        self.seq
+    }
+
+    fn state_bytes(&mut self, echo: u16) -> Vec<u8> {
+        let (pos, vel) = self.pose.unwrap_or((
+            (self.position * 1e6).round() as i32,
+            (self.velocity * 1e6).round() as i32,
+        ));
+        let status = if std::mem::take(&mut self.silent_latch) {
+            0x01
+        } else {
+            0
+        };
+        let mut b = vec![0xA5, b'S', self.version, status];
+        b.extend(echo.to_le_bytes());
+        b.extend(self.next_seq().to_le_bytes());
+        b.extend(pos.to_le_bytes());
+        b.extend(vel.to_le_bytes());
+        b.extend([self.buttons, 0]);
+        b.extend(self.applied_un.to_le_bytes());
+        b.extend(crc16(&b).to_le_bytes());
+        assert_eq!(b.len(), 24);
+        b
+    }
+
+    fn info_bytes(&mut self, echo: u16) -> Vec<u8> {
+        let mut b = vec![0xA5, b'I', self.version, 0];
+        b.extend(echo.to_le_bytes());
+        b.extend(self.next_seq().to_le_bytes());
+        b.extend(MAX_FORCE_UN.to_le_bytes());
+        b.extend(TRAVEL_UM[0].to_le_bytes());
+        b.extend(TRAVEL_UM[1].to_le_bytes());
+        b.extend(STIFFNESS_MN_M.to_le_bytes());
+        b.extend(DAMPING_MNS_M.to_le_bytes());
+        b.extend(RATE_HZ.to_le_bytes());
+        b.extend(crc16(&b).to_le_bytes());
+        assert_eq!(b.len(), 32);
+        b
+    }
+
+    /// Applies one valid force packet; returns the answer.
+    fn on_force(&mut self, seq: u16, flags: u8, force_un: i32) -> Vec<u8> {
+        self.received.push((seq, flags, force_un));
+        if flags & 0x02 != 0 {
+            self.active = false;
+            self.applied_un = 0;
+            return self.info_bytes(seq);
+        }
+        self.active = flags & 0x01 != 0;
+        self.applied_un = if self.active {
+            force_un.clamp(-MAX_FORCE_UN, MAX_FORCE_UN)
+        } else {
+            0
+        };
+        self.step();
+        let mut answer = std::mem::take(&mut self.garbage);
+        let mut state = self.state_bytes(seq);
+        if self.corrupt > 0 {
+            self.corrupt -= 1;
+            // The position's top byte: read as valid, the handle would be 1 km away.
+            state[11] ^= 0x40;
+        }
+        answer.extend(state);
+        answer
+    }
+}
+
+/// Force packets out of `buf` as the firmware parses them: (seq, flags, force µN); resyncs on
+/// the sync byte after garbage or a bad checksum; packets of another version are dropped.
+fn take_force_packets(buf: &mut Vec<u8>) -> Vec<(u16, u8, i32)> {
+    let mut out = Vec::new();
+    loop {
+        match buf.iter().position(|&b| b == 0xA5) {
+            Some(i) => drop(buf.drain(..i)),
+            None => {
+                buf.clear();
+                return out;
+            }
+        }
+        if buf.len() < 2 {
+            return out;
+        }
+        if buf[1] != b'F' {
+            buf.drain(..1);
+            continue;
+        }
+        if buf.len() < 12 {
+            return out;
+        }
+        if u16::from_le_bytes([buf[10], buf[11]]) != crc16(&buf[..10]) {
+            buf.drain(..1);
+            continue;
+        }
+        if buf[2] == 1 {
+            let seq = u16::from_le_bytes([buf[4], buf[5]]);
+            let force = i32::from_le_bytes([buf[6], buf[7], buf[8], buf[9]]);
+            out.push((seq, buf[3], force));
+        }
+        buf.drain(..12);
+    }
+}
+
+fn write_all(fd: &OwnedFd, mut bytes: &[u8]) {
+    while !bytes.is_empty() {
+        // SAFETY: `bytes` is valid for its length.
+        let n = unsafe { libc::write(fd.as_raw_fd(), bytes.as_ptr().cast(), bytes.len()) };
+        if n > 0 {
+            bytes = &bytes[n as usize..];
+        } else {
+            std::thread::yield_now();
+        }
+    }
+}
+
+/// The fake device's thread and its world.
+struct Fake {
+    world: Arc<(Mutex<World>, Condvar)>,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Fake {
+    fn start(master: OwnedFd, world: World) -> Fake {
+        let world = Arc::new((Mutex::new(world), Condvar::new()));
+        let stop = Arc::new(AtomicBool::new(false));
+        let (w, s) = (world.clone(), stop.clone());
+        let thread = std::thread::spawn(move || {
+            let mut buf = Vec::new();
+            let mut last_host = Instant::now();
+            while !s.load(Ordering::Relaxed) {
+                let mut pfd = libc::pollfd {
+                    fd: master.as_raw_fd(),
+                    events: libc::POLLIN,
+                    revents: 0,
+                };
+                // SAFETY: one valid pollfd.
+                unsafe { libc::poll(&mut pfd, 1, 1) };
+                let mut chunk = [0u8; 256];
+                loop {
+                    // SAFETY: `chunk` is valid for its length.
+                    let n = unsafe { libc::read(master.as_raw_fd(), chunk.as_mut_ptr().cast(), chunk.len()) };
+                    if n <= 0 {
+                        break;
+                    }
+                    buf.extend_from_slice(&chunk[..n as usize]);
+                }
+                let (lock, changed) = &*w;
+                let mut world = lock.lock().unwrap();
+                for (seq, flags, force) in take_force_packets(&mut buf) {
+                    last_host = Instant::now();
+                    let answer = world.on_force(seq, flags, force);
+                    if !world.mute {
+                        write_all(&master, &answer);
+                    }
+                }
+                if world.active && last_host.elapsed() >= DEVICE_SILENCE {
+                    world.active = false;
+                    world.applied_un = 0;
+                    world.silent_latch = true;
+                    world.watchdog_trips += 1;
+                }
+                drop(world);
+                changed.notify_all();
+            }
+        });
+        Fake {
+            world,
+            stop,
+            thread: Some(thread),
+        }
+    }
+
+    fn world(&self) -> MutexGuard<'_, World> {
+        self.world.0.lock().unwrap()
+    }
+
+    /// Waits until the fake's world satisfies `cond`.
+    fn wait_until(&self, what: &str, cond: impl Fn(&World) -> bool) {
+        let (lock, changed) = &*self.world;
+        let (_world, timeout) = changed
+            .wait_timeout_while(lock.lock().unwrap(), PATIENCE, |w| !cond(w))
+            .unwrap();
+        assert!(!timeout.timed_out(), "the fake device never saw: {what}");
+    }
+}
+
+impl Drop for Fake {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            t.join().unwrap();
+        }
+    }
+}
+
+/// Long time-outs, so a loaded machine cannot make the device look silent.
+fn patient() -> SerialOptions {
+    SerialOptions {
+        silent_after: PATIENCE,
+        open_timeout: PATIENCE,
+        ..SerialOptions::default()
+    }
+}
+
+/// A pty with a fake device on it, and `SerialDevice` open on the other side.
+fn setup(world: World, options: SerialOptions) -> (SerialDevice, Fake, OwnedFd) {
+    let (master, slave, path) = open_pty();
+    let fake = Fake::start(master, world);
+    let dev = SerialDevice::open_with(&path, options).expect("open the fake device");
+    (dev, fake, slave)
+}
+
+/// One device cycle: write, then read the answer.
+fn cycle(dev: &mut SerialDevice, force: f64) -> DeviceSample {
+    dev.write_force(force).expect("write_force");
+    dev.read(1e-3).expect("read")
+}
+
+/// Cycles with `force` until `cond` holds for a sample.
+fn cycle_until(dev: &mut SerialDevice, force: f64, what: &str, cond: impl Fn(&DeviceSample) -> bool) -> DeviceSample {
+    let start = Instant::now();
+    loop {
+        let s = cycle(dev, force);
+        if cond(&s) {
+            return s;
+        }
+        assert!(start.elapsed() < PATIENCE, "never saw {what}; last sample {s:?}");
+    }
+}
+
+#[test]
+fn the_device_reports_its_limits_and_its_handle_in_si() {
+    let (mut dev, fake, _slave) = setup(World::default(), patient());
+    let spec = dev.spec();
+    assert_eq!(spec.name, "serial");
+    assert_eq!(spec.max_force, 2.0);
+    assert_eq!(spec.travel, [-0.03, 0.03]);
+    assert_eq!(spec.max_stiffness, 300.0);
+    assert_eq!(spec.max_damping, 1.2);
+    assert_eq!(dev.rate_hz(), 1000);
+    assert!(dev.device().starts_with("serial:/dev/"));
+
+    {
+        let mut w = fake.world();
+        w.pose = Some((12_345, -67_890));
+        w.buttons = 0x03;
+    }
+    let s = cycle_until(&mut dev, 0.0, "the posed handle", |s| s.buttons != 0);
+    assert!((s.position - 0.012_345).abs() < 1e-12, "{s:?}");
+    assert!((s.velocity + 0.067_89).abs() < 1e-12, "{s:?}");
+    assert_eq!(s.buttons, BUTTON_ENGAGE | BUTTON_CLUTCH);
+
+    {
+        let mut w = fake.world();
+        w.pose = Some((-29_000, 1_500_000));
+        w.buttons = 0x01;
+    }
+    let s = cycle_until(&mut dev, 0.0, "the engage button alone", |s| s.buttons == BUTTON_ENGAGE);
+    assert!(
+        (s.position + 0.029).abs() < 1e-12 && (s.velocity - 1.5).abs() < 1e-12,
+        "{s:?}"
+    );
+    assert_eq!(dev.bad_packets(), 0);
+}
+
+#[test]
+fn a_force_written_arrives_and_moves_the_handle() {
+    let (mut dev, fake, _slave) = setup(World::default(), patient());
+    let start = dev.read(1e-3).unwrap().position;
+    let up = cycle_until(&mut dev, 1.0, "the handle pushed up by 2 mm", |s| {
+        s.position > start + 0.002
+    });
+    assert!(up.velocity > 0.0, "{up:?}");
+    assert_eq!(dev.applied_force(), 1.0);
+    assert_eq!(
+        fake.world().received.last().map(|r| (r.1, r.2)),
+        Some((0x01, 1_000_000))
+    );
+
+    let down = cycle_until(&mut dev, -1.5, "the handle pushed down past its start", |s| {
+        s.position < start
+    });
+    assert!(down.velocity < 0.0, "{down:?}");
+    assert_eq!(dev.applied_force(), -1.5);
+    assert_eq!(
+        fake.world().received.last().map(|r| (r.1, r.2)),
+        Some((0x01, -1_500_000))
+    );
+}
+
+#[test]
+fn forces_are_clamped_to_the_devices_limit_before_the_wire() {
+    let (mut dev, fake, _slave) = setup(World::default(), patient());
+    let before = fake.world().received.len();
+    let forces = [
+        10.0,
+        -1e12,
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        0.5,
+        -1.999_999_7,
+    ];
+    for f in forces {
+        cycle(&mut dev, f);
+    }
+    fake.wait_until("all the force packets", |w| w.received.len() >= before + forces.len());
+    let w = fake.world();
+    let got: Vec<(u8, i32)> = w.received[before..].iter().map(|r| (r.1, r.2)).collect();
+    let want = [2_000_000, -2_000_000, 0, 2_000_000, -2_000_000, 500_000, -2_000_000].map(|f| (0x01, f));
+    assert_eq!(got, want);
+    let seqs: Vec<u16> = w.received[before..].iter().map(|r| r.0).collect();
+    assert!(seqs.windows(2).all(|p| p[1] == p[0].wrapping_add(1)), "{seqs:?}");
+}
+
+#[test]
+fn a_corrupted_state_packet_is_skipped_and_counted() {
+    let (mut dev, fake, _slave) = setup(World::default(), patient());
+    cycle(&mut dev, 0.2);
+    // Answered (under load perhaps after the read gave up): the next answer is the one to corrupt,
+    // and the read that waits for it must time out.
+    fake.wait_until("the first force", |w| w.received.last().map(|r| r.2) == Some(200_000));
+    assert_eq!(dev.bad_packets(), 0);
+    let timeouts = dev.timeouts();
+
+    fake.world().corrupt = 1;
+    let start = Instant::now();
+    while dev.bad_packets() == 0 {
+        // Read as valid, the corrupted position would be a protocol error: every read is Ok.
+        let s = cycle(&mut dev, 0.2);
+        assert!(s.position.abs() < 0.04, "{s:?}");
+        assert!(start.elapsed() < PATIENCE, "the corrupted packet was never counted");
+    }
+    assert_eq!(fake.world().corrupt, 0);
+    assert!(
+        dev.timeouts() > timeouts,
+        "the read waiting for the corrupted answer timed out"
+    );
+    let bad = dev.bad_packets();
+
+    // Bytes without a sync byte before an answer are skipped, not counted as packets.
+    fake.world().garbage = vec![0x00, 0x13, 0x37, 0x53, 0x49, 0xFF];
+    cycle_until(&mut dev, 0.2, "the answer after the garbage", |_| {
+        fake.world().garbage.is_empty()
+    });
+    cycle(&mut dev, 0.2);
+    assert_eq!(dev.bad_packets(), bad);
+}
+
+#[test]
+fn a_silent_device_is_reported_within_its_time_out() {
+    let options = SerialOptions {
+        open_timeout: PATIENCE,
+        ..SerialOptions::default()
+    };
+    let silent_after = options.silent_after;
+    let (mut dev, fake, _slave) = setup(World::default(), options);
+    fake.world().mute = true;
+    let muted = Instant::now();
+    let err = loop {
+        dev.write_force(0.3).unwrap();
+        match dev.read(1e-3) {
+            Ok(_) => assert!(muted.elapsed() < PATIENCE, "the device never went silent"),
+            Err(e) => break e,
+        }
+    };
+    match err {
+        DeviceError::Silent { ms, .. } => assert!(ms >= silent_after.as_millis() as u64, "{ms} ms"),
+        e => panic!("expected Silent, got {e}"),
+    }
+    assert!(dev.timeouts() > 0);
+}
+
+#[test]
+fn the_device_zeroes_the_force_when_the_host_falls_silent() {
+    let (mut dev, fake, _slave) = setup(World::default(), patient());
+    cycle(&mut dev, 1.0);
+    fake.wait_until("the watchdog zeroing the force", |w| w.watchdog_trips >= 1);
+    assert!(!fake.world().active && fake.world().applied_un == 0);
+    assert_eq!(dev.watchdog_trips(), 0);
+    // The next state packet says the force was zeroed; the host counts it.
+    let start = Instant::now();
+    while dev.watchdog_trips() == 0 {
+        cycle(&mut dev, 1.0);
+        assert!(start.elapsed() < PATIENCE, "the host never heard of the zeroed force");
+    }
+}
+
+#[test]
+fn close_sends_zero_force_and_the_device_confirms_it() {
+    let (mut dev, fake, _slave) = setup(World::default(), patient());
+    cycle_until(&mut dev, 1.5, "the force rendered", |_| {
+        fake.world().applied_un == 1_500_000
+    });
+    dev.close().expect("close");
+    assert_eq!(dev.applied_force(), 0.0);
+    let w = fake.world();
+    assert_eq!(w.received.last().map(|r| (r.1, r.2)), Some((0x00, 0)));
+    assert!(!w.active && w.applied_un == 0);
+}
+
+#[test]
+fn dropping_a_live_device_sends_zero_force() {
+    let (mut dev, fake, _slave) = setup(World::default(), patient());
+    cycle(&mut dev, -1.5);
+    fake.wait_until("the force", |w| {
+        w.received.last().map(|r| (r.1, r.2)) == Some((0x01, -1_500_000))
+    });
+    drop(dev);
+    fake.wait_until("a zero-force packet after the drop", |w| {
+        w.received.last().map(|r| (r.1, r.2)) == Some((0x00, 0))
+    });
+    assert!(!fake.world().active);
+}
+
+#[test]
+fn a_state_out_of_the_devices_range_is_a_protocol_error() {
+    let (mut dev, fake, _slave) = setup(World::default(), patient());
+    // 30 mm of travel each way and 6 mm of give: 40 mm cannot be.
+    fake.world().pose = Some((40_000, 0));
+    let start = Instant::now();
+    let err = loop {
+        dev.write_force(0.0).unwrap();
+        match dev.read(1e-3) {
+            Ok(s) => assert!(s.position.abs() < 0.036 && start.elapsed() < PATIENCE, "{s:?}"),
+            Err(e) => break e,
+        }
+    };
+    assert!(matches!(err, DeviceError::Protocol { .. }), "{err}");
+    assert!(err.to_string().contains("40.000 mm is outside the travel"), "{err}");
+}
+
+#[test]
+fn an_unplugged_device_is_an_io_error() {
+    let (mut dev, fake, _slave) = setup(World::default(), patient());
+    cycle(&mut dev, 0.5);
+    // The fake's thread owns the master side: stopping it closes it, which hangs the slave up.
+    drop(fake);
+    let start = Instant::now();
+    let err = loop {
+        match dev.write_force(0.5).and_then(|()| dev.read(1e-3)) {
+            Ok(_) => assert!(start.elapsed() < PATIENCE, "the hang-up never showed"),
+            Err(e) => break e,
+        }
+    };
+    assert!(matches!(err, DeviceError::Io { .. }), "{err}");
+}
+
+#[test]
+fn a_device_of_another_protocol_version_is_named() {
+    let (master, _slave, path) = open_pty();
+    let _fake = Fake::start(
+        master,
+        World {
+            version: 2,
+            ..World::default()
+        },
+    );
+    let err = SerialDevice::open_with(&path, patient()).err().expect("open must fail");
+    assert!(matches!(err, DeviceError::Protocol { .. }), "{err}");
+    assert!(err.to_string().contains("protocol version 2"), "{err}");
+}
+
+#[test]
+fn opening_what_does_not_answer_fails_with_a_typed_error() {
+    let (_master, _slave, path) = open_pty();
+    let options = SerialOptions {
+        open_timeout: Duration::from_millis(300),
+        ..SerialOptions::default()
+    };
+    let start = Instant::now();
+    match SerialDevice::open_with(&path, options) {
+        Err(DeviceError::Silent { ms, .. }) => assert_eq!(ms, 300),
+        Err(e) => panic!("expected Silent, got {e}"),
+        Ok(_) => panic!("nothing answers on {path}"),
+    }
+    assert!(start.elapsed() >= Duration::from_millis(300));
+
+    match SerialDevice::open("/dev/null") {
+        Err(e @ DeviceError::Io { .. }) => assert!(e.to_string().contains("not a terminal"), "{e}"),
+        other => panic!("expected an I/O error, got {:?}", other.err()),
+    }
+    match SerialDevice::open("/nonexistent/ttyACM9") {
+        Err(DeviceError::Io { source, .. }) => assert_eq!(source.kind(), std::io::ErrorKind::NotFound),
+        other => panic!("expected an I/O error, got {:?}", other.err()),
+    }
+    assert!(matches!(
+        SerialDevice::open("/dev/ttyACM0@1234"),
+        Err(DeviceError::BadSpec { .. })
+    ));
+}
