@@ -1,0 +1,316 @@
+//! [`SerialDevice`], the [`Device`] on a serial port: the hello on opening, then one force packet
+//! and one state packet a cycle, with its counters and time-outs.
+
+use std::time::{Duration, Instant};
+
+use super::decoder::Decoder;
+use super::port::{Port, parse_serial_arg};
+use super::protocol::{
+    DEFAULT_BAUD, DevicePacket, FLAG_ACTIVE, FLAG_HELLO, ForcePacket, PacketError, STATUS_HOST_SILENT,
+    newtons_to_micronewtons, state_in_si,
+};
+use crate::device::{Device, DeviceError, DeviceSample, DeviceSpec, clamp_force};
+
+// Named by a link in the documentation of `SerialDevice::status`.
+#[cfg(doc)]
+use super::protocol::STATUS_FORCE_LIMITED;
+
+/// How often a hello is repeated while opening.
+const HELLO_RETRY: Duration = Duration::from_millis(100);
+
+/// How a [`SerialDevice`] talks and how long it waits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SerialOptions {
+    /// Baud rate ([`DEFAULT_BAUD`]); a USB CDC device ignores it.
+    pub baud: u32,
+    /// How long [`Device::read`] waits for the answer to the last force packet (2 ms).
+    pub read_wait: Duration,
+    /// No valid state packet for this long is [`DeviceError::Silent`] (20 ms).
+    pub silent_after: Duration,
+    /// How long opening waits for the device to answer a hello (3 s: an Arduino resets when its
+    /// port opens).
+    pub open_timeout: Duration,
+}
+
+impl Default for SerialOptions {
+    fn default() -> SerialOptions {
+        SerialOptions {
+            baud: DEFAULT_BAUD,
+            read_wait: Duration::from_millis(2),
+            silent_after: Duration::from_millis(20),
+            open_timeout: Duration::from_secs(3),
+        }
+    }
+}
+
+/// A Hapkit-class device on a serial port (see the [module documentation](super) for the protocol).
+pub struct SerialDevice {
+    port: Port,
+    decoder: Decoder,
+    options: SerialOptions,
+    spec: DeviceSpec,
+    rate_hz: u16,
+    next_seq: u16,
+    /// The force packet whose answer has not come yet.
+    awaiting: Option<u16>,
+    sample: DeviceSample,
+    applied_force: f64,
+    status: u8,
+    last_valid: Instant,
+    timeouts: u64,
+    watchdog_trips: u64,
+    /// The last packet sent was active: dropping sends an inactive one.
+    force_live: bool,
+}
+
+impl SerialDevice {
+    /// Opens `ARG` of `--device serial:ARG`: `PATH` at [`DEFAULT_BAUD`] or `PATH@BAUD`
+    /// (`/dev/ttyUSB0@1000000`), with the default time-outs.
+    pub fn open(arg: &str) -> Result<SerialDevice, DeviceError> {
+        let (path, baud) = parse_serial_arg(arg)?;
+        SerialDevice::open_with(
+            path,
+            SerialOptions {
+                baud,
+                ..SerialOptions::default()
+            },
+        )
+    }
+
+    /// Opens the port at `path`, asks the device for its limits (hello → info) and reads its first
+    /// state. [`DeviceError::Silent`] when it does not answer within `options.open_timeout`,
+    /// [`DeviceError::Protocol`] when it speaks another version or reports implausible limits.
+    pub fn open_with(path: &str, options: SerialOptions) -> Result<SerialDevice, DeviceError> {
+        let port = Port::open(path, options.baud)?;
+        let mut decoder = Decoder::new();
+        let started = Instant::now();
+        let deadline = started + options.open_timeout;
+        let protocol = |port: &Port, why: String| DeviceError::Protocol {
+            device: port.device.clone(),
+            why,
+        };
+        let mut seq: u16 = 0;
+        let mut next_hello = started;
+        let info = 'hello: loop {
+            let now = Instant::now();
+            if now >= deadline {
+                return Err(DeviceError::Silent {
+                    device: port.device.clone(),
+                    ms: options.open_timeout.as_millis() as u64,
+                });
+            }
+            if now >= next_hello {
+                port.write_all(
+                    &ForcePacket {
+                        seq,
+                        flags: FLAG_HELLO,
+                        force_un: 0,
+                    }
+                    .encode(),
+                )?;
+                seq = seq.wrapping_add(1);
+                next_hello = now + HELLO_RETRY;
+            }
+            let revents = port.poll(libc::POLLIN, next_hello.min(deadline).saturating_duration_since(now))?;
+            if revents & libc::POLLIN != 0 {
+                port.read_into(&mut decoder)?;
+            }
+            while let Some(p) = decoder.next_packet() {
+                match p {
+                    Ok(DevicePacket::Info(info)) if info.echo < seq => break 'hello info,
+                    Ok(_) => {}
+                    Err(e) => return Err(protocol(&port, e.to_string())),
+                }
+            }
+        };
+        let spec = info.spec().map_err(|why| protocol(&port, why))?;
+        let mut dev = SerialDevice {
+            port,
+            decoder,
+            options,
+            spec,
+            rate_hz: info.rate_hz,
+            next_seq: seq,
+            awaiting: None,
+            sample: DeviceSample::default(),
+            applied_force: 0.0,
+            status: 0,
+            last_valid: Instant::now(),
+            timeouts: 0,
+            watchdog_trips: 0,
+            force_live: false,
+        };
+        dev.send(0, 0)?;
+        dev.pump(
+            deadline
+                .saturating_duration_since(Instant::now())
+                .max(options.silent_after),
+        )?;
+        if dev.awaiting.is_some() {
+            return Err(DeviceError::Silent {
+                device: dev.port.device.clone(),
+                ms: started.elapsed().as_millis() as u64,
+            });
+        }
+        Ok(dev)
+    }
+
+    /// The path, as `serial:PATH`.
+    pub fn device(&self) -> &str {
+        &self.port.device
+    }
+
+    /// Packets skipped for a bad checksum or cut short.
+    pub fn bad_packets(&self) -> u64 {
+        self.decoder.bad_packets()
+    }
+
+    /// Reads that ended without the answer to the last force packet.
+    pub fn timeouts(&self) -> u64 {
+        self.timeouts
+    }
+
+    /// Times the device reported zeroing its force because the host fell silent.
+    pub fn watchdog_trips(&self) -> u64 {
+        self.watchdog_trips
+    }
+
+    /// Status byte of the newest state packet ([`STATUS_HOST_SILENT`], [`STATUS_FORCE_LIMITED`]).
+    pub fn status(&self) -> u8 {
+        self.status
+    }
+
+    /// The force the motor renders (N), from the newest state packet.
+    pub fn applied_force(&self) -> f64 {
+        self.applied_force
+    }
+
+    /// The device's control rate (Hz), from its info packet.
+    pub fn rate_hz(&self) -> u16 {
+        self.rate_hz
+    }
+
+    fn protocol(&self, why: String) -> DeviceError {
+        DeviceError::Protocol {
+            device: self.port.device.clone(),
+            why,
+        }
+    }
+
+    /// Sends one force packet and awaits its answer.
+    fn send(&mut self, flags: u8, force_un: i32) -> Result<(), DeviceError> {
+        let seq = self.next_seq;
+        self.port.write_all(&ForcePacket { seq, flags, force_un }.encode())?;
+        self.next_seq = seq.wrapping_add(1);
+        self.awaiting = Some(seq);
+        Ok(())
+    }
+
+    /// Takes in every packet received, waiting up to `wait` for the answer being awaited (not at
+    /// all when none is).
+    fn pump(&mut self, wait: Duration) -> Result<(), DeviceError> {
+        let deadline = Instant::now() + wait;
+        let mut polled = false;
+        loop {
+            while let Some(p) = self.decoder.next_packet() {
+                self.accept(p)?;
+            }
+            let now = Instant::now();
+            if polled && (self.awaiting.is_none() || now >= deadline) {
+                return Ok(());
+            }
+            let timeout = match self.awaiting {
+                Some(_) => deadline.saturating_duration_since(now),
+                None => Duration::ZERO,
+            };
+            let revents = self.port.poll(libc::POLLIN, timeout)?;
+            polled = true;
+            if revents & libc::POLLIN != 0 {
+                self.port.read_into(&mut self.decoder)?;
+            }
+        }
+    }
+
+    fn accept(&mut self, packet: Result<DevicePacket, PacketError>) -> Result<(), DeviceError> {
+        match packet {
+            // A late answer to a repeated hello.
+            Ok(DevicePacket::Info(_)) => Ok(()),
+            Ok(DevicePacket::State(s)) => {
+                let (sample, force) = state_in_si(&self.spec, &s).map_err(|why| self.protocol(why))?;
+                self.sample = sample;
+                self.applied_force = force;
+                self.status = s.status;
+                if s.status & STATUS_HOST_SILENT != 0 {
+                    self.watchdog_trips += 1;
+                }
+                if self.awaiting == Some(s.echo) {
+                    self.awaiting = None;
+                }
+                self.last_valid = Instant::now();
+                Ok(())
+            }
+            Err(e) => Err(self.protocol(e.to_string())),
+        }
+    }
+}
+
+impl Device for SerialDevice {
+    fn spec(&self) -> DeviceSpec {
+        self.spec
+    }
+
+    /// The newest valid state, after waiting at most [`SerialOptions::read_wait`] for the answer
+    /// to the last force packet. `dt` is ignored.
+    fn read(&mut self, _dt: f64) -> Result<DeviceSample, DeviceError> {
+        self.pump(self.options.read_wait)?;
+        if self.awaiting.is_some() {
+            self.timeouts += 1;
+        }
+        let quiet = self.last_valid.elapsed();
+        if quiet > self.options.silent_after {
+            return Err(DeviceError::Silent {
+                device: self.port.device.clone(),
+                ms: quiet.as_millis() as u64,
+            });
+        }
+        Ok(self.sample)
+    }
+
+    /// Sends one active force packet: `force` clamped to the device's maximum, in µN.
+    fn write_force(&mut self, force: f64) -> Result<(), DeviceError> {
+        let force_un = newtons_to_micronewtons(clamp_force(force, self.spec.max_force));
+        self.send(FLAG_ACTIVE, force_un)?;
+        self.force_live = true;
+        Ok(())
+    }
+
+    /// Sends an inactive zero-force packet and waits up to [`SerialOptions::silent_after`] for the
+    /// device to confirm it renders no force.
+    fn close(&mut self) -> Result<(), DeviceError> {
+        self.send(0, 0)?;
+        self.force_live = false;
+        self.pump(self.options.silent_after)?;
+        if self.awaiting.is_some() {
+            return Err(DeviceError::Silent {
+                device: self.port.device.clone(),
+                ms: self.options.silent_after.as_millis() as u64,
+            });
+        }
+        if self.applied_force != 0.0 {
+            return Err(self.protocol(format!(
+                "still renders {:.6} N after the zero-force packet",
+                self.applied_force
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl Drop for SerialDevice {
+    fn drop(&mut self) {
+        if self.force_live {
+            // Best effort: the device's own watchdog zeroes the force 10 ms later anyway.
+            let _ = self.send(0, 0);
+        }
+    }
+}
