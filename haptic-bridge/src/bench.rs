@@ -114,7 +114,13 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<String> {
     // Wait until the echo answers (its ports exist).
     let mut ready = false;
     for _ in 0..500 {
-        send(&publisher, HapticState { seq: 0, ..Default::default() })?;
+        send(
+            &publisher,
+            HapticState {
+                seq: 0,
+                ..Default::default()
+            },
+        )?;
         if wait_for(&subscriber, 0, Duration::from_millis(10))?.is_some() {
             ready = true;
             break;
@@ -129,11 +135,14 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<String> {
     let mut lost = 0u64;
     for seq in 1..=a.samples {
         let sent = monotonic_ns();
-        send(&publisher, HapticState {
-            seq,
-            time_ns: sent,
-            ..Default::default()
-        })?;
+        send(
+            &publisher,
+            HapticState {
+                seq,
+                time_ns: sent,
+                ..Default::default()
+            },
+        )?;
         match wait_for(&subscriber, seq, Duration::from_millis(100))? {
             Some(pong) => {
                 let back = monotonic_ns();
@@ -143,10 +152,13 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<String> {
             None => lost += 1,
         }
     }
-    let _ = send(&publisher, HapticState {
-        seq: u64::MAX,
-        ..Default::default()
-    });
+    let _ = send(
+        &publisher,
+        HapticState {
+            seq: u64::MAX,
+            ..Default::default()
+        },
+    );
     let _ = child.wait();
     Ok(format!(
         "iceoryx2 transport, {} round trips ({lost} lost):\n  one-way    {}\n  round trip {}\n",

@@ -97,6 +97,8 @@ pub struct Bridge<D: Device> {
     pid: u32,
     /// Handle position of the previous good sample (m), for the reference work.
     x_prev: Option<f64>,
+    /// The environment model in force over the interval that is running.
+    ref_prev: Option<ForceFeedback>,
 }
 
 impl<D: Device> Bridge<D> {
@@ -121,6 +123,7 @@ impl<D: Device> Bridge<D> {
             link_up: false,
             pid: std::process::id(),
             x_prev: None,
+            ref_prev: None,
         }
     }
 
@@ -184,6 +187,7 @@ impl<D: Device> Bridge<D> {
         if live.is_none() {
             self.pc.reset();
             self.x_prev = None;
+            self.ref_prev = None;
         }
         self.link_up = fresh.is_some();
         let mut row = CycleRow {
@@ -195,30 +199,44 @@ impl<D: Device> Bridge<D> {
         };
         let Some(s) = sample else {
             self.rendered = 0.0;
+            self.pc.reset();
             self.x_prev = None;
+            self.ref_prev = None;
             let _ = self.device.write_force(0.0);
             row.handle = f64::NAN;
             return row;
         };
-        // The environment's continuous model at the hand, and the work it does over this step:
-        // the passivity observer's reference.
-        let model = live.map(|mut f| {
-            f.stiffness = f.stiffness.clamp(-self.spec.max_stiffness, self.spec.max_stiffness);
-            f
-        });
+        // What the device renders: the server's local model with its stiffness capped at what the
+        // device renders stably (or its force held, without the local model). The passivity
+        // observer's reference is the environment as the server modelled it over the interval
+        // that just ended, uncapped: the work it would have done on the handle along that path.
         let max = self.spec.max_force;
-        let (env, w_ref) = match model {
+        let env = match live {
             Some(f) => {
-                let at = |x: f64| clamp_force(f.force_at(x), max);
-                let env = if self.cfg.local_model { at(s.position) } else { at(f.anchor) };
-                let w = self.x_prev.map_or(0.0, |x0| 0.5 * (at(x0) + at(s.position)) * (s.position - x0));
-                (env, w)
+                let capped = ForceFeedback {
+                    stiffness: f.stiffness.clamp(-self.spec.max_stiffness, self.spec.max_stiffness),
+                    ..f
+                };
+                let x = if self.cfg.local_model { s.position } else { f.anchor };
+                clamp_force(capped.force_at(x), max)
             }
-            None => (0.0, 0.0),
+            None => 0.0,
+        };
+        let (dx, w_ref) = match (self.x_prev, self.ref_prev) {
+            (Some(x0), Some(f)) => {
+                let reference = |x: f64| clamp_force(f.force_at(x), max);
+                (
+                    s.position - x0,
+                    0.5 * (reference(x0) + reference(s.position)) * (s.position - x0),
+                )
+            }
+            (Some(x0), None) => (s.position - x0, 0.0),
+            _ => (0.0, 0.0),
         };
         self.x_prev = Some(s.position);
+        self.ref_prev = live;
         let out = if live.is_some() {
-            self.pc.step(env, s.velocity, dt, w_ref, max)
+            self.pc.step(env, dx, s.velocity, dt, w_ref, max)
         } else {
             crate::passivity::PassivityOutput {
                 force: 0.0,
@@ -321,7 +339,10 @@ mod tests {
             if row.force == 0.0 && silent_at.is_none() {
                 silent_at = Some(t - ms);
                 assert!(!row.link);
-                assert_eq!(link.published.last().unwrap().flags & STATE_SERVER_SILENT, STATE_SERVER_SILENT);
+                assert_eq!(
+                    link.published.last().unwrap().flags & STATE_SERVER_SILENT,
+                    STATE_SERVER_SILENT
+                );
             }
         }
         assert!(silent_at.unwrap() <= STALE_NS + ms, "{silent_at:?}");
@@ -448,7 +469,10 @@ mod tests {
         let (p2p_on, e_on) = wall(k, true, false);
         eprintln!("held wall {k} N/m: without PC p2p {p2p_off:e} m, E_min {e_off:e} J; with {p2p_on:e} m, {e_on:e} J");
         assert!(p2p_off > 2e-4, "without the controller the wall should buzz: {p2p_off}");
-        assert!(p2p_on < 2e-5, "with the controller the hand should rest on the wall: {p2p_on}");
+        assert!(
+            p2p_on < 2e-5,
+            "with the controller the hand should rest on the wall: {p2p_on}"
+        );
         assert!(e_on > -1e-6, "{e_on}");
         assert!(e_off < -1e-4, "{e_off}");
     }

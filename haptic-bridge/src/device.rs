@@ -197,7 +197,10 @@ mod tests {
             DeviceKind::Serial("/dev/ttyACM0".into())
         );
         let e = "serial:".parse::<DeviceKind>().unwrap_err().to_string();
-        assert!(e.contains("needs a path") && e.contains("allowed: sim, none, serial:PATH"), "{e}");
+        assert!(
+            e.contains("needs a path") && e.contains("allowed: sim, none, serial:PATH"),
+            "{e}"
+        );
         let e = "phantom".parse::<DeviceKind>().unwrap_err().to_string();
         assert!(e.contains("\"phantom\"") && e.contains("unknown device"), "{e}");
     }

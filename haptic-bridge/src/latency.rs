@@ -54,7 +54,11 @@ impl Histogram {
         for (i, &c) in self.counts.iter().enumerate() {
             seen += c;
             if seen >= rank {
-                return if i == BUCKETS { self.max } else { ((i as u64 + 1) * BUCKET_NS).min(self.max) };
+                return if i == BUCKETS {
+                    self.max
+                } else {
+                    ((i as u64 + 1) * BUCKET_NS).min(self.max)
+                };
             }
         }
         self.max
@@ -92,6 +96,10 @@ mod tests {
         assert_eq!(h.max(), 99_950);
         h.record(1_000_000_000);
         assert_eq!(h.quantile(1.0), 1_000_000_000);
-        assert!(h.summary().contains("max 1000000.0 µs (101 samples)"), "{}", h.summary());
+        assert!(
+            h.summary().contains("max 1000000.0 µs (101 samples)"),
+            "{}",
+            h.summary()
+        );
     }
 }

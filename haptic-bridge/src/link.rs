@@ -1,14 +1,13 @@
 //! The bridge's end of the iceoryx2 haptic link: publishes [`HapticState`] on
 //! `nanopush/haptic/state`, subscribes to [`ForceFeedback`] on `nanopush/haptic/force`.
 //!
-//! The node is built with the configuration in code ([`ipc_config`]: no config-file search, no
+//! The node is built with the configuration in code (`nanopush_proto::haptic::ipc_config`: no config-file search, no
 //! warning), leaves signals to the process, and removes the resources of dead nodes when it is
 //! created (a bridge or server killed with SIGKILL). The state service allows one publisher: a
 //! second bridge while one is live is refused with [`LinkError::BridgeLive`].
 
 use nanopush_proto::haptic::{
-    BRIDGE_NODE_NAME, ForceFeedback, HapticState, IpcNode, force_service, ipc_node, is_publisher_taken,
-    state_service,
+    BRIDGE_NODE_NAME, ForceFeedback, HapticState, IpcNode, force_service, ipc_node, is_publisher_taken, state_service,
 };
 
 use crate::bridge::Link;

@@ -319,7 +319,10 @@ mod tests {
         assert_eq!(Script::parse("press").unwrap(), Script::Press);
         assert!(matches!(Script::parse("sine").unwrap(), Script::Sine { .. }));
         let e = Script::parse("wiggle").unwrap_err().to_string();
-        assert!(e.contains("wiggle") && e.contains("allowed: hold, sine, press, file:PATH"), "{e}");
+        assert!(
+            e.contains("wiggle") && e.contains("allowed: hold, sine, press, file:PATH"),
+            "{e}"
+        );
         let e = Script::parse("file:/nonexistent/x.csv").unwrap_err().to_string();
         assert!(e.contains("/nonexistent/x.csv"), "{e}");
         let ok = Script::from_csv("s.csv", "t_s,handle_m\n0,0\n1,0.01\n").unwrap();
@@ -372,7 +375,11 @@ mod tests {
         for _ in 0..1300 {
             step(&mut op, true, 0.0);
         }
-        assert!((op.set_point() - (0.002 - PRESS_SPEED * 1.0)).abs() < 2e-5, "{}", op.set_point());
+        assert!(
+            (op.set_point() - (0.002 - PRESS_SPEED * 1.0)).abs() < 2e-5,
+            "{}",
+            op.set_point()
+        );
         // The surface pushes back: it holds where it is for 1 s.
         step(&mut op, true, 1.0);
         let held = op.set_point();

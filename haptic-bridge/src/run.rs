@@ -84,7 +84,11 @@ fn make_realtime(cpu: usize) {
             "nanopush-haptic: device loop {} core {}, {}",
             if pinned { "pinned to" } else { "not pinned to" },
             cpu.min(ncpu - 1),
-            if fifo { "SCHED_FIFO 45" } else { "SCHED_OTHER (SCHED_FIFO refused)" }
+            if fifo {
+                "SCHED_FIFO 45"
+            } else {
+                "SCHED_OTHER (SCHED_FIFO refused)"
+            }
         );
     }
 }
@@ -108,7 +112,9 @@ fn trace_line(r: &CycleRow) -> String {
 
 /// Starts the trace writer thread: rows arrive through a bounded channel (the device loop never
 /// blocks on the disk; a full channel drops the row and counts it).
-fn trace_writer(path: PathBuf) -> anyhow::Result<(mpsc::SyncSender<CycleRow>, std::thread::JoinHandle<std::io::Result<()>>)> {
+fn trace_writer(
+    path: PathBuf,
+) -> anyhow::Result<(mpsc::SyncSender<CycleRow>, std::thread::JoinHandle<std::io::Result<()>>)> {
     let file = std::fs::File::create(&path).with_context(|| format!("creating the trace {}", path.display()))?;
     let (tx, rx) = mpsc::sync_channel::<CycleRow>(1 << 14);
     let handle = std::thread::spawn(move || {
@@ -156,7 +162,11 @@ fn next_deadline(free: Instant, server: Option<nanopush_proto::haptic::ForceFeed
     }
     let locked = now + Duration::from_nanos(at - now_ns);
     // Never more than a period away, and never sooner than half a period from the free clock.
-    if locked > now + step || locked + step / 2 < free { free } else { locked }
+    if locked > now + step || locked + step / 2 < free {
+        free
+    } else {
+        locked
+    }
 }
 
 /// Runs the bridge; returns the summary to print.
@@ -171,7 +181,10 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
     }
     let kind: DeviceKind = a.device.parse()?;
     if a.device != "sim" && a.operator != "hold" {
-        bail!("--operator {} drives the simulated device only (--device sim)", a.operator);
+        bail!(
+            "--operator {} drives the simulated device only (--device sim)",
+            a.operator
+        );
     }
     catch_signals();
     let started = Instant::now();

@@ -166,7 +166,11 @@ pub fn ipc_config() -> iceoryx2::config::Config {
     let mut cfg = iceoryx2::config::Config::default();
     let ns = std::env::var(NAMESPACE_ENV).unwrap_or_default();
     let ok = ns.len() <= 32 && ns.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
-    let prefix = if ns.is_empty() || !ok { "nanopush_".to_string() } else { format!("nanopush_{ns}_") };
+    let prefix = if ns.is_empty() || !ok {
+        "nanopush_".to_string()
+    } else {
+        format!("nanopush_{ns}_")
+    };
     if let Ok(p) = iceoryx2::prelude::FileName::new(prefix.as_bytes()) {
         cfg.global.prefix = p;
     }
@@ -176,11 +180,8 @@ pub fn ipc_config() -> iceoryx2::config::Config {
 /// An iceoryx2 node of the haptic link.
 pub type IpcNode = iceoryx2::node::Node<iceoryx2::service::ipc::Service>;
 /// A service of the haptic link carrying `T`.
-pub type IpcService<T> = iceoryx2::service::port_factory::publish_subscribe::PortFactory<
-    iceoryx2::service::ipc::Service,
-    T,
-    (),
->;
+pub type IpcService<T> =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<iceoryx2::service::ipc::Service, T, ()>;
 
 /// Why the haptic link could not be set up.
 #[derive(Debug)]
@@ -244,7 +245,10 @@ pub fn force_service(node: &IpcNode) -> Result<IpcService<ForceFeedback>, LinkSe
 /// Whether a publisher creation failed because the service already has its one publisher (a
 /// live bridge, or a live server).
 pub fn is_publisher_taken(e: &iceoryx2::port::publisher::PublisherCreateError) -> bool {
-    matches!(e, iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers)
+    matches!(
+        e,
+        iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers
+    )
 }
 
 /// Live nodes named `name` (processes alive), after removing dead ones' resources.
@@ -289,7 +293,14 @@ mod tests {
         assert!((f.force_at(0.02) - (-0.5)).abs() < 1e-12);
         assert_eq!(f.force_at(f64::NAN), 0.5);
         assert_eq!(ForceFeedback { active: 0, ..f }.force_at(0.0095), 0.0);
-        assert_eq!(ForceFeedback { force: f64::INFINITY, ..f }.force_at(0.01), 0.0);
+        assert_eq!(
+            ForceFeedback {
+                force: f64::INFINITY,
+                ..f
+            }
+            .force_at(0.01),
+            0.0
+        );
     }
 
     #[test]

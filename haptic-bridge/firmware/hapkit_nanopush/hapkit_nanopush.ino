@@ -6,7 +6,7 @@
 // takes PWM on pin 5 and the direction on pin 8. Optional buttons, each from its pin to GND:
 // engage on pin 2, clutch on pin 4.
 //
-// Protocol version 1, as haptic-bridge/src/serial.rs and haptic-bridge/README.md document it:
+// Protocol version 1, as haptic-bridge/src/serial/ and haptic-bridge/README.md document it:
 // fixed-length little-endian packets, sync 0xA5, a kind byte, the version, CRC-16/CCITT-FALSE
 // (poly 0x1021, init 0xFFFF) of the bytes before it at the end.
 //   host -> device  force 'F' 12 bytes: flags (bit 0 active, bit 1 hello), seq u16, force i32 uN
@@ -28,7 +28,7 @@
 #include <avr/wdt.h>
 #include <math.h>
 
-// ---- Protocol (kept equal to haptic-bridge/src/serial.rs; a Rust test checks these lines) ----
+// ---- Protocol (kept equal to haptic-bridge/src/serial/; a Rust test checks these lines) ----
 const uint8_t SYNC = 0xA5;
 const uint8_t KIND_FORCE = 'F';
 const uint8_t KIND_STATE = 'S';

@@ -213,6 +213,8 @@ pub struct Bilateral {
     fault: Option<Fault>,
     /// The engage button's previous state (edges toggle the engagement).
     button_prev: bool,
+    /// The height at which the lever reached its deflection limit, while the hand presses on.
+    force_floor: Option<f64>,
 }
 
 impl Bilateral {
@@ -228,6 +230,7 @@ impl Bilateral {
             z_ref: 0.0,
             fault: None,
             button_prev: false,
+            force_floor: None,
         }
     }
 
@@ -260,6 +263,7 @@ impl Bilateral {
         self.z_ref = stage[2];
         self.approach_from = stage[2];
         self.fault = None;
+        self.force_floor = None;
         self.phase = Phase::Approach;
     }
 
@@ -321,7 +325,11 @@ impl Bilateral {
             self.engage_after_push(input.stage);
         }
         // The link went down while the hand moved the tip.
-        if handle.is_none() && matches!(self.phase, Phase::Ramp { .. } | Phase::Engaged | Phase::Clutched | Phase::Settle { .. })
+        if handle.is_none()
+            && matches!(
+                self.phase,
+                Phase::Ramp { .. } | Phase::Engaged | Phase::Clutched | Phase::Settle { .. }
+            )
         {
             self.phase = Phase::LinkLost;
         }
@@ -438,7 +446,11 @@ impl Bilateral {
         }
         if let Phase::Ramp { gain: g } = self.phase {
             let g = (g + p.tick / RAMP).min(1.0);
-            self.phase = if g >= 1.0 { Phase::Engaged } else { Phase::Ramp { gain: g } };
+            self.phase = if g >= 1.0 {
+                Phase::Engaged
+            } else {
+                Phase::Ramp { gain: g }
+            };
         }
         if self.phase == Phase::Clutched {
             return 0.0;
@@ -448,10 +460,18 @@ impl Bilateral {
             Some(zc) => (zc - p.max_indent - FLOOR_MARGIN, zc + p.max_height),
             None => (f64::NEG_INFINITY, f64::INFINITY),
         };
-        // The force limit: once the lever is bent to the limit, the tip goes no deeper (and
-        // backs off by the excess).
+        // The force limit: once the lever is bent to the limit, the height where it was reached
+        // becomes a floor (backed off by any excess), held until the hand comes back above it.
         if zeta >= p.max_indent {
-            lo = lo.max(self.z_ref + (zeta - p.max_indent));
+            let at = self.z_ref + (zeta - p.max_indent);
+            self.force_floor = Some(self.force_floor.map_or(at, |f| f.max(at)));
+        }
+        if let Some(f) = self.force_floor {
+            if z_des > f {
+                self.force_floor = None;
+            } else {
+                lo = lo.max(f);
+            }
         }
         self.slew(z_des.clamp(lo, hi), p.max_speed);
         if z_des < lo { p.k_z * (lo - z_des) } else { 0.0 }

@@ -100,7 +100,10 @@ impl TipSample {
     /// attraction at the cut-off `a₀` with a formed meniscus plus the JKR pull-off load — the
     /// scale of the pull-off force, in closed form.
     pub fn adhesion(&self) -> f64 {
-        -self.long_range.sphere_plane(self.r_t, self.a0, Meniscus::Formed, self.a0) - self.jkr.pull_off_load()
+        -self
+            .long_range
+            .sphere_plane(self.r_t, self.a0, Meniscus::Formed, self.a0)
+            - self.jkr.pull_off_load()
     }
 
     /// Moves the tip's piezo to distance `d` (m) from where `track` left it and returns the

@@ -63,14 +63,14 @@ pub struct HapticFile {
 
 impl Default for HapticFile {
     /// 1 mm of handle = 10 nm of tip; the pull-off is felt as 1 N; the tip parks 100 nm above
-    /// the surface (10 mm of handle); the hand moves it at most 200 nm/s (20 mm/s of handle)
-    /// and at most 300 nm above the surface.
+    /// the surface (10 mm of handle); the hand moves it at most 1 µm/s (100 mm/s of handle, the
+    /// strategy's own approach speed) and at most 300 nm above the surface.
     fn default() -> HapticFile {
         HapticFile {
             nm_per_mm: 10.0,
             pull_off_at_hand_n: 1.0,
             park_gap_nm: 100.0,
-            max_speed_nm_per_s: 200.0,
+            max_speed_nm_per_s: 1000.0,
             max_height_nm: 300.0,
         }
     }

@@ -434,7 +434,11 @@ fn validate_haptic(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
     let c = |field: &str, v: f64, r: Range| check(origin, &format!("haptic.{field}"), v, r);
     let h = &s.haptic;
     c("nm_per_mm", h.nm_per_mm, Range::closed(0.01, 1000.0, "nm/mm"))?;
-    c("pull_off_at_hand_n", h.pull_off_at_hand_n, Range::closed(0.01, 10.0, "N"))?;
+    c(
+        "pull_off_at_hand_n",
+        h.pull_off_at_hand_n,
+        Range::closed(0.01, 10.0, "N"),
+    )?;
     c("park_gap_nm", h.park_gap_nm, Range::closed(1.0, 10_000.0, "nm"))?;
     c(
         "max_speed_nm_per_s",

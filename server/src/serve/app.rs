@@ -17,7 +17,8 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use futures_util::{SinkExt, StreamExt};
 use nanopush_proto::ws::{
-    ClientMessage, ErrorCode, HapticAction, Role, ScanLineHeader, ServerMessage, Stream as WsStream, Telemetry, WS_VERSION,
+    ClientMessage, ErrorCode, HapticAction, Role, ScanLineHeader, ServerMessage, Stream as WsStream, Telemetry,
+    WS_VERSION,
 };
 use tokio::sync::{broadcast, mpsc, watch};
 

@@ -14,8 +14,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use nanopush_proto::haptic::{
-    ForceFeedback, HapticState, IpcNode, SERVER_NODE_NAME, force_service, ipc_node, is_publisher_taken,
-    monotonic_ns, state_service,
+    ForceFeedback, HapticState, IpcNode, SERVER_NODE_NAME, force_service, ipc_node, is_publisher_taken, monotonic_ns,
+    state_service,
 };
 
 use crate::serve::metrics::Histogram;
@@ -94,7 +94,16 @@ pub struct HapticMetrics {
 
 /// Names of the bilateral phases, in [`crate::control::bilateral::Phase`] order.
 pub const PHASES: [&str; 10] = [
-    "off", "approach", "park", "settle", "ramp", "engaged", "clutched", "pushing", "link_lost", "retract",
+    "off",
+    "approach",
+    "park",
+    "settle",
+    "ramp",
+    "engaged",
+    "clutched",
+    "pushing",
+    "link_lost",
+    "retract",
 ];
 
 /// The index of a phase name in [`PHASES`].
@@ -293,7 +302,11 @@ fn supervise(bin: &PathBuf, stop: &AtomicBool, slot: &Mutex<Option<Child>>, metr
         let started = Instant::now();
         match spawned {
             Ok(c) => {
-                tracing::info!("haptic: started the simulated bridge {} (pid {})", bin.display(), c.id());
+                tracing::info!(
+                    "haptic: started the simulated bridge {} (pid {})",
+                    bin.display(),
+                    c.id()
+                );
                 if let Ok(mut s) = slot.lock() {
                     *s = Some(c);
                 }
@@ -382,12 +395,21 @@ mod tests {
         };
         assert!(believable(&good));
         for bad in [
-            HapticState { position: f64::NAN, ..good },
-            HapticState { velocity: f64::INFINITY, ..good },
+            HapticState {
+                position: f64::NAN,
+                ..good
+            },
+            HapticState {
+                velocity: f64::INFINITY,
+                ..good
+            },
             HapticState { position: 1.0, ..good },
             HapticState { max_force: 0.0, ..good },
             HapticState { max_force: 1e6, ..good },
-            HapticState { force: f64::NAN, ..good },
+            HapticState {
+                force: f64::NAN,
+                ..good
+            },
         ] {
             assert!(!believable(&bad), "{bad:?}");
         }
