@@ -59,8 +59,9 @@ impl IpcLink {
         })
     }
 
-    /// Removes dead nodes' resources (a server killed with SIGKILL), so that a new server can
-    /// publish; call it a few times a second, not every cycle.
+    /// Removes dead nodes' resources (a server killed with SIGKILL). Not needed in the device
+    /// loop (a new server's node removes the dead one's when it is created) and not to be called
+    /// there: it walks iceoryx2's node records on disk, which can take milliseconds.
     pub fn cleanup_dead_nodes(&self) {
         let _ = self.node.try_cleanup_dead_nodes();
     }

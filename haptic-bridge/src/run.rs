@@ -34,7 +34,8 @@ pub struct RunArgs {
     /// Write one CSV row per device cycle here.
     #[arg(long)]
     trace: Option<PathBuf>,
-    /// Device cycle rate (Hz), in [100, 4000].
+    /// Device cycle rate (Hz), in [500, 4000] (the link's 5 ms watchdogs need a sample per ms
+    /// or two).
     #[arg(long, default_value_t = 1000.0)]
     rate_hz: f64,
     /// Hold the server's force between its samples instead of rendering its local linear model.
@@ -52,6 +53,9 @@ pub struct RunArgs {
     /// Print a JSON summary (cycles, drops, latency) on stdout at the end.
     #[arg(long)]
     json: bool,
+    /// The force is zeroed within this long of the server's last sample (ms), in [2, 1000].
+    #[arg(long, default_value_t = 5.0)]
+    server_timeout_ms: f64,
 }
 
 static STOP: AtomicBool = AtomicBool::new(false);
@@ -146,38 +150,40 @@ fn open_device(kind: &DeviceKind, operator: &str, period: f64) -> anyhow::Result
 /// handle just after the server has ticked, so its sample waits one server period, not two.
 pub const PHASE_LEAD_NS: u64 = 30_000;
 
-/// The next cycle's deadline: `free` (the bridge's own clock) or, with a live server, locked to
-/// the server's tick — `PHASE_LEAD_NS` after the server's next force sample is due (its period is
-/// the bridge's, or a multiple of it). Without this the handle's sample waits up to a server
-/// period before the server reads it and the force waits up to a device period before it is
+/// The next cycle's deadline (monotonic ns) after the one at `prev`: one period on, nudged
+/// toward the server's tick when a server is live — a quarter of the phase error per cycle, at
+/// most a tenth of a period — so that the device cycle settles `PHASE_LEAD_NS` after the server's
+/// force sample. The period never changes by more than that nudge: a late server sample never
+/// makes the bridge skip a cycle. Without the lock the handle's sample waits up to a server
+/// period before the server reads it and the force up to a device period before it is
 /// rendered: 1-2 ms end to end at 1 kHz instead of ~1 ms.
-fn next_deadline(free: Instant, server: Option<nanopush_proto::haptic::ForceFeedback>, step: Duration) -> Instant {
+pub fn next_deadline(prev: u64, server: Option<nanopush_proto::haptic::ForceFeedback>, step_ns: u64) -> u64 {
+    let free = prev + step_ns;
     let Some(f) = server else { return free };
-    let now_ns = monotonic_ns();
-    let now = Instant::now();
-    let step_ns = step.as_nanos() as u64;
-    let mut at = f.time_ns + PHASE_LEAD_NS;
-    if at <= now_ns {
-        at += (now_ns - at) / step_ns * step_ns + step_ns;
-    }
-    let locked = now + Duration::from_nanos(at - now_ns);
-    // Never more than a period away, and never sooner than half a period from the free clock.
-    if locked > now + step || locked + step / 2 < free {
-        free
-    } else {
-        locked
-    }
+    let step = step_ns as i64;
+    let want = ((f.time_ns + PHASE_LEAD_NS) % step_ns) as i64;
+    let have = (free % step_ns) as i64;
+    // The phase error wrapped to [−step/2, step/2).
+    let err = (want - have + step + step / 2).rem_euclid(step) - step / 2;
+    let nudge = (err / 4).clamp(-step / 10, step / 10);
+    (free as i64 + nudge) as u64
 }
 
 /// Runs the bridge; returns the summary to print.
 pub fn run(a: &RunArgs) -> anyhow::Result<String> {
-    if !(a.rate_hz.is_finite() && (100.0..=4000.0).contains(&a.rate_hz)) {
-        bail!("--rate-hz {} is out of range; allowed: [100, 4000] Hz", a.rate_hz);
+    if !(a.rate_hz.is_finite() && (500.0..=4000.0).contains(&a.rate_hz)) {
+        bail!("--rate-hz {} is out of range; allowed: [500, 4000] Hz", a.rate_hz);
     }
     if let Some(d) = a.duration
         && !(d.is_finite() && d > 0.0 && d <= 1e6)
     {
         bail!("--duration {d} is out of range; allowed: (0, 1e6] s");
+    }
+    if !(a.server_timeout_ms.is_finite() && (2.0..=1000.0).contains(&a.server_timeout_ms)) {
+        bail!(
+            "--server-timeout-ms {} is out of range; allowed: [2, 1000] ms",
+            a.server_timeout_ms
+        );
     }
     let kind: DeviceKind = a.device.parse()?;
     if a.device != "sim" && a.operator != "hold" {
@@ -217,20 +223,22 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
         local_model: !a.no_local_model,
         passivity: !a.no_passivity,
         device_code: code,
+        // Checked every cycle: the cycle that sees `timeout − period` is within the time-out.
+        stale_ns: ((a.server_timeout_ms * 1e-3 - period).max(period) * 1e9) as u64,
     };
     let mut bridge = Bridge::new(device, cfg, monotonic_ns());
     let sleeper = spin_sleep::SpinSleeper::default();
-    let step = Duration::from_secs_f64(period);
-    let mut deadline = Instant::now();
+    let step_ns = (period * 1e9).round() as u64;
+    let mut deadline = monotonic_ns();
     let mut hist = Histogram::default();
     let (mut cycles, mut overruns, mut dropped_rows, mut last_latency) = (0u64, 0u64, 0u64, 0u64);
     let mut was_up = false;
     let mut max_force_seen: f64 = 0.0;
     while !STOP.load(Ordering::SeqCst) {
-        let now = Instant::now();
+        let now = monotonic_ns();
         if deadline > now {
-            sleeper.sleep(deadline - now);
-        } else if now - deadline > step {
+            sleeper.sleep(Duration::from_nanos(deadline - now));
+        } else if now - deadline > step_ns {
             overruns += 1;
             deadline = now;
         }
@@ -242,11 +250,17 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
             last_latency = row.latency_ns;
         }
         if row.link != was_up {
-            eprintln!(
-                "nanopush-haptic: server {} at t = {:.3} s",
-                if row.link { "live" } else { "silent: force zeroed" },
-                row.t
-            );
+            if row.link {
+                eprintln!("nanopush-haptic: server live at t = {:.3} s", row.t);
+            } else {
+                let age = bridge
+                    .last_force()
+                    .map_or(f64::NAN, |f| monotonic_ns().saturating_sub(f.time_ns) as f64 * 1e-6);
+                eprintln!(
+                    "nanopush-haptic: server silent at t = {:.3} s (its last sample {age:.1} ms old): force zeroed",
+                    row.t
+                );
+            }
             was_up = row.link;
         }
         if let Some((tx, _)) = &trace
@@ -254,13 +268,10 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
         {
             dropped_rows += 1;
         }
-        if cycles % (a.rate_hz as u64 / 10).max(1) == 0 {
-            link.cleanup_dead_nodes();
-        }
         if bridge.device.finished() || deadline_total.is_some_and(|d| started.elapsed() >= d) {
             break;
         }
-        deadline = next_deadline(deadline + step, bridge.last_force().filter(|_| row.link), step);
+        deadline = next_deadline(deadline, bridge.last_force().filter(|_| row.link), step_ns);
     }
     bridge.close();
     drop(link);
@@ -298,4 +309,33 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
     } else {
         String::new()
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nanopush_proto::haptic::ForceFeedback;
+
+    /// The lock pulls the device cycle to 30 µs after the server's tick within a few dozen
+    /// cycles, keeps the period within a tenth of itself, and never skips a cycle.
+    #[test]
+    fn the_cycle_locks_to_the_servers_tick_without_skipping() {
+        let step = 1_000_000u64;
+        // The server publishes at 0.6 ms past each millisecond (plus jitter).
+        let server = |k: u64| ForceFeedback {
+            time_ns: k * step + 600_000 + (k % 7) * 5_000,
+            ..Default::default()
+        };
+        let mut d = 0u64;
+        for k in 0..100u64 {
+            let next = next_deadline(d, Some(server(k)), step);
+            let period = next - d;
+            assert!((900_000..=1_100_000).contains(&period), "period {period} at {k}");
+            d = next;
+        }
+        let phase = d % step;
+        assert!((600_000..700_000).contains(&phase), "phase {phase}");
+        // Without a server, the free clock.
+        assert_eq!(next_deadline(5, None, step), 5 + step);
+    }
 }

@@ -23,8 +23,9 @@ pub const MAX_PUBLISHERS: usize = 1;
 pub const MAX_SUBSCRIBERS: usize = 4;
 /// Nodes each service allows.
 pub const MAX_NODES: usize = 8;
-/// A peer whose newest sample is older than this is silent (ns): 5 missed samples at 1 kHz.
-pub const STALE_NS: u64 = 5_000_000;
+/// The bridge takes a server whose newest sample is older than this as silent (ns): checked
+/// every device cycle, so at 1 kHz the force is zero within 5 ms of the server's last sample.
+pub const STALE_NS: u64 = 4_000_000;
 
 /// [`HapticState::flags`]: the bridge hears no server and renders zero force.
 pub const STATE_SERVER_SILENT: u32 = 1;

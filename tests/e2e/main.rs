@@ -1,6 +1,7 @@
 //! End-to-end tests: the real binaries, started as a user would start them.
 
 mod haptic;
+mod haptic_link;
 mod model;
 mod push;
 mod scan;

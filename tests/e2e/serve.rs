@@ -14,7 +14,7 @@ use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
-const TOKEN: &str = "e2e-operator-token";
+pub(crate) const TOKEN: &str = "e2e-operator-token";
 
 /// A server on a free port, killed on drop.
 struct Server {
@@ -92,7 +92,7 @@ fn start(tag: &str, extra: &[&str]) -> Server {
 }
 
 /// A plain HTTP/1.1 GET: status and body.
-fn http_get(addr: &str, path: &str) -> (u16, Vec<u8>) {
+pub(crate) fn http_get(addr: &str, path: &str) -> (u16, Vec<u8>) {
     let mut s = TcpStream::connect(addr).unwrap();
     write!(s, "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n").unwrap();
     let mut buf = Vec::new();
@@ -120,9 +120,9 @@ fn dechunk(mut b: &[u8]) -> Vec<u8> {
     out
 }
 
-type Ws = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+pub(crate) type Ws = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
 
-async fn connect(addr: &str, token: Option<&str>) -> Ws {
+pub(crate) async fn connect(addr: &str, token: Option<&str>) -> Ws {
     let url = match token {
         Some(t) => format!("ws://{addr}/ws?token={t}"),
         None => format!("ws://{addr}/ws"),
@@ -133,12 +133,12 @@ async fn connect(addr: &str, token: Option<&str>) -> Ws {
     ws
 }
 
-async fn send(ws: &mut Ws, v: Value) {
+pub(crate) async fn send(ws: &mut Ws, v: Value) {
     ws.send(Message::Text(v.to_string().into())).await.unwrap();
 }
 
 /// The next JSON message that satisfies `pred`, within `secs`.
-async fn until(ws: &mut Ws, secs: f64, pred: impl Fn(&Value) -> bool) -> Value {
+pub(crate) async fn until(ws: &mut Ws, secs: f64, pred: impl Fn(&Value) -> bool) -> Value {
     let deadline = Instant::now() + Duration::from_secs_f64(secs);
     loop {
         let left = deadline.saturating_duration_since(Instant::now());
@@ -156,16 +156,16 @@ async fn until(ws: &mut Ws, secs: f64, pred: impl Fn(&Value) -> bool) -> Value {
     }
 }
 
-fn is(v: &Value, ty: &str) -> bool {
+pub(crate) fn is(v: &Value, ty: &str) -> bool {
     v["type"] == ty
 }
 
 /// The reply (ok or error) to command `id`.
-async fn reply(ws: &mut Ws, id: u32) -> Value {
+pub(crate) async fn reply(ws: &mut Ws, id: u32) -> Value {
     until(ws, 10.0, |v| (is(v, "ok") || is(v, "error")) && v["id"] == id).await
 }
 
-fn runtime() -> tokio::runtime::Runtime {
+pub(crate) fn runtime() -> tokio::runtime::Runtime {
     tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()

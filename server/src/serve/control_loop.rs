@@ -27,7 +27,7 @@ use nanopush_proto::haptic::{ForceFeedback, HapticState, monotonic_ns};
 use crate::control::bilateral::{Bilateral, BilateralParams, Input as HapticInput, Phase as HapticPhase};
 use crate::control::{Leg, Prepared, Strategy, StrategyParams};
 use crate::instrument::{Afm, Reading};
-use crate::serve::haptic::{DOWN_AFTER_NS, LINK_DOWN, LINK_UP, ServerLink, believable, phase_index};
+use crate::serve::haptic::{LINK_DOWN, LINK_UP, ServerLink, believable, phase_index};
 use crate::serve::metrics::LoopMetrics;
 
 /// A push prepared off the loop (localization, model prediction, plan), ready to run.
@@ -212,6 +212,8 @@ pub struct LoopConfig {
     pub cpu: Option<usize>,
     /// Connect the haptic link over iceoryx2.
     pub haptic: bool,
+    /// The haptic link is down within this long of the last handle sample (ms).
+    pub haptic_timeout_ms: f64,
 }
 
 /// Asks for SCHED_FIFO priority 50 and pins the thread to `cpu`; logs what was granted.
@@ -457,6 +459,7 @@ impl ControlLoop {
         } else {
             None
         };
+        let down_after = crate::serve::haptic::down_after_ns(cfg.haptic_timeout_ms, 1.0 / cfg.rate_hz);
         let mut handle: Option<HapticState> = None;
         let (mut last_rx, mut last_latency, mut link_up) = (0u64, 0u64, false);
         let period = Duration::from_secs_f64(1.0 / cfg.rate_hz);
@@ -493,7 +496,7 @@ impl ControlLoop {
                         hm.rejected_samples.fetch_add(1, Relaxed);
                     }
                 }
-                let up = handle.is_some() && now_ns.saturating_sub(last_rx) < DOWN_AFTER_NS;
+                let up = handle.is_some() && now_ns.saturating_sub(last_rx) < down_after;
                 if up != link_up {
                     let pid = handle.map_or(0, |s| s.pid);
                     if up {

@@ -2,8 +2,8 @@
 //! control loop uses, the link's state for `/api/status` and `/metrics` (atomics written by the
 //! loop), and the supervisor that runs a simulated bridge as a child under `--haptic sim`.
 //!
-//! Liveness: the control loop watches the age of the newest handle sample every tick (down after
-//! [`DOWN_AFTER_NS`]: 5 missed samples at 1 kHz); the supervisor looks for dead nodes a few times
+//! Liveness: the control loop watches the age of the newest handle sample every tick (down
+//! within `--haptic-timeout-ms`, 5 ms by default: 5 missed samples at 1 kHz); the supervisor looks for dead nodes a few times
 //! a second off the real-time thread and removes their resources, so a bridge killed with SIGKILL
 //! leaves nothing behind for the next one.
 
@@ -22,9 +22,16 @@ use crate::serve::metrics::Histogram;
 
 type Ipc = iceoryx2::service::ipc::Service;
 
-/// A silent bridge is down after this long without a sample (ns): the tick that sees 4.5 ms
-/// declares it, 5 ms after the last sample at a 1 kHz loop.
-pub const DOWN_AFTER_NS: u64 = 4_500_000;
+/// The default link time-out (ms, `--haptic-timeout-ms`): a silent bridge is declared down
+/// within this long of its last sample.
+pub const DEFAULT_TIMEOUT_MS: f64 = 5.0;
+
+/// The age of the newest sample at which a loop ticking every `tick` seconds declares the link
+/// down (ns), so that it does within `timeout_ms` of the last sample: a sample is at most one
+/// tick old when a tick reads it, so the tick that sees `timeout − tick/2` is within the time-out.
+pub fn down_after_ns(timeout_ms: f64, tick: f64) -> u64 {
+    ((timeout_ms * 1e-3 - 0.5 * tick).max(0.5 * tick) * 1e9) as u64
+}
 /// Largest handle position a bridge may report (m): beyond it a sample is rejected.
 pub const MAX_HANDLE: f64 = 0.5;
 /// Largest device force limit a bridge may report (N).
@@ -43,7 +50,7 @@ pub enum HapticMode {
 
 /// Link state codes in [`HapticMetrics::link`].
 pub const LINK_OFF: u64 = 0;
-/// No sample within [`DOWN_AFTER_NS`].
+/// No sample within the time-out.
 pub const LINK_DOWN: u64 = 1;
 /// Samples arrive.
 pub const LINK_UP: u64 = 2;
@@ -293,12 +300,28 @@ fn supervise(bin: &PathBuf, stop: &AtomicBool, slot: &Mutex<Option<Child>>, metr
     let mut last_clean = Instant::now();
     let mut first = true;
     'outer: while !stop.load(Relaxed) {
-        let spawned = Command::new(bin)
-            .args(["--device", "sim", "--operator", "hold"])
+        let mut cmd = Command::new(bin);
+        cmd.args(["--device", "sim", "--operator", "hold"])
             .stdin(Stdio::null())
             .stdout(Stdio::null())
-            .stderr(Stdio::inherit())
-            .spawn();
+            .stderr(Stdio::inherit());
+        let parent = std::process::id() as libc::pid_t;
+        // SAFETY: the closure runs in the child between fork and exec and calls only
+        // async-signal-safe functions (prctl, getppid, _exit).
+        unsafe {
+            use std::os::unix::process::CommandExt;
+            cmd.pre_exec(move || {
+                // The bridge goes with its server, even one killed with SIGKILL (which cannot
+                // run this supervisor's clean-up): the kernel sends it SIGTERM, on which it
+                // zeroes its force and exits.
+                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+                if libc::getppid() != parent {
+                    libc::_exit(0);
+                }
+                Ok(())
+            });
+        }
+        let spawned = cmd.spawn();
         let started = Instant::now();
         match spawned {
             Ok(c) => {
@@ -413,6 +436,14 @@ mod tests {
         ] {
             assert!(!believable(&bad), "{bad:?}");
         }
+    }
+
+    #[test]
+    fn the_down_threshold_keeps_detection_within_the_time_out() {
+        assert_eq!(down_after_ns(5.0, 1e-3), 4_500_000);
+        assert_eq!(down_after_ns(100.0, 1e-3), 99_500_000);
+        // Never below half a tick (a link is not down between two samples).
+        assert_eq!(down_after_ns(0.1, 1e-3), 500_000);
     }
 
     #[test]

@@ -69,6 +69,10 @@ pub struct ServeArgs {
     /// The bridge binary for `--haptic sim` (default: `nanopush-haptic` next to this binary).
     #[arg(long)]
     haptic_bin: Option<PathBuf>,
+    /// The haptic link is declared down (z frozen, tip parked) within this long of the last
+    /// handle sample (ms), in [2, 1000].
+    #[arg(long, default_value_t = 5.0)]
+    haptic_timeout_ms: f64,
 }
 
 fn in_range(name: &str, v: f64, lo: f64, hi: f64, unit: &str) -> anyhow::Result<()> {
@@ -137,6 +141,7 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
     in_range("--max-clients", a.max_clients as f64, 1.0, 100_000.0, "")?;
     in_range("--scan-line-hz", a.scan_line_hz, 0.1, 1000.0, " Hz")?;
     in_range("--telemetry-hz", a.telemetry_hz, 1.0, 1000.0, " Hz")?;
+    in_range("--haptic-timeout-ms", a.haptic_timeout_ms, 2.0, 1000.0, " ms")?;
     let scene = crate::load_scene(a.scene.as_ref())?;
     let operator_token = match a
         .operator_token
@@ -173,6 +178,7 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         realtime: !a.no_realtime,
         cpu: a.cpu,
         haptic: a.haptic != "none",
+        haptic_timeout_ms: a.haptic_timeout_ms,
     };
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)

@@ -1,0 +1,467 @@
+//! Haptic z-control end to end: `nanopush serve` and `nanopush-haptic` as separate processes on
+//! the iceoryx2 link, driven as the lease holder drives them from the browser.
+//!
+//! Each test gets its own link namespace (`NANOPUSH_HAPTIC_NAMESPACE`), so links never cross;
+//! the tests run one at a time (each has a real-time loop and a real-time device loop, and the
+//! machine has two cores).
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use nanopush_e2e::{bin, workspace};
+use serde_json::{Value, json};
+
+use crate::serve::{TOKEN, connect, http_get, is, reply, runtime, send, until};
+
+/// One haptic test at a time.
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+/// A test's directory and link namespace.
+struct Bench {
+    dir: PathBuf,
+    namespace: String,
+}
+
+impl Bench {
+    fn new(tag: &str) -> Bench {
+        let dir = std::env::temp_dir().join(format!("nanopush-e2e-haptic-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        // The paper's scene with the tip starting 2.2 µm above bare substrate at (20, 20) µm, away
+        // from its particle at (50, 50) µm (the server starts the tip at the [scan] centre).
+        let text = std::fs::read_to_string(workspace().join("scenes/paper-default.toml")).unwrap();
+        let extra =
+            "[strategy]\nstart_height_um = 2.2\n\n[scan]\ncentre_x_um = 20.0\ncentre_y_um = 20.0\nsize_um = 10.0\n";
+        std::fs::write(dir.join("scene.toml"), format!("{text}\n{extra}")).unwrap();
+        Bench {
+            dir,
+            namespace: format!("e2e{tag}{}", std::process::id()),
+        }
+    }
+}
+
+impl Drop for Bench {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            for log in ["server.log", "server2.log", "bridge.log"] {
+                if let Ok(t) = std::fs::read_to_string(self.dir.join(log)) {
+                    eprintln!("--- {log} ---\n{t}");
+                }
+            }
+        }
+        if std::env::var_os("NANOPUSH_E2E_KEEP").is_none() {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
+}
+
+/// A process killed (and reaped) on drop.
+struct Proc(Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// `nanopush serve --haptic MODE` on a free port; its address. The log goes to `log`.
+fn serve(b: &Bench, mode: &str, log: &str) -> (Proc, String) {
+    serve_with(b, mode, log, &[])
+}
+
+fn serve_with(b: &Bench, mode: &str, log: &str, extra: &[&str]) -> (Proc, String) {
+    let mut child = Command::new(bin("nanopush"))
+        .current_dir(workspace())
+        .env("NANOPUSH_HAPTIC_NAMESPACE", &b.namespace)
+        .args(["serve", "--port", "0", "--haptic", mode, "--operator-token", TOKEN])
+        .args(extra)
+        .arg("--scene")
+        .arg(b.dir.join("scene.toml"))
+        .arg("--data-dir")
+        .arg(b.dir.join("records"))
+        .stdout(Stdio::piped())
+        .stderr(std::fs::File::create(b.dir.join(log)).unwrap())
+        .spawn()
+        .expect("starting nanopush serve");
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let first = lines.next().expect("a first line").unwrap();
+    let addr = first
+        .strip_prefix("nanopush serve: listening on ")
+        .unwrap_or_else(|| panic!("unexpected first line {first:?}"))
+        .to_string();
+    std::thread::spawn(move || for _ in lines {});
+    (Proc(child), addr)
+}
+
+/// `nanopush-haptic --device sim` with `args`; its stderr lines are collected.
+fn bridge(b: &Bench, args: &[&str]) -> (Proc, Arc<Mutex<Vec<String>>>) {
+    let mut child = Command::new(bin("nanopush-haptic"))
+        .current_dir(workspace())
+        .env("NANOPUSH_HAPTIC_NAMESPACE", &b.namespace)
+        .args(["--device", "sim"])
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("starting nanopush-haptic");
+    let lines = Arc::new(Mutex::new(Vec::new()));
+    let sink = lines.clone();
+    let err = child.stderr.take().unwrap();
+    let log = b.dir.join("bridge.log");
+    std::thread::spawn(move || {
+        for line in BufReader::new(err).lines().map_while(Result::ok) {
+            let _ = std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(&log)
+                .and_then(|mut f| std::io::Write::write_all(&mut f, format!("{line}\n").as_bytes()));
+            sink.lock().unwrap().push(line);
+        }
+    });
+    (Proc(child), lines)
+}
+
+fn status(addr: &str) -> Value {
+    let (code, body) = http_get(addr, &format!("/api/status?token={TOKEN}"));
+    assert_eq!(code, 200);
+    serde_json::from_slice(&body).unwrap()
+}
+
+/// Waits until `pred` holds for the status, within `secs`.
+fn wait_status(addr: &str, secs: f64, what: &str, pred: impl Fn(&Value) -> bool) -> Value {
+    let deadline = Instant::now() + Duration::from_secs_f64(secs);
+    loop {
+        let s = status(addr);
+        if pred(&s) {
+            return s;
+        }
+        assert!(Instant::now() < deadline, "{what} not within {secs} s: {}", s["haptic"]);
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Waits until a line containing `text` appears, within `secs`; returns it.
+fn wait_line(lines: &Mutex<Vec<String>>, secs: f64, text: &str) -> String {
+    let deadline = Instant::now() + Duration::from_secs_f64(secs);
+    loop {
+        if let Some(l) = lines.lock().unwrap().iter().find(|l| l.contains(text)) {
+            return l.clone();
+        }
+        assert!(Instant::now() < deadline, "no line with {text:?} within {secs} s");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+fn wait_exit(p: &mut Proc, secs: f64) -> std::process::ExitStatus {
+    let deadline = Instant::now() + Duration::from_secs_f64(secs);
+    loop {
+        if let Some(st) = p.0.try_wait().unwrap() {
+            return st;
+        }
+        assert!(Instant::now() < deadline, "the process did not exit within {secs} s");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// As the lease holder: take the lease and send `haptic {action}`; the reply.
+fn haptic(addr: &str, action: &str) -> Value {
+    runtime().block_on(async {
+        let mut ws = connect(addr, Some(TOKEN)).await;
+        until(&mut ws, 5.0, |m| is(m, "welcome")).await;
+        send(&mut ws, json!({"type": "take_lease", "id": 1})).await;
+        assert_eq!(reply(&mut ws, 1).await["type"], "ok");
+        send(&mut ws, json!({"type": "haptic", "id": 2, "action": action})).await;
+        let r = reply(&mut ws, 2).await;
+        // Hold the lease a moment so the command reaches the loop before the socket closes.
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        r
+    })
+}
+
+/// One row of the bridge's trace.
+#[derive(Debug, Clone, Copy)]
+struct Row {
+    t: f64,
+    handle: f64,
+    force: f64,
+    tip_z: f64,
+    link: bool,
+    energy: f64,
+}
+
+fn read_trace(path: &Path) -> Vec<Row> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("t_s,handle_m,handle_force_n,tip_z_m,tip_force_n,link,pc_damping,port_energy_j")
+    );
+    lines
+        .map(|l| {
+            let c: Vec<&str> = l.split(',').collect();
+            let f = |i: usize| c[i].parse::<f64>().unwrap();
+            Row {
+                t: f(0),
+                handle: f(1),
+                force: f(2),
+                tip_z: f(3),
+                link: c[5] == "up",
+                energy: f(7),
+            }
+        })
+        .collect()
+}
+
+/// The press through the real processes: the tip follows the hand down, the hand feels the
+/// snap-in and then the adhesion hold it until the pull-off lets go (Fig 3's curve, scaled), the
+/// force never exceeds the device's limit, and the port energy never goes below −1 µJ.
+///
+/// Both sides run with a 100 ms link time-out: this is a test of the feel, not of the watchdog
+/// (the kill tests below check the 5 ms default), and a virtual machine now and then pauses both
+/// processes for ~5 ms, which the default would rightly treat as a lost link.
+#[test]
+fn a_press_through_the_server_feels_the_snap_in_and_the_pull_off() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let b = Bench::new("press");
+    let (_srv, addr) = serve_with(&b, "external", "server.log", &["--haptic-timeout-ms", "100"]);
+    let trace = b.dir.join("trace.csv");
+    let (mut br, _lines) = bridge(
+        &b,
+        &[
+            "--operator",
+            "press",
+            "--duration",
+            "60",
+            "--server-timeout-ms",
+            "100",
+            "--trace",
+            trace.to_str().unwrap(),
+        ],
+    );
+    let s = wait_status(&addr, 10.0, "link up", |s| s["haptic"]["link"] == "up");
+    assert_eq!(s["haptic"]["device"], "sim");
+    assert_eq!(haptic(&addr, "engage")["type"], "ok");
+    wait_status(&addr, 20.0, "engaged", |s| s["haptic"]["phase"] == "engaged");
+    let st = wait_exit(&mut br, 60.0);
+    assert!(st.success(), "the bridge exits 0 when the press ends: {st}");
+    let rows = read_trace(&trace);
+    assert!(rows.len() > 5000, "{} rows", rows.len());
+    // Never more than the device's 2.5 N; never below −1 µJ.
+    assert!(rows.iter().all(|r| r.force.abs() <= 2.5));
+    let e_min = rows.iter().map(|r| r.energy).fold(f64::INFINITY, f64::min);
+    assert!(e_min > -1e-6, "port energy went to {e_min:e} J");
+    // Engaged at the parking height, 100 nm above the surface the approach found; the hand
+    // starts down from there.
+    let engaged = rows
+        .iter()
+        .position(|r| r.link && (r.tip_z - 100e-9).abs() < 1e-9 && r.handle < -0.1e-3)
+        .expect("the press starts from the parking height");
+    let lowest = (engaged..rows.len())
+        .min_by(|&i, &j| rows[i].handle.total_cmp(&rows[j].handle))
+        .unwrap();
+    // Going down, the tip follows the hand: 10 nm of tip per mm of handle until it touches.
+    let mid = (engaged..lowest)
+        .find(|&i| rows[i].tip_z < 50e-9)
+        .expect("halfway down");
+    let (r0, r1) = (rows[engaged], rows[mid]);
+    let ratio = (r1.tip_z - r0.tip_z) / (r1.handle - r0.handle);
+    assert!((ratio - 10e-9 / 1e-3).abs() < 0.2e-6, "tip/handle {ratio:e}");
+    // The snap-in: on the way down the hand is pulled down (attraction) before it is pushed up.
+    let down = &rows[engaged..=lowest];
+    let snap = down
+        .iter()
+        .position(|r| r.force < -0.2)
+        .expect("a snap-in pulls the hand down");
+    assert!(
+        down[snap..].iter().any(|r| r.force > 0.5),
+        "then the surface pushes back"
+    );
+    // The pull-off: on the way up the adhesion holds the hand (a force below −0.5 N) and lets go
+    // at once (within 5 ms the force is back near zero).
+    let up = &rows[lowest..];
+    let (hold, strongest) = up
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.force.total_cmp(&b.1.force))
+        .map(|(i, r)| (i, r.force))
+        .unwrap();
+    assert!(strongest < -0.5, "the adhesion should hold the hand: {strongest} N");
+    let release = up[hold..]
+        .iter()
+        .position(|r| r.force > -0.1)
+        .expect("the pull-off lets go");
+    assert!(up[hold + release].t - up[hold].t < 0.005, "a jump, not a slope");
+    assert!(up.last().unwrap().tip_z > 50e-9, "the hand took the tip back up");
+}
+
+/// `kill -9` of the supervised bridge: the server lives, says "haptic link down" within 5 ms of
+/// the last sample, takes the tip back to its parking height, restarts the bridge, and the link
+/// is up again and engages anew.
+#[test]
+fn a_killed_bridge_is_survived_restarted_and_engaged_again() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let b = Bench::new("kill-bridge");
+    let (_srv, addr) = serve(&b, "sim", "server.log");
+    let s = wait_status(&addr, 10.0, "link up", |s| s["haptic"]["link"] == "up");
+    let pid = s["haptic"]["pid"].as_u64().unwrap();
+    assert_eq!(haptic(&addr, "engage")["type"], "ok");
+    wait_status(&addr, 20.0, "engaged", |s| s["haptic"]["phase"] == "engaged");
+    // SAFETY: kill(2) on the bridge's pid, read from the server.
+    unsafe {
+        libc::kill(pid as libc::pid_t, libc::SIGKILL);
+    }
+    let log = b.dir.join("server.log");
+    let deadline = Instant::now() + Duration::from_secs(5);
+    let line = loop {
+        let text = std::fs::read_to_string(&log).unwrap();
+        if let Some(l) = text.lines().find(|l| l.contains("haptic link down")) {
+            break l.to_string();
+        }
+        assert!(Instant::now() < deadline, "no 'haptic link down' in the log");
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    let ms: f64 = line
+        .split("no handle sample for ")
+        .nth(1)
+        .and_then(|r| r.split(" ms").next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{line}"));
+    assert!(ms <= 5.0, "detected {ms} ms after the last sample");
+    // A new bridge (the supervisor's restart), the link up, the force ramp again.
+    let s = wait_status(&addr, 10.0, "restarted", |s| {
+        s["haptic"]["restarts"].as_u64() >= Some(1) && s["haptic"]["link"] == "up"
+    });
+    assert_ne!(s["haptic"]["pid"].as_u64().unwrap(), pid);
+    assert!(s["haptic"]["link_downs"].as_u64() >= Some(1));
+    wait_status(&addr, 10.0, "engaged again", |s| s["haptic"]["phase"] == "engaged");
+    // The tip waited at the parking height, 100 nm above where the approach found the surface.
+    let (code, body) = http_get(&addr, &format!("/metrics?token={TOKEN}"));
+    assert_eq!(code, 200);
+    let text = String::from_utf8(body).unwrap();
+    for family in [
+        "nanopush_haptic_link_up 1",
+        "nanopush_haptic_engaged 1",
+        "nanopush_haptic_restarts_total 1",
+        "# TYPE nanopush_haptic_latency_seconds histogram",
+    ] {
+        assert!(text.contains(family), "{family} in /metrics");
+    }
+}
+
+/// `kill -9` of the server: the bridge renders zero force within 5 ms of the server's last
+/// sample, and takes up a new server on the same link without a restart.
+#[test]
+fn a_killed_server_zeroes_the_force_and_the_bridge_takes_up_a_new_one() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let b = Bench::new("kill-server");
+    let (mut srv, addr) = serve(&b, "external", "server.log");
+    let trace = b.dir.join("trace.csv");
+    let (mut br, lines) = bridge(
+        &b,
+        &[
+            "--operator",
+            "hold",
+            "--duration",
+            "60",
+            "--trace",
+            trace.to_str().unwrap(),
+        ],
+    );
+    wait_status(&addr, 10.0, "link up", |s| s["haptic"]["link"] == "up");
+    assert_eq!(haptic(&addr, "engage")["type"], "ok");
+    wait_status(&addr, 20.0, "engaged", |s| s["haptic"]["phase"] == "engaged");
+    wait_line(&lines, 5.0, "server live");
+    let _ = srv.0.kill();
+    let _ = srv.0.wait();
+    let line = wait_line(&lines, 5.0, "server silent");
+    let ms: f64 = line
+        .split("its last sample ")
+        .nth(1)
+        .and_then(|r| r.split(" ms").next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{line}"));
+    assert!(ms <= 5.0, "zeroed {ms} ms after the server's last sample");
+    // A new server on the same link: the bridge is live again without a restart.
+    let (_srv2, addr2) = serve(&b, "external", "server2.log");
+    wait_status(&addr2, 10.0, "link up", |s| s["haptic"]["link"] == "up");
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while lines
+        .lock()
+        .unwrap()
+        .iter()
+        .filter(|l| l.contains("server live"))
+        .count()
+        < 2
+    {
+        assert!(Instant::now() < deadline, "the bridge did not take up the new server");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    // SIGTERM: the bridge zeroes its force and exits 0; from the silence on, every force was 0.
+    // SAFETY: kill(2) on our own child.
+    unsafe {
+        libc::kill(br.0.id() as libc::pid_t, libc::SIGTERM);
+    }
+    assert!(wait_exit(&mut br, 5.0).success());
+    let rows = read_trace(&trace);
+    let silent = rows
+        .iter()
+        .position(|r| !r.link && r.t > 1.0)
+        .expect("a silent stretch");
+    let back = rows[silent..].iter().position(|r| r.link).expect("live again") + silent;
+    assert!(rows[silent..back].iter().all(|r| r.force == 0.0));
+}
+
+/// One bridge at a time: a second one on the same link is refused with a clear message.
+#[test]
+fn a_second_bridge_is_refused() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let b = Bench::new("second");
+    let (_first, lines) = bridge(&b, &["--operator", "hold", "--duration", "30"]);
+    wait_line(&lines, 5.0, "waiting for nanopush serve");
+    let out = Command::new(bin("nanopush-haptic"))
+        .env("NANOPUSH_HAPTIC_NAMESPACE", &b.namespace)
+        .args(["--device", "sim", "--duration", "1"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("another nanopush-haptic is live"), "{err}");
+}
+
+/// Without a haptic link the command says so; bad scales name the field and the range.
+#[test]
+fn haptic_commands_are_refused_with_the_reason() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let b = Bench::new("refuse");
+    let (_srv, addr) = serve(&b, "none", "server.log");
+    let r = haptic(&addr, "engage");
+    assert_eq!(r["code"], "unavailable", "{r}");
+    assert!(r["message"].as_str().unwrap().contains("--haptic sim"));
+    assert_eq!(status(&addr)["haptic"]["link"], "off");
+    runtime().block_on(async {
+        let mut ws = connect(&addr, Some(TOKEN)).await;
+        until(&mut ws, 5.0, |m| is(m, "welcome")).await;
+        send(&mut ws, json!({"type": "haptic", "id": 1, "action": "engage"})).await;
+        assert_eq!(reply(&mut ws, 1).await["code"], "no_lease");
+        send(&mut ws, json!({"type": "take_lease", "id": 2})).await;
+        reply(&mut ws, 2).await;
+        send(
+            &mut ws,
+            json!({"type": "haptic", "id": 3, "action": "scale", "nm_per_mm": 1e6}),
+        )
+        .await;
+        let r = reply(&mut ws, 3).await;
+        assert_eq!(r["code"], "out_of_range");
+        assert!(r["message"].as_str().unwrap().contains("nm_per_mm"), "{r}");
+        send(&mut ws, json!({"type": "haptic", "id": 4, "action": "scale"})).await;
+        assert_eq!(reply(&mut ws, 4).await["code"], "invalid");
+        send(&mut ws, json!({"type": "haptic", "id": 5, "action": "wobble"})).await;
+        let r = until(&mut ws, 5.0, |m| is(m, "error")).await;
+        assert_eq!(r["code"], "malformed");
+        assert!(r["message"].as_str().unwrap().contains("wobble"), "{r}");
+    });
+}
