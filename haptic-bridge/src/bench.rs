@@ -131,19 +131,52 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<String> {
         let _ = child.wait();
         bail!("the echo process did not answer within 5 s");
     }
+    let measured = measure(a.samples, &publisher, &subscriber);
+    let _ = send(
+        &publisher,
+        HapticState {
+            seq: u64::MAX,
+            ..Default::default()
+        },
+    );
+    // Reaped whatever happened (the echo also ends by itself after 10 s without a ping).
+    let deadline = Instant::now() + Duration::from_secs(2);
+    while child.try_wait().ok().flatten().is_none() {
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let (one_way, round_trip, lost) = measured?;
+    Ok(format!(
+        "iceoryx2 transport, {} round trips ({lost} lost):\n  one-way    {}\n  round trip {}\n",
+        a.samples,
+        one_way.summary(),
+        round_trip.summary()
+    ))
+}
+
+/// The ping-pong itself: one-way and round-trip histograms, and the pongs lost.
+fn measure(
+    samples: u64,
+    publisher: &Publisher,
+    subscriber: &Subscriber,
+) -> anyhow::Result<(Histogram, Histogram, u64)> {
     let (mut one_way, mut round_trip) = (Histogram::default(), Histogram::default());
     let mut lost = 0u64;
-    for seq in 1..=a.samples {
+    for seq in 1..=samples {
         let sent = monotonic_ns();
         send(
-            &publisher,
+            publisher,
             HapticState {
                 seq,
                 time_ns: sent,
                 ..Default::default()
             },
         )?;
-        match wait_for(&subscriber, seq, Duration::from_millis(100))? {
+        match wait_for(subscriber, seq, Duration::from_millis(100))? {
             Some(pong) => {
                 let back = monotonic_ns();
                 one_way.record(pong.latency_ns.saturating_sub(sent));
@@ -152,18 +185,5 @@ pub fn run(a: &BenchArgs) -> anyhow::Result<String> {
             None => lost += 1,
         }
     }
-    let _ = send(
-        &publisher,
-        HapticState {
-            seq: u64::MAX,
-            ..Default::default()
-        },
-    );
-    let _ = child.wait();
-    Ok(format!(
-        "iceoryx2 transport, {} round trips ({lost} lost):\n  one-way    {}\n  round trip {}\n",
-        a.samples,
-        one_way.summary(),
-        round_trip.summary()
-    ))
+    Ok((one_way, round_trip, lost))
 }

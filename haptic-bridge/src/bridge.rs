@@ -11,9 +11,7 @@
 //! - the passivity controller removes energy the loop generates;
 //! - the force is clamped to the device's limit last ([`clamp_force`]), whatever the server sent.
 
-use nanopush_proto::haptic::{
-    FORCE_ENGAGED, ForceFeedback, HapticState, STALE_NS, STATE_DEVICE_FAULT, STATE_SERVER_SILENT,
-};
+use nanopush_proto::haptic::{FORCE_ENGAGED, ForceFeedback, HapticState, STALE_NS, STATE_SERVER_SILENT};
 
 use crate::device::{Device, DeviceSample, DeviceSpec, LinkView, clamp_force};
 use crate::passivity::Passivity;
@@ -163,15 +161,13 @@ impl<D: Device> Bridge<D> {
         let dt = 1.0 / self.cfg.rate_hz;
         let t = now_ns.saturating_sub(self.start_ns) as f64 * 1e-9;
         let read = self.device.read(dt);
-        let (sample, fault) = match read {
-            Ok(s) if self.believable(&s) => (Some(s), false),
-            Ok(_) => {
+        // A sample that cannot be believed, or a device that failed to answer, is dropped and
+        // counted; nothing is published for it (the server's watchdog sees the silence).
+        let sample = match read {
+            Ok(s) if self.believable(&s) => Some(s),
+            _ => {
                 self.dropped += 1;
-                (None, false)
-            }
-            Err(_) => {
-                self.dropped += 1;
-                (None, true)
+                None
             }
         };
         if let Some(f) = link.newest() {
@@ -186,9 +182,10 @@ impl<D: Device> Bridge<D> {
             self.force = Some(f);
         }
         // A server is live while its newest sample is fresh; its force is live while it says so.
+        // Stamped in the future (more than a cycle ahead) is not believed: it would stay fresh.
         let fresh = self
             .force
-            .filter(|f| now_ns.saturating_sub(f.time_ns) <= self.cfg.stale_ns);
+            .filter(|f| f.time_ns <= now_ns + 1_000_000 && now_ns.saturating_sub(f.time_ns) <= self.cfg.stale_ns);
         let live = fresh.filter(|f| f.active != 0);
         if live.is_none() {
             self.pc.reset();
@@ -219,8 +216,10 @@ impl<D: Device> Bridge<D> {
         let max = self.spec.max_force;
         let env = match live {
             Some(f) => {
+                // A spring the hand presses into (≤ 0), no stiffer than the device renders: a
+                // positive stiffness would be an anti-spring, active by construction.
                 let capped = ForceFeedback {
-                    stiffness: f.stiffness.clamp(-self.spec.max_stiffness, self.spec.max_stiffness),
+                    stiffness: f.stiffness.clamp(-self.spec.max_stiffness, 0.0),
                     ..f
                 };
                 let x = if self.cfg.local_model { s.position } else { f.anchor };
@@ -230,6 +229,10 @@ impl<D: Device> Bridge<D> {
         };
         let (dx, w_ref) = match (self.x_prev, self.ref_prev) {
             (Some(x0), Some(f)) => {
+                let f = ForceFeedback {
+                    stiffness: f.stiffness.min(0.0),
+                    ..f
+                };
                 let reference = |x: f64| clamp_force(f.force_at(x), max);
                 (
                     s.position - x0,
@@ -274,7 +277,7 @@ impl<D: Device> Bridge<D> {
             dropped: self.dropped,
             pid: self.pid,
             buttons: s.buttons,
-            flags: if self.link_up { 0 } else { STATE_SERVER_SILENT } | if fault { STATE_DEVICE_FAULT } else { 0 },
+            flags: if self.link_up { 0 } else { STATE_SERVER_SILENT },
             device: self.cfg.device_code,
         };
         self.sent[(self.seq % LATENCY_RING as u64) as usize] = (self.seq, now_ns);

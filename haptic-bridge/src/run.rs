@@ -227,6 +227,12 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
         stale_ns: ((a.server_timeout_ms * 1e-3 - period).max(period) * 1e9) as u64,
     };
     let mut bridge = Bridge::new(device, cfg, monotonic_ns());
+    let (log, logged) = mpsc::sync_channel::<String>(64);
+    let logger = std::thread::spawn(move || {
+        for line in logged {
+            eprintln!("{line}");
+        }
+    });
     let sleeper = spin_sleep::SpinSleeper::default();
     let step_ns = (period * 1e9).round() as u64;
     let mut deadline = monotonic_ns();
@@ -250,17 +256,19 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
             last_latency = row.latency_ns;
         }
         if row.link != was_up {
-            if row.link {
-                eprintln!("nanopush-haptic: server live at t = {:.3} s", row.t);
+            // Said by the logger thread: no writes to stderr from the device loop.
+            let said = if row.link {
+                format!("nanopush-haptic: server live at t = {:.3} s", row.t)
             } else {
                 let age = bridge
                     .last_force()
                     .map_or(f64::NAN, |f| monotonic_ns().saturating_sub(f.time_ns) as f64 * 1e-6);
-                eprintln!(
+                format!(
                     "nanopush-haptic: server silent at t = {:.3} s (its last sample {age:.1} ms old): force zeroed",
                     row.t
-                );
-            }
+                )
+            };
+            let _ = log.try_send(said);
             was_up = row.link;
         }
         if let Some((tx, _)) = &trace
@@ -275,6 +283,8 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
     }
     bridge.close();
     drop(link);
+    drop(log);
+    let _ = logger.join();
     if let Some((tx, handle)) = trace {
         drop(tx);
         match handle.join() {

@@ -12,7 +12,7 @@ use iceoryx2::prelude::ZeroCopySend;
 pub const HAPTIC_STATE_SERVICE: &str = "nanopush/haptic/state";
 /// Service the server publishes the force to render on.
 pub const FORCE_FEEDBACK_SERVICE: &str = "nanopush/haptic/force";
-/// Node name of a bridge (the server looks for it when it checks the link's liveness).
+/// Node name of a bridge (as iceoryx2's node list shows it).
 pub const BRIDGE_NODE_NAME: &str = "nanopush-haptic";
 /// Node name of a server.
 pub const SERVER_NODE_NAME: &str = "nanopush-serve";
@@ -29,8 +29,6 @@ pub const STALE_NS: u64 = 4_000_000;
 
 /// [`HapticState::flags`]: the bridge hears no server and renders zero force.
 pub const STATE_SERVER_SILENT: u32 = 1;
-/// [`HapticState::flags`]: the device reported a fault (its force is zeroed).
-pub const STATE_DEVICE_FAULT: u32 = 2;
 
 /// [`ForceFeedback::flags`]: haptic z-control is engaged (the hand moves the tip).
 pub const FORCE_ENGAGED: u32 = 1;
@@ -84,7 +82,7 @@ pub struct HapticState {
     pub pid: u32,
     /// Buttons: bit 0 engage, bit 1 clutch.
     pub buttons: u32,
-    /// `STATE_*` bits.
+    /// `STATE_*` bits ([`STATE_SERVER_SILENT`]).
     pub flags: u32,
     /// `DEVICE_*` code.
     pub device: u32,
@@ -135,7 +133,12 @@ impl ForceFeedback {
         if self.active == 0 {
             return 0.0;
         }
-        let dx = (x - self.anchor).clamp(-self.half_range.abs(), self.half_range.abs());
+        let r = if self.half_range.is_finite() {
+            self.half_range.abs()
+        } else {
+            0.0
+        };
+        let dx = (x - self.anchor).clamp(-r, r);
         let f = self.force + if dx.is_finite() { self.stiffness * dx } else { 0.0 };
         if f.is_finite() { f } else { 0.0 }
     }
@@ -163,11 +166,20 @@ pub const NAMESPACE_ENV: &str = "NANOPUSH_HAPTIC_NAMESPACE";
 /// [`NAMESPACE_ENV`]. Passing it to `NodeBuilder::config` skips iceoryx2's config-file search and
 /// its "No config file was loaded" warning.
 pub fn ipc_config() -> iceoryx2::config::Config {
+    ipc_config_in(&std::env::var(NAMESPACE_ENV).unwrap_or_default())
+}
+
+/// Whether `ns` is a valid namespace (empty: the default link).
+pub fn valid_namespace(ns: &str) -> bool {
+    ns.len() <= 32 && ns.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+}
+
+/// [`ipc_config`] for the namespace `ns` (empty: the default; an invalid one is taken as the
+/// default here, and refused by [`ipc_node`]).
+pub fn ipc_config_in(ns: &str) -> iceoryx2::config::Config {
     use iceoryx2::prelude::SemanticString;
     let mut cfg = iceoryx2::config::Config::default();
-    let ns = std::env::var(NAMESPACE_ENV).unwrap_or_default();
-    let ok = ns.len() <= 32 && ns.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
-    let prefix = if ns.is_empty() || !ok {
+    let prefix = if ns.is_empty() || !valid_namespace(ns) {
         "nanopush_".to_string()
     } else {
         format!("nanopush_{ns}_")
@@ -176,6 +188,19 @@ pub fn ipc_config() -> iceoryx2::config::Config {
         cfg.global.prefix = p;
     }
     cfg
+}
+
+/// Removes the resources of dead nodes on the link `ns` (processes killed with SIGKILL): what
+/// a new node does when it is created, for a caller that has none (a test's clean-up).
+pub fn cleanup_dead_nodes_in(ns: &str) {
+    use iceoryx2::prelude::*;
+    if let Ok(node) = NodeBuilder::new()
+        .config(&ipc_config_in(ns))
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+    {
+        let _ = node.try_cleanup_dead_nodes();
+    }
 }
 
 /// An iceoryx2 node of the haptic link.
@@ -203,6 +228,12 @@ impl std::error::Error for LinkSetupError {}
 /// that blocks the next one.
 pub fn ipc_node(name: &str) -> Result<IpcNode, LinkSetupError> {
     use iceoryx2::prelude::*;
+    let ns = std::env::var(NAMESPACE_ENV).unwrap_or_default();
+    if !valid_namespace(&ns) {
+        return Err(LinkSetupError(format!(
+            "{NAMESPACE_ENV}={ns:?} is not a valid link namespace; allowed: at most 32 letters, digits, '-' and '_'"
+        )));
+    }
     let node_name: NodeName = name
         .try_into()
         .map_err(|e| LinkSetupError(format!("node name {name:?}: {e:?}")))?;
@@ -250,22 +281,6 @@ pub fn is_publisher_taken(e: &iceoryx2::port::publisher::PublisherCreateError) -
         e,
         iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers
     )
-}
-
-/// Live nodes named `name` (processes alive), after removing dead ones' resources.
-pub fn live_nodes(name: &str) -> usize {
-    use iceoryx2::node::NodeView;
-    use iceoryx2::prelude::*;
-    let mut n = 0;
-    let _ = Node::<ipc::Service>::list(&ipc_config(), |state| {
-        if let NodeState::Alive(view) = &state
-            && view.details().as_ref().is_some_and(|d| d.name().as_str() == name)
-        {
-            n += 1;
-        }
-        CallbackProgression::Continue
-    });
-    n
 }
 
 #[cfg(test)]

@@ -442,9 +442,30 @@ mod tests {
             volts: -0.2,
             phase: "idle".into(),
             estimate: None,
+            haptic: None,
         }))
         .unwrap();
         assert!(t.starts_with(r#"{"type":"telemetry","t":1.0"#), "{t}");
+        // Without a haptic link, no `haptic` key at all.
+        assert!(!t.contains("haptic"), "{t}");
+    }
+
+    #[test]
+    fn the_haptic_command_parses_and_refuses_unknown_actions() {
+        let m: ClientMessage =
+            serde_json::from_str(r#"{"type":"haptic","id":7,"action":"scale","nm_per_mm":20}"#).unwrap();
+        assert_eq!(
+            m,
+            ClientMessage::Haptic {
+                id: Some(7),
+                action: HapticAction::Scale,
+                nm_per_mm: Some(20.0),
+                pull_off_at_hand_n: None,
+            }
+        );
+        assert_eq!(m.id(), Some(7));
+        assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"haptic","action":"wobble"}"#).is_err());
+        assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"haptic","action":"engage","force":1}"#).is_err());
     }
 
     #[test]

@@ -115,7 +115,7 @@ pub fn run_push_within(
 ) -> Result<PushRun, SimulationError> {
     let mut sim = Simulation::new(model, method, opts);
     let samples = (duration / dt).round().max(1.0);
-    if !(samples <= MAX_SAMPLES as f64) {
+    if samples.is_nan() || samples > MAX_SAMPLES as f64 {
         return Err(SimulationError::Budget {
             what: "trace samples",
             limit: MAX_SAMPLES,

@@ -215,6 +215,11 @@ pub struct Bilateral {
     button_prev: bool,
     /// The height at which the lever reached its deflection limit, while the hand presses on.
     force_floor: Option<f64>,
+    /// The phase a running push interrupted (the hand gets the tip back after it only if it had
+    /// it before).
+    before_push: Phase,
+    /// The force ramp during a push (0..1).
+    push_gain: f64,
 }
 
 impl Bilateral {
@@ -231,6 +236,8 @@ impl Bilateral {
             fault: None,
             button_prev: false,
             force_floor: None,
+            before_push: Phase::Off,
+            push_gain: 0.0,
         }
     }
 
@@ -282,6 +289,36 @@ impl Bilateral {
         self.anchor = (handle, self.z_ref);
     }
 
+    /// New scales (each only when given). While the hand owns the tip the anchor moves to the
+    /// handle's position now (the tip does not jump) and the force ramps in again from zero, as
+    /// after a clutch: a scale is never applied to the hand in one step.
+    pub fn rescale(&mut self, position_gain: Option<f64>, force_gain: Option<f64>, handle: Option<f64>) {
+        if let Some(g) = position_gain {
+            self.params.position_gain = g;
+        }
+        if let Some(g) = force_gain {
+            self.params.force_gain = g;
+        }
+        if matches!(self.phase, Phase::Ramp { .. } | Phase::Engaged | Phase::Clutched) {
+            if let Some(x) = handle.filter(|x| x.is_finite()) {
+                self.anchor = (x, self.z_ref);
+            }
+            if self.phase != Phase::Clutched {
+                self.phase = Phase::Ramp { gain: 0.0 };
+            }
+        }
+    }
+
+    /// The link to the hand is lost (or a new bridge replaced it): as when no sample arrives.
+    pub fn link_lost(&mut self) {
+        if matches!(
+            self.phase,
+            Phase::Settle { .. } | Phase::Ramp { .. } | Phase::Engaged | Phase::Clutched
+        ) {
+            self.phase = Phase::LinkLost;
+        }
+    }
+
     fn deflection(&self, volts: f64) -> f64 {
         (volts - self.params.baseline) / self.params.sensor_gain
     }
@@ -318,11 +355,26 @@ impl Bilateral {
         }
         self.button_prev = button;
 
-        // A push owns z: the hand only feels.
-        if input.pushing && self.phase != Phase::Off {
+        // A push owns z: the hand only feels (the force ramps in from zero). After it the hand
+        // gets the tip back only if it had it before.
+        if input.pushing && !matches!(self.phase, Phase::Off | Phase::Pushing) {
+            self.before_push = self.phase;
+            self.push_gain = 0.0;
             self.phase = Phase::Pushing;
         } else if !input.pushing && self.phase == Phase::Pushing {
-            self.engage_after_push(input.stage);
+            let resume = matches!(
+                self.before_push,
+                Phase::Approach
+                    | Phase::Park
+                    | Phase::Settle { .. }
+                    | Phase::Ramp { .. }
+                    | Phase::Engaged
+                    | Phase::Clutched
+            );
+            self.phase = Phase::Off;
+            if resume {
+                self.engage(input.stage);
+            }
         }
         // The link went down while the hand moved the tip.
         if handle.is_none()
@@ -345,9 +397,9 @@ impl Bilateral {
                     self.contact_z = Some(input.stage[2]);
                     self.phase = Phase::Park;
                 } else if self.approach_from - self.z_ref > p.search_depth {
+                    // Nothing within reach: back up to where the approach started, then off.
                     self.fault = Some(Fault::NoSurface);
-                    self.z_ref = self.approach_from;
-                    self.phase = Phase::Off;
+                    self.phase = Phase::Retract;
                 } else {
                     self.slew(f64::NEG_INFINITY, p.approach_speed);
                 }
@@ -359,11 +411,10 @@ impl Bilateral {
                 }
             }
             Phase::LinkLost | Phase::Retract => {
-                // Up to the parking height (never down); then wait for the link, or stop.
-                let parked = match self.park_height() {
-                    Some(park) => self.slew(self.z_ref.max(park), p.approach_speed),
-                    None => true,
-                };
+                // Up to the parking height (where the approach started when no surface was
+                // found), never down; then wait for the link, or stop.
+                let goal = self.park_height().unwrap_or(self.approach_from);
+                let parked = self.slew(self.z_ref.max(goal), p.approach_speed);
                 if parked && self.phase == Phase::Retract {
                     self.phase = Phase::Off;
                 } else if parked && handle.is_some() {
@@ -399,7 +450,12 @@ impl Bilateral {
             }
             Phase::Clutched => flags |= FORCE_ENGAGED | FORCE_CLUTCHED,
             Phase::Pushing => {
-                gain = 1.0;
+                if handle.is_some() {
+                    self.push_gain = (self.push_gain + p.tick / RAMP).min(1.0);
+                } else {
+                    self.push_gain = 0.0;
+                }
+                gain = self.push_gain;
                 flags |= FORCE_PUSHING;
             }
             _ => {}
@@ -473,14 +529,10 @@ impl Bilateral {
                 lo = lo.max(f);
             }
         }
-        self.slew(z_des.clamp(lo, hi), p.max_speed);
+        // When the force floor has risen above the top limit, the floor (up, away from the
+        // surface) wins.
+        self.slew(z_des.min(hi).max(lo), p.max_speed);
         if z_des < lo { p.k_z * (lo - z_des) } else { 0.0 }
-    }
-
-    /// After a push the tip is wherever the strategy retracted it: approach and park again.
-    fn engage_after_push(&mut self, stage: [f64; 3]) {
-        self.phase = Phase::Off;
-        self.engage(stage);
     }
 }
 

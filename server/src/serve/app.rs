@@ -274,6 +274,8 @@ fn haptic_status(h: &crate::serve::haptic::HapticMetrics) -> serde_json::Value {
         "dropped_samples": h.dropped_samples.load(Relaxed),
         "rejected_samples": h.rejected_samples.load(Relaxed),
         "link_downs": h.link_downs.load(Relaxed),
+        "tip_z_m": h.tip_z_m().is_finite().then(|| h.tip_z_m()),
+        "fault": (h.fault_name() != "none").then(|| h.fault_name()),
         "pc_active": h.pc_active(),
         "pc_damping": num(h.pc_damping()),
         "port_energy_j": num(h.port_energy()),
@@ -686,6 +688,12 @@ fn haptic_command(
                 ));
             }
             if action == HapticAction::Engage {
+                if st.shared.busy.load(Relaxed) {
+                    return Err(Refusal::new(
+                        ErrorCode::Busy,
+                        "a push is running (it owns z); engage haptic z-control after it",
+                    ));
+                }
                 HapticCommand::Engage
             } else {
                 HapticCommand::Recenter

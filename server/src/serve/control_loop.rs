@@ -283,6 +283,8 @@ pub struct ControlLoop {
     active: Option<Active>,
     ending: Option<Ending>,
     shutting_down: bool,
+    /// Told once the haptic link is open (or could not be).
+    ready: Option<std::sync::mpsc::SyncSender<Result<(), String>>>,
 }
 
 impl ControlLoop {
@@ -297,6 +299,19 @@ impl ControlLoop {
             active: None,
             ending: None,
             shutting_down: false,
+            ready: None,
+        }
+    }
+
+    /// Tells `tx` once the haptic link is open (`Ok`) or could not be (`Err` with the reason).
+    pub fn with_ready(mut self, tx: std::sync::mpsc::SyncSender<Result<(), String>>) -> ControlLoop {
+        self.ready = Some(tx);
+        self
+    }
+
+    fn report_ready(&mut self, r: Result<(), String>) {
+        if let Some(tx) = self.ready.take() {
+            let _ = tx.send(r);
         }
     }
 
@@ -397,17 +412,8 @@ impl ControlLoop {
                         position_gain,
                         force_gain,
                     } => {
-                        // Re-anchored where the hand is now, so the tip does not jump.
-                        if let Some(g) = position_gain {
-                            self.bilateral.params.position_gain = g;
-                            let x = f64::from_bits(shared.metrics.haptic.handle_m.load(Relaxed));
-                            if x.is_finite() {
-                                self.bilateral.recenter(x);
-                            }
-                        }
-                        if let Some(g) = force_gain {
-                            self.bilateral.params.force_gain = g;
-                        }
+                        let x = f64::from_bits(shared.metrics.haptic.handle_m.load(Relaxed));
+                        self.bilateral.rescale(position_gain, force_gain, Some(x));
                     }
                 },
             }
@@ -446,22 +452,29 @@ impl ControlLoop {
         let rt = cfg.realtime && make_realtime(cfg.cpu);
         shared.metrics.realtime.store(rt as u64, Relaxed);
         let hm = &shared.metrics.haptic;
+        hm.tip_z_m.store(f64::NAN.to_bits(), Relaxed);
         let haptic = if cfg.haptic {
             hm.enabled.store(true, Relaxed);
             hm.link.store(LINK_DOWN, Relaxed);
             match ServerLink::open() {
-                Ok(h) => Some(h),
+                Ok(h) => {
+                    self.report_ready(Ok(()));
+                    Some(h)
+                }
                 Err(e) => {
-                    tracing::error!("{e}; running without force feedback");
+                    // The server refuses to start (serve::run waits for this answer).
+                    hm.fault.store(2, Relaxed);
+                    self.report_ready(Err(e.to_string()));
                     None
                 }
             }
         } else {
+            self.report_ready(Ok(()));
             None
         };
         let down_after = crate::serve::haptic::down_after_ns(cfg.haptic_timeout_ms, 1.0 / cfg.rate_hz);
         let mut handle: Option<HapticState> = None;
-        let (mut last_rx, mut last_latency, mut link_up) = (0u64, 0u64, false);
+        let (mut last_taken, mut last_latency, mut link_up) = (0u64, 0u64, false);
         let period = Duration::from_secs_f64(1.0 / cfg.rate_hz);
         let sleeper = spin_sleep::SpinSleeper::default();
         let mut reading = self.afm.read();
@@ -484,32 +497,34 @@ impl ControlLoop {
             if let Some(h) = &haptic {
                 let now_ns = monotonic_ns();
                 if let (Some(s), _) = h.newest() {
-                    if believable(&s) {
+                    // A sample stamped in the future (another clock, a bad bridge) is not
+                    // believed either: it would look fresh for ever.
+                    if believable(&s) && s.time_ns <= now_ns + 1_000_000 {
                         hm.sample(&s, now_ns);
                         if s.latency_ns != 0 && s.latency_ns != last_latency {
                             hm.latency.record(s.latency_ns as f64 * 1e-9);
                             last_latency = s.latency_ns;
                         }
+                        // A new bridge (another pid) starts over with the settle and the ramp.
+                        if handle.is_some_and(|old| old.pid != s.pid) && link_up {
+                            self.bilateral.link_lost();
+                        }
                         handle = Some(s);
-                        last_rx = now_ns;
+                        last_taken = s.time_ns.min(now_ns);
                     } else {
                         hm.rejected_samples.fetch_add(1, Relaxed);
                     }
                 }
-                let up = handle.is_some() && now_ns.saturating_sub(last_rx) < down_after;
+                // The age since the handle was read (one clock for both processes).
+                let age = now_ns.saturating_sub(last_taken);
+                let up = handle.is_some() && age < down_after;
                 if up != link_up {
-                    let pid = handle.map_or(0, |s| s.pid);
-                    if up {
-                        tracing::info!(
-                            "haptic link up: {} bridge, pid {pid}",
-                            nanopush_proto::haptic::device_name(handle.map_or(0, |s| s.device))
-                        );
-                    } else {
+                    // Logged by the haptic monitor thread, not here: no I/O in the loop.
+                    if !up {
+                        hm.last_down_age_ns.store(age, Relaxed);
                         hm.link_downs.fetch_add(1, Relaxed);
-                        tracing::warn!(
-                            "haptic link down: no handle sample for {:.1} ms (bridge pid {pid}); z frozen, tip to its parking height",
-                            now_ns.saturating_sub(last_rx) as f64 * 1e-6
-                        );
+                    } else {
+                        hm.link_ups.fetch_add(1, Relaxed);
                     }
                     hm.link.store(if up { LINK_UP } else { LINK_DOWN }, Relaxed);
                     link_up = up;
@@ -563,6 +578,10 @@ impl ControlLoop {
                 });
             }
             hm.tip_force_n.store(hand.feedback.tip_force.to_bits(), Relaxed);
+            hm.tip_z_m.store(hand.feedback.tip_z.to_bits(), Relaxed);
+            if haptic.is_some() {
+                hm.fault.store(u64::from(self.bilateral.fault().is_some()), Relaxed);
+            }
             let phase_name = match &self.active {
                 Some(a) => a.strategy.phase.name(),
                 None => "idle",

@@ -26,11 +26,11 @@ type Ipc = iceoryx2::service::ipc::Service;
 /// within this long of its last sample.
 pub const DEFAULT_TIMEOUT_MS: f64 = 5.0;
 
-/// The age of the newest sample at which a loop ticking every `tick` seconds declares the link
-/// down (ns), so that it does within `timeout_ms` of the last sample: a sample is at most one
-/// tick old when a tick reads it, so the tick that sees `timeout − tick/2` is within the time-out.
+/// The age of the newest sample — since the bridge read the handle, on the clock both
+/// processes share — at which a loop ticking every `tick` seconds declares the link down (ns):
+/// the tick that first sees `timeout − tick` is at most one tick later, within the time-out.
 pub fn down_after_ns(timeout_ms: f64, tick: f64) -> u64 {
-    ((timeout_ms * 1e-3 - 0.5 * tick).max(0.5 * tick) * 1e9) as u64
+    ((timeout_ms * 1e-3 - tick).max(tick) * 1e9) as u64
 }
 /// Largest handle position a bridge may report (m): beyond it a sample is rejected.
 pub const MAX_HANDLE: f64 = 0.5;
@@ -89,6 +89,14 @@ pub struct HapticMetrics {
     pub rejected_samples: AtomicU64,
     /// Times the link went down.
     pub link_downs: AtomicU64,
+    /// Times the link came up.
+    pub link_ups: AtomicU64,
+    /// Age of the newest sample when the link last went down (ns).
+    pub last_down_age_ns: AtomicU64,
+    /// The tip's height above the detected surface (m), f64 bits; NaN before an approach.
+    pub tip_z_m: AtomicU64,
+    /// The last fault of haptic z-control ([`FAULTS`] index; 0: none).
+    pub fault: AtomicU64,
     /// Samples received.
     pub samples: AtomicU64,
     /// `monotonic_ns` of the last sample (0: never).
@@ -112,6 +120,9 @@ pub const PHASES: [&str; 10] = [
     "link_lost",
     "retract",
 ];
+
+/// Names of the faults in [`HapticMetrics::fault`].
+pub const FAULTS: [&str; 3] = ["none", "no_surface", "second_server"];
 
 /// The index of a phase name in [`PHASES`].
 pub fn phase_index(name: &str) -> u64 {
@@ -137,6 +148,16 @@ impl HapticMetrics {
     /// The phase's name.
     pub fn phase_name(&self) -> &'static str {
         PHASES[(self.phase.load(Relaxed) as usize).min(PHASES.len() - 1)]
+    }
+
+    /// The tip's height above the detected surface (m).
+    pub fn tip_z_m(&self) -> f64 {
+        f(&self.tip_z_m)
+    }
+
+    /// The last fault's name (`none` when there was none).
+    pub fn fault_name(&self) -> &'static str {
+        FAULTS[(self.fault.load(Relaxed) as usize).min(FAULTS.len() - 1)]
     }
 
     /// Tip force (N).
@@ -258,9 +279,13 @@ impl ServerLink {
     }
 }
 
-/// Runs `nanopush-haptic --device sim --operator hold` as a child: restarts it with back-off when
-/// it exits (0.2 s doubling to 5 s; reset after 10 s of life), always reaps it, kills it on
-/// shutdown, and looks for dead iceoryx2 nodes a few times a second.
+/// The haptic link's monitor, a plain thread beside the real-time loop: it logs the link's
+/// transitions the loop counts (so the loop never writes a log line), removes dead iceoryx2
+/// nodes a few times a second, and under `--haptic sim` runs `nanopush-haptic --device sim
+/// --operator hold` as a child — restarted with back-off when it exits (0.2 s doubling to 5 s;
+/// reset after 10 s of life), always reaped, in a process group of its own (a Ctrl-C to the
+/// server does not reach it before the tip is parked), stopped by the kernel if the server dies
+/// (`PR_SET_PDEATHSIG`), stopped with SIGTERM on shutdown.
 pub struct Supervisor {
     stop: Arc<AtomicBool>,
     child: Arc<Mutex<Option<Child>>>,
@@ -268,14 +293,14 @@ pub struct Supervisor {
 }
 
 impl Supervisor {
-    /// Starts the supervisor of `bin`.
-    pub fn start(bin: PathBuf, shared: Arc<crate::serve::control_loop::Shared>) -> Supervisor {
+    /// Starts the monitor; with `bin`, it runs that bridge as a child.
+    pub fn start(bin: Option<PathBuf>, shared: Arc<crate::serve::control_loop::Shared>) -> Supervisor {
         let stop = Arc::new(AtomicBool::new(false));
         let child: Arc<Mutex<Option<Child>>> = Arc::new(Mutex::new(None));
         let (stop2, child2) = (stop.clone(), child.clone());
         let thread = std::thread::Builder::new()
-            .name("haptic-supervisor".into())
-            .spawn(move || supervise(&bin, &stop2, &child2, &shared.metrics.haptic))
+            .name("haptic-monitor".into())
+            .spawn(move || monitor(bin.as_deref(), &stop2, &child2, &shared.metrics.haptic))
             .ok();
         Supervisor { stop, child, thread }
     }
@@ -285,7 +310,7 @@ impl Supervisor {
         self.child.lock().ok()?.as_ref().map(Child::id)
     }
 
-    /// Kills the child, reaps it, and ends the supervisor.
+    /// Stops the child (SIGTERM, SIGKILL after 1 s), reaps it, and ends the monitor.
     pub fn shutdown(mut self) {
         self.stop.store(true, Relaxed);
         if let Some(t) = self.thread.take() {
@@ -294,96 +319,110 @@ impl Supervisor {
     }
 }
 
-fn supervise(bin: &PathBuf, stop: &AtomicBool, slot: &Mutex<Option<Child>>, metrics: &HapticMetrics) {
-    let mut backoff = Duration::from_millis(200);
-    let cleaner = ipc_node("nanopush-serve-supervisor").ok();
+fn spawn_bridge(bin: &std::path::Path) -> std::io::Result<Child> {
+    let mut cmd = Command::new(bin);
+    cmd.args(["--device", "sim", "--operator", "hold"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::inherit());
+    let parent = std::process::id() as libc::pid_t;
+    // SAFETY: the closure runs in the child between fork and exec and calls only
+    // async-signal-safe functions (setpgid, prctl, getppid, _exit).
+    unsafe {
+        use std::os::unix::process::CommandExt;
+        cmd.pre_exec(move || {
+            libc::setpgid(0, 0);
+            // The bridge goes with its server, even one killed with SIGKILL: the kernel sends
+            // it SIGTERM, on which it zeroes its force and exits.
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+            if libc::getppid() != parent {
+                libc::_exit(0);
+            }
+            Ok(())
+        });
+    }
+    cmd.spawn()
+}
+
+fn monitor(bin: Option<&std::path::Path>, stop: &AtomicBool, slot: &Mutex<Option<Child>>, h: &HapticMetrics) {
+    let cleaner = ipc_node("nanopush-serve-monitor").ok();
     let mut last_clean = Instant::now();
+    let (mut downs, mut ups) = (0u64, 0u64);
+    let mut backoff = Duration::from_millis(200);
+    let mut started = Instant::now();
+    let mut respawn_at: Option<Instant> = bin.map(|_| Instant::now());
     let mut first = true;
-    'outer: while !stop.load(Relaxed) {
-        let mut cmd = Command::new(bin);
-        cmd.args(["--device", "sim", "--operator", "hold"])
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::inherit());
-        let parent = std::process::id() as libc::pid_t;
-        // SAFETY: the closure runs in the child between fork and exec and calls only
-        // async-signal-safe functions (prctl, getppid, _exit).
-        unsafe {
-            use std::os::unix::process::CommandExt;
-            cmd.pre_exec(move || {
-                // The bridge goes with its server, even one killed with SIGKILL (which cannot
-                // run this supervisor's clean-up): the kernel sends it SIGTERM, on which it
-                // zeroes its force and exits.
-                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
-                if libc::getppid() != parent {
-                    libc::_exit(0);
-                }
-                Ok(())
-            });
+    while !stop.load(Relaxed) {
+        // The link's transitions, as the loop counted them.
+        let (d, u) = (h.link_downs.load(Relaxed), h.link_ups.load(Relaxed));
+        if u > ups {
+            tracing::info!(
+                "haptic link up: {} bridge, pid {}",
+                nanopush_proto::haptic::device_name(h.device.load(Relaxed) as u32),
+                h.pid.load(Relaxed)
+            );
         }
-        let spawned = cmd.spawn();
-        let started = Instant::now();
-        match spawned {
-            Ok(c) => {
-                tracing::info!(
-                    "haptic: started the simulated bridge {} (pid {})",
-                    bin.display(),
-                    c.id()
-                );
-                if let Ok(mut s) = slot.lock() {
-                    *s = Some(c);
-                }
-                if !first {
-                    metrics.restarts.fetch_add(1, Relaxed);
-                }
-                first = false;
-            }
-            Err(e) => tracing::error!("haptic: cannot start the bridge {}: {e}", bin.display()),
+        if d > downs {
+            tracing::warn!(
+                "haptic link down: no handle sample for {:.1} ms (bridge pid {}); z frozen, tip to its parking height",
+                h.last_down_age_ns.load(Relaxed) as f64 * 1e-6,
+                h.pid.load(Relaxed)
+            );
         }
-        // Wait for it to exit (or for shutdown), reaping it; clean dead nodes meanwhile.
-        loop {
-            if stop.load(Relaxed) {
-                break 'outer;
-            }
-            let status = slot
-                .lock()
-                .ok()
-                .and_then(|mut s| s.as_mut().and_then(|c| c.try_wait().ok().flatten()));
-            let gone = status.is_some() || slot.lock().map(|s| s.is_none()).unwrap_or(true);
-            if let Some(st) = status {
-                if let Ok(mut s) = slot.lock() {
-                    *s = None;
-                }
+        (downs, ups) = (d, u);
+        // The simulated bridge: reap it when it exits, start it again after the back-off.
+        if let Some(bin) = bin {
+            if let Ok(mut s) = slot.lock()
+                && let Some(c) = s.as_mut()
+                && let Ok(Some(status)) = c.try_wait()
+            {
+                *s = None;
                 if started.elapsed() > Duration::from_secs(10) {
                     backoff = Duration::from_millis(200);
                 }
                 tracing::warn!(
-                    "haptic: the simulated bridge exited ({st}); restarting in {:.1} s",
+                    "haptic: the simulated bridge exited ({status}); restarting in {:.1} s",
                     backoff.as_secs_f64()
                 );
+                respawn_at = Some(Instant::now() + backoff);
+                backoff = (backoff * 2).min(Duration::from_secs(5));
             }
-            if gone {
-                break;
-            }
-            if last_clean.elapsed() > Duration::from_millis(100) {
+            if respawn_at.is_some_and(|t| Instant::now() >= t) {
+                respawn_at = None;
                 if let Some(n) = &cleaner {
                     let _ = n.try_cleanup_dead_nodes();
                 }
-                last_clean = Instant::now();
+                match spawn_bridge(bin) {
+                    Ok(c) => {
+                        tracing::info!(
+                            "haptic: started the simulated bridge {} (pid {})",
+                            bin.display(),
+                            c.id()
+                        );
+                        if !first {
+                            h.restarts.fetch_add(1, Relaxed);
+                        }
+                        first = false;
+                        started = Instant::now();
+                        if let Ok(mut s) = slot.lock() {
+                            *s = Some(c);
+                        }
+                    }
+                    Err(e) => {
+                        tracing::error!("haptic: cannot start the bridge {}: {e}", bin.display());
+                        respawn_at = Some(Instant::now() + backoff);
+                        backoff = (backoff * 2).min(Duration::from_secs(5));
+                    }
+                }
             }
-            std::thread::sleep(Duration::from_millis(20));
         }
-        if let Some(n) = &cleaner {
-            let _ = n.try_cleanup_dead_nodes();
-        }
-        let until = Instant::now() + backoff;
-        while Instant::now() < until {
-            if stop.load(Relaxed) {
-                break 'outer;
+        if last_clean.elapsed() > Duration::from_millis(100) {
+            if let Some(n) = &cleaner {
+                let _ = n.try_cleanup_dead_nodes();
             }
-            std::thread::sleep(Duration::from_millis(20));
+            last_clean = Instant::now();
         }
-        backoff = (backoff * 2).min(Duration::from_secs(5));
+        std::thread::sleep(Duration::from_millis(2));
     }
     // Shutdown: SIGTERM (the bridge zeroes its force and exits), SIGKILL after 1 s; always reap.
     if let Ok(mut s) = slot.lock()
@@ -440,10 +479,10 @@ mod tests {
 
     #[test]
     fn the_down_threshold_keeps_detection_within_the_time_out() {
-        assert_eq!(down_after_ns(5.0, 1e-3), 4_500_000);
-        assert_eq!(down_after_ns(100.0, 1e-3), 99_500_000);
-        // Never below half a tick (a link is not down between two samples).
-        assert_eq!(down_after_ns(0.1, 1e-3), 500_000);
+        assert_eq!(down_after_ns(5.0, 1e-3), 4_000_000);
+        assert_eq!(down_after_ns(100.0, 1e-3), 99_000_000);
+        // Never below a tick (a link is not down between two samples).
+        assert_eq!(down_after_ns(0.1, 1e-3), 1_000_000);
     }
 
     #[test]

@@ -29,6 +29,9 @@ pub enum ServeError {
         /// Cause.
         source: std::io::Error,
     },
+    /// The haptic link could not be opened.
+    #[error("{0}")]
+    Haptic(String),
 }
 
 /// A running server's address and the operator's URL.
@@ -57,7 +60,8 @@ pub async fn run(
     let base = crate::scan::ScanParams::from_scene(&scene);
     let afm = Afm::from_scene(&scene, base.centre_x, base.centre_y, tick);
     let shared = Arc::new(Shared::new(&afm));
-    let control = ControlLoop::new(afm, params, scene.bilateral_params(tick));
+    let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel(1);
+    let control = ControlLoop::new(afm, params, scene.bilateral_params(tick)).with_ready(ready_tx);
     let loop_shared = shared.clone();
     let loop_thread = std::thread::Builder::new()
         .name("control-loop".into())
@@ -66,6 +70,20 @@ pub async fn run(
             context: "starting the control loop thread".into(),
             source,
         })?;
+    // A haptic link that cannot be opened (another server holds it) stops the start: better
+    // a clear refusal than a server that says its link is down.
+    match ready_rx.recv_timeout(Duration::from_secs(10)) {
+        Ok(Ok(())) => {}
+        failed => {
+            let why = match failed {
+                Ok(Err(why)) => why,
+                _ => "the control loop did not start within 10 s".to_string(),
+            };
+            let _ = shared.commands.push(LoopCommand::Shutdown);
+            let _ = loop_thread.join();
+            return Err(ServeError::Haptic(why));
+        }
+    }
     let (ev_tx, ev_rx) = tokio::sync::mpsc::unbounded_channel();
     let rec_shared = shared.clone();
     let dir = cfg.data_dir.clone();
@@ -78,8 +96,9 @@ pub async fn run(
         })?;
 
     let supervisor = match &cfg.haptic {
-        haptic::HapticMode::Sim(bin) => Some(haptic::Supervisor::start(bin.clone(), shared.clone())),
-        _ => None,
+        haptic::HapticMode::Sim(bin) => Some(haptic::Supervisor::start(Some(bin.clone()), shared.clone())),
+        haptic::HapticMode::External => Some(haptic::Supervisor::start(None, shared.clone())),
+        haptic::HapticMode::None => None,
     };
     let state = Arc::new(AppState::new(cfg, scene, shared.clone(), params));
     let listener = tokio::net::TcpListener::bind(bind)
@@ -118,7 +137,8 @@ pub async fn run(
         let _ = tokio::task::spawn_blocking(move || {
             let _ = recorder.join();
             let _ = loop_thread.join();
-            // The loop has published zero force; now the simulated bridge goes, reaped.
+            // The loop has parked the tip and published zero force; now the monitor and the
+            // simulated bridge go, reaped.
             if let Some(s) = supervisor {
                 s.shutdown();
             }

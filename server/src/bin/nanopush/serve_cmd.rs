@@ -142,6 +142,13 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
     in_range("--scan-line-hz", a.scan_line_hz, 0.1, 1000.0, " Hz")?;
     in_range("--telemetry-hz", a.telemetry_hz, 1.0, 1000.0, " Hz")?;
     in_range("--haptic-timeout-ms", a.haptic_timeout_ms, 2.0, 1000.0, " ms")?;
+    if a.haptic != "none" && a.rate_hz < 500.0 {
+        bail!(
+            "--haptic {} needs --rate-hz of at least 500 Hz (the bridge zeroes its force when the server's samples are 4 ms apart); got {}",
+            a.haptic,
+            a.rate_hz
+        );
+    }
     let scene = crate::load_scene(a.scene.as_ref())?;
     let operator_token = match a
         .operator_token

@@ -232,7 +232,10 @@ fn a_push_owns_z_and_the_hand_only_feels() {
     assert_eq!(out.target, None);
     assert_eq!(out.feedback.flags, FORCE_PUSHING);
     assert_eq!(out.feedback.stiffness, 0.0);
-    assert_eq!(out.feedback.gain, 1.0);
+    assert!(
+        out.feedback.gain > 0.0 && out.feedback.gain < 0.01,
+        "the force ramps in"
+    );
     rig.pushing = false;
     rig.tick();
     assert_eq!(rig.law.phase(), Phase::Approach);
@@ -268,9 +271,62 @@ fn the_engage_button_toggles_and_no_surface_is_a_fault() {
     rig.tick();
     assert_eq!(rig.law.phase(), Phase::Off);
 
+    // Nothing within 1 µm below a tip 3 µm up: a fault, and the tip back where it started.
     let mut rig = Rig::new();
+    let start = rig.stage[2];
     rig.law.params.search_depth = 1.0 * UM;
     rig.law.engage(rig.stage);
-    rig.until(2_000, |r| r.law.phase() == Phase::Off);
+    rig.until(3_000, |r| r.law.phase() == Phase::Off);
     assert_eq!(rig.law.fault(), Some(Fault::NoSurface));
+    assert!(
+        (rig.stage[2] - start).abs() < 1e-12,
+        "left {} nm below the start",
+        (start - rig.stage[2]) * 1e9
+    );
+}
+
+/// A push that starts while the hand is engaged ramps the force in (never the full force in one
+/// tick) and gives the tip back to the hand after it; one that starts after a release does not.
+#[test]
+fn a_push_ramps_the_force_in_and_returns_the_tip_only_to_an_engaged_hand() {
+    let mut rig = Rig::new();
+    rig.engaged();
+    rig.pushing = true;
+    let gains: Vec<f64> = (0..1100).map(|_| rig.tick().feedback.gain).collect();
+    assert!(gains[0] < 0.01 && gains.windows(2).all(|w| w[1] >= w[0]) && gains[1099] == 1.0);
+    rig.pushing = false;
+    rig.tick();
+    assert_eq!(rig.law.phase(), Phase::Approach);
+
+    let mut rig = Rig::new();
+    rig.engaged();
+    rig.law.release();
+    rig.pushing = true;
+    rig.tick();
+    rig.pushing = false;
+    rig.tick();
+    assert!(
+        matches!(rig.law.phase(), Phase::Off | Phase::Retract),
+        "{:?}",
+        rig.law.phase()
+    );
+}
+
+/// New scales never reach the hand in one step: the force ramps in again from zero, and the
+/// tip does not jump (re-anchored at the handle).
+#[test]
+fn a_new_scale_ramps_in_again() {
+    let mut rig = Rig::new();
+    rig.engaged();
+    let z = rig.stage[2];
+    let x = rig.handle.position;
+    rig.law
+        .rescale(Some(2e-5), Some(rig.law.params.force_gain * 5.0), Some(x));
+    let f = rig.tick().feedback;
+    assert!(matches!(rig.law.phase(), Phase::Ramp { .. }));
+    assert!(f.gain < 0.01);
+    assert!((rig.stage[2] - z).abs() < 1e-15);
+    // 1 mm of hand is now 20 nm of tip.
+    rig.handle.position -= 1e-3;
+    rig.until(100, |r| (r.stage[2] - (z - 20e-9)).abs() < 1e-15);
 }
