@@ -17,18 +17,18 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use futures_util::{SinkExt, StreamExt};
 use nanopush_proto::ws::{
-    ClientMessage, ErrorCode, HapticAction, Role, ScanLineHeader, ServerMessage, Stream as WsStream, Telemetry,
-    WS_VERSION,
+    ClientMessage, ErrorCode, Role, ScanLineHeader, ServerMessage, Stream as WsStream, Telemetry, WS_VERSION,
 };
 use tokio::sync::{broadcast, mpsc, watch};
 
 use crate::control::{MoveTarget, Prepared, StrategyParams, plan_move};
 use crate::scan::{ScanParams, Scanner, Sphere, Surface, Tip, find_particles, write_gsf};
 use crate::scene::Scene;
-use crate::serve::control_loop::{HapticCommand, LoopCommand, LoopEvent, PushJob, Shared};
+use crate::serve::control_loop::{LoopCommand, LoopEvent, PushJob, Shared};
+use crate::serve::haptic_api::{haptic_command, haptic_status, haptic_telemetry};
 use crate::serve::metrics::{NetMetrics, render};
 use crate::serve::records::{self, write_atomic};
-use crate::serve::validate::{Refusal, number, push_target};
+use crate::serve::validate::{Refusal, number, parse_command, push_target};
 
 /// Server settings.
 #[derive(Debug, Clone)]
@@ -237,50 +237,6 @@ async fn status(State(st): State<Arc<AppState>>) -> Response {
         "haptic": haptic_status(&m.haptic),
     });
     axum::Json(body).into_response()
-}
-
-/// The haptic handle for telemetry; `None` without a haptic link.
-fn haptic_telemetry(h: &crate::serve::haptic::HapticMetrics) -> Option<nanopush_proto::ws::HapticTelemetry> {
-    if !h.enabled.load(Relaxed) {
-        return None;
-    }
-    let sampled = h.samples.load(Relaxed) > 0;
-    Some(nanopush_proto::ws::HapticTelemetry {
-        link: h.link_name().into(),
-        phase: h.phase_name().into(),
-        handle_m: sampled.then(|| h.handle_m()),
-        force_n: sampled.then(|| h.force_n()),
-        tip_force_n: h.tip_force_n(),
-        pc_active: h.pc_active(),
-    })
-}
-
-/// The haptic link for `/api/status`: link `up`/`down`/`off`, the device, the z-control phase,
-/// the handle and the force at the hand, the bridge's restarts and dropped samples, and the
-/// passivity controller's activity.
-fn haptic_status(h: &crate::serve::haptic::HapticMetrics) -> serde_json::Value {
-    let link = h.link_name();
-    let sampled = h.samples.load(Relaxed) > 0;
-    let num = |v: f64| (sampled && v.is_finite()).then_some(v);
-    serde_json::json!({
-        "link": link,
-        "device": sampled.then(|| nanopush_proto::haptic::device_name(h.device.load(Relaxed) as u32)),
-        "pid": sampled.then(|| h.pid.load(Relaxed)),
-        "engaged": h.phase_name() != "off",
-        "phase": h.phase_name(),
-        "handle_m": num(h.handle_m()),
-        "force_n": num(h.force_n()),
-        "restarts": h.restarts.load(Relaxed),
-        "dropped_samples": h.dropped_samples.load(Relaxed),
-        "rejected_samples": h.rejected_samples.load(Relaxed),
-        "link_downs": h.link_downs.load(Relaxed),
-        "tip_z_m": h.tip_z_m().is_finite().then(|| h.tip_z_m()),
-        "fault": (h.fault_name() != "none").then(|| h.fault_name()),
-        "pc_active": h.pc_active(),
-        "pc_damping": num(h.pc_damping()),
-        "port_energy_j": num(h.port_energy()),
-        "latency_p99_bound_s": (h.latency.count() > 0).then(|| h.latency.quantile_bound(0.99)),
-    })
 }
 
 async fn scene_json(State(st): State<Arc<AppState>>) -> Response {
@@ -555,16 +511,10 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
             );
             continue;
         }
-        let parsed: ClientMessage = match serde_json::from_str(text.as_str()) {
+        let parsed = match parse_command(text.as_str()) {
             Ok(m) => m,
-            Err(e) => {
-                reply(
-                    &st,
-                    &reply_tx,
-                    None,
-                    ErrorCode::Malformed,
-                    format!("not a valid command: {e}"),
-                );
+            Err((id, why)) => {
+                reply(&st, &reply_tx, id, ErrorCode::Malformed, why);
                 continue;
             }
         };
@@ -661,73 +611,6 @@ fn busy(st: &AppState) -> Result<(), Refusal> {
     }
     if st.scanning.load(Relaxed) {
         return Err(Refusal::new(ErrorCode::Busy, "a scan is running; send stop first"));
-    }
-    Ok(())
-}
-
-/// A `haptic` command: checked here, carried out by the control loop.
-fn haptic_command(
-    st: &AppState,
-    action: HapticAction,
-    nm_per_mm: Option<f64>,
-    pull_off_at_hand_n: Option<f64>,
-) -> Result<(), Refusal> {
-    let h = &st.shared.metrics.haptic;
-    let cmd = match action {
-        HapticAction::Engage | HapticAction::Recenter => {
-            if !h.enabled.load(Relaxed) {
-                return Err(Refusal::new(
-                    ErrorCode::Unavailable,
-                    "this server runs without a haptic link (start it with --haptic sim or --haptic external)",
-                ));
-            }
-            if h.link_name() != "up" {
-                return Err(Refusal::new(
-                    ErrorCode::Unavailable,
-                    "the haptic link is down: no handle samples from nanopush-haptic",
-                ));
-            }
-            if action == HapticAction::Engage {
-                if st.shared.busy.load(Relaxed) {
-                    return Err(Refusal::new(
-                        ErrorCode::Busy,
-                        "a push is running (it owns z); engage haptic z-control after it",
-                    ));
-                }
-                HapticCommand::Engage
-            } else {
-                HapticCommand::Recenter
-            }
-        }
-        HapticAction::Release => HapticCommand::Release,
-        HapticAction::Scale => {
-            if nm_per_mm.is_none() && pull_off_at_hand_n.is_none() {
-                return Err(Refusal::new(
-                    ErrorCode::Invalid,
-                    "scale needs nm_per_mm and/or pull_off_at_hand_n",
-                ));
-            }
-            let position_gain = nm_per_mm
-                .map(|v| number("nm_per_mm", v, 0.01, 1000.0, false, "nm/mm"))
-                .transpose()?
-                .map(|v| v * 1e-9 / 1e-3);
-            let adhesion = st.scene.tip_sample().adhesion().max(1e-12);
-            let force_gain = pull_off_at_hand_n
-                .map(|v| number("pull_off_at_hand_n", v, 0.01, 10.0, false, "N"))
-                .transpose()?
-                .map(|v| v / adhesion);
-            HapticCommand::Scale {
-                position_gain,
-                force_gain,
-            }
-        }
-    };
-    if st.shared.commands.push(LoopCommand::Haptic(cmd)).is_err() {
-        st.shared.metrics.dropped_commands.fetch_add(1, Relaxed);
-        return Err(Refusal::new(
-            ErrorCode::Busy,
-            "the control loop's command queue is full; try again",
-        ));
     }
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! Checks of client commands: finite numbers, ranges, known particles. Each refusal is a typed
 //! error naming the field, the value and the allowed range.
 
+use nanopush_proto::ws::ClientMessage;
 use nanopush_proto::ws::ErrorCode;
 
 use crate::control::MoveTarget;
@@ -41,6 +42,25 @@ pub fn number(field: &str, value: f64, lo: f64, hi: f64, lo_open: bool, unit: &s
         ));
     }
     Ok(value)
+}
+
+/// One command from one text message: exactly one JSON value, an object (an array, a number or
+/// several values in one message are refused, though serde would read a tagged enum from an
+/// array). The error carries the object's `id` when it has a readable one.
+pub fn parse_command(text: &str) -> Result<ClientMessage, (Option<u32>, String)> {
+    let value: serde_json::Value =
+        serde_json::from_str(text).map_err(|e| (None, format!("not one JSON value: {e}")))?;
+    let serde_json::Value::Object(map) = &value else {
+        return Err((
+            None,
+            "a command is one JSON object with a \"type\"; got something else".into(),
+        ));
+    };
+    let id = map
+        .get("id")
+        .and_then(serde_json::Value::as_u64)
+        .and_then(|v| u32::try_from(v).ok());
+    serde_json::from_value(value).map_err(|e| (id, format!("not a valid command: {e}")))
 }
 
 /// Checks a push's numbers; `range_um` is the stage range.
@@ -89,6 +109,30 @@ pub fn push_target(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 12.4: commands are JSON objects, one per message: an array (which serde would read
+    /// as the tagged enum) and several values are refused; a bad object's id is echoed.
+    #[test]
+    fn a_command_is_one_json_object() {
+        assert!(matches!(
+            parse_command(r#"{"type":"ping","id":4}"#),
+            Ok(ClientMessage::Ping { id: Some(4) })
+        ));
+        for bad in [
+            r#"["push",13,1,0.2,0]"#,
+            r#"{"type":"ping"} {"type":"ping"}"#,
+            "7",
+            r#""ping""#,
+            "",
+        ] {
+            let (id, why) = parse_command(bad).unwrap_err();
+            assert_eq!(id, None, "{bad}");
+            assert!(!why.is_empty());
+        }
+        let (id, why) = parse_command(r#"{"type":"push","id":9,"particle":"x"}"#).unwrap_err();
+        assert_eq!(id, Some(9));
+        assert!(why.contains("not a valid command"), "{why}");
+    }
 
     #[test]
     fn numbers_are_checked_for_finiteness_and_range() {
