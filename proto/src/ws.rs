@@ -278,8 +278,11 @@ pub enum ServerMessage {
         failure: Option<String>,
         /// Estimated final centre (m); null when the push never started (no plan, not found).
         estimate: Option<[f64; 2]>,
-        /// Name of its record under `/api/records`.
+        /// Name of its record under `/api/records`; null when none was written.
         record: Option<String>,
+        /// Why no record was written (disk full, read-only, gone), when one was not.
+        #[serde(default)]
+        record_error: Option<String>,
     },
     /// A scan starts (stream `scan`); binary line frames follow.
     ScanStart {
@@ -302,8 +305,11 @@ pub enum ServerMessage {
     ScanDone {
         /// Scan id.
         scan: u32,
-        /// Name of its record.
+        /// Name of its record; null when none was written.
         record: Option<String>,
+        /// Why no record was written, when one was not (a cancelled scan has neither).
+        #[serde(default)]
+        record_error: Option<String>,
     },
     /// The server is shutting down; the connection closes next.
     Shutdown {

@@ -55,11 +55,18 @@ fn fast_scene(dir: &Path) -> PathBuf {
 }
 
 fn start(tag: &str, extra: &[&str]) -> Server {
+    start_with(tag, |_| {}, extra)
+}
+
+/// [`start`], with `prepare` run on the records directory (created) before the server starts.
+fn start_with(tag: &str, prepare: impl FnOnce(&Path), extra: &[&str]) -> Server {
     let dir = std::env::temp_dir().join(format!("nanopush-e2e-serve-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let scene = fast_scene(&dir);
     let records = dir.join("records");
+    std::fs::create_dir_all(&records).unwrap();
+    prepare(&records);
     let mut child = Command::new(bin("nanopush"))
         .current_dir(workspace())
         .args([
@@ -641,5 +648,62 @@ fn commands_do_not_delay_telemetry() {
             p99 * 1e3,
             period * 1e3
         );
+    });
+}
+
+/// Issue 12.8: no symlink is served or listed out of the data directory; tokens in a query are
+/// decoded; `.partial` files an earlier run left are removed at start; and a record that cannot
+/// be written is reported with the reason, not as a silent `null`.
+#[test]
+fn records_are_served_safely_and_write_failures_say_why() {
+    let srv = start_with(
+        "files",
+        |records| {
+            std::fs::write(records.join("push-1-r1-p1.csv.partial"), b"half a trace").unwrap();
+            std::os::unix::fs::symlink("/etc/hostname", records.join("push-9-r9-p9.csv")).unwrap();
+        },
+        &["--viewer-token", "tok+en/1"],
+    );
+    let records = srv.dir.join("records");
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while records.join("push-1-r1-p1.csv.partial").exists() {
+        assert!(Instant::now() < deadline, "the .partial file was not cleaned at start");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // The token, percent-encoded as a browser sends it.
+    assert_eq!(http_get(&srv.addr, "/api/status?token=tok%2Ben%2F1").0, 200);
+    assert_eq!(
+        http_get(&srv.addr, "/api/status?token=tok+en/1").0,
+        401,
+        "'+' is a space"
+    );
+    let (code, body) = http_get(&srv.addr, "/api/records?token=tok%2Ben%2F1");
+    assert_eq!(code, 200);
+    assert!(
+        !String::from_utf8_lossy(&body).contains("push-9"),
+        "a symlink is listed"
+    );
+    assert_eq!(
+        http_get(&srv.addr, "/api/records/push-9-r9-p9.csv?token=tok%2Ben%2F1").0,
+        404
+    );
+    // The data directory goes away under the server: the scan's record cannot be written.
+    std::fs::remove_dir_all(&records).unwrap();
+    std::fs::write(&records, b"not a directory").unwrap();
+    runtime().block_on(async {
+        let mut op = connect(&srv.addr, Some(TOKEN)).await;
+        until(&mut op, 5.0, |m| is(m, "welcome")).await;
+        send(&mut op, json!({"type": "subscribe", "id": 1, "streams": ["scan"]})).await;
+        reply(&mut op, 1).await;
+        send(&mut op, json!({"type": "take_lease", "id": 2})).await;
+        reply(&mut op, 2).await;
+        send(&mut op, json!({"type": "scan", "id": 3, "pixels": 8, "size_um": 4.0})).await;
+        assert_eq!(reply(&mut op, 3).await["type"], "ok");
+        let done = until(&mut op, 30.0, |m| is(m, "scan_done")).await;
+        assert!(done["record"].is_null(), "{done}");
+        let why = done["record_error"]
+            .as_str()
+            .unwrap_or_else(|| panic!("no reason: {done}"));
+        assert!(why.contains("records") && why.contains("os error"), "{why}");
     });
 }

@@ -197,11 +197,13 @@ async fn guard(State(st): State<Arc<AppState>>, req: axum::extract::Request, nex
     if let Some(viewer) = st.cfg.viewer_token.as_deref()
         && req.uri().path().starts_with("/api/")
     {
+        // Decoded once, as a browser or curl encodes it (`%2B`, `+`).
         let token = req
             .uri()
             .query()
             .and_then(|q| q.split('&').find_map(|kv| kv.strip_prefix("token=")))
-            .unwrap_or("");
+            .and_then(crate::serve::validate::percent_decode)
+            .unwrap_or_default();
         if token != viewer && token != st.cfg.operator_token {
             return (StatusCode::UNAUTHORIZED, "this API needs ?token= (viewer or operator)").into_response();
         }
@@ -258,7 +260,15 @@ async fn record_get(State(st): State<Arc<AppState>>, UrlPath(name): UrlPath<Stri
         )
             .into_response();
     }
-    match tokio::fs::read(st.cfg.data_dir.join(&name)).await {
+    // A plain file in the data directory, never a symlink (to anywhere).
+    let path = st.cfg.data_dir.join(&name);
+    if !tokio::fs::symlink_metadata(&path)
+        .await
+        .is_ok_and(|m| m.file_type().is_file())
+    {
+        return (StatusCode::NOT_FOUND, format!("no record named {name}")).into_response();
+    }
+    match tokio::fs::read(&path).await {
         Ok(bytes) => {
             let ctype = match name.rsplit('.').next() {
                 Some("json") => "application/json",
@@ -818,6 +828,7 @@ fn run_done_failed(st: &AppState, particle: u32, outcome: &str, failure: String)
         failure: Some(failure),
         estimate: None,
         record: None,
+        record_error: None,
     });
 }
 
@@ -849,6 +860,7 @@ fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, generation: u6
             failure: None,
             estimate: Some([located.x, located.y]),
             record: None,
+            record_error: None,
         });
         return;
     }
@@ -921,11 +933,19 @@ fn run_scan(st: &AppState, params: ScanParams) {
             std::thread::sleep(next - now);
         }
     }
-    let mut record = None;
+    let (mut record, mut record_error) = (None, None);
     if !cancelled {
         let stem = format!("scan-{}-{scan_id}", records::unix_now());
         let mut gsf = Vec::new();
-        if write_gsf(&mut gsf, &img, &stem).is_ok() && std::fs::create_dir_all(&st.cfg.data_dir).is_ok() {
+        let prepared = write_gsf(&mut gsf, &img, &stem)
+            .map_err(|e| e.to_string())
+            .and_then(|()| std::fs::create_dir_all(&st.cfg.data_dir).map_err(|e| e.to_string()))
+            .map_err(|e| format!("preparing the record in {}: {e}", st.cfg.data_dir.display()));
+        if let Err(e) = &prepared {
+            tracing::error!("records: scan {scan_id}: {e}");
+            record_error = Some(e.clone());
+        }
+        if prepared.is_ok() {
             let gsf_name = format!("{stem}.gsf");
             let summary = serde_json::json!({
                 "schema": "scan-record",
@@ -942,17 +962,32 @@ fn run_scan(st: &AppState, params: ScanParams) {
                 .and_then(|()| write_atomic(&st.cfg.data_dir.join(&json_name), summary.to_string().as_bytes()));
             match ok {
                 Ok(()) => record = Some(gsf_name),
-                Err(e) => tracing::error!("records: scan {scan_id}: {e}"),
+                Err(e) => {
+                    tracing::error!("records: scan {scan_id}: {e}");
+                    record_error = Some(format!("writing {stem} in {}: {e}", st.cfg.data_dir.display()));
+                }
             }
         }
     }
-    send_text(&ServerMessage::ScanDone { scan: scan_id, record });
+    send_text(&ServerMessage::ScanDone {
+        scan: scan_id,
+        record,
+        record_error,
+    });
     st.scanning.store(false, Relaxed);
+}
+
+/// A record's name, or the reason it is missing, as the two fields of a message.
+fn split(r: records::Recorded) -> (Option<String>, Option<String>) {
+    match r {
+        Ok(name) => (Some(name), None),
+        Err(why) => (None, Some(why)),
+    }
 }
 
 /// Telemetry at `telemetry_hz`, produced only while someone subscribes to `tip`; and loop
 /// events forwarded to everyone.
-pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiver<(LoopEvent, Option<String>)>) {
+pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiver<(LoopEvent, records::Recorded)>) {
     let mut tick = tokio::time::interval(Duration::from_secs_f64(1.0 / st.cfg.telemetry_hz));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut shutdown = st.shutdown.subscribe();
@@ -971,12 +1006,14 @@ pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiv
             e = events.recv() => {
                 let Some((LoopEvent::RunDone { particle, outcome, failure, estimate, .. }, record)) = e else { break };
                 st.remember(particle, estimate);
-                st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record });
+                let (record, record_error) = split(record);
+                st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record, record_error });
             }
             _ = shutdown.changed() => {
                 // Forward what the recorder still finishes (the aborted run's record).
                 while let Some((LoopEvent::RunDone { particle, outcome, failure, estimate, .. }, record)) = events.recv().await {
-                    st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record });
+                    let (record, record_error) = split(record);
+                    st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record, record_error });
                 }
                 break;
             }

@@ -56,10 +56,11 @@ pub fn list(dir: &Path) -> std::io::Result<Vec<RecordEntry>> {
         if !valid_name(&name) {
             continue;
         }
-        let Ok(meta) = e.metadata() else { continue };
-        if !meta.is_file() {
+        // A plain file only: a symlink (to anywhere) is never listed or served.
+        if !e.file_type().is_ok_and(|t| t.is_file()) {
             continue;
         }
+        let Ok(meta) = e.metadata() else { continue };
         let kind = name.split('-').next().unwrap_or("").to_string();
         let modified = meta
             .modified()
@@ -110,18 +111,35 @@ struct Open {
     rows: u64,
 }
 
+/// A record's name, or why it could not be written.
+pub type Recorded = Result<String, String>;
+
+/// Removes the `.partial` files a crash (or a kill) left in `dir`; how many.
+pub fn clean_partials(dir: &Path) -> usize {
+    let Ok(rd) = std::fs::read_dir(dir) else { return 0 };
+    rd.flatten()
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".partial"))
+        .filter(|e| std::fs::remove_file(e.path()).is_ok())
+        .count()
+}
+
 /// Drains the loop's trace rows and events, writes the records, and forwards each event with
-/// its record's name. Ends when the loop has finished and everything is written.
-pub fn run_recorder(
-    shared: Arc<Shared>,
-    dir: PathBuf,
-    out: tokio::sync::mpsc::UnboundedSender<(LoopEvent, Option<String>)>,
-) {
+/// its record's name — or the reason it could not be written. Ends when the loop has finished
+/// and everything is written.
+pub fn run_recorder(shared: Arc<Shared>, dir: PathBuf, out: tokio::sync::mpsc::UnboundedSender<(LoopEvent, Recorded)>) {
     if let Err(e) = std::fs::create_dir_all(&dir) {
         tracing::error!("records: cannot create {}: {e}", dir.display());
     }
+    let cleaned = clean_partials(&dir);
+    if cleaned > 0 {
+        tracing::warn!(
+            "records: removed {cleaned} unfinished .partial file(s) left in {} by an earlier run",
+            dir.display()
+        );
+    }
     let mut open: Option<Open> = None;
     let mut done: Vec<(u64, String, u64)> = Vec::new();
+    let mut failed: Vec<(u64, String)> = Vec::new();
     loop {
         let finished = shared.finished.load(std::sync::atomic::Ordering::Acquire);
         let mut events = Vec::new();
@@ -129,7 +147,7 @@ pub fn run_recorder(
             events.push(e);
         }
         while let Some(msg) = shared.records.pop() {
-            handle(&dir, msg, &mut open, &mut done);
+            handle(&dir, msg, &mut open, &mut done, &mut failed);
         }
         for e in events {
             let LoopEvent::RunDone {
@@ -141,8 +159,10 @@ pub fn run_recorder(
                 truth,
                 legs,
             } = e;
-            let mut record = None;
-            if let Some(pos) = done.iter().position(|d| d.0 == run) {
+            let mut record: Recorded = Err("no trace was recorded for this run".into());
+            if let Some(pos) = failed.iter().position(|f| f.0 == run) {
+                record = Err(failed.remove(pos).1);
+            } else if let Some(pos) = done.iter().position(|d| d.0 == run) {
                 let (_, trace, rows) = done.remove(pos);
                 let stem = trace.trim_end_matches(".csv").to_string();
                 let summary = PushSummary {
@@ -160,10 +180,16 @@ pub fn run_recorder(
                 let json = format!("{stem}.json");
                 match serde_json::to_vec_pretty(&summary).map_err(std::io::Error::other) {
                     Ok(bytes) => match write_atomic(&dir.join(&json), &bytes) {
-                        Ok(()) => record = Some(json),
-                        Err(e) => tracing::error!("records: writing {json}: {e}"),
+                        Ok(()) => record = Ok(json),
+                        Err(e) => {
+                            tracing::error!("records: writing {json}: {e}");
+                            record = Err(format!("writing {json} in {}: {e}", dir.display()));
+                        }
                     },
-                    Err(e) => tracing::error!("records: {e}"),
+                    Err(e) => {
+                        tracing::error!("records: {e}");
+                        record = Err(e.to_string());
+                    }
                 }
             }
             let _ = out.send((e, record));
@@ -175,15 +201,21 @@ pub fn run_recorder(
     }
     if let Some(o) = open.take() {
         // The loop ended inside a run (it always sends End first; this is a safety net).
-        finish(&dir, o, &mut done);
+        finish(&dir, o, &mut done, &mut failed);
     }
 }
 
-fn handle(dir: &Path, msg: RecordMsg, open: &mut Option<Open>, done: &mut Vec<(u64, String, u64)>) {
+fn handle(
+    dir: &Path,
+    msg: RecordMsg,
+    open: &mut Option<Open>,
+    done: &mut Vec<(u64, String, u64)>,
+    failed: &mut Vec<(u64, String)>,
+) {
     match msg {
         RecordMsg::Begin { run, particle } => {
             if let Some(o) = open.take() {
-                finish(dir, o, done);
+                finish(dir, o, done, failed);
             }
             let name = format!("push-{}-r{run}-p{particle}.csv", unix_now());
             match std::fs::File::create(partial(&dir.join(&name))) {
@@ -198,7 +230,10 @@ fn handle(dir: &Path, msg: RecordMsg, open: &mut Option<Open>, done: &mut Vec<(u
                         rows: 0,
                     });
                 }
-                Err(e) => tracing::error!("records: creating {name}: {e}"),
+                Err(e) => {
+                    tracing::error!("records: creating {name}: {e}");
+                    failed.push((run, format!("creating {name} in {}: {e}", dir.display())));
+                }
             }
         }
         RecordMsg::Row {
@@ -221,7 +256,7 @@ fn handle(dir: &Path, msg: RecordMsg, open: &mut Option<Open>, done: &mut Vec<(u
         RecordMsg::End { run } => {
             if let Some(o) = open.take() {
                 if o.run == run {
-                    finish(dir, o, done);
+                    finish(dir, o, done, failed);
                 } else {
                     *open = Some(o);
                 }
@@ -230,12 +265,16 @@ fn handle(dir: &Path, msg: RecordMsg, open: &mut Option<Open>, done: &mut Vec<(u
     }
 }
 
-fn finish(dir: &Path, mut o: Open, done: &mut Vec<(u64, String, u64)>) {
+fn finish(dir: &Path, mut o: Open, done: &mut Vec<(u64, String, u64)>, failed: &mut Vec<(u64, String)>) {
     let path = dir.join(&o.name);
     let ok = o.file.flush().and_then(|()| o.file.get_ref().sync_all());
     match ok.and_then(|()| std::fs::rename(partial(&path), &path)) {
         Ok(()) => done.push((o.run, o.name, o.rows)),
-        Err(e) => tracing::error!("records: finishing {} (particle {}): {e}", o.name, o.particle),
+        Err(e) => {
+            tracing::error!("records: finishing {} (particle {}): {e}", o.name, o.particle);
+            let _ = std::fs::remove_file(partial(&path));
+            failed.push((o.run, format!("finishing {} in {}: {e}", o.name, dir.display())));
+        }
     }
 }
 
