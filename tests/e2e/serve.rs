@@ -337,12 +337,37 @@ fn bad_messages_get_typed_errors_and_the_server_lives_on() {
                 "out_of_range",
                 "within the stage",
             ),
+            // Issue 12.7: a side of 5e-324 µm passed and wrote a GSF with XReal = 0; a target on
+            // the stage's edge ran ~200 s into a time-out.
+            (
+                10,
+                json!({"type": "scan", "id": 10, "size_um": 5e-324}),
+                "out_of_range",
+                "size_um",
+            ),
+            (
+                11,
+                json!({"type": "push", "id": 11, "particle": 1, "to_x_um": 100.0, "to_y_um": 50.0}),
+                "out_of_range",
+                "allowed: [0.500, 99.500] µm",
+            ),
         ] {
             send(&mut op, cmd).await;
             let r = reply(&mut op, id).await;
             assert_eq!(r["code"], code, "{r}");
             assert!(r["message"].as_str().unwrap().contains(words), "{r}");
         }
+        // Issue 12.7: the whole stage in one scan, about its centre, is allowed (it was refused
+        // by a unit round trip's rounding).
+        send(
+            &mut op,
+            json!({"type": "scan", "id": 12, "centre_x_um": 50.0, "centre_y_um": 50.0, "size_um": 100.0, "pixels": 8}),
+        )
+        .await;
+        assert_eq!(reply(&mut op, 12).await["type"], "ok");
+        send(&mut op, json!({"type": "stop", "id": 13})).await;
+        assert_eq!(reply(&mut op, 13).await["type"], "ok");
+        tokio::time::sleep(Duration::from_millis(1100)).await;
         // Rate limit: 50 messages per second; a burst of 80 pings sees some refused.
         for _ in 0..80 {
             send(&mut op, json!({"type": "ping"})).await;
@@ -705,5 +730,41 @@ fn records_are_served_safely_and_write_failures_say_why() {
             .as_str()
             .unwrap_or_else(|| panic!("no reason: {done}"));
         assert!(why.contains("records") && why.contains("os error"), "{why}");
+    });
+}
+
+/// Issues 12.5 and 12.6: messages of 65 KiB, 200 KiB and 5 MB each get `too_large` and the
+/// connection stays (a ping sent before gets its `ok`, one sent after too); and a client that
+/// sends 300 commands before reading any reply loses none of them (its queue holds 64: it is
+/// slowed down, not answered with silence).
+#[test]
+fn big_messages_are_refused_and_no_reply_is_lost() {
+    let srv = start("big", &["--max-rate", "10000"]);
+    runtime().block_on(async {
+        let mut ws = connect(&srv.addr, None).await;
+        until(&mut ws, 5.0, |m| is(m, "welcome")).await;
+        send(&mut ws, json!({"type": "ping", "id": 1})).await;
+        for kib in [65usize, 200, 5 * 1024] {
+            let text = format!(r#"{{"type":"ping","id":9,"pad":"{}"}}"#, "x".repeat(kib * 1024));
+            ws.send(Message::Text(text.into())).await.unwrap();
+        }
+        send(&mut ws, json!({"type": "ping", "id": 2})).await;
+        assert_eq!(reply(&mut ws, 1).await["type"], "ok");
+        for _ in 0..3 {
+            let e = until(&mut ws, 10.0, |m| is(m, "error")).await;
+            assert_eq!(e["code"], "too_large", "{e}");
+        }
+        assert_eq!(reply(&mut ws, 2).await["type"], "ok");
+        // 300 pings, not a reply read in between.
+        for id in 100..400 {
+            send(&mut ws, json!({"type": "ping", "id": id})).await;
+        }
+        let mut seen = std::collections::HashSet::new();
+        while seen.len() < 300 {
+            let m = until(&mut ws, 10.0, |m| is(m, "ok") || is(m, "error")).await;
+            assert_eq!(m["type"], "ok", "{m}");
+            seen.insert(m["id"].as_u64().unwrap());
+        }
+        assert!((100..400).all(|id| seen.contains(&id)));
     });
 }

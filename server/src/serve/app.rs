@@ -348,9 +348,9 @@ async fn ws_upgrade(
         return (StatusCode::SERVICE_UNAVAILABLE, "too many clients (--max-clients)").into_response();
     }
     let failed = st.clone();
-    // A hard cap well above the protocol's limit: larger messages are refused with a typed error
-    // by the session; only absurd ones (over 16× the limit) close the connection.
-    let cap = (st.cfg.max_message_bytes * 16).max(64 * 1024);
+    // A hard cap far above the protocol's limit: larger messages are refused with a typed error
+    // by the session (the connection stays); only absurd ones, over 8 MiB, close it (1009).
+    let cap = HARD_CAP.max(st.cfg.max_message_bytes);
     ws.max_message_size(cap)
         .max_frame_size(cap)
         .on_failed_upgrade(move |_| {
@@ -479,7 +479,7 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
             (client.tokens + now.duration_since(client.last).as_secs_f64() * st.cfg.max_rate).min(st.cfg.max_rate);
         client.last = now;
         if client.tokens < 1.0 {
-            reply(
+            if !reply(
                 &st,
                 &reply_tx,
                 None,
@@ -488,27 +488,35 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
                     "more than {} messages per second; this one was dropped",
                     st.cfg.max_rate
                 ),
-            );
+            )
+            .await
+            {
+                break;
+            }
             continue;
         }
         client.tokens -= 1.0;
         let text = match msg {
             Message::Text(t) => t,
             Message::Binary(b) => {
-                reply(
+                if !reply(
                     &st,
                     &reply_tx,
                     None,
                     ErrorCode::Malformed,
                     format!("binary frames ({} bytes) are not commands; send JSON text", b.len()),
-                );
+                )
+                .await
+                {
+                    break;
+                }
                 continue;
             }
             Message::Close(_) => break,
             _ => continue,
         };
         if text.len() > st.cfg.max_message_bytes {
-            reply(
+            if !reply(
                 &st,
                 &reply_tx,
                 None,
@@ -518,20 +526,28 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
                     text.len(),
                     st.cfg.max_message_bytes
                 ),
-            );
+            )
+            .await
+            {
+                break;
+            }
             continue;
         }
         let parsed = match parse_command(text.as_str()) {
             Ok(m) => m,
             Err((id, why)) => {
-                reply(&st, &reply_tx, id, ErrorCode::Malformed, why);
+                if !reply(&st, &reply_tx, id, ErrorCode::Malformed, why).await {
+                    break;
+                }
                 continue;
             }
         };
         let cid = parsed.id();
         match handle(&st, &mut client, parsed) {
             Ok(()) => {
-                let _ = reply_tx.try_send(to_text(&ServerMessage::Ok { id: cid }));
+                if !deliver(&reply_tx, to_text(&ServerMessage::Ok { id: cid })).await {
+                    break;
+                }
                 // Only a changed subscription wakes the sender (it resubscribes, dropping queued
                 // frames of the streams it did not want).
                 streams_tx.send_if_modified(|cur| {
@@ -542,7 +558,11 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
                     changed
                 });
             }
-            Err(r) => reply(&st, &reply_tx, cid, r.code, r.message),
+            Err(r) => {
+                if !reply(&st, &reply_tx, cid, r.code, r.message).await {
+                    break;
+                }
+            }
         }
     }
     // Disconnected: the lease goes with it.
@@ -584,9 +604,27 @@ fn to_text(m: &ServerMessage) -> Utf8Bytes {
     serde_json::to_string(m).unwrap_or_else(|_| "{}".into()).into()
 }
 
-fn reply(st: &AppState, tx: &mpsc::Sender<Utf8Bytes>, id: Option<u32>, code: ErrorCode, message: String) {
+/// The smallest scan side (µm): 10 nm.
+pub const MIN_SCAN_UM: f64 = 0.01;
+
+/// The largest WebSocket message a session reads (bytes): anything above `--max-message-bytes`
+/// and up to this gets `too_large` and the connection stays; above it the connection is closed.
+pub const HARD_CAP: usize = 8 << 20;
+
+/// How long a reply may wait for room in a client's reply queue before the client, which has
+/// read none of its replies for that long, is disconnected.
+pub const REPLY_PATIENCE: Duration = Duration::from_secs(30);
+
+/// Queues a reply, waiting for room: a client that sends faster than it reads its replies is
+/// slowed down (its messages wait in its own socket), never answered with silence. `false` when
+/// the client has read nothing for [`REPLY_PATIENCE`] (or is gone): the session ends.
+async fn deliver(tx: &mpsc::Sender<Utf8Bytes>, text: Utf8Bytes) -> bool {
+    tx.send_timeout(text, REPLY_PATIENCE).await.is_ok()
+}
+
+async fn reply(st: &AppState, tx: &mpsc::Sender<Utf8Bytes>, id: Option<u32>, code: ErrorCode, message: String) -> bool {
     st.net.refused.fetch_add(1, Relaxed);
-    let _ = tx.try_send(to_text(&ServerMessage::Error { id, code, message }));
+    deliver(tx, to_text(&ServerMessage::Error { id, code, message })).await
 }
 
 fn counter(st: &AppState, s: WsStream) -> &AtomicU64 {
@@ -706,12 +744,15 @@ fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<(), 
             let f = &st.scene.file;
             let range = f.stage.range_um;
             let target = push_target(distance_um, direction_deg, to_x_um, to_y_um, range)?;
-            if !f.particles.iter().any(|p| p.id == particle) {
+            let Some(part) = f.particles.iter().find(|p| p.id == particle) else {
                 let ids: Vec<String> = f.particles.iter().map(|p| p.id.to_string()).collect();
                 return Err(Refusal::new(
                     ErrorCode::UnknownParticle,
                     format!("particle = {particle}: no such particle; ids: {}", ids.join(", ")),
                 ));
+            };
+            if let MoveTarget::Point(p) = target {
+                on_stage(p, part.radius_nm * 1e-9, range * 1e-6)?;
             }
             busy(st)?;
             st.shared.busy.store(true, Relaxed);
@@ -743,23 +784,33 @@ fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<(), 
             let f = &st.scene.file;
             let range = f.stage.range_um;
             let base = ScanParams::from_scene(&st.scene);
-            let size = number("size_um", size_um.unwrap_or(base.size * 1e6), 0.0, range, true, "µm")? * 1e-6;
-            let cx = number(
+            // Checked in the protocol's units (µm), converted once: a full-range square about the
+            // default centre was refused by the rounding of a µm → m → µm round trip. The side
+            // is at least 10 nm (below that a pixel is a fraction of an atom).
+            let size_um = number(
+                "size_um",
+                size_um.unwrap_or(base.size * 1e6),
+                MIN_SCAN_UM,
+                range,
+                false,
+                "µm",
+            )?;
+            let cx_um = number(
                 "centre_x_um",
                 centre_x_um.unwrap_or(base.centre_x * 1e6),
                 0.0,
                 range,
                 false,
                 "µm",
-            )? * 1e-6;
-            let cy = number(
+            )?;
+            let cy_um = number(
                 "centre_y_um",
                 centre_y_um.unwrap_or(base.centre_y * 1e6),
                 0.0,
                 range,
                 false,
                 "µm",
-            )? * 1e-6;
+            )?;
             let px = number(
                 "pixels",
                 pixels.map_or(base.pixels.min(256) as f64, f64::from),
@@ -768,21 +819,17 @@ fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<(), 
                 false,
                 "",
             )? as usize;
-            if cx - size / 2.0 < 0.0
-                || cy - size / 2.0 < 0.0
-                || cx + size / 2.0 > range * 1e-6
-                || cy + size / 2.0 > range * 1e-6
-            {
+            let eps = 1e-9 * range;
+            let half = size_um / 2.0;
+            if cx_um - half < -eps || cy_um - half < -eps || cx_um + half > range + eps || cy_um + half > range + eps {
                 return Err(Refusal::new(
                     ErrorCode::OutOfRange,
                     format!(
-                        "the scan square (centre ({}, {}) µm, side {} µm) must lie within the stage, [0, {range}] µm",
-                        cx * 1e6,
-                        cy * 1e6,
-                        size * 1e6
+                        "the scan square (centre ({cx_um}, {cy_um}) µm, side {size_um} µm) must lie within the stage, [0, {range}] µm"
                     ),
                 ));
             }
+            let (size, cx, cy) = (size_um * 1e-6, cx_um * 1e-6, cy_um * 1e-6);
             busy(st)?;
             st.scanning.store(true, Relaxed);
             st.scan_cancel.store(false, Relaxed);
@@ -820,6 +867,27 @@ fn surface_now(st: &AppState) -> Surface {
     }
 }
 
+/// Whether a particle of radius `r` (m) can be pushed to `p` (m): its centre at least a radius
+/// inside the stage's `[0, range]` square, so the particle stays on the stage and the tip, which
+/// stays inside it, can reach behind it.
+fn on_stage(p: (f64, f64), r: f64, range: f64) -> Result<(), Refusal> {
+    let inside = |v: f64| v >= r && v <= range - r;
+    if inside(p.0) && inside(p.1) {
+        return Ok(());
+    }
+    Err(Refusal::new(
+        ErrorCode::OutOfRange,
+        format!(
+            "target ({:.3}, {:.3}) µm is out of range for a particle {:.3} µm in radius; allowed: [{:.3}, {:.3}] µm in x and y",
+            p.0 * 1e6,
+            p.1 * 1e6,
+            r * 1e6,
+            r * 1e6,
+            (range - r) * 1e6
+        ),
+    ))
+}
+
 fn run_done_failed(st: &AppState, particle: u32, outcome: &str, failure: String) {
     st.shared.busy.store(false, Relaxed);
     st.broadcast_event(&ServerMessage::RunDone {
@@ -849,6 +917,11 @@ fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, generation: u6
         Ok(p) => p,
         Err(e) => return run_done_failed(st, particle, "plan", format!("particle {particle}: {e}")),
     };
+    // A target the particle cannot reach whole, with the tip behind it, fails now, not after a
+    // push that runs into the stage's edge until its time-out.
+    if let Err(r) = on_stage(plan.target, plan.located.radius, f.stage.range_um * 1e-6) {
+        return run_done_failed(st, particle, "plan", format!("particle {particle}: {}", r.message));
+    }
     let (located, legs) = (plan.located, plan.legs);
     if legs.is_empty() {
         // Already there (within 10 nm): nothing to push.
