@@ -768,3 +768,39 @@ fn big_messages_are_refused_and_no_reply_is_lost() {
         assert!((100..400).all(|id| seen.contains(&id)));
     });
 }
+
+/// Issue 12.2: viewers filling `--max-clients` never lock the operator out (the operator token
+/// has places of its own), and one address cannot take every viewer place.
+#[test]
+fn viewers_never_lock_the_operator_out_and_one_address_has_a_limit() {
+    let srv = start("reserve", &["--max-clients", "2", "--max-clients-per-address", "3"]);
+    runtime().block_on(async {
+        let mut a = connect(&srv.addr, None).await;
+        let mut b = connect(&srv.addr, None).await;
+        until(&mut a, 5.0, |m| is(m, "welcome")).await;
+        until(&mut b, 5.0, |m| is(m, "welcome")).await;
+        let e = tokio_tungstenite::connect_async(format!("ws://{}/ws", srv.addr))
+            .await
+            .unwrap_err();
+        assert!(e.to_string().contains("503"), "{e}");
+        // The operator still gets in, takes the lease and is answered.
+        let mut op = connect(&srv.addr, Some(TOKEN)).await;
+        assert_eq!(until(&mut op, 5.0, |m| is(m, "welcome")).await["role"], "operator");
+        send(&mut op, json!({"type": "take_lease", "id": 1})).await;
+        assert_eq!(reply(&mut op, 1).await["type"], "ok");
+    });
+    // Per address: a third viewer place is the address's limit here (3), a fourth is refused.
+    let srv = start("peraddr", &["--max-clients", "100", "--max-clients-per-address", "3"]);
+    runtime().block_on(async {
+        let mut held = Vec::new();
+        for _ in 0..3 {
+            let mut c = connect(&srv.addr, None).await;
+            until(&mut c, 5.0, |m| is(m, "welcome")).await;
+            held.push(c);
+        }
+        let e = tokio_tungstenite::connect_async(format!("ws://{}/ws", srv.addr))
+            .await
+            .unwrap_err();
+        assert!(e.to_string().contains("429"), "{e}");
+    });
+}

@@ -43,8 +43,10 @@ pub struct ServeConfig {
     pub max_message_bytes: usize,
     /// Messages per second per connection.
     pub max_rate: f64,
-    /// Most clients at once.
+    /// Most viewer connections at once (operators have [`OPERATOR_PLACES`] of their own).
     pub max_clients: u64,
+    /// Most viewer connections from one remote address.
+    pub max_clients_per_address: u64,
     /// Record directory.
     pub data_dir: PathBuf,
     /// Static files of the web client.
@@ -98,6 +100,90 @@ pub struct AppState {
     pub stopping: AtomicBool,
     /// Bumped by every `stop`: a push still being prepared when it changes is dropped.
     pub generation: AtomicU64,
+    /// Places taken: viewers (up to `--max-clients`) and operators (up to [`OPERATOR_PLACES`],
+    /// apart, so viewers can never lock the operator out), and viewers per remote address.
+    places: Mutex<Places>,
+}
+
+/// Connections counted for admission.
+#[derive(Debug, Default)]
+struct Places {
+    viewers: u64,
+    operators: u64,
+    per_address: std::collections::HashMap<std::net::IpAddr, u64>,
+}
+
+/// Connections kept for the operator token, beyond `--max-clients` (which counts viewers).
+pub const OPERATOR_PLACES: u64 = 8;
+
+/// A place taken at the upgrade, given back when the connection ends (or fails to upgrade).
+struct Place {
+    st: Arc<AppState>,
+    role: Role,
+    ip: std::net::IpAddr,
+}
+
+impl Place {
+    /// Takes a place for `role` from `ip`, or says why not.
+    fn take(st: &Arc<AppState>, role: Role, ip: std::net::IpAddr) -> Result<Place, (StatusCode, String)> {
+        let mut p = st.places.lock().expect("places lock");
+        match role {
+            Role::Operator => {
+                if p.operators >= OPERATOR_PLACES {
+                    return Err((
+                        StatusCode::SERVICE_UNAVAILABLE,
+                        format!("{OPERATOR_PLACES} operator connections are open already"),
+                    ));
+                }
+                p.operators += 1;
+            }
+            Role::Viewer => {
+                let here = p.per_address.get(&ip).copied().unwrap_or(0);
+                if here >= st.cfg.max_clients_per_address {
+                    return Err((
+                        StatusCode::TOO_MANY_REQUESTS,
+                        format!(
+                            "{here} connections from {ip} already; allowed: {} per address (--max-clients-per-address)",
+                            st.cfg.max_clients_per_address
+                        ),
+                    ));
+                }
+                if p.viewers >= st.cfg.max_clients {
+                    return Err((
+                        StatusCode::SERVICE_UNAVAILABLE,
+                        "too many clients (--max-clients)".into(),
+                    ));
+                }
+                p.viewers += 1;
+                *p.per_address.entry(ip).or_insert(0) += 1;
+            }
+        }
+        st.net.clients.fetch_add(1, Relaxed);
+        Ok(Place {
+            st: st.clone(),
+            role,
+            ip,
+        })
+    }
+}
+
+impl Drop for Place {
+    fn drop(&mut self) {
+        let Ok(mut p) = self.st.places.lock() else { return };
+        match self.role {
+            Role::Operator => p.operators = p.operators.saturating_sub(1),
+            Role::Viewer => {
+                p.viewers = p.viewers.saturating_sub(1);
+                if let Some(n) = p.per_address.get_mut(&self.ip) {
+                    *n = n.saturating_sub(1);
+                    if *n == 0 {
+                        p.per_address.remove(&self.ip);
+                    }
+                }
+            }
+        }
+        self.st.net.clients.fetch_sub(1, Relaxed);
+    }
 }
 
 impl AppState {
@@ -130,6 +216,7 @@ impl AppState {
             ),
             stopping: AtomicBool::new(false),
             generation: AtomicU64::new(0),
+            places: Mutex::new(Places::default()),
             scene,
         }
     }
@@ -341,22 +428,28 @@ async fn ws_upgrade(
         None if st.cfg.viewer_token.is_none() => Role::Viewer,
         _ => return (StatusCode::UNAUTHORIZED, "invalid or missing token").into_response(),
     };
-    // Counted here, atomically, so simultaneous upgrades cannot pass the cap together; the
-    // session (or a failed upgrade) gives the place back.
-    if st.net.clients.fetch_add(1, Relaxed) >= st.cfg.max_clients {
-        st.net.clients.fetch_sub(1, Relaxed);
-        return (StatusCode::SERVICE_UNAVAILABLE, "too many clients (--max-clients)").into_response();
-    }
-    let failed = st.clone();
+    // Counted here, under one lock, so simultaneous upgrades cannot pass the cap together; the
+    // session (or a failed upgrade) gives the place back when it drops it.
+    let place = match Place::take(&st, role, peer.ip()) {
+        Ok(p) => std::sync::Arc::new(Mutex::new(Some(p))),
+        Err((code, why)) => return (code, why).into_response(),
+    };
+    let failed = place.clone();
     // A hard cap far above the protocol's limit: larger messages are refused with a typed error
     // by the session (the connection stays); only absurd ones, over 8 MiB, close it (1009).
     let cap = HARD_CAP.max(st.cfg.max_message_bytes);
     ws.max_message_size(cap)
         .max_frame_size(cap)
         .on_failed_upgrade(move |_| {
-            failed.net.clients.fetch_sub(1, Relaxed);
+            if let Ok(mut p) = failed.lock() {
+                p.take();
+            }
         })
-        .on_upgrade(move |socket| session(st, socket, role, peer))
+        .on_upgrade(move |socket| async move {
+            let held = place.lock().ok().and_then(|mut p| p.take());
+            session(st, socket, role, peer).await;
+            drop(held);
+        })
 }
 
 /// Per-connection state for message handling.
@@ -591,7 +684,6 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
         // A peer that stopped reading: do not leave its sender behind.
         send.abort();
     }
-    st.net.clients.fetch_sub(1, Relaxed);
     tracing::info!("client {id} disconnected");
 }
 

@@ -136,7 +136,17 @@ impl Server {
         let log = std::fs::File::create(dir.join("server.log")).map_err(|e| format!("creating the server log: {e}"))?;
         let mut child = Command::new(&o.server)
             .current_dir(nanopush_e2e::workspace())
-            .args(["serve", "--port", "0", "--haptic", "none", "--max-clients", "2000"])
+            .args([
+                "serve",
+                "--port",
+                "0",
+                "--haptic",
+                "none",
+                "--max-clients",
+                "2000",
+                "--max-clients-per-address",
+                "2000",
+            ])
             .args([
                 "--operator-token",
                 TOKEN,

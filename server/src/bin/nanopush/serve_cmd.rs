@@ -40,9 +40,13 @@ pub struct ServeArgs {
     /// Messages per second per connection, in [1, 10000].
     #[arg(long, default_value_t = 50.0)]
     max_rate: f64,
-    /// Most clients at once, in [1, 100000].
+    /// Most viewer connections at once, in [1, 100000] (the operator token has 8 more places of
+    /// its own: viewers never lock the operator out).
     #[arg(long, default_value_t = 1000)]
     max_clients: u64,
+    /// Most viewer connections from one remote address, in [1, 100000].
+    #[arg(long, default_value_t = 64)]
+    max_clients_per_address: u64,
     /// Directory of the records (push traces, scans).
     #[arg(long, default_value = "records")]
     data_dir: PathBuf,
@@ -139,6 +143,13 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
     )?;
     in_range("--max-rate", a.max_rate, 1.0, 10_000.0, " messages/s")?;
     in_range("--max-clients", a.max_clients as f64, 1.0, 100_000.0, "")?;
+    in_range(
+        "--max-clients-per-address",
+        a.max_clients_per_address as f64,
+        1.0,
+        100_000.0,
+        "",
+    )?;
     in_range("--scan-line-hz", a.scan_line_hz, 0.1, 1000.0, " Hz")?;
     in_range("--telemetry-hz", a.telemetry_hz, 1.0, 1000.0, " Hz")?;
     in_range("--haptic-timeout-ms", a.haptic_timeout_ms, 2.0, 1000.0, " ms")?;
@@ -174,6 +185,7 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         max_message_bytes: a.max_message_bytes,
         max_rate: a.max_rate,
         max_clients: a.max_clients,
+        max_clients_per_address: a.max_clients_per_address,
         data_dir: a.data_dir.clone(),
         web_dir,
         scan_line_hz: a.scan_line_hz,
