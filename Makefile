@@ -1,7 +1,7 @@
 # nanopush: the two commands a new user needs are `make run` and `make test`.
 CARGO ?= cargo
 
-.PHONY: run web test setup build release fmt-check clippy unit web-test clean
+.PHONY: run web test setup build release fmt-check clippy unit web-test prometheus-check clean
 
 ## make run: build (release), install the web client's packages, and start the teleoperation
 ## server on the embedded default scene; it prints the URL to open (with the operator token).
@@ -37,8 +37,13 @@ unit: build
 web-test:
 	cd web && npm ci --no-audit --no-fund && npm test
 
+## The lab's monitoring: the shipped Prometheus config and its alert rules (deploy/prometheus/).
+prometheus-check:
+	promtool check config deploy/prometheus/prometheus.yml
+	promtool test rules deploy/prometheus/alerts_test.yml
+
 ## make test: set up, then formatting, lints with -D warnings, and every test.
-test: setup fmt-check clippy unit web-test
+test: setup fmt-check clippy prometheus-check unit web-test
 
 clean:
 	$(CARGO) clean

@@ -3,6 +3,7 @@
 mod haptic;
 mod haptic_link;
 mod model;
+mod prometheus;
 mod push;
 mod scan;
 mod serve;

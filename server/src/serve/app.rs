@@ -378,7 +378,12 @@ async fn record_get(State(st): State<Arc<AppState>>, UrlPath(name): UrlPath<Stri
 async fn metrics(State(st): State<Arc<AppState>>) -> Response {
     (
         [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
-        render(&st.shared.metrics, &st.net, nanopush_proto::haptic::monotonic_ns()),
+        render(
+            &st.shared.metrics,
+            &st.net,
+            nanopush_proto::haptic::monotonic_ns(),
+            crate::serve::metrics::disk_space(&st.cfg.data_dir),
+        ),
     )
         .into_response()
 }
@@ -1108,6 +1113,7 @@ fn run_scan(st: &AppState, params: ScanParams) {
             .map_err(|e| format!("preparing the record in {}: {e}", st.cfg.data_dir.display()));
         if let Err(e) = &prepared {
             tracing::error!("records: scan {scan_id}: {e}");
+            st.shared.metrics.record_failures.fetch_add(1, Relaxed);
             record_error = Some(e.clone());
         }
         if prepared.is_ok() {
@@ -1129,6 +1135,7 @@ fn run_scan(st: &AppState, params: ScanParams) {
                 Ok(()) => record = Some(gsf_name),
                 Err(e) => {
                     tracing::error!("records: scan {scan_id}: {e}");
+                    st.shared.metrics.record_failures.fetch_add(1, Relaxed);
                     record_error = Some(format!("writing {stem} in {}: {e}", st.cfg.data_dir.display()));
                 }
             }

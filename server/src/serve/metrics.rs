@@ -110,6 +110,8 @@ pub struct LoopMetrics {
     pub dropped_rows: AtomicU64,
     /// The haptic link.
     pub haptic: crate::serve::haptic::HapticMetrics,
+    /// Records (push traces and summaries, scans) that could not be written.
+    pub record_failures: AtomicU64,
     /// 1 when SCHED_FIFO was granted.
     pub realtime: AtomicU64,
 }
@@ -127,8 +129,22 @@ pub struct NetMetrics {
     pub sent: AtomicU64,
 }
 
-/// Renders both sets as a Prometheus exposition; `now_ns` is `CLOCK_MONOTONIC` now.
-pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64) -> String {
+/// Free and total bytes of the file system holding `dir` (statvfs), for the disk alert.
+pub fn disk_space(dir: &std::path::Path) -> Option<(f64, f64)> {
+    use std::os::unix::ffi::OsStrExt;
+    let path = std::ffi::CString::new(dir.as_os_str().as_bytes()).ok()?;
+    let mut st: libc::statvfs = unsafe { std::mem::zeroed() };
+    // SAFETY: a NUL-terminated path and a statvfs struct we own.
+    if unsafe { libc::statvfs(path.as_ptr(), &mut st) } != 0 {
+        return None;
+    }
+    let frag = st.f_frsize as f64;
+    Some((st.f_bavail as f64 * frag, st.f_blocks as f64 * frag))
+}
+
+/// Renders both sets as a Prometheus exposition; `now_ns` is `CLOCK_MONOTONIC` now; `disk` the
+/// data directory's free and total bytes, when known.
+pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64, disk: Option<(f64, f64)>) -> String {
     let mut s = String::with_capacity(8192);
     l.period_error.render(
         &mut s,
@@ -157,7 +173,26 @@ pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64) -> String {
         now_ns.saturating_sub(last) as f64 * 1e-9
     };
     // (name, help, type, value)
-    let scalars: [(&str, &str, &str, f64); 22] = [
+    let (free, total) = disk.unwrap_or((f64::NAN, f64::NAN));
+    let scalars: [(&str, &str, &str, f64); 25] = [
+        (
+            "nanopush_record_write_failures_total",
+            "Records (push traces and summaries, scans) that could not be written.",
+            "counter",
+            l.record_failures.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_data_dir_free_bytes",
+            "Free bytes (for unprivileged users) on the file system of the data directory.",
+            "gauge",
+            free,
+        ),
+        (
+            "nanopush_data_dir_size_bytes",
+            "Size of the file system of the data directory.",
+            "gauge",
+            total,
+        ),
         (
             "nanopush_loop_ticks_total",
             "Control ticks run.",
@@ -324,12 +359,20 @@ mod tests {
     fn the_exposition_names_every_family_once() {
         let l = LoopMetrics::default();
         l.physics.record(3e-6);
-        let text = render(&l, &NetMetrics::default(), 1);
+        let text = render(&l, &NetMetrics::default(), 1, disk_space(std::path::Path::new("/")));
         assert_eq!(
             text.matches("# TYPE nanopush_loop_compute_seconds histogram").count(),
             1
         );
         assert!(text.contains("nanopush_loop_compute_seconds_bucket{phase=\"physics\",le=\"3e-6\"} 1"));
         assert!(text.contains("nanopush_haptic_link_age_seconds -1"));
+        assert!(text.contains("nanopush_record_write_failures_total 0"));
+        let free: f64 = text
+            .lines()
+            .find_map(|l| l.strip_prefix("nanopush_data_dir_free_bytes "))
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(free > 0.0);
     }
 }

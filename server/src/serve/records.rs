@@ -192,6 +192,12 @@ pub fn run_recorder(shared: Arc<Shared>, dir: PathBuf, out: tokio::sync::mpsc::U
                     }
                 }
             }
+            if record.is_err() {
+                shared
+                    .metrics
+                    .record_failures
+                    .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            }
             let _ = out.send((e, record));
         }
         if finished && shared.records.is_empty() && shared.events.is_empty() {

@@ -1,0 +1,137 @@
+//! Lab monitoring end to end: a real Prometheus server (Debian's `prometheus`, installed by
+//! `.ci/setup`) with the shipped alert rules scrapes a real `nanopush serve`, and a series and
+//! the rules are read back through Prometheus' HTTP API.
+
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use nanopush_e2e::{bin, workspace};
+use serde_json::Value;
+
+struct Proc(Child, PathBuf);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+        if std::thread::panicking() {
+            eprintln!("--- log ---\n{}", std::fs::read_to_string(&self.1).unwrap_or_default());
+        }
+    }
+}
+
+fn get(addr: &str, path: &str) -> Option<(u16, String)> {
+    let mut s = TcpStream::connect(addr).ok()?;
+    // HTTP/1.0: a plain body, never chunked.
+    write!(s, "GET {path} HTTP/1.0\r\nHost: {addr}\r\n\r\n").ok()?;
+    let mut buf = String::new();
+    s.read_to_string(&mut buf).ok()?;
+    let status = buf.split_whitespace().nth(1)?.parse().ok()?;
+    Some((
+        status,
+        buf.split_once("\r\n\r\n")
+            .map(|(_, b)| b.to_string())
+            .unwrap_or_default(),
+    ))
+}
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+#[test]
+fn prometheus_scrapes_the_server_and_loads_the_alert_rules() {
+    let dir = std::env::temp_dir().join(format!("nanopush-e2e-prometheus-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let port = free_port();
+    let server_log = dir.join("server.log");
+    let _server = Proc(
+        Command::new(bin("nanopush"))
+            .current_dir(workspace())
+            .args(["serve", "--haptic", "none", "--port", &port.to_string(), "--data-dir"])
+            .arg(dir.join("records"))
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&server_log).unwrap())
+            .spawn()
+            .expect("starting nanopush serve"),
+        server_log,
+    );
+    let alerts = workspace().join("deploy/prometheus/alerts.yml");
+    let config = dir.join("prometheus.yml");
+    std::fs::write(
+        &config,
+        format!(
+            "global:\n  scrape_interval: 1s\n  evaluation_interval: 1s\nrule_files:\n  - {}\nscrape_configs:\n  - job_name: nanopush\n    static_configs:\n      - targets: [\"127.0.0.1:{port}\"]\n",
+            alerts.display()
+        ),
+    )
+    .unwrap();
+    let web = format!("127.0.0.1:{}", free_port());
+    let prom_log = dir.join("prometheus.log");
+    let _prometheus = Proc(
+        Command::new("prometheus")
+            .arg(format!("--config.file={}", config.display()))
+            .arg(format!("--storage.tsdb.path={}", dir.join("data").display()))
+            .arg(format!("--web.listen-address={web}"))
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&prom_log).unwrap())
+            .spawn()
+            .expect("starting prometheus (Debian package `prometheus`, installed by .ci/setup)"),
+        prom_log,
+    );
+    // A series from the server, through Prometheus' query API.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let ticks = loop {
+        if let Some((200, body)) = get(
+            &web,
+            "/api/v1/query?query=nanopush_loop_ticks_total%7Bjob%3D%22nanopush%22%7D",
+        ) {
+            let v: Value = serde_json::from_str(&body).unwrap();
+            if let Some(x) = v["data"]["result"][0]["value"][1].as_str() {
+                break x.parse::<f64>().unwrap();
+            }
+        }
+        assert!(
+            Instant::now() < deadline,
+            "no nanopush series in Prometheus within 60 s"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    assert!(ticks > 0.0, "{ticks}");
+    let (_, up) = get(&web, "/api/v1/query?query=up%7Bjob%3D%22nanopush%22%7D").unwrap();
+    let up: Value = serde_json::from_str(&up).unwrap();
+    assert_eq!(up["data"]["result"][0]["value"][1], "1");
+    // The shipped rules are loaded, and a healthy server fires none of them.
+    let (_, rules) = get(&web, "/api/v1/rules").unwrap();
+    let rules: Value = serde_json::from_str(&rules).unwrap();
+    let names: Vec<&str> = rules["data"]["groups"][0]["rules"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|r| r["name"].as_str())
+        .collect();
+    for alert in [
+        "NanopushDown",
+        "NanopushLoopOverruns",
+        "NanopushHapticLinkDownWhileEngaged",
+        "NanopushRecordWritesFailing",
+        "NanopushDiskNearlyFull",
+    ] {
+        assert!(names.contains(&alert), "{alert} in {names:?}");
+    }
+    let (_, firing) = get(&web, "/api/v1/alerts").unwrap();
+    let firing: Value = serde_json::from_str(&firing).unwrap();
+    assert!(
+        firing["data"]["alerts"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|a| a["state"] != "firing"),
+        "{firing}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
