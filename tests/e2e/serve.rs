@@ -804,3 +804,159 @@ fn viewers_never_lock_the_operator_out_and_one_address_has_a_limit() {
         assert!(e.to_string().contains("429"), "{e}");
     });
 }
+
+/// Issue 12.3: a slowloris client (headers that never finish) is closed after the header
+/// time-out, fifty of them do not keep anyone else out, and a WebSocket peer that stops
+/// answering pings is closed after the dead-peer time-out while a live one stays.
+#[test]
+fn slow_and_dead_connections_are_closed() {
+    let srv = start(
+        "slow",
+        &["--header-timeout-s", "1", "--ws-ping-s", "0.5", "--ws-timeout-s", "1.5"],
+    );
+    let mut lorises: Vec<TcpStream> = (0..50)
+        .map(|_| {
+            let mut s = TcpStream::connect(&srv.addr).unwrap();
+            s.write_all(b"GET /api/status HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Slow: ")
+                .unwrap();
+            s
+        })
+        .collect();
+    // Meanwhile a normal request is answered at once.
+    assert_eq!(http_get(&srv.addr, "/api/status").0, 200);
+    let t0 = Instant::now();
+    for s in &mut lorises {
+        s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+        let mut buf = [0u8; 64];
+        // Closed by the server (EOF or reset), not left hanging (a read time-out).
+        let closed = match s.read(&mut buf) {
+            Ok(n) => n == 0,
+            Err(e) => !matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut),
+        };
+        assert!(closed, "a slowloris socket was answered or left open");
+    }
+    assert!(t0.elapsed() < Duration::from_secs(8), "closed after {:?}", t0.elapsed());
+    runtime().block_on(async {
+        let mut live = connect(&srv.addr, None).await;
+        let mut dead = connect(&srv.addr, None).await;
+        until(&mut live, 5.0, |m| is(m, "welcome")).await;
+        until(&mut dead, 5.0, |m| is(m, "welcome")).await;
+        // The live peer keeps reading (tungstenite answers each ping); the dead one does not.
+        let end = Instant::now() + Duration::from_secs(3);
+        while Instant::now() < end {
+            let _ = tokio::time::timeout(Duration::from_millis(100), live.next()).await;
+        }
+        send(&mut live, json!({"type": "ping", "id": 5})).await;
+        assert_eq!(reply(&mut live, 5).await["type"], "ok");
+        let mut ended = false;
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while Instant::now() < deadline {
+            match tokio::time::timeout(Duration::from_secs(1), dead.next()).await {
+                Ok(None) | Ok(Some(Err(_))) | Ok(Some(Ok(Message::Close(_)))) => {
+                    ended = true;
+                    break;
+                }
+                _ => {}
+            }
+        }
+        assert!(ended, "a peer that answered no ping was not closed");
+    });
+}
+
+/// A client socket with a tiny receive buffer (so a server that sends to it and is not read
+/// fills it at once), upgraded to a WebSocket by hand, subscribed to telemetry.
+fn stalled_subscriber(addr: &str) -> TcpStream {
+    use std::os::fd::FromRawFd;
+    let sa: std::net::SocketAddrV4 = addr.parse().unwrap();
+    // SAFETY: a fresh socket, options set on it, connected, then owned by the TcpStream.
+    let s = unsafe {
+        let fd = libc::socket(libc::AF_INET, libc::SOCK_STREAM, 0);
+        assert!(fd >= 0);
+        let small: libc::c_int = 2048;
+        libc::setsockopt(
+            fd,
+            libc::SOL_SOCKET,
+            libc::SO_RCVBUF,
+            &small as *const _ as *const libc::c_void,
+            std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+        );
+        let sin = libc::sockaddr_in {
+            sin_family: libc::AF_INET as libc::sa_family_t,
+            sin_port: sa.port().to_be(),
+            sin_addr: libc::in_addr {
+                s_addr: u32::from(*sa.ip()).to_be(),
+            },
+            sin_zero: [0; 8],
+        };
+        let r = libc::connect(
+            fd,
+            &sin as *const _ as *const libc::sockaddr,
+            std::mem::size_of::<libc::sockaddr_in>() as libc::socklen_t,
+        );
+        assert_eq!(r, 0, "connect");
+        TcpStream::from_raw_fd(fd)
+    };
+    let mut s = s;
+    write!(
+        s,
+        "GET /ws HTTP/1.1\r\nHost: {addr}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+         Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n"
+    )
+    .unwrap();
+    let mut head = Vec::new();
+    let mut b = [0u8; 1];
+    while !head.ends_with(b"\r\n\r\n") {
+        s.read_exact(&mut b).unwrap();
+        head.push(b[0]);
+    }
+    assert!(
+        String::from_utf8_lossy(&head).contains("101"),
+        "{}",
+        String::from_utf8_lossy(&head)
+    );
+    let p = br#"{"type":"subscribe","streams":["tip"]}"#;
+    let key = [7u8, 1, 3, 9];
+    let mut frame = vec![0x81, 0x80 | p.len() as u8];
+    frame.extend_from_slice(&key);
+    frame.extend(p.iter().enumerate().map(|(i, c)| c ^ key[i % 4]));
+    s.write_all(&frame).unwrap();
+    s
+}
+
+/// Issue 12.3: a reader that stops reading is dropped once one frame has waited 5 s to be sent
+/// (its socket full), and the others go on meanwhile.
+#[test]
+fn a_reader_that_stops_reading_is_dropped_without_slowing_the_others() {
+    let srv = start("stalled", &["--telemetry-hz", "1000"]);
+    let clients = |addr: &str| -> u64 {
+        let (_, body) = http_get(addr, "/api/status");
+        serde_json::from_slice::<Value>(&body).unwrap()["clients"]
+            .as_u64()
+            .unwrap()
+    };
+    runtime().block_on(async {
+        let mut other = connect(&srv.addr, None).await;
+        until(&mut other, 5.0, |m| is(m, "welcome")).await;
+        send(&mut other, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
+        reply(&mut other, 1).await;
+        let stalled = stalled_subscriber(&srv.addr);
+        let deadline = Instant::now() + Duration::from_secs(30);
+        let mut frames = 0;
+        // The other client reads on; the stalled one is let go of within the budget.
+        while clients(&srv.addr) > 1 {
+            assert!(Instant::now() < deadline, "the stalled reader was never dropped");
+            let end = Instant::now() + Duration::from_millis(200);
+            while Instant::now() < end {
+                if let Ok(Some(Ok(Message::Text(_)))) =
+                    tokio::time::timeout(Duration::from_millis(50), other.next()).await
+                {
+                    frames += 1;
+                }
+            }
+        }
+        assert!(frames > 500, "the others waited: {frames} frames");
+        drop(stalled);
+        send(&mut other, json!({"type": "ping", "id": 2})).await;
+        assert_eq!(reply(&mut other, 2).await["type"], "ok");
+    });
+}

@@ -47,6 +47,12 @@ pub struct ServeConfig {
     pub max_clients: u64,
     /// Most viewer connections from one remote address.
     pub max_clients_per_address: u64,
+    /// A WebSocket ping every this long.
+    pub ws_ping: Duration,
+    /// A WebSocket peer silent for longer than this (no pong, nothing) is closed.
+    pub ws_timeout: Duration,
+    /// An HTTP request's headers must arrive within this long.
+    pub header_timeout: Duration,
     /// Record directory.
     pub data_dir: PathBuf,
     /// Static files of the web client.
@@ -484,9 +490,16 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
     };
     let _ = reply_tx.try_send(to_text(&welcome));
 
+    // When the peer last sent anything (a command, a pong): the sender's keep-alive closes a
+    // connection whose peer stayed silent past the dead-peer time-out.
+    let heard = Arc::new(Mutex::new(Instant::now()));
+    let heard_by_sender = heard.clone();
     let send_state = st.clone();
     let mut send = tokio::spawn(async move {
         let st = send_state;
+        let mut ping = tokio::time::interval(st.cfg.ws_ping);
+        ping.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        ping.tick().await;
         let mut events = st.events.subscribe();
         let mut telemetry = st.telemetry.subscribe();
         let mut scans = st.scans.subscribe();
@@ -526,6 +539,17 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
                     scans = scans.resubscribe();
                     continue;
                 }
+                _ = ping.tick() => {
+                    let silent = heard_by_sender.lock().map_or(Duration::ZERO, |t| t.elapsed());
+                    if silent > st.cfg.ws_timeout {
+                        tracing::info!("client {id}: nothing heard for {:.0} s; closing (a dead peer)", silent.as_secs_f64());
+                        let _ = sink
+                            .send(Message::Close(Some(CloseFrame { code: 1001, reason: "no answer to pings".into() })))
+                            .await;
+                        break;
+                    }
+                    Message::Ping(Bytes::from_static(b"nanopush"))
+                }
                 _ = shutdown.changed() => {
                     let bye = to_text(&ServerMessage::Shutdown { reason: "server shutting down".into() });
                     let _ = sink.send(Message::Text(bye)).await;
@@ -535,8 +559,18 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
                     break;
                 }
             };
-            if sink.send(msg).await.is_err() {
-                break;
+            // The send budget: a peer that takes more than this to take one frame (it stopped
+            // reading and its socket is full) is dropped; the others never wait for it.
+            match tokio::time::timeout(SEND_BUDGET, sink.send(msg)).await {
+                Ok(Ok(())) => {}
+                Ok(Err(_)) => break,
+                Err(_) => {
+                    tracing::info!(
+                        "client {id}: a frame waited over {} s to be sent; closing (a reader that stopped reading)",
+                        SEND_BUDGET.as_secs()
+                    );
+                    break;
+                }
             }
         }
     });
@@ -564,6 +598,9 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
             }
         };
         let Some(Ok(msg)) = next else { break };
+        if let Ok(mut t) = heard.lock() {
+            *t = Instant::now();
+        }
         if matches!(msg, Message::Close(_)) {
             break;
         }
@@ -700,6 +737,9 @@ fn lagged(st: &AppState, n: u64) -> Message {
 fn to_text(m: &ServerMessage) -> Utf8Bytes {
     serde_json::to_string(m).unwrap_or_else(|_| "{}".into()).into()
 }
+
+/// Longest a single frame may wait to be sent to a client before the client is dropped.
+pub const SEND_BUDGET: Duration = Duration::from_secs(5);
 
 /// The smallest scan side (µm): 10 nm.
 pub const MIN_SCAN_UM: f64 = 0.01;

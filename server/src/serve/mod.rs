@@ -3,6 +3,7 @@
 
 pub mod app;
 pub mod control_loop;
+pub mod guard;
 pub mod haptic;
 pub mod haptic_api;
 pub mod metrics;
@@ -158,8 +159,11 @@ pub async fn run(
     let app = app::router(state.clone()).into_make_service_with_connect_info::<SocketAddr>();
     // TCP_NODELAY on every connection: with Nagle's algorithm a client's message delayed the
     // next telemetry frames by 25-45 ms (the frame waited for the ACK of the reply).
-    let listener = axum::serve::ListenerExt::tap_io(listener, |tcp: &mut tokio::net::TcpStream| {
-        if let Err(e) = tcp.set_nodelay(true) {
+    // Slowloris: each request's headers within the header time-out, a plain HTTP connection
+    // idle for a minute closed (WebSockets keep themselves alive with pings).
+    let guarded = guard::GuardedListener::new(listener, state.cfg.header_timeout, Duration::from_secs(60));
+    let listener = axum::serve::ListenerExt::tap_io(guarded, |io: &mut guard::Guarded| {
+        if let Err(e) = io.tcp().set_nodelay(true) {
             tracing::debug!("TCP_NODELAY refused on a connection: {e}");
         }
     });

@@ -47,6 +47,16 @@ pub struct ServeArgs {
     /// Most viewer connections from one remote address, in [1, 100000].
     #[arg(long, default_value_t = 64)]
     max_clients_per_address: u64,
+    /// An HTTP request's headers must arrive within this long (s), in [0.1, 300].
+    #[arg(long, default_value_t = 10.0)]
+    header_timeout_s: f64,
+    /// A WebSocket ping every this long (s), in [0.1, 300].
+    #[arg(long, default_value_t = 10.0)]
+    ws_ping_s: f64,
+    /// A WebSocket peer silent (no pong, nothing) for longer than this is closed (s), in
+    /// [0.2, 3600]; at least twice --ws-ping-s.
+    #[arg(long, default_value_t = 30.0)]
+    ws_timeout_s: f64,
     /// Directory of the records (push traces, scans).
     #[arg(long, default_value = "records")]
     data_dir: PathBuf,
@@ -150,6 +160,16 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         100_000.0,
         "",
     )?;
+    in_range("--header-timeout-s", a.header_timeout_s, 0.1, 300.0, " s")?;
+    in_range("--ws-ping-s", a.ws_ping_s, 0.1, 300.0, " s")?;
+    in_range("--ws-timeout-s", a.ws_timeout_s, 0.2, 3600.0, " s")?;
+    if a.ws_timeout_s < 2.0 * a.ws_ping_s {
+        bail!(
+            "--ws-timeout-s {} must be at least twice --ws-ping-s {} (a peer gets two pings to answer)",
+            a.ws_timeout_s,
+            a.ws_ping_s
+        );
+    }
     in_range("--scan-line-hz", a.scan_line_hz, 0.1, 1000.0, " Hz")?;
     in_range("--telemetry-hz", a.telemetry_hz, 1.0, 1000.0, " Hz")?;
     in_range("--haptic-timeout-ms", a.haptic_timeout_ms, 2.0, 1000.0, " ms")?;
@@ -186,6 +206,9 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         max_rate: a.max_rate,
         max_clients: a.max_clients,
         max_clients_per_address: a.max_clients_per_address,
+        ws_ping: std::time::Duration::from_secs_f64(a.ws_ping_s),
+        ws_timeout: std::time::Duration::from_secs_f64(a.ws_timeout_s),
+        header_timeout: std::time::Duration::from_secs_f64(a.header_timeout_s),
         data_dir: a.data_dir.clone(),
         web_dir,
         scan_line_hz: a.scan_line_hz,
