@@ -170,6 +170,63 @@ async fn garbage(addr: String, stop: Arc<AtomicBool>, sent: Arc<AtomicU64>) {
     }
 }
 
+/// The operator: holds the lease, subscribes to telemetry, sends a ping every 100 ms for `secs`;
+/// returns the commands sent, the ones answered and the telemetry arrival times.
+async fn operator(addr: String, secs: f64) -> (u64, u64, Vec<Instant>) {
+    let mut op = ws(&addr, Some(TOKEN)).await.expect("the operator connects");
+    let _ = op
+        .send(Message::Text(json!({"type": "take_lease", "id": 1}).to_string().into()))
+        .await;
+    let _ = op
+        .send(Message::Text(
+            json!({"type": "subscribe", "id": 2, "streams": ["tip"]})
+                .to_string()
+                .into(),
+        ))
+        .await;
+    let (mut sent, mut answered) = (0u64, std::collections::HashSet::new());
+    let mut arrivals: Vec<Instant> = Vec::new();
+    let end = Instant::now() + Duration::from_secs_f64(secs);
+    let mut next = Instant::now();
+    let mut id = 100u32;
+    let answer = |t: &str, answered: &mut std::collections::HashSet<u64>| {
+        if t.contains("\"ok\"")
+            && let Ok(v) = serde_json::from_str::<serde_json::Value>(t)
+            && let Some(i) = v["id"].as_u64()
+            && i >= 100
+        {
+            answered.insert(i);
+        }
+    };
+    while Instant::now() < end {
+        if Instant::now() >= next {
+            let _ = op
+                .send(Message::Text(json!({"type": "ping", "id": id}).to_string().into()))
+                .await;
+            sent += 1;
+            id += 1;
+            next += Duration::from_millis(100);
+        }
+        let wait = next.saturating_duration_since(Instant::now());
+        if let Ok(Some(Ok(Message::Text(t)))) = tokio::time::timeout(wait, op.next()).await {
+            if t.contains("\"telemetry\"") {
+                arrivals.push(Instant::now());
+            } else {
+                answer(&t, &mut answered);
+            }
+        }
+    }
+    // The last answers.
+    let drain = Instant::now() + Duration::from_secs(2);
+    while Instant::now() < drain {
+        if let Ok(Some(Ok(Message::Text(t)))) = tokio::time::timeout(Duration::from_millis(100), op.next()).await {
+            answer(&t, &mut answered);
+        }
+    }
+    let _ = op.close(None).await;
+    (sent, answered.len() as u64, arrivals)
+}
+
 fn main() {
     let secs: f64 = std::env::args().nth(1).and_then(|a| a.parse().ok()).unwrap_or(600.0);
     let mut child = Command::new(bin("nanopush"))
@@ -233,67 +290,29 @@ fn main() {
         tasks.push(tokio::spawn(garbage(addr.clone(), stop.clone(), junk.clone())));
         tokio::time::sleep(Duration::from_secs(3)).await;
         let o1 = metric(&addr, "nanopush_loop_overruns_total");
-        // The operator.
-        let mut op = ws(&addr, Some(TOKEN)).await.expect("the operator connects");
-        let _ = op
-            .send(Message::Text(json!({"type": "take_lease", "id": 1}).to_string().into()))
-            .await;
-        let _ = op
-            .send(Message::Text(
-                json!({"type": "subscribe", "id": 2, "streams": ["tip"]})
-                    .to_string()
-                    .into(),
-            ))
-            .await;
-        let (mut sent, mut answered) = (0u64, std::collections::HashSet::new());
-        let mut arrivals: Vec<Instant> = Vec::new();
-        let end = Instant::now() + Duration::from_secs_f64(secs);
-        let mut next = Instant::now();
-        let mut id = 100u32;
-        while Instant::now() < end {
-            if Instant::now() >= next {
-                let _ = op
-                    .send(Message::Text(json!({"type": "ping", "id": id}).to_string().into()))
-                    .await;
-                sent += 1;
-                id += 1;
-                next += Duration::from_millis(100);
-            }
-            let wait = next.saturating_duration_since(Instant::now());
-            if let Ok(Some(Ok(Message::Text(t)))) = tokio::time::timeout(wait, op.next()).await {
-                if t.contains("\"telemetry\"") {
-                    arrivals.push(Instant::now());
-                } else if t.contains("\"ok\"")
-                    && let Ok(v) = serde_json::from_str::<serde_json::Value>(&t)
-                    && let Some(i) = v["id"].as_u64()
-                    && i >= 100
-                {
-                    answered.insert(i);
-                }
-            }
-        }
-        // The last answers.
-        let drain = Instant::now() + Duration::from_secs(2);
-        while Instant::now() < drain {
-            if let Ok(Some(Ok(Message::Text(t)))) = tokio::time::timeout(Duration::from_millis(100), op.next()).await
-                && t.contains("\"ok\"")
-                && let Ok(v) = serde_json::from_str::<serde_json::Value>(&t)
-                && let Some(i) = v["id"].as_u64()
-                && i >= 100
-            {
-                answered.insert(i);
-            }
-        }
+        // The operator, on a thread and runtime of its own: its measurements are not delayed by
+        // the 500 viewers this process also serves.
+        let (op_addr, op_secs) = (addr.clone(), secs);
+        let handle = std::thread::spawn(move || {
+            tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+                .unwrap()
+                .block_on(operator(op_addr, op_secs))
+        });
+        let (sent, answered, arrivals) =
+            tokio::task::spawn_blocking(move || handle.join().expect("the operator thread"))
+                .await
+                .unwrap();
         let o2 = metric(&addr, "nanopush_loop_overruns_total");
         let during = footprint(pid);
         stop.store(true, Relaxed);
-        let _ = op.close(None).await;
         for t in tasks {
             let _ = tokio::time::timeout(Duration::from_secs(5), t).await;
         }
         let mut gaps: Vec<f64> = arrivals.windows(2).map(|w| (w[1] - w[0]).as_secs_f64()).collect();
         gaps.sort_by(f64::total_cmp);
-        (sent, answered.len() as u64, gaps, during, o2 - o1)
+        (sent, answered, gaps, during, o2 - o1)
     });
     drop(rt);
     std::thread::sleep(Duration::from_secs(10));
