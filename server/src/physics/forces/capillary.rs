@@ -172,6 +172,23 @@ mod tests {
         assert_eq!(c.update(s, lr + 0.01e-9), Meniscus::Absent);
     }
 
+    /// Issue 14: the formation gap pinned by hand (a doubled `L_t` passed every test that read
+    /// it back from the struct): at 73 % RH, `r₁ = 0.54 nm / ln(1/0.73) = 1.7159 nm`, so on
+    /// approach the meniscus forms at `L_t = 2r₁ = 3.432 nm` above the cut-off, and not at
+    /// 3.46 nm.
+    #[test]
+    fn the_meniscus_forms_at_twice_the_kelvin_radius_by_hand() {
+        let r1 = 0.54e-9 / (1.0f64 / 0.73).ln();
+        assert!((r1 - 1.7159e-9).abs() < 0.0001e-9);
+        let c = Capillary::new(29.13e-9, 0.072, 0.73, 0.173e-9, A0);
+        assert!((c.formation_gap - 3.432e-9).abs() < 0.001e-9, "{:e}", c.formation_gap);
+        assert_eq!(c.update(Meniscus::Absent, A0 + 3.40e-9), Meniscus::Formed);
+        assert_eq!(c.update(Meniscus::Absent, A0 + 3.46e-9), Meniscus::Absent);
+        // It ruptures at L_t + δ_b = 3.605 nm above the cut-off on the way out.
+        assert_eq!(c.update(Meniscus::Formed, A0 + 3.59e-9), Meniscus::Formed);
+        assert_eq!(c.update(Meniscus::Formed, A0 + 3.62e-9), Meniscus::Absent);
+    }
+
     #[test]
     fn no_meniscus_when_dry() {
         let c = Capillary::new(29e-9, 0.072, 0.0, 0.1e-9, A0);
