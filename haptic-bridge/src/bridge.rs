@@ -89,7 +89,6 @@ pub struct Bridge<D: Device> {
     force: Option<ForceFeedback>,
     seq: u64,
     dropped: u64,
-    rendered: f64,
     sent: Box<[(u64, u64); LATENCY_RING]>,
     last_latency_seq: u64,
     latency_ns: u64,
@@ -116,7 +115,6 @@ impl<D: Device> Bridge<D> {
             force: None,
             seq: 0,
             dropped: 0,
-            rendered: 0.0,
             sent: Box::new([(u64::MAX, 0); LATENCY_RING]),
             last_latency_seq: u64::MAX,
             latency_ns: 0,
@@ -136,11 +134,6 @@ impl<D: Device> Bridge<D> {
     /// Samples dropped so far.
     pub fn dropped(&self) -> u64 {
         self.dropped
-    }
-
-    /// Whether a server was live at the last cycle.
-    pub fn link_up(&self) -> bool {
-        self.link_up
     }
 
     /// The newest force sample from a server, if any.
@@ -201,7 +194,6 @@ impl<D: Device> Bridge<D> {
             ..CycleRow::default()
         };
         let Some(s) = sample else {
-            self.rendered = 0.0;
             self.pc.reset();
             self.x_prev = None;
             self.ref_prev = None;
@@ -257,7 +249,6 @@ impl<D: Device> Bridge<D> {
         if self.device.write_force(force).is_err() {
             self.dropped += 1;
         }
-        self.rendered = force;
         self.device.observe(&LinkView {
             t,
             up: self.link_up,

@@ -37,10 +37,7 @@ pub struct DeviceSample {
     pub buttons: u32,
 }
 
-/// Button bit: engage / release haptic z-control.
-pub const BUTTON_ENGAGE: u32 = 1;
-/// Button bit: clutch held.
-pub const BUTTON_CLUTCH: u32 = 2;
+pub use nanopush_proto::haptic::{BUTTON_CLUTCH, BUTTON_ENGAGE};
 
 /// Why a device failed.
 #[derive(Debug, thiserror::Error)]

@@ -31,7 +31,7 @@ pub enum LinkError {
 
 /// The bridge's ports.
 pub struct IpcLink {
-    node: IpcNode,
+    _node: IpcNode,
     publisher: iceoryx2::port::publisher::Publisher<Ipc, HapticState, ()>,
     subscriber: iceoryx2::port::subscriber::Subscriber<Ipc, ForceFeedback, ()>,
     /// Samples the link failed to send.
@@ -52,18 +52,11 @@ impl IpcLink {
         };
         let subscriber = force.subscriber_builder().create().map_err(|e| ipc(&e))?;
         Ok(IpcLink {
-            node,
+            _node: node,
             publisher,
             subscriber,
             send_failures: 0,
         })
-    }
-
-    /// Removes dead nodes' resources (a server killed with SIGKILL). Not needed in the device
-    /// loop (a new server's node removes the dead one's when it is created) and not to be called
-    /// there: it walks iceoryx2's node records on disk, which can take milliseconds.
-    pub fn cleanup_dead_nodes(&self) {
-        let _ = self.node.try_cleanup_dead_nodes();
     }
 }
 

@@ -115,11 +115,6 @@ impl Passivity {
             energy: self.energy,
         }
     }
-
-    /// Observed energy before the last cycle's dissipation, `E[n]` (J).
-    pub fn observed(&self) -> f64 {
-        self.energy
-    }
 }
 
 #[cfg(test)]

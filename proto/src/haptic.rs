@@ -27,6 +27,11 @@ pub const MAX_NODES: usize = 8;
 /// every device cycle, so at 1 kHz the force is zero within 5 ms of the server's last sample.
 pub const STALE_NS: u64 = 4_000_000;
 
+/// [`HapticState::buttons`]: the engage button (a press toggles haptic z-control).
+pub const BUTTON_ENGAGE: u32 = 1;
+/// [`HapticState::buttons`]: the clutch, held (the tip stays while the hand re-centres).
+pub const BUTTON_CLUTCH: u32 = 2;
+
 /// [`HapticState::flags`]: the bridge hears no server and renders zero force.
 pub const STATE_SERVER_SILENT: u32 = 1;
 
@@ -80,7 +85,7 @@ pub struct HapticState {
     pub dropped: u64,
     /// The bridge's process id.
     pub pid: u32,
-    /// Buttons: bit 0 engage, bit 1 clutch.
+    /// Buttons: [`BUTTON_ENGAGE`], [`BUTTON_CLUTCH`].
     pub buttons: u32,
     /// `STATE_*` bits ([`STATE_SERVER_SILENT`]).
     pub flags: u32,

@@ -36,10 +36,7 @@ use nanopush_proto::haptic::{FORCE_CLUTCHED, FORCE_ENGAGED, FORCE_PUSHING, Force
 
 use crate::scene::Scene;
 
-/// Button bit: the clutch is held.
-pub const BUTTON_CLUTCH: u32 = 2;
-/// Button bit: engage / release.
-pub const BUTTON_ENGAGE: u32 = 1;
+pub use nanopush_proto::haptic::{BUTTON_CLUTCH, BUTTON_ENGAGE};
 /// Hand force below which the forces may engage (N).
 pub const ENGAGE_FORCE: f64 = 0.2;
 /// Ticks the force must stay below [`ENGAGE_FORCE`].

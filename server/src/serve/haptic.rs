@@ -288,7 +288,6 @@ impl ServerLink {
 /// (`PR_SET_PDEATHSIG`), stopped with SIGTERM on shutdown.
 pub struct Supervisor {
     stop: Arc<AtomicBool>,
-    child: Arc<Mutex<Option<Child>>>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
@@ -296,18 +295,12 @@ impl Supervisor {
     /// Starts the monitor; with `bin`, it runs that bridge as a child.
     pub fn start(bin: Option<PathBuf>, shared: Arc<crate::serve::control_loop::Shared>) -> Supervisor {
         let stop = Arc::new(AtomicBool::new(false));
-        let child: Arc<Mutex<Option<Child>>> = Arc::new(Mutex::new(None));
-        let (stop2, child2) = (stop.clone(), child.clone());
+        let stop2 = stop.clone();
         let thread = std::thread::Builder::new()
             .name("haptic-monitor".into())
-            .spawn(move || monitor(bin.as_deref(), &stop2, &child2, &shared.metrics.haptic))
+            .spawn(move || monitor(bin.as_deref(), &stop2, &Mutex::new(None), &shared.metrics.haptic))
             .ok();
-        Supervisor { stop, child, thread }
-    }
-
-    /// The child's pid now, if one runs.
-    pub fn pid(&self) -> Option<u32> {
-        self.child.lock().ok()?.as_ref().map(Child::id)
+        Supervisor { stop, thread }
     }
 
     /// Stops the child (SIGTERM, SIGKILL after 1 s), reaps it, and ends the monitor.
