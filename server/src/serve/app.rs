@@ -290,12 +290,10 @@ async fn guard(State(st): State<Arc<AppState>>, req: axum::extract::Request, nex
     if let Some(viewer) = st.cfg.viewer_token.as_deref()
         && req.uri().path().starts_with("/api/")
     {
-        // Decoded once, as a browser or curl encodes it (`%2B`, `+`).
-        let token = req
-            .uri()
-            .query()
-            .and_then(|q| q.split('&').find_map(|kv| kv.strip_prefix("token=")))
-            .and_then(crate::serve::validate::percent_decode)
+        // Decoded once, as the WebSocket route's query is (`%2B` is '+', '+' a space).
+        let token = Query::<WsQuery>::try_from_uri(req.uri())
+            .ok()
+            .and_then(|q| q.0.token)
             .unwrap_or_default();
         if token != viewer && token != st.cfg.operator_token {
             return (StatusCode::UNAUTHORIZED, "this API needs ?token= (viewer or operator)").into_response();

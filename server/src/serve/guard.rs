@@ -133,12 +133,12 @@ impl AsyncRead for Guarded {
         let before = buf.filled().len();
         match Pin::new(&mut self.io).poll_read(cx, buf) {
             Poll::Ready(Ok(())) => {
-                let new = buf.filled()[before..].to_vec();
+                let new = &buf.filled()[before..];
                 if !new.is_empty() && self.state == State::Idle {
                     let idle = self.idle_timeout;
                     self.deadline.as_mut().reset(Instant::now() + idle);
                 }
-                self.saw(&new);
+                self.saw(new);
                 Poll::Ready(Ok(()))
             }
             Poll::Pending if self.expired(cx) => Poll::Ready(Err(io::Error::new(

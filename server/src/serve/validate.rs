@@ -63,32 +63,6 @@ pub fn parse_command(text: &str) -> Result<ClientMessage, (Option<u32>, String)>
     serde_json::from_value(value).map_err(|e| (id, format!("not a valid command: {e}")))
 }
 
-/// Decodes a query value once (`%XX` escapes, `+` as a space); `None` when an escape is
-/// malformed or the bytes are not UTF-8.
-pub fn percent_decode(s: &str) -> Option<String> {
-    let b = s.as_bytes();
-    let mut out = Vec::with_capacity(b.len());
-    let mut i = 0;
-    while i < b.len() {
-        match b[i] {
-            b'%' => {
-                let hex = std::str::from_utf8(b.get(i + 1..i + 3)?).ok()?;
-                out.push(u8::from_str_radix(hex, 16).ok()?);
-                i += 3;
-            }
-            b'+' => {
-                out.push(b' ');
-                i += 1;
-            }
-            c => {
-                out.push(c);
-                i += 1;
-            }
-        }
-    }
-    String::from_utf8(out).ok()
-}
-
 /// Checks a push's numbers; `range_um` is the stage range.
 pub fn push_target(
     distance_um: Option<f64>,
@@ -158,19 +132,6 @@ mod tests {
         let (id, why) = parse_command(r#"{"type":"push","id":9,"particle":"x"}"#).unwrap_err();
         assert_eq!(id, Some(9));
         assert!(why.contains("not a valid command"), "{why}");
-    }
-
-    /// Issue 12.8: tokens in a query are decoded once.
-    #[test]
-    fn query_values_are_percent_decoded_once() {
-        assert_eq!(percent_decode("a%2Bb%2F1").as_deref(), Some("a+b/1"));
-        assert_eq!(percent_decode("a+b").as_deref(), Some("a b"));
-        assert_eq!(percent_decode("%252B").as_deref(), Some("%2B"));
-        assert_eq!(percent_decode("plain").as_deref(), Some("plain"));
-        assert_eq!(percent_decode("%zz"), None);
-        assert_eq!(percent_decode("%4"), None);
-        assert_eq!(percent_decode("%C3%A9").as_deref(), Some("é"));
-        assert_eq!(percent_decode("%FF"), None);
     }
 
     #[test]
