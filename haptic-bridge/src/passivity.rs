@@ -22,7 +22,7 @@
 //! motor does, and which counts the controller's own dissipation without a separate term). Why
 //! the reference: the tip-sample force has stored energy the raw observer, starting from zero,
 //! reads as activity. At the snap-in the adhesion pulls the hand down with ~1 N over ~0.7 mm of
-//! handle (0.35 mJ at the default scaling): a raw observer goes 350 µJ negative and its
+//! handle (about 0.35 mJ at the default scaling, by `½F²/K`): a raw observer goes that far negative and its
 //! controller would damp out exactly the snap-in and the pull-off the operator must feel. What
 //! the sampled loop adds — a stiff contact rendered with a hold, a stiffness above what the
 //! device renders (the bridge caps it; the reference does not), a force that lags the hand — is
