@@ -93,6 +93,7 @@ impl Scene {
             polarity: f.sensor.gain_v_per_nm.signum(),
             set_point: st.set_point_v,
             safety_limit: st.safety_limit_v,
+            full_scale: f.sensor.full_scale_v,
             lost_threshold: st.lost_threshold_mv * 1e-3,
             noise: f.sensor.noise_rms_mv * 1e-3,
             search_range: st.search_range_um * 1e-6,
@@ -265,6 +266,9 @@ impl Prepared {
             let phase = strategy.phase.name();
             let estimate = strategy.summary.estimated_distance;
             reading = afm.step(target)?;
+            if let Some(u) = afm.take_fault() {
+                strategy.unphysical(u, reading.t);
+            }
             let p = afm.particles()[index];
             trace.push(RunRow {
                 t: reading.t,

@@ -64,6 +64,8 @@ pub struct StrategyParams {
     pub set_point: f64,
     /// Safety limit (V).
     pub safety_limit: f64,
+    /// The readout's full scale (V): a reading at `±full_scale` is saturated, the force unknown.
+    pub full_scale: f64,
     /// Distance from the baseline under which a pushed particle counts as lost (V).
     pub lost_threshold: f64,
     /// Readout noise RMS (V), for margins.
@@ -154,8 +156,9 @@ pub enum Failure {
         /// Push travel (µm).
         travel_um: f64,
     },
-    /// The deflection went beyond the safety limit: emergency retract.
-    #[error("deflection {volts:.3} V beyond the safety limit {limit:.3} V in phase {phase}: emergency retract")]
+    /// The deflection went beyond the safety limit, or the reading saturated the readout on
+    /// either side (`limit` is then the rail): emergency retract.
+    #[error("deflection {volts:.3} V beyond the limit {limit:.3} V in phase {phase}: emergency retract")]
     DeflectionLimit {
         /// Reading (V).
         volts: f64,
@@ -175,6 +178,19 @@ pub enum Failure {
     Stopped {
         /// Who or what stopped it.
         reason: &'static str,
+    },
+    /// The simulated instrument left physics (a solver-health guard tripped): see
+    /// [`crate::instrument::Unphysical`]. The push model is dropped where it last was physical.
+    #[error("unphysical state in phase {phase}: {what} = {value:e} beyond its bound {limit:e}")]
+    Unphysical {
+        /// What was out of bounds.
+        what: &'static str,
+        /// Its value (SI).
+        value: f64,
+        /// The bound (SI).
+        limit: f64,
+        /// Phase it happened in.
+        phase: &'static str,
     },
     /// A phase took longer than its time-out.
     #[error("time-out: phase {phase} took more than {timeout_s} s")]
@@ -197,6 +213,7 @@ impl Failure {
             Failure::NoSeparation { .. } => "no_separation",
             Failure::Stopped { .. } => "stopped",
             Failure::Timeout { .. } => "timeout",
+            Failure::Unphysical { .. } => "unphysical",
         }
     }
 }
@@ -355,6 +372,23 @@ impl Strategy {
         self.fail(Failure::Stopped { reason }, t);
     }
 
+    /// The instrument reports an unphysical state (its guard dropped the push model): the run
+    /// fails with `unphysical` and the tip goes straight up.
+    pub fn unphysical(&mut self, u: crate::instrument::Unphysical, t: f64) {
+        let phase = self.phase.name();
+        let failure = Failure::Unphysical {
+            what: u.what,
+            value: u.value,
+            limit: u.limit,
+            phase,
+        };
+        if matches!(self.phase, Phase::Retract | Phase::Done) {
+            self.summary.failure.get_or_insert(failure);
+        } else {
+            self.fail(failure, t);
+        }
+    }
+
     /// Whether the run is over.
     pub fn done(&self) -> bool {
         self.phase == Phase::Done
@@ -371,7 +405,7 @@ impl Strategy {
         }
         // A tip that may touch the particle backs off first; an emergency goes straight up.
         let touching = matches!(self.phase, Phase::Push { .. } | Phase::Hold { .. })
-            && !matches!(failure, Failure::DeflectionLimit { .. });
+            && !matches!(failure, Failure::DeflectionLimit { .. } | Failure::Unphysical { .. });
         if touching {
             let goal = self.back_off_goal();
             self.enter(Phase::BackOff { goal }, t);
@@ -421,6 +455,20 @@ impl Strategy {
                 Failure::DeflectionLimit {
                     volts: r.volts,
                     limit: p.safety_limit,
+                    phase,
+                },
+                r.t,
+            );
+        }
+        // A saturated reading says nothing of the force but that it is beyond the readout's
+        // range, on either side (a soft lever pulled by adhesion saturates the other way):
+        // straight up, in every phase short of the retraction.
+        if r.volts.abs() >= p.full_scale && !matches!(self.phase, Phase::Retract | Phase::Done) {
+            let phase = self.phase.name();
+            self.fail(
+                Failure::DeflectionLimit {
+                    volts: r.volts,
+                    limit: p.full_scale.copysign(r.volts),
                     phase,
                 },
                 r.t,

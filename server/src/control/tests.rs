@@ -268,3 +268,122 @@ fn a_slow_push_prediction_is_bounded_in_memory_and_time() {
         }
     }
 }
+
+/// The paper's default scene with `edit` applied to its text.
+fn default_scene(edit: &[(&str, &str)]) -> Scene {
+    let mut text = crate::scene::DEFAULT_SCENE.to_string();
+    for (from, to) in edit {
+        assert!(text.contains(from), "scene text has {from:?}");
+        text = text.replacen(from, to, 1);
+    }
+    Scene::parse("paper-default (test)", &text).expect("valid scene")
+}
+
+/// Issue 13.2: with `k_c = 0.01 N/m` (valid) the particle jumped from 49.8 µm to 38 648 µm in
+/// one tick when the contact broke during the retraction, the reading went to +438 V, and the
+/// push reported `ok`. The cause: after a friction switch in the roll, the quasi-static balance
+/// had vanished and Newton's method walked the particle off to a far root (in the estimator's
+/// prediction as well, which then expected 3.7 cm of drag). Now the balance that vanished is a
+/// release where it vanished, the readout saturates at ±10 V, and such a lever, which cannot
+/// shear a 1 µm particle loose within the safety limit, fails with `deflection_limit`.
+#[test]
+fn a_soft_lever_trips_the_deflection_limit_and_never_throws_the_particle() {
+    for k in ["0.01", "0.02"] {
+        let s = default_scene(&[("stiffness_n_per_m = 8.0", &format!("stiffness_n_per_m = {k}"))]);
+        let run = push(&s, 1.0 * UM, (0.0, 0.0));
+        let moved = run.true_distance();
+        assert!(
+            moved.abs() < 0.5 * UM,
+            "k_c {k}: the particle moved {:.3} µm",
+            moved / UM
+        );
+        for row in &run.trace {
+            assert!(
+                row.volts.abs() <= 10.0,
+                "k_c {k}: reading {} V at t {}",
+                row.volts,
+                row.t
+            );
+            assert!(
+                (row.particle.0 - run.particle_before.0).abs() < 0.5 * UM,
+                "k_c {k}: {row:?}"
+            );
+        }
+        assert!(
+            matches!(run.summary.failure, Some(Failure::DeflectionLimit { .. })),
+            "k_c {k}: {:?}",
+            run.summary.failure
+        );
+        let shift = run.prediction.retract_shift;
+        assert!(shift.abs() < 1.0 * UM, "k_c {k}: predicted drag {shift:e} m");
+        assert_retracted(&run);
+    }
+}
+
+fn reading(t: f64, volts: f64, stage: [f64; 3]) -> crate::instrument::Reading {
+    crate::instrument::Reading { t, volts, stage }
+}
+
+/// A strategy for the gold-latex scene's particle, fed readings by hand.
+fn bare_strategy() -> (Strategy, [f64; 3]) {
+    let s = scene(&[]);
+    let p = s.pushed_particle();
+    let params = s.strategy_params(1e-3);
+    let prep = Prepared::new(&s, p.id, p.radius_nm * 1e-9, &params).unwrap();
+    let request = prep
+        .request(p.id, (p.x_um * UM, p.y_um * UM), (p.x_um * UM + UM, p.y_um * UM), None)
+        .unwrap();
+    let start = [p.x_um * UM - 6.0 * UM, p.y_um * UM, 3.0 * UM];
+    let strategy = Strategy::new(
+        params,
+        prep.task(&request, 1e-3),
+        prep.hxy(),
+        &reading(0.0, -0.2, start),
+    );
+    (strategy, start)
+}
+
+#[test]
+fn a_reading_on_either_rail_trips_the_deflection_limit() {
+    // The safety limit is on the push's side (−4 V); a lever pulled by adhesion saturates the
+    // other rail, +10 V: that trips too, in any phase before the retraction.
+    for (volts, expected) in [(10.0, 10.0), (-10.0, -4.0)] {
+        let (mut st, start) = bare_strategy();
+        st.tick(&reading(1e-3, -0.2, start));
+        st.tick(&reading(2e-3, volts, start));
+        match st.summary.failure {
+            Some(f @ Failure::DeflectionLimit { limit, phase, .. }) => {
+                assert_eq!(limit, expected, "the rail, or the safety limit on the push's side");
+                assert_eq!(phase, "travel");
+                assert_eq!(f.code(), "deflection_limit");
+            }
+            other => panic!("{volts} V: {other:?}"),
+        }
+        // Straight up (already at the start height here, so the retraction ends at once).
+        assert!(matches!(st.phase, Phase::Retract | Phase::Done), "{:?}", st.phase);
+    }
+    // Just inside the rail on the pulling side: nothing trips.
+    let (mut st, start) = bare_strategy();
+    st.tick(&reading(1e-3, 9.99, start));
+    assert_eq!(st.summary.failure, None);
+}
+
+#[test]
+fn an_unphysical_instrument_state_fails_the_push_and_retracts() {
+    let (mut st, start) = bare_strategy();
+    st.tick(&reading(1e-3, -0.2, start));
+    let u = crate::instrument::Unphysical {
+        what: "particle displacement in one tick (m)",
+        value: 0.0386,
+        limit: 1.03e-6,
+    };
+    st.unphysical(u, 2e-3);
+    let f = st.summary.failure.expect("a failure");
+    assert_eq!(f.code(), "unphysical");
+    assert!(f.to_string().contains("particle displacement in one tick"), "{f}");
+    assert_eq!(st.phase, Phase::Retract);
+    // Once retracting, the retraction goes on; the first failure is the one reported.
+    st.unphysical(u, 3e-3);
+    assert_eq!(st.phase, Phase::Retract);
+    assert_eq!(st.summary.failure, Some(f));
+}

@@ -82,6 +82,69 @@ pub enum AfmError {
     },
 }
 
+/// A solver-health guard that tripped: the push model's state left physics. The instrument
+/// then drops the push model and leaves the particle where it last was physical.
+///
+/// The bounds, checked every tick of a push:
+/// - every state of the model finite;
+/// - the particle's centre inside the stage's travel widened by a margin of
+///   `max(10 Rₐ, 1 µm)` on each side;
+/// - the particle's displacement in one tick at most the stage's own travel in that tick plus
+///   `Rₐ + Rₜ` (a pushed particle moves with the tip: it cannot outrun it by more than the
+///   contact's size in one tick, whatever the elastic release);
+/// - the deflection `ζ_z` finite.
+///
+/// The readout's own limit (the ADC saturating at its full scale) is the strategy's to act on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Unphysical {
+    /// What was out of bounds.
+    pub what: &'static str,
+    /// Its value (SI; NaN for a non-finite state).
+    pub value: f64,
+    /// The bound (SI).
+    pub limit: f64,
+}
+
+impl Unphysical {
+    /// Checks one tick of a push: the particle moved from `before` to `after` (m) while the
+    /// stage travelled `stage_travel` (m) in the plane; `states` is the model's state, `zeta_z`
+    /// the deflection; `radii` the particle's and the tip's; `range` the stage's travel.
+    pub fn check(
+        states: &[f64],
+        zeta_z: f64,
+        before: (f64, f64),
+        after: (f64, f64),
+        stage_travel: f64,
+        radii: (f64, f64),
+        range: f64,
+    ) -> Option<Unphysical> {
+        if let Some(v) = states.iter().chain([&zeta_z]).find(|v| !v.is_finite()) {
+            return Some(Unphysical {
+                what: "push model state",
+                value: *v,
+                limit: f64::MAX,
+            });
+        }
+        let margin = (10.0 * radii.0).max(1e-6);
+        for (what, v) in [("particle x (m)", after.0), ("particle y (m)", after.1)] {
+            if v < -margin || v > range + margin {
+                return Some(Unphysical {
+                    what,
+                    value: v,
+                    limit: if v < 0.0 { -margin } else { range + margin },
+                });
+            }
+        }
+        let moved = (after.0 - before.0).hypot(after.1 - before.1);
+        let limit = stage_travel + radii.0 + radii.1;
+        (moved > limit).then_some(Unphysical {
+            what: "particle displacement in one tick (m)",
+            value: moved,
+            limit,
+        })
+    }
+}
+
 /// A push in progress: the Eq 17 model in the frame of the push.
 #[derive(Debug, Clone)]
 struct Contact {
@@ -117,6 +180,7 @@ pub struct Afm {
     zeta_z: f64,
     contact: Option<Contact>,
     r_t: f64,
+    fault: Option<Unphysical>,
 }
 
 impl Afm {
@@ -149,6 +213,7 @@ impl Afm {
             free: TipTrack::far(1.0),
             zeta_z: 0.0,
             contact: None,
+            fault: None,
         };
         let d = afm.piezo_distance();
         afm.free = TipTrack::far(d);
@@ -179,6 +244,12 @@ impl Afm {
     /// Time now (s).
     pub fn time(&self) -> f64 {
         self.t
+    }
+
+    /// The guard that tripped since the last call, if any (see [`Unphysical`]): the caller
+    /// ends the push with it.
+    pub fn take_fault(&mut self) -> Option<Unphysical> {
+        self.fault.take()
     }
 
     /// The hidden state now.
@@ -325,9 +396,26 @@ impl Afm {
         // The particle stays where the push model leaves it (at a pull-off: where the balance
         // vanished).
         let y = c.sim.x[c.sim.model.layout.particle_y.pos];
+        let after = (c.particle0.0 + c.dir.0 * y, c.particle0.1 + c.dir.1 * y);
+        let p = self.particles[c.index];
+        let stage_travel = (target[0] - self.stage[0]).hypot(target[1] - self.stage[1]);
+        let states = &c.sim.x[..n];
+        if let Some(u) = Unphysical::check(
+            states,
+            probe.zeta_z,
+            (p.x, p.y),
+            after,
+            stage_travel,
+            (p.radius, self.r_t),
+            self.range,
+        ) {
+            // The model left physics: drop it; the particle stays where it last was physical.
+            self.fault = Some(u);
+            self.release(target, t1);
+            return Ok(());
+        }
         let p = &mut self.particles[c.index];
-        p.x = c.particle0.0 + c.dir.0 * y;
-        p.y = c.particle0.1 + c.dir.1 * y;
+        (p.x, p.y) = after;
         self.stage = target;
         self.t = t1;
         self.zeta_z = probe.zeta_z;
@@ -347,5 +435,44 @@ impl Afm {
         let d = self.piezo_distance();
         self.free = TipTrack::far(d.max(self.tip.a0 * 10.0));
         self.zeta_z = self.tip.track(&mut self.free, d).deflection;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Unphysical;
+
+    const R: (f64, f64) = (1e-6, 30e-9);
+
+    #[test]
+    fn the_guard_passes_a_push_and_trips_on_each_bound() {
+        let states = [1e-9, 2e-9, 3e-9];
+        let ok = Unphysical::check(&states, 1e-9, (50e-6, 50e-6), (50.001e-6, 50e-6), 1e-9, R, 100e-6);
+        assert_eq!(ok, None);
+        // 38.6 mm in one tick (issue 13.2).
+        let jump =
+            Unphysical::check(&states, 1e-9, (49.8e-6, 50e-6), (38.648e-3, 50e-6), 1e-9, R, 100e-6).expect("trips");
+        assert!(jump.what.starts_with("particle x"), "outside the stage first: {jump:?}");
+        // Inside the stage but faster than the tip: more than Rₐ + Rₜ beyond the stage's travel.
+        let fast = Unphysical::check(&states, 1e-9, (50e-6, 50e-6), (52e-6, 50e-6), 1e-9, R, 100e-6).expect("trips");
+        assert_eq!(fast.what, "particle displacement in one tick (m)");
+        assert!((fast.limit - (1e-9 + 1.03e-6)).abs() < 1e-15);
+        // The stage's own travel is allowed for.
+        assert_eq!(
+            Unphysical::check(&states, 1e-9, (50e-6, 50e-6), (52e-6, 50e-6), 1.5e-6, R, 100e-6),
+            None
+        );
+        // A margin of max(10 Rₐ, 1 µm) beyond the stage's range.
+        assert_eq!(
+            Unphysical::check(&states, 0.0, (0.5e-6, 1e-6), (-9e-6, 1e-6), 10e-6, R, 100e-6),
+            None
+        );
+        let out = Unphysical::check(&states, 0.0, (0.5e-6, 1e-6), (-10.5e-6, 1e-6), 11e-6, R, 100e-6).unwrap();
+        assert_eq!(out.what, "particle x (m)");
+        assert!((out.limit + 10e-6).abs() < 1e-18, "{out:?}");
+        // Non-finite states and deflection.
+        let nan = Unphysical::check(&[1.0, f64::NAN], 0.0, (0.0, 0.0), (0.0, 0.0), 0.0, R, 100e-6).unwrap();
+        assert_eq!(nan.what, "push model state");
+        assert!(Unphysical::check(&states, f64::INFINITY, (0.0, 0.0), (0.0, 0.0), 0.0, R, 100e-6).is_some());
     }
 }

@@ -2,7 +2,7 @@
 
 mod afm;
 
-pub use afm::{Afm, AfmError, Particle, RELEASE_GAP, Reading, Truth};
+pub use afm::{Afm, AfmError, Particle, RELEASE_GAP, Reading, Truth, Unphysical};
 
 use crate::scan::{Sphere, Surface};
 use crate::scene::Scene;

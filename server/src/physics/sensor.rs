@@ -27,9 +27,14 @@ impl Sensor {
     }
 }
 
+/// Full scale of the readout's analogue-to-digital converter (V): `±10 V`, the input range of
+/// the usual AFM controller ADCs.
+pub const FULL_SCALE: f64 = 10.0;
+
 /// The instrument's readout of the sensor at the 1 kHz sampling: the linear reading plus white
 /// noise (Gaussian, `noise_rms`) and a periodic perturbation `A sin(2πft)` (the hardware and
-/// environment noise of Fig 15). Seeded, so a run is reproducible.
+/// environment noise of Fig 15), digitized by an ADC that saturates at `±full_scale`:
+/// `U = clamp(U₀ + g ζ_z + A sin(2πft) + n, −U_fs, U_fs)`. Seeded, so a run is reproducible.
 #[derive(Debug, Clone)]
 pub struct Readout {
     /// The sensor.
@@ -38,6 +43,8 @@ pub struct Readout {
     pub perturbation: f64,
     /// Perturbation frequency `f` (Hz).
     pub perturbation_hz: f64,
+    /// The ADC's full scale `U_fs` (V): readings saturate at `±U_fs`.
+    pub full_scale: f64,
     rng: SmallRng,
     normal: Option<Normal<f64>>,
 }
@@ -50,11 +57,24 @@ impl Readout {
             sensor,
             perturbation,
             perturbation_hz,
+            full_scale: FULL_SCALE,
             rng: SmallRng::seed_from_u64(seed),
         }
     }
 
-    /// A noiseless, unperturbed readout (for tests and the model's own predictions).
+    /// The same readout with an ADC of full scale `±full_scale` (V).
+    pub fn with_full_scale(mut self, full_scale: f64) -> Readout {
+        self.full_scale = full_scale;
+        self
+    }
+
+    /// Whether a reading sits on one of the ADC's rails.
+    pub fn saturated(&self, volts: f64) -> bool {
+        volts.abs() >= self.full_scale
+    }
+
+    /// A noiseless, unperturbed readout with no ADC limit (for tests and the model's own
+    /// predictions).
     pub fn ideal(sensor: Sensor) -> Readout {
         Readout::new(
             Sensor {
@@ -65,6 +85,7 @@ impl Readout {
             50.0,
             0,
         )
+        .with_full_scale(f64::INFINITY)
     }
 
     /// The reading (V) of deflection `ζ_z` (m) at time `t` (s).
@@ -76,7 +97,7 @@ impl Readout {
         if let Some(n) = &self.normal {
             u += n.sample(&mut self.rng);
         }
-        u
+        u.clamp(-self.full_scale, self.full_scale)
     }
 }
 
@@ -107,6 +128,23 @@ mod tests {
         assert!((rms - 0.005).abs() < 0.00015, "rms {rms}");
         let mut ideal = Readout::ideal(s);
         assert_eq!(ideal.read(0.123, 1e-9), s.volts(1e-9));
+    }
+
+    #[test]
+    fn the_adc_saturates_at_its_full_scale() {
+        let s = Sensor {
+            baseline: -0.2,
+            gain: -0.8e9,
+            noise_rms: 0.005,
+        };
+        let mut r = Readout::new(s, 0.0, 50.0, 1).with_full_scale(10.0);
+        // −548 nm of deflection would read +438 V on a linear sensor: the ADC's rail is +10 V.
+        assert_eq!(r.read(0.0, -548e-9), 10.0);
+        assert_eq!(r.read(0.0, 548e-9), -10.0);
+        assert!(r.saturated(10.0) && r.saturated(-10.0) && !r.saturated(9.99));
+        // Inside the range the reading is linear (within the noise).
+        assert!((r.read(0.0, 1e-9) - s.volts(1e-9)).abs() < 0.03);
+        assert_eq!(Readout::new(s, 0.0, 50.0, 1).full_scale, FULL_SCALE);
     }
 
     #[test]

@@ -257,6 +257,14 @@ pub struct SensorFile {
     /// Seed of the readout noise.
     #[serde(default = "default_seed")]
     pub noise_seed: u64,
+    /// Full scale of the readout's ADC (V): readings saturate at ± this, and a saturated
+    /// reading trips the deflection limit.
+    #[serde(default = "default_full_scale")]
+    pub full_scale_v: f64,
+}
+
+fn default_full_scale() -> f64 {
+    crate::physics::sensor::FULL_SCALE
 }
 
 fn default_perturbation_hz() -> f64 {

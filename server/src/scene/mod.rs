@@ -154,6 +154,7 @@ impl Scene {
     pub fn readout(&self) -> Readout {
         let s = &self.file.sensor;
         Readout::new(self.sensor(), s.perturbation_mv * 1e-3, s.perturbation_hz, s.noise_seed)
+            .with_full_scale(s.full_scale_v)
     }
 
     /// The substrate's topography (tilt and roughness).

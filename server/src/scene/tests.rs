@@ -278,6 +278,17 @@ fn strategy_values_are_checked_against_the_sensor() {
         e.contains("strategy.safety_limit_v") && e.contains("beyond the set point -1.5 V"),
         "{e}"
     );
+    assert!(
+        with("[physics]", "[strategy]\nsafety_limit_v = -6.0\n\n[physics]").is_ok(),
+        "a −6 V limit is inside the default ±10 V"
+    );
+    let e = err("noise_rms_mv = 5.0", "noise_rms_mv = 5.0\nfull_scale_v = 3.0");
+    assert!(
+        e.contains("strategy.safety_limit_v") && e.contains("outside the readout's range (-3, 3) V"),
+        "{e}"
+    );
+    let e = err("noise_rms_mv = 5.0", "noise_rms_mv = 5.0\nfull_scale_v = 0.5");
+    assert!(e.contains("sensor.full_scale_v") && e.contains("[1, 100] V"), "{e}");
     let e = err("[physics]", "[strategy]\nstep_um = 0.0\n\n[physics]");
     assert!(e.contains("strategy.step_um") && e.contains("[0.001, 10] µm"), "{e}");
     let e = err("[physics]", "[strategy]\nsearch_rang_um = 5.0\n\n[physics]");

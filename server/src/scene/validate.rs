@@ -311,6 +311,11 @@ pub fn validate(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
         s.sensor.noise_rms_mv,
         Range::closed(0.0, 1000.0, "mV"),
     )?;
+    c(
+        "sensor.full_scale_v",
+        s.sensor.full_scale_v,
+        Range::closed(1.0, 100.0, "V"),
+    )?;
     validate_strategy(origin, s)?;
     c(
         "sensor.perturbation_mv",
@@ -526,6 +531,23 @@ fn validate_strategy(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
                 st.safety_limit_v, st.set_point_v
             ),
         });
+    }
+    // The ADC saturates at its full scale: every level the strategy reads must lie inside it.
+    let fs = s.sensor.full_scale_v;
+    for (field, v) in [
+        ("sensor.baseline_v", base),
+        ("strategy.set_point_v", st.set_point_v),
+        ("strategy.safety_limit_v", st.safety_limit_v),
+    ] {
+        if v.abs() >= fs {
+            return Err(SceneError::Inconsistent {
+                origin: origin.into(),
+                field: field.into(),
+                message: format!(
+                    "{v} V is outside the readout's range (-{fs}, {fs}) V (sensor.full_scale_v = {fs}): the ADC saturates there"
+                ),
+            });
+        }
     }
     Ok(())
 }

@@ -549,7 +549,16 @@ impl ControlLoop {
 
             // Physics.
             match self.afm.step(target) {
-                Ok(r) => reading = r,
+                Ok(r) => {
+                    reading = r;
+                    if let Some(u) = self.afm.take_fault() {
+                        // The guard dropped a push model that left physics: the push fails with
+                        // `unphysical` and retracts (logged by the run's end, off the loop).
+                        if let Some(a) = &mut self.active {
+                            a.strategy.unphysical(u, reading.t);
+                        }
+                    }
+                }
                 Err(e) => {
                     // The push model failed; the instrument dropped the contact, so the tip is
                     // free. A running push is stopped and retracts like any other failure.

@@ -77,10 +77,18 @@ pub const RELEASE_GAP: f64 = 20e-9;
 pub enum Advance {
     /// The tip still holds the particle at the end time.
     Holding,
-    /// The tip let go: its contact broke and the gap opened beyond [`RELEASE_GAP`], or, while
-    /// lifting, the quasi-static balance reached the fold of the pull-off (the JKR and meniscus
-    /// equilibrium the integrator follows vanishes, and the tip snaps free, as on the force
-    /// curve's retraction). The state is where the balance vanished.
+    /// The tip let go: its contact broke and the gap opened beyond [`RELEASE_GAP`]; or the
+    /// contact broke while the particle is quasi-static (see below); or, while lifting, the
+    /// quasi-static balance reached the fold of the pull-off (the JKR and meniscus equilibrium
+    /// the integrator follows vanishes, and the tip snaps free, as on the force curve's
+    /// retraction). The state is where the contact broke or the balance vanished.
+    ///
+    /// A quasi-static particle (no inertia) has no balance once the tip's contact breaks: its
+    /// rows then hold only the tip's long-range attraction against a rolling contact with no
+    /// rolling resistance (Eq 17 has none), so any `y = Rₐθ + const` is as good as another and
+    /// Newton's method walks the particle off to wherever the attraction has decayed (a 0.01 N/m
+    /// lever sent it 38 mm in one tick). The break is therefore the release for such a
+    /// particle: it stays where the contact broke.
     Released,
 }
 
@@ -91,6 +99,9 @@ pub struct TickReport {
     pub stats: Stats,
     /// Mode switches handled.
     pub switches: u32,
+    /// The call stopped where the tip's contact broke (only when asked to, see
+    /// [`Advance::Released`]).
+    pub broke_contact: bool,
 }
 
 /// Why a simulation stopped.
@@ -106,6 +117,15 @@ pub enum SimulationError {
         /// Switches counted.
         count: u32,
         /// Time reached.
+        t: f64,
+    },
+    /// The tip's contact broke under a quasi-static particle, or its balance vanished, in a
+    /// call that does not release (see [`Advance::Released`]): the push lost its particle.
+    #[error(
+        "the tip's contact with the particle broke (or its quasi-static balance vanished) at t = {t:e} s: the tip lost the particle"
+    )]
+    ContactLost {
+        /// Time (s).
         t: f64,
     },
     /// A run went over the work it was allowed (integrator steps or trace samples): what a
@@ -143,6 +163,11 @@ pub struct Simulation {
     scale: [f64; MAX_STATES],
     /// Most mode switches in one call before it is called chattering.
     pub max_switches: u32,
+    /// Whether `advance_to` stops at a break of the tip's contact under a quasi-static particle
+    /// instead of failing (set by [`Self::advance_or_release`]).
+    stop_at_break: bool,
+    /// The quasi-static balance vanished (see [`Self::rebalance`]): the tip lets go.
+    balance_lost: bool,
 }
 
 impl Simulation {
@@ -164,6 +189,8 @@ impl Simulation {
             shearing_time: None,
             scale,
             max_switches: 10_000,
+            stop_at_break: false,
+            balance_lost: false,
         };
         sim.enforce_mode();
         sim
@@ -227,8 +254,36 @@ impl Simulation {
         }
         // A switch may change a force discontinuously (meniscus, contact): balance the
         // quasi-static rows again and restart the step-size history.
-        self.model.equilibrate(self.t, &mut self.x[..n], &self.mode);
+        self.rebalance();
         self.integrator.reset_step();
+    }
+
+    /// Whether the particle's position is a quasi-static (algebraic) row.
+    fn quasi_static_particle(&self) -> bool {
+        self.model.layout.particle_y.vel.is_none()
+    }
+
+    /// Balances the quasi-static rows again ([`PushModel::equilibrate`]) after a switch or a new
+    /// drive, unless there is no balance to find: a quasi-static particle the tip let go of, or
+    /// a Newton solution that moved the particle by more than `Rₐ + Rₜ` (the balance vanished
+    /// at a fold, and Newton's method walked off to a far root where the attraction has
+    /// decayed: in a roll with an adhesive 0.01 N/m lever it went 3.7 cm). Then the state stays
+    /// where it was and [`Self::balance_lost`] is set.
+    fn rebalance(&mut self) {
+        if self.balance_lost || (!self.mode.tip_contact && self.quasi_static_particle()) {
+            return;
+        }
+        let n = self.model.len();
+        let before = self.x;
+        let res = self.model.equilibrate(self.t, &mut self.x[..n], &self.mode);
+        let l = &self.model.layout;
+        let reach = self.model.p.r_a + self.model.p.r_t;
+        let moved = |pos: usize| (self.x[pos] - before[pos]).abs();
+        let walked = moved(l.particle_y.pos) > reach || l.particle_z.is_some_and(|z| moved(z.pos) > reach);
+        if !res.is_finite() || walked || self.x[..n].iter().any(|v| !v.is_finite()) {
+            self.x = before;
+            self.balance_lost = true;
+        }
     }
 
     /// Typical magnitudes of the states, for the absolute tolerance: 1 nm for positions and
@@ -272,8 +327,7 @@ impl Simulation {
         }
         self.model.drive = drive;
         self.integrator.forget_derivatives();
-        let n = self.model.len();
-        self.model.equilibrate(self.t, &mut self.x[..n], &self.mode);
+        self.rebalance();
         self.enforce_mode()
     }
 
@@ -281,9 +335,13 @@ impl Simulation {
     /// particle (see [`Advance::Released`]). A failure while the drive is not lifting is an error.
     pub fn advance_or_release(&mut self, t_end: f64) -> Result<Advance, SimulationError> {
         let lifting = self.model.drive.vz > 0.0;
-        match self.advance_to(t_end) {
+        self.stop_at_break = true;
+        let result = self.advance_to(t_end);
+        self.stop_at_break = false;
+        match result {
             Err(_) if lifting => Ok(Advance::Released),
             Err(e) => Err(e),
+            Ok(report) if report.broke_contact => Ok(Advance::Released),
             Ok(_) => {
                 let n = self.model.len();
                 let gap = self.model.probe(self.t, &self.x[..n], &self.mode).gap;
@@ -311,6 +369,17 @@ impl Simulation {
         let n = self.model.len();
         let mut report = TickReport::default();
         while self.t < t_end {
+            // The tip's contact broke (at an event, or in the mode a new drive or a meniscus
+            // rupture made due at once) and the particle is quasi-static: it has no balance
+            // without the tip (see [`Advance::Released`]). Stop here: a release when asked for,
+            // else an error (a fixed-duration push lost its particle).
+            if self.balance_lost || (!self.mode.tip_contact && self.quasi_static_particle()) {
+                if self.stop_at_break {
+                    report.broke_contact = true;
+                    break;
+                }
+                return Err(SimulationError::ContactLost { t: self.t });
+            }
             let problem = InMode {
                 model: &self.model,
                 mode: self.mode,
@@ -319,6 +388,7 @@ impl Simulation {
             let (outcome, st) = self
                 .integrator
                 .advance(&problem, &problem, &mut self.t, &mut self.x[..n], t_end)?;
+
             report.stats.add(&st);
             match outcome {
                 Outcome::Reached => break,
@@ -326,6 +396,7 @@ impl Simulation {
                     let kind = SWITCHES[index.min(MAX_EVENTS - 1).min(SWITCHES.len() - 1)];
                     self.switch(kind);
                     report.switches += 1 + self.enforce_mode();
+
                     if report.switches > self.max_switches {
                         return Err(SimulationError::Chattering {
                             count: report.switches,
