@@ -21,7 +21,7 @@ pub struct LegReport {
     /// Where it was asked to go (m).
     pub to: [f64; 2],
     /// `ok`, or the failure's code (`no_substrate`, `no_contact`, `particle_lost`,
-    /// `deflection_limit`, `no_separation`, `timeout`).
+    /// `deflection_limit`, `no_separation`, `timeout`, `unphysical`, `stopped`).
     pub outcome: String,
     /// The failure in words, if any.
     pub failure: Option<String>,
@@ -33,6 +33,11 @@ pub struct LegReport {
     pub estimated_distance: f64,
     /// The distance the particle really moved along the push (m), from the simulator.
     pub true_distance: f64,
+    /// Of that, what it moved before the push phase, during the contact search (m), from the
+    /// simulator: a search that pushes the particle without the reading reaching `ζ_set`
+    /// shows here (and in `failure`).
+    #[serde(default)]
+    pub search_distance: f64,
     /// Stage travel during the push (m).
     pub push_travel: f64,
     /// Model prediction used by the estimator: settled lag `δ° = s − y` (m).

@@ -53,8 +53,40 @@ pub struct StrategyRun {
 impl StrategyRun {
     /// True displacement of the particle along the push direction (m).
     pub fn true_distance(&self) -> f64 {
+        self.along(self.particle_after)
+    }
+
+    fn along(&self, p: (f64, f64)) -> f64 {
         let d = self.task.direction;
-        (self.particle_after.0 - self.particle_before.0) * d.0 + (self.particle_after.1 - self.particle_before.1) * d.1
+        (p.0 - self.particle_before.0) * d.0 + (p.1 - self.particle_before.1) * d.1
+    }
+
+    /// True displacement along the push before the push phase began, during the approach and
+    /// the contact search (m): what the search pushed the particle without the reading
+    /// reaching `ζ_set` (a stiff lever, a fast stage, a particle with little friction).
+    pub fn search_distance(&self) -> f64 {
+        // The rows before the first of the push phase (all of them when it never began).
+        let n = self
+            .trace
+            .iter()
+            .position(|r| r.phase == "push")
+            .unwrap_or(self.trace.len());
+        self.trace[..n].last().map_or(0.0, |r| self.along(r.particle))
+    }
+
+    /// The outcome in words: the failure, and what the search pushed when it pushed more than
+    /// 10 nm without finding the contact.
+    pub fn failure_text(&self) -> Option<String> {
+        let f = self.summary.failure.as_ref()?;
+        let moved = self.search_distance();
+        Some(if self.summary.contact_step.is_none() && moved.abs() > 10e-9 {
+            format!(
+                "{f}; meanwhile the search pushed the particle {:.3} µm: the reading never reached ζ_set while pushing it",
+                moved * 1e6
+            )
+        } else {
+            f.to_string()
+        })
     }
 }
 
@@ -64,15 +96,25 @@ pub enum RunError {
     /// The instrument simulation failed.
     #[error(transparent)]
     Afm(#[from] AfmError),
-    /// The model prediction for the estimator failed.
-    #[error("model prediction for the estimator failed: {0}")]
-    Predict(#[from] SimulationError),
+    /// The model prediction for the estimator failed. (Not a `source`: the message carries
+    /// the cause once, with the scene fields that drive the model.)
+    #[error(
+        "model prediction for the estimator failed: {0} (the pushing model of Eq 17 is driven by the scene's \
+         [friction], [cantilever], [particles], [environment], [push] and [physics] fields)"
+    )]
+    Predict(SimulationError),
     /// The run exceeded its tick budget (a bug: every phase has a time-out).
     #[error("the run did not finish within {0} ticks")]
     Budget(u64),
     /// No such particle in the instrument.
     #[error("no particle with id {0}")]
     NoParticle(u32),
+}
+
+impl From<SimulationError> for RunError {
+    fn from(e: SimulationError) -> RunError {
+        RunError::Predict(e)
+    }
 }
 
 impl Scene {

@@ -387,3 +387,34 @@ fn an_unphysical_instrument_state_fails_the_push_and_retracts() {
     assert_eq!(st.phase, Phase::Retract);
     assert_eq!(st.summary.failure, Some(f));
 }
+
+/// Issue 13.3: zero friction on every pair failed at t = 0 ("step size 3.2e-21 s fell below the
+/// minimum", naming no field): with no torque on the particle its rotation is undetermined.
+/// The model leaves the rotation out; such a particle slides ahead of the tip, the reading
+/// never reaches ζ_set, and the outcome says the search pushed it.
+#[test]
+fn a_frictionless_particle_is_pushed_by_the_search_and_the_outcome_says_so() {
+    let s = default_scene(&[
+        ("particle_substrate_static = 0.3", "particle_substrate_static = 0.0"),
+        ("particle_substrate_kinetic = 0.2", "particle_substrate_kinetic = 0.0"),
+        ("tip_particle_static = 0.3", "tip_particle_static = 0.0"),
+        ("tip_particle_kinetic = 0.2", "tip_particle_kinetic = 0.0"),
+    ]);
+    let run = push(&s, 1.0 * UM, (0.0, 0.0));
+    assert!(
+        matches!(run.summary.failure, Some(Failure::NoContact { .. })),
+        "{:?}",
+        run.summary.failure
+    );
+    let moved = run.search_distance();
+    assert!(moved > 1.0 * UM, "the search pushed it {:.3} µm", moved / UM);
+    assert_eq!(moved, run.true_distance(), "all of it in the search");
+    let text = run.failure_text().unwrap();
+    assert!(text.contains("meanwhile the search pushed the particle"), "{text}");
+    assert_retracted(&run);
+    // A push that found its contact moved the particle a few nm during the search (the steps
+    // that load it up to ζ_set), under the 10 nm the outcome text reports.
+    let ok = push(&scene(&[]), 1.0 * UM, (0.0, 0.0));
+    assert!(ok.search_distance().abs() < 10e-9, "{:e}", ok.search_distance());
+    assert_eq!(ok.failure_text(), None);
+}

@@ -52,7 +52,8 @@ pub fn feasibility(mu_s: f64, r_a: f64, r_t: f64, beta: f64, k_y: f64, k_z: f64,
     Feasibility {
         lower,
         upper,
-        satisfied: mu_s >= lower && mu_s <= upper,
+        // At the upper bound itself (to rounding) Eq 15's denominator vanishes: not feasible.
+        satisfied: mu_s >= lower && mu_s < upper * (1.0 - 1e-9),
     }
 }
 

@@ -54,11 +54,14 @@ impl StaticPhase {
     /// `y* = μ_as^s A_as / (k_y cos²α + k_z sin²α − μ_as^s sin α cos α (k_y − k_z))`,
     /// with `A_as = 4πRₐγ_L` in the paper. `None` when the denominator is not positive: the
     /// friction grows at least as fast as the push and the particle cannot be pushed (Eq 16),
-    /// or when there is no adhesion (`A ≤ 0`: the static phase of Eq 14 has no extent).
+    /// or when there is no adhesion (`A ≤ 0`: the static phase of Eq 14 has no extent). At the
+    /// Eq 16 bound itself the denominator is a rounding residue (a y* of 1.5·10⁷ m): a
+    /// denominator below 10⁻⁹ of the stiffness terms `k_y cos²α + k_z sin²α` counts as zero.
     pub fn shearing_point(&self) -> Option<f64> {
         let (s, c) = self.alpha.sin_cos();
-        let den = self.k_y * c * c + self.k_z * s * s - self.mu_s * s * c * (self.k_y - self.k_z);
-        (den > 0.0 && self.adhesion > 0.0).then(|| self.mu_s * self.adhesion / den)
+        let stiffness = self.k_y * c * c + self.k_z * s * s;
+        let den = stiffness - self.mu_s * s * c * (self.k_y - self.k_z);
+        (den > 1e-9 * stiffness && self.adhesion > 0.0).then(|| self.mu_s * self.adhesion / den)
     }
 }
 
@@ -101,5 +104,19 @@ mod tests {
         assert!(p.shearing_point().is_none());
         p.mu_s = 3.7;
         assert!(p.shearing_point().is_some());
+    }
+
+    /// Issue 13.5: exactly at the Eq 16 bound the denominator was a rounding residue and y*
+    /// came out as 1.5·10⁷ m.
+    #[test]
+    fn at_the_eq16_bound_no_shearing() {
+        let mut p = paper();
+        let (s, c) = p.alpha.sin_cos();
+        p.mu_s = (p.k_y * c / s + p.k_z * s / c) / (p.k_y - p.k_z);
+        assert!(p.shearing_point().is_none(), "{:?}", p.shearing_point());
+        // Just inside, a finite (large) y*: the bound is not widened beyond rounding.
+        p.mu_s *= 1.0 - 1e-6;
+        let y = p.shearing_point().expect("inside the window");
+        assert!(y > 1e-6 && y.is_finite(), "{y}");
     }
 }

@@ -319,9 +319,11 @@ impl Scene {
         let mu = f.friction.particle_substrate_static;
         let fz = friction::feasibility(mu, r_a, r_t, beta, c.k_y(), c.k_z(), c.tilt);
         let mut w = Vec::new();
-        if mu > fz.upper {
+        // At the bound itself (to rounding) Eq 15's denominator vanishes and y* diverges.
+        if mu >= fz.upper * (1.0 - 1e-9) {
             w.push(SceneWarning(format!(
-                "friction.particle_substrate_static = {mu} is above the Eq 16 upper bound {:.4} (k_y cot α + k_z tan α)/(k_y − k_z): the particle cannot be pushed, the tip's load never exceeds the static friction",
+                "friction.particle_substrate_static = {mu} is {} the Eq 16 upper bound {:.4} (k_y cot α + k_z tan α)/(k_y − k_z): the particle cannot be pushed, the tip's load never exceeds the static friction (Eq 15's denominator is ≤ 0: no shearing point y*)",
+                if mu > fz.upper * (1.0 + 1e-9) { "above" } else { "at" },
                 fz.upper
             )));
         }

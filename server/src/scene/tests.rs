@@ -134,6 +134,25 @@ fn mu_above_eq16_is_a_warning() {
     );
 }
 
+/// Issue 13.5: with μ_as exactly at the Eq 16 bound `model` reported the push feasible and
+/// y* = 1.5·10⁷ m, with no warning.
+#[test]
+fn mu_at_the_eq16_bound_is_a_warning_and_infeasible() {
+    let s = Scene::default_scene();
+    let c = s.cantilever();
+    let upper = crate::physics::friction::mu_upper_bound(c.k_y(), c.k_z(), c.tilt);
+    let at = with(
+        "particle_substrate_static = 0.3",
+        &format!("particle_substrate_static = {upper:.17}"),
+    )
+    .unwrap();
+    let w: Vec<String> = at.warnings.iter().map(|w| w.to_string()).collect();
+    assert!(w.iter().any(|w| w.contains("is at the Eq 16 upper bound")), "{w:?}");
+    let r = crate::report::model_report(&at);
+    assert!(!r.mu_feasible, "at the bound");
+    assert!(r.y_star.is_none_or(|y| y < 1e-3), "y* {:?}", r.y_star);
+}
+
 #[test]
 fn mu_below_eq9_is_a_warning() {
     let text = DEFAULT_SCENE

@@ -78,7 +78,19 @@ fn main() -> ExitCode {
         Command::Accuracy(args) => accuracy_cmd::run(&args),
         Command::Sweep(args) => sweep_cmd::run(&args),
         Command::Scan(args) => scan_cmd::run(&args),
-        Command::Push(args) => push_cmd::run(&args),
+        Command::Push(args) => match push_cmd::run(&args) {
+            // A push that ran but failed exits 1 after its report (documented in the README).
+            Ok((text, false)) => {
+                let code = print_stdout(&text);
+                return if code == ExitCode::SUCCESS {
+                    ExitCode::from(push_cmd::EXIT_FAILED_PUSH)
+                } else {
+                    code
+                };
+            }
+            Ok((text, true)) => Ok(text),
+            Err(e) => Err(e),
+        },
         Command::Serve(args) => serve_cmd::run(&args),
     };
     match result {

@@ -143,11 +143,12 @@ fn leg_report(run: &StrategyRun, from: (f64, f64), to: (f64, f64)) -> LegReport 
         from: [from.0, from.1],
         to: [to.0, to.1],
         outcome: s.failure.as_ref().map_or("ok", Failure::code).into(),
-        failure: s.failure.as_ref().map(|f| f.to_string()),
+        failure: run.failure_text(),
         contact_step: s.contact_step,
         t_star: s.t_star,
         estimated_distance: s.estimated_distance,
         true_distance: run.true_distance(),
+        search_distance: run.search_distance(),
         push_travel: s.push_travel,
         settle_offset: run.prediction.settle_offset,
         retract_shift: run.prediction.retract_shift,
@@ -155,8 +156,12 @@ fn leg_report(run: &StrategyRun, from: (f64, f64), to: (f64, f64)) -> LegReport 
     }
 }
 
-/// Runs the command.
-pub fn run(a: &PushArgs) -> anyhow::Result<String> {
+/// Exit status of a push that ran but whose outcome is not `ok` (a failure code: the tip is
+/// retracted and the report written). Errors (bad input, a failed simulation) exit 2.
+pub const EXIT_FAILED_PUSH: u8 = 1;
+
+/// Runs the command: the report, and whether every leg ended `ok`.
+pub fn run(a: &PushArgs) -> anyhow::Result<(String, bool)> {
     let scene = crate::load_scene(a.scene.as_ref())?;
     let req = check(a, &scene)?;
     let wall = std::time::Instant::now();
@@ -228,10 +233,11 @@ pub fn run(a: &PushArgs) -> anyhow::Result<String> {
     if let Some(dir) = &a.out {
         write_outputs(dir, &scene, &runs, &report, &before_img, &after_img)?;
     }
+    let ok = report.legs.iter().all(|l| l.outcome == "ok");
     if a.json {
-        return Ok(serde_json::to_string_pretty(&report)? + "\n");
+        return Ok((serde_json::to_string_pretty(&report)? + "\n", ok));
     }
-    Ok(text(&report, &runs))
+    Ok((text(&report, &runs), ok))
 }
 
 fn text(r: &PushReport, runs: &[StrategyRun]) -> String {

@@ -237,7 +237,14 @@ impl PushModel {
     /// Assembles the model; the particle's initial indentation is its JKR equilibrium under the
     /// included long-range attraction with no tip load.
     pub fn new(p: PushParams) -> PushModel {
-        let layout = Layout::new(&p.dofs);
+        // With no friction at either contact (every μ zero) nothing exerts a torque on the
+        // particle: its rotation is undetermined (a zero row of the quasi-static Jacobian, which
+        // the integrator cannot solve) and moves nothing else. It is left out.
+        let mut dofs = p.dofs;
+        if p.frictionless() {
+            dofs.particle_rotation = crate::physics::pushing::params::Dof::Off;
+        }
+        let layout = Layout::new(&dofs);
         let a0 = p.interactions.a0;
         let lr_as: f64 = p.interactions.particle_substrate_force(a0);
         let z_fixed = -p.jkr_as.indentation_from_load(-lr_as).unwrap_or(0.0);

@@ -158,6 +158,13 @@ pub struct PushParams {
 }
 
 impl PushParams {
+    /// No friction at either contact: every `μ` zero.
+    pub fn frictionless(&self) -> bool {
+        [self.mu_as_s, self.mu_as_k, self.mu_ta_s, self.mu_ta_k]
+            .iter()
+            .all(|&m| m == 0.0)
+    }
+
     /// `R̃ = RₜRₐ/(Rₜ + Rₐ)` (m).
     pub fn r_eff(&self) -> f64 {
         self.r_t * self.r_a / (self.r_t + self.r_a)
