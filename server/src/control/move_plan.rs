@@ -40,12 +40,12 @@ impl MoveTarget {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MoveError {
     /// The local scan shows no particle near the believed position.
-    #[error("particle not found in a scan near ({:.3}, {:.3}) µm: {source}", .near.0 * 1e6, .near.1 * 1e6)]
+    #[error("particle not found in a scan near ({:.3}, {:.3}) µm: {cause}", .near.0 * 1e6, .near.1 * 1e6)]
     NotFound {
         /// Where it was looked for (m).
         near: (f64, f64),
-        /// Why.
-        source: LocateError,
+        /// Why (in the message, not a `source`: printed once).
+        cause: LocateError,
     },
     /// No path.
     #[error(transparent)]
@@ -65,8 +65,22 @@ pub struct MovePlan {
     pub legs: Vec<Leg>,
 }
 
-/// A 128-pixel local scan around `near` (m), 12 radii wide (4-20 µm), and the particle nearest
-/// to `near` in it.
+/// Pixels of the local scan.
+pub const LOCAL_PIXELS: usize = 128;
+
+/// The side of the local scan for a particle of radius `r_a` under a tip of radius `r_t` (m):
+/// 12 particle radii, at least 4 µm (room for where the particle is believed to be), but with
+/// at least four pixels across the particle's image, whose half-width is `Rₐ + Rₜ` (a pitch of
+/// at most `(Rₐ + Rₜ)/4`: the side at most `32 (Rₐ + Rₜ)` at 128 pixels), and at most 20 µm.
+/// A 14 nm gold particle under a 10 nm tip gets 544 nm (4.25 nm pixels) where the fixed 4 µm
+/// gave 31 nm pixels and lost it between them.
+pub fn local_scan_size(r_a: f64, r_t: f64) -> f64 {
+    let resolving = (r_a + r_t) / 4.0 * LOCAL_PIXELS as f64;
+    (12.0 * r_a).max(4e-6).min(resolving).min(20e-6)
+}
+
+/// A 128-pixel local scan around `near` (m), sized by [`local_scan_size`], and the particle
+/// nearest to `near` in it (within a quarter of the side).
 pub fn locate_near(
     surface: &Surface,
     tip: Tip,
@@ -74,12 +88,12 @@ pub fn locate_near(
     near: (f64, f64),
     radius_hint: f64,
 ) -> (HeightImage, Result<Located, LocateError>) {
-    let size = (12.0 * radius_hint).clamp(4e-6, 20e-6);
+    let size = local_scan_size(radius_hint, tip.radius);
     let params = ScanParams {
         centre_x: near.0,
         centre_y: near.1,
         size,
-        pixels: 128,
+        pixels: LOCAL_PIXELS,
         ..base
     };
     let img = scan(surface, tip, params);
@@ -100,7 +114,7 @@ pub fn plan_move(
     let tip = Tip::from_scene(scene);
     let base = ScanParams::from_scene(scene);
     let (local, located) = locate_near(surface, tip, base, near, radius_hint);
-    let located = located.map_err(|source| MoveError::NotFound { near, source })?;
+    let located = located.map_err(|cause| MoveError::NotFound { near, cause })?;
     let from = (located.x, located.y);
     let to = target.point(from);
     if (to.0 - from.0).hypot(to.1 - from.1) < DONE_WITHIN {

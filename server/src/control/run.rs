@@ -109,6 +109,9 @@ pub enum RunError {
     /// No such particle in the instrument.
     #[error("no particle with id {0}")]
     NoParticle(u32),
+    /// The scene's model is too stiff to push in real time (see [`Scene::pushable`]).
+    #[error("{0}")]
+    NotPushable(String),
 }
 
 impl From<SimulationError> for RunError {
@@ -118,6 +121,33 @@ impl From<SimulationError> for RunError {
 }
 
 impl Scene {
+    /// Whether the instrument can push with this scene's model: not with a dynamic particle or
+    /// cantilever, whose contact and cantilever modes (periods of nanoseconds to microseconds)
+    /// cost ~10⁴ integrator steps per 1 ms control tick (`paper-full-dynamics` ran past a
+    /// 2·10⁶-step budget in its first 0.13 s of push, after 9 minutes). Such a scene is the
+    /// reference of `simulate` and `accuracy`; pushes run the quasi-static reduction.
+    pub fn pushable(&self) -> Result<(), RunError> {
+        use crate::scene::file::DofFile;
+        let ph = &self.file.physics;
+        for (field, dof) in [
+            ("particle_y", ph.particle_y),
+            ("particle_z", ph.particle_z),
+            ("particle_rotation", ph.particle_rotation),
+            ("cantilever", ph.cantilever),
+        ] {
+            if dof == DofFile::Dynamic {
+                return Err(RunError::NotPushable(format!(
+                    "scene {:?} cannot be pushed: physics.{field} = \"dynamic\" puts modes of nanoseconds to \
+                     microseconds into the model (~10⁴ integrator steps per 1 ms control tick); pushes need \
+                     the quasi-static reduction (physics.{field} = \"quasi_static\"); `nanopush simulate` and \
+                     `nanopush accuracy` run this scene",
+                    self.file.name
+                )));
+            }
+        }
+        Ok(())
+    }
+
     /// The strategy settings of the scene (`[strategy]`, `[sensor]`, `[push]`), SI.
     pub fn strategy_params(&self, tick: f64) -> StrategyParams {
         let f = &self.file;
@@ -191,6 +221,7 @@ pub struct Prepared {
 impl Prepared {
     /// The model prediction for particle `id` of `scene` with estimated radius `radius` (m).
     pub fn new(scene: &Scene, id: u32, radius: f64, params: &StrategyParams) -> Result<Prepared, RunError> {
+        scene.pushable()?;
         let f = &scene.file;
         let part = f
             .particles

@@ -317,3 +317,25 @@ fn strategy_values_are_checked_against_the_sensor() {
     assert_eq!(s.file.strategy.step_um, 0.1);
     assert_eq!(s.file.strategy.set_point_v, -1.5);
 }
+
+/// Issue 13.6: a particle a scan cannot find is refused at load, naming the field and the
+/// threshold.
+#[test]
+fn a_particle_below_the_scan_noise_is_refused() {
+    let mut f = Scene::default_scene().file.clone();
+    // 1 nm of scan noise: the threshold is 6σ = 6 nm, so a particle must be 12 nm high.
+    f.scan.noise_rms_nm = 1.0;
+    f.particles[0].radius_nm = 5.5;
+    let e = Scene::from_file("test", f.clone()).expect_err("refused").to_string();
+    assert!(
+        e.contains("particles[0].radius_nm") && e.contains("cannot resolve") && e.contains("6.000 nm"),
+        "{e}"
+    );
+    f.particles[0].radius_nm = 6.0;
+    let ok = Scene::from_file("test", f);
+    assert!(
+        !ok.as_ref().is_err_and(|e| e.to_string().contains("cannot resolve")),
+        "{:?}",
+        ok.err()
+    );
+}

@@ -423,6 +423,26 @@ fn validate_scan(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
         sc.tip_half_angle_deg,
         Range::closed(0.0, 60.0, "degrees"),
     )?;
+    // Every particle must stand out of a scan: the localization takes a pixel as a particle
+    // when it is more than max(6σ, 0.5 nm) above the levelled substrate, σ the image's noise
+    // (scan noise and roughness); a particle whose height 2Rₐ is not twice that cannot be found
+    // before a push. (The local scan's pixels follow the particle and tip radii, see
+    // `control::move_plan::local_scan_size`, so the pitch never hides it.)
+    let sigma = sc.noise_rms_nm.hypot(s.substrate.roughness_rms_nm);
+    let threshold = (6.0 * sigma).max(0.5);
+    for (k, p) in s.particles.iter().enumerate() {
+        if 2.0 * p.radius_nm < 2.0 * threshold {
+            return Err(SceneError::Inconsistent {
+                origin: origin.into(),
+                field: format!("particles[{k}].radius_nm"),
+                message: format!(
+                    "{} nm: a scan cannot resolve it: its height 2Rₐ = {} nm is less than twice the localization threshold max(6σ, 0.5 nm) = {threshold:.3} nm, with σ = √(scan.noise_rms_nm² + substrate.roughness_rms_nm²) = {sigma:.3} nm; lower the noise or the roughness, or use a larger particle",
+                    p.radius_nm,
+                    2.0 * p.radius_nm
+                ),
+            });
+        }
+    }
     Ok(())
 }
 
