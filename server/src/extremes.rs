@@ -46,6 +46,8 @@ pub struct CaseResult {
     pub case: Case,
     /// Every state finite and displacements bounded at the end.
     pub finite_and_bounded: bool,
+    /// The scene was refused at load (the reason in `outcome`): nothing to integrate.
+    pub refused: bool,
     /// The result (`slip after 3.2 ms`, `rolls`, `sticks`) or the diagnosis.
     pub outcome: String,
     /// Diagnoses from the feasibility conditions (Eq 8, 9, 16), possibly several.
@@ -157,6 +159,7 @@ pub fn run_case(scene: &Scene, c: &Case, rtol: f64) -> CaseResult {
     let mut r = CaseResult {
         case: *c,
         finite_and_bounded: false,
+        refused: false,
         outcome: String::new(),
         diagnoses: Vec::new(),
         steps: 0,
@@ -167,6 +170,7 @@ pub fn run_case(scene: &Scene, c: &Case, rtol: f64) -> CaseResult {
     let s = match scene_for(scene, c) {
         Ok(s) => s,
         Err(e) => {
+            r.refused = true;
             r.outcome = format!("rejected scene: {e}");
             r.wall_time = start.elapsed().as_secs_f64();
             return r;
@@ -254,6 +258,10 @@ mod tests {
         let mut failures = Vec::new();
         for c in &cases {
             let r = run_case(&scene, c, 1e-5);
+            if r.refused {
+                failures.push(format!("{c:?}: {}", r.outcome));
+                continue;
+            }
             if !r.finite_and_bounded {
                 failures.push(format!("{c:?}: {} {:?}", r.outcome, r.diagnoses));
             }

@@ -26,6 +26,7 @@
 #![deny(missing_docs)]
 
 pub mod accuracy;
+pub mod campaign;
 pub mod control;
 pub mod extremes;
 pub mod files;

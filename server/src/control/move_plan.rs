@@ -68,27 +68,30 @@ pub struct MovePlan {
 /// Pixels of the local scan.
 pub const LOCAL_PIXELS: usize = 128;
 
-/// The side of the local scan for a particle of radius `r_a` under a tip of radius `r_t` (m):
-/// 12 particle radii, at least 4 µm (room for where the particle is believed to be), but with
-/// at least four pixels across the particle's image, whose half-width is `Rₐ + Rₜ` (a pitch of
-/// at most `(Rₐ + Rₜ)/4`: the side at most `32 (Rₐ + Rₜ)` at 128 pixels), and at most 20 µm.
+/// The side of the local scan for a particle of radius `r_a` under a tip of radius `r_t` (m),
+/// on a stage of travel `range`: 12 particle radii (substrate all around the particle, for the
+/// levelling), at least 4 µm (room for where the particle is believed to be), but with at least
+/// four pixels across the particle's image, whose half-width is `Rₐ + Rₜ` (a pitch of at most
+/// `(Rₐ + Rₜ)/4`: the side at most `32 (Rₐ + Rₜ)` at 128 pixels), and at most the stage's travel.
 /// A 14 nm gold particle under a 10 nm tip gets 544 nm (4.25 nm pixels) where the fixed 4 µm
-/// gave 31 nm pixels and lost it between them.
-pub fn local_scan_size(r_a: f64, r_t: f64) -> f64 {
+/// gave 31 nm pixels and lost it between them; a 10 µm particle gets 100 µm where a 20 µm cap
+/// filled the image with the particle and left no substrate to level on.
+pub fn local_scan_size(r_a: f64, r_t: f64, range: f64) -> f64 {
     let resolving = (r_a + r_t) / 4.0 * LOCAL_PIXELS as f64;
-    (12.0 * r_a).max(4e-6).min(resolving).min(20e-6)
+    (12.0 * r_a).max(4e-6).min(resolving).min(range)
 }
 
-/// A 128-pixel local scan around `near` (m), sized by [`local_scan_size`], and the particle
-/// nearest to `near` in it (within a quarter of the side).
+/// A 128-pixel local scan around `near` (m), sized by [`local_scan_size`] on a stage of travel
+/// `range` (m), and the particle nearest to `near` in it (within a quarter of the side).
 pub fn locate_near(
     surface: &Surface,
     tip: Tip,
     base: ScanParams,
     near: (f64, f64),
     radius_hint: f64,
+    range: f64,
 ) -> (HeightImage, Result<Located, LocateError>) {
-    let size = local_scan_size(radius_hint, tip.radius);
+    let size = local_scan_size(radius_hint, tip.radius, range);
     let params = ScanParams {
         centre_x: near.0,
         centre_y: near.1,
@@ -113,7 +116,8 @@ pub fn plan_move(
 ) -> Result<MovePlan, MoveError> {
     let tip = Tip::from_scene(scene);
     let base = ScanParams::from_scene(scene);
-    let (local, located) = locate_near(surface, tip, base, near, radius_hint);
+    let range = scene.file.stage.range_um * 1e-6;
+    let (local, located) = locate_near(surface, tip, base, near, radius_hint, range);
     let located = located.map_err(|cause| MoveError::NotFound { near, cause })?;
     let from = (located.x, located.y);
     let to = target.point(from);

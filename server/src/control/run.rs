@@ -109,7 +109,8 @@ pub enum RunError {
     /// No such particle in the instrument.
     #[error("no particle with id {0}")]
     NoParticle(u32),
-    /// The scene's model is too stiff to push in real time (see [`Scene::pushable`]).
+    /// The scene cannot be pushed: its model is too stiff for real time, or the strategy's
+    /// geometry does not fit its particles (see [`Scene::pushable`]).
     #[error("{0}")]
     NotPushable(String),
 }
@@ -126,8 +127,31 @@ impl Scene {
     /// cost ~10⁴ integrator steps per 1 ms control tick (`paper-full-dynamics` ran past a
     /// 2·10⁶-step budget in its first 0.13 s of push, after 9 minutes). Such a scene is the
     /// reference of `simulate` and `accuracy`; pushes run the quasi-static reduction.
+    ///
+    /// And the strategy's geometry (Sec 2.1): travel at the start height must clear every
+    /// particle (the tip would run into it), and the parking height that gives the contact
+    /// angle β, `h = Rₐ − Rₜ + (Rₐ + Rₜ) sin β`, must put the tip's apex above the substrate.
     pub fn pushable(&self) -> Result<(), RunError> {
         use crate::scene::file::DofFile;
+        let s = &self.file;
+        let tallest = s.particles.iter().map(|p| 2.0 * p.radius_nm * 1e-3).fold(0.0, f64::max);
+        if s.strategy.start_height_um <= tallest {
+            return Err(RunError::NotPushable(format!(
+                "strategy.start_height_um = {} µm does not clear the tallest particle ({tallest} µm high): moves at the start height would run into it; allowed: above {tallest} µm",
+                s.strategy.start_height_um
+            )));
+        }
+        let (sin_b, r_t) = (s.push.contact_angle_deg.to_radians().sin(), s.tip.radius_nm);
+        for (k, p) in s.particles.iter().enumerate() {
+            let r_a = p.radius_nm;
+            if r_a - r_t + (r_a + r_t) * sin_b <= 0.0 {
+                let min = ((r_t - r_a) / (r_t + r_a)).asin().to_degrees();
+                return Err(RunError::NotPushable(format!(
+                    "push.contact_angle_deg = {}°: the tip (radius {r_t} nm) would have to reach below the substrate to meet particles[{k}] (radius {r_a} nm) at that angle (parking height Rₐ − Rₜ + (Rₐ + Rₜ) sin β ≤ 0); allowed: above {min:.2}° for this particle, or a sharper tip",
+                    s.push.contact_angle_deg
+                )));
+            }
+        }
         let ph = &self.file.physics;
         for (field, dof) in [
             ("particle_y", ph.particle_y),

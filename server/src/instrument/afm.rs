@@ -89,9 +89,11 @@ pub enum AfmError {
 /// - every state of the model finite;
 /// - the particle's centre inside the stage's travel widened by a margin of
 ///   `max(10 Rₐ, 1 µm)` on each side;
-/// - the particle's displacement in one tick at most the stage's own travel in that tick plus
+/// - the particle's displacement in one tick at most the stage's travel in that tick plus
 ///   `Rₐ + Rₜ` (a pushed particle moves with the tip: it cannot outrun it by more than the
-///   contact's size in one tick, whatever the elastic release);
+///   contact's size in one tick, whatever the elastic release); the stage's travel is the
+///   commanded one or, when larger, three ticks at the scene's fastest stage speed (a dynamic
+///   stage, Eq 13, lags its command and catches up after it stops);
 /// - the deflection `ζ_z` finite.
 ///
 /// The readout's own limit (the ADC saturating at its full scale) is the strategy's to act on.
@@ -181,6 +183,7 @@ pub struct Afm {
     contact: Option<Contact>,
     r_t: f64,
     fault: Option<Unphysical>,
+    speed_bound: f64,
 }
 
 impl Afm {
@@ -214,6 +217,7 @@ impl Afm {
             zeta_z: 0.0,
             contact: None,
             fault: None,
+            speed_bound: 0.0,
         };
         let d = afm.piezo_distance();
         afm.free = TipTrack::far(d);
@@ -244,6 +248,12 @@ impl Afm {
     /// Time now (s).
     pub fn time(&self) -> f64 {
         self.t
+    }
+
+    /// The fastest the stage is ever commanded to move (m/s), for the guard's displacement bound
+    /// (see [`Unphysical`]).
+    pub fn set_speed_bound(&mut self, speed: f64) {
+        self.speed_bound = speed;
     }
 
     /// The guard that tripped since the last call, if any (see [`Unphysical`]): the caller
@@ -398,7 +408,9 @@ impl Afm {
         let y = c.sim.x[c.sim.model.layout.particle_y.pos];
         let after = (c.particle0.0 + c.dir.0 * y, c.particle0.1 + c.dir.1 * y);
         let p = self.particles[c.index];
-        let stage_travel = (target[0] - self.stage[0]).hypot(target[1] - self.stage[1]);
+        let stage_travel = (target[0] - self.stage[0])
+            .hypot(target[1] - self.stage[1])
+            .max(3.0 * self.speed_bound * self.tick);
         let states = &c.sim.x[..n];
         if let Some(u) = Unphysical::check(
             states,

@@ -46,7 +46,7 @@ impl Afm {
                 )
             })
             .collect();
-        Afm::new(
+        let mut afm = Afm::new(
             scene.tip_sample(),
             scene.readout(),
             topography,
@@ -54,6 +54,14 @@ impl Afm {
             [x, y, z],
             f.stage.range_um * 1e-6,
             tick,
-        )
+        );
+        let st = &f.strategy;
+        let fastest = f
+            .push
+            .speed_um_per_s
+            .max(st.travel_speed_um_per_s)
+            .max(st.approach_speed_um_per_s);
+        afm.set_speed_bound(fastest * 1e-6);
+        afm
     }
 }

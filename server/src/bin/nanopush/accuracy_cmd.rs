@@ -37,7 +37,8 @@ pub struct AccuracyArgs {
     /// Finest tolerance of the sweep (1e-2 down to this), in [1e-10, 1e-2].
     #[arg(long, default_value_t = 1e-10)]
     min_rtol: f64,
-    /// Run the stability grid over extreme parameters instead (see `extremes` in the library).
+    /// Run the stability grid over extreme parameters instead (see `extremes` in the library),
+    /// then the campaign of whole pushes (`campaign` in the library).
     #[arg(long)]
     extremes: bool,
     /// With --extremes: the reduced grid (sweep end points and two corners).
@@ -78,7 +79,10 @@ fn extremes(a: &AccuracyArgs) -> anyhow::Result<String> {
         )?;
     }
     crate::units::write_file(&a.out.join("extremes.csv"), &csv)?;
-    let bad = results.iter().filter(|r| !r.finite_and_bounded).count();
+    let bad = results.iter().filter(|r| !r.finite_and_bounded && !r.refused).count();
+    let refused = results.iter().filter(|r| r.refused).count();
+    // Then the whole pushes (A → E) over the validated ranges.
+    let (campaign_text, campaign_json) = crate::campaign_cmd::run(&scene, a.reduced, &a.out)?;
     let mut out = String::new();
     if a.json {
         let rows: Vec<serde_json::Value> = results
@@ -96,15 +100,16 @@ fn extremes(a: &AccuracyArgs) -> anyhow::Result<String> {
         writeln!(
             out,
             "{}",
-            serde_json::json!({"schema": "nanopush.extremes", "version": nanopush_proto::VERSION, "scene": scene.file.name, "cases": rows.len(), "not_finite_or_unbounded": bad, "wall_time": total, "results": rows})
+            serde_json::json!({"schema": "nanopush.extremes", "version": nanopush_proto::VERSION, "scene": scene.file.name, "cases": rows.len(), "not_finite_or_unbounded": bad, "refused": refused, "wall_time": total, "results": rows, "campaign": campaign_json})
         )?;
         return Ok(out);
     }
     writeln!(
         out,
-        "Stability grid around scene \"{}\": {} cases, {} not finite or unbounded, {:.2} s",
+        "Stability grid around scene \"{}\": {} cases, {} refused by the scene's rules, {} not finite or unbounded, {:.2} s",
         scene.file.name,
         results.len(),
+        refused,
         bad,
         total
     )?;
@@ -149,11 +154,12 @@ fn extremes(a: &AccuracyArgs) -> anyhow::Result<String> {
     }
     if bad > 0 {
         writeln!(out, "Not finite or unbounded:")?;
-        for r in results.iter().filter(|r| !r.finite_and_bounded) {
+        for r in results.iter().filter(|r| !r.finite_and_bounded && !r.refused) {
             writeln!(out, "{}", row(r))?;
         }
     }
     writeln!(out, "Wrote {}/extremes.csv.", a.out.display())?;
+    out.push_str(&campaign_text);
     Ok(out)
 }
 

@@ -1,6 +1,7 @@
 //! `nanopush`: the command line of the nanopush model and (later) server.
 
 mod accuracy_cmd;
+mod campaign_cmd;
 mod model_cmd;
 mod plot;
 mod push_cmd;

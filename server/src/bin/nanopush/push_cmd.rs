@@ -203,6 +203,7 @@ pub fn run(a: &PushArgs) -> anyhow::Result<(String, bool)> {
         ScanParams::from_scene(&scene),
         estimate,
         radius,
+        f.stage.range_um * UM,
     );
     let after = after.ok();
     let truth = afm

@@ -1,0 +1,376 @@
+//! The stability campaign on whole pushes: every valid scene must push whole, physically, in
+//! bounded memory. [`crate::extremes`] pushes 20 nm of the bare model; this pushes the
+//! instrument A → E (travel, park, contact search, push, hold, back-off, retract) at least 1 µm,
+//! exactly as `nanopush push` does (a local scan finds the particle, the strategy pushes it),
+//! over the validated range of every parameter, one at a time and at the corners.
+//!
+//! Each case ends with an outcome: `ok`, a failure code of the strategy (`no_contact`,
+//! `deflection_limit`, `timeout`, `unphysical`, ...) or a refusal before the push (an invalid
+//! scene, a particle the scan cannot find, a scene too stiff to push, a prediction over its
+//! budget), each with its reason. The campaign's checks, per case: no panic; every reading and
+//! position finite; the readings inside the readout's range; the particle inside the stage; an
+//! `ok` never with the particle further than its radius plus 10 % of the push from the target;
+//! the trace's memory and the wall time.
+
+use std::time::Instant;
+
+use crate::control::move_plan::{MoveTarget, plan_move};
+use crate::control::{Prepared, RunRow};
+use crate::instrument::Afm;
+use crate::physics::friction;
+use crate::scan::Surface;
+use crate::scene::Scene;
+
+const UM: f64 = 1e-6;
+
+/// One scene edit of the campaign: a scene field and its value (file units).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Edit {
+    /// `particles[pushed].radius_nm`.
+    RadiusNm(f64),
+    /// `tip.radius_nm`.
+    TipRadiusNm(f64),
+    /// `cantilever.stiffness_n_per_m`.
+    StiffnessNPerM(f64),
+    /// `environment.relative_humidity`.
+    Humidity(f64),
+    /// `friction.particle_substrate_static` (the kinetic one at 2/3 of it).
+    MuAs(f64),
+    /// `friction.tip_particle_static` (the kinetic one at 2/3 of it).
+    MuTa(f64),
+    /// `cantilever.tilt_deg`.
+    TiltDeg(f64),
+    /// `push.contact_angle_deg`.
+    ContactAngleDeg(f64),
+    /// `push.speed_um_per_s`.
+    SpeedUmPerS(f64),
+    /// `friction.particle_substrate_static` at a fraction of the Eq 16 upper bound (1 = on it).
+    MuAsAtEq16(f64),
+    /// `friction.particle_substrate_static` at a multiple of the Eq 9 lower bound (1 = on it).
+    MuAsAtEq9(f64),
+}
+
+impl Edit {
+    /// The field and value, for reports.
+    pub fn describe(&self) -> String {
+        match *self {
+            Edit::RadiusNm(v) => format!("radius_nm={v}"),
+            Edit::TipRadiusNm(v) => format!("tip_radius_nm={v}"),
+            Edit::StiffnessNPerM(v) => format!("stiffness_n_per_m={v}"),
+            Edit::Humidity(v) => format!("relative_humidity={v}"),
+            Edit::MuAs(v) => format!("mu_as={v}"),
+            Edit::MuTa(v) => format!("mu_ta={v}"),
+            Edit::TiltDeg(v) => format!("tilt_deg={v}"),
+            Edit::ContactAngleDeg(v) => format!("contact_angle_deg={v}"),
+            Edit::SpeedUmPerS(v) => format!("speed_um_per_s={v}"),
+            Edit::MuAsAtEq16(f) => format!("mu_as={f}×Eq16"),
+            Edit::MuAsAtEq9(f) => format!("mu_as={f}×Eq9"),
+        }
+    }
+
+    fn apply(&self, scene: &Scene, f: &mut crate::scene::file::SceneFile) {
+        let id = f.push.particle_id;
+        let fr = &mut f.friction;
+        match *self {
+            Edit::RadiusNm(v) => {
+                for p in f.particles.iter_mut().filter(|p| p.id == id) {
+                    p.radius_nm = v;
+                }
+                // Travel at the start height must clear the particle (a push rule).
+                f.strategy.start_height_um = f.strategy.start_height_um.max(2.0 * v * 1e-3 + 1.0);
+            }
+            Edit::TipRadiusNm(v) => f.tip.radius_nm = v,
+            Edit::StiffnessNPerM(v) => f.cantilever.stiffness_n_per_m = v,
+            Edit::Humidity(v) => f.environment.relative_humidity = v,
+            Edit::MuAs(v) => {
+                fr.particle_substrate_static = v;
+                fr.particle_substrate_kinetic = v * 2.0 / 3.0;
+            }
+            Edit::MuTa(v) => {
+                fr.tip_particle_static = v;
+                fr.tip_particle_kinetic = v * 2.0 / 3.0;
+            }
+            Edit::TiltDeg(v) => f.cantilever.tilt_deg = v,
+            Edit::ContactAngleDeg(v) => f.push.contact_angle_deg = v,
+            Edit::SpeedUmPerS(v) => f.push.speed_um_per_s = v,
+            Edit::MuAsAtEq16(k) | Edit::MuAsAtEq9(k) => {
+                let c = scene.cantilever();
+                let p = scene.pushed_particle();
+                let (r_a, r_t) = (p.radius_nm * 1e-9, f.tip.radius_nm * 1e-9);
+                let beta = f.push.contact_angle_deg.to_radians();
+                let fz = friction::feasibility(0.0, r_a, r_t, beta, c.k_y(), c.k_z(), c.tilt);
+                let bound = if matches!(self, Edit::MuAsAtEq16(_)) {
+                    fz.upper
+                } else {
+                    fz.lower
+                };
+                fr.particle_substrate_static = k * bound;
+                fr.particle_substrate_kinetic = k * bound * 2.0 / 3.0;
+            }
+        }
+    }
+}
+
+/// A case: the edits applied to the base scene.
+pub type Case = Vec<Edit>;
+
+/// The campaign's cases around a scene. One at a time over each validated range (its ends
+/// included), every friction zero, the Eq 9 and Eq 16 bounds, and (full campaign) the corners of
+/// radius (50 nm, 5 µm) × stiffness × humidity × speed. The reduced campaign (a unit test) keeps the cases a
+/// debug build runs in seconds.
+pub fn cases(reduced: bool) -> Vec<Case> {
+    use Edit::*;
+    let mut v: Vec<Case> = Vec::new();
+    let one = |v: &mut Vec<Case>, e: &[Edit]| v.extend(e.iter().map(|&e| vec![e]));
+    if reduced {
+        v.push(vec![RadiusNm(7.0), TipRadiusNm(5.0)]);
+        one(
+            &mut v,
+            &[
+                RadiusNm(5000.0),
+                StiffnessNPerM(0.01),
+                StiffnessNPerM(500.0),
+                Humidity(0.0),
+                Humidity(0.99),
+                TiltDeg(0.0),
+                TiltDeg(75.0),
+                ContactAngleDeg(1.0),
+                ContactAngleDeg(89.0),
+                SpeedUmPerS(1000.0),
+                MuAsAtEq16(1.0),
+            ],
+        );
+        v.push(vec![MuAs(0.0), MuTa(0.0)]);
+        return v;
+    }
+    // Small particles under a tip sharp enough to meet them at β = 30° (a 30 nm tip cannot:
+    // refused, as the 7 nm case shows).
+    one(&mut v, &[7.0, 50.0, 250.0, 1000.0, 2500.0, 10000.0].map(RadiusNm));
+    v.push(vec![RadiusNm(2.0), TipRadiusNm(1.0)]);
+    v.push(vec![RadiusNm(7.0), TipRadiusNm(5.0)]);
+    one(&mut v, &[1.0, 100.0, 1000.0].map(TipRadiusNm));
+    one(&mut v, &[0.01, 0.1, 1.0, 8.0, 50.0, 100.0, 500.0].map(StiffnessNPerM));
+    one(&mut v, &[0.0, 0.2, 0.5, 0.73, 0.9, 0.99, 0.999].map(Humidity));
+    one(&mut v, &[0.0, 0.1, 0.3, 0.65, 1.0, 2.0].map(MuAs));
+    one(&mut v, &[0.0, 0.3, 1.0, 2.0].map(MuTa));
+    one(&mut v, &[0.0, 15.0, 45.0, 75.0].map(TiltDeg));
+    one(&mut v, &[1.0, 10.0, 30.0, 60.0, 89.0].map(ContactAngleDeg));
+    one(&mut v, &[1e-6, 1e-3, 0.1, 1.0, 10.0, 100.0, 1000.0].map(SpeedUmPerS));
+    one(&mut v, &[0.999, 1.0, 1.001].map(MuAsAtEq16));
+    one(&mut v, &[0.999, 1.0, 1.001].map(MuAsAtEq9));
+    v.push(vec![MuAs(0.0), MuTa(0.0)]);
+    for bits in 0..16u32 {
+        let e = |i: u32, lo: f64, hi: f64| if bits & (1 << i) != 0 { hi } else { lo };
+        v.push(vec![
+            RadiusNm(e(0, 50.0, 5000.0)),
+            StiffnessNPerM(e(1, 0.01, 500.0)),
+            Humidity(e(2, 0.0, 0.99)),
+            SpeedUmPerS(e(3, 1e-3, 1000.0)),
+        ]);
+    }
+    v
+}
+
+/// What one whole push did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PushCase {
+    /// The edits, described.
+    pub case: String,
+    /// `ok`, a failure code, or `refused` (the scene, the scan or the preparation).
+    pub outcome: String,
+    /// The reason (empty for `ok`).
+    pub reason: String,
+    /// Push asked for (m).
+    pub distance: f64,
+    /// The particle's true displacement along the push (m).
+    pub moved: f64,
+    /// Largest |reading| (V).
+    pub max_volts: f64,
+    /// Checks that failed (empty when the case is sound).
+    pub violations: Vec<String>,
+    /// The tip ended retracted.
+    pub retracted: bool,
+    /// Ticks run.
+    pub ticks: usize,
+    /// Memory of the trace (bytes).
+    pub trace_bytes: usize,
+    /// Wall time (s).
+    pub wall_time: f64,
+}
+
+/// Pushes a case's scene whole: the particle found by a local scan and pushed `max(1 µm, 2Rₐ)`
+/// along +x from 2 µm plus the approach distance behind it, as `nanopush push` does.
+pub fn run_case(base: &Scene, case: &[Edit]) -> PushCase {
+    let start = Instant::now();
+    let describe = case.iter().map(Edit::describe).collect::<Vec<_>>().join(" ");
+    let mut out = PushCase {
+        case: describe,
+        outcome: "refused".into(),
+        reason: String::new(),
+        distance: 0.0,
+        moved: 0.0,
+        max_volts: 0.0,
+        violations: Vec::new(),
+        retracted: false,
+        ticks: 0,
+        trace_bytes: 0,
+        wall_time: 0.0,
+    };
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| push_whole(base, case, &mut out)));
+    if let Err(p) = result {
+        let msg = p
+            .downcast_ref::<String>()
+            .cloned()
+            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+            .unwrap_or_default();
+        out.violations.push(format!("panic: {msg}"));
+    }
+    out.wall_time = start.elapsed().as_secs_f64();
+    out
+}
+
+fn push_whole(base: &Scene, case: &[Edit], out: &mut PushCase) {
+    let mut f = base.file.clone();
+    for e in case {
+        e.apply(base, &mut f);
+    }
+    let scene = match Scene::from_file("<campaign case>", f) {
+        Ok(s) => s,
+        Err(e) => {
+            out.reason = format!("scene: {e}");
+            return;
+        }
+    };
+    let tick = 1e-3;
+    let p = scene.pushed_particle();
+    let (x, y, r) = (p.x_um * UM, p.y_um * UM, p.radius_nm * 1e-9);
+    let distance = (2.0 * r).max(1.0 * UM);
+    out.distance = distance;
+    let target = MoveTarget::Distance {
+        distance,
+        direction: (1.0, 0.0),
+    };
+    let plan = match plan_move(&scene, &Surface::from_scene(&scene), (x, y), r, target) {
+        Ok(plan) => plan,
+        Err(e) => {
+            out.reason = format!("plan: {e}");
+            return;
+        }
+    };
+    let params = scene.strategy_params(tick);
+    let found = plan.located;
+    let prepared = match Prepared::new(&scene, p.id, found.radius, &params) {
+        Ok(prepared) => prepared,
+        Err(e) => {
+            out.reason = format!("prepare: {e}");
+            return;
+        }
+    };
+    let Some(request) = prepared.request(p.id, (found.x, found.y), plan.target, None) else {
+        out.reason = "already at the target".into();
+        return;
+    };
+    let start_x = (x - (scene.file.strategy.approach_distance_um + 2.0) * UM - r).max(0.0);
+    let mut afm = Afm::from_scene(&scene, start_x, y, tick);
+    let run = match prepared.run(&mut afm, &request, params) {
+        Ok(run) => run,
+        Err(e) => {
+            out.outcome = "error".into();
+            out.reason = e.to_string();
+            out.violations.push(format!("the run failed: {e}"));
+            return;
+        }
+    };
+    out.outcome = run.summary.failure.as_ref().map_or("ok", |f| f.code()).into();
+    out.reason = run.failure_text().unwrap_or_default();
+    out.moved = run.true_distance();
+    out.ticks = run.trace.len();
+    out.trace_bytes = run.trace.capacity() * std::mem::size_of::<RunRow>();
+    let range = scene.file.stage.range_um * UM;
+    let full_scale = scene.file.sensor.full_scale_v;
+    for row in &run.trace {
+        out.max_volts = out.max_volts.max(row.volts.abs());
+        let finite = row.volts.is_finite()
+            && row.stage.iter().all(|v| v.is_finite())
+            && row.particle.0.is_finite()
+            && row.particle.1.is_finite();
+        if !finite {
+            out.violations
+                .push(format!("non-finite row at t = {} s: {row:?}", row.t));
+            break;
+        }
+        if row.volts.abs() > full_scale {
+            out.violations
+                .push(format!("reading {} V beyond the ±{full_scale} V readout", row.volts));
+            break;
+        }
+        let inside = |v: f64| (-r..=range + r).contains(&v);
+        if !(inside(row.particle.0) && inside(row.particle.1)) {
+            out.violations.push(format!(
+                "particle outside the stage at t = {} s: {:?}",
+                row.t, row.particle
+            ));
+            break;
+        }
+    }
+    if out.outcome == "ok" && (out.moved - distance).abs() > r + 0.1 * distance {
+        out.violations.push(format!(
+            "ok, but the particle moved {:.3} µm for {:.3} µm asked",
+            out.moved / UM,
+            distance / UM
+        ));
+    }
+    // A failed push may leave a soft lever stuck to the surface by adhesion it cannot pull
+    // free within the retraction (a failure, said in the reason); an `ok` never.
+    out.retracted = run.retracted;
+    if !run.retracted {
+        if out.outcome == "ok" {
+            out.violations.push("ok, but the tip did not end retracted".into());
+        } else {
+            out.reason.push_str("; the tip did not come free of the surface");
+        }
+    }
+}
+
+/// The peak resident memory of this process so far (bytes), where the OS says (Linux).
+pub fn peak_rss_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The reduced campaign (each validated range's ends, every friction zero, the Eq 16
+    /// bound): every case a plausible outcome or a refusal with its reason, and sound.
+    #[test]
+    fn reduced_campaign_pushes_whole_and_physically() {
+        let scene = Scene::default_scene();
+        let mut bad = Vec::new();
+        for case in cases(true) {
+            let r = run_case(&scene, &case);
+            assert!(!r.outcome.is_empty());
+            if r.outcome != "ok" {
+                assert!(!r.reason.is_empty(), "{}: {} without a reason", r.case, r.outcome);
+            }
+            if !r.violations.is_empty() {
+                bad.push(format!("{}: {} {:?}", r.case, r.outcome, r.violations));
+            }
+        }
+        assert!(bad.is_empty(), "{}", bad.join("\n"));
+    }
+
+    #[test]
+    fn an_edit_names_its_field_and_the_bounds_are_computed() {
+        assert_eq!(Edit::SpeedUmPerS(1e-6).describe(), "speed_um_per_s=0.000001");
+        let scene = Scene::default_scene();
+        let mut f = scene.file.clone();
+        Edit::MuAsAtEq16(1.0).apply(&scene, &mut f);
+        // The default scene's Eq 16 bound (k_y cot α + k_z tan α)/(k_y − k_z) = 3.7546.
+        assert!((f.friction.particle_substrate_static - 3.7546).abs() < 1e-4);
+        assert!(cases(false).len() > 60);
+    }
+}
