@@ -363,6 +363,37 @@ mod tests {
         assert!(bad.is_empty(), "{}", bad.join("\n"));
     }
 
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig { cases: 6, failure_persistence: None, ..Default::default() })]
+        /// Random valid scenes around the default (every parameter drawn at once): a whole push
+        /// ends sound, with an outcome and, unless ok, its reason.
+        #[test]
+        fn random_valid_scenes_push_soundly(
+            radius in 50.0..3000.0f64,
+            k in 0.05..100.0f64,
+            rh in 0.0..0.99f64,
+            mu_as in 0.0..2.0f64,
+            mu_ta in 0.0..2.0f64,
+            tilt in 0.0..60.0f64,
+            beta in 10.0..80.0f64,
+            speed in 0.2..50.0f64,
+        ) {
+            let case = vec![
+                Edit::RadiusNm(radius),
+                Edit::StiffnessNPerM(k),
+                Edit::Humidity(rh),
+                Edit::MuAs(mu_as),
+                Edit::MuTa(mu_ta),
+                Edit::TiltDeg(tilt),
+                Edit::ContactAngleDeg(beta),
+                Edit::SpeedUmPerS(speed),
+            ];
+            let r = run_case(&Scene::default_scene(), &case);
+            proptest::prop_assert!(r.violations.is_empty(), "{}: {} {:?}", r.case, r.outcome, r.violations);
+            proptest::prop_assert!(r.outcome == "ok" || !r.reason.is_empty(), "{}: {}", r.case, r.outcome);
+        }
+    }
+
     #[test]
     fn an_edit_names_its_field_and_the_bounds_are_computed() {
         assert_eq!(Edit::SpeedUmPerS(1e-6).describe(), "speed_um_per_s=0.000001");

@@ -7,5 +7,6 @@ mod prometheus;
 mod push;
 mod scan;
 mod serve;
+mod serve_scenes;
 mod simulate;
 mod sweep;

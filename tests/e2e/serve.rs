@@ -17,9 +17,9 @@ use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 pub(crate) const TOKEN: &str = "e2e-operator-token";
 
 /// A server on a free port, killed on drop.
-struct Server {
+pub(crate) struct Server {
     child: Child,
-    addr: String,
+    pub(crate) addr: String,
     dir: PathBuf,
 }
 
@@ -38,8 +38,8 @@ impl Drop for Server {
 
 /// The gold-latex scene made quick for a test: a low start height, fast approaches and travel, a
 /// short run-up and a level substrate (the push itself at the paper's 2 µm/s), so a whole push
-/// takes a few seconds of real time.
-fn fast_scene(dir: &Path) -> PathBuf {
+/// takes a few seconds of real time; then each of `edits` `(from, to)` replaced once in its text.
+fn fast_scene_with(dir: &Path, edits: &[(&str, &str)]) -> PathBuf {
     let text = std::fs::read_to_string(workspace().join("scenes/gold-latex-500nm.toml")).unwrap();
     let text = text.replacen("tilt_x_mrad = 6.0", "tilt_x_mrad = 0.0", 1).replacen(
         "roughness_rms_nm = 0.5",
@@ -49,6 +49,11 @@ fn fast_scene(dir: &Path) -> PathBuf {
     let text = format!(
         "{text}\n[strategy]\nstart_height_um = 1.2\napproach_speed_um_per_s = 5.0\ntravel_speed_um_per_s = 40.0\napproach_distance_um = 0.3\ndwell_ms = 2.0\n\n[scan]\ncentre_x_um = 40.0\ncentre_y_um = 32.0\nsize_um = 16.0\npixels = 32\n"
     );
+    let mut text = text;
+    for (from, to) in edits {
+        assert!(text.contains(from), "the scene has {from:?}");
+        text = text.replacen(from, to, 1);
+    }
     let path = dir.join("fast.toml");
     std::fs::write(&path, text).unwrap();
     path
@@ -60,10 +65,19 @@ fn start(tag: &str, extra: &[&str]) -> Server {
 
 /// [`start`], with `prepare` run on the records directory (created) before the server starts.
 fn start_with(tag: &str, prepare: impl FnOnce(&Path), extra: &[&str]) -> Server {
+    start_edited(tag, &[], prepare, extra)
+}
+
+/// [`start`] on the fast scene with `edits` (see [`fast_scene_with`]).
+pub(crate) fn start_scene(tag: &str, edits: &[(&str, &str)]) -> Server {
+    start_edited(tag, edits, |_| {}, &[])
+}
+
+fn start_edited(tag: &str, edits: &[(&str, &str)], prepare: impl FnOnce(&Path), extra: &[&str]) -> Server {
     let dir = std::env::temp_dir().join(format!("nanopush-e2e-serve-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    let scene = fast_scene(&dir);
+    let scene = fast_scene_with(&dir, edits);
     let records = dir.join("records");
     std::fs::create_dir_all(&records).unwrap();
     prepare(&records);
