@@ -280,6 +280,7 @@ export function initialState({ traceSeconds = 10 } = {}) {
     tip: null, // last telemetry {t, stage:[x,y,z] m, volts, phase, estimate}
     telemetryCount: 0,
     trace: { seconds: traceSeconds, t: [], volts: [], z: [], force: [] },
+    serverParticles: null, // particle positions the server sent (state), kept over scene reloads
     push: null, // the push running: {particle, path: [[x, y] m…], by}
     scanStale: false, // a push has run since the scan shown
     lastRun: null, // the newest run_done
@@ -307,6 +308,15 @@ export class Session {
   /** Loads an /api/scene document: the particles and the stage range. */
   setScene(scene) {
     this.state.particles = sceneParticles(scene);
+    // The server's word (state, then run_done) beats the scene file's positions, whichever
+    // arrived first.
+    for (const q of this.state.serverParticles ?? []) {
+      const p = this.state.particles.find((pp) => pp.id === q.id);
+      if (p) {
+        p.x = q.x;
+        p.y = q.y;
+      }
+    }
     const r = scene?.stage?.range_um;
     if (typeof r === 'number' && r > 0) this.state.stageRange = r / 1e6;
     return this.state;
@@ -504,6 +514,11 @@ export class Session {
         if (p && Array.isArray(msg.estimate)) {
           p.x = msg.estimate[0];
           p.y = msg.estimate[1];
+        }
+        const q = (s.serverParticles ?? []).find((qq) => qq.id === msg.particle);
+        if (q && Array.isArray(msg.estimate)) {
+          q.x = msg.estimate[0];
+          q.y = msg.estimate[1];
         }
         return { kind: 'run_done', run: msg };
       }

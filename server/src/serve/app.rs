@@ -398,6 +398,11 @@ async fn status(State(st): State<Arc<AppState>>) -> Response {
         "telemetry_sent": st.net.sent.load(Relaxed),
         "dropped_frames": st.net.dropped_frames.load(Relaxed),
         "haptic": haptic_status(&m.haptic),
+        // Where the controller believes each particle is (m), as the `state` message says.
+        "particles": match st.state_message() {
+            ServerMessage::State { particles, .. } => serde_json::to_value(particles).unwrap_or_default(),
+            _ => serde_json::Value::Null,
+        },
     });
     axum::Json(body).into_response()
 }
