@@ -340,7 +340,7 @@ export class Image2D {
       const t = el('text', { x: x + w + 6, y: y + 4, class: 'ctick' }, cb);
       t.textContent = `${Number(v.toPrecision(4))}`;
     }
-    const tl = el('text', { x: x + w + 60, y: g.y + g.h / 2, class: 'axis-label', 'text-anchor': 'middle', transform: `rotate(90 ${x + w + 60} ${g.y + g.h / 2})` }, cb);
+    const tl = el('text', { x: x + w + 48, y: g.y + g.h / 2, class: 'axis-label', 'text-anchor': 'middle', transform: `rotate(90 ${x + w + 48} ${g.y + g.h / 2})` }, cb);
     tl.textContent = 'height (nm)';
   }
 
