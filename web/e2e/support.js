@@ -44,16 +44,19 @@ export function fastScene(dir) {
 
 /**
  * Starts `nanopush serve` (no real-time scheduling: the machine is shared) and resolves when it
- * prints its address. `extra` are more arguments; `webDir` another web client directory.
+ * prints its address. `extra` are more arguments; `webDir` another web client directory;
+ * `haptic` the link (`none`, `sim`).
  * @returns {Promise<{url:string, addr:string, base:string, dir:string, log:()=>string, stop:()=>Promise<void>}>}
  */
-export async function startServer({ extra = [], webDir = WEB } = {}) {
+export async function startServer({ extra = [], webDir = WEB, haptic = 'none' } = {}) {
   const dir = mkdtempSync(join(tmpdir(), 'nanopush-browser-'));
   const records = join(dir, 'records');
   mkdirSync(records);
-  const args = ['serve', '--port', '0', '--haptic', 'none', '--no-realtime', '--operator-token', TOKEN,
+  const args = ['serve', '--port', '0', '--haptic', haptic, '--no-realtime', '--operator-token', TOKEN,
     '--scene', fastScene(dir), '--data-dir', records, '--web-dir', webDir, '--scan-line-hz', '400', ...extra];
-  const child = spawn(serverBin(), args, { cwd: ROOT, stdio: ['ignore', 'pipe', 'pipe'] });
+  // A haptic link of its own (iceoryx2 services apart from any other server on this machine).
+  const env = { ...process.env, NANOPUSH_HAPTIC_NAMESPACE: `browser${process.pid}` };
+  const child = spawn(serverBin(), args, { cwd: ROOT, env, stdio: ['ignore', 'pipe', 'pipe'] });
   let log = '';
   child.stderr.on('data', (d) => { log += d; });
   const lines = createInterface({ input: child.stdout });

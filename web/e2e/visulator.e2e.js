@@ -52,6 +52,26 @@ test('the operator page loads with no console errors, and axe finds no violation
   await shot(op, '01-operator-loaded');
 });
 
+test('the tip is on screen, drawn over everything, and no label or panel covers it', async () => {
+  await op.waitForFunction(() => window.nanopush.view.tip.visible, null, { timeout: 10000 });
+  const t = await op.evaluate(() => {
+    const v = window.nanopush.view;
+    const p = v.tip.position.clone().project(v.camera);
+    const r = v.container.getBoundingClientRect();
+    const x = r.left + ((p.x + 1) / 2) * r.width;
+    const y = r.top + ((1 - p.y) / 2) * r.height;
+    const hit = document.elementFromPoint(x, y);
+    return {
+      onScreen: Math.abs(p.x) < 1 && Math.abs(p.y) < 1,
+      covered: hit ? (hit.closest('.plabel, .overlay > *') ? hit.className || hit.tagName : null) : 'nothing',
+      depthTest: v.tip.material.depthTest,
+    };
+  });
+  assert.ok(t.onScreen, 'the tip is in the view');
+  assert.equal(t.covered, null, `the tip is covered by ${t.covered}`);
+  assert.equal(t.depthTest, false, 'drawn through the scan and the particles');
+});
+
 test('the operator takes the lease, scans and pushes a particle; /api/status shows it moved', async () => {
   await op.click('#take-lease');
   await op.waitForFunction(() => window.nanopush.session.hasLease);
@@ -285,6 +305,29 @@ test('the monitoring view is read-only, shows the instrument, and axe finds no v
   assert.deepEqual(v, [], JSON.stringify(v, null, 1));
   await shot(m, '09-monitor');
   await m.context().close();
+});
+
+test('with a haptic link, the haptic panel shows it and the lease holder can engage', async () => {
+  const hs = await startServer({ haptic: 'sim', webDir: process.env.E2E_WEB_DIR || WEB });
+  try {
+    const p = await newPage(browser);
+    await p.goto(`${hs.base}/?token=${TOKEN}`);
+    await ready(p);
+    await p.waitForSelector('#haptic-panel', { state: 'visible', timeout: 20000 });
+    await waitText(p, '#hap-link', /^up$/, 20000);
+    await p.waitForSelector('#chart-hap canvas', { timeout: 10000 });
+    assert.equal(await p.$eval('#hap-fs', (e) => e.disabled), true, 'no lease: no haptic controls');
+    await p.click('#take-lease');
+    await p.waitForFunction(() => !document.querySelector('#hap-fs').disabled);
+    await p.click('#hap-engage');
+    await waitText(p, '#reply-haptic', /ok/, 10000);
+    await waitText(p, '#hap-phase', /approach|park|settle|ramp|engaged/, 20000);
+    await shot(p, '11-haptic');
+    assert.deepEqual(p.errors, []);
+    await p.context().close();
+  } finally {
+    await hs.stop();
+  }
 });
 
 test('served without web/node_modules, the page says how to install them and the server warns at start', async () => {

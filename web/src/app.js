@@ -6,6 +6,7 @@ import { Session, commands, encodeCommand, wsUrl, apiUrl, backoffMs, controlStat
 import { View3D, formatLength } from './view3d.js';
 import { Image2D } from './image2d.js';
 import { Charts, traceCsv } from './charts.js';
+import { HapticPanel } from './haptic.js';
 import { viridisCss } from './colormap.js';
 
 const $ = (id) => document.getElementById(id);
@@ -21,7 +22,7 @@ let countdownTimer = null;
 let selected = null; // particle id
 let exagTouched = false;
 let scanCentreTouched = false;
-const replyEl = { take_lease: 'reply-lease', release_lease: 'reply-lease', push: 'reply-push', scan: 'reply-scan', stop: 'reply-stop' };
+const replyEl = { take_lease: 'reply-lease', release_lease: 'reply-lease', push: 'reply-push', scan: 'reply-scan', stop: 'reply-stop', haptic: 'reply-haptic' };
 const lastIdByOutput = new Map(); // output element id → latest command id shown there
 
 const view = new View3D($('view3d'), {
@@ -30,6 +31,11 @@ const view = new View3D($('view3d'), {
 });
 const image2d = new Image2D($('image2d'), { cursorEl: $('img-cursor'), profileEl: $('profile'), profileInfoEl: $('profile-info') });
 const charts = new Charts($('chart-force'), $('chart-z'), $('chart-fd'));
+const haptic = new HapticPanel({
+  panel: $('haptic-panel'),
+  plot: $('chart-hap'),
+  fields: { link: $('hap-link'), phase: $('hap-phase'), engaged: $('hap-engaged'), handle: $('hap-handle'), hand: $('hap-hand'), tip: $('hap-tip'), pc: $('hap-pc') },
+});
 const outcomes = new Map(); // record name → run_done, for the records' outcome column
 let openedRecord = null; // a past scan opened from the records (not the live one)
 
@@ -66,6 +72,7 @@ function flush(now) {
     if (dirty.has('tip')) {
       view.setTip(st.tip);
       renderTip();
+      haptic.update(st.tip?.t, st.tip?.haptic);
     }
     if (dirty.has('charts')) charts.update(st.trace);
     dirty.clear();
@@ -545,6 +552,7 @@ function renderControls() {
   set($('push-fs'), c.push);
   set($('scan-fs'), c.scan);
   set($('stop-btn'), c.stop);
+  set($('hap-fs'), c.haptic);
   // Buttons inside a disabled fieldset: give them the reason as a tooltip too.
   $('push-btn').title = c.push.why;
   $('scan-btn').title = c.scan.why;
@@ -709,6 +717,8 @@ $('exag-auto').addEventListener('click', () => {
 $('frame-stage').addEventListener('click', () => view.frameStage());
 $('frame-scan').addEventListener('click', () => view.frameScan());
 $('frame-tip').addEventListener('click', () => view.frameTip());
+for (const a of ['engage', 'release', 'recenter']) $(`hap-${a}`).addEventListener('click', () => guarded('reply-haptic', () => commands.haptic(a)));
+$('hap-scale').addEventListener('click', () => guarded('reply-haptic', () => commands.haptic('scale', { nmPerMm: num('hap-nm'), pullOffAtHandN: num('hap-po') })));
 $('level').addEventListener('change', () => image2d.setLevelling($('level').value));
 $('scan-x').addEventListener('input', () => { scanCentreTouched = true; });
 $('scan-y').addEventListener('input', () => { scanCentreTouched = true; });
@@ -736,4 +746,4 @@ refreshRecords();
 connect();
 
 // For tests and the curious: the state the page shows.
-window.nanopush = { session, view, image2d, charts };
+window.nanopush = { session, view, image2d, charts, haptic };

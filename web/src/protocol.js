@@ -146,6 +146,28 @@ export const commands = {
   stop(id) {
     return withId({ type: 'stop' }, id);
   },
+  /**
+   * A haptic z-control command: `engage`, `release`, `recenter`, or `scale` with `nmPerMm`
+   * [0.01, 1000] and/or `pullOffAtHandN` [0.01, 10].
+   */
+  haptic(action, { nmPerMm, pullOffAtHandN } = {}, id) {
+    if (!['engage', 'release', 'recenter', 'scale'].includes(action)) throw new RangeError(`action must be engage, release, recenter or scale, got ${JSON.stringify(action)}`);
+    const m = { type: 'haptic', action };
+    if (action === 'scale') {
+      if (nmPerMm === undefined && pullOffAtHandN === undefined) throw new RangeError('scale needs nm_per_mm and/or pull_off_at_hand_n');
+      if (nmPerMm !== undefined) {
+        finite('nm_per_mm', nmPerMm);
+        if (!(nmPerMm >= 0.01 && nmPerMm <= 1000)) throw new RangeError(`nm_per_mm must be in [0.01, 1000] nm/mm, got ${nmPerMm}`);
+        m.nm_per_mm = nmPerMm;
+      }
+      if (pullOffAtHandN !== undefined) {
+        finite('pull_off_at_hand_n', pullOffAtHandN);
+        if (!(pullOffAtHandN >= 0.01 && pullOffAtHandN <= 10)) throw new RangeError(`pull_off_at_hand_n must be in [0.01, 10] N, got ${pullOffAtHandN}`);
+        m.pull_off_at_hand_n = pullOffAtHandN;
+      }
+    }
+    return withId(m, id);
+  },
   ping(id) {
     return withId({ type: 'ping' }, id);
   },
@@ -647,6 +669,7 @@ export function controlState(state) {
     releaseLease: base ? no(base) : mine ? yes : no('You do not hold the lease'),
     push: needLease,
     scan: needLease,
+    haptic: needLease,
     stop: needLease,
   };
 }

@@ -222,8 +222,9 @@ export class View3D {
       el.textContent = `#${p.id}`;
       el.title = `particle ${p.id}${p.material ? ` (${p.material})` : ''}, radius ${formatLength(p.radius)}`;
       const label = new CSS2DObject(el);
-      label.position.set(0, 0, 1.25);
-      label.center.set(0.5, 1);
+      // Beside the sphere, not over it (where the tip works), and see-through.
+      label.position.set(1.15, 0, 0);
+      label.center.set(0, 0.5);
       mesh.add(label);
       this.particleGroup.add(mesh);
       this.particleMeshes.set(p.id, mesh);

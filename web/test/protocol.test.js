@@ -317,6 +317,15 @@ test('apiUrl passes the page token on to the JSON API', () => {
   assert.equal(apiUrl('/api/records?a=1', { search: '?token=t' }), '/api/records?a=1&token=t');
 });
 
+test('haptic commands: the documented JSON, ranges checked before sending', () => {
+  assert.equal(encodeCommand(commands.haptic('engage', {}, 5)), '{"type":"haptic","action":"engage","id":5}');
+  assert.equal(encodeCommand(commands.haptic('scale', { nmPerMm: 20 })), '{"type":"haptic","action":"scale","nm_per_mm":20}');
+  assert.throws(() => commands.haptic('fly'), /engage, release, recenter or scale/);
+  assert.throws(() => commands.haptic('scale'), /nm_per_mm and\/or pull_off_at_hand_n/);
+  assert.throws(() => commands.haptic('scale', { nmPerMm: 5000 }), /\[0\.01, 1000\] nm\/mm, got 5000/);
+  assert.throws(() => commands.haptic('scale', { pullOffAtHandN: 0 }), /\[0\.01, 10\] N, got 0/);
+});
+
 function openSession(client = 4) {
   const s = new Session();
   s.setScene({ stage: { range_um: 100 }, particles: [{ id: 1, radius_nm: 500, x_um: 40, y_um: 30 }, { id: 2, radius_nm: 500, x_um: 55, y_um: 62 }] });
