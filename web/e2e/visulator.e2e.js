@@ -92,6 +92,9 @@ test('the operator takes the lease, scans and pushes a particle; /api/status sho
   assert.ok(Math.abs(s.particles.find((p) => p.id === 1).x - p1.x) < 1e-12, 'the page shows where the server says');
   assert.equal(s.stale, true, 'the scan is stale after the push');
   assert.equal(await op.isVisible('#img-stale'), true);
+  // Forces in nN, with the strategy's set point (26 nN in this scene) on the plots.
+  assert.match(await op.textContent('#chart-force'), /tip force.*set point/s);
+  assert.ok(Math.abs((await op.evaluate(() => window.nanopush.charts.setPointN)) - 26e-9) < 1e-15);
   // The records show the run's outcome.
   await waitText(op, '#records', /ok/, 10000);
   assert.deepEqual(op.errors, []);

@@ -2,7 +2,7 @@
 // (src/view3d.js), the 2D height image with its line profile (src/image2d.js) and force plots
 // (src/charts.js), wired to `nanopush serve`'s WebSocket. Messages change the Session and mark
 // what is dirty; one animation frame redraws what is dirty (never once per message).
-import { Session, commands, encodeCommand, wsUrl, apiUrl, backoffMs, controlState, STREAMS, describeRun, parseGsf } from './protocol.js';
+import { Session, commands, encodeCommand, wsUrl, apiUrl, backoffMs, controlState, STREAMS, describeRun, parseGsf, setPointForceN } from './protocol.js';
 import { View3D, formatLength } from './view3d.js';
 import { Image2D } from './image2d.js';
 import { Charts, traceCsv } from './charts.js';
@@ -122,6 +122,12 @@ function attach(sock) {
     ws = null;
     // The shutdown message was logged when it came: do not say it twice.
     if (st.shutdown === null) logEvent(`connection closed (code ${ev.code}${ev.reason ? `, ${ev.reason}` : ''})`, 'bad');
+    if (session.hasLease) {
+      // The server frees the lease of a connection that closes, and stops its push or scan.
+      const t = 'you lost the lease: the connection closed (the server stops a push or scan whose lease holder is gone); take it again once reconnected';
+      logEvent(t, 'bad');
+      announce(t);
+    }
     scheduleReconnect();
   };
   sock.onerror = () => {};
@@ -395,6 +401,7 @@ async function loadScene() {
 
 function applyScene(scene) {
   session.setScene(scene);
+  charts.setSetPoint(setPointForceN(scene));
   $('scene-name').textContent = scene.name ? `· ${scene.name}` : '';
   const range = st.stageRange * 1e6;
   view.setStage(range);

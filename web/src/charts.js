@@ -6,7 +6,7 @@ import uPlot from 'uplot';
 
 const AXIS = { stroke: '#c4ccd6', grid: { stroke: '#3a4554' }, ticks: { stroke: '#3a4554' } };
 
-function chart(el, xLabel, label, unit, colour, digits, xFixed = true) {
+function chart(el, xLabel, label, unit, colour, digits, xFixed = true, setPoint = false) {
   const opts = {
     width: Math.max(200, el.clientWidth),
     height: 140,
@@ -20,9 +20,10 @@ function chart(el, xLabel, label, unit, colour, digits, xFixed = true) {
     series: [
       { label: xFixed ? 't' : 'height', value: (u, v) => (v == null ? '–' : xFixed ? `${v.toFixed(2)} s` : `${v.toFixed(1)} nm`) },
       { label, stroke: colour, width: 1.5, value: (u, v) => (v == null ? '–' : `${v.toFixed(digits)} ${unit}`) },
+      ...(setPoint ? [{ label: 'set point', stroke: '#e6e6e6', width: 1, dash: [6, 4], value: (u, v) => (v == null ? '–' : `${v.toFixed(digits)} ${unit}`) }] : []),
     ],
   };
-  return new uPlot(opts, [[], []], el);
+  return new uPlot(opts, setPoint ? [[], [], []] : [[], []], el);
 }
 
 /** CSV of a telemetry trace (SI units in the column names). */
@@ -34,15 +35,21 @@ export function traceCsv(trace) {
 
 export class Charts {
   constructor(forceEl, zEl, fdEl) {
-    this.force = chart(forceEl, 's before now', 'tip force', 'nN', '#f0a83c', 2);
+    this.force = chart(forceEl, 's before now', 'tip force', 'nN', '#f0a83c', 2, true, true);
     this.z = chart(zEl, 's before now', 'tip height', 'µm', '#7fe3ff', 4);
-    this.fd = chart(fdEl, 'tip height above its lowest (nm)', 'tip force', 'nN', '#ff7ab8', 2, false);
+    this.fd = chart(fdEl, 'tip height above its lowest (nm)', 'tip force', 'nN', '#ff7ab8', 2, false, true);
+    this.setPointN = null; // the strategy's contact set point as a force (N), drawn dashed
     this.since = -Infinity; // the force-distance plot starts here (s, server time)
     this.pending = null;
     const els = [forceEl, zEl, fdEl];
     new ResizeObserver(() => {
       for (const [c, e] of [[this.force, els[0]], [this.z, els[1]], [this.fd, els[2]]]) c.setSize({ width: Math.max(200, e.clientWidth), height: 140 });
     }).observe(forceEl.parentElement);
+  }
+
+  /** The set point (N) drawn on both force plots; null: none. */
+  setSetPoint(n) {
+    this.setPointN = Number.isFinite(n) ? n : null;
   }
 
   /** The force-distance plot restarts here (server time, s): a push or approach begins. */
@@ -65,7 +72,8 @@ export class Charts {
         z[i] = trace.z[i] * 1e6;
         f[i] = (trace.force[i] ?? NaN) * 1e9;
       }
-      this.force.setData([x, f]);
+      const sp = (len) => new Float64Array(len).fill(this.setPointN === null ? NaN : this.setPointN * 1e9);
+      this.force.setData([x, f, sp(n)]);
       this.z.setData([x, z]);
       // Force against height since the push / approach began (or the whole window), sorted
       // by height as uPlot needs ascending x.
@@ -76,7 +84,7 @@ export class Charts {
       const idx = [];
       for (let i = i0; i < n; i++) idx.push(i);
       idx.sort((a, b) => trace.z[a] - trace.z[b]);
-      this.fd.setData([Float64Array.from(idx, (i) => (trace.z[i] - zmin) * 1e9), Float64Array.from(idx, (i) => (trace.force[i] ?? NaN) * 1e9)]);
+      this.fd.setData([Float64Array.from(idx, (i) => (trace.z[i] - zmin) * 1e9), Float64Array.from(idx, (i) => (trace.force[i] ?? NaN) * 1e9), sp(idx.length)]);
     }, 120);
   }
 }

@@ -268,6 +268,21 @@ function formatPoint([x, y]) {
   return `(${(x * u.scale).toFixed(u.name === 'nm' ? 1 : 2)}, ${(y * u.scale).toFixed(u.name === 'nm' ? 1 : 2)}) ${u.name}`;
 }
 
+/**
+ * The strategy's contact set point as a tip force (N), from an /api/scene document: the set
+ * point reading `ζ_set` (V) is a deflection (`set_point_v` − `baseline_v`) / `gain_v_per_nm`,
+ * and the force `k_z ζ` (positive repulsive, as telemetry's `tip_force_n`). Null when the scene
+ * lacks a value.
+ */
+export function setPointForceN(scene) {
+  const v = scene?.strategy?.set_point_v;
+  const b = scene?.sensor?.baseline_v;
+  const g = scene?.sensor?.gain_v_per_nm;
+  const k = scene?.cantilever?.stiffness_n_per_m;
+  if (![v, b, g, k].every(Number.isFinite) || g === 0) return null;
+  return k * ((v - b) / g) * 1e-9;
+}
+
 /** Particles of an /api/scene document, in metres: [{id, radius, x, y, material}]. */
 export function sceneParticles(scene) {
   const ps = (scene && Array.isArray(scene.particles)) ? scene.particles : [];

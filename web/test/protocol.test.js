@@ -3,7 +3,7 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import {
   decodeScanLine, encodeScanLine, FrameError, commands, encodeCommand, wsUrl, apiUrl, backoffMs,
-  Session, controlState, sceneParticles, WS_VERSION, parseGsf, describeRun, lengthUnit, formatLen,
+  Session, controlState, sceneParticles, WS_VERSION, parseGsf, setPointForceN, describeRun, lengthUnit, formatLen,
 } from '../src/protocol.js';
 
 // The frame `ScanLineHeader { scan: 2, line: 5, xres: 3, yres: 8, y: 1.5e-6 }.encode(&[1.0, 2.0,
@@ -421,6 +421,13 @@ test('parseGsf reads a record and refuses a wrong size or a foreign file, saying
   assert.throws(() => parseGsf(gsf('XRes = 3\nYRes = 3\n', [1, 2])), /3×3 needs/);
   assert.throws(() => parseGsf(new TextEncoder().encode('hello').buffer), /not a Gwyddion Simple Field/);
   assert.throws(() => parseGsf(gsf('XRes = x\nYRes = 2\n', [])), /XRes x/);
+});
+
+test('the set point as a force: the gold-latex scene\'s −1.5 V is 3.25 nm of deflection, 26 nN at 8 N/m', () => {
+  // scenes/gold-latex-500nm.toml: set_point_v −1.5, baseline_v −0.2, gain_v_per_nm −0.4, k 8 N/m.
+  const f = setPointForceN({ strategy: { set_point_v: -1.5 }, sensor: { baseline_v: -0.2, gain_v_per_nm: -0.4 }, cantilever: { stiffness_n_per_m: 8 } });
+  assert.ok(Math.abs(f - 26e-9) < 1e-15, `${f}`);
+  assert.equal(setPointForceN({ strategy: {} }), null);
 });
 
 test('lengths take nm below 2 µm and µm above', () => {
