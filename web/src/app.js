@@ -22,6 +22,7 @@ let countdownTimer = null;
 let selected = null; // particle id
 let exagTouched = false;
 let scanCentreTouched = false;
+let scanFormTouched = false;
 const replyEl = { take_lease: 'reply-lease', release_lease: 'reply-lease', push: 'reply-push', scan: 'reply-scan', stop: 'reply-stop', haptic: 'reply-haptic' };
 const lastIdByOutput = new Map(); // output element id → latest command id shown there
 
@@ -418,6 +419,11 @@ function applyScene(scene) {
   view.setParticles(st.particles, selected);
   if (!st.scan) view.frameStage();
   if ($('scan-x').value === '') centreScanOnParticle();
+  // The scan form starts at the scene's own scan (a 14 nm particle is not imaged 10 µm wide).
+  if (!scanFormTouched && scene.scan) {
+    if (Number.isFinite(scene.scan.size_um)) $('scan-size').value = String(scene.scan.size_um);
+    if (Number.isFinite(scene.scan.pixels)) $('scan-px').value = String(Math.min(512, Math.max(8, scene.scan.pixels)));
+  }
   renderPush();
 }
 
@@ -728,6 +734,7 @@ for (const a of ['engage', 'release', 'recenter']) $(`hap-${a}`).addEventListene
 $('hap-scale').addEventListener('click', () => guarded('reply-haptic', () => commands.haptic('scale', { nmPerMm: num('hap-nm'), pullOffAtHandN: num('hap-po') })));
 $('level').addEventListener('change', () => image2d.setLevelling($('level').value));
 $('scan-x').addEventListener('input', () => { scanCentreTouched = true; });
+for (const id of ['scan-size', 'scan-px']) $(id).addEventListener('input', () => { scanFormTouched = true; });
 $('scan-y').addEventListener('input', () => { scanCentreTouched = true; });
 $('csv').addEventListener('click', () => {
   const blob = new Blob([traceCsv(st.trace)], { type: 'text/csv' });
