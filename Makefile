@@ -33,9 +33,11 @@ clippy:
 unit: build
 	$(CARGO) test --workspace
 
-## The browser client's tests (web/: node --test on the protocol module).
-web-test:
-	cd web && npm ci --no-audit --no-fund && npm test
+## The browser client's tests: node --test on its modules, then the browser end-to-end tests
+## (web/e2e/: Debian's headless chromium, driven by playwright-core, against the real
+## `nanopush serve` from target/debug or $CARGO_TARGET_DIR; screenshots in web/test-results/).
+web-test: build
+	cd web && npm ci --no-audit --no-fund && npm test && npm run e2e
 
 ## The lab's monitoring: the shipped Prometheus config and its alert rules (deploy/prometheus/).
 prometheus-check:

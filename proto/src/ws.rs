@@ -200,9 +200,61 @@ pub struct Telemetry {
     pub phase: String,
     /// The pushed particle's estimated centre (m), while a push runs.
     pub estimate: Option<[f64; 2]>,
+    /// The tip force from the measured deflection, `k_z ζ_z` (N), positive repulsive.
+    #[serde(default)]
+    pub tip_force_n: f64,
     /// The haptic link, when the server runs one (`--haptic sim|external`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub haptic: Option<HapticTelemetry>,
+}
+
+/// A particle where the server believes it is now (SI).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ParticleNow {
+    /// Particle id.
+    pub id: u32,
+    /// Centre x, y (m).
+    pub x: f64,
+    /// Centre y (m).
+    pub y: f64,
+    /// Radius (m).
+    pub radius: f64,
+}
+
+/// A push as commanded: the particle and the planned path of its centre (SI).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PushPath {
+    /// Particle.
+    pub particle: u32,
+    /// The path's points (m): where the particle was located, then the end of each leg.
+    pub path: Vec<[f64; 2]>,
+    /// The client that commanded it.
+    pub by: u32,
+}
+
+/// The latest scan, for a client that joins after it (SI).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ScanNow {
+    /// Scan id.
+    pub scan: u32,
+    /// Pixels per line.
+    pub xres: u32,
+    /// Lines.
+    pub yres: u32,
+    /// Left edge (m).
+    pub x_offset: f64,
+    /// Bottom edge (m).
+    pub y_offset: f64,
+    /// Width (m).
+    pub x_real: f64,
+    /// Height (m).
+    pub y_real: f64,
+    /// Whether it has finished (false: its remaining lines follow on the `scan` stream).
+    pub done: bool,
+    /// Its record (a GSF file under `/api/records`), when finished and written.
+    pub record: Option<String>,
+    /// A push has run since: the sample no longer looks like this.
+    pub stale: bool,
 }
 
 /// The haptic handle in telemetry (SI).
@@ -242,6 +294,25 @@ pub enum ServerMessage {
         /// Control loop rate (Hz).
         tick_hz: f64,
     },
+    /// Second message on a connection, right after `welcome`: the instrument as it is now, so
+    /// a client that joins late (or reloads) shows what the others see.
+    State {
+        /// The particles where the server believes they are (the scene's positions, then each
+        /// push's final estimate).
+        particles: Vec<ParticleNow>,
+        /// Stage position (m), as in telemetry.
+        stage: [f64; 3],
+        /// Phase, as in telemetry.
+        phase: String,
+        /// Lease holder.
+        lease: Option<u32>,
+        /// The push running now, if any.
+        push: Option<PushPath>,
+        /// The latest scan (running or finished), if any.
+        scan: Option<ScanNow>,
+    },
+    /// A push was planned and starts (to everyone): what will be pushed, along which path.
+    PushStarted(PushPath),
     /// A command was accepted.
     Ok {
         /// Its id.
@@ -267,6 +338,9 @@ pub enum ServerMessage {
     Lease {
         /// Holder now.
         holder: Option<u32>,
+        /// Why it changed, when not by the holder's own command (its connection closed).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        reason: Option<String>,
     },
     /// A push ended (to everyone).
     RunDone {
@@ -448,12 +522,52 @@ mod tests {
             volts: -0.2,
             phase: "idle".into(),
             estimate: None,
+            tip_force_n: 1e-9,
             haptic: None,
         }))
         .unwrap();
+        assert!(t.contains(r#""tip_force_n":1e-9"#), "{t}");
         assert!(t.starts_with(r#"{"type":"telemetry","t":1.0"#), "{t}");
         // Without a haptic link, no `haptic` key at all.
         assert!(!t.contains("haptic"), "{t}");
+    }
+
+    #[test]
+    fn the_state_and_push_started_messages_carry_their_type_and_fields() {
+        let path = PushPath {
+            particle: 2,
+            path: vec![[1e-6, 2e-6], [3e-6, 2e-6]],
+            by: 5,
+        };
+        let s = serde_json::to_value(ServerMessage::PushStarted(path.clone())).unwrap();
+        assert_eq!(s["type"], "push_started");
+        assert_eq!(s["particle"], 2);
+        assert_eq!(s["by"], 5);
+        let s = serde_json::to_value(ServerMessage::State {
+            particles: vec![ParticleNow {
+                id: 2,
+                x: 1e-6,
+                y: 2e-6,
+                radius: 5e-7,
+            }],
+            stage: [0.0; 3],
+            phase: "idle".into(),
+            lease: Some(5),
+            push: Some(path),
+            scan: None,
+        })
+        .unwrap();
+        assert_eq!(s["type"], "state");
+        assert_eq!(s["particles"][0]["radius"], 5e-7);
+        assert_eq!(s["push"]["path"][1][0], 3e-6);
+        assert!(s["scan"].is_null());
+        // A lease change by command has no reason key; one by a disconnect says why.
+        let l = serde_json::to_string(&ServerMessage::Lease {
+            holder: None,
+            reason: None,
+        })
+        .unwrap();
+        assert_eq!(l, r#"{"type":"lease","holder":null}"#);
     }
 
     #[test]

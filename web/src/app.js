@@ -1,8 +1,12 @@
 // The Nano Visulator page: a view of the protocol Session (src/protocol.js), a 3D view
-// (src/view3d.js) and strip charts (src/charts.js), wired to `nanopush serve`'s WebSocket.
-import { Session, commands, encodeCommand, wsUrl, apiUrl, backoffMs, controlState, STREAMS } from './protocol.js';
+// (src/view3d.js), the 2D height image with its line profile (src/image2d.js) and force plots
+// (src/charts.js), wired to `nanopush serve`'s WebSocket. Messages change the Session and mark
+// what is dirty; one animation frame redraws what is dirty (never once per message).
+import { Session, commands, encodeCommand, wsUrl, apiUrl, backoffMs, controlState, STREAMS, describeRun, parseGsf, setPointForceN } from './protocol.js';
 import { View3D, formatLength } from './view3d.js';
-import { Charts } from './charts.js';
+import { Image2D } from './image2d.js';
+import { Charts, traceCsv } from './charts.js';
+import { HapticPanel } from './haptic.js';
 import { viridisCss } from './colormap.js';
 
 const $ = (id) => document.getElementById(id);
@@ -17,14 +21,68 @@ let reconnectTimer = null;
 let countdownTimer = null;
 let selected = null; // particle id
 let exagTouched = false;
-const replyEl = { take_lease: 'reply-lease', release_lease: 'reply-lease', push: 'reply-push', scan: 'reply-scan', stop: 'reply-stop' };
+let scanCentreTouched = false;
+let scanFormTouched = false;
+const replyEl = { take_lease: 'reply-lease', release_lease: 'reply-lease', push: 'reply-push', scan: 'reply-scan', stop: 'reply-stop', haptic: 'reply-haptic' };
 const lastIdByOutput = new Map(); // output element id → latest command id shown there
 
 const view = new View3D($('view3d'), {
   onPickPoint: (x, y) => pickTarget(x, y),
   onPickParticle: (id) => selectParticle(id),
 });
-const charts = new Charts($('chart-volts'), $('chart-z'));
+const image2d = new Image2D($('image2d'), { cursorEl: $('img-cursor'), profileEl: $('profile'), profileInfoEl: $('profile-info') });
+const charts = new Charts($('chart-force'), $('chart-z'), $('chart-fd'));
+const haptic = new HapticPanel({
+  panel: $('haptic-panel'),
+  plot: $('chart-hap'),
+  fields: { link: $('hap-link'), phase: $('hap-phase'), engaged: $('hap-engaged'), handle: $('hap-handle'), hand: $('hap-hand'), tip: $('hap-tip'), pc: $('hap-pc') },
+});
+const outcomes = new Map(); // record name → run_done, for the records' outcome column
+let openedRecord = null; // a past scan opened from the records (not the live one)
+
+// ----- redraw on change, once per animation frame -----
+
+const dirty = new Set();
+let framePending = false;
+function mark(...what) {
+  for (const w of what) dirty.add(w);
+  if (!framePending) {
+    framePending = true;
+    requestAnimationFrame(flush);
+  }
+}
+let lastLive = 0;
+/**
+ * The live views (tip, its text, the plots) follow telemetry every frame while the browser
+ * keeps up; when its frames are slow (a software renderer, a busy machine) they refresh less
+ * often (three frame times apart, at least 250 ms, at most 1 s), so frames stay free for what the operator does:
+ * a Stop click and its reply are never queued behind tip updates.
+ */
+function livePeriodMs() {
+  const f = view.frameInterval;
+  return f > 40 ? Math.min(1000, Math.max(250, 3 * f)) : 0;
+}
+function flush(now) {
+  framePending = false;
+  if (dirty.has('status')) renderStatus();
+  if (dirty.has('legend')) renderLegend();
+  dirty.delete('status');
+  dirty.delete('legend');
+  if (dirty.size && now - lastLive >= livePeriodMs()) {
+    lastLive = now;
+    if (dirty.has('tip')) {
+      view.setTip(st.tip);
+      renderTip();
+      haptic.update(st.tip?.t, st.tip?.haptic);
+    }
+    if (dirty.has('charts')) charts.update(st.trace);
+    dirty.clear();
+  }
+  if (dirty.size && !framePending) {
+    framePending = true;
+    requestAnimationFrame(flush);
+  }
+}
 $('legend-bar').style.background = `linear-gradient(to right, ${viridisCss()})`;
 
 // ----- connection -----
@@ -63,8 +121,14 @@ function attach(sock) {
   sock.onclose = (ev) => {
     if (ws !== sock) return;
     ws = null;
-    const why = st.shutdown !== null ? `server shut down: ${st.shutdown}` : `closed (code ${ev.code}${ev.reason ? `, ${ev.reason}` : ''})`;
-    logEvent(`connection ${why}`, 'bad');
+    // The shutdown message was logged when it came: do not say it twice.
+    if (st.shutdown === null) logEvent(`connection closed (code ${ev.code}${ev.reason ? `, ${ev.reason}` : ''})`, 'bad');
+    if (session.hasLease) {
+      // The server frees the lease of a connection that closes, and stops its push or scan.
+      const t = 'you lost the lease: the connection closed (the server stops a push or scan whose lease holder is gone); take it again once reconnected';
+      logEvent(t, 'bad');
+      announce(t);
+    }
     scheduleReconnect();
   };
   sock.onerror = () => {};
@@ -116,43 +180,56 @@ function onMessage(data) {
       loadScene();
       logEvent(`welcome: client ${st.client}, ${st.role}, scene ${st.scene}, ${st.tickHz} Hz`);
       break;
+    case 'state':
+      onState(ev);
+      break;
     case 'telemetry':
-      view.setTip(st.tip);
-      charts.update(st.trace);
-      renderTip();
+      mark('tip', 'charts');
       if (st.tip.phase !== lastPhase) {
         lastPhase = st.tip.phase;
-        renderStatus();
+        mark('status');
       }
-      return; // 60 Hz: skip the full render
+      return; // 60 Hz: drawn in the next animation frame, with whatever else changed
     case 'scan_start':
-      view.startScan(st.scan);
-      $('legend').hidden = false;
+      openedRecord = null;
+      showScan();
       logEvent(`scan ${st.scan.id} started: ${st.scan.xres}×${st.scan.yres} px, ${formatLength(st.scan.x_real)} square`);
       if (!scanFramed) {
         view.frameScan();
         scanFramed = true;
       }
-      view.updateParticles(st.particles, selected);
-      updatePreview();
-      renderLegend();
       return;
     case 'scan_line':
+      if (openedRecord) return; // a past scan is shown; the live one fills the Session only
       view.scanLine(st.scan, ev.line);
-      renderLegend();
+      image2d.invalidate();
+      mark('legend');
       return;
     case 'scan_done':
-      logEvent(`scan done${ev.record ? `: ${ev.record}` : ''}`, 'good');
+      logEvent(ev.record ? `scan done: ${ev.record}` : ev.record_error ? `scan done, no record: ${ev.record_error}` : 'scan cancelled', ev.record ? 'good' : 'bad');
       if (!exagTouched) autoExaggeration();
       renderLegend();
       refreshRecords();
       break;
+    case 'push_started': {
+      const p = ev.push;
+      const end = p.path[p.path.length - 1];
+      const who = p.by === st.client ? 'you' : `client ${p.by}`;
+      logEvent(`push started: #${p.particle} by ${who}, to (${(end[0] * 1e6).toFixed(3)}, ${(end[1] * 1e6).toFixed(3)}) µm in ${p.path.length - 1} leg${p.path.length > 2 ? 's' : ''}`);
+      charts.restartFd(st.tip?.t ?? -Infinity);
+      renderPush();
+      break;
+    }
     case 'run_done': {
       const r = ev.run;
-      const ok = r.outcome === 'ok';
-      logEvent(`push of #${r.particle}: ${r.outcome}${r.failure ? ` (${r.failure})` : ''}, ends at (${(r.estimate[0] * 1e6).toFixed(2)}, ${(r.estimate[1] * 1e6).toFixed(2)}) µm`, ok ? 'good' : 'bad');
+      const text = describeRun(r);
+      logEvent(text, r.outcome === 'ok' ? 'good' : 'bad');
+      showLastRun(r, text);
+      announce(text);
+      if (r.record) outcomes.set(r.record, r);
       view.updateParticles(st.particles, selected);
-      updatePreview();
+      renderPush();
+      renderStale();
       refreshRecords();
       break;
     }
@@ -168,11 +245,22 @@ function onMessage(data) {
       break;
     case 'lagged':
       break;
-    case 'lease':
-      logEvent(st.lease === null ? 'lease released' : st.lease === st.client ? 'you hold the lease' : `client ${st.lease} holds the lease`);
+    case 'lease': {
+      const now = st.lease === null ? 'the lease is free' : st.lease === st.client ? 'you hold the lease' : `client ${st.lease} holds the lease`;
+      if (ev.lost) {
+        const t = `you lost the lease: ${ev.reason ?? now}`;
+        logEvent(t, 'bad');
+        announce(t);
+      } else {
+        logEvent(ev.reason ? `${now}: ${ev.reason}` : now, ev.reason ? 'bad' : '');
+        if (ev.reason) announce(ev.reason);
+      }
+      renderPush();
       break;
+    }
     case 'shutdown':
       logEvent(`server shutting down: ${st.shutdown}`, 'bad');
+      announce(`server shutting down: ${st.shutdown}`);
       break;
     case 'error':
       logEvent(`${st.lastError.code}: ${st.lastError.message}`, 'bad');
@@ -184,6 +272,116 @@ function onMessage(data) {
 }
 let lastPhase = null;
 let scanFramed = false;
+
+/** The server's `state`: particles, lease, phase, the push running and the latest scan. */
+function onState(ev) {
+  view.updateParticles(st.particles, selected);
+  if (selected !== null && $('scan-x').value !== '' && !scanCentreTouched) centreScanOnParticle();
+  if (st.tip) mark('tip');
+  if (ev.scanChanged && !openedRecord) {
+    showScan();
+    if (st.scan.done && st.scan.record) loadLatestScan(st.scan.id, st.scan.record);
+  }
+  renderPush();
+  renderStale();
+  logEvent(`state: phase ${st.phase ?? '–'}, ${st.lease === null ? 'lease free' : `lease held by client ${st.lease}`}${st.push ? `, pushing #${st.push.particle}` : ''}${st.scan ? `, latest scan ${st.scan.record ?? st.scan.id}${st.scanStale ? ' (stale)' : ''}` : ''}`);
+}
+
+/** Shows the Session's scan (new, or refilled) in both views. */
+function showScan() {
+  view.startScan(st.scan);
+  if (st.scan.lines) view.fillScan(st.scan);
+  image2d.setScan(st.scan);
+  $('legend').hidden = false;
+  $('img-title').textContent = openedRecord ? `· record ${openedRecord}` : `· scan ${st.scan.id}`;
+  view.updateParticles(st.particles, selected);
+  renderStale();
+  renderLegend();
+}
+
+/** A late joiner's latest scan: its heights from the record the server names. */
+async function loadLatestScan(id, record) {
+  try {
+    const r = await fetch(apiUrl(`/api/records/${encodeURIComponent(record)}`, location));
+    if (!r.ok) throw new Error(`HTTP ${r.status}`);
+    const g = parseGsf(await r.arrayBuffer());
+    if (!session.fillScan(id, g.heights)) return; // another scan started meanwhile
+    view.fillScan(st.scan);
+    image2d.invalidate();
+    if (!exagTouched) autoExaggeration();
+    if (!scanFramed) {
+      view.frameScan();
+      scanFramed = true;
+    }
+    renderLegend();
+  } catch (e) {
+    logEvent(`could not load the latest scan ${record}: ${e.message}`, 'bad');
+  }
+}
+
+/** A past scan from the records, shown until the next live scan starts. */
+async function openScanRecord(name) {
+  try {
+    const r = await fetch(apiUrl(`/api/records/${encodeURIComponent(name)}`, location));
+    if (!r.ok) throw new Error(`HTTP ${r.status}`);
+    const g = parseGsf(await r.arrayBuffer());
+    const s = new Session();
+    s.startScan({ scan: -1, xres: g.xres, yres: g.yres, x_offset: g.x_offset, y_offset: g.y_offset, x_real: g.x_real, y_real: g.y_real });
+    s.fillScan(-1, g.heights);
+    openedRecord = name;
+    const sc = s.state.scan;
+    view.startScan(sc);
+    view.fillScan(sc);
+    image2d.setScan(sc);
+    $('img-title').textContent = `· record ${name}`;
+    $('img-stale').hidden = true;
+    view.frameScan();
+    logEvent(`opened ${name}: ${g.xres}×${g.yres} px, ${formatLength(g.x_real)} square`);
+  } catch (e) {
+    logEvent(`could not open ${name}: ${e.message}`, 'bad');
+  }
+}
+
+function renderStale() {
+  const stale = st.scanStale && !openedRecord && !!st.scan;
+  $('img-stale').hidden = !stale;
+  $('scan-progress').classList.toggle('stale', stale);
+  mark('legend');
+}
+
+/** The push running (everyone's view of it) or, for the lease holder, the form's preview. */
+function renderPush() {
+  const p = st.push;
+  const el = $('push-now');
+  if (p) {
+    view.setPushPath(p.path);
+    view.setPreview(null);
+    view.setTarget(null);
+    const end = p.path[p.path.length - 1];
+    el.textContent = `Pushing #${p.particle} (${p.by === st.client ? 'you' : `client ${p.by}`}) to (${(end[0] * 1e6).toFixed(3)}, ${(end[1] * 1e6).toFixed(3)}) µm`;
+    el.hidden = false;
+  } else {
+    view.setPushPath(null);
+    el.hidden = true;
+    updatePreview();
+  }
+}
+
+function showLastRun(r, text) {
+  const el = $('lastrun');
+  el.textContent = text;
+  el.className = `lastrun ${r.outcome === 'ok' ? 'good' : 'bad'}`;
+  el.hidden = false;
+}
+
+/** Says something to screen readers (only what matters: runs, the lease, shutdown). */
+function announce(text) {
+  const el = $('announce');
+  el.textContent = '';
+  setTimeout(() => {
+    el.textContent = text;
+  }, 50);
+}
 
 // ----- scene, particles, records -----
 
@@ -204,6 +402,7 @@ async function loadScene() {
 
 function applyScene(scene) {
   session.setScene(scene);
+  charts.setSetPoint(setPointForceN(scene));
   $('scene-name').textContent = scene.name ? `· ${scene.name}` : '';
   const range = st.stageRange * 1e6;
   view.setStage(range);
@@ -220,14 +419,19 @@ function applyScene(scene) {
   view.setParticles(st.particles, selected);
   if (!st.scan) view.frameStage();
   if ($('scan-x').value === '') centreScanOnParticle();
-  updatePreview();
+  // The scan form starts at the scene's own scan (a 14 nm particle is not imaged 10 µm wide).
+  if (!scanFormTouched && scene.scan) {
+    if (Number.isFinite(scene.scan.size_um)) $('scan-size').value = String(scene.scan.size_um);
+    if (Number.isFinite(scene.scan.pixels)) $('scan-px').value = String(Math.min(512, Math.max(8, scene.scan.pixels)));
+  }
+  renderPush();
 }
 
 function selectParticle(id) {
   selected = id;
   $('particle').value = String(id);
   view.updateParticles(st.particles, selected);
-  updatePreview();
+  renderPush();
 }
 
 function pickTarget(xUm, yUm) {
@@ -251,7 +455,7 @@ function centreScanOnParticle() {
 async function refreshRecords() {
   const body = $('records');
   if (demo) {
-    body.replaceChildren(row(['(demo: no records)'], 4));
+    body.replaceChildren(row(['(demo: no records)'], 5));
     return;
   }
   try {
@@ -259,7 +463,7 @@ async function refreshRecords() {
     if (!r.ok) throw new Error(`HTTP ${r.status}`);
     const list = await r.json();
     if (!list.length) {
-      body.replaceChildren(row(['no records yet'], 4));
+      body.replaceChildren(row(['no records yet'], 5));
       return;
     }
     list.sort((a, b) => String(b.modified).localeCompare(String(a.modified)));
@@ -269,7 +473,20 @@ async function refreshRecords() {
       a.href = apiUrl(`/api/records/${encodeURIComponent(rec.name)}`, location);
       a.download = rec.name;
       a.textContent = rec.name;
-      const cells = [a, rec.kind ?? '', formatBytes(rec.bytes), formatTime(rec.modified)];
+      const first = document.createElement('span');
+      first.append(a);
+      if (rec.name.endsWith('.gsf')) {
+        const b = document.createElement('button');
+        b.type = 'button';
+        b.className = 'small';
+        b.textContent = 'Open';
+        b.setAttribute('aria-label', `Open ${rec.name} in the views`);
+        b.addEventListener('click', () => openScanRecord(rec.name));
+        first.append(' ', b);
+      }
+      const run = outcomes.get(rec.name);
+      const outcome = run ? (run.outcome === 'ok' ? 'ok' : `${run.outcome}: ${run.failure ?? ''}`) : '';
+      const cells = [first, rec.kind ?? '', outcome, formatBytes(rec.bytes), formatTime(rec.modified)];
       for (const c of cells) {
         const td = document.createElement('td');
         td.append(c);
@@ -278,7 +495,7 @@ async function refreshRecords() {
       return tr;
     }));
   } catch (e) {
-    body.replaceChildren(row([`could not list records: ${e.message}`], 4));
+    body.replaceChildren(row([`could not list records: ${e.message}`], 5));
   }
 }
 
@@ -348,6 +565,7 @@ function renderControls() {
   set($('push-fs'), c.push);
   set($('scan-fs'), c.scan);
   set($('stop-btn'), c.stop);
+  set($('hap-fs'), c.haptic);
   // Buttons inside a disabled fieldset: give them the reason as a tooltip too.
   $('push-btn').title = c.push.why;
   $('scan-btn').title = c.scan.why;
@@ -358,8 +576,8 @@ function renderTip() {
   const t = st.tip;
   if (!t) return;
   const [x, y, z] = t.stage;
-  $('tipinfo').textContent = `tip x ${(x * 1e6).toFixed(3)} µm · y ${(y * 1e6).toFixed(3)} µm · z ${(z * 1e9).toFixed(1)} nm · ${t.volts.toFixed(3)} V · ${t.phase}` +
-    (t.estimate ? ` · particle at (${(t.estimate[0] * 1e6).toFixed(2)}, ${(t.estimate[1] * 1e6).toFixed(2)}) µm` : '');
+  $('tipinfo').textContent = `tip x ${(x * 1e6).toFixed(3)} µm · y ${(y * 1e6).toFixed(3)} µm · z ${(z * 1e9).toFixed(1)} nm · force ${((t.force ?? 0) * 1e9).toFixed(2)} nN · ${t.volts.toFixed(3)} V · ${t.phase}` +
+    (t.estimate ? ` · particle at (${(t.estimate[0] * 1e6).toFixed(3)}, ${(t.estimate[1] * 1e6).toFixed(3)}) µm` : '');
 }
 
 function renderLegend() {
@@ -370,7 +588,7 @@ function renderLegend() {
     $('legend-lo').textContent = formatLength(r.lo);
     $('legend-hi').textContent = formatLength(r.hi);
   }
-  $('scan-progress').textContent = sc.done ? `scan ${sc.id} complete` : `scan ${sc.id}: line ${sc.lines}/${sc.yres}`;
+  $('scan-progress').textContent = (sc.done ? `scan ${sc.id} complete` : `scan ${sc.id}: line ${sc.lines}/${sc.yres}`) + (st.scanStale ? ' · stale (a push ran since)' : '');
 }
 
 function showReply(id, status, text) {
@@ -426,9 +644,11 @@ function num(id) {
   return v === '' ? undefined : Number(v);
 }
 
+/** The form's push preview: only the lease holder's own, and only while no push runs (viewers
+ * see the operator's commanded path instead, from `push_started` / `state`). */
 function updatePreview() {
   const p = st.particles.find((q) => q.id === selected);
-  if (!p) {
+  if (!p || st.push || !session.hasLease) {
     view.setPreview(null);
     view.setTarget(null);
     return;
@@ -462,7 +682,21 @@ function guarded(out, build) {
 
 $('take-lease').addEventListener('click', () => guarded('reply-lease', () => commands.takeLease()));
 $('release-lease').addEventListener('click', () => guarded('reply-lease', () => commands.releaseLease()));
-$('stop-btn').addEventListener('click', () => guarded('reply-stop', () => commands.stop()));
+// Stop goes on the pointer's press, not its release (a click): one event sooner. The click that
+// follows is then ignored; a keyboard's Enter or Space still clicks.
+let stopPressed = false;
+$('stop-btn').addEventListener('pointerdown', (e) => {
+  if (e.button !== 0 || $('stop-btn').disabled) return;
+  stopPressed = true;
+  guarded('reply-stop', () => commands.stop());
+});
+$('stop-btn').addEventListener('click', () => {
+  if (stopPressed) {
+    stopPressed = false;
+    return;
+  }
+  guarded('reply-stop', () => commands.stop());
+});
 $('push-form').addEventListener('submit', (e) => {
   e.preventDefault();
   const particle = Number($('particle').value);
@@ -475,7 +709,10 @@ $('scan-form').addEventListener('submit', (e) => {
   scanFramed = false;
   guarded('reply-scan', () => commands.scan({ centreXUm: num('scan-x'), centreYUm: num('scan-y'), sizeUm: num('scan-size'), pixels: num('scan-px') }));
 });
-$('scan-centre').addEventListener('click', centreScanOnParticle);
+$('scan-centre').addEventListener('click', () => {
+  scanCentreTouched = false;
+  centreScanOnParticle();
+});
 $('particle').addEventListener('change', () => selectParticle(Number($('particle').value)));
 for (const r of document.querySelectorAll('input[name=mode]')) r.addEventListener('change', () => {
   setMode(mode());
@@ -492,6 +729,21 @@ $('exag-auto').addEventListener('click', () => {
 });
 $('frame-stage').addEventListener('click', () => view.frameStage());
 $('frame-scan').addEventListener('click', () => view.frameScan());
+$('frame-tip').addEventListener('click', () => view.frameTip());
+for (const a of ['engage', 'release', 'recenter']) $(`hap-${a}`).addEventListener('click', () => guarded('reply-haptic', () => commands.haptic(a)));
+$('hap-scale').addEventListener('click', () => guarded('reply-haptic', () => commands.haptic('scale', { nmPerMm: num('hap-nm'), pullOffAtHandN: num('hap-po') })));
+$('level').addEventListener('change', () => image2d.setLevelling($('level').value));
+$('scan-x').addEventListener('input', () => { scanCentreTouched = true; });
+for (const id of ['scan-size', 'scan-px']) $(id).addEventListener('input', () => { scanFormTouched = true; });
+$('scan-y').addEventListener('input', () => { scanCentreTouched = true; });
+$('csv').addEventListener('click', () => {
+  const blob = new Blob([traceCsv(st.trace)], { type: 'text/csv' });
+  const a = document.createElement('a');
+  a.href = URL.createObjectURL(blob);
+  a.download = `nanopush-trace-${new Date().toISOString().replace(/[:.]/g, '-')}.csv`;
+  a.click();
+  setTimeout(() => URL.revokeObjectURL(a.href), 1000);
+});
 $('clear-trail').addEventListener('click', () => view.clearTrail());
 $('rec-refresh').addEventListener('click', refreshRecords);
 document.addEventListener('keydown', (e) => {
@@ -508,4 +760,4 @@ refreshRecords();
 connect();
 
 // For tests and the curious: the state the page shows.
-window.nanopush = { session, view };
+window.nanopush = { session, view, image2d, charts, haptic };

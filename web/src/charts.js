@@ -1,39 +1,63 @@
-// Strip charts (uPlot): the deflection reading (V) and the tip height (µm) over the last
-// seconds of telemetry, against time relative to the newest sample.
+// Force and height plots (uPlot, one chart object each, data replaced in place): the tip force
+// in nN against time, the tip height against time (last seconds of telemetry, time relative to
+// the newest sample), and force against height for the current approach or push (the paper's
+// Fig 3 / Fig 9 / Fig 15 views). Redrawn at most ~8 times a second, never per message.
 import uPlot from 'uplot';
 
-function chart(el, label, unit, colour) {
+const AXIS = { stroke: '#c4ccd6', grid: { stroke: '#3a4554' }, ticks: { stroke: '#3a4554' } };
+
+function chart(el, xLabel, label, unit, colour, digits, xFixed = true, setPoint = false) {
   const opts = {
     width: Math.max(200, el.clientWidth),
-    height: 150,
+    height: 140,
     legend: { show: true, live: true },
     cursor: { drag: { x: false, y: false } },
-    scales: { x: { time: false, range: (u, lo, hi) => [Math.min(lo, -10), 0] } },
+    scales: { x: xFixed ? { time: false, range: (u, lo) => [Math.min(lo, -10), 0] } : { time: false } },
     axes: [
-      { stroke: '#a9b4c2', grid: { stroke: '#2a323d' }, ticks: { stroke: '#2a323d' }, label: 's before now', labelSize: 18, size: 30 },
-      { stroke: '#a9b4c2', grid: { stroke: '#2a323d' }, ticks: { stroke: '#2a323d' }, label: unit, labelSize: 18, size: 60 },
+      { ...AXIS, label: xLabel, labelSize: 18, size: 30 },
+      { ...AXIS, label: unit, labelSize: 18, size: 60 },
     ],
     series: [
-      { label: 't', value: (u, v) => (v == null ? '–' : `${v.toFixed(2)} s`) },
-      { label, stroke: colour, width: 1.5, value: (u, v) => (v == null ? '–' : `${v.toFixed(unit === 'V' ? 3 : 4)} ${unit}`) },
+      { label: xFixed ? 't' : 'height', value: (u, v) => (v == null ? '–' : xFixed ? `${v.toFixed(2)} s` : `${v.toFixed(1)} nm`) },
+      { label, stroke: colour, width: 1.5, value: (u, v) => (v == null ? '–' : `${v.toFixed(digits)} ${unit}`) },
+      ...(setPoint ? [{ label: 'set point', stroke: '#e6e6e6', width: 1, dash: [6, 4], value: (u, v) => (v == null ? '–' : `${v.toFixed(digits)} ${unit}`) }] : []),
     ],
   };
-  return new uPlot(opts, [[], []], el);
+  return new uPlot(opts, setPoint ? [[], [], []] : [[], []], el);
+}
+
+/** CSV of a telemetry trace (SI units in the column names). */
+export function traceCsv(trace) {
+  const rows = ['t_s,z_m,volts,tip_force_n'];
+  for (let i = 0; i < trace.t.length; i++) rows.push(`${trace.t[i]},${trace.z[i]},${trace.volts[i]},${trace.force[i] ?? ''}`);
+  return rows.join('\n') + '\n';
 }
 
 export class Charts {
-  constructor(voltsEl, zEl) {
-    this.volts = chart(voltsEl, 'deflection', 'V', '#f0a83c');
-    this.z = chart(zEl, 'tip height', 'µm', '#7fe3ff');
-    this.els = [voltsEl, zEl];
+  constructor(forceEl, zEl, fdEl) {
+    this.force = chart(forceEl, 's before now', 'tip force', 'nN', '#f0a83c', 2, true, true);
+    this.z = chart(zEl, 's before now', 'tip height', 'µm', '#7fe3ff', 4);
+    this.fd = chart(fdEl, 'tip height above its lowest (nm)', 'tip force', 'nN', '#ff7ab8', 2, false, true);
+    this.setPointN = null; // the strategy's contact set point as a force (N), drawn dashed
+    this.since = -Infinity; // the force-distance plot starts here (s, server time)
     this.pending = null;
+    const els = [forceEl, zEl, fdEl];
     new ResizeObserver(() => {
-      this.volts.setSize({ width: Math.max(200, voltsEl.clientWidth), height: 150 });
-      this.z.setSize({ width: Math.max(200, zEl.clientWidth), height: 150 });
-    }).observe(voltsEl.parentElement);
+      for (const [c, e] of [[this.force, els[0]], [this.z, els[1]], [this.fd, els[2]]]) c.setSize({ width: Math.max(200, e.clientWidth), height: 140 });
+    }).observe(forceEl.parentElement);
   }
 
-  /** Redraws from the Session's trace, at most ~10 times a second. */
+  /** The set point (N) drawn on both force plots; null: none. */
+  setSetPoint(n) {
+    this.setPointN = Number.isFinite(n) ? n : null;
+  }
+
+  /** The force-distance plot restarts here (server time, s): a push or approach begins. */
+  restartFd(t) {
+    this.since = t;
+  }
+
+  /** Redraws from the Session's trace, at most ~8 times a second. */
   update(trace) {
     if (this.pending) return;
     this.pending = setTimeout(() => {
@@ -42,12 +66,25 @@ export class Charts {
       const tEnd = n ? trace.t[n - 1] : 0;
       const x = new Float64Array(n);
       const z = new Float64Array(n);
+      const f = new Float64Array(n);
       for (let i = 0; i < n; i++) {
         x[i] = trace.t[i] - tEnd;
         z[i] = trace.z[i] * 1e6;
+        f[i] = (trace.force[i] ?? NaN) * 1e9;
       }
-      this.volts.setData([x, Float64Array.from(trace.volts)]);
+      const sp = (len) => new Float64Array(len).fill(this.setPointN === null ? NaN : this.setPointN * 1e9);
+      this.force.setData([x, f, sp(n)]);
       this.z.setData([x, z]);
-    }, 100);
+      // Force against height since the push / approach began (or the whole window), sorted
+      // by height as uPlot needs ascending x.
+      let i0 = 0;
+      while (i0 < n && trace.t[i0] < this.since) i0++;
+      let zmin = Infinity;
+      for (let i = i0; i < n; i++) zmin = Math.min(zmin, trace.z[i]);
+      const idx = [];
+      for (let i = i0; i < n; i++) idx.push(i);
+      idx.sort((a, b) => trace.z[a] - trace.z[b]);
+      this.fd.setData([Float64Array.from(idx, (i) => (trace.z[i] - zmin) * 1e9), Float64Array.from(idx, (i) => (trace.force[i] ?? NaN) * 1e9), sp(idx.length)]);
+    }, 120);
   }
 }

@@ -146,6 +146,28 @@ export const commands = {
   stop(id) {
     return withId({ type: 'stop' }, id);
   },
+  /**
+   * A haptic z-control command: `engage`, `release`, `recenter`, or `scale` with `nmPerMm`
+   * [0.01, 1000] and/or `pullOffAtHandN` [0.01, 10].
+   */
+  haptic(action, { nmPerMm, pullOffAtHandN } = {}, id) {
+    if (!['engage', 'release', 'recenter', 'scale'].includes(action)) throw new RangeError(`action must be engage, release, recenter or scale, got ${JSON.stringify(action)}`);
+    const m = { type: 'haptic', action };
+    if (action === 'scale') {
+      if (nmPerMm === undefined && pullOffAtHandN === undefined) throw new RangeError('scale needs nm_per_mm and/or pull_off_at_hand_n');
+      if (nmPerMm !== undefined) {
+        finite('nm_per_mm', nmPerMm);
+        if (!(nmPerMm >= 0.01 && nmPerMm <= 1000)) throw new RangeError(`nm_per_mm must be in [0.01, 1000] nm/mm, got ${nmPerMm}`);
+        m.nm_per_mm = nmPerMm;
+      }
+      if (pullOffAtHandN !== undefined) {
+        finite('pull_off_at_hand_n', pullOffAtHandN);
+        if (!(pullOffAtHandN >= 0.01 && pullOffAtHandN <= 10)) throw new RangeError(`pull_off_at_hand_n must be in [0.01, 10] N, got ${pullOffAtHandN}`);
+        m.pull_off_at_hand_n = pullOffAtHandN;
+      }
+    }
+    return withId(m, id);
+  },
   ping(id) {
     return withId({ type: 'ping' }, id);
   },
@@ -178,6 +200,87 @@ export function apiUrl(path, loc) {
 export function backoffMs(attempt, baseMs = 500, maxMs = 15000) {
   const n = Math.max(1, attempt);
   return Math.min(maxMs, baseMs * 2 ** (n - 1));
+}
+
+/**
+ * Parses a Gwyddion Simple Field (the scan records of `/api/records/NAME.gsf`): the header's
+ * `Key = Value` lines, NUL padding to a multiple of 4, then XRes×YRes little-endian f32
+ * (row-major, first row = lowest y, as `nanopush` writes it). Throws an Error naming what is wrong.
+ * @returns {{xres:number, yres:number, x_real:number, y_real:number, x_offset:number, y_offset:number, title:string, heights:Float32Array}}
+ */
+export function parseGsf(buf) {
+  const bytes = buf instanceof ArrayBuffer ? new Uint8Array(buf) : new Uint8Array(buf.buffer, buf.byteOffset, buf.byteLength);
+  const magic = 'Gwyddion Simple Field 1.0\n';
+  const head = String.fromCharCode(...bytes.subarray(0, magic.length));
+  if (head !== magic) throw new Error('GSF: not a Gwyddion Simple Field (bad first line)');
+  const nul = bytes.indexOf(0);
+  if (nul < 0) throw new Error('GSF: no NUL after the header');
+  const text = new TextDecoder().decode(bytes.subarray(magic.length, nul));
+  const kv = {};
+  for (const line of text.split('\n')) {
+    const i = line.indexOf('=');
+    if (i > 0) kv[line.slice(0, i).trim()] = line.slice(i + 1).trim();
+  }
+  const xres = Number(kv.XRes);
+  const yres = Number(kv.YRes);
+  if (!Number.isInteger(xres) || !Number.isInteger(yres) || xres < 1 || yres < 1 || xres * yres > 4096 * 4096) {
+    throw new Error(`GSF: XRes ${kv.XRes}, YRes ${kv.YRes}: need positive integers`);
+  }
+  const start = (nul + 4) & ~3;
+  const need = start + 4 * xres * yres;
+  if (bytes.byteLength !== need) throw new Error(`GSF: ${bytes.byteLength} bytes, ${xres}×${yres} needs ${need}`);
+  const v = new DataView(bytes.buffer, bytes.byteOffset + start, 4 * xres * yres);
+  const heights = new Float32Array(xres * yres);
+  for (let i = 0; i < heights.length; i++) heights[i] = v.getFloat32(4 * i, true);
+  const num = (k, d) => (kv[k] !== undefined && Number.isFinite(Number(kv[k])) ? Number(kv[k]) : d);
+  return {
+    xres, yres, heights,
+    x_real: num('XReal', 1), y_real: num('YReal', 1), x_offset: num('XOffset', 0), y_offset: num('YOffset', 0),
+    title: kv.Title ?? '',
+  };
+}
+
+/** What a finished push means, in words: `ok`, or the failure code, reason and record. */
+export function describeRun(r) {
+  const rec = r.record ? `record ${r.record}` : r.record_error ? `no record: ${r.record_error}` : 'no record';
+  if (r.outcome === 'ok') {
+    const at = Array.isArray(r.estimate) ? `, particle now at ${formatPoint(r.estimate)}` : '';
+    return `push of #${r.particle} ok${at} (${rec})`;
+  }
+  const never = Array.isArray(r.estimate) ? `, particle left at ${formatPoint(r.estimate)}` : ', it never started';
+  return `push of #${r.particle} failed: ${r.outcome}: ${r.failure ?? 'no reason given'}${never} (${rec})`;
+}
+
+/** The length unit that suits a size (m): nm below 2 µm, else µm. */
+export function lengthUnit(sizeM) {
+  return Math.abs(sizeM) < 2e-6 ? { name: 'nm', scale: 1e9 } : { name: 'µm', scale: 1e6 };
+}
+
+/** A length (m) with a unit chosen for `ref` (m; defaults to the value itself). */
+export function formatLen(m, ref = m, digits = 3) {
+  const u = lengthUnit(ref);
+  const v = m * u.scale;
+  return `${Number(v.toPrecision(digits))} ${u.name}`;
+}
+
+function formatPoint([x, y]) {
+  const u = lengthUnit(Math.max(Math.abs(x), Math.abs(y)));
+  return `(${(x * u.scale).toFixed(u.name === 'nm' ? 1 : 2)}, ${(y * u.scale).toFixed(u.name === 'nm' ? 1 : 2)}) ${u.name}`;
+}
+
+/**
+ * The strategy's contact set point as a tip force (N), from an /api/scene document: the set
+ * point reading `ζ_set` (V) is a deflection (`set_point_v` − `baseline_v`) / `gain_v_per_nm`,
+ * and the force `k_z ζ` (positive repulsive, as telemetry's `tip_force_n`). Null when the scene
+ * lacks a value.
+ */
+export function setPointForceN(scene) {
+  const v = scene?.strategy?.set_point_v;
+  const b = scene?.sensor?.baseline_v;
+  const g = scene?.sensor?.gain_v_per_nm;
+  const k = scene?.cantilever?.stiffness_n_per_m;
+  if (![v, b, g, k].every(Number.isFinite) || g === 0) return null;
+  return k * ((v - b) / g) * 1e-9;
 }
 
 /** Particles of an /api/scene document, in metres: [{id, radius, x, y, material}]. */
@@ -213,7 +316,13 @@ export function initialState({ traceSeconds = 10 } = {}) {
     phase: null,
     tip: null, // last telemetry {t, stage:[x,y,z] m, volts, phase, estimate}
     telemetryCount: 0,
-    trace: { seconds: traceSeconds, t: [], volts: [], z: [] },
+    trace: { seconds: traceSeconds, t: [], volts: [], z: [], force: [] },
+    serverParticles: null, // particle positions the server sent (state), kept over scene reloads
+    push: null, // the push running: {particle, path: [[x, y] m…], by}
+    scanStale: false, // a push has run since the scan shown
+    lastRun: null, // the newest run_done
+    leaseNote: null, // why the lease changed, when the server said
+    stateReceived: false, // the server's `state` arrived on this connection
     lagged: { events: 0, skipped: 0 },
     scan: null, // {id, xres, yres, x_offset, y_offset, x_real, y_real, heights, received, lines, min, max, done, record}
     strayLines: 0, // scan lines of no current scan
@@ -236,6 +345,15 @@ export class Session {
   /** Loads an /api/scene document: the particles and the stage range. */
   setScene(scene) {
     this.state.particles = sceneParticles(scene);
+    // The server's word (state, then run_done) beats the scene file's positions, whichever
+    // arrived first.
+    for (const q of this.state.serverParticles ?? []) {
+      const p = this.state.particles.find((pp) => pp.id === q.id);
+      if (p) {
+        p.x = q.x;
+        p.y = q.y;
+      }
+    }
     const r = scene?.stage?.range_um;
     if (typeof r === 'number' && r > 0) this.state.stageRange = r / 1e6;
     return this.state;
@@ -261,6 +379,9 @@ export class Session {
     s.client = null;
     s.role = null;
     s.lease = null;
+    s.phase = null;
+    s.push = null;
+    s.stateReceived = false;
     for (const c of s.commands.values()) {
       if (c.status === 'pending') {
         c.status = 'error';
@@ -326,10 +447,42 @@ export class Session {
         s.lease = msg.lease ?? null;
         s.scene = msg.scene;
         s.tickHz = msg.tick_hz;
+        s.stateReceived = false;
         if (msg.version !== WS_VERSION) {
           this.logError('version', `the server speaks protocol ${msg.version}, this page ${WS_VERSION}`);
         }
         return { kind: 'welcome' };
+      case 'state': {
+        s.stateReceived = true;
+        s.lease = msg.lease ?? null;
+        s.phase = msg.phase ?? null;
+        if (Array.isArray(msg.stage)) s.tip = { t: null, stage: msg.stage, volts: 0, phase: msg.phase, estimate: null, force: 0 };
+        for (const q of msg.particles ?? []) {
+          const p = s.particles.find((pp) => pp.id === q.id);
+          if (p) {
+            p.x = q.x;
+            p.y = q.y;
+            p.radius = q.radius;
+          } else {
+            s.particles.push({ id: q.id, material: '', radius: q.radius, x: q.x, y: q.y });
+          }
+        }
+        s.serverParticles = (msg.particles ?? []).map((q) => ({ ...q }));
+        s.push = msg.push ?? null;
+        const sc = msg.scan ?? null;
+        let scanChanged = false;
+        if (sc && (!s.scan || s.scan.id !== sc.scan)) {
+          this.startScan({ ...sc, type: 'scan_start' });
+          s.scan.done = !!sc.done;
+          s.scan.record = sc.record ?? null;
+          scanChanged = true;
+        }
+        s.scanStale = !!sc?.stale;
+        return { kind: 'state', scan: sc, scanChanged };
+      }
+      case 'push_started':
+        s.push = { particle: msg.particle, path: msg.path ?? [], by: msg.by ?? null };
+        return { kind: 'push_started', push: s.push };
       case 'ok': {
         const c = msg.id != null ? s.commands.get(msg.id) : undefined;
         if (c) {
@@ -350,7 +503,8 @@ export class Session {
         return { kind: 'reply', ok: false, id: msg.id ?? null, command: c ?? null };
       }
       case 'telemetry': {
-        s.tip = { t: msg.t, stage: msg.stage, volts: msg.volts, phase: msg.phase, estimate: msg.estimate ?? null };
+        const force = Number.isFinite(msg.tip_force_n) ? msg.tip_force_n : 0;
+        s.tip = { t: msg.t, stage: msg.stage, volts: msg.volts, phase: msg.phase, estimate: msg.estimate ?? null, force, haptic: msg.haptic ?? null };
         s.phase = msg.phase;
         s.telemetryCount++;
         const tr = s.trace;
@@ -359,16 +513,19 @@ export class Session {
           tr.t.length = 0;
           tr.volts.length = 0;
           tr.z.length = 0;
+          tr.force.length = 0;
         }
         tr.t.push(msg.t);
         tr.volts.push(msg.volts);
         tr.z.push(msg.stage[2]);
+        tr.force.push(force);
         let drop = 0;
         while (drop < tr.t.length && tr.t[drop] < msg.t - tr.seconds) drop++;
         if (drop) {
           tr.t.splice(0, drop);
           tr.volts.splice(0, drop);
           tr.z.splice(0, drop);
+          tr.force.splice(0, drop);
         }
         return { kind: 'telemetry' };
       }
@@ -376,10 +533,18 @@ export class Session {
         s.lagged.events++;
         s.lagged.skipped += msg.skipped ?? 0;
         return { kind: 'lagged' };
-      case 'lease':
+      case 'lease': {
+        const before = s.lease;
+        const hadIt = before !== null && before === s.client;
         s.lease = msg.holder ?? null;
-        return { kind: 'lease' };
+        s.leaseNote = msg.reason ?? null;
+        const lost = hadIt && s.lease !== s.client;
+        return { kind: 'lease', before, lost, reason: msg.reason ?? null };
+      }
       case 'run_done': {
+        s.lastRun = msg;
+        s.push = null;
+        if (Array.isArray(msg.estimate)) s.scanStale = s.scan !== null;
         s.runs.push(msg);
         if (s.runs.length > RUNS_MAX) s.runs.splice(0, s.runs.length - RUNS_MAX);
         const p = s.particles.find((q) => q.id === msg.particle);
@@ -387,15 +552,41 @@ export class Session {
           p.x = msg.estimate[0];
           p.y = msg.estimate[1];
         }
+        const q = (s.serverParticles ?? []).find((qq) => qq.id === msg.particle);
+        if (q && Array.isArray(msg.estimate)) {
+          q.x = msg.estimate[0];
+          q.y = msg.estimate[1];
+        }
         return { kind: 'run_done', run: msg };
       }
-      case 'scan_start': {
+      case 'scan_start':
+        if (!this.startScan(msg)) return { kind: 'error' };
+        return { kind: 'scan_start' };
+      case 'scan_done':
+        if (s.scan && s.scan.id === msg.scan) {
+          s.scan.done = true;
+          s.scan.record = msg.record ?? null;
+        }
+        return { kind: 'scan_done', record: msg.record ?? null, record_error: msg.record_error ?? null };
+      case 'shutdown':
+        s.shutdown = msg.reason ?? '';
+        return { kind: 'shutdown' };
+      default:
+        return { kind: 'unknown', type: msg.type };
+    }
+  }
+
+  /** A new, empty scan (from `scan_start`, `state` or a record); false when its size is absurd. */
+  startScan(msg) {
+    const s = this.state;
+    {
         const n = msg.xres * msg.yres;
         if (!Number.isInteger(n) || n <= 0 || n > 512 * 512) {
           this.logError('client_scan', `scan_start with ${msg.xres}×${msg.yres} pixels`);
           s.scan = null;
-          return { kind: 'error' };
+          return false;
         }
+        s.scanStale = false;
         s.scan = {
           id: msg.scan,
           xres: msg.xres,
@@ -411,21 +602,33 @@ export class Session {
           max: -Infinity,
           done: false,
           record: null,
+          version: 0, // bumped by every change of the heights
         };
-        return { kind: 'scan_start' };
-      }
-      case 'scan_done':
-        if (s.scan && s.scan.id === msg.scan) {
-          s.scan.done = true;
-          s.scan.record = msg.record ?? null;
-        }
-        return { kind: 'scan_done', record: msg.record ?? null };
-      case 'shutdown':
-        s.shutdown = msg.reason ?? '';
-        return { kind: 'shutdown' };
-      default:
-        return { kind: 'unknown', type: msg.type };
+        return true;
     }
+  }
+
+  /**
+   * Fills the current scan `scanId` with a whole image (a parsed GSF record: `heights`
+   * row-major, first row lowest y). Returns false when it is not the scan shown or does not fit.
+   */
+  fillScan(scanId, heights) {
+    const sc = this.state.scan;
+    if (!sc || sc.id !== scanId || heights.length !== sc.xres * sc.yres) return false;
+    sc.heights.set(heights);
+    sc.received.fill(1);
+    sc.lines = sc.yres;
+    sc.min = Infinity;
+    sc.max = -Infinity;
+    for (const h of heights) {
+      if (Number.isFinite(h)) {
+        if (h < sc.min) sc.min = h;
+        if (h > sc.max) sc.max = h;
+      }
+    }
+    sc.done = true;
+    sc.version++;
+    return true;
   }
 
   applyScanLine(buf) {
@@ -447,6 +650,7 @@ export class Session {
       return { kind: 'error' };
     }
     sc.heights.set(f.heights, f.line * sc.xres);
+    sc.version++;
     if (!sc.received[f.line]) {
       sc.received[f.line] = 1;
       sc.lines++;
@@ -480,6 +684,7 @@ export function controlState(state) {
     releaseLease: base ? no(base) : mine ? yes : no('You do not hold the lease'),
     push: needLease,
     scan: needLease,
+    haptic: needLease,
     stop: needLease,
   };
 }

@@ -9,6 +9,11 @@ import { viridisTable } from './colormap.js';
 const UM = 1e6; // metres → µm
 const LUT_N = 256;
 const TRAIL_N = 900;
+/** Most vertices per side of the 3D surface: a 512² scan is drawn from every 4th pixel (the 2D
+ * image keeps every pixel); 65k vertices is what a software renderer draws at a usable rate. */
+const MAX_SIDE = 160;
+/** Smallest on-screen radius of the tip ball (CSS px), however far the camera is. */
+const TIP_MIN_PX = 7;
 
 export class View3D {
   /**
@@ -22,8 +27,11 @@ export class View3D {
     this.stageUm = 100;
     this.dirty = true;
 
-    this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
-    this.renderer.setPixelRatio(Math.min(2, window.devicePixelRatio || 1));
+    // A software renderer (SwiftShader, llvmpipe: no GPU) gets no multisampling and one pixel
+    // per CSS pixel: each frame costs it a fraction.
+    this.software = softwareGl();
+    this.renderer = new THREE.WebGLRenderer({ antialias: !this.software });
+    this.renderer.setPixelRatio(this.software ? 1 : Math.min(2, window.devicePixelRatio || 1));
     this.renderer.setClearColor(0x10141a);
     container.appendChild(this.renderer.domElement);
     this.renderer.domElement.setAttribute('aria-hidden', 'true');
@@ -43,7 +51,7 @@ export class View3D {
 
     this.substrate = new THREE.Mesh(
       new THREE.PlaneGeometry(1, 1),
-      new THREE.MeshBasicMaterial({ color: 0x2a3340, polygonOffset: true, polygonOffsetFactor: 2, polygonOffsetUnits: 2 }),
+      new THREE.MeshBasicMaterial({ color: 0x1b222b, polygonOffset: true, polygonOffsetFactor: 2, polygonOffsetUnits: 2 }),
     );
     this.zGroup.add(this.substrate);
     this.grid = null;
@@ -53,11 +61,19 @@ export class View3D {
     this.particleMeshes = new Map();
 
     // The tip: a ball, a drop line to the substrate and a trail of recent positions.
-    this.tip = new THREE.Mesh(new THREE.SphereGeometry(1, 24, 16), new THREE.MeshBasicMaterial({ color: 0xff7a3d }));
+    // Drawn last and through everything (the scan, particles): the operator must always see
+    // where the tip is; a ring and a shadow on the substrate mark it from above too.
+    this.tip = new THREE.Mesh(new THREE.SphereGeometry(1, 24, 16), new THREE.MeshBasicMaterial({ color: 0xff7a3d, depthTest: false, depthWrite: false }));
+    this.tip.renderOrder = 1000;
     this.tip.visible = false;
     this.scene.add(this.tip);
-    this.tipRing = new THREE.Mesh(new THREE.RingGeometry(1.25, 1.6, 32), new THREE.MeshBasicMaterial({ color: 0xffd0b0, side: THREE.DoubleSide }));
+    this.tipRing = new THREE.Mesh(new THREE.RingGeometry(1.25, 1.6, 32), new THREE.MeshBasicMaterial({ color: 0xffd0b0, side: THREE.DoubleSide, depthTest: false, depthWrite: false }));
+    this.tipRing.renderOrder = 1001;
     this.tip.add(this.tipRing);
+    this.tipShadow = new THREE.Mesh(new THREE.CircleGeometry(1, 32), new THREE.MeshBasicMaterial({ color: 0x000000, transparent: true, opacity: 0.55, depthTest: false, depthWrite: false }));
+    this.tipShadow.renderOrder = 999;
+    this.tipShadow.visible = false;
+    this.scene.add(this.tipShadow);
     this.dropGeom = new THREE.BufferGeometry().setAttribute('position', new THREE.Float32BufferAttribute(new Float32Array(6), 3));
     this.drop = new THREE.Line(this.dropGeom, new THREE.LineDashedMaterial({ color: 0xff9a66, dashSize: 0.3, gapSize: 0.2 }));
     this.drop.visible = false;
@@ -85,6 +101,11 @@ export class View3D {
     this.preview = new THREE.ArrowHelper(new THREE.Vector3(1, 0, 0), new THREE.Vector3(), 1, 0xff4fa3);
     this.preview.visible = false;
     this.scene.add(this.preview);
+    // The commanded push (everyone sees it): the planned path of the particle's centre.
+    this.pushPath = new THREE.Group();
+    this.pushPath.visible = false;
+    this.scene.add(this.pushPath);
+    this.pushPathPoints = null;
 
     // The scan.
     this.scanMesh = null;
@@ -100,13 +121,29 @@ export class View3D {
     this.resize();
     this.setStage(100);
     this.frameStage();
-    const loop = () => {
-      if (this.dirty) {
+    // Render on change, at most once per animation frame; when a frame is slow (a software
+    // renderer, a big scan), wait as long as it took before the next, so at least half of the
+    // main thread stays free for input (a Stop click is never queued behind frames).
+    this.renderMs = 0;
+    this.frames = 0;
+    this.frameInterval = 16.7; // ms between animation frames, smoothed: how busy the browser is
+    let notBefore = 0;
+    let last = 0;
+    const loop = (now) => {
+      if (last) this.frameInterval += 0.2 * (Math.min(2000, now - last) - this.frameInterval);
+      last = now;
+      if (this.dirty && now >= notBefore) {
         this.dirty = false;
+        const t0 = performance.now();
+        this.scaleTip();
         this.renderer.render(this.scene, this.camera);
         this.labels.render(this.scene, this.camera);
         this.colourFull = false;
         this.posFull = false;
+        const dt = performance.now() - t0;
+        this.renderMs = dt;
+        this.frames++;
+        notBefore = dt > 12 ? performance.now() + dt : 0;
       }
       requestAnimationFrame(loop);
     };
@@ -152,7 +189,8 @@ export class View3D {
       pts.push(v, 0, 0, v, rangeUm, 0, 0, v, 0, rangeUm, v, 0);
     }
     const g = new THREE.BufferGeometry().setAttribute('position', new THREE.Float32BufferAttribute(pts, 3));
-    this.grid = new THREE.LineSegments(g, new THREE.LineBasicMaterial({ color: 0x3d4a5c }));
+    // #8796aa on the #1b222b substrate: 5:1 contrast.
+    this.grid = new THREE.LineSegments(g, new THREE.LineBasicMaterial({ color: 0x8796aa }));
     this.zGroup.add(this.grid);
     this.requestRender();
   }
@@ -184,8 +222,9 @@ export class View3D {
       el.textContent = `#${p.id}`;
       el.title = `particle ${p.id}${p.material ? ` (${p.material})` : ''}, radius ${formatLength(p.radius)}`;
       const label = new CSS2DObject(el);
-      label.position.set(0, 0, 1.25);
-      label.center.set(0.5, 1);
+      // Beside the sphere, not over it (where the tip works), and see-through.
+      label.position.set(1.15, 0, 0);
+      label.center.set(0, 0.5);
       mesh.add(label);
       this.particleGroup.add(mesh);
       this.particleMeshes.set(p.id, mesh);
@@ -230,17 +269,22 @@ export class View3D {
     const { xres, yres } = scan;
     const wUm = scan.x_real * UM;
     const hUm = scan.y_real * UM;
-    // Vertices at pixel centres: the plane spans (n-1)/n of the region, centred on it.
-    const geom = new THREE.PlaneGeometry(wUm * (xres - 1) / xres, hUm * (yres - 1) / yres, xres - 1, yres - 1);
+    // Vertices at the centres of every `step`-th pixel (nx × ny of them).
+    const step = Math.max(1, Math.ceil(Math.max(xres, yres) / MAX_SIDE));
+    const nx = Math.max(2, Math.ceil(xres / step));
+    const ny = Math.max(2, Math.ceil(yres / step));
+    const spanX = wUm * ((nx - 1) * step) / xres;
+    const spanY = hUm * ((ny - 1) * step) / yres;
+    const geom = new THREE.PlaneGeometry(spanX, spanY, nx - 1, ny - 1);
     const pos = geom.getAttribute('position');
     pos.setUsage(THREE.DynamicDrawUsage);
-    const col = new THREE.BufferAttribute(new Float32Array(xres * yres * 3), 3);
+    const col = new THREE.BufferAttribute(new Float32Array(nx * ny * 3), 3);
     col.setUsage(THREE.DynamicDrawUsage);
     geom.setAttribute('color', col);
     geom.setDrawRange(0, 0);
     const mesh = new THREE.Mesh(geom, new THREE.MeshBasicMaterial({ vertexColors: true, side: THREE.DoubleSide }));
-    mesh.position.set(scan.x_offset * UM + wUm / 2, scan.y_offset * UM + hUm / 2, 0);
-    mesh.userData = { wUm, hUm, xres, yres, scanId: scan.id };
+    mesh.position.set(scan.x_offset * UM + (wUm / xres) * 0.5 + spanX / 2, scan.y_offset * UM + (hUm / yres) * 0.5 + spanY / 2, 0);
+    mesh.userData = { wUm, hUm, xres, yres, nx, ny, step, scanId: scan.id };
     this.scanMesh = mesh;
     this.zGroup.add(mesh);
     this.posFull = true;
@@ -272,19 +316,19 @@ export class View3D {
   scanLine(scan, line) {
     const mesh = this.scanMesh;
     if (!mesh || mesh.userData.scanId !== scan.id) return;
-    const { xres, yres } = scan;
+    const { yres } = scan;
+    const { nx, ny, step } = mesh.userData;
     const geom = mesh.geometry;
     const pos = geom.getAttribute('position');
-    const row = yres - 1 - line; // PlaneGeometry rows run from +y down
-    const arr = pos.array;
-    for (let i = 0; i < xres; i++) {
-      const h = scan.heights[line * xres + i];
-      arr[3 * (row * xres + i) + 2] = Number.isFinite(h) ? h * UM : 0;
+    const onMesh = line % step === 0 && line / step < ny;
+    const row = ny - 1 - line / step; // PlaneGeometry rows run from +y down
+    if (onMesh) {
+      this.writeRow(scan, line / step);
+      // Upload just this row, unless a full upload is pending (a new scan) until the next
+      // render: a range added now would narrow it.
+      if (!this.posFull) pos.addUpdateRange(row * nx * 3, nx * 3);
+      pos.needsUpdate = true;
     }
-    // Upload just this row, unless a full upload is pending (a new scan) until the next render:
-    // a range added now would narrow it.
-    if (!this.posFull) pos.addUpdateRange(row * xres * 3, xres * 3);
-    pos.needsUpdate = true;
 
     // Colour by height: recolour everything when the range grows by more than 2 %.
     const lo = scan.min;
@@ -294,11 +338,11 @@ export class View3D {
     if (!r || lo < r.lo - 0.02 * span || hi > r.hi + 0.02 * span) {
       this.colourRange = { lo: lo - 0.01 * span, hi: hi + 0.01 * span };
       this.recolour(scan);
-    } else {
-      this.colourRow(scan, line);
+    } else if (onMesh) {
+      this.colourRow(scan, line / step);
       const col = geom.getAttribute('color');
       // A full upload pending (after a recolour) must not be narrowed to this row.
-      if (!this.colourFull) col.addUpdateRange(row * xres * 3, xres * 3);
+      if (!this.colourFull) col.addUpdateRange(row * nx * 3, nx * 3);
       col.needsUpdate = true;
     }
 
@@ -307,27 +351,68 @@ export class View3D {
     this.substrate.position.z = floor;
     if (this.grid) this.grid.position.z = floor;
 
-    // Draw the quads between contiguous received lines from the bottom.
+    this.updateDrawRange(scan);
+  }
+
+  /** Writes mesh row `b` (scan line b·step) into the positions. */
+  writeRow(scan, b) {
+    const { xres } = scan;
+    const { nx, ny, step } = this.scanMesh.userData;
+    const arr = this.scanMesh.geometry.getAttribute('position').array;
+    const row = ny - 1 - b;
+    const line = b * step;
+    for (let a = 0; a < nx; a++) {
+      const h = scan.heights[line * xres + Math.min(xres - 1, a * step)];
+      arr[3 * (row * nx + a) + 2] = Number.isFinite(h) ? h * UM : 0;
+    }
+  }
+
+  /** Draws the quads between contiguous received mesh rows from the bottom. */
+  updateDrawRange(scan) {
+    const { nx, ny, step } = this.scanMesh.userData;
     let k = 0;
-    while (k < yres && scan.received[k]) k++;
-    const quadRows = Math.max(0, k - 1);
-    const total = (yres - 1) * (xres - 1) * 6;
-    geom.setDrawRange(total - quadRows * (xres - 1) * 6, quadRows * (xres - 1) * 6);
+    while (k < scan.yres && scan.received[k]) k++;
+    // Mesh rows b with b·step < k are in.
+    const rows = Math.min(ny, Math.ceil(k / step));
+    const quadRows = Math.max(0, rows - 1);
+    const total = (ny - 1) * (nx - 1) * 6;
+    this.scanMesh.geometry.setDrawRange(total - quadRows * (nx - 1) * 6, quadRows * (nx - 1) * 6);
     this.scanBoundsDirty = true;
     this.requestRender();
   }
 
-  colourRow(scan, line) {
-    const { xres, yres } = scan;
+  /** A whole scan at once (a record opened, or fetched by a late joiner). */
+  fillScan(scan) {
+    if (!this.scanMesh || this.scanMesh.userData.scanId !== scan.id) this.startScan(scan);
+    const { ny } = this.scanMesh.userData;
+    for (let b = 0; b < ny; b++) this.writeRow(scan, b);
+    const pos = this.scanMesh.geometry.getAttribute('position');
+    pos.clearUpdateRanges();
+    pos.needsUpdate = true;
+    this.posFull = true;
+    const span = Math.max(scan.max - scan.min, 1e-12);
+    this.colourRange = { lo: scan.min - 0.01 * span, hi: scan.max + 0.01 * span };
+    this.recolour(scan);
+    const floor = Math.min(0, scan.min * UM) - 0.002 * Math.max(this.scanMesh.userData.wUm, 1e-3);
+    this.substrate.position.z = floor;
+    if (this.grid) this.grid.position.z = floor;
+    this.updateDrawRange(scan);
+  }
+
+  /** Colours mesh row `b` (scan line b·step). */
+  colourRow(scan, b) {
+    const { xres } = scan;
+    const { nx, ny, step } = this.scanMesh.userData;
     const col = this.scanMesh.geometry.getAttribute('color').array;
     const { lo, hi } = this.colourRange;
     const inv = (LUT_N - 1) / Math.max(hi - lo, 1e-18);
-    const row = yres - 1 - line;
-    for (let i = 0; i < xres; i++) {
-      const h = scan.heights[line * xres + i];
+    const row = ny - 1 - b;
+    const line = b * step;
+    for (let a = 0; a < nx; a++) {
+      const h = scan.heights[line * xres + Math.min(xres - 1, a * step)];
       let k = Math.round((h - lo) * inv);
       k = k > 0 ? (k < LUT_N ? k : LUT_N - 1) : 0;
-      const o = 3 * (row * xres + i);
+      const o = 3 * (row * nx + a);
       col[o] = this.lut[3 * k];
       col[o + 1] = this.lut[3 * k + 1];
       col[o + 2] = this.lut[3 * k + 2];
@@ -335,7 +420,8 @@ export class View3D {
   }
 
   recolour(scan) {
-    for (let l = 0; l < scan.yres; l++) if (scan.received[l]) this.colourRow(scan, l);
+    const { ny, step } = this.scanMesh.userData;
+    for (let b = 0; b < ny; b++) if (scan.received[b * step]) this.colourRow(scan, b);
     const col = this.scanMesh.geometry.getAttribute('color');
     col.clearUpdateRanges();
     col.needsUpdate = true;
@@ -351,6 +437,10 @@ export class View3D {
 
   /** Telemetry: the tip ball at the stage position (apex height, exaggerated like the scan). */
   setTip(tip, addTrail = true) {
+    // An idle tip (the same position, 60 times a second) costs no frame.
+    const same = tip && this.lastTip && addTrail && tip.stage.every((v, i) => v === this.lastTip.stage[i]) &&
+      String(tip.estimate) === String(this.lastTip.estimate);
+    if (same) return;
     this.lastTip = tip;
     if (!tip) {
       this.tip.visible = false;
@@ -365,8 +455,11 @@ export class View3D {
     const yu = y * UM;
     const zu = z * UM;
     this.tip.visible = true;
+    this.tipR = r;
     this.tip.scale.setScalar(r);
     this.tip.position.set(xu, yu, zu * this.exaggeration + r);
+    this.tipShadow.visible = true;
+    this.tipShadow.position.set(xu, yu, this.surfaceUnder(xu, yu) * this.exaggeration);
     const d = this.dropGeom.getAttribute('position');
     d.setXYZ(0, xu, yu, zu * this.exaggeration);
     d.setXYZ(1, xu, yu, this.surfaceUnder(xu, yu) * this.exaggeration);
@@ -393,6 +486,57 @@ export class View3D {
     } else {
       this.estimate.visible = false;
     }
+    this.requestRender();
+  }
+
+  /** Keeps the tip ball at least TIP_MIN_PX on screen, however far the camera is. */
+  scaleTip() {
+    if (!this.tip.visible) return;
+    const h = Math.max(1, this.container.clientHeight);
+    const dist = this.camera.position.distanceTo(this.tip.position);
+    const perPx = (2 * dist * Math.tan((this.camera.fov * Math.PI) / 360)) / h;
+    const r = Math.max(this.tipR ?? 0, TIP_MIN_PX * perPx);
+    this.tip.scale.setScalar(r);
+    this.tipShadow.scale.setScalar(r * 1.1);
+  }
+
+  /** Centres the camera on the tip. */
+  frameTip() {
+    if (!this.tip.visible) return;
+    const p = this.tip.position;
+    const s = this.scanMesh ? Math.max(this.scanMesh.userData.wUm, this.scanMesh.userData.hUm) : this.stageUm / 5;
+    this.frameBox(p.x - s / 2, p.y - s / 2, s, s);
+  }
+
+  /** The commanded push path (points in m), drawn for everyone; null hides it. */
+  setPushPath(path) {
+    while (this.pushPath.children.length) {
+      const c = this.pushPath.children.pop();
+      c.geometry?.dispose();
+    }
+    this.pushPathPoints = path && path.length >= 2 ? path.map(([x, y]) => [x * UM, y * UM]) : null;
+    if (!this.pushPathPoints) {
+      this.pushPath.visible = false;
+      this.requestRender();
+      return;
+    }
+    const z = Math.max(0.05, this.markerUm() * 0.2);
+    const pts = this.pushPathPoints.map(([x, y]) => new THREE.Vector3(x, y, z));
+    const mat = new THREE.LineBasicMaterial({ color: 0x4fd1ff, depthTest: false });
+    const line = new THREE.Line(new THREE.BufferGeometry().setFromPoints(pts), mat);
+    line.renderOrder = 998;
+    this.pushPath.add(line);
+    const a = pts[pts.length - 2];
+    const b = pts[pts.length - 1];
+    const d = new THREE.Vector3().subVectors(b, a);
+    const len = d.length();
+    if (len > 0) {
+      const head = Math.min(len * 0.4, this.markerUm() * 2.5);
+      const arrow = new THREE.ArrowHelper(d.normalize(), b.clone().addScaledVector(d, -head), head, 0x4fd1ff, head, head * 0.6);
+      arrow.renderOrder = 998;
+      this.pushPath.add(arrow);
+    }
+    this.pushPath.visible = true;
     this.requestRender();
   }
 
@@ -513,6 +657,19 @@ export class View3D {
     }
     const hit = this.raycaster.intersectObjects(targets, false)[0];
     if (hit && this.handlers.onPickPoint) this.handlers.onPickPoint(hit.point.x, hit.point.y);
+  }
+}
+
+/** Whether WebGL runs on a software renderer (SwiftShader, llvmpipe, softpipe). */
+function softwareGl() {
+  try {
+    const gl = document.createElement('canvas').getContext('webgl2');
+    const ext = gl?.getExtension('WEBGL_debug_renderer_info');
+    const name = ext ? gl.getParameter(ext.UNMASKED_RENDERER_WEBGL) : gl?.getParameter(gl.RENDERER);
+    gl?.getExtension('WEBGL_lose_context')?.loseContext();
+    return /swiftshader|llvmpipe|softpipe|software/i.test(String(name));
+  } catch {
+    return false;
   }
 }
 

@@ -3,7 +3,7 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import {
   decodeScanLine, encodeScanLine, FrameError, commands, encodeCommand, wsUrl, apiUrl, backoffMs,
-  Session, controlState, sceneParticles, WS_VERSION,
+  Session, controlState, sceneParticles, WS_VERSION, parseGsf, setPointForceN, describeRun, lengthUnit, formatLen,
 } from '../src/protocol.js';
 
 // The frame `ScanLineHeader { scan: 2, line: 5, xres: 3, yres: 8, y: 1.5e-6 }.encode(&[1.0, 2.0,
@@ -129,7 +129,7 @@ test('session: welcome, lease changes and who may command', () => {
   assert.equal(c.push.enabled, false);
   assert.equal(c.push.why, 'Take the lease first');
 
-  assert.deepEqual(s.apply({ type: 'lease', holder: 4 }), { kind: 'lease' });
+  assert.deepEqual(s.apply({ type: 'lease', holder: 4 }), { kind: 'lease', before: null, lost: false, reason: null });
   assert.equal(s.hasLease, true);
   c = controlState(s.state);
   assert.equal(c.push.enabled, true);
@@ -279,7 +279,7 @@ test('session: a scan assembles its binary lines into the height array', () => {
   assert.match(s.state.lastError.message, /bad magic/);
   assert.equal(sc.heights[0], 1, 'a bad frame changes nothing');
 
-  assert.deepEqual(s.apply({ type: 'scan_done', scan: 7, record: 'scan-7.gsf' }), { kind: 'scan_done', record: 'scan-7.gsf' });
+  assert.deepEqual(s.apply({ type: 'scan_done', scan: 7, record: 'scan-7.gsf' }), { kind: 'scan_done', record: 'scan-7.gsf', record_error: null });
   assert.equal(sc.done, true);
   assert.equal(sc.record, 'scan-7.gsf');
 
@@ -315,4 +315,124 @@ test('apiUrl passes the page token on to the JSON API', () => {
   assert.equal(apiUrl('/api/scene', { search: '?token=abc%2Bd' }), '/api/scene?token=abc%2Bd');
   assert.equal(apiUrl('/api/records/x.csv', { search: '' }), '/api/records/x.csv');
   assert.equal(apiUrl('/api/records?a=1', { search: '?token=t' }), '/api/records?a=1&token=t');
+});
+
+test('haptic commands: the documented JSON, ranges checked before sending', () => {
+  assert.equal(encodeCommand(commands.haptic('engage', {}, 5)), '{"type":"haptic","action":"engage","id":5}');
+  assert.equal(encodeCommand(commands.haptic('scale', { nmPerMm: 20 })), '{"type":"haptic","action":"scale","nm_per_mm":20}');
+  assert.throws(() => commands.haptic('fly'), /engage, release, recenter or scale/);
+  assert.throws(() => commands.haptic('scale'), /nm_per_mm and\/or pull_off_at_hand_n/);
+  assert.throws(() => commands.haptic('scale', { nmPerMm: 5000 }), /\[0\.01, 1000\] nm\/mm, got 5000/);
+  assert.throws(() => commands.haptic('scale', { pullOffAtHandN: 0 }), /\[0\.01, 10\] N, got 0/);
+});
+
+function openSession(client = 4) {
+  const s = new Session();
+  s.setScene({ stage: { range_um: 100 }, particles: [{ id: 1, radius_nm: 500, x_um: 40, y_um: 30 }, { id: 2, radius_nm: 500, x_um: 55, y_um: 62 }] });
+  s.connecting();
+  s.opened();
+  s.apply({ type: 'welcome', version: 1, client, role: 'operator', lease: null, scene: 'g', tick_hz: 1000 });
+  return s;
+}
+
+test('session: the state after welcome moves particles, sets lease, phase, push and an unfinished scan', () => {
+  const s = openSession(4);
+  const ev = s.apply({
+    type: 'state', particles: [{ id: 1, x: 45e-6, y: 31e-6, radius: 5e-7 }], stage: [1e-6, 2e-6, 3e-6], phase: 'pushing', lease: 9,
+    push: { particle: 1, path: [[40e-6, 30e-6], [45e-6, 30e-6]], by: 9 },
+    scan: { scan: 3, xres: 4, yres: 2, x_offset: 0, y_offset: 0, x_real: 1e-6, y_real: 1e-6, done: true, record: 'scan-1-3.gsf', stale: true },
+  });
+  assert.equal(ev.kind, 'state');
+  assert.equal(ev.scanChanged, true);
+  assert.equal(s.state.particles[0].x, 45e-6);
+  assert.equal(s.state.particles[1].x, 55e-6, 'a particle the state leaves out stays');
+  assert.equal(s.state.lease, 9);
+  assert.equal(s.state.phase, 'pushing');
+  assert.deepEqual(s.state.tip.stage, [1e-6, 2e-6, 3e-6]);
+  assert.equal(s.state.push.by, 9);
+  assert.equal(s.state.scan.id, 3);
+  assert.equal(s.state.scan.record, 'scan-1-3.gsf');
+  assert.equal(s.state.scanStale, true);
+  assert.equal(s.fillScan(3, new Float32Array([1, 2, 3, 4, 5, 6, 7, 8])), true);
+  assert.equal(s.state.scan.lines, 2);
+  assert.equal(s.state.scan.max, 8);
+  assert.equal(s.fillScan(4, new Float32Array(8)), false, 'another scan id');
+  assert.equal(s.fillScan(3, new Float32Array(7)), false, 'another size');
+  // A reconnect forgets what the old connection was told.
+  s.closed(1, 500);
+  assert.equal(s.state.phase, null);
+  assert.equal(s.state.push, null);
+  assert.equal(s.state.lease, null);
+});
+
+test('session: a push that never started (estimate null) is a run like any other, and clears the push path', () => {
+  const s = openSession(4);
+  s.apply({ type: 'push_started', particle: 1, path: [[40e-6, 30e-6], [50e-6, 30e-6]], by: 4 });
+  assert.deepEqual(s.state.push.path[1], [50e-6, 30e-6]);
+  const r = { type: 'run_done', particle: 1, outcome: 'plan', failure: 'particle 1: target out of reach', estimate: null, record: null, record_error: null };
+  const ev = s.apply(r);
+  assert.equal(ev.kind, 'run_done');
+  assert.equal(s.state.push, null);
+  assert.equal(s.state.particles[0].x, 40e-6, 'not moved');
+  assert.equal(describeRun(r), 'push of #1 failed: plan: particle 1: target out of reach, it never started (no record)');
+  assert.equal(describeRun({ particle: 2, outcome: 'ok', estimate: [5e-5, 6e-5], record: 'push-1.csv' }), 'push of #2 ok, particle now at (50.00, 60.00) µm (record push-1.csv)');
+  assert.equal(describeRun({ particle: 2, outcome: 'stopped', failure: 'stopped by the operator', estimate: [5e-8, 6e-8], record: null, record_error: 'disk full' }),
+    'push of #2 failed: stopped: stopped by the operator, particle left at (50.0, 60.0) nm (no record: disk full)');
+});
+
+test('session: losing the lease is told apart from a lease changing elsewhere, with the server\'s reason', () => {
+  const s = openSession(4);
+  assert.equal(s.apply({ type: 'lease', holder: 4 }).lost, false);
+  const ev = s.apply({ type: 'lease', holder: null, reason: 'client 4 disconnected' });
+  assert.equal(ev.lost, true);
+  assert.equal(ev.reason, 'client 4 disconnected');
+  assert.equal(s.apply({ type: 'lease', holder: 7 }).lost, false);
+});
+
+test('session: telemetry keeps the tip force (N) in the trace; a run_done after a scan marks it stale', () => {
+  const s = openSession(4);
+  s.apply({ type: 'telemetry', t: 1, stage: [0, 0, 1e-6], volts: 0.1, phase: 'idle', estimate: null, tip_force_n: 2.5e-9 });
+  assert.deepEqual(s.state.trace.force, [2.5e-9]);
+  s.apply({ type: 'scan_start', scan: 1, xres: 8, yres: 8, x_offset: 0, y_offset: 0, x_real: 1e-6, y_real: 1e-6 });
+  assert.equal(s.state.scanStale, false);
+  s.apply({ type: 'run_done', particle: 1, outcome: 'ok', failure: null, estimate: [41e-6, 30e-6], record: 'r', record_error: null });
+  assert.equal(s.state.scanStale, true);
+});
+
+// A GSF as `write_gsf` (server/src/scan) makes it: header, NUL padding to a multiple of 4, f32 LE.
+function gsf(header, values) {
+  const head = new TextEncoder().encode('Gwyddion Simple Field 1.0\n' + header);
+  const pad = 4 - (head.length % 4);
+  const out = new Uint8Array(head.length + pad + 4 * values.length);
+  out.set(head);
+  const v = new DataView(out.buffer, head.length + pad);
+  values.forEach((x, i) => v.setFloat32(4 * i, x, true));
+  return out.buffer;
+}
+
+test('parseGsf reads a record and refuses a wrong size or a foreign file, saying which', () => {
+  const g = parseGsf(gsf('XRes = 3\nYRes = 2\nXReal = 2e-06\nYReal = 2e-06\nXOffset = 1e-05\nYOffset = 2e-05\nTitle = scan\n', [1, 2, 3, 4, 5, 6]));
+  assert.equal(g.xres, 3);
+  assert.equal(g.yres, 2);
+  assert.equal(g.x_real, 2e-6);
+  assert.equal(g.y_offset, 2e-5);
+  assert.equal(g.title, 'scan');
+  assert.deepEqual([...g.heights], [1, 2, 3, 4, 5, 6]);
+  assert.throws(() => parseGsf(gsf('XRes = 3\nYRes = 3\n', [1, 2])), /3×3 needs/);
+  assert.throws(() => parseGsf(new TextEncoder().encode('hello').buffer), /not a Gwyddion Simple Field/);
+  assert.throws(() => parseGsf(gsf('XRes = x\nYRes = 2\n', [])), /XRes x/);
+});
+
+test('the set point as a force: the gold-latex scene\'s −1.5 V is 3.25 nm of deflection, 26 nN at 8 N/m', () => {
+  // scenes/gold-latex-500nm.toml: set_point_v −1.5, baseline_v −0.2, gain_v_per_nm −0.4, k 8 N/m.
+  const f = setPointForceN({ strategy: { set_point_v: -1.5 }, sensor: { baseline_v: -0.2, gain_v_per_nm: -0.4 }, cantilever: { stiffness_n_per_m: 8 } });
+  assert.ok(Math.abs(f - 26e-9) < 1e-15, `${f}`);
+  assert.equal(setPointForceN({ strategy: {} }), null);
+});
+
+test('lengths take nm below 2 µm and µm above', () => {
+  assert.deepEqual(lengthUnit(14e-9), { name: 'nm', scale: 1e9 });
+  assert.deepEqual(lengthUnit(16e-6), { name: 'µm', scale: 1e6 });
+  assert.equal(formatLen(250e-9), '250 nm');
+  assert.equal(formatLen(12.5e-6), '12.5 µm');
 });

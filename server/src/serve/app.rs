@@ -17,7 +17,8 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use futures_util::{SinkExt, StreamExt};
 use nanopush_proto::ws::{
-    ClientMessage, ErrorCode, Role, ScanLineHeader, ServerMessage, Stream as WsStream, Telemetry, WS_VERSION,
+    ClientMessage, ErrorCode, ParticleNow, PushPath, Role, ScanLineHeader, ScanNow, ServerMessage, Stream as WsStream,
+    Telemetry, WS_VERSION,
 };
 use tokio::sync::{broadcast, mpsc, watch};
 
@@ -106,6 +107,10 @@ pub struct AppState {
     pub stopping: AtomicBool,
     /// Bumped by every `stop`: a push still being prepared when it changes is dropped.
     pub generation: AtomicU64,
+    /// The push running now (its planned path), for clients that join during it.
+    pub push_now: Mutex<Option<PushPath>>,
+    /// The latest scan (running or finished), for clients that join after it.
+    pub latest_scan: Mutex<Option<ScanNow>>,
     /// Places taken: viewers (up to `--max-clients`) and operators (up to [`OPERATOR_PLACES`],
     /// apart, so viewers can never lock the operator out), and viewers per remote address.
     places: Mutex<Places>,
@@ -222,6 +227,8 @@ impl AppState {
             ),
             stopping: AtomicBool::new(false),
             generation: AtomicU64::new(0),
+            push_now: Mutex::new(None),
+            latest_scan: Mutex::new(None),
             places: Mutex::new(Places::default()),
             scene,
         }
@@ -245,10 +252,71 @@ impl AppState {
     fn lease_holder(&self) -> Option<u32> {
         *self.lease.lock().expect("lease lock")
     }
+
+    /// The instrument as it is now, for a client that has just connected: the particles where
+    /// the controller believes they are, the tip, the phase, the lease, the push running and
+    /// the latest scan.
+    pub fn state_message(&self) -> ServerMessage {
+        let estimates = self.estimates.lock().map(|e| e.clone()).unwrap_or_default();
+        let particles = self
+            .scene
+            .file
+            .particles
+            .iter()
+            .map(|p| {
+                let (x, y) = estimates.get(&p.id).copied().unwrap_or((p.x_um * 1e-6, p.y_um * 1e-6));
+                ParticleNow {
+                    id: p.id,
+                    x,
+                    y,
+                    radius: p.radius_nm * 1e-9,
+                }
+            })
+            .collect();
+        let (stage, phase) = self
+            .shared
+            .snapshot
+            .lock()
+            .map(|s| (s.stage, s.phase))
+            .unwrap_or(([0.0; 3], "idle"));
+        let phase = if self.scanning.load(Relaxed) && phase == "idle" {
+            "scanning"
+        } else {
+            phase
+        };
+        ServerMessage::State {
+            particles,
+            stage,
+            phase: phase.into(),
+            lease: self.lease_holder(),
+            push: self.push_now.lock().ok().and_then(|p| p.clone()),
+            scan: self.latest_scan.lock().ok().and_then(|s| s.clone()),
+        }
+    }
+
+    /// A push ended: it no longer runs, and if it moved anything the latest scan is stale.
+    fn push_ended(&self, started: bool) {
+        if let Ok(mut p) = self.push_now.lock() {
+            *p = None;
+        }
+        if started && let Ok(mut s) = self.latest_scan.lock() {
+            if let Some(s) = s.as_mut() {
+                s.stale = true;
+            }
+        }
+    }
 }
 
 /// The router.
 pub fn router(state: Arc<AppState>) -> Router {
+    let packages = state.cfg.web_dir.join("node_modules");
+    if !packages.join("three").is_dir() || !packages.join("uplot").is_dir() {
+        tracing::warn!(
+            "the web client's packages are missing ({} has no three/ or uplot/): the page cannot start; install them with `cd {} && npm ci` (or `make web`)",
+            packages.display(),
+            state.cfg.web_dir.display()
+        );
+    }
     let web = tower_http::services::ServeDir::new(&state.cfg.web_dir).append_index_html_on_directories(true);
     Router::new()
         .route("/ws", get(ws_upgrade))
@@ -257,7 +325,9 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/records", get(records_list))
         .route("/api/records/{name}", get(record_get))
         .route("/metrics", get(metrics))
-        .fallback_service(web)
+        // Static files gzip-compressed when the browser accepts it (three.js's 1.3 MB module is
+        // ~300 kB on the wire): a remote operator's page loads in seconds, not tens of seconds.
+        .fallback_service(tower_http::compression::Compression::new(web))
         .layer(axum::middleware::from_fn_with_state(state.clone(), guard))
         .with_state(state)
 }
@@ -328,6 +398,11 @@ async fn status(State(st): State<Arc<AppState>>) -> Response {
         "telemetry_sent": st.net.sent.load(Relaxed),
         "dropped_frames": st.net.dropped_frames.load(Relaxed),
         "haptic": haptic_status(&m.haptic),
+        // Where the controller believes each particle is (m), as the `state` message says.
+        "particles": match st.state_message() {
+            ServerMessage::State { particles, .. } => serde_json::to_value(particles).unwrap_or_default(),
+            _ => serde_json::Value::Null,
+        },
     });
     axum::Json(body).into_response()
 }
@@ -487,6 +562,7 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
         tick_hz: 1.0 / st.params.tick,
     };
     let _ = reply_tx.try_send(to_text(&welcome));
+    let _ = reply_tx.try_send(to_text(&st.state_message()));
 
     // When the peer last sent anything (a command, a pong): the sender's keep-alive closes a
     // connection whose peer stayed silent past the dead-peer time-out.
@@ -698,13 +774,33 @@ async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketA
             }
         }
     }
-    // Disconnected: the lease goes with it.
+    // Disconnected: the lease goes with it, and so does what it commanded. Nobody watches a
+    // push or scan whose operator is gone, so it is stopped (the tip retracts); the push ends
+    // in a `run_done` with outcome `stopped`, recorded like any other.
     {
         let mut lease = st.lease.lock().expect("lease lock");
         if *lease == Some(id) {
             *lease = None;
             drop(lease);
-            st.broadcast_event(&ServerMessage::Lease { holder: None });
+            let pushing = st.shared.busy.load(Relaxed);
+            let scanning = st.scanning.load(Relaxed);
+            if pushing || scanning {
+                st.scan_cancel.store(true, Relaxed);
+                st.generation.fetch_add(1, Relaxed);
+                if pushing && st.shared.commands.push(LoopCommand::Stop).is_err() {
+                    st.shared.metrics.dropped_commands.fetch_add(1, Relaxed);
+                }
+            }
+            let what = match (pushing, scanning) {
+                (true, _) => "; its push was stopped",
+                (_, true) => "; its scan was stopped",
+                _ => "",
+            };
+            tracing::info!("client {id} held the lease and disconnected{what}");
+            st.broadcast_event(&ServerMessage::Lease {
+                holder: None,
+                reason: Some(format!("client {id}, which held the lease, disconnected{what}")),
+            });
         }
     }
     for s in &client.streams {
@@ -839,7 +935,10 @@ fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<(), 
                 None => {
                     *lease = Some(c.id);
                     drop(lease);
-                    st.broadcast_event(&ServerMessage::Lease { holder: Some(c.id) });
+                    st.broadcast_event(&ServerMessage::Lease {
+                        holder: Some(c.id),
+                        reason: None,
+                    });
                     Ok(())
                 }
             }
@@ -851,7 +950,10 @@ fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<(), 
             }
             *lease = None;
             drop(lease);
-            st.broadcast_event(&ServerMessage::Lease { holder: None });
+            st.broadcast_event(&ServerMessage::Lease {
+                holder: None,
+                reason: None,
+            });
             Ok(())
         }
         ClientMessage::Stop { .. } => {
@@ -893,9 +995,10 @@ fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<(), 
             st.shared.busy.store(true, Relaxed);
             let st2 = st.clone();
             let generation = st.generation.load(Relaxed);
+            let by = c.id;
             tokio::task::spawn_blocking(move || {
                 let prepared = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    prepare_push(&st2, particle, target, generation)
+                    prepare_push(&st2, particle, target, generation, by)
                 }));
                 if prepared.is_err() {
                     run_done_failed(
@@ -1024,6 +1127,7 @@ fn on_stage(p: (f64, f64), r: f64, range: f64) -> Result<(), Refusal> {
 }
 
 fn run_done_failed(st: &AppState, particle: u32, outcome: &str, failure: String) {
+    st.push_ended(false);
     st.shared.busy.store(false, Relaxed);
     st.broadcast_event(&ServerMessage::RunDone {
         particle,
@@ -1037,7 +1141,7 @@ fn run_done_failed(st: &AppState, particle: u32, outcome: &str, failure: String)
 
 /// Off the loop: locate the particle in a quick local scan, plan, predict; then hand the job
 /// to the loop.
-fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, generation: u64) {
+fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, generation: u64, by: u32) {
     let f = &st.scene.file;
     let Some(part) = f.particles.iter().find(|p| p.id == particle) else {
         return;
@@ -1061,6 +1165,7 @@ fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, generation: u6
     if legs.is_empty() {
         // Already there (within 10 nm): nothing to push.
         st.remember(particle, [located.x, located.y]);
+        st.push_ended(false);
         st.shared.busy.store(false, Relaxed);
         st.broadcast_event(&ServerMessage::RunDone {
             particle,
@@ -1080,16 +1185,26 @@ fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, generation: u6
         return run_done_failed(st, particle, "stopped", "stopped before the push began".into());
     }
     let run = st.shared.runs.fetch_add(1, Relaxed) + 1;
+    let mut path = vec![[located.x, located.y]];
+    path.extend(legs.iter().map(|l| [l.to.0, l.to.1]));
+    let started = PushPath { particle, path, by };
     let job = PushJob {
         run,
         particle,
         legs,
         prepared,
     };
+    // Said after the job is queued: a `stop` sent on hearing `push_started` reaches the loop
+    // after the push, and stops it.
+    if let Ok(mut p) = st.push_now.lock() {
+        *p = Some(started.clone());
+    }
     if st.shared.commands.push(LoopCommand::Push(Box::new(job))).is_err() {
         st.shared.metrics.dropped_commands.fetch_add(1, Relaxed);
         run_done_failed(st, particle, "error", "the control loop's command queue is full".into());
+        return;
     }
+    st.broadcast_event(&ServerMessage::PushStarted(started));
 }
 
 /// A scan on its own thread: lines at the scan line rate to the `scan` stream, then the GSF
@@ -1104,6 +1219,22 @@ fn run_scan(st: &AppState, params: ScanParams) {
             let _ = st.scans.send(Message::Text(to_text(m)));
         }
     };
+    let previous = st.latest_scan.lock().ok().and_then(|s| s.clone());
+    let now = ScanNow {
+        scan: scan_id,
+        xres: img0.xres as u32,
+        yres: img0.yres as u32,
+        x_offset: img0.x_offset,
+        y_offset: img0.y_offset,
+        x_real: img0.x_real,
+        y_real: img0.y_real,
+        done: false,
+        record: None,
+        stale: false,
+    };
+    if let Ok(mut s) = st.latest_scan.lock() {
+        *s = Some(now.clone());
+    }
     send_text(&ServerMessage::ScanStart {
         scan: scan_id,
         xres: img0.xres as u32,
@@ -1179,6 +1310,18 @@ fn run_scan(st: &AppState, params: ScanParams) {
             }
         }
     }
+    if let Ok(mut s) = st.latest_scan.lock() {
+        // A cancelled scan is not the latest picture of the sample: the one before stays.
+        *s = if cancelled {
+            previous
+        } else {
+            Some(ScanNow {
+                done: true,
+                record: record.clone(),
+                ..now
+            })
+        };
+    }
     send_text(&ServerMessage::ScanDone {
         scan: scan_id,
         record,
@@ -1208,7 +1351,7 @@ pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiv
                     continue;
                 }
                 let s = match st.shared.snapshot.lock() {
-                    Ok(s) => Telemetry { t: s.t, stage: s.stage, volts: s.volts, phase: if st.scanning.load(Relaxed) && s.phase == "idle" { "scanning".into() } else { s.phase.into() }, estimate: s.estimate, haptic: haptic_telemetry(&st.shared.metrics.haptic) },
+                    Ok(s) => Telemetry { t: s.t, stage: s.stage, volts: s.volts, phase: if st.scanning.load(Relaxed) && s.phase == "idle" { "scanning".into() } else { s.phase.into() }, estimate: s.estimate, tip_force_n: st.shared.metrics.haptic.tip_force_n(), haptic: haptic_telemetry(&st.shared.metrics.haptic) },
                     Err(_) => continue,
                 };
                 let _ = st.telemetry.send(to_text(&ServerMessage::Telemetry(s)));
@@ -1216,6 +1359,7 @@ pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiv
             e = events.recv() => {
                 let Some((LoopEvent::RunDone { particle, outcome, failure, estimate, .. }, record)) = e else { break };
                 st.remember(particle, estimate);
+                st.push_ended(true);
                 let (record, record_error) = split(record);
                 st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record, record_error });
             }

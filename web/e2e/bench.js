@@ -1,0 +1,77 @@
+// The page's figures for the README, measured (not asserted): its transfer size (first load,
+// gzip as served) and its frame rate with a 512² scan on screen at 1600×1000 (headless chromium,
+// WebGL on SwiftShader), idle and during a push; also the README's screenshot.
+//   cd web && node e2e/bench.js [--screenshot ../docs/visulator.png]
+import { startServer, launchBrowser, newPage, ready } from './support.js';
+
+const shotPath = process.argv.includes('--screenshot') ? process.argv[process.argv.indexOf('--screenshot') + 1] : null;
+const srv = await startServer();
+const browser = await launchBrowser();
+try {
+  const page = await newPage(browser);
+  const cdp = await page.context().newCDPSession(page);
+  await cdp.send('Network.enable');
+  await cdp.send('Network.setCacheDisabled', { cacheDisabled: true });
+  let wire = 0;
+  let files = 0;
+  const decoded = new Map();
+  cdp.on('Network.loadingFinished', (e) => {
+    wire += e.encodedDataLength;
+    files++;
+  });
+  cdp.on('Network.dataReceived', (e) => decoded.set(e.requestId, (decoded.get(e.requestId) ?? 0) + e.dataLength));
+  await page.goto(srv.url, { waitUntil: 'networkidle' });
+  await ready(page);
+  const raw = [...decoded.values()].reduce((a, b) => a + b, 0);
+  console.log(`page load: ${files} requests, ${(wire / 1024).toFixed(0)} KiB on the wire (gzip), ${(raw / 1024).toFixed(0)} KiB uncompressed`);
+
+  const fps = (ms) => page.evaluate((dur) => new Promise((res) => {
+    const v = window.nanopush.view;
+    const f0 = v.frames;
+    let n = 0;
+    const t0 = performance.now();
+    const f = () => {
+      n++;
+      if (performance.now() - t0 < dur) requestAnimationFrame(f);
+      else res({ raf: (n * 1000) / dur, view3d: ((v.frames - f0) * 1000) / dur, renderMs: v.renderMs });
+    };
+    requestAnimationFrame(f);
+  }), ms);
+  await page.click('#take-lease');
+  await page.waitForFunction(() => window.nanopush.session.hasLease);
+  await page.fill('#scan-size', '16');
+  await page.fill('#scan-px', '512');
+  await page.click('#scan-btn');
+  await page.waitForFunction(() => window.nanopush.session.state.scan?.done, null, { timeout: 60000 });
+  await page.click('#exag-auto');
+  await page.waitForTimeout(1000);
+  const idle = await fps(3000);
+  await page.check('input[name=mode][value=by]');
+  await page.fill('#distance', '4');
+  await page.fill('#direction', '180');
+  await page.click('#push-btn');
+  await page.waitForFunction(() => !['idle', 'scanning'].includes(window.nanopush.session.state.phase), null, { timeout: 30000 });
+  await page.waitForTimeout(1000);
+  const pushing = await fps(5000);
+  const f = (x) => `${x.raf.toFixed(1)} frames/s (3D view redrawn ${x.view3d.toFixed(1)}/s, ${x.renderMs.toFixed(1)} ms of main thread each)`;
+  console.log(`512² scan at 1600×1000, idle: ${f(idle)}`);
+  console.log(`512² scan at 1600×1000, during a push: ${f(pushing)}`);
+  if (shotPath) {
+    // A line profile across the particle for the picture.
+    const g = await page.evaluate(() => window.nanopush.image2d.geometry());
+    const box = await page.$eval('#image2d', (e) => { const r = e.getBoundingClientRect(); return { x: r.left, y: r.top }; });
+    const at = (fx, fy) => [box.x + g.x + fx * g.w, box.y + g.y + g.h - fy * g.h];
+    await page.mouse.move(...at(0.2, 0.35));
+    await page.mouse.down();
+    await page.mouse.move(...at(0.8, 0.55), { steps: 5 });
+    await page.mouse.up();
+    await page.waitForTimeout(1500);
+    await page.setViewportSize({ width: 1440, height: 900 });
+    await page.waitForTimeout(1500);
+    await page.screenshot({ path: shotPath });
+    console.log(`screenshot: ${shotPath}`);
+  }
+} finally {
+  await browser.close();
+  await srv.stop();
+}

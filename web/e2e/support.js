@@ -1,0 +1,143 @@
+// Helpers for the browser end-to-end tests: start the real `nanopush serve` on a free port with
+// a quick scene, and a headless Chromium (Debian's, driven by playwright-core) with SwiftShader.
+import { spawn } from 'node:child_process';
+import { mkdtempSync, readFileSync, writeFileSync, mkdirSync, existsSync, rmSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join, dirname, resolve } from 'node:path';
+import { fileURLToPath } from 'node:url';
+import { createInterface } from 'node:readline';
+import { chromium } from 'playwright-core';
+
+export const WEB = resolve(dirname(fileURLToPath(import.meta.url)), '..');
+export const ROOT = resolve(WEB, '..');
+export const TOKEN = 'e2e-browser-operator';
+export const ARTIFACTS = join(WEB, 'test-results');
+
+/** The server binary: $NANOPUSH_BIN, else $CARGO_TARGET_DIR/debug, else target/debug. */
+export function serverBin() {
+  if (process.env.NANOPUSH_BIN) return process.env.NANOPUSH_BIN;
+  const target = process.env.CARGO_TARGET_DIR ? resolve(ROOT, process.env.CARGO_TARGET_DIR) : join(ROOT, 'target');
+  const bin = join(target, 'debug', 'nanopush');
+  if (!existsSync(bin)) throw new Error(`${bin} is missing: build it first (cargo build --bins), or set NANOPUSH_BIN`);
+  return bin;
+}
+
+/** The chromium executable: $CHROMIUM, else /usr/bin/chromium (Debian's `chromium`). */
+export function chromiumPath() {
+  const p = process.env.CHROMIUM || '/usr/bin/chromium';
+  if (!existsSync(p)) throw new Error(`${p} is missing: install Debian's chromium (make setup), or set CHROMIUM`);
+  return p;
+}
+
+/**
+ * The gold-latex scene made quick, as the Rust e2e tests make it (tests/e2e/serve.rs): a level
+ * substrate, a low start height, fast approaches and travel, a 16 µm default scan.
+ */
+export function fastScene(dir) {
+  let text = readFileSync(join(ROOT, 'scenes/gold-latex-500nm.toml'), 'utf8');
+  text = text.replace('tilt_x_mrad = 6.0', 'tilt_x_mrad = 0.0').replace('roughness_rms_nm = 0.5', 'roughness_rms_nm = 0.0');
+  text += '\n[strategy]\nstart_height_um = 1.2\napproach_speed_um_per_s = 5.0\ntravel_speed_um_per_s = 40.0\napproach_distance_um = 0.3\ndwell_ms = 2.0\n\n[scan]\ncentre_x_um = 40.0\ncentre_y_um = 32.0\nsize_um = 16.0\npixels = 32\n';
+  const path = join(dir, 'fast.toml');
+  writeFileSync(path, text);
+  return path;
+}
+
+/**
+ * Starts `nanopush serve` (no real-time scheduling: the machine is shared) and resolves when it
+ * prints its address. `extra` are more arguments; `webDir` another web client directory;
+ * `haptic` the link (`none`, `sim`).
+ * @returns {Promise<{url:string, addr:string, base:string, dir:string, log:()=>string, stop:()=>Promise<void>}>}
+ */
+export async function startServer({ extra = [], webDir = WEB, haptic = 'none' } = {}) {
+  const dir = mkdtempSync(join(tmpdir(), 'nanopush-browser-'));
+  const records = join(dir, 'records');
+  mkdirSync(records);
+  const args = ['serve', '--port', '0', '--haptic', haptic, '--no-realtime', '--operator-token', TOKEN,
+    '--scene', fastScene(dir), '--data-dir', records, '--web-dir', webDir, '--scan-line-hz', '400', ...extra];
+  // A haptic link of its own (iceoryx2 services apart from any other server on this machine).
+  const env = { ...process.env, NANOPUSH_HAPTIC_NAMESPACE: `browser${process.pid}` };
+  const child = spawn(serverBin(), args, { cwd: ROOT, env, stdio: ['ignore', 'pipe', 'pipe'] });
+  let log = '';
+  child.stderr.on('data', (d) => { log += d; });
+  const lines = createInterface({ input: child.stdout });
+  const addr = await new Promise((res, rej) => {
+    const t = setTimeout(() => rej(new Error(`nanopush serve did not start within 20 s:\n${log}`)), 20000);
+    child.on('exit', (code) => rej(new Error(`nanopush serve exited (${code}):\n${log}`)));
+    lines.once('line', (l) => {
+      clearTimeout(t);
+      const m = /listening on (\S+)/.exec(l);
+      if (m) res(m[1]);
+      else rej(new Error(`unexpected first line ${JSON.stringify(l)}`));
+    });
+  });
+  const base = `http://${addr}`;
+  return {
+    addr,
+    base,
+    url: `${base}/?token=${TOKEN}`,
+    dir,
+    log: () => log,
+    async stop() {
+      if (child.exitCode === null) {
+        const gone = new Promise((res) => child.once('exit', res));
+        child.kill('SIGTERM');
+        const t = setTimeout(() => child.kill('SIGKILL'), 10000);
+        await gone;
+        clearTimeout(t);
+      }
+      rmSync(dir, { recursive: true, force: true });
+    },
+  };
+}
+
+/** Headless Chromium with WebGL2 on SwiftShader. */
+export function launchBrowser() {
+  return chromium.launch({
+    executablePath: chromiumPath(),
+    args: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--no-sandbox', '--disable-dev-shm-usage'],
+  });
+}
+
+/** A page that collects console errors and page errors (uncaught exceptions). */
+export async function newPage(browser, { width = 1600, height = 1000 } = {}) {
+  const context = await browser.newContext({ viewport: { width, height } });
+  const page = await context.newPage();
+  page.errors = [];
+  page.on('console', (m) => {
+    if (m.type() === 'error') page.errors.push(`console: ${m.text()}`);
+  });
+  page.on('pageerror', (e) => page.errors.push(`pageerror: ${e.message}`));
+  return page;
+}
+
+/** GET a JSON document of the server. */
+export async function getJson(base, path) {
+  const r = await fetch(base + path);
+  if (!r.ok) throw new Error(`${path}: HTTP ${r.status}`);
+  return r.json();
+}
+
+/** Saves a screenshot under web/test-results/. */
+export async function shot(page, name) {
+  mkdirSync(ARTIFACTS, { recursive: true });
+  await page.screenshot({ path: join(ARTIFACTS, `${name}.png`) });
+}
+
+/** Runs axe-core on the page: the violations (empty when there are none). */
+export async function axe(page) {
+  await page.addScriptTag({ path: join(WEB, 'node_modules/axe-core/axe.min.js') });
+  return page.evaluate(async () => {
+    const r = await window.axe.run(document, { resultTypes: ['violations'] });
+    return r.violations.map((v) => ({ id: v.id, impact: v.impact, help: v.help, nodes: v.nodes.slice(0, 5).map((n) => `${n.target.join(' ')}: ${n.failureSummary}`) }));
+  });
+}
+
+/** Waits until the page's Session is connected and has the server's state. */
+export async function ready(page) {
+  // (`stateReceived ?? true`: so the tests also run against a page older than the `state`
+  // message, to see them fail for what the page shows, not for a missing field.)
+  await page.waitForFunction(() => {
+    const s = window.nanopush?.session.state;
+    return s?.connection === 'open' && s.client !== null && (s.stateReceived ?? true);
+  }, null, { timeout: 20000 });
+}

@@ -1,0 +1,483 @@
+// The 2D height image, as an AFM user reads one (Gwyddion's views): the scan in false colour
+// with physical axes in a unit chosen for its size (nm or µm), a scale bar, a labelled colour
+// bar, plane levelling (mean plane / line by line / none), a cursor readout of x, y and height,
+// and a line profile (drag a line across the image, see the height along it in nm).
+// The scan is the Session's scan object (heights in m, row 0 = lowest y); it grows line by line
+// and is drawn at most once per animation frame, only when something changed.
+import { viridisTable } from './colormap.js';
+import { lengthUnit } from './protocol.js';
+
+const SVG = 'http://www.w3.org/2000/svg';
+const M = { left: 58, right: 86, top: 10, bottom: 42 }; // margins (CSS px) around the image
+const LUT = (() => {
+  const t = viridisTable(256);
+  const out = new Uint8ClampedArray(256 * 3);
+  for (let i = 0; i < t.length; i++) out[i] = Math.round(t[i] * 255);
+  return out;
+})();
+
+/** A "nice" step (1, 2, 5 × 10^k) so that `span / step` is about `n`. */
+export function niceStep(span, n = 5) {
+  const raw = span / n;
+  const p = 10 ** Math.floor(Math.log10(raw));
+  const f = raw / p;
+  return (f < 1.5 ? 1 : f < 3.5 ? 2 : f < 7.5 ? 5 : 10) * p;
+}
+
+/**
+ * Levelled heights (m) of the received lines: `none`; `plane`, the least-squares mean plane
+ * z = a + b·i + c·j subtracted; `line`, each line's mean subtracted (Gwyddion's "align rows").
+ * Pixels of lines not yet received are NaN.
+ */
+export function level(scan, mode) {
+  const { xres, yres, heights, received } = scan;
+  const out = new Float32Array(xres * yres).fill(NaN);
+  if (mode === 'line') {
+    for (let j = 0; j < yres; j++) {
+      if (!received[j]) continue;
+      let s = 0;
+      let n = 0;
+      for (let i = 0; i < xres; i++) {
+        const h = heights[j * xres + i];
+        if (Number.isFinite(h)) {
+          s += h;
+          n++;
+        }
+      }
+      const m = n ? s / n : 0;
+      for (let i = 0; i < xres; i++) out[j * xres + i] = heights[j * xres + i] - m;
+    }
+    return out;
+  }
+  let a = 0;
+  let b = 0;
+  let c = 0;
+  if (mode === 'plane') {
+    // Normal equations of z = a + b i + c j over the finite pixels.
+    let n = 0; let si = 0; let sj = 0; let sii = 0; let sjj = 0; let sij = 0; let sz = 0; let siz = 0; let sjz = 0;
+    for (let j = 0; j < yres; j++) {
+      if (!received[j]) continue;
+      for (let i = 0; i < xres; i++) {
+        const z = heights[j * xres + i];
+        if (!Number.isFinite(z)) continue;
+        n++; si += i; sj += j; sii += i * i; sjj += j * j; sij += i * j; sz += z; siz += i * z; sjz += j * z;
+      }
+    }
+    if (n >= 3) {
+      // Solve the 3×3 system by Cramer's rule (centred sums keep it well conditioned).
+      const mi = si / n; const mj = sj / n; const mz = sz / n;
+      const cii = sii - n * mi * mi; const cjj = sjj - n * mj * mj; const cij = sij - n * mi * mj;
+      const ciz = siz - n * mi * mz; const cjz = sjz - n * mj * mz;
+      const det = cii * cjj - cij * cij;
+      if (Math.abs(det) > 1e-12) {
+        b = (ciz * cjj - cjz * cij) / det;
+        c = (cjz * cii - ciz * cij) / det;
+      } else if (cii > 0) {
+        b = ciz / cii;
+      } else if (cjj > 0) {
+        c = cjz / cjj;
+      }
+      a = mz - b * mi - c * mj;
+    } else if (n > 0) {
+      a = sz / n;
+    }
+  }
+  for (let j = 0; j < yres; j++) {
+    if (!received[j]) continue;
+    for (let i = 0; i < xres; i++) out[j * xres + i] = heights[j * xres + i] - (a + b * i + c * j);
+  }
+  return out;
+}
+
+/** Heights along the segment from (i0, j0) to (i1, j1) (pixel coordinates), bilinear. */
+export function profileAlong(data, xres, yres, i0, j0, i1, j1) {
+  const n = Math.max(2, Math.ceil(Math.hypot(i1 - i0, j1 - j0)) + 1);
+  const t = new Float64Array(n);
+  const h = new Float64Array(n);
+  const at = (i, j) => data[Math.min(yres - 1, Math.max(0, j)) * xres + Math.min(xres - 1, Math.max(0, i))];
+  for (let k = 0; k < n; k++) {
+    const f = k / (n - 1);
+    const x = i0 + f * (i1 - i0);
+    const y = j0 + f * (j1 - j0);
+    const ix = Math.floor(x);
+    const iy = Math.floor(y);
+    const fx = x - ix;
+    const fy = y - iy;
+    const v = (1 - fx) * (1 - fy) * at(ix, iy) + fx * (1 - fy) * at(ix + 1, iy) + (1 - fx) * fy * at(ix, iy + 1) + fx * fy * at(ix + 1, iy + 1);
+    t[k] = f;
+    h[k] = v;
+  }
+  return { t, h };
+}
+
+function el(name, attrs = {}, parent = null) {
+  const e = document.createElementNS(SVG, name);
+  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, String(v));
+  if (parent) parent.append(e);
+  return e;
+}
+
+export class Image2D {
+  /**
+   * @param {HTMLElement} container
+   * @param {{cursorEl?: HTMLElement, profileEl?: HTMLElement, profileInfoEl?: HTMLElement}} opts
+   */
+  constructor(container, opts = {}) {
+    this.container = container;
+    this.opts = opts;
+    this.scan = null;
+    this.mode = 'plane';
+    this.dirty = false;
+    this.drawnVersion = -1;
+    this.levelled = null;
+    this.range = null;
+    this.profile = null;
+    this.line = null; // {i0, j0, i1, j1} in pixel coordinates (i along x, j along y, j = 0 lowest)
+
+    container.classList.add('img2d');
+    this.canvas = document.createElement('canvas');
+    this.canvas.setAttribute('aria-hidden', 'true');
+    this.svg = el('svg', { class: 'img2d-svg', role: 'img', 'aria-label': 'Height image: no scan yet' });
+    container.append(this.canvas, this.svg);
+    this.off = document.createElement('canvas');
+    this.empty = el('text', { class: 'empty', x: 20, y: 40 }, this.svg);
+    this.empty.textContent = 'No scan yet';
+    this.bindPointer();
+    new ResizeObserver(() => this.invalidate()).observe(container);
+    const loop = () => {
+      if (this.dirty) {
+        this.dirty = false;
+        this.draw();
+      }
+      requestAnimationFrame(loop);
+    };
+    requestAnimationFrame(loop);
+  }
+
+  invalidate() {
+    this.dirty = true;
+  }
+
+  /** A new scan (the Session's scan object, or null). */
+  setScan(scan) {
+    this.scan = scan;
+    this.line = null;
+    this.profile = null;
+    this.drawnVersion = -1;
+    this.invalidate();
+    this.updateProfile();
+  }
+
+  setLevelling(mode) {
+    this.mode = mode;
+    this.drawnVersion = -1;
+    this.invalidate();
+    this.updateProfile();
+  }
+
+  /** The image area (CSS px, relative to the container) and the physical unit. */
+  geometry() {
+    const sc = this.scan;
+    const W = this.container.clientWidth;
+    const H = this.container.clientHeight;
+    if (!sc) return null;
+    const availW = Math.max(10, W - M.left - M.right);
+    const availH = Math.max(10, H - M.top - M.bottom);
+    // Physically square pixels: the image keeps x_real : y_real.
+    const k = Math.min(availW / sc.x_real, availH / sc.y_real);
+    const w = sc.x_real * k;
+    const h = sc.y_real * k;
+    return { x: M.left, y: M.top, w, h, W, H, unit: lengthUnit(Math.max(sc.x_real, sc.y_real)) };
+  }
+
+  relevel() {
+    const sc = this.scan;
+    this.levelled = level(sc, this.mode);
+    let lo = Infinity;
+    let hi = -Infinity;
+    for (const v of this.levelled) {
+      if (Number.isFinite(v)) {
+        if (v < lo) lo = v;
+        if (v > hi) hi = v;
+      }
+    }
+    this.range = lo <= hi ? { lo, hi: hi > lo ? hi : lo + 1e-12 } : null;
+  }
+
+  draw() {
+    const sc = this.scan;
+    const dpr = Math.min(2, window.devicePixelRatio || 1);
+    const W = this.container.clientWidth;
+    const H = this.container.clientHeight;
+    this.canvas.width = Math.max(1, Math.round(W * dpr));
+    this.canvas.height = Math.max(1, Math.round(H * dpr));
+    this.canvas.style.width = `${W}px`;
+    this.canvas.style.height = `${H}px`;
+    this.svg.setAttribute('width', W);
+    this.svg.setAttribute('height', H);
+    this.svg.setAttribute('viewBox', `0 0 ${W} ${H}`);
+    const ctx = this.canvas.getContext('2d');
+    ctx.clearRect(0, 0, this.canvas.width, this.canvas.height);
+    while (this.svg.lastChild) this.svg.lastChild.remove();
+    if (!sc) {
+      this.svg.append(this.empty);
+      return;
+    }
+    if (this.drawnVersion !== sc.version || !this.levelled) {
+      this.relevel();
+      this.paintPixels();
+      this.drawnVersion = sc.version;
+    }
+    const g = this.geometry();
+    ctx.imageSmoothingEnabled = false;
+    ctx.fillStyle = '#0f141a';
+    ctx.fillRect(g.x * dpr, g.y * dpr, g.w * dpr, g.h * dpr);
+    ctx.drawImage(this.off, g.x * dpr, g.y * dpr, g.w * dpr, g.h * dpr);
+    this.drawAxes(g);
+    this.drawScaleBar(g);
+    this.drawColourBar(g);
+    this.drawProfileLine(g);
+    const u = g.unit;
+    this.svg.setAttribute('aria-label', `Height image of scan ${sc.id}: ${(sc.x_real * u.scale).toPrecision(3)} × ${(sc.y_real * u.scale).toPrecision(3)} ${u.name}, ${sc.xres} × ${sc.yres} pixels, ${sc.lines} of ${sc.yres} lines`);
+  }
+
+  paintPixels() {
+    const sc = this.scan;
+    const { xres, yres } = sc;
+    this.off.width = xres;
+    this.off.height = yres;
+    const octx = this.off.getContext('2d');
+    const img = octx.createImageData(xres, yres);
+    const d = img.data;
+    const r = this.range;
+    const inv = r ? 255 / (r.hi - r.lo) : 0;
+    for (let j = 0; j < yres; j++) {
+      const row = yres - 1 - j; // canvas rows run from the top (highest y)
+      for (let i = 0; i < xres; i++) {
+        const v = this.levelled[j * xres + i];
+        const o = 4 * (row * xres + i);
+        if (!Number.isFinite(v) || !r) {
+          d[o + 3] = 0;
+          continue;
+        }
+        let k = Math.round((v - r.lo) * inv);
+        k = k < 0 ? 0 : k > 255 ? 255 : k;
+        d[o] = LUT[3 * k];
+        d[o + 1] = LUT[3 * k + 1];
+        d[o + 2] = LUT[3 * k + 2];
+        d[o + 3] = 255;
+      }
+    }
+    octx.putImageData(img, 0, 0);
+  }
+
+  drawAxes(g) {
+    const sc = this.scan;
+    const u = g.unit;
+    const axes = el('g', { class: 'axes' }, this.svg);
+    el('rect', { x: g.x, y: g.y, width: g.w, height: g.h, class: 'frame' }, axes);
+    const tick = (span, horizontal) => {
+      const step = niceStep(span * u.scale, 5) / u.scale;
+      for (let v = 0; v <= span * (1 + 1e-9); v += step) {
+        const f = v / span;
+        const label = `${Number((v * u.scale).toPrecision(6))}`;
+        if (horizontal) {
+          const x = g.x + f * g.w;
+          el('line', { x1: x, x2: x, y1: g.y + g.h, y2: g.y + g.h + 5, class: 'tick' }, axes);
+          const t = el('text', { x, y: g.y + g.h + 17, class: 'xtick', 'text-anchor': 'middle', 'data-value-m': v }, axes);
+          t.textContent = label;
+        } else {
+          const y = g.y + g.h - f * g.h;
+          el('line', { x1: g.x - 5, x2: g.x, y1: y, y2: y, class: 'tick' }, axes);
+          const t = el('text', { x: g.x - 8, y: y + 4, class: 'ytick', 'text-anchor': 'end', 'data-value-m': v }, axes);
+          t.textContent = label;
+        }
+      }
+    };
+    tick(sc.x_real, true);
+    tick(sc.y_real, false);
+    const xl = el('text', { x: g.x + g.w / 2, y: g.y + g.h + 34, class: 'axis-label', 'text-anchor': 'middle' }, axes);
+    xl.textContent = `x (${u.name})`;
+    const yl = el('text', { x: 14, y: g.y + g.h / 2, class: 'axis-label', 'text-anchor': 'middle', transform: `rotate(-90 14 ${g.y + g.h / 2})` }, axes);
+    yl.textContent = `y (${u.name})`;
+  }
+
+  drawScaleBar(g) {
+    const sc = this.scan;
+    const u = g.unit;
+    // About a fifth of the width, a round length.
+    const len = niceStep(sc.x_real * u.scale, 5) / u.scale;
+    const px = (len / sc.x_real) * g.w;
+    const x = g.x + 10;
+    const y = g.y + g.h - 12;
+    const bar = el('g', { class: 'scalebar', 'data-length-m': len }, this.svg);
+    el('rect', { x: x - 4, y: y - 18, width: px + 8, height: 26, class: 'scalebar-bg' }, bar);
+    el('rect', { x, y, width: px, height: 4, class: 'scalebar-bar' }, bar);
+    const t = el('text', { x: x + px / 2, y: y - 5, 'text-anchor': 'middle' }, bar);
+    t.textContent = `${Number((len * u.scale).toPrecision(6))} ${u.name}`;
+  }
+
+  drawColourBar(g) {
+    const r = this.range;
+    if (!r) return;
+    const x = g.x + g.w + 14;
+    const w = 14;
+    const cb = el('g', { class: 'colourbar' }, this.svg);
+    const id = `cbgrad-${Math.random().toString(36).slice(2, 8)}`;
+    const defs = el('defs', {}, cb);
+    const grad = el('linearGradient', { id, x1: 0, y1: 1, x2: 0, y2: 0 }, defs);
+    for (let k = 0; k <= 8; k++) {
+      const i = Math.round((k / 8) * 255);
+      el('stop', { offset: k / 8, 'stop-color': `rgb(${LUT[3 * i]},${LUT[3 * i + 1]},${LUT[3 * i + 2]})` }, grad);
+    }
+    el('rect', { x, y: g.y, width: w, height: g.h, fill: `url(#${id})`, class: 'frame' }, cb);
+    const span = (r.hi - r.lo) * 1e9;
+    const step = niceStep(span, 4);
+    const first = Math.ceil((r.lo * 1e9) / step) * step;
+    for (let v = first; v <= r.hi * 1e9 + 1e-9; v += step) {
+      const y = g.y + g.h - ((v - r.lo * 1e9) / span) * g.h;
+      el('line', { x1: x + w, x2: x + w + 4, y1: y, y2: y, class: 'tick' }, cb);
+      const t = el('text', { x: x + w + 6, y: y + 4, class: 'ctick' }, cb);
+      t.textContent = `${Number(v.toPrecision(4))}`;
+    }
+    const tl = el('text', { x: x + w + 48, y: g.y + g.h / 2, class: 'axis-label', 'text-anchor': 'middle', transform: `rotate(90 ${x + w + 48} ${g.y + g.h / 2})` }, cb);
+    tl.textContent = 'height (nm)';
+  }
+
+  drawProfileLine(g) {
+    const l = this.line;
+    if (!l) return;
+    const sc = this.scan;
+    const px = (i) => g.x + ((i + 0.5) / sc.xres) * g.w;
+    const py = (j) => g.y + g.h - ((j + 0.5) / sc.yres) * g.h;
+    el('line', { x1: px(l.i0), y1: py(l.j0), x2: px(l.i1), y2: py(l.j1), class: 'profile-line' }, this.svg);
+  }
+
+  /** Pixel coordinates (i, j; j = 0 lowest y) of a client point, or null off the image. */
+  pixelAt(clientX, clientY, clamp = false) {
+    const sc = this.scan;
+    const g = this.geometry();
+    if (!sc || !g) return null;
+    const rect = this.container.getBoundingClientRect();
+    let fx = (clientX - rect.left - g.x) / g.w;
+    let fy = (g.y + g.h - (clientY - rect.top)) / g.h;
+    if (clamp) {
+      fx = Math.min(1, Math.max(0, fx));
+      fy = Math.min(1, Math.max(0, fy));
+    } else if (fx < 0 || fx > 1 || fy < 0 || fy > 1) {
+      return null;
+    }
+    return { i: fx * sc.xres - 0.5, j: fy * sc.yres - 0.5, fx, fy };
+  }
+
+  bindPointer() {
+    let drag = null;
+    const target = this.svg;
+    target.addEventListener('pointerdown', (e) => {
+      const p = this.pixelAt(e.clientX, e.clientY);
+      if (!p || e.button !== 0) return;
+      drag = p;
+      target.setPointerCapture?.(e.pointerId);
+      e.preventDefault();
+    });
+    target.addEventListener('pointermove', (e) => {
+      if (drag) {
+        const p = this.pixelAt(e.clientX, e.clientY, true);
+        this.line = { i0: drag.i, j0: drag.j, i1: p.i, j1: p.j };
+        this.invalidate();
+      }
+      this.readout(e.clientX, e.clientY);
+    });
+    const end = (e) => {
+      if (!drag) return;
+      const p = this.pixelAt(e.clientX, e.clientY, true);
+      if (Math.hypot(p.i - drag.i, p.j - drag.j) >= 1) {
+        this.line = { i0: drag.i, j0: drag.j, i1: p.i, j1: p.j };
+      }
+      drag = null;
+      this.invalidate();
+      this.updateProfile();
+    };
+    target.addEventListener('pointerup', end);
+    target.addEventListener('pointercancel', end);
+    target.addEventListener('pointerleave', () => {
+      if (this.opts.cursorEl) this.opts.cursorEl.textContent = 'x –, y –, height –';
+    });
+  }
+
+  readout(clientX, clientY) {
+    const out = this.opts.cursorEl;
+    const sc = this.scan;
+    if (!out || !sc) return;
+    const p = this.pixelAt(clientX, clientY);
+    if (!p) {
+      out.textContent = 'x –, y –, height –';
+      return;
+    }
+    const u = lengthUnit(Math.max(sc.x_real, sc.y_real));
+    const i = Math.min(sc.xres - 1, Math.max(0, Math.round(p.i)));
+    const j = Math.min(sc.yres - 1, Math.max(0, Math.round(p.j)));
+    const x = p.fx * sc.x_real;
+    const y = p.fy * sc.y_real;
+    const v = this.levelled ? this.levelled[j * sc.xres + i] : NaN;
+    const d = u.name === 'nm' ? 1 : 3;
+    out.textContent = `x ${(x * u.scale).toFixed(d)} ${u.name}, y ${(y * u.scale).toFixed(d)} ${u.name}` +
+      ` (stage ${((sc.x_offset + x) * 1e6).toFixed(3)}, ${((sc.y_offset + y) * 1e6).toFixed(3)} µm), height ${Number.isFinite(v) ? `${(v * 1e9).toFixed(2)} nm` : '–'}`;
+  }
+
+  /** Recomputes the profile along the drawn line and shows it. */
+  async updateProfile() {
+    const sc = this.scan;
+    const l = this.line;
+    const info = this.opts.profileInfoEl;
+    if (!sc || !l) {
+      this.profile = null;
+      if (info) info.textContent = sc ? 'Drag a line across the image to see its profile.' : '';
+      if (this.plot) this.plot.setData([[], []]);
+      return;
+    }
+    if (!this.levelled || this.drawnVersion !== sc.version) this.relevel();
+    const { t, h } = profileAlong(this.levelled, sc.xres, sc.yres, l.i0, l.j0, l.i1, l.j1);
+    const dx = ((l.i1 - l.i0) / sc.xres) * sc.x_real;
+    const dy = ((l.j1 - l.j0) / sc.yres) * sc.y_real;
+    const lengthM = Math.hypot(dx, dy);
+    const u = lengthUnit(lengthM);
+    const xs = Float64Array.from(t, (f) => f * lengthM * u.scale);
+    const hs = Float64Array.from(h, (v) => v * 1e9);
+    let lo = Infinity;
+    let hi = -Infinity;
+    for (const v of hs) {
+      if (Number.isFinite(v)) {
+        lo = Math.min(lo, v);
+        hi = Math.max(hi, v);
+      }
+    }
+    this.profile = { lengthM, unit: u.name, distances: xs, heightsNm: hs };
+    if (info) info.textContent = `profile length ${(lengthM * u.scale).toPrecision(4)} ${u.name}, height range ${Number.isFinite(hi - lo) ? (hi - lo).toFixed(2) : '–'} nm, ${xs.length} points`;
+    const el2 = this.opts.profileEl;
+    if (!el2) return;
+    const { default: uPlot } = await import('uplot');
+    if (!this.plot || this.plotUnit !== u.name) {
+      this.plot?.destroy();
+      this.plotUnit = u.name;
+      this.plot = new uPlot({
+        width: Math.max(200, el2.clientWidth),
+        height: 150,
+        legend: { show: true, live: true },
+        cursor: { drag: { x: false, y: false } },
+        scales: { x: { time: false } },
+        axes: [
+          { stroke: '#c4ccd6', grid: { stroke: '#3a4554' }, ticks: { stroke: '#3a4554' }, label: `distance along the line (${u.name})`, labelSize: 18, size: 30 },
+          { stroke: '#c4ccd6', grid: { stroke: '#3a4554' }, ticks: { stroke: '#3a4554' }, label: 'height (nm)', labelSize: 18, size: 60 },
+        ],
+        series: [
+          { label: 'distance', value: (p, v) => (v == null ? '–' : `${v.toFixed(3)} ${u.name}`) },
+          { label: 'height', stroke: '#7fe3ff', width: 1.5, value: (p, v) => (v == null ? '–' : `${v.toFixed(2)} nm`) },
+        ],
+      }, [xs, hs], el2);
+      new ResizeObserver(() => this.plot?.setSize({ width: Math.max(200, el2.clientWidth), height: 150 })).observe(el2);
+    } else {
+      this.plot.setData([xs, hs]);
+    }
+  }
+}

@@ -1,0 +1,96 @@
+// The monitoring view (`/?view=monitor`): compact and read-only, for a wall screen. The
+// instrument's phase, the control loop's health, the haptic link, clients and the lease (from
+// /api/status, every second), and the last runs (run_done events on a viewer WebSocket, with no
+// streams). No controls; needs no npm packages.
+import { Session, wsUrl, apiUrl, backoffMs, describeRun } from './protocol.js';
+
+const POLL_MS = 1000;
+
+function h(tag, attrs = {}, ...kids) {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, v);
+  e.append(...kids);
+  return e;
+}
+
+function build() {
+  document.title = 'Monitor · Nano Visulator · nanopush';
+  document.body.className = 'monitor';
+  const tile = (id, label) => h('div', { class: 'tile' }, h('dt', {}, label), h('dd', { id }, '–'));
+  const main = h('main', { class: 'mon' },
+    h('h1', {}, 'nanopush monitor ', h('span', { class: 'sub', id: 'm-scene' }, '')),
+    h('p', { id: 'm-conn', class: 'm-conn' }, 'connecting…'),
+    h('dl', { class: 'tiles' },
+      tile('m-phase', 'Instrument phase'),
+      tile('m-loop', 'Control loop'),
+      tile('m-jitter', 'Period error p99'),
+      tile('m-haptic', 'Haptic link'),
+      tile('m-clients', 'Clients'),
+      tile('m-lease', 'Lease'),
+      tile('m-uptime', 'Uptime')),
+    h('section', { 'aria-labelledby': 'm-runs-h' },
+      h('h2', { id: 'm-runs-h' }, 'Last runs'),
+      h('ol', { id: 'm-runs', class: 'm-runs' }, h('li', {}, 'none yet'))));
+  document.body.replaceChildren(main);
+}
+
+function set(id, text, cls = '') {
+  const e = document.getElementById(id);
+  e.textContent = text;
+  e.className = cls;
+}
+
+async function poll() {
+  try {
+    const r = await fetch(apiUrl('/api/status', location));
+    if (!r.ok) throw new Error(`HTTP ${r.status}`);
+    const s = await r.json();
+    set('m-scene', `· ${s.scene}`);
+    set('m-phase', s.phase + (s.busy ? ' (busy)' : ''));
+    const l = s.loop ?? {};
+    const health = l.overruns > 0 ? `${l.ticks} ticks, ${l.overruns} overruns` : `${l.ticks} ticks, no overruns`;
+    set('m-loop', `${health}${l.realtime ? ', real-time' : ', not real-time'}`, l.overruns > 0 ? 'warn' : 'good');
+    const p99 = l.period_error_p99_bound_s;
+    set('m-jitter', Number.isFinite(p99) ? `≤ ${(p99 * 1e6).toFixed(0)} µs` : '–');
+    const hp = s.haptic ?? {};
+    set('m-haptic', hp.link === 'off' || !hp.link ? 'off' : `${hp.link}${hp.engaged ? ', engaged' : ''}`, hp.link === 'down' ? 'bad' : '');
+    set('m-clients', String(s.clients));
+    set('m-lease', s.lease === null ? 'free' : `client ${s.lease}`);
+    set('m-uptime', `${Math.floor(s.uptime_s / 60)} min ${Math.floor(s.uptime_s % 60)} s`);
+    set('m-conn', 'status: live', 'good');
+  } catch (e) {
+    set('m-conn', `status unavailable: ${e.message}`, 'bad');
+  }
+}
+
+const runs = [];
+function showRuns() {
+  const ol = document.getElementById('m-runs');
+  if (!runs.length) return;
+  ol.replaceChildren(...runs.slice(-8).reverse().map((r) => h('li', { class: r.outcome === 'ok' ? 'good' : 'bad' }, `${r.at.toLocaleTimeString()} ${describeRun(r)}`)));
+}
+
+function connect(attempt = 0) {
+  const session = new Session();
+  let ws;
+  try {
+    ws = new WebSocket(wsUrl(location));
+  } catch {
+    setTimeout(() => connect(attempt + 1), backoffMs(attempt + 1));
+    return;
+  }
+  ws.onmessage = (ev) => {
+    if (typeof ev.data !== 'string') return;
+    const e = session.apply(ev.data);
+    if (e.kind === 'run_done') {
+      runs.push({ ...e.run, at: new Date() });
+      showRuns();
+    }
+  };
+  ws.onclose = () => setTimeout(() => connect(attempt + 1), backoffMs(attempt + 1));
+}
+
+build();
+poll();
+setInterval(poll, POLL_MS);
+connect();
