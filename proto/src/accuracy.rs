@@ -16,9 +16,13 @@ pub struct AccuracyPoint {
     pub final_error: Option<f64>,
     /// Trajectory L2 error of the push (m); `null` for the classical problems.
     pub trajectory_error: Option<f64>,
-    /// The error estimated without the reference: the difference from the same method at the
-    /// next, 10× finer tolerance (same units); `null` at the finest tolerance.
+    /// The error estimated without the reference: the largest difference from the same method's
+    /// runs at finer tolerances (same units), skipping runs that agree to rounding (the same
+    /// steps); `null` at the finest tolerance and where no finer run differs.
     pub estimated_error: Option<f64>,
+    /// The finer tolerance whose run gave `estimated_error`.
+    #[serde(default)]
+    pub estimate_rtol: Option<f64>,
     /// Median wall time (s).
     pub wall_time: f64,
     /// Accepted steps.
