@@ -9,6 +9,9 @@
 //! The reference is the same model with Rodas4 at `rtol = 1e-12` (the finest tolerance at which
 //! the quasi-static scenes still integrate cleanly in double precision), cross-checked against
 //! TR-BDF2 at `rtol = 1e-10`; the report prints their difference.
+//!
+//! [`reduction`] compares the quasi-static reduction with the full model on what a push does
+//! (regime, `t*`, settled `y` and `ζ_z`), rotation on and off.
 
 use std::time::Instant;
 
@@ -16,6 +19,8 @@ use crate::physics::integrate::test_problems::{Robertson, VanDerPol};
 use crate::physics::integrate::{Integrator, Method, NoEvents, Options, Problem};
 use crate::physics::pushing::PushModel;
 use crate::push_run::{PushRun, run_push};
+
+pub mod reduction;
 
 /// One method at one tolerance.
 #[derive(Debug, Clone, PartialEq)]
