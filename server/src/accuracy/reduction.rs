@@ -4,7 +4,7 @@
 //!
 //! The reduced model puts the particle (y, z, θ) and the cantilever at force balance (zero-mass
 //! rows); the full model keeps their inertia (12 states). Both start from the same state, and
-//! until the first shear their traces agree to ~1e-16 m: loading at 1 µm/s is quasi-static. They
+//! until the first shear their traces agree to ~1e-15 m: loading at 1 µm/s is quasi-static. They
 //! part at the first stick → slip, and the reason is physics, not numerics:
 //!
 //! **Why the models disagree after `t*`** (an independent, hand-solved argument). At the shear
@@ -17,10 +17,10 @@
 //!   kinetic balance by as much again and stops (slip rate zero) with the spring at
 //!   `μᵏN − ΔF·e^{−πζ/√(1−ζ²)}`, below the kinetic friction: the contact sticks and must be
 //!   loaded again — stick-slip, for every drive slower than the critical velocity
-//!   `V_c ~ ΔF/√(km)` (here ~mm/s with the cantilever's mass, against `V` = 1 µm/s). Steady
+//!   `V_c ~ ΔF/√(km)` (~5 mm/s with the cantilever's mass, against `V` = 1 µm/s). Steady
 //!   sliding at `V` would need the slip rate never to reach zero, i.e. every fast oscillation
-//!   left by the jump to stay below `V/ω` ~ 10⁻¹³ m in amplitude at MHz frequencies; the jump
-//!   itself is ~2 nm;
+//!   left by the jump to stay below `V/ω`, 10⁻¹³-10⁻¹² m at 0.1-4 MHz; the jump itself is
+//!   ~2 nm;
 //! - *without inertia* (zero-mass rows) the jump is instantaneous and lands exactly on the
 //!   kinetic balance, where the slip rate is the drive's, `+V`: the contact slides steadily. That
 //!   is the overdamped limit (`ζ ≫ 1` in every fast mode), not the limit of the scene's lightly
@@ -380,7 +380,7 @@ mod tests {
     /// README quotes. Slow in debug (the full model takes ~10⁵ steps per ms while it rings):
     /// `cargo test --release -p nanopush --lib -- --ignored paper_scene_reduction`.
     #[test]
-    #[ignore = "runs the 12-state model for 20 ms of push: ~10 s in release"]
+    #[ignore = "runs the 12-state model for 20 ms of push, four times: ~10 s in release, more on a loaded machine"]
     fn paper_scene_reduction_against_the_full_model() {
         let scene = Scene::default_scene();
         let p = scene.push_params();
