@@ -16,9 +16,13 @@ pub struct AccuracyPoint {
     pub final_error: Option<f64>,
     /// Trajectory L2 error of the push (m); `null` for the classical problems.
     pub trajectory_error: Option<f64>,
-    /// The error estimated without the reference: the difference from the same method at the
-    /// next, 10× finer tolerance (same units); `null` at the finest tolerance.
+    /// The error estimated without the reference: the largest difference from the same method's
+    /// runs at finer tolerances (same units), skipping runs that agree to rounding (the same
+    /// steps); `null` at the finest tolerance and where no finer run differs.
     pub estimated_error: Option<f64>,
+    /// The finer tolerance whose run gave `estimated_error`.
+    #[serde(default)]
+    pub estimate_rtol: Option<f64>,
     /// Median wall time (s).
     pub wall_time: f64,
     /// Accepted steps.
@@ -46,6 +50,54 @@ pub struct QuasiStaticCost {
     pub failure: Option<String>,
 }
 
+/// One model's push as the reduction comparison sees it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PushOutcome {
+    /// `stuck`, `slides`, `rolls`, `stick-slip` or `stick-roll`.
+    pub regime: String,
+    /// Jumps of the particle's offset behind the stage (more than 0.05 nm between two samples).
+    pub jumps: usize,
+    /// Shearing time `t*` (s); `null` if the particle never slipped on the substrate.
+    pub shearing_time: Option<f64>,
+    /// Friction phase sampled at the end.
+    pub final_phase: String,
+    /// Mean offset behind the stage `s − y` over the tail (m).
+    pub settled_y: f64,
+    /// Its spread, max − min, over the tail (m).
+    pub y_spread: f64,
+    /// Mean `ζ_z` over the tail (m).
+    pub zeta_z: f64,
+    /// Its spread over the tail (m).
+    pub zeta_z_spread: f64,
+    /// Accepted steps.
+    pub steps: u64,
+    /// Wall time (s).
+    pub wall_time: f64,
+}
+
+/// The reduced and the full model on one rotation setting.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReductionRow {
+    /// Whether the particle may rotate.
+    pub rotation: bool,
+    /// The quasi-static reduction (particle and cantilever at force balance).
+    pub reduced: PushOutcome,
+    /// The full model (every DOF dynamic); `null` when it failed.
+    pub full: Option<PushOutcome>,
+    /// The full model at a 100× finer tolerance; `null` when it failed or was not run.
+    pub full_fine: Option<PushOutcome>,
+    /// Why a full-model run failed, when one did.
+    pub failure: Option<String>,
+    /// Whether both do the same thing (`regime`).
+    pub regime_agrees: Option<bool>,
+    /// `|t*_reduced − t*_full|` (s); `null` unless both shear.
+    pub shearing_time_error: Option<f64>,
+    /// `settled_y` reduced − full (m).
+    pub settled_y_error: Option<f64>,
+    /// `zeta_z` reduced − full (m).
+    pub zeta_z_error: Option<f64>,
+}
+
 /// `nanopush accuracy --json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AccuracyReport {
@@ -66,6 +118,10 @@ pub struct AccuracyReport {
     pub points: Vec<AccuracyPoint>,
     /// The cost of the quasi-static reduction.
     pub quasi_static_cost: Option<QuasiStaticCost>,
+    /// The quasi-static reduction against the full model, rotation off and on (empty with
+    /// `--no-full-model`).
+    #[serde(default)]
+    pub reduction: Vec<ReductionRow>,
     /// Our default method against the best peer solver at equal error.
     pub equal_error: Vec<EqualError>,
 }

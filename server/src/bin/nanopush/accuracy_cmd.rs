@@ -5,12 +5,12 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
+use nanopush::accuracy::reduction::{CompareOptions, Comparison, Summary, compare};
 use nanopush::accuracy::{Point, classical_points, classical_reference, estimate_errors, push_points, push_reference};
 use nanopush::peers::{PeerPoint, SOLVERS, peer_points};
-use nanopush::physics::integrate::{Method, Options};
+use nanopush::physics::integrate::Method;
 use nanopush::physics::pushing::{Dof, PushModel};
-use nanopush::push_run::run_push;
-use nanopush_proto::accuracy::{AccuracyPoint, AccuracyReport, EqualError, QuasiStaticCost};
+use nanopush_proto::accuracy::{AccuracyPoint, AccuracyReport, EqualError, PushOutcome, QuasiStaticCost, ReductionRow};
 use plotters::prelude::*;
 
 /// Arguments of `nanopush accuracy`.
@@ -172,11 +172,117 @@ fn to_proto(p: &Point) -> AccuracyPoint {
         final_error: opt(p.final_error),
         trajectory_error: opt(p.trajectory_error),
         estimated_error: opt(p.estimated_error),
+        estimate_rtol: opt(p.estimate_rtol),
         wall_time: p.wall_time,
         steps: p.steps,
         rejected: p.rejected,
         failure: p.failure.clone(),
     }
+}
+
+fn outcome_to_proto(s: &Summary) -> PushOutcome {
+    PushOutcome {
+        regime: s.regime.as_str().into(),
+        jumps: s.jumps,
+        shearing_time: s.shearing_time,
+        final_phase: s.final_phase.into(),
+        settled_y: s.settled_y,
+        y_spread: s.y_spread,
+        zeta_z: s.zeta_z,
+        zeta_z_spread: s.zeta_z_spread,
+        steps: s.steps,
+        wall_time: s.wall_time,
+    }
+}
+
+fn reduction_to_proto(c: &Comparison) -> ReductionRow {
+    let fine = c.full_fine.as_ref();
+    let failure = match (&c.full, fine) {
+        (Err(e), _) => Some(format!("full model: {e}")),
+        (_, Some(Err(e))) => Some(format!("full model at rtol/100: {e}")),
+        _ => None,
+    };
+    ReductionRow {
+        rotation: c.rotation,
+        reduced: outcome_to_proto(&c.reduced),
+        full: c.full.as_ref().ok().map(outcome_to_proto),
+        full_fine: fine.and_then(|f| f.as_ref().ok()).map(outcome_to_proto),
+        failure,
+        regime_agrees: c.regime_agrees(),
+        shearing_time_error: c.shearing_time_error(),
+        settled_y_error: c.settled_y_error(),
+        zeta_z_error: c.zeta_z_error(),
+    }
+}
+
+/// The reduction table: one line per model and rotation setting, then the errors.
+fn write_reduction(out: &mut String, rows: &[ReductionRow]) -> anyhow::Result<()> {
+    let nm = |v: f64| format!("{:.3}", v * 1e9);
+    let ms = |v: Option<f64>| v.map_or("never".to_string(), |t| format!("{:.4}", t * 1e3));
+    writeln!(
+        out,
+        "Quasi-static reduction against the full model (rodas4, rtol 1e-6; settled = mean of the last half, ± its spread):"
+    )?;
+    writeln!(
+        out,
+        "  {:<9} {:<15} {:<11} {:>6} {:>9} {:>17} {:>17} {:>9} {:>10}",
+        "rotation", "model", "regime", "jumps", "t*/ms", "settled y/nm", "settled ζz/nm", "steps", "time/s"
+    )?;
+    for r in rows {
+        let rot = if r.rotation { "on" } else { "off" };
+        let mut line = |name: &str, o: &PushOutcome| {
+            writeln!(
+                out,
+                "  {:<9} {:<15} {:<11} {:>6} {:>9} {:>17} {:>17} {:>9} {:>10.3e}",
+                rot,
+                name,
+                o.regime,
+                o.jumps,
+                ms(o.shearing_time),
+                format!("{} ± {}", nm(o.settled_y), nm(o.y_spread / 2.0)),
+                format!("{} ± {}", nm(o.zeta_z), nm(o.zeta_z_spread / 2.0)),
+                o.steps,
+                o.wall_time
+            )
+        };
+        line("reduced", &r.reduced)?;
+        if let Some(f) = &r.full {
+            line("full", f)?;
+        }
+        if let Some(f) = &r.full_fine {
+            line("full, rtol/100", f)?;
+        }
+        if let Some(e) = &r.failure {
+            writeln!(out, "  {rot:<9} FAILED: {e}")?;
+        }
+    }
+    writeln!(out, "  Error of the reduction against the full model:")?;
+    for r in rows {
+        let t = match (r.reduced.shearing_time, r.full.as_ref().and_then(|f| f.shearing_time)) {
+            (Some(_), Some(_)) => format!("{:.3e} s", r.shearing_time_error.unwrap_or(f64::NAN)),
+            (None, None) => "neither shears".into(),
+            (Some(_), None) => "only the reduction shears".into(),
+            (None, Some(_)) => "only the full model shears".into(),
+        };
+        writeln!(
+            out,
+            "  rotation {:<3}: regime {}; t* {}; settled y {} nm; ζz {} nm",
+            if r.rotation { "on" } else { "off" },
+            match r.regime_agrees {
+                Some(true) => "agrees",
+                Some(false) => "DIFFERS",
+                None => "-",
+            },
+            t,
+            r.settled_y_error.map_or("-".into(), |v| format!("{:+.3}", v * 1e9)),
+            r.zeta_z_error.map_or("-".into(), |v| format!("{:+.3}", v * 1e9)),
+        )?;
+    }
+    writeln!(
+        out,
+        "  (After the first shear the full model's jump overshoots the kinetic balance and the contact sticks again, stick-slip; the reduction, which has no inertia, lands on the balance and slides or rolls steadily: README, `nanopush accuracy`.)"
+    )?;
+    Ok(())
 }
 
 fn plot(path: &Path, title: &str, unit: &str, points: &[&AccuracyPoint]) -> anyhow::Result<()> {
@@ -247,6 +353,7 @@ fn peer_to_proto(p: &PeerPoint) -> AccuracyPoint {
         final_error: p.final_error.is_finite().then_some(p.final_error),
         trajectory_error: None,
         estimated_error: None,
+        estimate_rtol: None,
         wall_time: p.wall_time,
         steps: p.steps,
         rejected: 0,
@@ -315,58 +422,42 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     rows.extend(peer_points(a.reps, a.min_rtol).iter().map(peer_to_proto));
     let equal = equal_error(&rows);
 
-    // The cost of the quasi-static reduction: the same scene with every DOF dynamic, over a
-    // short window (its nanosecond modes are resolved), against the reduced model's reference.
-    let qs = if a.no_full_model {
-        None
+    // The quasi-static reduction against the full model (every DOF dynamic), rotation off and
+    // on: regime, t*, settled y and ζ_z (see `accuracy::reduction`).
+    let reduction = if a.no_full_model {
+        Vec::new()
     } else {
-        let window = a.duration;
-        let mut full = model.p;
-        full.dofs.particle_y = Dof::Dynamic;
-        full.dofs.particle_z = Dof::Dynamic;
-        full.dofs.particle_rotation = Dof::Dynamic;
-        full.dofs.cantilever = Dof::Dynamic;
-        let full_model = PushModel::new(full);
-        let start = std::time::Instant::now();
-        let reduced = run_push(model.clone(), Method::Rodas4, Options::with_rtol(1e-6), window, window)
-            .context("reduced model")?;
-        let reduced_time = start.elapsed().as_secs_f64();
-        let start = std::time::Instant::now();
-        let fr = run_push(
-            full_model,
-            Method::Rodas4,
-            Options {
-                max_steps,
-                ..Options::with_rtol(1e-6)
-            },
-            window,
-            window,
-        );
-        let full_time = start.elapsed().as_secs_f64();
-        Some(match fr {
-            Ok(f) => {
-                let d = (f.final_particle_y() - reduced.final_particle_y())
-                    .abs()
-                    .max((f.final_zeta_z() - reduced.final_zeta_z()).abs());
-                QuasiStaticCost {
-                    duration: window,
-                    final_difference: Some(d),
-                    reduced_wall_time: reduced_time,
-                    full_wall_time: full_time,
-                    full_steps: f.stats.steps,
-                    failure: None,
-                }
-            }
-            Err(e) => QuasiStaticCost {
-                duration: window,
-                final_difference: None,
-                reduced_wall_time: reduced_time,
-                full_wall_time: full_time,
-                full_steps: 0,
-                failure: Some(e.to_string()),
-            },
-        })
+        compare(&model.p, &CompareOptions::report(a.duration)).map_err(anyhow::Error::msg)?
     };
+    let rows_red: Vec<ReductionRow> = reduction.iter().map(reduction_to_proto).collect();
+    // Its cost, on the scene's own rotation setting.
+    let scene_rotation = model.p.dofs.particle_rotation != Dof::Off;
+    let qs = reduction
+        .iter()
+        .find(|c| c.rotation == scene_rotation)
+        .map(|c| match &c.full {
+            Ok(f) => QuasiStaticCost {
+                duration: a.duration,
+                final_difference: Some(
+                    c.settled_y_error()
+                        .unwrap_or(f64::NAN)
+                        .abs()
+                        .max(c.zeta_z_error().unwrap_or(f64::NAN).abs()),
+                ),
+                reduced_wall_time: c.reduced.wall_time,
+                full_wall_time: f.wall_time,
+                full_steps: f.steps,
+                failure: None,
+            },
+            Err(e) => QuasiStaticCost {
+                duration: a.duration,
+                final_difference: None,
+                reduced_wall_time: c.reduced.wall_time,
+                full_wall_time: 0.0,
+                full_steps: 0,
+                failure: Some(e.clone()),
+            },
+        });
 
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let mut csv = String::from(
@@ -410,6 +501,7 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
         repetitions: a.reps,
         points: rows.clone(),
         quasi_static_cost: qs,
+        reduction: rows_red,
         equal_error: equal,
     };
     let mut out = String::new();
@@ -471,10 +563,10 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     }
     if let Some(q) = &report.quasi_static_cost {
         match (&q.final_difference, &q.failure) {
-            (Some(d), _) => writeln!(
+            (Some(_), _) => writeln!(
                 out,
-                "Quasi-static reduction over {} s: differs from the full 12-state model by {:.3e} m; {:.3e} s against {:.3e} s ({} steps) for the full model.",
-                q.duration, d, q.reduced_wall_time, q.full_wall_time, q.full_steps
+                "Quasi-static reduction over {} s: {:.3e} s against {:.3e} s ({} steps) for the full 12-state model.",
+                q.duration, q.reduced_wall_time, q.full_wall_time, q.full_steps
             )?,
             (None, Some(f)) => writeln!(
                 out,
@@ -483,6 +575,9 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
             )?,
             _ => {}
         }
+    }
+    if !report.reduction.is_empty() {
+        write_reduction(&mut out, &report.reduction)?;
     }
     writeln!(
         out,
