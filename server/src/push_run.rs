@@ -145,3 +145,51 @@ pub fn run_push_within(
         final_phase: sim.phase().as_str(),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::integrate::{Method, Options};
+    use crate::physics::pushing::{Dof, PushModel};
+    use crate::scene::Scene;
+
+    /// The README's `nanopush simulate` and Fig 7 figures, pinned (issue 14): the default scene
+    /// pushed 50 ms at 1 µm/s (Rodas4, rtol 1e-6) — the tip contact slips at 5.3 ms and the
+    /// particle rolls from then on, 49.3 nm of travel for 50.0 nm of stage, the offset behind
+    /// the stage settling at 0.669 nm after peaking at 1.33 nm; with rotation off it shears at
+    /// t* = 6.2 ms and settles at 4.47 nm.
+    #[test]
+    fn fig7_settling_and_the_simulate_figures() {
+        let scene = Scene::default_scene();
+        let run = run_push(
+            PushModel::new(scene.push_params()),
+            Method::Rodas4,
+            Options::with_rtol(1e-6),
+            0.05,
+            1e-4,
+        )
+        .unwrap();
+        let roll = run.trace.iter().find(|r| r.phase == "roll").expect("it rolls");
+        assert!((roll.t - 5.3e-3).abs() < 0.05e-3, "the tip slips at {:e} s", roll.t);
+        assert_eq!(run.shearing_time, None, "it never slides on the substrate");
+        let y = run.final_particle_y();
+        assert!((y - 49.3e-9).abs() < 0.05e-9, "particle travel {y:e} m");
+        let last = run.trace.last().unwrap();
+        let offset = last.stage_y - last.particle_y;
+        assert!((offset - 0.669e-9).abs() < 0.001e-9, "settled offset {offset:e} m");
+        let peak = run.trace.iter().map(|r| r.stage_y - r.particle_y).fold(0.0, f64::max);
+        assert!((peak - 1.327e-9).abs() < 0.005e-9, "peak offset {peak:e} m");
+
+        let mut p = scene.push_params();
+        p.dofs.particle_rotation = Dof::Off;
+        let run = run_push(PushModel::new(p), Method::Rodas4, Options::with_rtol(1e-6), 0.05, 1e-4).unwrap();
+        let t_star = run.shearing_time.expect("it shears");
+        assert!((t_star - 6.2e-3).abs() < 0.05e-3, "t* {t_star:e} s");
+        let last = run.trace.last().unwrap();
+        let offset = last.stage_y - last.particle_y;
+        assert!(
+            (offset - 4.47e-9).abs() < 0.01e-9,
+            "settled offset without rotation {offset:e} m"
+        );
+    }
+}

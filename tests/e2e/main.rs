@@ -7,6 +7,7 @@ mod prometheus;
 mod push;
 mod scan;
 mod serve;
+mod serve_behaviour;
 mod serve_scenes;
 mod simulate;
 mod sweep;

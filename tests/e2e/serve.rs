@@ -18,7 +18,7 @@ pub(crate) const TOKEN: &str = "e2e-operator-token";
 
 /// A server on a free port, killed on drop.
 pub(crate) struct Server {
-    child: Child,
+    pub(crate) child: Child,
     pub(crate) addr: String,
     dir: PathBuf,
 }

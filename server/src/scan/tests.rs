@@ -152,16 +152,28 @@ fn drift_and_hysteresis_shift_the_image_as_modelled() {
     assert!((img.at(100, 0) - img.at(0, 0) - 100.0 * 0.5 * NM).abs() < 1e-12);
 }
 
-/// Localization of every particle of the two shipped particle scenes, noise on (0.2 nm RMS):
-/// within a pixel laterally, 1 % in radius (measured: see the README).
+/// Localization of every particle of the two shipped particle scenes, noise on (0.2 nm RMS), at
+/// 128 and 256 pixels, held to the README's table (issue 14: this test once allowed a whole
+/// pixel, 195-391 nm, while the README claimed 0.01-0.12 nm): on the level paper scene within
+/// 0.05 nm (measured ≤ 0.011 nm); on gold-latex within 0.3 nm across its 6 mrad tilt and 2 nm
+/// along it (measured 1.40-1.53 nm: the plane levelling tilts the sphere's image, a systematic
+/// shift the same at both pitches); the radius within 0.05 % (measured ≤ 0.039 %).
 #[test]
-fn shipped_particles_are_localized_within_a_pixel_and_a_percent() {
-    for name in ["paper-default", "gold-latex-500nm"] {
+fn shipped_particles_are_localized_as_the_readme_says() {
+    for (name, pixels) in [
+        ("paper-default", 128),
+        ("paper-default", 256),
+        ("gold-latex-500nm", 128),
+        ("gold-latex-500nm", 256),
+    ] {
         let sc = scene(name);
         let (s, t, p) = (
             Surface::from_scene(&sc),
             Tip::from_scene(&sc),
-            ScanParams::from_scene(&sc),
+            ScanParams {
+                pixels,
+                ..ScanParams::from_scene(&sc)
+            },
         );
         assert!(p.noise_rms > 0.0);
         let img = scan(&s, t, p);
@@ -183,14 +195,20 @@ fn shipped_particles_are_localized_within_a_pixel_and_a_percent() {
                 l.expected_width / NM,
                 l.radius_from_width.unwrap() / NM
             );
-            assert!(ex <= p.pixel() && ey <= p.pixel(), "{name}: {l:?}");
-            assert!(er < 0.01, "{name}: radius {:e} vs {:e}", l.radius, sp.r);
+            let (along, across) = if name == "paper-default" {
+                (0.05, 0.05)
+            } else {
+                (2.0, 0.3)
+            };
+            assert!(ex <= along * NM && ey <= across * NM, "{name} at {pixels} px: {l:?}");
+            assert!(er < 5e-4, "{name} at {pixels} px: radius {:e} vs {:e}", l.radius, sp.r);
             assert!((l.z - (s.centre_z(sp))).abs() < 0.01 * sp.r);
             // The width cross-checks: the base within two pixels of the model (pixel-limited),
             // the radius from the half-height width within 5 %.
             assert!((l.base_width - l.expected_width).abs() < 2.0 * p.pixel(), "{l:?}");
             let rw = l.radius_from_width.unwrap();
-            assert!((rw - sp.r).abs() < 0.05 * sp.r, "{name}: radius from width {rw:e}");
+            let width_tol = if pixels >= 256 { 0.05 } else { 0.15 };
+            assert!((rw - sp.r).abs() < width_tol * sp.r, "{name}: radius from width {rw:e}");
             assert!(found.iter().any(|f| (f.x - l.x).hypot(f.y - l.y) < 1e-12));
         }
     }

@@ -1322,12 +1322,14 @@ fn run_scan(st: &AppState, params: ScanParams) {
             })
         };
     }
+    // Free before it is announced: a client that starts the next scan on hearing `scan_done`
+    // must not be told the last one is still running.
+    st.scanning.store(false, Relaxed);
     send_text(&ServerMessage::ScanDone {
         scan: scan_id,
         record,
         record_error,
     });
-    st.scanning.store(false, Relaxed);
 }
 
 /// A record's name, or the reason it is missing, as the two fields of a message.

@@ -125,3 +125,47 @@ impl Problem for Robertson {
         if i == 1 { 1e-12 } else { 1e-6 }
     }
 }
+
+/// Prothero & Robinson's problem, made nonlinear: `y' = λ(y − φ) + φ' + (y − φ)²` with
+/// `φ(t) = sin(t) + cos(2t)`, `y(0) = φ(0)`: the exact solution is `y = φ(t)` for any `λ`
+/// (Prothero & Robinson, Math. Comp. 28, 1974; Hairer & Wanner, *Solving ODEs II*, Sec IV.15).
+/// Time-dependent through `φ`, so a method that drops `∂f/∂t` or evaluates its stages at the
+/// wrong times loses its order on it, unlike on an autonomous problem.
+pub struct ProtheroRobinson {
+    /// `λ` (negative: the larger `|λ|`, the stiffer).
+    pub lambda: f64,
+}
+
+impl ProtheroRobinson {
+    /// `φ(t)`, the exact solution.
+    pub fn phi(t: f64) -> f64 {
+        t.sin() + (2.0 * t).cos()
+    }
+    fn dphi(t: f64) -> f64 {
+        t.cos() - 2.0 * (2.0 * t).sin()
+    }
+    fn ddphi(t: f64) -> f64 {
+        -t.sin() - 4.0 * (2.0 * t).cos()
+    }
+}
+
+impl Problem for ProtheroRobinson {
+    fn len(&self) -> usize {
+        1
+    }
+    fn mass(&self, _i: usize) -> f64 {
+        1.0
+    }
+    fn rhs(&self, t: f64, y: &[f64], out: &mut [f64]) {
+        let e = y[0] - Self::phi(t);
+        out[0] = self.lambda * e + Self::dphi(t) + e * e;
+    }
+    fn jacobian(&self, t: f64, y: &[f64], jac: &mut [f64]) {
+        jac[0] = self.lambda + 2.0 * (y[0] - Self::phi(t));
+    }
+    /// `∂f/∂t = −(λ + 2e) φ' + φ''`, `e = y − φ`.
+    fn time_derivative(&self, t: f64, y: &[f64], out: &mut [f64]) {
+        let e = y[0] - Self::phi(t);
+        out[0] = -(self.lambda + 2.0 * e) * Self::dphi(t) + Self::ddphi(t);
+    }
+}

@@ -4,7 +4,7 @@
 // Numerical kernels index several arrays with one loop variable: index loops are clearer.
 #![allow(clippy::needless_range_loop)]
 
-use super::test_problems::{LinearStiff, Robertson, VanDerPol};
+use super::test_problems::{LinearStiff, ProtheroRobinson, Robertson, VanDerPol};
 use super::*;
 
 /// Fixed steps of size `h` (a tolerance so loose that nothing is rejected, `h_max = h`).
@@ -35,6 +35,55 @@ fn observed_order_of_convergence() {
             "{}: observed order {observed:.3} (errors {errs:?}), theory {p}",
             m.name()
         );
+    }
+}
+
+/// Fixed steps of size `h` on Prothero-Robinson over `[0, 1]`: the error at `t = 1`.
+fn prothero_robinson_error(method: Method, lambda: f64, h: f64) -> f64 {
+    let mut opts = Options::with_rtol(1e12);
+    opts.h_max = h;
+    let mut it = Integrator::new(method, opts);
+    let p = ProtheroRobinson { lambda };
+    let mut y = [ProtheroRobinson::phi(0.0)];
+    let mut t = 0.0;
+    let (o, st) = it.advance(&p, &NoEvents, &mut t, &mut y, 1.0).unwrap();
+    assert_eq!(o, Outcome::Reached);
+    assert_eq!(st.rejected, 0);
+    (y[0] - ProtheroRobinson::phi(1.0)).abs()
+}
+
+/// Issue 14: every reference problem was autonomous, so Rodas4 without its `∂f/∂t` terms, or
+/// with every stage evaluated at `t`, passed the suite. On the time-dependent, nonlinear
+/// Prothero-Robinson problem (mildly stiff, `hλ` from −1 to −0.125) every method shows its
+/// classical order.
+#[test]
+fn observed_order_on_a_time_dependent_nonlinear_problem() {
+    for m in Method::ALL {
+        let hs = [0.1, 0.05, 0.025, 0.0125];
+        let errs: Vec<f64> = hs.iter().map(|&h| prothero_robinson_error(m, -10.0, h)).collect();
+        let n = errs.len();
+        let observed = (errs[n - 2] / errs[n - 1]).log2();
+        let p = m.order() as f64;
+        assert!(
+            (observed - p).abs() <= 0.3,
+            "{}: observed order {observed:.3} (errors {errs:?}), theory {p}",
+            m.name()
+        );
+    }
+}
+
+/// The same problem very stiff (`λ = −10⁶`), adaptive: every method follows the moving
+/// solution within a small multiple of the tolerance. (In this limit the error is set by the
+/// stiff decay toward `φ`, not the step: it need not fall with the tolerance.)
+#[test]
+fn a_stiff_non_autonomous_problem_is_followed_at_the_tolerance() {
+    let p = ProtheroRobinson { lambda: -1e6 };
+    for m in Method::ALL {
+        for rtol in [1e-4, 1e-6] {
+            let (y, _) = solve(&p, &[ProtheroRobinson::phi(0.0)], 2.0, m, rtol);
+            let err = (y[0] - ProtheroRobinson::phi(2.0)).abs();
+            assert!(err < 10.0 * rtol, "{}: error {err:e} at rtol {rtol:e}", m.name());
+        }
     }
 }
 

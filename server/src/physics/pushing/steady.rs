@@ -226,6 +226,49 @@ mod tests {
         assert!(s.y > 0.0 && s.y < 50e-9, "y = {}", s.y);
     }
 
+    /// Issue 14: the magnitude test accepted 0 < y < 50 nm and never checked ζ_z, so a flipped
+    /// sign of the contact-angle correction `Δy` passed. Here Eq 18's three linear lines, written
+    /// again from the paper (Eq 17's `F_y^c`, `F_z^c`; `ζ_y`, `ζ_z` and `y = ζ_y cos α +
+    /// ζ_z sin α + Δy`, `Δy = (ζ_y sin α − ζ_z cos α) sin β cos β`), are solved as one 3×3
+    /// system by LU — a different route from the closed-form substitution — and `y`, `ζ_y`,
+    /// `ζ_z` must agree to 1e-9, at the paper's angles and at two others.
+    #[test]
+    fn the_linear_lines_solved_directly_agree() {
+        for (alpha_deg, beta_deg) in [(15.0, 30.0), (5.0, 60.0), (35.0, 20.0)] {
+            let mut i = paper();
+            i.alpha = f64::to_radians(alpha_deg);
+            i.beta = f64::to_radians(beta_deg);
+            let s = steady_state(&i, &jkr()).unwrap();
+            let (sa, ca) = i.alpha.sin_cos();
+            let (sb, cb) = i.beta.sin_cos();
+            let (sg, cg) = (i.beta - i.alpha).sin_cos();
+            let (fn_, ft) = (s.normal_ta, s.friction_ta);
+            // Unknowns (y, ζ_y, ζ_z). F_y^c = k_y ca y + cy, F_z^c = k_z sa y + cz.
+            let (cy, cz) = (-fn_ * cb + ft * sg, -fn_ * sb - ft * cg);
+            // ζ_y − y ca + F_y^c/k_y + F_z^c/k_yz = 0
+            let r1 = [-ca + ca + i.k_z * sa / i.k_yz, 1.0, 0.0, -(cy / i.k_y + cz / i.k_yz)];
+            // ζ_z − y sa + F_z^c/k_z + F_y^c/k_yz = 0
+            let r2 = [-sa + sa + i.k_y * ca / i.k_yz, 0.0, 1.0, -(cz / i.k_z + cy / i.k_yz)];
+            // y − ζ_y ca − ζ_z sa − (ζ_y sa − ζ_z ca) sb cb = 0
+            let r3 = [1.0, -ca - sa * sb * cb, -sa + ca * sb * cb, 0.0];
+            let a = nalgebra::Matrix3::new(r1[0], r1[1], r1[2], r2[0], r2[1], r2[2], r3[0], r3[1], r3[2]);
+            let b = nalgebra::Vector3::new(r1[3], r2[3], r3[3]);
+            let x = a.lu().solve(&b).expect("regular");
+            let close = |got: f64, want: f64, what: &str| {
+                assert!(
+                    (got - want).abs() <= 1e-9 * want.abs().max(1e-12),
+                    "α {alpha_deg}°, β {beta_deg}°: {what} {got:e} against the direct solve {want:e}"
+                )
+            };
+            close(s.y, x[0], "y");
+            close(s.zeta_y, x[1], "ζ_y");
+            close(s.zeta_z, x[2], "ζ_z");
+        }
+        // And the paper scene's figures themselves (Fig 10-13's settled values at α 15°, β 30°).
+        let s = steady_state(&paper(), &jkr()).unwrap();
+        assert!((s.y - 6.57e-9).abs() < 0.01e-9, "y = {:e}", s.y);
+    }
+
     #[test]
     fn jams_at_high_friction() {
         let mut i = paper();

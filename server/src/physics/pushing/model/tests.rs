@@ -417,6 +417,48 @@ fn dynamic_stage_follows_eq13_load() {
     assert!((pr.stage_accel - pr.friction_as / m.p.stage.stiffness() * m.p.stage.omega().powi(2)).abs() < 1e-9);
 }
 
+/// Issue 14: the stage test above compared 0 with −0 (no friction load at the initial state), so
+/// a flipped sign of the load passed. Here the particle has been pushed 2 nm along +y over a
+/// sticking substrate contact, so the substrate holds it back (`f_as < 0` on the particle).
+/// Newton's third law: the particle drags the substrate, and so the stage that carries it, along
+/// +y in the lab, against the stage's own motion (the stage moves the substrate −y under the
+/// tip); in the frame of the push the tip's travel `s` then falls behind its command. At its
+/// command and at rest the stage accelerates by `f_as/m_s` (negative), and its equilibrium lies
+/// `|f_as|/k_s` behind the command.
+#[test]
+fn a_loaded_stage_lags_its_command() {
+    let m = full();
+    let st = m.layout.stage.unwrap();
+    let mut x = m.initial_state();
+    let mode = m.initial_mode();
+    let t = 1e-3;
+    x[st.pos] = m.p.speed * t;
+    x[st.vel.unwrap()] = 0.0;
+    x[m.layout.particle_y.pos] += 2e-9;
+    let pr = m.probe(t, &x[..12], &mode);
+    assert!(
+        pr.friction_as < -1e-9,
+        "the substrate holds the particle back: {:e} N",
+        pr.friction_as
+    );
+    let mass = m.p.stage.mass;
+    assert!(pr.stage_accel < 0.0, "{:e}", pr.stage_accel);
+    assert!(
+        (pr.stage_accel - pr.friction_as / mass).abs() < 1e-9 * (pr.friction_as / mass).abs(),
+        "{:e} against f_as/m_s = {:e}",
+        pr.stage_accel,
+        pr.friction_as / mass
+    );
+    // Moved back by |f_as|/k_s, it is at equilibrium.
+    x[st.pos] += pr.friction_as / m.p.stage.stiffness();
+    let pr2 = m.probe(t, &x[..12], &mode);
+    assert!(
+        pr2.stage_accel.abs() < 1e-9 * (pr.friction_as / mass).abs(),
+        "{:e}",
+        pr2.stage_accel
+    );
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
     #[test]

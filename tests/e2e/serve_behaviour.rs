@@ -1,0 +1,144 @@
+//! `nanopush serve` behaviours that had no test (issue 14): a second command while a push runs
+//! gets `busy`, a stop during a scan cancels it (no record, and a new scan may start), and on
+//! SIGTERM every client gets `shutdown` and then a close frame (1001, "server shutting down").
+//! Each waits on conditions with a time-out, never a fixed sleep.
+
+use std::time::Duration;
+
+use futures_util::StreamExt;
+use serde_json::{Value, json};
+use tokio_tungstenite::tungstenite::Message;
+
+use crate::serve::{TOKEN, connect, is, reply, runtime, send, start_scene, until};
+
+#[test]
+fn a_command_while_a_push_runs_is_busy_and_stop_ends_the_push() {
+    let srv = start_scene("busy", &[]);
+    runtime().block_on(async {
+        let mut op = connect(&srv.addr, Some(TOKEN)).await;
+        until(&mut op, 5.0, |m| is(m, "welcome")).await;
+        send(&mut op, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
+        send(&mut op, json!({"type": "take_lease", "id": 2})).await;
+        assert_eq!(reply(&mut op, 2).await["type"], "ok");
+        send(
+            &mut op,
+            json!({"type": "push", "id": 3, "particle": 1, "distance_um": 5.0}),
+        )
+        .await;
+        assert_eq!(reply(&mut op, 3).await["type"], "ok");
+        until(&mut op, 20.0, |m| is(m, "telemetry") && m["phase"] != "idle").await;
+        // A second push, and a scan, while it runs.
+        send(
+            &mut op,
+            json!({"type": "push", "id": 4, "particle": 2, "distance_um": 1.0}),
+        )
+        .await;
+        let e = reply(&mut op, 4).await;
+        assert_eq!(
+            (e["type"].as_str(), e["code"].as_str()),
+            (Some("error"), Some("busy")),
+            "{e}"
+        );
+        assert!(e["message"].as_str().unwrap().contains("send stop first"), "{e}");
+        send(
+            &mut op,
+            json!({"type": "scan", "id": 5, "centre_x_um": 40.0, "centre_y_um": 30.0, "size_um": 4.0, "pixels": 16}),
+        )
+        .await;
+        assert_eq!(reply(&mut op, 5).await["code"], "busy");
+        send(&mut op, json!({"type": "stop", "id": 6})).await;
+        assert_eq!(reply(&mut op, 6).await["type"], "ok");
+        let done = until(&mut op, 30.0, |m| is(m, "run_done")).await;
+        assert_eq!(done["outcome"], "stopped", "{done}");
+        // No longer busy: a new command is accepted.
+        send(
+            &mut op,
+            json!({"type": "push", "id": 7, "particle": 1, "distance_um": 0.5}),
+        )
+        .await;
+        assert_eq!(reply(&mut op, 7).await["type"], "ok");
+    });
+}
+
+/// The reply to command `id` and the first message `ty`, in whichever order they come (a scan's
+/// `scan_start` may overtake the command's reply).
+async fn reply_and(ws: &mut crate::serve::Ws, id: u32, ty: &str) -> (Value, Value) {
+    let (mut r, mut m) = (None, None);
+    while r.is_none() || m.is_none() {
+        let v = until(ws, 10.0, |v| v["id"] == id || is(v, ty)).await;
+        if is(&v, ty) {
+            m = Some(v);
+        } else {
+            r = Some(v);
+        }
+    }
+    (r.unwrap(), m.unwrap())
+}
+
+#[test]
+fn a_stop_during_a_scan_cancels_it_without_a_record() {
+    let srv = start_scene("scan-stop", &[]);
+    runtime().block_on(async {
+        let mut op = connect(&srv.addr, Some(TOKEN)).await;
+        until(&mut op, 5.0, |m| is(m, "welcome")).await;
+        send(&mut op, json!({"type": "subscribe", "id": 1, "streams": ["scan"]})).await;
+        send(&mut op, json!({"type": "take_lease", "id": 2})).await;
+        assert_eq!(reply(&mut op, 2).await["type"], "ok");
+        // 64 lines at the default 1 line/s: a minute, unless stopped.
+        let scan =
+            json!({"type": "scan", "id": 3, "centre_x_um": 40.0, "centre_y_um": 30.0, "size_um": 4.0, "pixels": 64});
+        send(&mut op, scan.clone()).await;
+        let (r, start) = reply_and(&mut op, 3, "scan_start").await;
+        assert_eq!(r["type"], "ok", "{r}");
+        send(&mut op, json!({"type": "stop", "id": 4})).await;
+        let (r, done) = reply_and(&mut op, 4, "scan_done").await;
+        assert_eq!(r["type"], "ok", "{r}");
+        assert_eq!(done["scan"], start["scan"]);
+        assert!(
+            done["record"].is_null() && done["record_error"].is_null(),
+            "cancelled: {done}"
+        );
+        // The scan is over: another may start.
+        let mut again = scan;
+        again["id"] = json!(5);
+        send(&mut op, again).await;
+        let (r, next) = reply_and(&mut op, 5, "scan_start").await;
+        assert_eq!(r["type"], "ok", "{r}");
+        assert_ne!(next["scan"], start["scan"]);
+    });
+}
+
+#[test]
+fn on_sigterm_every_client_gets_shutdown_then_a_close_frame() {
+    let mut srv = start_scene("close-frame", &[]);
+    runtime().block_on(async {
+        let mut op = connect(&srv.addr, Some(TOKEN)).await;
+        let mut viewer = connect(&srv.addr, None).await;
+        until(&mut op, 5.0, |m| is(m, "welcome")).await;
+        until(&mut viewer, 5.0, |m| is(m, "welcome")).await;
+        // SAFETY: sending a signal to our own child process.
+        unsafe { libc::kill(srv.child.id() as i32, libc::SIGTERM) };
+        for ws in [&mut op, &mut viewer] {
+            let mut saw_shutdown = false;
+            let close = loop {
+                let msg = tokio::time::timeout(Duration::from_secs(20), ws.next())
+                    .await
+                    .expect("the server closes within 20 s");
+                match msg {
+                    Some(Ok(Message::Text(t))) => {
+                        let v: Value = serde_json::from_str(&t).unwrap();
+                        saw_shutdown |= is(&v, "shutdown");
+                    }
+                    Some(Ok(Message::Close(frame))) => break frame,
+                    Some(Ok(_)) => {}
+                    other => panic!("the connection ended without a close frame: {other:?}"),
+                }
+            };
+            assert!(saw_shutdown, "a shutdown message before the close");
+            let frame = close.expect("a close frame with a code");
+            assert_eq!(u16::from(frame.code), 1001);
+            assert_eq!(frame.reason.as_str(), "server shutting down");
+        }
+    });
+    assert!(srv.child.wait().unwrap().success());
+}
