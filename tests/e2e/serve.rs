@@ -186,6 +186,17 @@ pub(crate) async fn reply(ws: &mut Ws, id: u32) -> Value {
     until(ws, 10.0, |v| (is(v, "ok") || is(v, "error")) && v["id"] == id).await
 }
 
+/// The operator's usual start: connected with the token, welcomed as `operator`, subscribed to
+/// `stream` (command 1), holding the lease (command 2).
+pub(crate) async fn operator(addr: &str, stream: &str) -> Ws {
+    let mut op = connect(addr, Some(TOKEN)).await;
+    assert_eq!(until(&mut op, 5.0, |m| is(m, "welcome")).await["role"], "operator");
+    send(&mut op, json!({"type": "subscribe", "id": 1, "streams": [stream]})).await;
+    send(&mut op, json!({"type": "take_lease", "id": 2})).await;
+    assert_eq!(reply(&mut op, 2).await["type"], "ok");
+    op
+}
+
 pub(crate) fn runtime() -> tokio::runtime::Runtime {
     tokio::runtime::Builder::new_current_thread()
         .enable_all()
@@ -229,11 +240,7 @@ fn a_viewer_receives_telemetry_and_cannot_command() {
 fn an_operator_pushes_a_particle_and_sees_it_move() {
     let srv = start("push", &[]);
     runtime().block_on(async {
-        let mut op = connect(&srv.addr, Some(TOKEN)).await;
-        assert_eq!(until(&mut op, 5.0, |m| is(m, "welcome")).await["role"], "operator");
-        send(&mut op, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
-        send(&mut op, json!({"type": "take_lease", "id": 2})).await;
-        assert_eq!(reply(&mut op, 2).await["type"], "ok");
+        let mut op = operator(&srv.addr, "tip").await;
         send(
             &mut op,
             json!({"type": "push", "id": 3, "particle": 1, "distance_um": 1.0, "direction_deg": 0.0}),
@@ -514,11 +521,7 @@ fn sigterm_mid_push_retracts_the_tip_and_completes_every_record() {
     let mut srv = start("sigterm", &[]);
     let records = srv.dir.join("records");
     runtime().block_on(async {
-        let mut op = connect(&srv.addr, Some(TOKEN)).await;
-        until(&mut op, 5.0, |m| is(m, "welcome")).await;
-        send(&mut op, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
-        send(&mut op, json!({"type": "take_lease", "id": 2})).await;
-        assert_eq!(reply(&mut op, 2).await["type"], "ok");
+        let mut op = operator(&srv.addr, "tip").await;
         send(
             &mut op,
             json!({"type": "push", "id": 3, "particle": 1, "distance_um": 5.0}),
@@ -559,11 +562,7 @@ fn sigterm_mid_push_retracts_the_tip_and_completes_every_record() {
 fn a_scan_streams_its_lines_and_records_a_complete_gsf() {
     let srv = start("scan", &["--scan-line-hz", "200"]);
     runtime().block_on(async {
-        let mut op = connect(&srv.addr, Some(TOKEN)).await;
-        until(&mut op, 5.0, |m| is(m, "welcome")).await;
-        send(&mut op, json!({"type": "subscribe", "id": 1, "streams": ["scan"]})).await;
-        send(&mut op, json!({"type": "take_lease", "id": 2})).await;
-        assert_eq!(reply(&mut op, 2).await["type"], "ok");
+        let mut op = operator(&srv.addr, "scan").await;
         send(
             &mut op,
             json!({"type": "scan", "id": 3, "centre_x_um": 40.0, "centre_y_um": 30.0, "size_um": 4.0, "pixels": 16}),

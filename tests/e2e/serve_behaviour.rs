@@ -9,17 +9,13 @@ use futures_util::StreamExt;
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 
-use crate::serve::{TOKEN, connect, is, reply, runtime, send, start_scene, until};
+use crate::serve::{TOKEN, connect, is, operator, reply, runtime, send, start_scene, until};
 
 #[test]
 fn a_command_while_a_push_runs_is_busy_and_stop_ends_the_push() {
     let srv = start_scene("busy", &[]);
     runtime().block_on(async {
-        let mut op = connect(&srv.addr, Some(TOKEN)).await;
-        until(&mut op, 5.0, |m| is(m, "welcome")).await;
-        send(&mut op, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
-        send(&mut op, json!({"type": "take_lease", "id": 2})).await;
-        assert_eq!(reply(&mut op, 2).await["type"], "ok");
+        let mut op = operator(&srv.addr, "tip").await;
         send(
             &mut op,
             json!({"type": "push", "id": 3, "particle": 1, "distance_um": 5.0}),
@@ -79,11 +75,7 @@ async fn reply_and(ws: &mut crate::serve::Ws, id: u32, ty: &str) -> (Value, Valu
 fn a_stop_during_a_scan_cancels_it_without_a_record() {
     let srv = start_scene("scan-stop", &[]);
     runtime().block_on(async {
-        let mut op = connect(&srv.addr, Some(TOKEN)).await;
-        until(&mut op, 5.0, |m| is(m, "welcome")).await;
-        send(&mut op, json!({"type": "subscribe", "id": 1, "streams": ["scan"]})).await;
-        send(&mut op, json!({"type": "take_lease", "id": 2})).await;
-        assert_eq!(reply(&mut op, 2).await["type"], "ok");
+        let mut op = operator(&srv.addr, "scan").await;
         // 64 lines at the default 1 line/s: a minute, unless stopped.
         let scan =
             json!({"type": "scan", "id": 3, "centre_x_um": 40.0, "centre_y_um": 30.0, "size_um": 4.0, "pixels": 64});

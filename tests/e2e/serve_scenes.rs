@@ -5,16 +5,12 @@
 
 use serde_json::json;
 
-use crate::serve::{TOKEN, connect, http_get, is, reply, runtime, send, start_scene, until};
+use crate::serve::{http_get, is, operator, reply, runtime, send, start_scene, until};
 
 fn push_and_still_answer(tag: &str, edits: &[(&str, &str)], expect: &[&str]) {
     let srv = start_scene(tag, edits);
     runtime().block_on(async {
-        let mut op = connect(&srv.addr, Some(TOKEN)).await;
-        until(&mut op, 5.0, |m| is(m, "welcome")).await;
-        send(&mut op, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
-        send(&mut op, json!({"type": "take_lease", "id": 2})).await;
-        assert_eq!(reply(&mut op, 2).await["type"], "ok");
+        let mut op = operator(&srv.addr, "tip").await;
         send(
             &mut op,
             json!({"type": "push", "id": 3, "particle": 1, "distance_um": 1.0, "direction_deg": 0.0}),

@@ -403,22 +403,8 @@ fn ideal_stage_moves_at_v() {
     assert!((pr.stage - 2e-3 * m.p.speed).abs() < 1e-20);
 }
 
-#[test]
-fn dynamic_stage_follows_eq13_load() {
-    let m = full();
-    let st = m.layout.stage.unwrap();
-    let mut x = m.initial_state();
-    let mode = m.initial_mode();
-    // At rest at its command (s = Vt), with no friction load, the stage does not accelerate.
-    let t = 1e-3;
-    x[st.pos] = m.p.speed * t;
-    x[st.vel.unwrap()] = 0.0;
-    let pr = m.probe(t, &x[..12], &mode);
-    assert!((pr.stage_accel - pr.friction_as / m.p.stage.stiffness() * m.p.stage.omega().powi(2)).abs() < 1e-9);
-}
-
-/// Issue 14: the stage test above compared 0 with −0 (no friction load at the initial state), so
-/// a flipped sign of the load passed. Here the particle has been pushed 2 nm along +y over a
+/// The stage follows Eq 13 with the friction load. (Issue 14: the test before this one compared
+/// 0 with −0, no friction load at the initial state, so a flipped sign of the load passed.) Here the particle has been pushed 2 nm along +y over a
 /// sticking substrate contact, so the substrate holds it back (`f_as < 0` on the particle).
 /// Newton's third law: the particle drags the substrate, and so the stage that carries it, along
 /// +y in the lab, against the stage's own motion (the stage moves the substrate −y under the
