@@ -1,7 +1,7 @@
 # nanopush: the two commands a new user needs are `make run` and `make test`.
 CARGO ?= cargo
 
-.PHONY: run web test setup build release fmt-check clippy unit web-test prometheus-check clean
+.PHONY: run web test setup build release fmt-check clippy unit web-test prometheus-check mutants clean
 
 ## make run: build (release), install the web client's packages, and start the teleoperation
 ## server on the embedded default scene; it prints the URL to open (with the operator token).
@@ -46,6 +46,18 @@ prometheus-check:
 
 ## make test: set up, then formatting, lints with -D warnings, and every test.
 test: setup fmt-check clippy prometheus-check unit web-test
+
+## make mutants: mutation testing with cargo-mutants (from crates.io, installed on first use) on
+## the physics, the integrators, the control and the protocol's validation, against the library's
+## tests. Not part of `make test`: ~3600 mutants, many hours on 2 cores. Results in mutants.out/.
+## MUTANTS_FILES narrows it, e.g. make mutants MUTANTS_FILES='server/src/physics/integrate/*.rs'.
+MUTANTS_FILES ?= server/src/physics/**/*.rs server/src/control/**/*.rs server/src/serve/validate.rs proto/src/**/*.rs
+MUTANTS_TESTS ?=
+mutants:
+	@command -v cargo-mutants >/dev/null || $(CARGO) install cargo-mutants --locked
+	$(CARGO) mutants --workspace $(foreach f,$(MUTANTS_FILES),-f '$(f)') \
+	  -e '**/tests.rs' -e '**/tests/**' -e '**/test_problems.rs' --timeout-multiplier 3 \
+	  -- --lib $(MUTANTS_TESTS)
 
 clean:
 	$(CARGO) clean

@@ -71,14 +71,17 @@ pub enum AfmError {
     #[error("stage command {0:?} is not finite")]
     NotFinite([f64; 3]),
     /// The pushing model failed.
-    #[error("push simulation of particle {id} failed at t = {t:.6} s: {source}")]
+    #[error(
+        "push simulation of particle {id} failed at t = {t:.6} s: {cause} (the pushing model of Eq 17 is driven by the \
+         scene's [friction], [cantilever], [particles], [environment], [push] and [physics] fields)"
+    )]
     Push {
         /// Particle.
         id: u32,
         /// Time (s).
         t: f64,
-        /// Cause.
-        source: SimulationError,
+        /// Why (in the message, not a `source`: printed once).
+        cause: SimulationError,
     },
 }
 
@@ -400,7 +403,7 @@ impl Afm {
         let advance = c
             .sim
             .advance_or_release(t1)
-            .map_err(|source| AfmError::Push { id, t: self.t, source })?;
+            .map_err(|cause| AfmError::Push { id, t: self.t, cause })?;
         let n = c.sim.model.len();
         let probe = c.sim.model.probe(c.sim.t, &c.sim.x[..n], &c.sim.mode);
         // The particle stays where the push model leaves it (at a pull-off: where the balance
