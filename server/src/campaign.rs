@@ -218,12 +218,7 @@ pub fn run_case(base: &Scene, case: &[Edit]) -> PushCase {
     };
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| push_whole(base, case, &mut out)));
     if let Err(p) = result {
-        let msg = p
-            .downcast_ref::<String>()
-            .cloned()
-            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-            .unwrap_or_default();
-        out.violations.push(format!("panic: {msg}"));
+        out.violations.push(format!("panic: {}", crate::panic_message(&*p)));
     }
     out.wall_time = start.elapsed().as_secs_f64();
     out

@@ -39,3 +39,13 @@ pub mod scan;
 pub mod scene;
 pub mod serve;
 pub mod sweep;
+
+/// The message of a caught panic's payload (`&str` or `String`), for reports that turn a
+/// panic in one case, run or push into a row with its reason.
+pub fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "(no message)".into())
+}

@@ -261,14 +261,8 @@ fn run_peer<P: Problem + Sync>(p: &P, peer: Peer, y0: &[f64], t_end: f64, rtol: 
         Peer::RussellRadau5 => run_radau5(p, y0, t_end, rtol),
         _ => run_diffsol(p, peer, y0, t_end, rtol),
     };
-    catch_unwind(AssertUnwindSafe(run)).unwrap_or_else(|panic| {
-        let msg = panic
-            .downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| panic.downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "unknown panic payload".into());
-        Err(format!("panicked: {msg}"))
-    })
+    catch_unwind(AssertUnwindSafe(run))
+        .unwrap_or_else(|panic| Err(format!("panicked: {}", crate::panic_message(&*panic))))
 }
 
 #[allow(clippy::too_many_arguments)]

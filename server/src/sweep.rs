@@ -486,14 +486,7 @@ pub fn compute_point(base: &Scene, param: Param, index: usize, value: f64, opts:
     let dynamic = match run {
         Ok(Ok(run)) => Ok(Settled::from_run(&run, opts.tail)),
         Ok(Err(e)) => Err(format!("simulating the push: {e}")),
-        Err(panic) => Err(format!(
-            "the model panicked: {}",
-            panic
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| panic.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "(no message)".into())
-        )),
+        Err(panic) => Err(format!("the model panicked: {}", crate::panic_message(&*panic))),
     };
     SweepPoint {
         index,

@@ -98,10 +98,7 @@ pub enum RunError {
     Afm(#[from] AfmError),
     /// The model prediction for the estimator failed. (Not a `source`: the message carries
     /// the cause once, with the scene fields that drive the model.)
-    #[error(
-        "model prediction for the estimator failed: {0} (the pushing model of Eq 17 is driven by the scene's \
-         [friction], [cantilever], [particles], [environment], [push] and [physics] fields)"
-    )]
+    #[error("model prediction for the estimator failed: {0} ({fields})", fields = crate::physics::pushing::MODEL_FIELDS)]
     Predict(SimulationError),
     /// The run exceeded its tick budget (a bug: every phase has a time-out).
     #[error("the run did not finish within {0} ticks")]

@@ -71,10 +71,7 @@ pub enum AfmError {
     #[error("stage command {0:?} is not finite")]
     NotFinite([f64; 3]),
     /// The pushing model failed.
-    #[error(
-        "push simulation of particle {id} failed at t = {t:.6} s: {cause} (the pushing model of Eq 17 is driven by the \
-         scene's [friction], [cantilever], [particles], [environment], [push] and [physics] fields)"
-    )]
+    #[error("push simulation of particle {id} failed at t = {t:.6} s: {cause} ({fields})", fields = crate::physics::pushing::MODEL_FIELDS)]
     Push {
         /// Particle.
         id: u32,

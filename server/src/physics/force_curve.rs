@@ -146,12 +146,15 @@ impl TipSample {
         Contact { meniscus, contact }
     }
 
-    /// Tip-sample force at gap `h` in state `s` (N, positive repulsive).
-    fn force(&self, s: Contact, h: f64) -> f64 {
+    /// Tip-sample force at gap `h` in state `s` (N, positive repulsive), generic so that
+    /// [`Self::branch`] has its exact slope.
+    fn force<T: Real>(&self, s: Contact, h: T) -> T {
         let elastic = if s.contact {
-            self.jkr.load_from_indentation(self.a0 - h).unwrap_or(0.0)
+            self.jkr
+                .load_from_indentation(T::cst(self.a0) - h)
+                .unwrap_or(T::cst(0.0))
         } else {
-            0.0
+            T::cst(0.0)
         };
         elastic + self.long_range.sphere_plane(self.r_t, h, s.meniscus, self.a0)
     }
@@ -207,23 +210,11 @@ impl TipSample {
         }
     }
 
-    /// Tip-sample force at gap `h` in state `s`, generic so its gradient is exact.
-    fn force_t<T: Real>(&self, s: Contact, h: T) -> T {
-        let elastic = if s.contact {
-            self.jkr
-                .load_from_indentation(T::cst(self.a0) - h)
-                .unwrap_or(T::cst(0.0))
-        } else {
-            T::cst(0.0)
-        };
-        elastic + self.long_range.sphere_plane(self.r_t, h, s.meniscus, self.a0)
-    }
-
     /// The piezo distance at which gap `h` is an equilibrium in state `s`,
     /// `d(h) = h − F(h)/k_c`, and its slope `d'(h) = 1 − F'(h)/k_c`: the branch is stable
     /// where `d' > 0` and ends at a fold where `d' = 0`.
     fn branch(&self, s: Contact, h: f64) -> (f64, f64) {
-        let (f, df) = derivative(|h| self.force_t(s, h), h);
+        let (f, df) = derivative(|h| self.force(s, h), h);
         (h - f / self.k_c, 1.0 - df / self.k_c)
     }
 
@@ -304,7 +295,7 @@ impl TipSample {
         let h = self
             .first_where(h_deep, end, |h| self.branch(s, h).1 <= 0.0)
             .unwrap_or(end);
-        (self.branch(s, h).0, self.force_t(s, h))
+        (self.branch(s, h).0, self.force(s, h))
     }
 
     /// Approach from `d_far` to `d_near`, then retract to `d_retract` (≥ `d_far`: a soft lever

@@ -12,3 +12,7 @@ pub use model::{Drive, FrictionPhase, Mode, Probe, PushModel, SwitchKind, Switch
 pub use params::{Dof, Dofs, Interactions, LongRange, PushParams};
 pub use simulation::{Advance, RELEASE_GAP, Simulation, SimulationError, TickReport};
 pub use steady::{SteadyInputs, SteadyState, steady_state};
+
+/// The scene sections that drive the pushing model (Eq 17), named by an error of a push
+/// simulation or of the estimator's prediction so that the user knows where to look.
+pub const MODEL_FIELDS: &str = "the pushing model of Eq 17 is driven by the scene's [friction], [cantilever], [particles], [environment], [push] and [physics] fields";

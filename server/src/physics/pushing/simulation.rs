@@ -99,9 +99,6 @@ pub struct TickReport {
     pub stats: Stats,
     /// Mode switches handled.
     pub switches: u32,
-    /// The call stopped where the tip's contact broke (only when asked to, see
-    /// [`Advance::Released`]).
-    pub broke_contact: bool,
 }
 
 /// Why a simulation stopped.
@@ -119,8 +116,9 @@ pub enum SimulationError {
         /// Time reached.
         t: f64,
     },
-    /// The tip's contact broke under a quasi-static particle, or its balance vanished, in a
-    /// call that does not release (see [`Advance::Released`]): the push lost its particle.
+    /// The tip's contact broke under a quasi-static particle, or its balance vanished (see
+    /// [`Advance::Released`]): [`Simulation::advance_or_release`] calls it a release; for a
+    /// fixed-duration run the push lost its particle.
     #[error(
         "the tip's contact with the particle broke (or its quasi-static balance vanished) at t = {t:e} s: the tip lost the particle"
     )]
@@ -163,9 +161,6 @@ pub struct Simulation {
     scale: [f64; MAX_STATES],
     /// Most mode switches in one call before it is called chattering.
     pub max_switches: u32,
-    /// Whether `advance_to` stops at a break of the tip's contact under a quasi-static particle
-    /// instead of failing (set by [`Self::advance_or_release`]).
-    stop_at_break: bool,
     /// The quasi-static balance vanished (see [`Self::rebalance`]): the tip lets go.
     balance_lost: bool,
 }
@@ -189,7 +184,6 @@ impl Simulation {
             shearing_time: None,
             scale,
             max_switches: 10_000,
-            stop_at_break: false,
             balance_lost: false,
         };
         sim.enforce_mode();
@@ -335,13 +329,11 @@ impl Simulation {
     /// particle (see [`Advance::Released`]). A failure while the drive is not lifting is an error.
     pub fn advance_or_release(&mut self, t_end: f64) -> Result<Advance, SimulationError> {
         let lifting = self.model.drive.vz > 0.0;
-        self.stop_at_break = true;
-        let result = self.advance_to(t_end);
-        self.stop_at_break = false;
-        match result {
+        match self.advance_to(t_end) {
+            // The contact broke, or the balance vanished: where it happened, the tip let go.
+            Err(SimulationError::ContactLost { .. }) => Ok(Advance::Released),
             Err(_) if lifting => Ok(Advance::Released),
             Err(e) => Err(e),
-            Ok(report) if report.broke_contact => Ok(Advance::Released),
             Ok(_) => {
                 let n = self.model.len();
                 let gap = self.model.probe(self.t, &self.x[..n], &self.mode).gap;
@@ -368,17 +360,15 @@ impl Simulation {
     pub fn advance_to(&mut self, t_end: f64) -> Result<TickReport, SimulationError> {
         let n = self.model.len();
         let mut report = TickReport::default();
+        let mut lost = false;
         while self.t < t_end {
             // The tip's contact broke (at an event, or in the mode a new drive or a meniscus
-            // rupture made due at once) and the particle is quasi-static: it has no balance
-            // without the tip (see [`Advance::Released`]). Stop here: a release when asked for,
-            // else an error (a fixed-duration push lost its particle).
+            // rupture made due at once) and the particle is quasi-static, or its balance
+            // vanished: it has no balance without the tip (see [`Advance::Released`]). Stop here,
+            // with the state where it happened ([`Self::advance_or_release`] calls it a release).
             if self.balance_lost || (!self.mode.tip_contact && self.quasi_static_particle()) {
-                if self.stop_at_break {
-                    report.broke_contact = true;
-                    break;
-                }
-                return Err(SimulationError::ContactLost { t: self.t });
+                lost = true;
+                break;
             }
             let problem = InMode {
                 model: &self.model,
@@ -407,6 +397,9 @@ impl Simulation {
             }
         }
         self.total.add(&report.stats);
+        if lost {
+            return Err(SimulationError::ContactLost { t: self.t });
+        }
         Ok(report)
     }
 }
