@@ -186,14 +186,22 @@ pub(crate) async fn reply(ws: &mut Ws, id: u32) -> Value {
     until(ws, 10.0, |v| (is(v, "ok") || is(v, "error")) && v["id"] == id).await
 }
 
+/// Sends command `v` and waits for its reply, which must be `ok` (the reply is matched by the
+/// command's `id`).
+pub(crate) async fn ok(ws: &mut Ws, v: Value) {
+    let id = v["id"].as_u64().expect("a command with an id") as u32;
+    send(ws, v).await;
+    let r = reply(ws, id).await;
+    assert_eq!(r["type"], "ok", "{r}");
+}
+
 /// The operator's usual start: connected with the token, welcomed as `operator`, subscribed to
 /// `stream` (command 1), holding the lease (command 2).
 pub(crate) async fn operator(addr: &str, stream: &str) -> Ws {
     let mut op = connect(addr, Some(TOKEN)).await;
     assert_eq!(until(&mut op, 5.0, |m| is(m, "welcome")).await["role"], "operator");
     send(&mut op, json!({"type": "subscribe", "id": 1, "streams": [stream]})).await;
-    send(&mut op, json!({"type": "take_lease", "id": 2})).await;
-    assert_eq!(reply(&mut op, 2).await["type"], "ok");
+    ok(&mut op, json!({"type": "take_lease", "id": 2})).await;
     op
 }
 
@@ -212,8 +220,7 @@ fn a_viewer_receives_telemetry_and_cannot_command() {
         let w = until(&mut v, 5.0, |m| is(m, "welcome")).await;
         assert_eq!(w["role"], "viewer");
         assert_eq!(w["tick_hz"], 1000.0);
-        send(&mut v, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
-        assert_eq!(reply(&mut v, 1).await["type"], "ok");
+        ok(&mut v, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
         let mut n = 0;
         let t0 = Instant::now();
         while n < 20 {
@@ -241,12 +248,11 @@ fn an_operator_pushes_a_particle_and_sees_it_move() {
     let srv = start("push", &[]);
     runtime().block_on(async {
         let mut op = operator(&srv.addr, "tip").await;
-        send(
+        ok(
             &mut op,
             json!({"type": "push", "id": 3, "particle": 1, "distance_um": 1.0, "direction_deg": 0.0}),
         )
         .await;
-        assert_eq!(reply(&mut op, 3).await["type"], "ok");
         // While it runs the telemetry shows the strategy's phases and the estimate.
         let pushing = until(&mut op, 20.0, |m| is(m, "telemetry") && m["phase"] == "push").await;
         assert!(pushing["estimate"].is_array());
@@ -307,8 +313,7 @@ fn bad_messages_get_typed_errors_and_the_server_lives_on() {
         }
         op.send(Message::Binary(vec![1, 2, 3].into())).await.unwrap();
         assert_eq!(until(&mut op, 5.0, |m| is(m, "error")).await["code"], "malformed");
-        send(&mut op, json!({"type": "take_lease", "id": 1})).await;
-        assert_eq!(reply(&mut op, 1).await["type"], "ok");
+        ok(&mut op, json!({"type": "take_lease", "id": 1})).await;
         for (id, cmd, code, words) in [
             (
                 2,
@@ -380,14 +385,12 @@ fn bad_messages_get_typed_errors_and_the_server_lives_on() {
         }
         // Issue 12.7: the whole stage in one scan, about its centre, is allowed (it was refused
         // by a unit round trip's rounding).
-        send(
+        ok(
             &mut op,
             json!({"type": "scan", "id": 12, "centre_x_um": 50.0, "centre_y_um": 50.0, "size_um": 100.0, "pixels": 8}),
         )
         .await;
-        assert_eq!(reply(&mut op, 12).await["type"], "ok");
-        send(&mut op, json!({"type": "stop", "id": 13})).await;
-        assert_eq!(reply(&mut op, 13).await["type"], "ok");
+        ok(&mut op, json!({"type": "stop", "id": 13})).await;
         tokio::time::sleep(Duration::from_millis(1100)).await;
         // Rate limit: 50 messages per second; a burst of 80 pings sees some refused.
         for _ in 0..80 {
@@ -396,8 +399,7 @@ fn bad_messages_get_typed_errors_and_the_server_lives_on() {
         let limited = until(&mut op, 5.0, |m| is(m, "error") && m["code"] == "rate_limited").await;
         assert!(limited["message"].as_str().unwrap().contains("50"));
         tokio::time::sleep(Duration::from_millis(1100)).await;
-        send(&mut op, json!({"type": "ping", "id": 99})).await;
-        assert_eq!(reply(&mut op, 99).await["type"], "ok");
+        ok(&mut op, json!({"type": "ping", "id": 99})).await;
     });
     let (status, body) = http_get(&srv.addr, "/api/status");
     assert_eq!(status, 200);
@@ -438,8 +440,7 @@ fn two_operators_contend_and_exactly_one_holds_the_lease() {
         drop(a);
         let freed = until(&mut b, 5.0, |m| is(m, "lease") && m["holder"].is_null()).await;
         assert!(freed["holder"].is_null());
-        send(&mut b, json!({"type": "take_lease", "id": 3})).await;
-        assert_eq!(reply(&mut b, 3).await["type"], "ok");
+        ok(&mut b, json!({"type": "take_lease", "id": 3})).await;
     });
 }
 
@@ -522,12 +523,11 @@ fn sigterm_mid_push_retracts_the_tip_and_completes_every_record() {
     let records = srv.dir.join("records");
     runtime().block_on(async {
         let mut op = operator(&srv.addr, "tip").await;
-        send(
+        ok(
             &mut op,
             json!({"type": "push", "id": 3, "particle": 1, "distance_um": 5.0}),
         )
         .await;
-        assert_eq!(reply(&mut op, 3).await["type"], "ok");
         until(&mut op, 20.0, |m| is(m, "telemetry") && m["phase"] == "push").await;
         // SAFETY: sending a signal to our own child process.
         unsafe { libc::kill(srv.child.id() as i32, libc::SIGTERM) };
@@ -610,8 +610,7 @@ fn a_scan_streams_its_lines_and_records_a_complete_gsf() {
         let data = gsf.len() - gsf[nul..].iter().position(|&c| c != 0).map_or(gsf.len() - nul, |k| k) - nul;
         assert_eq!(data, 16 * 16 * 4, "data bytes after the header");
         // A stop during a scan cancels it; the lease holder may scan again afterwards.
-        send(&mut op, json!({"type": "ping", "id": 4})).await;
-        assert_eq!(reply(&mut op, 4).await["type"], "ok");
+        ok(&mut op, json!({"type": "ping", "id": 4})).await;
     });
 }
 
@@ -735,8 +734,7 @@ fn records_are_served_safely_and_write_failures_say_why() {
         reply(&mut op, 1).await;
         send(&mut op, json!({"type": "take_lease", "id": 2})).await;
         reply(&mut op, 2).await;
-        send(&mut op, json!({"type": "scan", "id": 3, "pixels": 8, "size_um": 4.0})).await;
-        assert_eq!(reply(&mut op, 3).await["type"], "ok");
+        ok(&mut op, json!({"type": "scan", "id": 3, "pixels": 8, "size_um": 4.0})).await;
         let done = until(&mut op, 30.0, |m| is(m, "scan_done")).await;
         assert!(done["record"].is_null(), "{done}");
         let why = done["record_error"]
@@ -799,8 +797,7 @@ fn viewers_never_lock_the_operator_out_and_one_address_has_a_limit() {
         // The operator still gets in, takes the lease and is answered.
         let mut op = connect(&srv.addr, Some(TOKEN)).await;
         assert_eq!(until(&mut op, 5.0, |m| is(m, "welcome")).await["role"], "operator");
-        send(&mut op, json!({"type": "take_lease", "id": 1})).await;
-        assert_eq!(reply(&mut op, 1).await["type"], "ok");
+        ok(&mut op, json!({"type": "take_lease", "id": 1})).await;
     });
     // Per address: a third viewer place is the address's limit here (3), a fourth is refused.
     let srv = start("peraddr", &["--max-clients", "100", "--max-clients-per-address", "3"]);
@@ -859,8 +856,7 @@ fn slow_and_dead_connections_are_closed() {
         while Instant::now() < end {
             let _ = tokio::time::timeout(Duration::from_millis(100), live.next()).await;
         }
-        send(&mut live, json!({"type": "ping", "id": 5})).await;
-        assert_eq!(reply(&mut live, 5).await["type"], "ok");
+        ok(&mut live, json!({"type": "ping", "id": 5})).await;
         let mut ended = false;
         let deadline = Instant::now() + Duration::from_secs(5);
         while Instant::now() < deadline {
@@ -969,8 +965,7 @@ fn a_reader_that_stops_reading_is_dropped_without_slowing_the_others() {
         }
         assert!(frames > 500, "the others waited: {frames} frames");
         drop(stalled);
-        send(&mut other, json!({"type": "ping", "id": 2})).await;
-        assert_eq!(reply(&mut other, 2).await["type"], "ok");
+        ok(&mut other, json!({"type": "ping", "id": 2})).await;
     });
 }
 
@@ -989,19 +984,16 @@ fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
         assert!(first["scan"].is_null() && first["push"].is_null(), "{first}");
         assert_eq!(first["particles"][0]["x"], 40e-6);
         send(&mut op, json!({"type": "subscribe", "id": 1, "streams": ["scan"]})).await;
-        send(&mut op, json!({"type": "take_lease", "id": 2})).await;
-        assert_eq!(reply(&mut op, 2).await["type"], "ok");
-        send(&mut op, json!({"type": "scan", "id": 3, "pixels": 16})).await;
-        assert_eq!(reply(&mut op, 3).await["type"], "ok");
+        ok(&mut op, json!({"type": "take_lease", "id": 2})).await;
+        ok(&mut op, json!({"type": "scan", "id": 3, "pixels": 16})).await;
         let done = until(&mut op, 20.0, |m| is(m, "scan_done")).await;
         let scan_record = done["record"].as_str().expect("a scan record").to_string();
 
-        send(
+        ok(
             &mut op,
             json!({"type": "push", "id": 4, "particle": 1, "distance_um": 1.0, "direction_deg": 0.0}),
         )
         .await;
-        assert_eq!(reply(&mut op, 4).await["type"], "ok");
         // Everyone hears the push start, with its planned path.
         let started = until(&mut op, 20.0, |m| is(m, "push_started")).await;
         assert_eq!(started["particle"], 1);
@@ -1056,14 +1048,12 @@ fn issue_11_a_push_stops_when_its_lease_holder_disconnects() {
         let me = until(&mut op, 5.0, |m| is(m, "welcome")).await["client"]
             .as_u64()
             .unwrap();
-        send(&mut op, json!({"type": "take_lease", "id": 1})).await;
-        assert_eq!(reply(&mut op, 1).await["type"], "ok");
-        send(
+        ok(&mut op, json!({"type": "take_lease", "id": 1})).await;
+        ok(
             &mut op,
             json!({"type": "push", "id": 2, "particle": 1, "distance_um": 5.0, "direction_deg": 0.0}),
         )
         .await;
-        assert_eq!(reply(&mut op, 2).await["type"], "ok");
         until(&mut watcher, 20.0, |m| is(m, "push_started")).await;
         drop(op);
         let lease = until(&mut watcher, 10.0, |m| is(m, "lease")).await;

@@ -9,19 +9,18 @@ use futures_util::StreamExt;
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 
-use crate::serve::{TOKEN, connect, is, operator, reply, runtime, send, start_scene, until};
+use crate::serve::{TOKEN, connect, is, ok, operator, reply, runtime, send, start_scene, until};
 
 #[test]
 fn a_command_while_a_push_runs_is_busy_and_stop_ends_the_push() {
     let srv = start_scene("busy", &[]);
     runtime().block_on(async {
         let mut op = operator(&srv.addr, "tip").await;
-        send(
+        ok(
             &mut op,
             json!({"type": "push", "id": 3, "particle": 1, "distance_um": 5.0}),
         )
         .await;
-        assert_eq!(reply(&mut op, 3).await["type"], "ok");
         until(&mut op, 20.0, |m| is(m, "telemetry") && m["phase"] != "idle").await;
         // A second push, and a scan, while it runs.
         send(
@@ -42,17 +41,15 @@ fn a_command_while_a_push_runs_is_busy_and_stop_ends_the_push() {
         )
         .await;
         assert_eq!(reply(&mut op, 5).await["code"], "busy");
-        send(&mut op, json!({"type": "stop", "id": 6})).await;
-        assert_eq!(reply(&mut op, 6).await["type"], "ok");
+        ok(&mut op, json!({"type": "stop", "id": 6})).await;
         let done = until(&mut op, 30.0, |m| is(m, "run_done")).await;
         assert_eq!(done["outcome"], "stopped", "{done}");
         // No longer busy: a new command is accepted.
-        send(
+        ok(
             &mut op,
             json!({"type": "push", "id": 7, "particle": 1, "distance_um": 0.5}),
         )
         .await;
-        assert_eq!(reply(&mut op, 7).await["type"], "ok");
     });
 }
 

@@ -5,18 +5,17 @@
 
 use serde_json::json;
 
-use crate::serve::{http_get, is, operator, reply, runtime, send, start_scene, until};
+use crate::serve::{http_get, is, ok, operator, runtime, start_scene, until};
 
 fn push_and_still_answer(tag: &str, edits: &[(&str, &str)], expect: &[&str]) {
     let srv = start_scene(tag, edits);
     runtime().block_on(async {
         let mut op = operator(&srv.addr, "tip").await;
-        send(
+        ok(
             &mut op,
             json!({"type": "push", "id": 3, "particle": 1, "distance_um": 1.0, "direction_deg": 0.0}),
         )
         .await;
-        assert_eq!(reply(&mut op, 3).await["type"], "ok");
         let done = until(&mut op, 60.0, |m| is(m, "run_done")).await;
         let outcome = done["outcome"].as_str().unwrap().to_string();
         assert!(expect.contains(&outcome.as_str()), "{tag}: {done}");
@@ -28,8 +27,7 @@ fn push_and_still_answer(tag: &str, edits: &[(&str, &str)], expect: &[&str]) {
         let (status, body) = http_get(&srv.addr, "/api/status");
         assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
         until(&mut op, 5.0, |m| is(m, "telemetry")).await;
-        send(&mut op, json!({"type": "release_lease", "id": 4})).await;
-        assert_eq!(reply(&mut op, 4).await["type"], "ok");
+        ok(&mut op, json!({"type": "release_lease", "id": 4})).await;
     });
 }
 
