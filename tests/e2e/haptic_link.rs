@@ -191,10 +191,8 @@ fn haptic(addr: &str, action: &str) -> Value {
         send(&mut ws, json!({"type": "take_lease", "id": 1})).await;
         assert_eq!(reply(&mut ws, 1).await["type"], "ok");
         send(&mut ws, json!({"type": "haptic", "id": 2, "action": action})).await;
-        let r = reply(&mut ws, 2).await;
-        // Hold the lease a moment so the command reaches the loop before the socket closes.
-        tokio::time::sleep(Duration::from_millis(50)).await;
-        r
+        // An `ok` means the command is already in the loop's queue: the socket may close now.
+        reply(&mut ws, 2).await
     })
 }
 
@@ -455,6 +453,83 @@ fn a_killed_server_zeroes_the_force_and_the_bridge_takes_up_a_new_one() {
     assert!(rows[silent..back].iter().all(|r| r.force == 0.0));
     let gap = rows[silent].t - rows[pressed].t;
     assert!(gap < 0.006, "zeroed {gap} s after the last pressed cycle");
+}
+
+/// SIGTERM of the server while the hand presses: the server itself lets go of the hand before it
+/// exits. The hand's force drops to exactly 0 N while the link is still up (the server's own
+/// `active = 0`, not the bridge's watchdog, which is set to 100 ms here so the two cannot be
+/// confused) and stays 0 while the hand keeps pressing; the server exits 0 with the tip parked.
+#[test]
+fn a_terminated_server_zeroes_the_hands_force_before_it_goes() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let b = Bench::new("term");
+    let (mut srv, addr) = serve_with(&b, "external", "server.log", &["--haptic-timeout-ms", "100"]);
+    let trace = b.dir.join("trace.csv");
+    let script = b.dir.join("press-and-stay.csv");
+    std::fs::write(&script, "t_s,handle_m\n0,0\n3,-0.0125\n60,-0.0125\n").unwrap();
+    let operator = format!("file:{}", script.display());
+    let (mut br, lines) = bridge(
+        &b,
+        &[
+            "--operator",
+            &operator,
+            "--duration",
+            "60",
+            "--server-timeout-ms",
+            "100",
+            "--trace",
+            trace.to_str().unwrap(),
+        ],
+    );
+    wait_status(&addr, 10.0, "link up", |s| s["haptic"]["link"] == "up");
+    assert_eq!(haptic(&addr, "engage")["type"], "ok");
+    wait_status(&addr, 20.0, "engaged", |s| s["haptic"]["phase"] == "engaged");
+    wait_status(&addr, 10.0, "pressing", |s| {
+        s["haptic"]["force_n"].as_f64().is_some_and(|f| f > 0.3)
+    });
+    // SAFETY: kill(2) on our own child.
+    unsafe {
+        libc::kill(srv.0.id() as libc::pid_t, libc::SIGTERM);
+    }
+    assert!(wait_exit(&mut srv, 10.0).success(), "the server exits 0 on SIGTERM");
+    // The bridge notices the silence (100 ms later), then is stopped.
+    wait_line(&lines, 5.0, "server silent");
+    // SAFETY: as above.
+    unsafe {
+        libc::kill(br.0.id() as libc::pid_t, libc::SIGTERM);
+    }
+    assert!(wait_exit(&mut br, 5.0).success());
+    let rows = read_trace(&trace);
+    let pressed = rows
+        .iter()
+        .rposition(|r| r.link && r.force > 0.3)
+        .expect("pressed before the SIGTERM");
+    let zero = rows[pressed..]
+        .iter()
+        .position(|r| r.force == 0.0)
+        .expect("the force went to zero")
+        + pressed;
+    assert!(
+        rows[zero].link,
+        "zeroed by the watchdog, not by the server: {:?}",
+        rows[zero]
+    );
+    assert!(
+        rows[zero].t - rows[pressed].t < 0.05,
+        "zeroed {} s after the last pressed cycle",
+        rows[zero].t - rows[pressed].t
+    );
+    let end = rows.len() - 1;
+    assert!(
+        rows[zero..].iter().all(|r| r.force == 0.0),
+        "a force came back after the release"
+    );
+    assert!(
+        rows[end].t - rows[zero].t > 0.1,
+        "the hand was watched pressing on after the release"
+    );
+    let log = std::fs::read_to_string(b.dir.join("server.log")).unwrap();
+    assert!(log.contains("control loop ended"), "{log}");
 }
 
 /// One bridge at a time: a second one on the same link is refused with a clear message.

@@ -9,7 +9,7 @@ use futures_util::StreamExt;
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 
-use crate::serve::{TOKEN, connect, is, ok, operator, reply, runtime, send, start_scene, until};
+use crate::serve::{TOKEN, Ws, connect, http_get, is, ok, operator, reply, runtime, send, start, start_scene, until};
 
 #[test]
 fn a_command_while_a_push_runs_is_busy_and_stop_ends_the_push() {
@@ -130,4 +130,60 @@ fn on_sigterm_every_client_gets_shutdown_then_a_close_frame() {
         }
     });
     assert!(srv.child.wait().unwrap().success());
+}
+
+/// `telemetry_sent` and `dropped_frames` from `/api/status`.
+fn frames(addr: &str) -> (u64, u64) {
+    let (code, body) = http_get(addr, "/api/status");
+    assert_eq!(code, 200);
+    let s: Value = serde_json::from_slice(&body).unwrap();
+    (
+        s["telemetry_sent"].as_u64().unwrap(),
+        s["dropped_frames"].as_u64().unwrap(),
+    )
+}
+
+/// A subscriber that stops reading is not disconnected at once, and never slows anyone: its
+/// frames wait in its socket, the broadcast moves on without it, and when it reads again it is
+/// told how many it missed (`lagged {skipped}`, counted in `dropped_frames`) and telemetry goes
+/// on. Without the `lagged` message the client could not know that its trace has a hole.
+#[test]
+fn a_reader_that_falls_behind_is_told_how_many_frames_it_skipped() {
+    let srv = start("lagged", &["--telemetry-hz", "1000"]);
+    runtime().block_on(async {
+        // A small receive window, so that the server's socket to it fills within seconds.
+        let sock = tokio::net::TcpSocket::new_v4().unwrap();
+        sock.set_recv_buffer_size(4096).unwrap();
+        let tcp = sock.connect(srv.addr.parse().unwrap()).await.unwrap();
+        let (mut ws, _): (Ws, _) = tokio_tungstenite::client_async(
+            format!("ws://{}/ws", srv.addr),
+            tokio_tungstenite::MaybeTlsStream::Plain(tcp),
+        )
+        .await
+        .expect("upgrade");
+        until(&mut ws, 5.0, |m| is(m, "welcome")).await;
+        ok(&mut ws, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
+        assert_eq!(frames(&srv.addr).1, 0);
+        // Stop reading. The session's sender stalls once the socket is full: it is the only
+        // subscriber, so the server's count of frames taken for sending stops while telemetry
+        // is produced at 1 kHz. Wait for that (500 ms unchanged: ~500 frames, beyond the 64 the
+        // broadcast holds), well inside the 5 s a frame may wait before the reader is dropped.
+        let deadline = std::time::Instant::now() + Duration::from_secs(60);
+        let (mut last, mut still) = (frames(&srv.addr).0, 0);
+        while still < 5 {
+            assert!(std::time::Instant::now() < deadline, "the sends never stalled");
+            std::thread::sleep(Duration::from_millis(100));
+            let now = frames(&srv.addr).0;
+            still = if now == last { still + 1 } else { 0 };
+            last = now;
+        }
+        // Reading again: the frames already in the socket, then `lagged` with the count skipped.
+        let lagged = until(&mut ws, 10.0, |m| is(m, "lagged")).await;
+        let skipped = lagged["skipped"].as_u64().expect("a count");
+        assert!(skipped > 0, "{lagged}");
+        assert!(frames(&srv.addr).1 >= skipped, "counted in dropped_frames");
+        let t = until(&mut ws, 5.0, |m| is(m, "telemetry")).await;
+        assert!(t["t"].as_f64().unwrap() > 0.0);
+        ok(&mut ws, json!({"type": "ping", "id": 2})).await;
+    });
 }

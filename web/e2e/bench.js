@@ -1,8 +1,9 @@
 // The page's figures for the README, measured (not asserted): its transfer size (first load,
 // gzip as served) and its frame rate with a 512² scan on screen at 1600×1000 (headless chromium,
-// WebGL on SwiftShader), idle and during a push; also the README's screenshot.
+// WebGL on SwiftShader), idle and during a push; Stop, from the press to the frame that shows its
+// reply, during a push (three presses); also the README's screenshot.
 //   cd web && node e2e/bench.js [--screenshot ../docs/visulator.png]
-import { startServer, launchBrowser, newPage, ready } from './support.js';
+import { startServer, launchBrowser, newPage, ready, timedStop } from './support.js';
 
 const shotPath = process.argv.includes('--screenshot') ? process.argv[process.argv.indexOf('--screenshot') + 1] : null;
 const srv = await startServer();
@@ -56,6 +57,19 @@ try {
   const f = (x) => `${x.raf.toFixed(1)} frames/s (3D view redrawn ${x.view3d.toFixed(1)}/s, ${x.renderMs.toFixed(1)} ms of main thread each)`;
   console.log(`512² scan at 1600×1000, idle: ${f(idle)}`);
   console.log(`512² scan at 1600×1000, during a push: ${f(pushing)}`);
+  const stops = [];
+  for (let k = 0; k < 3; k++) {
+    const running = await page.evaluate(() => !['idle', 'scanning'].includes(window.nanopush.session.state.phase));
+    if (!running) {
+      await page.fill('#direction', k % 2 ? '0' : '180');
+      await page.click('#push-btn');
+      await page.waitForFunction(() => !['idle', 'scanning'].includes(window.nanopush.session.state.phase), null, { timeout: 30000 });
+    }
+    stops.push(await timedStop(page));
+    await page.waitForFunction(() => window.nanopush.session.state.phase === 'idle', null, { timeout: 30000 });
+  }
+  const inPage = stops.map((r) => r.inPage).sort((x, y) => x - y);
+  console.log(`Stop during a push, 512² scan at 1600×1000: median ${inPage[1].toFixed(0)} ms in the page (${stops.map((r) => `${r.inPage.toFixed(0)}/${r.outside}`).join(', ')} ms in the page / from outside)`);
   if (shotPath) {
     // A line profile across the particle for the picture.
     const g = await page.evaluate(() => window.nanopush.image2d.geometry());

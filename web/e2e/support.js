@@ -141,3 +141,25 @@ export async function ready(page) {
     return s?.connection === 'open' && s.client !== null && (s.stateReceived ?? true);
   }, null, { timeout: 20000 });
 }
+
+// Presses Stop as a user would (a real click) and measures until the frame that shows its
+// reply: `inPage` from the pointer-down event to that frame (ms), `outside` as the test saw it.
+export async function timedStop(page) {
+  await page.evaluate(() => {
+    window.stopTiming = {};
+    document.querySelector('#stop-btn').addEventListener('pointerdown', (e) => { window.stopTiming.down = e.timeStamp; }, { once: true });
+    new MutationObserver((_, obs) => {
+      if (/ok/.test(document.querySelector('#reply-stop').textContent)) {
+        obs.disconnect();
+        requestAnimationFrame(() => { window.stopTiming.shown = performance.now(); });
+      }
+    }).observe(document.querySelector('#reply-stop'), { childList: true, characterData: true, subtree: true });
+  });
+  const b = await page.$eval('#stop-btn', (e) => { const r = e.getBoundingClientRect(); return [r.left + r.width / 2, r.top + r.height / 2]; });
+  const t0 = Date.now();
+  await page.mouse.click(...b);
+  await page.waitForFunction(() => window.stopTiming.shown !== undefined, null, { timeout: 10000, polling: 5 });
+  const outside = Date.now() - t0;
+  const t = await page.evaluate(() => window.stopTiming);
+  return { inPage: t.shown - t.down, outside };
+}

@@ -127,6 +127,19 @@ mod tests {
     }
 
     #[test]
+    fn paper_c1_by_hand() {
+        // c₁ = 2L_z²/L_y² + t_c²/L_x² = 2(6.7/155)² + (2.4/50)² = 0.0037370 + 0.002304 = 0.0060410,
+        // the x-x compliance (Eq 10) times k_c: an x force of 1 µN bends the tip 0.755 nm.
+        let c = paper();
+        assert!((c.c1() - 0.0060410).abs() < 1e-7, "{}", c.c1());
+        let d = c.deflection(Vector3::new(1e-6, 0.0, 0.0));
+        assert!(
+            (d.x - 0.0060410e-6 / 8.0).abs() < 2e-14 && d.y == 0.0 && d.z == 0.0,
+            "{d}"
+        );
+    }
+
+    #[test]
     fn effective_mass_uses_f_squared() {
         let c = paper();
         let m = c.effective_mass();
