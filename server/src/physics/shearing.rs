@@ -106,6 +106,42 @@ mod tests {
         assert!(p.shearing_point().is_some());
     }
 
+    /// Eq 15 from its limit cases, each argued from Eq 14 alone, not from Eq 15's formula:
+    /// - α = 0: the lever pushes straight along y with `k_y` and adds no load, so the particle
+    ///   shears when `k_y y = μA`;
+    /// - α = 90°: the push is the normal stiffness `k_z` alone (and again no load), `k_z y = μA`;
+    /// - `k_y = k_z = k`: the lever's force `k y` points along the travel whatever α is, so it
+    ///   adds no load and `k y = μA` at every angle;
+    /// - no friction: shearing at once (`y* = 0`), and `y*` grows linearly in μ for small μ with
+    ///   the slope `A/(k_y cos²α + k_z sin²α)` (the friction demand per unit travel).
+    #[test]
+    fn eq15_limit_cases() {
+        let base = paper();
+        let mu_a = base.mu_s * base.adhesion;
+        let at = |alpha: f64| StaticPhase { alpha, ..base }.shearing_point().unwrap();
+        assert!((at(0.0) - mu_a / base.k_y).abs() < 1e-12 * at(0.0));
+        let vertical = at(std::f64::consts::FRAC_PI_2);
+        assert!((vertical - mu_a / base.k_z).abs() < 1e-9 * vertical, "{vertical:e}");
+        for deg in [5.0, 15.0, 40.0, 75.0] {
+            let iso = StaticPhase {
+                k_z: base.k_y,
+                alpha: f64::to_radians(deg),
+                ..base
+            };
+            let y = iso.shearing_point().unwrap();
+            assert!((y - mu_a / base.k_y).abs() < 1e-12 * y, "{deg}°: {y:e}");
+        }
+        // No friction, no static phase (no adhesion counts as none either).
+        let none = StaticPhase { mu_s: 0.0, ..base }.shearing_point();
+        assert!(none.is_none_or(|y| y == 0.0), "{none:?}");
+        let (s, c) = base.alpha.sin_cos();
+        let slope = base.adhesion / (base.k_y * c * c + base.k_z * s * s);
+        for mu in [1e-3, 1e-4] {
+            let y = StaticPhase { mu_s: mu, ..base }.shearing_point().unwrap();
+            assert!((y / mu - slope).abs() < 2.0 * mu * slope, "μ = {mu}: {:e}", y / mu);
+        }
+    }
+
     /// Issue 13.5: exactly at the Eq 16 bound the denominator was a rounding residue and y*
     /// came out as 1.5·10⁷ m.
     #[test]

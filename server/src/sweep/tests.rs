@@ -119,7 +119,10 @@ fn shard_parse_rejects_what_a_scheduler_should_not_send() {
 
 #[test]
 fn default_point_agrees_with_eq18_of_the_model_report() {
-    // The sweep's Eq 18 at the paper's α = 15° is `nanopush model`'s steady state.
+    // The sweep's Eq 18 at the paper's α = 15° is `nanopush model`'s steady state (plumbing: the
+    // sweep sets up the same scene), and it is the README's figure, 9.47 nm and ζz −24.2 nm
+    // (Fig 7, item 5): Eq 18 itself is checked against a linear solve of the paper's lines in
+    // `physics::pushing::steady::tests`.
     let b = base();
     let report = model_report(&b)
         .steady_state
@@ -133,6 +136,8 @@ fn default_point_agrees_with_eq18_of_the_model_report() {
     assert_eq!(p.index, 3);
     assert_eq!(s.y, report.y);
     assert_eq!(s.zeta_z, report.zeta_z);
+    assert!((s.y - 9.47e-9).abs() < 0.005e-9, "y {:e}", s.y);
+    assert!((s.zeta_z + 24.2e-9).abs() < 0.05e-9, "ζz {:e}", s.zeta_z);
     let d = p.dynamic.as_ref().expect("the push runs");
     assert!(d.y.mean.is_finite() && d.zeta_z.mean.is_finite());
     assert!(d.y.min <= d.y.mean && d.y.mean <= d.y.max);

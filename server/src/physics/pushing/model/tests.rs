@@ -267,17 +267,8 @@ fn shearing_point_tends_to_eq15_with_rigid_contacts() {
         y_soft > 2.0 * y_star,
         "soft contacts add travel: {y_soft:e} vs {y_star:e}"
     );
-    // With the decoupled stiffnesses the formula is the paper's Eq 15 exactly.
-    let eq15 = crate::physics::shearing::StaticPhase {
-        k_y: c.k_y(),
-        k_z: c.k_z(),
-        alpha: c.tilt,
-        mu_s: soft.mu_as_s,
-        adhesion: soft.adhesion_as(),
-    };
-    let (kyy_d, kzy_d) = (c.k_y() * ca * ca + c.k_z() * sa * sa, -(c.k_y() - c.k_z()) * sa * ca);
-    let y_d = soft.mu_as_s * soft.adhesion_as() / (kyy_d + soft.mu_as_s * kzy_d);
-    assert!((eq15.shearing_point().unwrap() - y_d).abs() < 1e-12 * y_d);
+    // (With the decoupled stiffnesses this is the paper's Eq 15, checked from its limit cases in
+    // `physics::shearing::tests::eq15_limit_cases`.)
 }
 
 #[test]
