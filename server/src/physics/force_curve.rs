@@ -462,6 +462,36 @@ mod tests {
         assert!((dry.pull_off_force / vdw - 1.0).abs() < 1e-9, "{}", dry.pull_off_force);
     }
 
+    /// The adhesion's closed form with a JKR contact: the work of adhesion adds the JKR pull-off
+    /// load `(3/2)πRₜw` to the long-range attraction at contact: for w = 0.1 J/m² and
+    /// Rₜ = 30 nm, 14.137 nN more than the same tip with a Hertz contact.
+    #[test]
+    fn a_jkr_contact_adds_its_pull_off_load_to_the_adhesion() {
+        let hertz = si_tip(true);
+        let jkr = TipSample {
+            jkr: Jkr::new(30e-9, contact_modulus(70e9, 0.3, 169e9, 0.27), 0.1),
+            ..hertz
+        };
+        let extra = jkr.adhesion() - hertz.adhesion();
+        assert!((extra - 14.137e-9).abs() < 0.001e-9, "{extra:e}");
+    }
+
+    /// The tip's track says whether it touches: not far away, yes pressed into the surface, and
+    /// no again once retracted past the pull-off.
+    #[test]
+    fn the_track_knows_when_the_tip_touches() {
+        // Dry: the snap-in is at about 0.9 nm (see the next test), the pull-off near 4 nm.
+        let t = si_tip(false);
+        let mut track = TipTrack::far(10e-9);
+        assert!(!track.in_contact());
+        t.track(&mut track, 5e-9);
+        assert!(!track.in_contact(), "5 nm away, before the snap-in");
+        t.track(&mut track, -2e-9);
+        assert!(track.in_contact(), "pressed 2 nm past the surface");
+        t.track(&mut track, 20e-9);
+        assert!(!track.in_contact(), "retracted past the pull-off");
+    }
+
     /// Dry snap-in: Hamaker's sphere-plane force `F = −C/q²`, `C = 2HRₜ³/3`, `q = h(h+2Rₜ)`,
     /// has its fold where `F' = 2C(2h+2Rₜ)/q³ = k_c` (solved here by bisection on that
     /// hand-derived slope), and the piezo distance there is `d* = h* − F(h*)/k_c`; for `h ≪ Rₜ`
