@@ -525,6 +525,97 @@ mod tests {
         }
     }
 
+    /// A stiff lever (100 N/m) is not snapped in by the meniscus when it forms: the tip goes on
+    /// down the formed branch to its fold, where the slopes of van der Waals
+    /// (`2C(2h+2Rₜ)/q³`) and of the meniscus (`F₀/(2r₁(1+(h−a₀)/2r₁)²)`, Eq 3) together reach
+    /// `k_c` (bisection on those hand-derived slopes), at `d = h* − F(h*)/k_c`.
+    #[test]
+    fn the_wet_snap_in_of_a_stiff_lever_is_at_the_formed_branchs_fold() {
+        let t = TipSample {
+            k_c: 100.0,
+            ..si_tip(true)
+        };
+        let (hm, r, a0, k) = (1.865e-19_f64, 30e-9_f64, 0.165e-9_f64, 100.0);
+        let c = 2.0 * hm * r.powi(3) / 3.0;
+        let r1 = crate::physics::forces::capillary::kelvin_radius(0.73);
+        let f0 = 2.0 * std::f64::consts::PI * 30e-9 * 2.0 * 0.072;
+        let force = |h: f64| {
+            let q = h * (h + 2.0 * r);
+            -c / (q * q) - f0 / (1.0 + (h - a0) / (2.0 * r1))
+        };
+        let slope = |h: f64| {
+            let q = h * (h + 2.0 * r);
+            let x = 1.0 + (h - a0) / (2.0 * r1);
+            2.0 * c * (2.0 * h + 2.0 * r) / q.powi(3) + f0 / (2.0 * r1 * x * x)
+        };
+        assert!(slope(a0) > k, "a fold above a₀");
+        let (mut lo, mut hi) = (a0, 2.0 * r1 + a0);
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if slope(mid) > k {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let h = 0.5 * (lo + hi);
+        let expected = h - force(h) / k;
+        let d = t.curve(10e-9, -5e-9, 10e-9, 200).snap_in_distance.unwrap();
+        assert!((d / expected - 1.0).abs() < 1e-9, "{d} vs {expected}");
+        // Below the formation gap: the tip was not snapped in where the meniscus formed.
+        assert!(d < 2.0 * r1 + a0, "{d}");
+    }
+
+    /// With a JKR contact (w = 0.05 J/m²) the tip leaves where the contact branch folds: at the
+    /// cut-off `a₀`, above which the long-range attraction's gradient (417 N/m) exceeds `k_c`.
+    /// There the JKR contact is at zero indentation, where its load is `−(4/3)πRₜw` (from
+    /// `δ = a²/R − (2/3)√(6πwa/K) = 0`), on top of the meniscus `2πRₜ·2γ_L` and van der Waals at
+    /// `a₀`; the end of the stable branch (δ_min = −0.047 nm) is never reached.
+    #[test]
+    fn a_jkr_contact_lets_go_at_the_cut_off_with_its_zero_indentation_load() {
+        let w = 0.05;
+        let t = TipSample {
+            jkr: Jkr::new(30e-9, contact_modulus(70e9, 0.3, 169e9, 0.27), w),
+            ..si_tip(true)
+        };
+        let pi = std::f64::consts::PI;
+        let expected = -4.0 / 3.0 * pi * 30e-9 * w - 2.0 * pi * 30e-9 * 2.0 * 0.072
+            + sphere_plane_force(1.865e-19, 30e-9, 0.165e-9, 0.165e-9);
+        let c = t.curve(10e-9, -5e-9, 20e-9, 200);
+        assert!(
+            (c.pull_off_force / expected - 1.0).abs() < 1e-6,
+            "{:e} vs {expected:e}",
+            c.pull_off_force
+        );
+        assert!(t.jkr.min_indentation() < 0.0);
+    }
+
+    /// The curve's bookkeeping: equally spaced piezo distances both ways; no snap-in or pull-off
+    /// reported for a curve that never touches, for one that starts and stays in contact, or for
+    /// a retraction too short to pull off.
+    #[test]
+    fn the_curve_reports_only_the_events_it_contains() {
+        let t = si_tip(false);
+        let c = t.curve(10e-9, -5e-9, 10e-9, 30);
+        for (k, p) in c.approach.iter().enumerate() {
+            assert!((p.distance - (10e-9 - 15e-9 * k as f64 / 30.0)).abs() < 1e-21, "{k}");
+        }
+        for (k, p) in c.retraction.iter().enumerate() {
+            assert!((p.distance - (-5e-9 + 15e-9 * k as f64 / 30.0)).abs() < 1e-21, "{k}");
+        }
+        let never = t.curve(10e-9, 3e-9, 10e-9, 30);
+        assert!(never.snap_in_distance.is_none() && never.pull_off_distance.is_none());
+        assert!(never.approach.iter().chain(&never.retraction).all(|p| !p.contact));
+        let pressed = t.curve(-1e-9, -3e-9, -0.5e-9, 30);
+        assert!(pressed.approach.iter().chain(&pressed.retraction).all(|p| p.contact));
+        assert!(pressed.snap_in_distance.is_none() && pressed.pull_off_distance.is_none());
+        // From 2 nm and back: still held by the adhesion (the dry pull-off is at 4.4 nm).
+        // (A retraction runs at least back to where the approach started.)
+        let short = t.curve(2e-9, -3e-9, 2e-9, 30);
+        assert!(short.snap_in_distance.is_some());
+        assert!(short.pull_off_distance.is_none(), "{:?}", short.pull_off_distance);
+    }
+
     #[test]
     fn dry_van_der_waals_only_pull_off() {
         let t = si_tip(false);

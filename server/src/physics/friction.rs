@@ -74,9 +74,37 @@ mod tests {
 
     #[test]
     fn eq16_bound_is_3_75() {
-        let u = mu_upper_bound(1427.0, 8.0, 15f64.to_radians());
-        assert!((u - 3.75).abs() < 0.005, "{u}");
+        // (1427 cot 15° + 8 tan 15°)/1419 = (5325.63 + 2.14)/1419 = 3.7546.
+        let a = 15f64.to_radians();
+        let u = mu_upper_bound(1427.0, 8.0, a);
+        assert!((u - 3.7546).abs() < 0.0001, "{u}");
+        // By another route: the μ at which Eq 15's denominator
+        // `k_y cos²α + k_z sin²α − μ sin α cos α (k_y − k_z)` vanishes.
+        let (s, c) = a.sin_cos();
+        let root = (1427.0 * c * c + 8.0 * s * s) / (s * c * (1427.0 - 8.0));
+        assert!((u - root).abs() < 1e-12 * root, "{u} vs {root}");
+        // No bound with no tilt, a negative one, or a lever no stiffer sideways than normally.
         assert_eq!(mu_upper_bound(1427.0, 8.0, 0.0), f64::INFINITY);
+        assert_eq!(mu_upper_bound(1427.0, 8.0, -0.1), f64::INFINITY);
+        assert_eq!(mu_upper_bound(8.0, 1427.0, a), f64::INFINITY);
+        assert_eq!(mu_upper_bound(8.0, 8.0, a), f64::INFINITY);
+    }
+
+    #[test]
+    fn eq16_window() {
+        // The paper's lever and a 1 µm particle at β = 30°: 0.0126 ≤ μ < 3.7546.
+        let f = |mu: f64| feasibility(mu, 1e-6, 30e-9, 30f64.to_radians(), 1427.0, 8.0, 15f64.to_radians());
+        let w = f(0.3);
+        assert_eq!(w.lower, mu_lower_bound(1e-6, 30e-9, 30f64.to_radians()));
+        assert_eq!(w.upper, mu_upper_bound(1427.0, 8.0, 15f64.to_radians()));
+        assert!((w.lower - 0.0126).abs() < 0.0001, "{}", w.lower);
+        assert!(w.satisfied);
+        assert!(f(w.lower).satisfied, "the lower bound itself is allowed");
+        assert!(!f(0.99 * w.lower).satisfied);
+        assert!(f(0.999 * w.upper).satisfied);
+        assert!(!f(w.upper).satisfied, "on the upper bound y* diverges");
+        assert!(!f(1.001 * w.upper).satisfied);
+        assert!(!f(5.0).satisfied);
     }
 
     #[test]
@@ -94,5 +122,7 @@ mod tests {
         // 0.5 R̃ sin β = 1.0 nm for R̃ = 4 nm, β = 30°: just above passes, just below fails.
         assert!(no_sticking_to_tip(1.01e-9, 4.0e-9, beta));
         assert!(!no_sticking_to_tip(0.99e-9, 4.0e-9, beta));
+        // Exactly on it (sin 90° = 1 exactly): Eq 8's inequality is strict.
+        assert!(!no_sticking_to_tip(1e-9, 2e-9, std::f64::consts::FRAC_PI_2));
     }
 }

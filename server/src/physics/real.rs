@@ -394,3 +394,88 @@ mod dualn_tests {
         assert!((v.eps[0] - dx.eps).abs() < 1e-14 && (v.eps[1] - dy.eps).abs() < 1e-14);
     }
 }
+
+/// Every operation of [`Real`], on `f64`, [`Dual`] and [`DualN`], against `std` for the values and
+/// central finite differences for the derivatives (an independent reference, not the rules
+/// themselves). Found by `make mutants`: the `f64` impl's `ln` and `powf`, `recip`, the orderings
+/// and most of the `DualN` operators had no test of their own.
+#[cfg(test)]
+mod every_operation {
+    use super::*;
+
+    /// Uses every operator and function of the trait once, and the `f64`-operand forms.
+    fn f<T: Real>(x: T, y: T) -> T {
+        let mut a = (x * y - y / x) + (-x) * 0.75 - x / 3.0 + (y + 2.0) - (x - 0.5);
+        a += x.sqrt() * y.ln() + (x * y).powf(1.7) + y.recip() + y.atan2(x) + (x - 2.5).max_c(0.1);
+        a
+    }
+
+    fn reference(x: f64, y: f64) -> f64 {
+        (x * y - y / x) + (-x) * 0.75 - x / 3.0 + (y + 2.0) - (x - 0.5)
+            + x.sqrt() * y.ln()
+            + (x * y).powf(1.7)
+            + 1.0 / y
+            + y.atan2(x)
+            + f64::max(x - 2.5, 0.1)
+    }
+
+    #[test]
+    fn values_and_derivatives_match_std_and_finite_differences() {
+        for (x, y) in [(3.1, 1.7), (0.8, 2.9), (2.0, 0.6)] {
+            let v = reference(x, y);
+            assert!((f(x, y) - v).abs() < 1e-12 * v.abs(), "f64 at ({x}, {y})");
+            let h = 1e-6;
+            let dx = (reference(x + h, y) - reference(x - h, y)) / (2.0 * h);
+            let dy = (reference(x, y + h) - reference(x, y - h)) / (2.0 * h);
+            let gx = f(Dual::var(x), Dual::new(y, 0.0));
+            let gy = f(Dual::new(x, 0.0), Dual::var(y));
+            assert!((gx.re - v).abs() < 1e-12 * v.abs() && (gy.re - v).abs() < 1e-12 * v.abs());
+            assert!(
+                (gx.eps - dx).abs() < 1e-6 * dx.abs().max(1.0),
+                "∂x at ({x}, {y}): {} vs {dx}",
+                gx.eps
+            );
+            assert!(
+                (gy.eps - dy).abs() < 1e-6 * dy.abs().max(1.0),
+                "∂y at ({x}, {y}): {} vs {dy}",
+                gy.eps
+            );
+            // Three lanes: x, y, and the direction (1, 1).
+            let lanes = |l: usize| -> [f64; 3] {
+                let mut e = [0.0; 3];
+                e[l] = 1.0;
+                e[2] = 1.0;
+                e
+            };
+            let n = f(DualN::<3> { re: x, eps: lanes(0) }, DualN::<3> { re: y, eps: lanes(1) });
+            assert!((n.re - v).abs() < 1e-12 * v.abs());
+            assert!((n.eps[0] - gx.eps).abs() < 1e-12 * gx.eps.abs().max(1.0), "lane x");
+            assert!((n.eps[1] - gy.eps).abs() < 1e-12 * gy.eps.abs().max(1.0), "lane y");
+            assert!((n.eps[2] - (gx.eps + gy.eps)).abs() < 1e-12 * (gx.eps + gy.eps).abs().max(1.0));
+        }
+    }
+
+    #[test]
+    fn constants_values_and_order() {
+        assert_eq!(<f64 as Real>::cst(2.5), 2.5);
+        assert_eq!(Dual::cst(2.5), Dual::new(2.5, 0.0));
+        assert_eq!(DualN::<2>::cst(2.5), DualN::constant(2.5));
+        assert_eq!((Dual::new(4.0, 1.0).re(), DualN::<2>::seed(4.0, 1).re()), (4.0, 4.0));
+        assert_eq!(DualN::<2>::seed(4.0, 1).eps, [0.0, 1.0]);
+        assert_eq!(<f64 as Real>::recip(4.0), 0.25);
+        assert_eq!(Dual::var(4.0).recip(), Dual::new(0.25, -1.0 / 16.0));
+        // Ordering is by value alone, whatever the derivatives.
+        assert!(Dual::new(1.0, 5.0) < Dual::new(2.0, -5.0));
+        assert!(DualN::<2>::seed(1.0, 0) < DualN::<2>::seed(2.0, 1));
+        assert!(DualN::<2>::seed(3.0, 0) > DualN::<2>::constant(2.0));
+        assert_eq!(
+            Dual::new(1.0, 5.0).partial_cmp(&Dual::new(1.0, -5.0)),
+            Some(std::cmp::Ordering::Equal)
+        );
+        // A square root at 0 with no tangent has no (infinite) derivative.
+        assert_eq!(Dual::new(0.0, 0.0).sqrt(), Dual::new(0.0, 0.0));
+        assert_eq!(DualN::<2>::constant(0.0).sqrt().eps, [0.0, 0.0]);
+        assert_eq!(DualN::<2>::seed(0.0, 0).sqrt().eps, [f64::INFINITY, 0.0]);
+        assert_eq!(Dual::var(0.0).sqrt().eps, f64::INFINITY);
+    }
+}
