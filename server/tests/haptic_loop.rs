@@ -237,7 +237,8 @@ fn the_local_model_makes_a_fast_device_steadier_than_a_held_force() {
 #[test]
 fn rates_table() {
     // (device cycles per tick, local model, scale) → (contact changes, lowest port energy J).
-    let readme: [((u32, bool, f64), (usize, f64)); 12] = [
+    type Cell = ((u32, bool, f64), (usize, f64));
+    let readme: [Cell; 12] = [
         ((1, false, 1.0), (10, -1.1e-4)),
         ((1, true, 1.0), (4, -2.0e-5)),
         ((1, false, 2.0), (64, -3.6e-2)),
