@@ -476,6 +476,11 @@ mod every_operation {
         assert_eq!(Dual::new(0.0, 0.0).sqrt(), Dual::new(0.0, 0.0));
         assert_eq!(DualN::<2>::constant(0.0).sqrt().eps, [0.0, 0.0]);
         assert_eq!(DualN::<2>::seed(0.0, 0).sqrt().eps, [f64::INFINITY, 0.0]);
+        let down = DualN::<2> {
+            re: 0.0,
+            eps: [-2.0, 0.0],
+        };
+        assert_eq!(down.sqrt().eps, [f64::NEG_INFINITY, 0.0]);
         assert_eq!(Dual::var(0.0).sqrt().eps, f64::INFINITY);
     }
 }
