@@ -131,9 +131,10 @@ mod tests {
             let y = iso.shearing_point().unwrap();
             assert!((y - mu_a / base.k_y).abs() < 1e-12 * y, "{deg}°: {y:e}");
         }
-        // No friction, no static phase (no adhesion counts as none either).
+        // No friction, no static phase; no adhesion, none either (Eq 14 has no extent).
         let none = StaticPhase { mu_s: 0.0, ..base }.shearing_point();
         assert!(none.is_none_or(|y| y == 0.0), "{none:?}");
+        assert_eq!(StaticPhase { adhesion: 0.0, ..base }.shearing_point(), None);
         let (s, c) = base.alpha.sin_cos();
         let slope = base.adhesion / (base.k_y * c * c + base.k_z * s * s);
         for mu in [1e-3, 1e-4] {
@@ -150,8 +151,12 @@ mod tests {
         let (s, c) = p.alpha.sin_cos();
         p.mu_s = (p.k_y * c / s + p.k_z * s / c) / (p.k_y - p.k_z);
         assert!(p.shearing_point().is_none(), "{:?}", p.shearing_point());
+        // A denominator under 10⁻⁹ of the stiffness terms is the bound: 10⁻¹² inside it, no y*.
+        let bound = p.mu_s;
+        p.mu_s = bound * (1.0 - 1e-12);
+        assert!(p.shearing_point().is_none(), "{:?}", p.shearing_point());
         // Just inside, a finite (large) y*: the bound is not widened beyond rounding.
-        p.mu_s *= 1.0 - 1e-6;
+        p.mu_s = bound * (1.0 - 1e-6);
         let y = p.shearing_point().expect("inside the window");
         assert!(y > 1e-6 && y.is_finite(), "{y}");
     }

@@ -50,6 +50,20 @@ mod tests {
     }
 
     #[test]
+    fn the_papers_stage_by_hand() {
+        // ω = 2π·250 Hz = 1570.80 rad/s; k_s = 0.05 kg · ω² = 123 370 N/m.
+        let s = Stage {
+            f_y: 250.0,
+            q_y: 20.0,
+            mass: 0.05,
+        };
+        assert!((s.omega() - 1570.796).abs() < 0.001, "{}", s.omega());
+        assert!((s.stiffness() - 123_370.0).abs() < 1.0, "{}", s.stiffness());
+        // 1 µm from its reference at rest: ÿ = −ω²·1 µm = −2.4674 m/s².
+        assert!((s.acceleration(1e-6, 0.0, 0.0, 0.0) + 2.4674).abs() < 1e-4);
+    }
+
+    #[test]
     fn resonance_and_damping() {
         // The homogeneous equation is a damped oscillator with ω = 2π·250 Hz and ζ = 1/(2Q).
         let s = Stage {

@@ -98,6 +98,11 @@ mod tests {
         assert!((t.height(10e-6, 5e-6) - (1e-8 - 1e-8)).abs() < 1e-20);
         assert_eq!(t.gradient(3e-6, 4e-6), (1e-3, -2e-3));
         assert!(Topography::flat().is_flat());
+        assert!(Topography::new(0.0, 0.0, 0.0, 5e-6, 1).is_flat());
+        // Any one of a tilt along x, one along y, or roughness makes it not flat.
+        assert!(!Topography::new(1e-3, 0.0, 0.0, 5e-6, 1).is_flat());
+        assert!(!Topography::new(0.0, -1e-3, 0.0, 5e-6, 1).is_flat());
+        assert!(!Topography::new(0.0, 0.0, 1e-9, 5e-6, 1).is_flat());
     }
 
     #[test]

@@ -204,6 +204,38 @@ mod tests {
         assert!(j.radius_from_indentation(j.min_indentation() * 1.01).is_none());
     }
 
+    /// The end of the stable branch under displacement control, by its defining property and
+    /// the literature's closed forms: `dδ/da = 0` at `a_min = (πwR²/(6K))^{1/3}`, where the load
+    /// is the fixed-grip pull-off `−(5/6)πRw` (5/9 of the load-controlled `(3/2)πRw`). For the
+    /// paper's latex contact: a_min = 24.67 nm.
+    #[test]
+    fn the_stable_branch_ends_at_the_fixed_grip_pull_off() {
+        let j = paper_contact();
+        let a = j.min_stable_radius();
+        let by_hand = (std::f64::consts::PI * 0.144 * 1e-12 / (6.0 * j.modulus)).cbrt();
+        assert!((a / by_hand - 1.0).abs() < 1e-12, "{a:e} vs {by_hand:e}");
+        assert!((a - 24.67e-9).abs() < 0.005e-9, "{a:e}");
+        assert!(j.d_indentation_d_radius(a).abs() < 1e-9 * 2.0 * a / j.radius);
+        let p = j.load_from_radius(a);
+        let fixed_grip = -5.0 / 6.0 * std::f64::consts::PI * 1e-6 * 0.144;
+        assert!((p / fixed_grip - 1.0).abs() < 1e-9, "{p:e} vs {fixed_grip:e}");
+        // The branch's end itself is still a contact; beyond it, none.
+        let d_min = j.min_indentation();
+        let at_end = j.radius_from_indentation(d_min).expect("the end is on the branch");
+        assert!((at_end / a - 1.0).abs() < 1e-6, "{at_end:e}");
+        assert!(j.radius_from_indentation(d_min - 1e-15).is_none());
+    }
+
+    #[test]
+    fn loads_out_of_the_domain_have_no_radius() {
+        let j = paper_contact();
+        assert_eq!(j.radius_from_load(f64::INFINITY), None);
+        assert_eq!(j.radius_from_load(f64::NAN), None);
+        assert_eq!(j.radius_from_load(f64::NEG_INFINITY), None);
+        assert_eq!(j.radius_from_indentation(f64::NAN), None);
+        assert_eq!(j.radius_from_indentation(f64::INFINITY), None);
+    }
+
     #[test]
     fn hertz_limit() {
         let j = Jkr::new(1e-6, 5e9, 0.0);
