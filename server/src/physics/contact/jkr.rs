@@ -237,6 +237,16 @@ mod tests {
     }
 
     #[test]
+    fn contact_modulus_by_hand() {
+        // Latex (3.4 GPa, ν 0.34) on silicon (169 GPa, ν 0.27): 1/E* = 0.8844/3.4e9 + 0.9271/169e9
+        // = 2.6560e-10 /Pa, E* = 3.7650 GPa, K = (4/3)E* = 5.0200 GPa.
+        let k = contact_modulus(3.4e9, 0.34, 169e9, 0.27);
+        assert!((k - 5.0200e9).abs() < 0.0001e9, "{k:e}");
+        // Symmetric in the two bodies.
+        assert_eq!(k, contact_modulus(169e9, 0.27, 3.4e9, 0.34));
+    }
+
+    #[test]
     fn hertz_limit() {
         let j = Jkr::new(1e-6, 5e9, 0.0);
         let a = 20e-9;

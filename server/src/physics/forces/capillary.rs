@@ -170,6 +170,17 @@ mod tests {
         assert!(c.force(Meniscus::Formed, mid) < 0.0);
         // And ruptures beyond it.
         assert_eq!(c.update(s, lr + 0.01e-9), Meniscus::Absent);
+        // The two thresholds themselves, to the bit: it forms at L_t (h ≤ L_t) and still holds
+        // at L_t + δ_b (it ruptures only beyond, h > L_t + δ_b).
+        assert_eq!(c.update(Meniscus::Absent, lt), Meniscus::Formed);
+        assert_eq!(c.update(Meniscus::Formed, lr), Meniscus::Formed);
+    }
+
+    #[test]
+    fn no_kelvin_radius_without_humidity_or_a_number() {
+        assert_eq!(kelvin_radius(f64::NAN), 0.0);
+        assert_eq!(kelvin_radius(-0.5), 0.0);
+        assert_eq!(kelvin_radius(0.0), 0.0);
     }
 
     /// Issue 14: the formation gap pinned by hand (a doubled `L_t` passed every test that read

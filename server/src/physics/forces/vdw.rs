@@ -183,6 +183,27 @@ mod tests {
         assert!(((p1 / p2).log2() - 4.0).abs() < 0.01);
     }
 
+    /// The kernel switches from its series to its closed form at x = 0.05, where the two agree
+    /// to rounding: `Σ xⁿ(n−2)/(2n)` summed by hand against `(x/2)(1/(1−x) + 1) + ln(1−x)`.
+    #[test]
+    fn kernel_series_and_closed_form_agree() {
+        for x in [0.01_f64, 0.0499, 0.05, 0.0501, 0.3] {
+            let series: f64 = (3..200).map(|n| x.powi(n) * (n as f64 - 2.0) / (2.0 * n as f64)).sum();
+            let closed = 0.5 * x * (1.0 / (1.0 - x) + 1.0) + (1.0 - x).ln();
+            let k = hamaker_energy_kernel(x);
+            assert!(
+                (k / series - 1.0).abs() < 1e-12,
+                "x = {x}: {k:e} vs the series {series:e}"
+            );
+            if x >= 0.0499 {
+                assert!(
+                    (k / closed - 1.0).abs() < 1e-9,
+                    "x = {x}: {k:e} vs the closed form {closed:e}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn cut_off_caps_the_force() {
         let at_a0 = sphere_plane_force(H, 1e-6, A0, A0);
