@@ -287,3 +287,94 @@ fn crossing_from_exactly_zero_fires_at_once() {
     assert_eq!(st.events, 1);
     assert!(t < 1e-6, "fired at {t}");
 }
+
+/// The work each method does on the reference problems, exactly (the runs are deterministic):
+/// accepted and rejected steps, right-hand sides, Jacobians and LU factorizations. These are the
+/// README's step counts (`nanopush accuracy`: Van der Pol at 1e-6, 1069 and 2787 steps;
+/// Robertson at 1e-8, 1545 and 6412), and they pin the step-size control: a change to the
+/// initial step, the controller or the rejection rule changes them, even where the error
+/// control still meets the tolerance.
+#[test]
+fn work_on_the_reference_problems_is_pinned() {
+    let p = VanDerPol { eps: 1e-6 };
+    let work = |st: &Stats| (st.steps, st.rejected, st.rhs_evals, st.jac_evals, st.factorizations);
+    for (m, rtol, expected) in [
+        (Method::Rodas4, 1e-6, (1069, 8, 6455, 1070, 1077)),
+        (Method::TrBdf2, 1e-6, (2787, 3, 20182, 2788, 2790)),
+        (Method::ImplicitEuler, 1e-5, (14349, 0, 57397, 14350, 14349)),
+    ] {
+        let (_, st) = solve(&p, &VanDerPol::Y0, VanDerPol::T_END, m, rtol);
+        assert_eq!(work(&st), expected, "Van der Pol, {} at {rtol:e}", m.name());
+        assert!(st.max_local_error <= 1.0, "{}", st.max_local_error);
+    }
+    for (m, expected) in [
+        (Method::Rodas4, (1545, 0, 9271, 1546, 1545)),
+        (Method::TrBdf2, (6412, 1, 45690, 6413, 6413)),
+    ] {
+        let (_, st) = solve(&Robertson, &Robertson::Y0, Robertson::T_END, m, 1e-8);
+        assert_eq!(work(&st), expected, "Robertson, {} at 1e-8", m.name());
+    }
+}
+
+/// `y' = −k y`.
+struct Decay {
+    k: f64,
+}
+impl Problem for Decay {
+    fn len(&self) -> usize {
+        1
+    }
+    fn mass(&self, _i: usize) -> f64 {
+        1.0
+    }
+    fn rhs(&self, _t: f64, y: &[f64], out: &mut [f64]) {
+        out[0] = -self.k * y[0];
+    }
+    fn jacobian(&self, _t: f64, _y: &[f64], jac: &mut [f64]) {
+        jac[0] = -self.k;
+    }
+}
+
+/// An integrator keeps `f`, `∂f/∂t` and `J` from the end of one call for the next: a call that
+/// continues the same problem evaluates them once per accepted step (at its end), the first
+/// reused. When the problem changes where the last call ended (a mode switch), `reset_step` and
+/// `forget_derivatives` must drop them, so the next call evaluates its start afresh (one
+/// evaluation more than steps) and integrates the new problem: `e^{−1}·e^{−3}` at t = 2 for
+/// `k` = 1 then 3.
+#[test]
+fn a_changed_problem_is_not_stepped_with_the_old_derivatives() {
+    let exact = (-1.0f64 - 3.0).exp();
+    for m in Method::ALL {
+        for how in ["same problem", "reset_step", "forget_derivatives"] {
+            let mut it = Integrator::new(m, Options::with_rtol(1e-10));
+            let (mut t, mut y) = (0.0, [1.0]);
+            let first = Decay { k: 1.0 };
+            it.advance(&first, &NoEvents, &mut t, &mut y, 1.0).unwrap();
+            let (next, expected) = match how {
+                "same problem" => (first, (-2.0f64).exp()),
+                "reset_step" => {
+                    it.reset_step();
+                    (Decay { k: 3.0 }, exact)
+                }
+                _ => {
+                    it.forget_derivatives();
+                    (Decay { k: 3.0 }, exact)
+                }
+            };
+            let (_, st) = it.advance(&next, &NoEvents, &mut t, &mut y, 2.0).unwrap();
+            let fresh = u64::from(how != "same problem");
+            assert_eq!(st.jac_evals, st.steps + fresh, "{} ({how})", m.name());
+            let tol = match m {
+                Method::Rodas4 => 1e-8,
+                Method::TrBdf2 => 1e-5,
+                Method::ImplicitEuler => 1e-3,
+            };
+            assert!(
+                (y[0] / expected - 1.0).abs() < tol,
+                "{} ({how}): {:e} vs {expected:e}",
+                m.name(),
+                y[0]
+            );
+        }
+    }
+}
