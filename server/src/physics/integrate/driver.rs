@@ -261,7 +261,7 @@ impl Integrator {
                     // starts on its boundary, e.g. a static limit of zero) to negative.
                     let crossed = (g0[k] > 0.0 && g1[k] <= 0.0) || (g0[k] == 0.0 && g1[k] < 0.0);
                     if crossed
-                        && let Some(theta) = self.locate(p, events, k, *t, h, g0[k], g1[k])
+                        && let Some(theta) = self.locate(p, events, k, *t, h, g0[k], g1[k], &mut st.event_evals)
                         && first.is_none_or(|(_, th)| theta < th)
                     {
                         first = Some((k, theta));
@@ -294,6 +294,7 @@ impl Integrator {
     /// Illinois (modified regula falsi) on `θ ↦ g_k(t + θh, y(θ))` with the dense output, to
     /// `event_tol` in time. Returns the right end of the final bracket (`g ≤ 0` there), or
     /// `None` when the function stops applying (NaN) inside the step: then it did not cross.
+    /// Counts its evaluations of the switching functions in `evals`.
     #[allow(clippy::too_many_arguments)]
     fn locate<P: Problem, E: Events>(
         &self,
@@ -304,6 +305,7 @@ impl Integrator {
         h: f64,
         ga: f64,
         gb: f64,
+        evals: &mut u64,
     ) -> Option<f64> {
         let n = p.len();
         if ga == 0.0 {
@@ -324,6 +326,7 @@ impl Integrator {
             }
             self.work.dense(c, &mut ys[..n]);
             events.eval(t + c * h, &ys[..n], &mut g);
+            *evals += 1;
             let fc = g[k];
             if fc.is_nan() {
                 return None;

@@ -118,6 +118,8 @@ pub struct Stats {
     pub error_sum: f64,
     /// Events located.
     pub events: u64,
+    /// Switching-function evaluations made to locate events (on the dense output).
+    pub event_evals: u64,
     /// Wall time of the call (s).
     pub wall_time: f64,
 }
@@ -133,6 +135,7 @@ impl Stats {
         self.max_local_error = self.max_local_error.max(o.max_local_error);
         self.error_sum += o.error_sum;
         self.events += o.events;
+        self.event_evals += o.event_evals;
         self.wall_time += o.wall_time;
     }
 }
@@ -202,6 +205,7 @@ mod tests {
             max_local_error: 0.5,
             error_sum: 1.5,
             events: 13,
+            event_evals: 41,
             wall_time: 0.25,
         };
         let b = Stats {
@@ -213,6 +217,7 @@ mod tests {
             max_local_error: 0.75,
             error_sum: 2.5,
             events: 37,
+            event_evals: 43,
             wall_time: 0.5,
         };
         a.add(&b);
@@ -225,6 +230,7 @@ mod tests {
             max_local_error: 0.75,
             error_sum: 4.0,
             events: 50,
+            event_evals: 84,
             wall_time: 0.75,
         };
         assert_eq!(a, sum);

@@ -361,6 +361,7 @@ fn a_changed_problem_is_not_stepped_with_the_old_derivatives() {
                     (Decay { k: 3.0 }, exact)
                 }
             };
+            assert_eq!(t, 1.0, "the call ends exactly at its t_end");
             let (_, st) = it.advance(&next, &NoEvents, &mut t, &mut y, 2.0).unwrap();
             let fresh = u64::from(how != "same problem");
             assert_eq!(st.jac_evals, st.steps + fresh, "{} ({how})", m.name());
@@ -377,4 +378,89 @@ fn a_changed_problem_is_not_stepped_with_the_old_derivatives() {
             );
         }
     }
+}
+
+/// Switching functions given as closures of the state.
+struct Switches(Vec<fn(&[f64]) -> f64>);
+impl Events for Switches {
+    fn count(&self) -> usize {
+        self.0.len()
+    }
+    fn eval(&self, _t: f64, y: &[f64], out: &mut [f64]) {
+        for (o, g) in out.iter_mut().zip(&self.0) {
+            *o = g(y);
+        }
+    }
+}
+
+/// Only a crossing fires: a function on its boundary throughout (0), one past it throughout
+/// (−1), one that never reaches it; of two that cross in the same step the earlier is reported
+/// (the ball passes 0.5 m at `√(1/g)` before 0.2 m at `√(1.6/g)`), whatever their order; and
+/// the call after an event starts afresh from the event's state (its derivatives at the end of
+/// the step that crossed are not the event point's).
+#[test]
+fn only_crossings_fire_and_the_earliest_is_reported() {
+    for m in Method::ALL {
+        let mut opts = Options::with_rtol(1e-9);
+        opts.event_tol = 1e-12;
+        let quiet = Switches(vec![|_| 0.0, |_| -1.0, |y| y[0] + 2.0]);
+        let mut it = Integrator::new(m, opts);
+        let (mut t, mut y) = (0.0, [1.0, 0.0]);
+        let (o, st) = it.advance(&Falling, &quiet, &mut t, &mut y, 0.3).unwrap();
+        assert_eq!((o, st.events, st.event_evals), (Outcome::Reached, 0, 0), "{}", m.name());
+        assert_eq!(t, 0.3, "{}: ends exactly at t_end", m.name());
+        // New switching functions: the cached ones must go (the driver's contract).
+        it.forget_derivatives();
+        let two = Switches(vec![|y| y[0] - 0.2, |y| y[0] - 0.5]);
+        let (o, st) = it.advance(&Falling, &two, &mut t, &mut y, 1.0).unwrap();
+        if m != Method::ImplicitEuler {
+            // (Implicit Euler's first-order steps are small: it crosses them one at a time.)
+            assert_eq!(st.steps, 1, "{}: both crossings in one step", m.name());
+        }
+        assert_eq!(o, Outcome::Event { index: 1 }, "{}", m.name());
+        let tol = if m == Method::ImplicitEuler { 1e-3 } else { 1e-9 };
+        assert!((t - (1.0 / 9.81f64).sqrt()).abs() < tol, "{}: {t}", m.name());
+        // On to 0.4 s (before the second crossing): a fresh start, and the exact parabola.
+        let (o, st) = it.advance(&Falling, &NoEvents, &mut t, &mut y, 0.4).unwrap();
+        assert_eq!(o, Outcome::Reached);
+        assert_eq!(
+            st.jac_evals,
+            st.steps + 1,
+            "{}: the event point is evaluated afresh",
+            m.name()
+        );
+        let tol = if m == Method::ImplicitEuler { 1e-2 } else { 1e-9 };
+        assert!((y[0] - (1.0 - 0.5 * 9.81 * 0.16)).abs() < tol, "{}: {}", m.name(), y[0]);
+    }
+}
+
+/// The Illinois iteration's work, pinned: the falling ball's impact is located to 1e-12 s in
+/// this many evaluations of the switching function (superlinear; bisection from a bracket of
+/// one step would take about 40).
+#[test]
+fn event_location_work_is_pinned() {
+    let mut evals = Vec::new();
+    for m in Method::ALL {
+        let mut opts = Options::with_rtol(1e-9);
+        opts.event_tol = 1e-12;
+        let mut it = Integrator::new(m, opts);
+        let (mut t, mut y) = (0.0, [1.0, 0.0]);
+        let (_, st) = it.advance(&Falling, &Ground, &mut t, &mut y, 10.0).unwrap();
+        evals.push(st.event_evals);
+    }
+    // Implicit Euler's dense output is linear: regula falsi on a linear function is exact.
+    assert_eq!(evals, [9, 9, 2]);
+}
+
+#[test]
+fn method_names_round_trip() {
+    let names: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+    assert_eq!(names, ["rodas4", "trbdf2", "implicit-euler"]);
+    for m in Method::ALL {
+        assert_eq!(Method::parse(m.name()), Some(m));
+    }
+    assert_eq!(Method::parse("rk4"), None);
+    assert_eq!(Method::parse(""), None);
+    let orders: Vec<u32> = Method::ALL.iter().map(|m| m.order()).collect();
+    assert_eq!(orders, [4, 2, 1]);
 }
