@@ -103,6 +103,10 @@ mod tests {
         assert!(!f(0.99 * w.lower).satisfied);
         assert!(f(0.999 * w.upper).satisfied);
         assert!(!f(w.upper).satisfied, "on the upper bound y* diverges");
+        assert!(
+            !f(w.upper * (1.0 - 1e-9)).satisfied,
+            "within 1e-9 of it, to rounding, too"
+        );
         assert!(!f(1.001 * w.upper).satisfied);
         assert!(!f(5.0).satisfied);
     }

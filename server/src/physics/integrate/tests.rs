@@ -347,6 +347,7 @@ fn a_changed_problem_is_not_stepped_with_the_old_derivatives() {
     for m in Method::ALL {
         for how in ["same problem", "reset_step", "forget_derivatives"] {
             let mut it = Integrator::new(m, Options::with_rtol(1e-10));
+            assert_eq!(it.step_size(), 0.0, "no step chosen before the first call");
             let (mut t, mut y) = (0.0, [1.0]);
             let first = Decay { k: 1.0 };
             it.advance(&first, &NoEvents, &mut t, &mut y, 1.0).unwrap();
@@ -362,6 +363,9 @@ fn a_changed_problem_is_not_stepped_with_the_old_derivatives() {
                 }
             };
             assert_eq!(t, 1.0, "the call ends exactly at its t_end");
+            // The step the next call will try: chosen, and well inside the span.
+            let h = it.step_size();
+            assert!(h > 1e-6 && h < 0.5, "{}: next step {h}", m.name());
             let (_, st) = it.advance(&next, &NoEvents, &mut t, &mut y, 2.0).unwrap();
             let fresh = u64::from(how != "same problem");
             assert_eq!(st.jac_evals, st.steps + fresh, "{} ({how})", m.name());
