@@ -305,6 +305,10 @@ fn work_on_the_reference_problems_is_pinned() {
     ] {
         let (_, st) = solve(&p, &VanDerPol::Y0, VanDerPol::T_END, m, rtol);
         assert_eq!(work(&st), expected, "Van der Pol, {} at {rtol:e}", m.name());
+        if m == Method::Rodas4 {
+            // The sum of the accepted steps' error norms (the error estimate's input).
+            assert!((st.error_sum - 649.1122528).abs() < 1e-6, "{}", st.error_sum);
+        }
         assert!(st.max_local_error <= 1.0, "{}", st.max_local_error);
     }
     for (m, expected) in [
@@ -467,4 +471,150 @@ fn method_names_round_trip() {
     assert_eq!(Method::parse(""), None);
     let orders: Vec<u32> = Method::ALL.iter().map(|m| m.order()).collect();
     assert_eq!(orders, [4, 2, 1]);
+}
+
+/// At rest until `t = 0.5`, then `y' = −1000 y` (a kink the steps, grown large on the flat
+/// part, run into), its right-hand side NaN beyond `|y| > 2` (a blown-up stage), and its
+/// Jacobian either right or reported as 0 (then Newton's iteration is a fixed-point one that
+/// diverges for large steps, and Rodas4's stages blow up).
+struct Kink {
+    right_jacobian: bool,
+}
+impl Problem for Kink {
+    fn len(&self) -> usize {
+        1
+    }
+    fn mass(&self, _i: usize) -> f64 {
+        1.0
+    }
+    fn rhs(&self, t: f64, y: &[f64], out: &mut [f64]) {
+        out[0] = if y[0].abs() > 2.0 {
+            f64::NAN
+        } else if t < 0.5 {
+            0.0
+        } else {
+            -1000.0 * y[0]
+        };
+    }
+    fn jacobian(&self, t: f64, _y: &[f64], jac: &mut [f64]) {
+        jac[0] = if self.right_jacobian && t >= 0.5 { -1000.0 } else { 0.0 };
+    }
+}
+
+/// The rejection paths of the driver (error too large; a non-finite stage; Newton failing),
+/// pinned: every method gets past the kink and reaches `e^{−10}` at t = 0.51, with the
+/// rejections each path makes.
+#[test]
+fn failed_steps_are_rejected_and_retried_smaller() {
+    let pinned = [
+        (true, Method::Rodas4, (67, 22, 513, 89)),
+        (true, Method::TrBdf2, (135, 22, 1029, 157)),
+        (true, Method::ImplicitEuler, (1411, 24, 5701, 1435)),
+        (false, Method::Rodas4, (1420, 22, 8631, 1442)),
+        (false, Method::TrBdf2, (135, 22, 1186, 157)),
+        (false, Method::ImplicitEuler, (1416, 24, 5827, 1440)),
+    ];
+    for (right, m, work) in pinned {
+        let mut it = Integrator::new(m, Options::with_rtol(1e-6));
+        let (mut t, mut y) = (0.0, [1.0]);
+        let (o, st) = it
+            .advance(&Kink { right_jacobian: right }, &NoEvents, &mut t, &mut y, 0.51)
+            .unwrap();
+        assert_eq!(o, Outcome::Reached);
+        let what = format!(
+            "{} with the {} Jacobian",
+            m.name(),
+            if right { "right" } else { "wrong" }
+        );
+        assert_eq!((st.steps, st.rejected, st.rhs_evals, st.factorizations), work, "{what}");
+        // Within ten times the absolute tolerance (1e-6) of e^{−10} = 4.54e-5.
+        assert!((y[0] - (-10f64).exp()).abs() < 1e-5, "{what}: {:e}", y[0]);
+    }
+}
+
+/// A problem at rest at the start (`y' = t`, `f(0) = 0`) gets the fallback initial step, a
+/// thousandth of the span, and the step then grows at most fivefold per step.
+#[test]
+fn a_problem_at_rest_starts_with_a_thousandth_of_the_span() {
+    struct Ramp;
+    impl Problem for Ramp {
+        fn len(&self) -> usize {
+            1
+        }
+        fn mass(&self, _i: usize) -> f64 {
+            1.0
+        }
+        fn rhs(&self, t: f64, _y: &[f64], out: &mut [f64]) {
+            out[0] = t;
+        }
+        fn jacobian(&self, _t: f64, _y: &[f64], jac: &mut [f64]) {
+            jac[0] = 0.0;
+        }
+        fn time_derivative(&self, _t: f64, _y: &[f64], out: &mut [f64]) {
+            out[0] = 1.0;
+        }
+    }
+    let mut it = Integrator::new(Method::Rodas4, Options::with_rtol(1e-8));
+    let (mut t, mut y) = (0.0, [0.0]);
+    let (_, st) = it.advance(&Ramp, &NoEvents, &mut t, &mut y, 1.0).unwrap();
+    assert!((y[0] - 0.5).abs() < 1e-12, "{}", y[0]);
+    // 1 ms, then 5, 25, 125 ms, and the rest (0.844 s) in one: Rodas4 is exact on y = t²/2.
+    assert_eq!((st.steps, st.rejected), (5, 0));
+}
+
+/// The step limit counts accepted and rejected steps together, and the state dimension may be
+/// `MAX_DIM` but not more.
+#[test]
+fn the_step_limit_and_the_dimension_limit() {
+    let p = VanDerPol { eps: 1e-6 };
+    // 1069 accepted + 8 rejected = 1077 attempts at 1e-6 (see the pinned work above).
+    for (max, ok) in [(1077, true), (1076, false), (1070, false)] {
+        let mut opts = Options::with_rtol(1e-6);
+        opts.max_steps = max;
+        let mut it = Integrator::new(Method::Rodas4, opts);
+        let (mut t, mut y) = (0.0, VanDerPol::Y0);
+        let r = it.advance(&p, &NoEvents, &mut t, &mut y, VanDerPol::T_END);
+        assert_eq!(r.is_ok(), ok, "max_steps {max}: {r:?}");
+        if !ok {
+            assert!(
+                matches!(r, Err(IntegrateError::TooManySteps { max: m, .. }) if m == max),
+                "{r:?}"
+            );
+        }
+    }
+    struct Many(usize);
+    impl Problem for Many {
+        fn len(&self) -> usize {
+            self.0
+        }
+        fn mass(&self, _i: usize) -> f64 {
+            1.0
+        }
+        fn rhs(&self, _t: f64, y: &[f64], out: &mut [f64]) {
+            for (o, v) in out.iter_mut().zip(y) {
+                *o = -v;
+            }
+        }
+        fn jacobian(&self, _t: f64, _y: &[f64], jac: &mut [f64]) {
+            let n = self.0;
+            jac[..n * n].fill(0.0);
+            for i in 0..n {
+                jac[i * n + i] = -1.0;
+            }
+        }
+    }
+    let mut y = [1.0; MAX_DIM + 1];
+    let mut it = Integrator::new(Method::Rodas4, Options::with_rtol(1e-6));
+    let mut t = 0.0;
+    let (o, _) = it
+        .advance(&Many(MAX_DIM), &NoEvents, &mut t, &mut y[..MAX_DIM], 1.0)
+        .unwrap();
+    assert_eq!(o, Outcome::Reached);
+    assert!((y[0] - (-1f64).exp()).abs() < 1e-5);
+    let mut t = 0.0;
+    let r = it.advance(&Many(MAX_DIM + 1), &NoEvents, &mut t, &mut y, 1.0);
+    assert!(
+        matches!(r, Err(IntegrateError::TooLarge { n, max }) if n == MAX_DIM + 1 && max == MAX_DIM),
+        "{r:?}"
+    );
 }
