@@ -618,3 +618,38 @@ fn the_step_limit_and_the_dimension_limit() {
         "{r:?}"
     );
 }
+
+/// A switching function of time alone.
+struct AtTime(fn(f64) -> f64);
+impl Events for AtTime {
+    fn count(&self) -> usize {
+        1
+    }
+    fn eval(&self, t: f64, _y: &[f64], out: &mut [f64]) {
+        out[0] = (self.0)(t);
+    }
+}
+
+/// Illinois on switching functions of either curvature (so that regula falsi stalls at either
+/// end of the bracket and each of the two halvings is needed), evaluated at the right times:
+/// `e^{−10t} − 1/2` (convex) crosses at `ln 2/10`, `1/2 − (e^{10t} − 1)/10` (concave) at
+/// `ln 6/10`. Located to 1e-12 s, in a pinned number of evaluations.
+#[test]
+fn illinois_locates_time_events_of_either_curvature() {
+    let cases: [(fn(f64) -> f64, f64); 2] = [
+        (|t| (-10.0 * t).exp() - 0.5, 2f64.ln() / 10.0),
+        (|t| 0.5 - ((10.0 * t).exp() - 1.0) / 10.0, 6f64.ln() / 10.0),
+    ];
+    let mut evals = Vec::new();
+    for (g, exact) in cases {
+        let mut opts = Options::with_rtol(1e-9);
+        opts.event_tol = 1e-12;
+        let mut it = Integrator::new(Method::Rodas4, opts);
+        let (mut t, mut y) = (0.0, [1.0]);
+        let (o, st) = it.advance(&Decay { k: 1.0 }, &AtTime(g), &mut t, &mut y, 1.0).unwrap();
+        assert_eq!(o, Outcome::Event { index: 0 });
+        assert!(t >= exact && t - exact < 1e-11, "{t} vs {exact}");
+        evals.push(st.event_evals);
+    }
+    assert_eq!(evals, [8, 8]);
+}
