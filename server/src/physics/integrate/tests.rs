@@ -636,7 +636,8 @@ impl Events for AtTime {
 /// `ln 6/10`. Located to 1e-12 s, in a pinned number of evaluations.
 #[test]
 fn illinois_locates_time_events_of_either_curvature() {
-    let cases: [(fn(f64) -> f64, f64); 2] = [
+    type Case = (fn(f64) -> f64, f64);
+    let cases: [Case; 2] = [
         (|t| (-10.0 * t).exp() - 0.5, 2f64.ln() / 10.0),
         (|t| 0.5 - ((10.0 * t).exp() - 1.0) / 10.0, 6f64.ln() / 10.0),
     ];
