@@ -196,6 +196,35 @@ fn haptic(addr: &str, action: &str) -> Value {
     })
 }
 
+/// A server with `--haptic external` (its own watchdog at 100 ms) and a bridge whose scripted
+/// hand, once engaged, goes 12.5 mm down in 3 s (past the surface, 100 nm = 10 mm below the
+/// parking height) and stays there, with `bridge_args` and a trace; returns once the hand feels
+/// more than 0.3 N: the server, its address, the bridge, its log lines and the trace's path.
+fn pressing(b: &Bench, bridge_args: &[&str]) -> (Proc, String, Proc, Arc<Mutex<Vec<String>>>, PathBuf) {
+    let (srv, addr) = serve_with(b, "external", "server.log", &["--haptic-timeout-ms", "100"]);
+    let trace = b.dir.join("trace.csv");
+    let script = b.dir.join("press-and-stay.csv");
+    std::fs::write(&script, "t_s,handle_m\n0,0\n3,-0.0125\n60,-0.0125\n").unwrap();
+    let operator = format!("file:{}", script.display());
+    let mut args = vec![
+        "--operator",
+        &operator,
+        "--duration",
+        "60",
+        "--trace",
+        trace.to_str().unwrap(),
+    ];
+    args.extend_from_slice(bridge_args);
+    let (br, lines) = bridge(b, &args);
+    wait_status(&addr, 10.0, "link up", |s| s["haptic"]["link"] == "up");
+    assert_eq!(haptic(&addr, "engage")["type"], "ok");
+    wait_status(&addr, 20.0, "engaged", |s| s["haptic"]["phase"] == "engaged");
+    wait_status(&addr, 10.0, "pressing", |s| {
+        s["haptic"]["force_n"].as_f64().is_some_and(|f| f > 0.3)
+    });
+    (srv, addr, br, lines, trace)
+}
+
 /// One row of the bridge's trace.
 #[derive(Debug, Clone, Copy)]
 struct Row {
@@ -386,30 +415,8 @@ fn a_killed_server_zeroes_the_force_and_the_bridge_takes_up_a_new_one() {
     let b = Bench::new("kill-server");
     // The server's own watchdog is not under test here (the kill-bridge test checks it): a long
     // one keeps a VM's pause from re-anchoring the hand mid-press. The bridge's is the default.
-    let (mut srv, addr) = serve_with(&b, "external", "server.log", &["--haptic-timeout-ms", "100"]);
-    let trace = b.dir.join("trace.csv");
-    // The hand, once engaged, goes 12.5 mm down in 3 s (past the surface, 100 nm = 10 mm below
-    // the parking height) and stays there: the server is killed while the hand presses.
-    let script = b.dir.join("press-and-stay.csv");
-    std::fs::write(&script, "t_s,handle_m\n0,0\n3,-0.0125\n60,-0.0125\n").unwrap();
-    let operator = format!("file:{}", script.display());
-    let (mut br, lines) = bridge(
-        &b,
-        &[
-            "--operator",
-            &operator,
-            "--duration",
-            "60",
-            "--trace",
-            trace.to_str().unwrap(),
-        ],
-    );
-    wait_status(&addr, 10.0, "link up", |s| s["haptic"]["link"] == "up");
-    assert_eq!(haptic(&addr, "engage")["type"], "ok");
-    wait_status(&addr, 20.0, "engaged", |s| s["haptic"]["phase"] == "engaged");
-    wait_status(&addr, 10.0, "pressing", |s| {
-        s["haptic"]["force_n"].as_f64().is_some_and(|f| f > 0.3)
-    });
+    // The server is killed while the hand presses.
+    let (mut srv, _addr, mut br, lines, trace) = pressing(&b, &[]);
     let before = lines.lock().unwrap().len();
     let _ = srv.0.kill();
     let _ = srv.0.wait();
@@ -463,30 +470,7 @@ fn a_killed_server_zeroes_the_force_and_the_bridge_takes_up_a_new_one() {
 fn a_terminated_server_zeroes_the_hands_force_before_it_goes() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let b = Bench::new("term");
-    let (mut srv, addr) = serve_with(&b, "external", "server.log", &["--haptic-timeout-ms", "100"]);
-    let trace = b.dir.join("trace.csv");
-    let script = b.dir.join("press-and-stay.csv");
-    std::fs::write(&script, "t_s,handle_m\n0,0\n3,-0.0125\n60,-0.0125\n").unwrap();
-    let operator = format!("file:{}", script.display());
-    let (mut br, lines) = bridge(
-        &b,
-        &[
-            "--operator",
-            &operator,
-            "--duration",
-            "60",
-            "--server-timeout-ms",
-            "100",
-            "--trace",
-            trace.to_str().unwrap(),
-        ],
-    );
-    wait_status(&addr, 10.0, "link up", |s| s["haptic"]["link"] == "up");
-    assert_eq!(haptic(&addr, "engage")["type"], "ok");
-    wait_status(&addr, 20.0, "engaged", |s| s["haptic"]["phase"] == "engaged");
-    wait_status(&addr, 10.0, "pressing", |s| {
-        s["haptic"]["force_n"].as_f64().is_some_and(|f| f > 0.3)
-    });
+    let (mut srv, _addr, mut br, lines, trace) = pressing(&b, &["--server-timeout-ms", "100"]);
     // SAFETY: kill(2) on our own child.
     unsafe {
         libc::kill(srv.0.id() as libc::pid_t, libc::SIGTERM);

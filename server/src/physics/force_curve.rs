@@ -357,6 +357,19 @@ mod tests {
         }
     }
 
+    /// Where a decreasing `slope` falls to `k` in `[lo, hi]`, by bisection: a branch's fold.
+    fn fold(slope: impl Fn(f64) -> f64, k: f64, mut lo: f64, mut hi: f64) -> f64 {
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if slope(mid) > k {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    }
+
     /// The pull-off force is the meniscus (4πRₜγ_L = 27 nN) plus van der Waals at contact
     /// (HRₜ/(6a₀²) ≈ 34 nN), within 5 %.
     fn assert_pull_off_is_meniscus_plus_vdw(c: &ForceCurve) {
@@ -505,16 +518,7 @@ mod tests {
             let q = h * (h + 2.0 * r);
             2.0 * c * (2.0 * h + 2.0 * r) / q.powi(3)
         };
-        let (mut lo, mut hi) = (0.2e-9, 5e-9);
-        for _ in 0..200 {
-            let mid = 0.5 * (lo + hi);
-            if slope(mid) > k {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        let h = 0.5 * (lo + hi);
+        let h = fold(slope, k, 0.2e-9, 5e-9);
         let q = h * (h + 2.0 * r);
         let expected = h + c / (q * q) / k;
         let simple = 1.5 * (hm * r / (3.0 * k)).cbrt();
@@ -549,16 +553,7 @@ mod tests {
             2.0 * c * (2.0 * h + 2.0 * r) / q.powi(3) + f0 / (2.0 * r1 * x * x)
         };
         assert!(slope(a0) > k, "a fold above a₀");
-        let (mut lo, mut hi) = (a0, 2.0 * r1 + a0);
-        for _ in 0..200 {
-            let mid = 0.5 * (lo + hi);
-            if slope(mid) > k {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        let h = 0.5 * (lo + hi);
+        let h = fold(slope, k, a0, 2.0 * r1 + a0);
         let expected = h - force(h) / k;
         let d = t.curve(10e-9, -5e-9, 10e-9, 200).snap_in_distance.unwrap();
         assert!((d / expected - 1.0).abs() < 1e-9, "{d} vs {expected}");
