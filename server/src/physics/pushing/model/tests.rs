@@ -509,3 +509,36 @@ fn switching_along_equals_switching_with_rates() {
     let b = m.switching(1e-4, &x, &mode);
     assert_eq!(a, b);
 }
+
+/// The drive's segments by hand: a segment from the state at `t` to targets at `t₁` starts where
+/// the previous one was at `t` (continuous) and reaches the targets at `t₁`; its generic form
+/// (the one the model differentiates) agrees with the plain one and has the segment's rate as
+/// its time derivative.
+#[test]
+fn drive_segments_are_continuous_and_reach_their_targets() {
+    let a = Drive {
+        t0: 1.0,
+        y0: 2e-6,
+        vy: 3e-6,
+        z0: -1e-9,
+        vz: 4e-9,
+    };
+    // y(1.5) = 2 µm + 3 µm/s · 0.5 s = 3.5 µm; z(1.5) = −1 nm + 2 nm = 1 nm.
+    assert!((a.y_at(1.5) - 3.5e-6).abs() < 1e-18 && (a.z_at(1.5) - 1e-9).abs() < 1e-21);
+    let b = a.ramp_to(1.5, 1.501, 3.6e-6, 3e-9);
+    assert_eq!((b.t0, b.y0, b.z0), (1.5, a.y_at(1.5), a.z_at(1.5)));
+    // 0.1 µm and 2 nm in 1 ms: 100 µm/s and 2 µm/s.
+    assert!((b.vy - 1e-4).abs() < 1e-12 && (b.vz - 2e-6).abs() < 1e-12, "{b:?}");
+    assert!((b.y_at(1.501) - 3.6e-6).abs() < 1e-18 && (b.z_at(1.501) - 3e-9).abs() < 1e-20);
+    let (y, dy) = crate::physics::real::derivative(|t| b.y(t), 1.5004);
+    assert!((y - b.y_at(1.5004)).abs() < 1e-18 && (dy - b.vy).abs() < 1e-15);
+    let (z, dz) = crate::physics::real::derivative(|t| b.z(t), 1.5004);
+    assert!((z - b.z_at(1.5004)).abs() < 1e-21 && (dz - b.vz).abs() < 1e-15);
+    let c = Drive::constant_speed(2e-6);
+    assert_eq!((c.y_at(0.25), c.z_at(0.25)), (0.5e-6, 0.0));
+    let names: Vec<&str> = [FrictionPhase::Stick, FrictionPhase::Slip, FrictionPhase::Roll]
+        .iter()
+        .map(|p| p.as_str())
+        .collect();
+    assert_eq!(names, ["stick", "slip", "roll"]);
+}
