@@ -50,7 +50,7 @@ test: setup fmt-check clippy prometheus-check unit web-test
 ## make mutants: mutation testing with cargo-mutants (from crates.io, installed on first use) on
 ## the physics, the integrators, the control and the protocol's validation, against the library's
 ## tests (`-C --lib`: each mutant builds only the library's test binary, not the binaries,
-## examples and integration tests too, about 3 times faster). Not part of `make test`: ~3600
+## examples and integration tests too: 2-3 s a build instead of 7). Not part of `make test`: ~3600
 ## mutants, hours on 2 cores. Results in mutants.out/; `--iterate` in CARGO_MUTANTS_ARGS re-runs
 ## only what a previous run did not catch.
 ## MUTANTS_FILES narrows it, e.g. make mutants MUTANTS_FILES='server/src/physics/integrate/*.rs'.

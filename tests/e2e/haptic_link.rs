@@ -225,6 +225,19 @@ fn pressing(b: &Bench, bridge_args: &[&str]) -> (Proc, String, Proc, Arc<Mutex<V
     (srv, addr, br, lines, trace)
 }
 
+/// Stops the bridge of a [`pressing`] test (SIGTERM: it zeroes its force and exits 0) and
+/// reads its trace; with the index of the last cycle pressed with more than 0.3 N on a live link.
+fn end_press(br: &mut Proc, trace: &Path) -> (Vec<Row>, usize) {
+    nanopush_e2e::sigterm(&br.0);
+    assert!(wait_exit(br, 5.0).success(), "the bridge exits 0 on SIGTERM");
+    let rows = read_trace(trace);
+    let pressed = rows
+        .iter()
+        .rposition(|r| r.link && r.force > 0.3)
+        .expect("pressed before the server went");
+    (rows, pressed)
+}
+
 /// One row of the bridge's trace.
 #[derive(Debug, Clone, Copy)]
 struct Row {
@@ -443,18 +456,9 @@ fn a_killed_server_zeroes_the_force_and_the_bridge_takes_up_a_new_one() {
         assert!(Instant::now() < deadline, "the bridge did not take up the new server");
         std::thread::sleep(Duration::from_millis(10));
     }
-    // SIGTERM: the bridge zeroes its force and exits 0; from the silence on, every force was 0.
-    // SAFETY: kill(2) on our own child.
-    unsafe {
-        libc::kill(br.0.id() as libc::pid_t, libc::SIGTERM);
-    }
-    assert!(wait_exit(&mut br, 5.0).success());
-    let rows = read_trace(&trace);
-    // The stretch the kill made: pressed with more than 0.3 N up to it, exactly 0 N through it.
-    let pressed = rows
-        .iter()
-        .rposition(|r| r.link && r.force > 0.3)
-        .expect("pressed before the kill");
+    // From the silence on, every force was 0. The stretch the kill made: pressed with more than
+    // 0.3 N up to it, exactly 0 N through it.
+    let (rows, pressed) = end_press(&mut br, &trace);
     let silent = rows[pressed..].iter().position(|r| !r.link).expect("a silent stretch") + pressed;
     let back = rows[silent..].iter().position(|r| r.link).expect("live again") + silent;
     assert!(rows[silent..back].iter().all(|r| r.force == 0.0));
@@ -471,23 +475,11 @@ fn a_terminated_server_zeroes_the_hands_force_before_it_goes() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let b = Bench::new("term");
     let (mut srv, _addr, mut br, lines, trace) = pressing(&b, &["--server-timeout-ms", "100"]);
-    // SAFETY: kill(2) on our own child.
-    unsafe {
-        libc::kill(srv.0.id() as libc::pid_t, libc::SIGTERM);
-    }
+    nanopush_e2e::sigterm(&srv.0);
     assert!(wait_exit(&mut srv, 10.0).success(), "the server exits 0 on SIGTERM");
     // The bridge notices the silence (100 ms later), then is stopped.
     wait_line(&lines, 5.0, "server silent");
-    // SAFETY: as above.
-    unsafe {
-        libc::kill(br.0.id() as libc::pid_t, libc::SIGTERM);
-    }
-    assert!(wait_exit(&mut br, 5.0).success());
-    let rows = read_trace(&trace);
-    let pressed = rows
-        .iter()
-        .rposition(|r| r.link && r.force > 0.3)
-        .expect("pressed before the SIGTERM");
+    let (rows, pressed) = end_press(&mut br, &trace);
     let zero = rows[pressed..]
         .iter()
         .position(|r| r.force == 0.0)

@@ -205,13 +205,18 @@ pub(crate) async fn operator(addr: &str, stream: &str) -> Ws {
     op
 }
 
+/// `/api/status` (no viewer token set).
+pub(crate) fn status(addr: &str) -> Value {
+    let (code, body) = http_get(addr, "/api/status");
+    assert_eq!(code, 200, "{}", String::from_utf8_lossy(&body));
+    serde_json::from_slice(&body).unwrap()
+}
+
 /// Waits (10 s at most) until the server's loop has made `n` ticks.
 pub(crate) fn wait_ticks(addr: &str, n: u64) {
     let deadline = Instant::now() + Duration::from_secs(10);
     loop {
-        let (status, body) = http_get(addr, "/api/status");
-        assert_eq!(status, 200);
-        let s: Value = serde_json::from_slice(&body).unwrap();
+        let s = status(addr);
         if s["loop"]["ticks"].as_u64().unwrap() >= n {
             return;
         }
@@ -574,8 +579,7 @@ fn sigterm_mid_push_retracts_the_tip_and_completes_every_record() {
         )
         .await;
         until(&mut op, 20.0, |m| is(m, "telemetry") && m["phase"] == "push").await;
-        // SAFETY: sending a signal to our own child process.
-        unsafe { libc::kill(srv.child.id() as i32, libc::SIGTERM) };
+        nanopush_e2e::sigterm(&srv.child);
         let done = until(&mut op, 20.0, |m| is(m, "run_done")).await;
         assert_eq!(done["outcome"], "stopped", "{done}");
         until(&mut op, 20.0, |m| is(m, "shutdown")).await;
@@ -982,12 +986,7 @@ fn stalled_subscriber(addr: &str) -> TcpStream {
 #[test]
 fn a_reader_that_stops_reading_is_dropped_without_slowing_the_others() {
     let srv = start("stalled", &["--telemetry-hz", "1000"]);
-    let clients = |addr: &str| -> u64 {
-        let (_, body) = http_get(addr, "/api/status");
-        serde_json::from_slice::<Value>(&body).unwrap()["clients"]
-            .as_u64()
-            .unwrap()
-    };
+    let clients = |addr: &str| status(addr)["clients"].as_u64().unwrap();
     runtime().block_on(async {
         let mut other = connect(&srv.addr, None).await;
         until(&mut other, 5.0, |m| is(m, "welcome")).await;

@@ -9,7 +9,7 @@ use futures_util::StreamExt;
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 
-use crate::serve::{TOKEN, Ws, connect, http_get, is, ok, operator, reply, runtime, send, start, start_scene, until};
+use crate::serve::{TOKEN, Ws, connect, is, ok, operator, reply, runtime, send, start, start_scene, status, until};
 
 #[test]
 fn a_command_while_a_push_runs_is_busy_and_stop_ends_the_push() {
@@ -105,8 +105,7 @@ fn on_sigterm_every_client_gets_shutdown_then_a_close_frame() {
         let mut viewer = connect(&srv.addr, None).await;
         until(&mut op, 5.0, |m| is(m, "welcome")).await;
         until(&mut viewer, 5.0, |m| is(m, "welcome")).await;
-        // SAFETY: sending a signal to our own child process.
-        unsafe { libc::kill(srv.child.id() as i32, libc::SIGTERM) };
+        nanopush_e2e::sigterm(&srv.child);
         for ws in [&mut op, &mut viewer] {
             let mut saw_shutdown = false;
             let close = loop {
@@ -134,9 +133,7 @@ fn on_sigterm_every_client_gets_shutdown_then_a_close_frame() {
 
 /// `telemetry_sent` and `dropped_frames` from `/api/status`.
 fn frames(addr: &str) -> (u64, u64) {
-    let (code, body) = http_get(addr, "/api/status");
-    assert_eq!(code, 200);
-    let s: Value = serde_json::from_slice(&body).unwrap();
+    let s = status(addr);
     (
         s["telemetry_sent"].as_u64().unwrap(),
         s["dropped_frames"].as_u64().unwrap(),

@@ -4,7 +4,7 @@
 
 use std::io::Write;
 use std::path::PathBuf;
-use std::process::{Command, Output, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 use std::sync::Once;
 
 /// The workspace root.
@@ -68,4 +68,11 @@ pub fn text(o: &Output) -> (String, String) {
         String::from_utf8_lossy(&o.stdout).into_owned(),
         String::from_utf8_lossy(&o.stderr).into_owned(),
     )
+}
+
+/// Sends SIGTERM to a child process (the way an operator or a service manager stops it).
+pub fn sigterm(child: &Child) {
+    // SAFETY: kill(2) on the pid of our own child, not yet reaped (so not reused).
+    let r = unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
+    assert_eq!(r, 0, "kill(SIGTERM) of pid {}", child.id());
 }

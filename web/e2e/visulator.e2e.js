@@ -219,9 +219,6 @@ test('the 2D image\'s axes, scale bar and line profile hold the right physical l
   await shot(op, '06-image-profile');
 });
 
-/** Clicks Stop while a push runs; ms from the press (the input event's own time stamp) to the
- * first frame after the reply shows, measured in the page, and from outside. */
-
 test('Stop ends a push at once with a 512² scan on screen', async () => {
   await op.fill('#scan-size', '16');
   await op.fill('#scan-px', '512');

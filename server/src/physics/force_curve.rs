@@ -562,7 +562,8 @@ mod tests {
     }
 
     /// With a JKR contact (w = 0.05 J/m²) the tip leaves where the contact branch folds: at the
-    /// cut-off `a₀`, above which the long-range attraction's gradient (417 N/m) exceeds `k_c`.
+    /// cut-off `a₀`, above which the long-range attraction's gradient (van der Waals alone
+    /// `2C(2a₀+2Rₜ)/q³` ≈ 420 N/m at `a₀`, by hand) exceeds `k_c`.
     /// There the JKR contact is at zero indentation, where its load is `−(4/3)πRₜw` (from
     /// `δ = a²/R − (2/3)√(6πwa/K) = 0`), on top of the meniscus `2πRₜ·2γ_L` and van der Waals at
     /// `a₀`; the end of the stable branch (δ_min = −0.047 nm) is never reached.
