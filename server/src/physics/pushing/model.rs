@@ -881,3 +881,5 @@ impl Probe<f64> {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod eq17_reference;
