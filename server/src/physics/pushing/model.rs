@@ -880,6 +880,6 @@ impl Probe<f64> {
 }
 
 #[cfg(test)]
-mod tests;
-#[cfg(test)]
 mod eq17_reference;
+#[cfg(test)]
+mod tests;

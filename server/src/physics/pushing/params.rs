@@ -227,8 +227,16 @@ mod tests {
         assert!(rel(p.inertia(), 0.4 * m_a * 1e-12) < 1e-12, "{}", p.inertia());
         assert!(rel(p.inertia(), 1.7593e-27) < 1e-4);
         // Eq 6: A_as = 4πRₐγ_L = 904.78 nN; Eq 7: A_ta = 2πR̃γ_L = 13.176 nN.
-        assert!(rel(p.paper_adhesion_as(), 904.78e-9) < 1e-5, "{}", p.paper_adhesion_as());
-        assert!(rel(p.paper_adhesion_ta(), 13.1765e-9) < 1e-5, "{}", p.paper_adhesion_ta());
+        assert!(
+            rel(p.paper_adhesion_as(), 904.78e-9) < 1e-5,
+            "{}",
+            p.paper_adhesion_as()
+        );
+        assert!(
+            rel(p.paper_adhesion_ta(), 13.1765e-9) < 1e-5,
+            "{}",
+            p.paper_adhesion_ta()
+        );
     }
 
     /// With capillary forces alone and Hertz contacts (γ_SL = 0 in the default scene: no JKR
@@ -239,8 +247,18 @@ mod tests {
         let wet = DEFAULT_SCENE.replace("van_der_waals = true", "van_der_waals = false");
         let p = params(&wet);
         assert_eq!(p.jkr_as.pull_off_load(), 0.0);
-        assert!(rel(p.adhesion_as(), p.paper_adhesion_as()) < 1e-9, "{} vs {}", p.adhesion_as(), p.paper_adhesion_as());
-        assert!(rel(p.adhesion_ta(), p.paper_adhesion_ta()) < 1e-9, "{} vs {}", p.adhesion_ta(), p.paper_adhesion_ta());
+        assert!(
+            rel(p.adhesion_as(), p.paper_adhesion_as()) < 1e-9,
+            "{} vs {}",
+            p.adhesion_as(),
+            p.paper_adhesion_as()
+        );
+        assert!(
+            rel(p.adhesion_ta(), p.paper_adhesion_ta()) < 1e-9,
+            "{} vs {}",
+            p.adhesion_ta(),
+            p.paper_adhesion_ta()
+        );
         assert_eq!(p.attraction_as(), p.adhesion_as());
         let q = params(DEFAULT_SCENE);
         assert!(q.adhesion_as() > p.adhesion_as() && q.adhesion_ta() > p.adhesion_ta());
@@ -251,13 +269,26 @@ mod tests {
     /// long-range attraction.
     #[test]
     fn a_jkr_contact_adds_its_pull_off_to_the_adhesion_only() {
-        let sticky = DEFAULT_SCENE.replace("solid_liquid_energy_mj_per_m2 = 0.0", "solid_liquid_energy_mj_per_m2 = 20.0");
+        let sticky = DEFAULT_SCENE.replace(
+            "solid_liquid_energy_mj_per_m2 = 0.0",
+            "solid_liquid_energy_mj_per_m2 = 20.0",
+        );
         let p = params(&sticky);
         let (as_pull, ta_pull) = (-p.jkr_as.pull_off_load(), -p.jkr_ta.pull_off_load());
         assert!(as_pull > 0.0 && ta_pull > 0.0);
         assert!(rel(p.adhesion_as() - p.attraction_as(), as_pull) < 1e-9);
-        let dry = params(&DEFAULT_SCENE.replace("solid_liquid_energy_mj_per_m2 = 0.0", "solid_liquid_energy_mj_per_m2 = 20.0").replace("capillary = true", "capillary = false"));
-        assert!(dry.adhesion_ta() > -dry.jkr_ta.pull_off_load(), "van der Waals adds to the pull-off");
+        let dry = params(
+            &DEFAULT_SCENE
+                .replace(
+                    "solid_liquid_energy_mj_per_m2 = 0.0",
+                    "solid_liquid_energy_mj_per_m2 = 20.0",
+                )
+                .replace("capillary = true", "capillary = false"),
+        );
+        assert!(
+            dry.adhesion_ta() > -dry.jkr_ta.pull_off_load(),
+            "van der Waals adds to the pull-off"
+        );
         assert!(p.adhesion_ta() > dry.adhesion_ta(), "the meniscus adds to the adhesion");
     }
 
@@ -266,9 +297,16 @@ mod tests {
         let p = params(DEFAULT_SCENE);
         assert!(!p.frictionless());
         let mut text = DEFAULT_SCENE.to_string();
-        for key in ["particle_substrate_kinetic", "particle_substrate_static", "tip_particle_kinetic", "tip_particle_static"] {
+        for key in [
+            "particle_substrate_kinetic",
+            "particle_substrate_static",
+            "tip_particle_kinetic",
+            "tip_particle_static",
+        ] {
             assert!(!params(&text).frictionless(), "{key} still nonzero");
-            text = text.replace(&format!("{key} = 0.3 "), &format!("{key} = 0.0 ")).replace(&format!("{key} = 0.2 "), &format!("{key} = 0.0 "));
+            text = text
+                .replace(&format!("{key} = 0.3 "), &format!("{key} = 0.0 "))
+                .replace(&format!("{key} = 0.2 "), &format!("{key} = 0.0 "));
         }
         assert!(params(&text).frictionless());
     }

@@ -74,7 +74,9 @@ pub struct SteadyState {
     pub normal_ta: f64,
     /// Tip-particle friction `f_ta = f_as` (N).
     pub friction_ta: f64,
-    /// Particle-substrate normal load `F_as` (N).
+    /// Particle-substrate normal load `F_as = F_ta sin β + μ_ta^k(A_ta + F_ta) cos β` (N), the
+    /// derivation's; with it Eq 6 holds, `f_as = μ_as^k(A_as + F_as)`. (It used the torque
+    /// balance's `f_ta` in place of the kinetic law's until a test read Eq 6 backwards.)
     pub load_as: f64,
     /// Particle `y` (m): its settling offset behind the stage (Fig 7, 10-13).
     pub y: f64,
@@ -125,7 +127,9 @@ pub fn steady_state(i: &SteadyInputs, jkr_as: &Jkr) -> Result<SteadyState, Stead
     }
     let normal_ta = i.mu_as_k * (i.mu_ta_k * cb * i.adhesion_ta + i.adhesion_as) / (lhs - rhs);
     let friction_ta = normal_ta * cb / (1.0 + sb);
-    let load_as = normal_ta * sb + friction_ta * cb;
+    // F_as as the derivation has it (the tip's load through the kinetic law at the tip), the
+    // load with which Eq 6's kinetic law gives back f_as = f_ta for the printed F_ta.
+    let load_as = normal_ta * sb + i.mu_ta_k * (i.adhesion_ta + normal_ta) * cb;
     // ζ_y = y cos α − (F_y^c/k_y + F_z^c/k_yz), ζ_z = y sin α − (F_z^c/k_z + F_y^c/k_yz).
     let gy = normal_ta * cb - friction_ta * sg; // −(F_y^c − k_y cos α y)
     let gz = normal_ta * sb + friction_ta * cg; // −(F_z^c − k_z sin α y)
@@ -267,6 +271,60 @@ mod tests {
         // And the paper scene's figures themselves (Fig 10-13's settled values at α 15°, β 30°).
         let s = steady_state(&paper(), &jkr()).unwrap();
         assert!((s.y - 6.57e-9).abs() < 0.01e-9, "y = {:e}", s.y);
+    }
+
+    /// The outputs the linear lines do not fix, each from a relation of its own: `F_as` from
+    /// Eq 6's kinetic law read backwards (`f_as = μ_as^k(A_as + F_as)`), `Δz = Δy tan β` (the
+    /// contact point moves along the particle's radius at β), `β̃` as the angle of the moved
+    /// contact point seen from the particle's centre, `F_z` from the lever's axes, and `z` as the
+    /// indentation at which the JKR contact carries `P_z` (Eq 5).
+    #[test]
+    fn the_other_outputs_by_their_own_relations() {
+        let i = paper();
+        let j = jkr();
+        let s = steady_state(&i, &j).unwrap();
+        let rel = |a: f64, b: f64| (a - b).abs() / b.abs();
+        assert!(
+            rel(s.load_as, s.friction_ta / i.mu_as_k - i.adhesion_as) < 1e-9,
+            "F_as {:e}",
+            s.load_as
+        );
+        assert!(s.delta_y != 0.0 && rel(s.delta_z, s.delta_y * i.beta.tan()) < 1e-12);
+        let (sa, ca) = i.alpha.sin_cos();
+        let (sb, cb) = i.beta.sin_cos();
+        assert!(rel(s.delta_y, (s.zeta_y * sa - s.zeta_z * ca) * sb * cb) < 1e-12);
+        let contact = nalgebra::Vector2::new(i.r_a * cb - s.delta_y, i.r_a * sb + s.delta_z);
+        assert!((s.beta_tilde - contact.y.atan2(contact.x)).abs() < 1e-15);
+        assert!(s.beta_tilde != i.beta);
+        assert!(rel(s.f_z, i.k_y * s.zeta_y * sa - i.k_z * s.zeta_z * ca) < 1e-12);
+        let p_z = s.normal_ta * s.beta_tilde.sin() + s.friction_ta * s.beta_tilde.cos() + i.attraction_as;
+        let carried = j.load_from_indentation(-s.z).unwrap();
+        assert!(
+            s.z < 0.0 && rel(carried, p_z) < 1e-9,
+            "JKR carries {carried:e} N at z = {:e}, P_z = {p_z:e}",
+            s.z
+        );
+    }
+
+    /// The inputs a scene gives Eq 18: the paper's values by hand for the default scene
+    /// (`k_y`, `k_yz` from Eq 10's c₂, c₃; `A_as = 4πRₐγ_L`, `A_ta = 2πR̃γ_L` once van der
+    /// Waals is left out).
+    #[test]
+    fn inputs_from_the_default_scene() {
+        let text = crate::scene::DEFAULT_SCENE.replace("van_der_waals = true", "van_der_waals = false");
+        let p = crate::scene::Scene::parse("test", &text).unwrap().push_params();
+        let got = SteadyInputs::from_params(&p);
+        let want = paper();
+        let rel = |a: f64, b: f64| (a - b).abs() / b.abs();
+        assert!(got.k_z == 8.0 && rel(got.r_a, 1e-6) < 1e-12);
+        assert!(
+            rel(got.k_y, want.k_y) < 1e-3 && rel(got.k_yz, want.k_yz) < 1e-3,
+            "{got:?}"
+        );
+        assert!(rel(got.alpha, want.alpha) < 1e-12 && rel(got.beta, want.beta) < 1e-12);
+        assert_eq!((got.mu_as_k, got.mu_ta_k), (0.2, 0.2));
+        assert!(rel(got.adhesion_as, want.adhesion_as) < 1e-9 && rel(got.adhesion_ta, want.adhesion_ta) < 1e-9);
+        assert!(rel(got.attraction_as, want.attraction_as) < 1e-9);
     }
 
     #[test]

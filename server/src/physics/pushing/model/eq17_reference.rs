@@ -169,20 +169,25 @@ fn reference(m: &PushModel, t: f64, x: &[f64], mode: &Mode) -> Reference {
 
     // The particle's three equations (Eq 17 lines 3-5), in the moving frame of the substrate.
     let particle_y = on_particle.x + friction_as + p.m_a * stage_accel;
-    let particle_z_damping = if l.particle_z.is_some_and(|s| s.vel.is_some()) { p.b_as * z_d } else { 0.0 };
+    let particle_z_damping = if l.particle_z.is_some_and(|s| s.vel.is_some()) {
+        p.b_as * z_d
+    } else {
+        0.0
+    };
     let particle_z = normal_as + on_particle.y - particle_z_damping;
     let torque = p.r_a * (friction_ta - friction_as);
 
     // Rows: dynamic DOFs as [position' = rate, rate' = force/mass], quasi-static ones as
     // force/scale = 0 (a zero-mass row).
     let mut f = vec![f64::NAN; m.len()];
-    let mut row = |slot: crate::physics::pushing::layout::Slot, force: f64, mass: f64, scale: f64, rate: f64| match slot.vel {
-        Some(v) => {
-            f[slot.pos] = rate;
-            f[v] = force / mass;
-        }
-        None => f[slot.pos] = force / scale,
-    };
+    let mut row =
+        |slot: crate::physics::pushing::layout::Slot, force: f64, mass: f64, scale: f64, rate: f64| match slot.vel {
+            Some(v) => {
+                f[slot.pos] = rate;
+                f[v] = force / mass;
+            }
+            None => f[slot.pos] = force / scale,
+        };
     let m_c = p.cantilever.effective_mass();
     row(l.zeta_y, lever.x, m_c, p.cantilever.k_c, zeta_y_d);
     row(l.zeta_z, lever.y, m_c, p.cantilever.k_c, zeta_z_d);
@@ -309,7 +314,10 @@ fn compare(label: &str, m: &PushModel, t: f64, x: &[f64], mode: &Mode) {
         ]
     };
     for ((name, a), (_, b)) in fields(&got).into_iter().zip(fields(&want.probe)) {
-        assert!(close(a, b), "{label}: probe {name} is {a:e}, the free-body diagrams give {b:e}");
+        assert!(
+            close(a, b),
+            "{label}: probe {name} is {a:e}, the free-body diagrams give {b:e}"
+        );
     }
 }
 
@@ -367,5 +375,8 @@ fn eq17_rows_equal_the_free_body_diagrams_in_mixed_layouts() {
     let elastic = p.jkr_as.load_from_indentation(-z).unwrap();
     let attraction = -p.interactions.particle_substrate_force(p.interactions.a0);
     assert!(z < -1e-12, "indented into the substrate: {z:e}");
-    assert!((elastic - attraction).abs() < 1e-9 * attraction, "{elastic:e} vs {attraction:e}");
+    assert!(
+        (elastic - attraction).abs() < 1e-9 * attraction,
+        "{elastic:e} vs {attraction:e}"
+    );
 }

@@ -66,3 +66,123 @@ fn frictionless_substrate_slides_at_once() {
     let t = sim.shearing_time.expect("slides");
     assert!(t < 1e-4, "slid only at {t:e} s");
 }
+
+/// The integrator sees the model in one mode: every `Problem` entry point is the model's own
+/// (a mass, Jacobian or `∂f/∂t` the integrator does not see would change only the error it
+/// controls, so a push's result alone would not tell).
+#[test]
+fn the_integrators_view_is_the_model_in_its_mode() {
+    let mut model = scene("paper-full-dynamics.toml");
+    model.drive = Drive {
+        t0: 1e-4,
+        y0: 2e-9,
+        vy: 1.5e-6,
+        z0: 0.0,
+        vz: 0.4e-6,
+    };
+    let n = model.len();
+    let mode = Mode {
+        substrate: Tangential::Slip { direction: 1.0 },
+        ..model.initial_mode()
+    };
+    let mut x = model.initial_state();
+    for (i, v) in x[..n].iter_mut().enumerate() {
+        *v += 1e-10 * (1.0 + i as f64);
+    }
+    let scale = Simulation::scales(&model);
+    let p = InMode {
+        model: &model,
+        mode,
+        scale,
+    };
+    let t = 3e-4;
+    let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+    p.rhs(t, &x[..n], &mut a);
+    model.rhs(t, &x[..n], &mode, &mut b);
+    assert_eq!(a, b);
+    p.time_derivative(t, &x[..n], &mut a);
+    model.time_derivative(t, &x[..n], &mode, &mut b);
+    assert_eq!(a, b);
+    assert!(b.iter().any(|v| *v != 0.0), "the drive moves: ∂f/∂t is not zero");
+    let (mut ja, mut jb) = (vec![0.0; n * n], vec![0.0; n * n]);
+    p.jacobian(t, &x[..n], &mut ja);
+    model.jacobian(t, &x[..n], &mode, &mut jb);
+    assert_eq!(ja, jb);
+    assert_eq!(p.len(), n);
+    for i in 0..n {
+        assert_eq!(p.mass(i), model.mass_diagonal()[i]);
+        assert_eq!(p.scale(i), scale[i]);
+    }
+    // Every switching function is an event, in the order of SWITCHES.
+    assert_eq!(Events::count(&p), 4);
+    let mut ev = [0.0; 4];
+    p.eval(t, &x[..n], &mut ev);
+    let sw = model.switching(t, &x[..n], &mode);
+    let want = [sw.substrate, sw.tip, sw.meniscus, sw.tip_contact].map(|v| v.unwrap_or(f64::NAN));
+    for (e, w) in ev.iter().zip(want) {
+        assert!(e == &w || (e.is_nan() && w.is_nan()), "{ev:?} vs {want:?}");
+    }
+    // At a step's end, with f, ∂f/∂t and J known, the same values (the slip rate exact).
+    let (mut f, mut ft, mut j) = (vec![0.0; n], vec![0.0; n], vec![0.0; n * n]);
+    model.derivatives(t, &x[..n], &mode, &mut f, &mut ft, &mut j);
+    let mut at_step = [0.0; 4];
+    p.eval_at_step(t, &x[..n], &f, &ft, &j, &mut at_step);
+    for (e, w) in at_step.iter().zip(ev) {
+        assert!((e - w).abs() <= 1e-9 * w.abs(), "{at_step:?} vs {ev:?}");
+    }
+    // In stick no rate is needed: the same values again.
+    let stick = InMode {
+        model: &model,
+        mode: model.initial_mode(),
+        scale,
+    };
+    stick.eval_at_step(t, &x[..n], &f, &ft, &j, &mut at_step);
+    stick.eval(t, &x[..n], &mut ev);
+    assert_eq!(at_step, ev);
+}
+
+/// The absolute tolerance's scales by hand: 1 nm for positions, 1 mm/s for rates, and for the
+/// rotation the same arc on the particle's surface (1 nm/Rₐ, 1 mm/s / Rₐ).
+#[test]
+fn tolerance_scales_by_hand() {
+    let model = scene("paper-full-dynamics.toml");
+    let l = model.layout;
+    let s = Simulation::scales(&model);
+    let r_a = model.p.r_a;
+    for slot in [
+        l.stage.unwrap(),
+        l.zeta_y,
+        l.zeta_z,
+        l.particle_y,
+        l.particle_z.unwrap(),
+    ] {
+        assert_eq!((s[slot.pos], s[slot.vel.unwrap()]), (1e-9, 1e-3));
+    }
+    let rot = l.rotation.unwrap();
+    assert_eq!(s[rot.pos], 1e-9 / r_a);
+    assert_eq!(s[rot.vel.unwrap()], 1e-3 / r_a);
+}
+
+/// A new drive equal to the present one is no new segment; a different one is taken, and a
+/// drive that pulls the tip back makes the slipping contact stick at once.
+#[test]
+fn set_drive_takes_only_a_new_segment() {
+    let mut sim = Simulation::new(scene("minimal.toml"), Method::Rodas4, Options::with_rtol(1e-6));
+    sim.advance_to(30e-3).unwrap();
+    assert_eq!(sim.phase(), FrictionPhase::Slip, "the minimal scene slides by 30 nm");
+    let same = sim.model.drive;
+    assert_eq!(sim.set_drive(same), 0);
+    let back = Drive {
+        vy: -same.vy,
+        ..same.ramp_to(sim.t, sim.t + 1e-3, same.y_at(sim.t), 0.0)
+    };
+    assert_eq!(sim.model.drive, same);
+    let switched = sim.set_drive(back);
+    assert_eq!(sim.model.drive, back);
+    sim.advance_to(sim.t + 1e-3).unwrap();
+    assert!(
+        switched > 0 || sim.phase() == FrictionPhase::Stick,
+        "{:?} after {switched} switches",
+        sim.phase()
+    );
+}
