@@ -882,4 +882,6 @@ impl Probe<f64> {
 #[cfg(test)]
 mod eq17_reference;
 #[cfg(test)]
+mod events_tests;
+#[cfg(test)]
 mod tests;
