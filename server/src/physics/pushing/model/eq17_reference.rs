@@ -295,6 +295,11 @@ fn compare(label: &str, m: &PushModel, t: f64, x: &[f64], mode: &Mode) {
         );
     }
     let got = m.probe(t, x, mode);
+    assert_eq!(
+        m.measured_deflection(x),
+        want.probe.zeta_z,
+        "{label}: the measured deflection is ζ_z'"
+    );
     let fields = |p: &Probe<f64>| {
         [
             ("gap", p.gap),
@@ -330,6 +335,31 @@ fn eq17_rows_equal_the_free_body_diagrams_with_every_dof_dynamic() {
     let x = generic(&m);
     for (label, mode) in every_mode(&m, &x) {
         compare(label, &m, 1e-4, &x, &mode);
+    }
+    // The particle lifted 0.3 nm off the substrate: the long-range forces at a gap beyond a₀,
+    // no substrate contact load.
+    let mut lifted = x.clone();
+    lifted[m.layout.particle_z.unwrap().pos] = 0.3e-9;
+    for (label, mode) in every_mode(&m, &lifted) {
+        compare(&format!("{label}, lifted"), &m, 1e-4, &lifted, &mode);
+    }
+    // JKR contacts (γ_SL = 20 mJ/m²): the pull-off enters the tip's friction load.
+    let start = DEFAULT_SCENE.find("[physics]").unwrap();
+    let text = format!(
+        "{}[physics]\n{}\n",
+        &DEFAULT_SCENE[..start],
+        physics("dynamic", "dynamic")
+    )
+    .replace(
+        "solid_liquid_energy_mj_per_m2 = 0.0",
+        "solid_liquid_energy_mj_per_m2 = 20.0",
+    );
+    let mut sticky = PushModel::new(Scene::parse("test", &text).unwrap().push_params());
+    assert!(sticky.p.jkr_ta.pull_off_load() < 0.0);
+    sticky.drive = drive();
+    let x = generic(&sticky);
+    for (label, mode) in every_mode(&sticky, &x) {
+        compare(&format!("{label}, JKR"), &sticky, 1e-4, &x, &mode);
     }
 }
 
