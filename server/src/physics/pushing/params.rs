@@ -277,6 +277,11 @@ mod tests {
         let (as_pull, ta_pull) = (-p.jkr_as.pull_off_load(), -p.jkr_ta.pull_off_load());
         assert!(as_pull > 0.0 && ta_pull > 0.0);
         assert!(rel(p.adhesion_as() - p.attraction_as(), as_pull) < 1e-9);
+        let hertz = params(DEFAULT_SCENE);
+        assert!(
+            rel(p.adhesion_ta() - hertz.adhesion_ta(), ta_pull) < 1e-9,
+            "the tip's adhesion gains the pull-off"
+        );
         let dry = params(
             &DEFAULT_SCENE
                 .replace(

@@ -330,7 +330,9 @@ fn compare(label: &str, m: &PushModel, t: f64, x: &[f64], mode: &Mode) {
 #[test]
 fn eq17_rows_equal_the_free_body_diagrams_with_every_dof_dynamic() {
     let mut m = model(&physics("dynamic", "dynamic"));
-    m.drive = drive();
+    // The stage 1 µm behind its command, so that it accelerates (2.5 m/s²) and the particle
+    // feels the frame's fictitious force (−mₐs̈, 1e-14 N: small, but a row's sign all the same).
+    m.drive = Drive { y0: 1e-6, ..drive() };
     assert_eq!(m.len(), 12);
     let x = generic(&m);
     for (label, mode) in every_mode(&m, &x) {

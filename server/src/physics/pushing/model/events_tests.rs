@@ -67,6 +67,15 @@ fn switching_functions_are_their_definitions() {
     let stick = m.initial_mode();
     let pr = m.probe(t, &x, &stick);
     assert!(pr.load_as > 0.0 && pr.load_ta > 0.0 && pr.friction_as != 0.0 && pr.friction_ta != 0.0);
+    assert!(pr.is_finite());
+    assert!(
+        !Probe { gap: f64::NAN, ..pr }.is_finite()
+            && !Probe {
+                stage: f64::INFINITY,
+                ..pr
+            }
+            .is_finite()
+    );
     let sw = m.switching(t, &x, &stick);
     let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * a.abs().max(b.abs()) + 1e-30;
     assert!(
