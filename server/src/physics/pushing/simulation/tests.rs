@@ -109,9 +109,9 @@ fn the_integrators_view_is_the_model_in_its_mode() {
     model.jacobian(t, &x[..n], &mode, &mut jb);
     assert_eq!(ja, jb);
     assert_eq!(p.len(), n);
-    for i in 0..n {
+    for (i, s) in scale.iter().enumerate().take(n) {
         assert_eq!(p.mass(i), model.mass_diagonal()[i]);
-        assert_eq!(p.scale(i), scale[i]);
+        assert_eq!(p.scale(i), *s);
     }
     // Every switching function is an event, in the order of SWITCHES.
     assert_eq!(Events::count(&p), 4);
