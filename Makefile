@@ -53,15 +53,19 @@ test: setup fmt-check clippy prometheus-check unit web-test
 ## examples and integration tests too: 2-3 s a build instead of 7). Not part of `make test`: ~3600
 ## mutants, hours on 2 cores. Results in mutants.out/; `--iterate` in CARGO_MUTANTS_ARGS re-runs
 ## only what a previous run did not catch.
-## MUTANTS_FILES narrows it, e.g. make mutants MUTANTS_FILES='server/src/physics/integrate/*.rs'.
+## MUTANTS_FILES narrows it, e.g. make mutants MUTANTS_FILES='server/src/physics/integrate/*.rs';
+## MUTANTS_TESTS holds the library test filters the mutants run against, one or several (they go
+## to the test binary: MUTANTS_TESTS='physics:: push_run:: sweep::'). Test-only modules
+## (tests.rs, *_tests.rs, the Eq 17 reference) are not mutated.
 MUTANTS_FILES ?= server/src/physics/**/*.rs server/src/control/**/*.rs server/src/serve/validate.rs proto/src/**/*.rs
 MUTANTS_TESTS ?=
 CARGO_MUTANTS_ARGS ?=
 mutants:
-	@command -v cargo-mutants >/dev/null || $(CARGO) install cargo-mutants --locked
+	@command -v cargo-mutants >/dev/null || $(CARGO) install cargo-mutants --version 27.1.0 --locked
 	$(CARGO) mutants --workspace $(CARGO_MUTANTS_ARGS) $(foreach f,$(MUTANTS_FILES),-f '$(f)') \
-	  -e '**/tests.rs' -e '**/tests/**' -e '**/test_problems.rs' --timeout-multiplier 3 \
-	  -C --lib -- $(MUTANTS_TESTS)
+	  -e '**/tests.rs' -e '**/tests/**' -e '**/*_tests.rs' -e '**/test_problems.rs' \
+	  -e '**/eq17_reference.rs' --timeout-multiplier 3 \
+	  -C --lib -- -- $(MUTANTS_TESTS)
 
 clean:
 	$(CARGO) clean
