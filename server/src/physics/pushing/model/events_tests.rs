@@ -254,3 +254,25 @@ fn quasi_static_rates_are_the_slope_of_the_balanced_states() {
         assert!(moved >= 2, "the push moves the balanced states");
     }
 }
+
+/// With JKR contacts (γ_SL = 20 mJ/m²) the tip contact holds down to a negative indentation
+/// `δ_min`, so its switching function `(a₀ − h) − δ_min` is positive at `h = a₀` and reaches
+/// zero only at `h = a₀ − δ_min` (beyond a₀, where the JKR branch ends).
+#[test]
+fn a_jkr_tip_contact_lets_go_beyond_a0() {
+    let m = model(&[(
+        "solid_liquid_energy_mj_per_m2 = 0.0",
+        "solid_liquid_energy_mj_per_m2 = 20.0",
+    )]);
+    let d_min = m.p.jkr_ta.min_indentation();
+    assert!(d_min < -1e-12, "JKR holds at a negative indentation: {d_min}");
+    let a0 = m.p.interactions.a0;
+    let x = m.initial_state()[..m.len()].to_vec();
+    let mode = m.initial_mode();
+    assert!(mode.tip_contact);
+    let gap = m.probe(0.0, &x, &mode).gap;
+    let sw = m.switching(0.0, &x, &mode).tip_contact.unwrap();
+    let want = (a0 - gap) - d_min;
+    assert!((sw - want).abs() <= 1e-9 * want.abs(), "{sw} vs {want}");
+    assert!(sw > -d_min * 0.5, "the function holds the contact past a₀: {sw}");
+}
