@@ -333,4 +333,18 @@ mod tests {
         i.mu_as_k = 1.2;
         assert!(matches!(steady_state(&i, &jkr()), Err(SteadyError::Jammed { .. })));
     }
+
+    /// A coupling that makes Eq 18's linear system singular is refused, not divided by: with
+    /// α = 0 the determinant is `1 − (k_y/k_yz) sin β cos β`, zero (to rounding) at
+    /// `k_yz = k_y sin β cos β`. Beside it, 1 % off, the system solves.
+    #[test]
+    fn a_singular_coupling_is_refused() {
+        let mut i = paper();
+        i.alpha = 0.0;
+        i.k_yz = i.k_y * i.beta.sin() * i.beta.cos();
+        assert!(matches!(steady_state(&i, &jkr()), Err(SteadyError::Singular)));
+        i.k_yz *= 1.01;
+        let s = steady_state(&i, &jkr()).unwrap();
+        assert!(s.y.is_finite() && s.y.abs() > 0.0, "{s:?}");
+    }
 }
