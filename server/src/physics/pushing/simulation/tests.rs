@@ -1,6 +1,7 @@
 //! Tests of the hybrid push simulation.
 
 use super::*;
+use crate::physics::forces::capillary::Meniscus;
 use crate::scene::Scene;
 
 fn scene(name: &str) -> PushModel {
@@ -185,4 +186,135 @@ fn set_drive_takes_only_a_new_segment() {
         "{:?} after {switched} switches",
         sim.phase()
     );
+}
+
+/// A tick reports the switches it made (each event, plus those it made due at once), and a
+/// tick that needs more than `max_switches` is refused as chattering while one that needs
+/// exactly that many is not.
+#[test]
+fn switches_are_counted_and_chattering_is_bounded() {
+    // The minimal scene shears within 30 ms; per tick, how many switches?
+    let run = |max_switches: u32| -> Result<Vec<u32>, u32> {
+        let mut sim = Simulation::new(scene("minimal.toml"), Method::Rodas4, Options::with_rtol(1e-6));
+        sim.max_switches = max_switches;
+        let mut counts = Vec::new();
+        for k in 1..=30 {
+            match sim.advance_to(k as f64 * 1e-3) {
+                Ok(r) => counts.push(r.switches),
+                Err(SimulationError::Chattering { count, .. }) => return Err(count),
+                Err(e) => panic!("{e}"),
+            }
+        }
+        Ok(counts)
+    };
+    let counts = run(10_000).unwrap();
+    let most = *counts.iter().max().unwrap();
+    assert!(most >= 1, "the shearing is a switch: {counts:?}");
+    assert!(run(most).is_ok(), "exactly {most} switches is not chattering");
+    assert_eq!(
+        run(most - 1),
+        Err(most),
+        "one more than the limit is refused, and counted"
+    );
+}
+
+/// A mode that does not fit the state (a switching function already negative: the tip pressed
+/// in but "apart", a meniscus "absent" around a tip in contact) is set right at once, and each
+/// switch is counted.
+#[test]
+fn a_mode_that_does_not_fit_the_state_is_set_right_at_once() {
+    let mut sim = Simulation::new(scene("paper-default.toml"), Method::Rodas4, Options::with_rtol(1e-6));
+    let fitted = sim.mode;
+    assert!(fitted.tip_contact && fitted.meniscus == Meniscus::Formed, "{fitted:?}");
+    assert_eq!(sim.enforce_mode(), 0, "a fitting mode is left alone");
+
+    sim.mode.meniscus = Meniscus::Absent;
+    assert!(
+        sim.model
+            .switching(sim.t, &sim.x[..sim.model.len()], &sim.mode)
+            .meniscus
+            .unwrap()
+            < 0.0
+    );
+    assert_eq!(sim.enforce_mode(), 1);
+    assert_eq!(sim.mode.meniscus, Meniscus::Formed);
+
+    sim.mode.tip_contact = false;
+    assert!(
+        sim.model
+            .switching(sim.t, &sim.x[..sim.model.len()], &sim.mode)
+            .tip_contact
+            .unwrap()
+            < 0.0
+    );
+    assert_eq!(sim.enforce_mode(), 1);
+    assert!(sim.mode.tip_contact);
+}
+
+/// A slipping contact at rest keeps slipping: only a slip that runs against its friction by
+/// more than 1 nm/s sticks. The minimal scene's push slides by 30 ms; the stage then stops (a
+/// new drive that holds), every row is quasi-static, so the slip rate is zero at once.
+#[test]
+fn a_slip_at_rest_is_no_reason_to_stick() {
+    let mut sim = Simulation::new(scene("minimal.toml"), Method::Rodas4, Options::with_rtol(1e-6));
+    sim.advance_to(30e-3).unwrap();
+    assert_eq!(sim.phase(), FrictionPhase::Slip);
+    let d = sim.model.drive;
+    let hold = Drive {
+        t0: sim.t,
+        y0: d.y_at(sim.t),
+        vy: 0.0,
+        z0: d.z_at(sim.t),
+        vz: 0.0,
+    };
+    assert_eq!(sim.set_drive(hold), 0, "{:?}", sim.mode);
+    let n = sim.model.len();
+    let (rate_as, _) = sim.model.contact_rates(sim.t, &sim.x[..n], &sim.mode).unwrap();
+    assert!(rate_as.abs() < 1e-12, "at rest: {rate_as}");
+    assert_eq!(sim.phase(), FrictionPhase::Slip);
+}
+
+/// A quasi-static particle has no balance without the tip: once the contact is broken the push
+/// stops where it is ([`SimulationError::ContactLost`]) and the state is unchanged; advancing
+/// to where it already is does nothing. Lifted at 1 mm/s, the minimal scene's tip lets go
+/// ([`Simulation::advance_or_release`]) where its contact breaks, before the tick's end.
+#[test]
+fn without_the_tip_a_quasi_static_particle_is_let_go() {
+    let mut sim = Simulation::new(scene("paper-default.toml"), Method::Rodas4, Options::with_rtol(1e-6));
+    assert!(sim.quasi_static_particle());
+    sim.mode.tip_contact = false;
+    let before = sim.x;
+    assert_eq!(sim.advance_to(0.0).unwrap().switches, 0);
+    assert!(matches!(sim.advance_to(1e-4), Err(SimulationError::ContactLost { .. })));
+    assert_eq!((sim.t, sim.x), (0.0, before));
+
+    let mut model = scene("minimal.toml");
+    model.drive = Drive {
+        vz: 1e-3,
+        ..Drive::constant_speed(0.0)
+    };
+    let mut sim = Simulation::new(model, Method::Rodas4, Options::with_rtol(1e-6));
+    assert_eq!(sim.advance_or_release(1e-3).unwrap(), Advance::Released);
+    assert!(
+        !sim.mode.tip_contact && sim.t < 1e-3,
+        "released where it broke, at {} s",
+        sim.t
+    );
+}
+
+/// Any other failure is an error while the tip pushes, and a release while it lifts (the
+/// particle is let go wherever the failure happened): chattering made certain with
+/// `max_switches = 0` under the minimal scene's push, which shears within 30 ms.
+#[test]
+fn a_failure_is_a_release_only_while_lifting() {
+    let run = |vz: f64| {
+        let mut model = scene("minimal.toml");
+        model.drive.vz = vz;
+        let mut sim = Simulation::new(model, Method::Rodas4, Options::with_rtol(1e-6));
+        sim.max_switches = 0;
+        sim.advance_or_release(30e-3)
+    };
+    assert!(matches!(run(0.0), Err(SimulationError::Chattering { count: 1, .. })));
+    assert!(matches!(run(-1e-9), Err(SimulationError::Chattering { count: 1, .. })));
+    assert_eq!(run(1e-9).unwrap(), Advance::Released);
 }
