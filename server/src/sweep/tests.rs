@@ -249,3 +249,35 @@ fn fig13_y_and_zeta_z_grow_with_the_radius() {
     let (ds, dl) = (sliding_at(Param::Radius, 250.0), sliding_at(Param::Radius, 1000.0));
     assert!(dl.y.mean > 1.5 * ds.y.mean && dl.zeta_z.mean < ds.zeta_z.mean);
 }
+
+/// The README's Eq 18 figures for Figs 10, 12 and 13 (default scene, the README's digits):
+/// `y` and `ζ_z` at α = 0°, 15°, 18° and past the pole at 19.5°; `y` at μ_as^s = 0.1 and 0.7;
+/// `y` at Rₐ = 100 nm and 3 µm.
+#[test]
+fn the_readmes_eq18_figures() {
+    let nm = |v: f64| v * 1e9;
+    let near = |got: f64, want: f64, tol: f64| (got - want).abs() <= tol;
+    for (alpha, y, zeta_z, tol_y, tol_z) in [
+        (0.0, 7.03, -4.6, 0.005, 0.05),
+        (15.0, 9.47, -24.2, 0.005, 0.05),
+        (18.0, 23.7, -178.0, 0.05, 0.5),
+        (19.5, -1.1, 95.0, 0.05, 0.5),
+    ] {
+        let s = eq18_at(Param::Alpha, alpha).unwrap();
+        assert!(
+            near(nm(s.y), y, tol_y) && near(nm(s.zeta_z), zeta_z, tol_z),
+            "α = {alpha}°: y {} nm, ζz {} nm",
+            nm(s.y),
+            nm(s.zeta_z)
+        );
+    }
+    for (param, value, y, tol) in [
+        (Param::MuAs, 0.1, 2.6, 0.05),
+        (Param::MuAs, 0.7, 37.0, 0.5),
+        (Param::Radius, 100.0, 0.97, 0.005),
+        (Param::Radius, 3000.0, 28.4, 0.05),
+    ] {
+        let s = eq18_at(param, value).unwrap();
+        assert!(near(nm(s.y), y, tol), "{param:?} = {value}: y {} nm", nm(s.y));
+    }
+}
