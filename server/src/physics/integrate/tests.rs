@@ -631,3 +631,43 @@ fn illinois_locates_time_events_of_either_curvature() {
     }
     assert_eq!(evals, [8, 8]);
 }
+
+/// Rodas4's dense output is of third order (Hairer & Wanner's continuous extension): an event
+/// located inside a step of a time-dependent nonlinear problem (Prothero-Robinson, λ = −10,
+/// fixed steps) lands within h⁴ of the exact crossing. `y = φ(t)` falls through
+/// `φ(0.77)` at `t* = 0.77`, mid-step for h = 0.08 and 0.04 (the crossing at the top of
+/// φ's hump, 0.26, is not near).
+#[test]
+fn rodas4_dense_output_locates_a_crossing_to_fourth_order() {
+    let p = ProtheroRobinson { lambda: -10.0 };
+    let level = ProtheroRobinson::phi(0.77);
+    struct Level(f64);
+    impl Events for Level {
+        fn count(&self) -> usize {
+            1
+        }
+        fn eval(&self, _t: f64, y: &[f64], out: &mut [f64]) {
+            out[0] = y[0] - self.0;
+        }
+    }
+    let error = |h: f64| {
+        let mut opts = Options::with_rtol(1e12);
+        opts.h_max = h;
+        opts.event_tol = 1e-14;
+        let mut it = Integrator::new(Method::Rodas4, opts);
+        let (mut t, mut y) = (0.0, [ProtheroRobinson::phi(0.0)]);
+        let (o, _) = it.advance(&p, &Level(level), &mut t, &mut y, 2.0).unwrap();
+        assert_eq!(o, Outcome::Event { index: 0 });
+        (t - 0.77).abs()
+    };
+    // Measured: 1.65e-5 and 9.6e-9 s. With a coefficient of the extension's cubic term of the
+    // wrong sign, 3.7e-3 and 5.7e-4 s (second order and a constant 600 times larger).
+    for h in [0.08, 0.04] {
+        let e = error(h);
+        assert!(
+            e < h.powi(4),
+            "h = {h}: the event is {e:e} s off, above h⁴ = {:e}",
+            h.powi(4)
+        );
+    }
+}
