@@ -184,3 +184,67 @@ fn a_reader_that_falls_behind_is_told_how_many_frames_it_skipped() {
         ok(&mut ws, json!({"type": "ping", "id": 2})).await;
     });
 }
+
+/// The CPUs a thread may run on, from `Cpus_allowed_list` ("0", "0-1", "0,2-3").
+fn allowed_cpus(status: &str) -> Vec<usize> {
+    let list = status
+        .lines()
+        .find_map(|l| l.strip_prefix("Cpus_allowed_list:"))
+        .expect("Cpus_allowed_list")
+        .trim();
+    list.split(',')
+        .flat_map(|r| match r.split_once('-') {
+            Some((a, b)) => (a.parse().unwrap()..=b.parse().unwrap()).collect::<Vec<usize>>(),
+            None => vec![r.parse().unwrap()],
+        })
+        .collect()
+}
+
+/// Issue 12's soak: the loop overran more under client load than idle. With realtime granted the
+/// control loop is pinned to the last core and every other thread of the server stays off it,
+/// the main thread too (the accept loop runs there, in `block_on`): before, the main thread and
+/// the recorder could run on the loop's core, where their socket and file work runs with
+/// preemption off.
+#[test]
+fn only_the_control_loop_runs_on_its_core() {
+    let ncpu = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if ncpu < 2 {
+        eprintln!("one CPU: nothing to keep apart");
+        return;
+    }
+    let srv = start("cores", &[]);
+    // A connection and a scan start the threads that come later (the blocking pool, the scan).
+    runtime().block_on(async {
+        let mut op = operator(&srv.addr, "scan").await;
+        ok(
+            &mut op,
+            json!({"type": "scan", "id": 2, "centre_x_um": 40.0, "centre_y_um": 30.0, "size_um": 4.0, "pixels": 16}),
+        )
+        .await;
+        until(&mut op, 30.0, |m| is(m, "scan_done")).await;
+    });
+    let pid = srv.child.id();
+    let mut seen = Vec::new();
+    for task in std::fs::read_dir(format!("/proc/{pid}/task")).unwrap() {
+        let task = task.unwrap().path();
+        let name = std::fs::read_to_string(task.join("comm")).unwrap().trim().to_string();
+        let Ok(status) = std::fs::read_to_string(task.join("status")) else {
+            continue; // the thread ended meanwhile
+        };
+        seen.push((name, allowed_cpus(&status)));
+    }
+    let last = ncpu - 1;
+    let (lp, others): (Vec<_>, Vec<_>) = seen.iter().partition(|(n, _)| n == "control-loop");
+    assert_eq!(lp.len(), 1, "{seen:?}");
+    assert_eq!(lp[0].1, vec![last], "the loop is pinned to the last core: {seen:?}");
+    for name in ["nanopush", "tokio-rt-worker", "recorder"] {
+        assert!(others.iter().any(|(n, _)| n == name), "no {name} thread: {seen:?}");
+    }
+    for (name, cpus) in others {
+        assert!(
+            !cpus.contains(&last),
+            "{name} may run on the loop's core {last}: {seen:?}"
+        );
+        assert!(!cpus.is_empty(), "{name}: {seen:?}");
+    }
+}
