@@ -8,6 +8,8 @@ mod push;
 mod scan;
 mod serve;
 mod serve_behaviour;
+mod serve_hostile;
 mod serve_scenes;
+mod serve_state;
 mod simulate;
 mod sweep;

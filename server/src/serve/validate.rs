@@ -146,15 +146,38 @@ mod tests {
         assert!(e.message.contains("x = 101 is out of range; allowed: [0, 100] µm"));
     }
 
+    /// The bounds the message prints are the bounds checked: a closed end is allowed, an open
+    /// one is not, and the next double past either end is refused (cargo-mutants: `> hi` as
+    /// `>= hi` survived).
+    #[test]
+    fn each_end_of_a_range_is_as_the_message_says() {
+        assert_eq!(number("x", 100.0, 0.0, 100.0, false, "µm"), Ok(100.0));
+        assert_eq!(number("x", 0.0, 0.0, 100.0, false, "µm"), Ok(0.0));
+        assert_eq!(number("x", 100.0, 0.0, 100.0, true, "µm"), Ok(100.0));
+        for (v, lo_open) in [
+            (0.0, true),
+            (100.0f64.next_up(), false),
+            (100.0f64.next_up(), true),
+            ((-0.0f64).next_down(), false),
+        ] {
+            assert_eq!(
+                number("x", v, 0.0, 100.0, lo_open, "µm").unwrap_err().code,
+                ErrorCode::OutOfRange,
+                "{v}"
+            );
+        }
+    }
+
     #[test]
     fn a_push_is_a_distance_or_a_point_never_both() {
         assert!(matches!(
             push_target(Some(2.0), Some(90.0), None, None, 100.0),
             Ok(MoveTarget::Distance { distance, direction }) if (distance - 2e-6).abs() < 1e-18 && direction.1 > 0.99
         ));
+        // A point in µm becomes metres (cargo-mutants: the conversion's `*` survived).
         assert!(matches!(
             push_target(None, None, Some(5.0), Some(6.0), 100.0),
-            Ok(MoveTarget::Point(_))
+            Ok(MoveTarget::Point((x, y))) if x == 5.0 * 1e-6 && y == 6.0 * 1e-6
         ));
         for bad in [
             push_target(Some(1.0), None, Some(1.0), Some(1.0), 100.0),

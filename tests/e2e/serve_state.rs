@@ -1,0 +1,132 @@
+//! `nanopush serve` for the page (issue 11): a late joiner gets the instrument's state, a push
+//! stops when its lease holder leaves, static files are compressed.
+
+use std::io::{Read, Write};
+use std::net::TcpStream;
+
+use serde_json::json;
+
+use crate::serve::{TOKEN, connect, http_get, is, ok, runtime, send, start, until};
+
+/// Issue 11, defects 2 and 5: a client that connects after a scan and a push gets, right after
+/// `welcome`, the instrument as it is: the moved particle, the lease, the phase, the latest scan
+/// (marked stale once a push ran since) and, while a push runs, its path.
+#[test]
+fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
+    let srv = start("late", &["--scan-line-hz", "400"]);
+    runtime().block_on(async {
+        let mut op = connect(&srv.addr, Some(TOKEN)).await;
+        let w = until(&mut op, 5.0, |m| is(m, "welcome")).await;
+        let me = w["client"].as_u64().unwrap();
+        let first = until(&mut op, 5.0, |_| true).await;
+        assert_eq!(first["type"], "state", "the message after welcome: {first}");
+        assert!(first["scan"].is_null() && first["push"].is_null(), "{first}");
+        assert_eq!(first["particles"][0]["x"], 40e-6);
+        send(&mut op, json!({"type": "subscribe", "id": 1, "streams": ["scan"]})).await;
+        ok(&mut op, json!({"type": "take_lease", "id": 2})).await;
+        ok(&mut op, json!({"type": "scan", "id": 3, "pixels": 16})).await;
+        let done = until(&mut op, 20.0, |m| is(m, "scan_done")).await;
+        let scan_record = done["record"].as_str().expect("a scan record").to_string();
+
+        ok(
+            &mut op,
+            json!({"type": "push", "id": 4, "particle": 1, "distance_um": 1.0, "direction_deg": 0.0}),
+        )
+        .await;
+        // Everyone hears the push start, with its planned path.
+        let started = until(&mut op, 20.0, |m| is(m, "push_started")).await;
+        assert_eq!(started["particle"], 1);
+        assert_eq!(started["by"], me);
+        let path = started["path"].as_array().unwrap();
+        assert_eq!(path.len(), 2, "{started}");
+        assert!((path[1][0].as_f64().unwrap() - 41e-6).abs() < 50e-9, "{started}");
+        // A viewer joining during the push sees its path.
+        let mut during = connect(&srv.addr, None).await;
+        until(&mut during, 5.0, |m| is(m, "welcome")).await;
+        let s = until(&mut during, 5.0, |_| true).await;
+        assert_eq!(s["type"], "state");
+        assert_eq!(s["push"]["particle"], 1, "{s}");
+        assert_eq!(s["lease"], me);
+        let run = until(&mut op, 30.0, |m| is(m, "run_done")).await;
+        assert_eq!(run["outcome"], "ok", "{run}");
+
+        let mut late = connect(&srv.addr, None).await;
+        until(&mut late, 5.0, |m| is(m, "welcome")).await;
+        let s = until(&mut late, 5.0, |_| true).await;
+        assert_eq!(s["type"], "state", "{s}");
+        assert!(s["push"].is_null(), "{s}");
+        assert_eq!(s["lease"], me);
+        assert_eq!(s["phase"], "idle");
+        let p1 = s["particles"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["id"] == 1)
+            .unwrap()
+            .clone();
+        assert_eq!(p1["x"], run["estimate"][0], "{s}");
+        assert!((p1["radius"].as_f64().unwrap() - 500e-9).abs() < 1e-15, "{p1}");
+        assert_eq!(s["scan"]["record"], scan_record.as_str());
+        assert_eq!(s["scan"]["done"], true);
+        assert_eq!(s["scan"]["xres"], 16);
+        assert_eq!(s["scan"]["stale"], true, "a push ran since the scan: {s}");
+        let (status, _) = http_get(&srv.addr, &format!("/api/records/{scan_record}"));
+        assert_eq!(status, 200);
+    });
+}
+
+/// Issue 11, defect 6: when the lease holder's connection closes during a push, the push is
+/// stopped (nobody watches it), recorded, and everyone is told why the lease went.
+#[test]
+fn issue_11_a_push_stops_when_its_lease_holder_disconnects() {
+    let srv = start("holder-gone", &[]);
+    runtime().block_on(async {
+        let mut watcher = connect(&srv.addr, None).await;
+        until(&mut watcher, 5.0, |m| is(m, "welcome")).await;
+        let mut op = connect(&srv.addr, Some(TOKEN)).await;
+        let me = until(&mut op, 5.0, |m| is(m, "welcome")).await["client"]
+            .as_u64()
+            .unwrap();
+        ok(&mut op, json!({"type": "take_lease", "id": 1})).await;
+        ok(
+            &mut op,
+            json!({"type": "push", "id": 2, "particle": 1, "distance_um": 5.0, "direction_deg": 0.0}),
+        )
+        .await;
+        until(&mut watcher, 20.0, |m| is(m, "push_started")).await;
+        drop(op);
+        let lease = until(&mut watcher, 10.0, |m| is(m, "lease")).await;
+        assert!(lease["holder"].is_null(), "{lease}");
+        let why = lease["reason"].as_str().expect("a reason");
+        assert!(
+            why.contains(&format!("client {me}")) && why.contains("push was stopped"),
+            "{why}"
+        );
+        let run = until(&mut watcher, 20.0, |m| is(m, "run_done")).await;
+        assert_eq!(run["outcome"], "stopped", "{run}");
+        assert!(run["record"].is_string(), "the stopped push is recorded: {run}");
+    });
+}
+
+/// Issue 11, page weight: static files are gzip-compressed for a browser that accepts it.
+#[test]
+fn issue_11_static_files_are_compressed() {
+    let srv = start("gzip", &[]);
+    let mut s = TcpStream::connect(&srv.addr).unwrap();
+    write!(
+        s,
+        "GET /src/protocol.js HTTP/1.1\r\nHost: {}\r\nAccept-Encoding: gzip\r\nConnection: close\r\n\r\n",
+        srv.addr
+    )
+    .unwrap();
+    let mut buf = Vec::new();
+    s.read_to_end(&mut buf).unwrap();
+    let head_end = buf.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
+    let head = String::from_utf8_lossy(&buf[..head_end]).to_ascii_lowercase();
+    assert!(head.starts_with("http/1.1 200"), "{head}");
+    assert!(head.contains("content-encoding: gzip"), "{head}");
+    // Without Accept-Encoding: plain.
+    let (status, body) = http_get(&srv.addr, "/src/protocol.js");
+    assert_eq!(status, 200);
+    assert!(String::from_utf8_lossy(&body).contains("parseGsf"));
+}
