@@ -193,7 +193,10 @@ mod tests {
             "settled offset without rotation {offset:e} m"
         );
         let zeta_z = run.steady_zeta_z();
-        assert!((zeta_z + 1.98e-9).abs() < 0.005e-9, "steady ζ_z without rotation {zeta_z:e} m");
+        assert!(
+            (zeta_z + 1.98e-9).abs() < 0.005e-9,
+            "steady ζ_z without rotation {zeta_z:e} m"
+        );
     }
 
     /// The README's `nanopush simulate` run (its defaults: the default scene, 50 ms, Rodas4 at

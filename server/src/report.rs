@@ -151,18 +151,27 @@ mod tests {
             let r = force_curve_report(&scene, steps);
             let snap_in = r.snap_in_distance.unwrap();
             let pull_off = r.pull_off_distance.unwrap();
-            assert!((snap_in - 3.60e-9).abs() < 0.005e-9, "{steps} steps: snap-in {snap_in:e} m");
+            assert!(
+                (snap_in - 3.60e-9).abs() < 0.005e-9,
+                "{steps} steps: snap-in {snap_in:e} m"
+            );
             assert!(
                 (r.pull_off_force + 55.09e-9).abs() < 0.005e-9,
                 "{steps} steps: pull-off {:e} N",
                 r.pull_off_force
             );
             assert!((r.pull_off_force / closed_form - 1.0).abs() < 1e-9, "{steps} steps");
-            assert!((pull_off - 7.05e-9).abs() < 0.005e-9, "{steps} steps: at {pull_off:e} m");
+            assert!(
+                (pull_off - 7.05e-9).abs() < 0.005e-9,
+                "{steps} steps: at {pull_off:e} m"
+            );
             assert!((pull_off - (ts.a0 - r.pull_off_force / ts.k_c)).abs() < 1e-15);
             let start = r.approach[0].distance;
             let end = r.retraction.last().unwrap().distance;
-            assert!((end - start - 1.5 * ts.adhesion() / ts.k_c).abs() < 1e-15, "{steps} steps");
+            assert!(
+                (end - start - 1.5 * ts.adhesion() / ts.k_c).abs() < 1e-15,
+                "{steps} steps"
+            );
         }
     }
 

@@ -346,7 +346,12 @@ fn a_particle_below_the_scan_noise_is_refused() {
 #[test]
 fn the_shipped_scenes_are_what_the_readmes_table_says() {
     let load = |name: &str| {
-        Scene::from_path(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(name)).unwrap()
+        Scene::from_path(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../scenes")
+                .join(name),
+        )
+        .unwrap()
     };
     let latex = load("gold-latex-500nm.toml");
     assert_eq!(latex.file.particles.len(), 3);
@@ -356,7 +361,10 @@ fn the_shipped_scenes_are_what_the_readmes_table_says() {
     assert_eq!(2.0 * gold.pushed_particle().radius_nm, 14.0);
     assert_eq!(gold.file.tip.radius_nm, 10.0);
     assert!(gold.file.physics.electrostatic);
-    assert_eq!((gold.file.strategy.step_um, gold.file.strategy.set_point_v), (0.01, -0.8));
+    assert_eq!(
+        (gold.file.strategy.step_um, gold.file.strategy.set_point_v),
+        (0.01, -0.8)
+    );
     let minimal = load("minimal.toml").file;
     assert_eq!(minimal.push.contact_angle_deg, 45.0);
     let ph = &minimal.physics;

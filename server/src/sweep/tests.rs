@@ -311,7 +311,11 @@ fn fig11_eq18_pole_at_beta_23_2_deg_is_the_sweeps_argmin_and_it_jams_from_67_4_d
     let (mut lo, mut hi) = (60.0, 75.0);
     for _ in 0..50 {
         let mid = 0.5 * (lo + hi);
-        if eq18_at(Param::Beta, mid).is_some() { lo = mid } else { hi = mid }
+        if eq18_at(Param::Beta, mid).is_some() {
+            lo = mid
+        } else {
+            hi = mid
+        }
     }
     assert!((lo - 67.4).abs() < 0.05, "jams from {lo}°");
     let jam = eq18(&Param::Beta.apply(&base(), 67.5).unwrap().push_params());
@@ -390,16 +394,26 @@ fn fig10_dynamic_y_sliding_9_98_4_26_9_15_nm_rolling_1_20_to_0_235_nm_at_42_deg(
 #[test]
 fn fig11_sliding_y_least_4_41_nm_at_33_deg_and_stuck_from_51_deg_rolling_56_deg_sliding() {
     let (y33, z33) = settled_nm(Param::Beta, 33.0, true);
-    assert!(near(y33, 4.41, 0.005) && near(z33, -2.07, 0.005), "β = 33°: {y33} nm, ζ_z {z33} nm");
+    assert!(
+        near(y33, 4.41, 0.005) && near(z33, -2.07, 0.005),
+        "β = 33°: {y33} nm, ζ_z {z33} nm"
+    );
     let volts = base().sensor().gain * z33 * 1e-9;
     assert!(near(volts, 1.66, 0.005), "{volts} V");
-    for b in grid(5.0, 65.0, 31).into_iter().filter(|&b| b != 33.0).chain([32.0, 34.0]) {
+    for b in grid(5.0, 65.0, 31)
+        .into_iter()
+        .filter(|&b| b != 33.0)
+        .chain([32.0, 34.0])
+    {
         if let Ok(d) = dynamic_at(Param::Beta, b, true) {
             assert!(d.y.mean * 1e9 > y33, "β = {b}°: {:e} m", d.y.mean);
         }
     }
     let (y34, z34) = settled_nm(Param::Beta, 34.0, true);
-    assert!(near(y34, 6.2, 0.05) && near(z34, 2.2, 0.05), "β = 34°: {y34} nm, ζ_z {z34} nm");
+    assert!(
+        near(y34, 6.2, 0.05) && near(z34, 2.2, 0.05),
+        "β = 34°: {y34} nm, ζ_z {z34} nm"
+    );
     for (beta, y, tol) in [(5.0, 4.52, 0.005), (51.0, 27.8, 0.05)] {
         let (got, _) = settled_nm(Param::Beta, beta, true);
         assert!(near(got, y, tol), "sliding, β = {beta}°: y {got} nm");
@@ -412,7 +426,10 @@ fn fig11_sliding_y_least_4_41_nm_at_33_deg_and_stuck_from_51_deg_rolling_56_deg_
     assert!(!stuck(50.0, false) && stuck(51.0, false), "rolling");
     assert!(!stuck(54.0, true) && stuck(56.0, true), "sliding");
     let e = dynamic_at(Param::Beta, 55.0, true).unwrap_err();
-    assert!(e.contains("contact with the particle broke") && e.contains("t = 1.1"), "{e}");
+    assert!(
+        e.contains("contact with the particle broke") && e.contains("t = 1.1"),
+        "{e}"
+    );
 }
 
 /// The README's dynamic model in Fig 12 (0.2 s pushes over the Fig 12 sweep's grid, μ_as^s from
@@ -423,12 +440,23 @@ fn fig11_sliding_y_least_4_41_nm_at_33_deg_and_stuck_from_51_deg_rolling_56_deg_
 fn fig12_sliding_y_1_8_to_18_4_nm_and_rolling_0_669_nm_at_any_mu() {
     let mus = grid(0.1, 1.5, 29);
     let sliding: Vec<f64> = mus.iter().map(|&mu| settled_nm(Param::MuAs, mu, true).0).collect();
-    assert!(near(sliding[0], 1.8, 0.05) && near(sliding[28], 18.4, 0.05), "{sliding:?}");
+    assert!(
+        near(sliding[0], 1.8, 0.05) && near(sliding[28], 18.4, 0.05),
+        "{sliding:?}"
+    );
     let chord = 0.5 * (sliding[0] + sliding[28]);
-    assert!((sliding[14] / chord - 1.0).abs() < 0.01, "μ = {}: {} nm", mus[14], sliding[14]);
+    assert!(
+        (sliding[14] / chord - 1.0).abs() < 0.01,
+        "μ = {}: {} nm",
+        mus[14],
+        sliding[14]
+    );
     for &mu in &mus {
         let (y, z) = settled_nm(Param::MuAs, mu, false);
-        assert!(near(y, 0.669, 0.0005) && near(z, 1.259, 0.0005), "rolling, μ = {mu}: {y}, {z} nm");
+        assert!(
+            near(y, 0.669, 0.0005) && near(z, 1.259, 0.0005),
+            "rolling, μ = {mu}: {y}, {z} nm"
+        );
     }
 }
 
@@ -445,7 +473,9 @@ fn fig13_sliding_y_0_75_to_10_1_nm_and_rolling_0_645_to_0_670_nm() {
         .into_iter()
         .map(|r| settled_nm(Param::Radius, r, false).0)
         .collect();
-    let (lo, hi) = rolling.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &y| (lo.min(y), hi.max(y)));
+    let (lo, hi) = rolling
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(lo, hi), &y| (lo.min(y), hi.max(y)));
     assert!(near(lo, 0.645, 0.0005) && lo == rolling[0], "{rolling:?}");
     assert!(near(hi, 0.670, 0.0005), "{rolling:?}");
 }

@@ -332,7 +332,11 @@ fn work_on_the_reference_problems_is_pinned() {
         if let Some(error) = error {
             let err = crate::accuracy::max_relative_error(&y, &VanDerPol::REFERENCE);
             let half_unit = 0.05 * 10f64.powf(error.log10().floor());
-            assert!((err - error).abs() <= half_unit, "Van der Pol, {}: error {err:e}", m.name());
+            assert!(
+                (err - error).abs() <= half_unit,
+                "Van der Pol, {}: error {err:e}",
+                m.name()
+            );
         }
         if m == Method::Rodas4 {
             // The sum of the accepted steps' error norms (the error estimate's input).

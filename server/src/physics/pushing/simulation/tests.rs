@@ -361,9 +361,17 @@ fn the_full_models_first_slip_takes_62_941_steps_in_one_tick_at_the_reduced_t_st
         model.p.dofs.particle_rotation = crate::physics::pushing::params::Dof::Off;
         PushModel::new(model.p)
     };
-    let mut reduced = Simulation::new(rotation_off("paper-default.toml"), Method::Rodas4, Options::with_rtol(1e-6));
+    let mut reduced = Simulation::new(
+        rotation_off("paper-default.toml"),
+        Method::Rodas4,
+        Options::with_rtol(1e-6),
+    );
     reduced.advance_to(7e-3).unwrap();
-    let mut full = Simulation::new(rotation_off("paper-full-dynamics.toml"), Method::Rodas4, Options::with_rtol(1e-6));
+    let mut full = Simulation::new(
+        rotation_off("paper-full-dynamics.toml"),
+        Method::Rodas4,
+        Options::with_rtol(1e-6),
+    );
     assert_eq!(scene("paper-full-dynamics.toml").len(), 12, "the full model");
     assert_eq!(full.model.len(), 10, "12 states less the rotation's two");
     let mut ticks = Vec::new();
