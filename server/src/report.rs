@@ -133,6 +133,59 @@ mod tests {
         assert!(r.steady_state.is_some());
     }
 
+    /// The README's force curve of the default scene (`nanopush model --force-curve`): snap-in
+    /// at 3.60 nm, pull-off −55.09 nN at 7.05 nm, the same at any `--steps` (root-finding, not
+    /// the grid). The pull-off is the closed form of a Hertz contact leaving at zero
+    /// indentation: the meniscus `4πRₜγ_L` (27 nN) plus van der Waals at contact `HRₜ/(6a₀²)`
+    /// with the scene's combined Hamaker constant; it lets go at `d = a₀ + |F|/k_c`. The
+    /// retraction runs out to 1.5 adhesion/k_c beyond the start.
+    #[test]
+    fn the_default_force_curve_snaps_in_at_3_60_nm_and_pulls_off_at_minus_55_09_nn_at_7_05_nm() {
+        use crate::physics::forces::vdw::sphere_plane_force;
+        let scene = Scene::default_scene();
+        let ts = scene.tip_sample();
+        let meniscus = 4.0 * std::f64::consts::PI * ts.r_t * scene.file.environment.surface_tension_mj_per_m2 * 1e-3;
+        assert!((meniscus - 27e-9).abs() < 0.5e-9, "meniscus {meniscus:e} N");
+        let closed_form = -meniscus + sphere_plane_force(ts.long_range.hamaker.unwrap(), ts.r_t, ts.a0, ts.a0);
+        for steps in [20, 200, 2000] {
+            let r = force_curve_report(&scene, steps);
+            let snap_in = r.snap_in_distance.unwrap();
+            let pull_off = r.pull_off_distance.unwrap();
+            assert!(
+                (snap_in - 3.60e-9).abs() < 0.005e-9,
+                "{steps} steps: snap-in {snap_in:e} m"
+            );
+            assert!(
+                (r.pull_off_force + 55.09e-9).abs() < 0.005e-9,
+                "{steps} steps: pull-off {:e} N",
+                r.pull_off_force
+            );
+            assert!((r.pull_off_force / closed_form - 1.0).abs() < 1e-9, "{steps} steps");
+            assert!(
+                (pull_off - 7.05e-9).abs() < 0.005e-9,
+                "{steps} steps: at {pull_off:e} m"
+            );
+            assert!((pull_off - (ts.a0 - r.pull_off_force / ts.k_c)).abs() < 1e-15);
+            let start = r.approach[0].distance;
+            let end = r.retraction.last().unwrap().distance;
+            assert!(
+                (end - start - 1.5 * ts.adhesion() / ts.k_c).abs() < 1e-15,
+                "{steps} steps"
+            );
+        }
+    }
+
+    /// The README's time scale of the particle's contacts in the default scene: `nanopush
+    /// model`'s `contact_period`, the substrate contact's tangential spring `k_as* = 8RₐG*`
+    /// against the particle's mass, `2π√(m_a/k_as*)` = 5.4 ns.
+    #[test]
+    fn the_default_scenes_contact_period_is_5_4_ns() {
+        let r = model_report(&Scene::default_scene());
+        assert!((r.contact_period - 5.4e-9).abs() < 0.05e-9, "{:e} s", r.contact_period);
+        let by_hand = 2.0 * std::f64::consts::PI * (r.particle_mass / r.k_as).sqrt();
+        assert!((r.contact_period / by_hand - 1.0).abs() < 1e-12);
+    }
+
     #[test]
     fn force_curve_has_hysteresis() {
         let r = force_curve_report(&Scene::default_scene(), 300);

@@ -116,6 +116,24 @@ mod tests {
         }
     }
 
+    /// The README's reason the default scene is quasi-static: the lever's lateral mode (the stiff
+    /// axis of `K = C_yz⁻¹`, the larger eigenvalue `(a+d)/2 + √(((a−d)/2)² + b²)` by hand) rings
+    /// at `√(λ/m_c*)/2π` = 3.7 MHz, and with the paper's `b_y = b_z` (the model damps both axes
+    /// alike) its quality factor `√(λ m_c*)/b_y` is ≈ 2700 (= Q_c √(λ/k_z), 2677).
+    #[test]
+    fn the_default_levers_lateral_mode_rings_at_3_7_mhz_with_q_2700() {
+        let c = crate::scene::Scene::default_scene().cantilever();
+        let k = c.stiffness_yz();
+        let (a, b, d) = (k[(0, 0)], k[(0, 1)], k[(1, 1)]);
+        let lateral = 0.5 * (a + d) + (0.25 * (a - d).powi(2) + b * b).sqrt();
+        let m = c.effective_mass();
+        let f = (lateral / m).sqrt() / (2.0 * std::f64::consts::PI);
+        let q = (lateral * m).sqrt() / c.damping();
+        assert!((f - 3.7e6).abs() < 0.05e6, "lateral mode at {f:e} Hz");
+        assert!((q - 2700.0).abs() < 50.0, "Q {q}");
+        assert!((q / (c.q_c * (lateral / c.k_z()).sqrt()) - 1.0).abs() < 1e-12);
+    }
+
     #[test]
     fn paper_stiffnesses() {
         // ERRATA item 9.

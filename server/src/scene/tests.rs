@@ -339,3 +339,35 @@ fn a_particle_below_the_scan_noise_is_refused() {
         ok.err()
     );
 }
+
+/// The README's table of shipped scenes ("Scenes"): gold-latex has three particles of 0.5 µm
+/// radius pushed at 2 µm/s; gold-14nm a 14 nm (diameter) colloid under a 10 nm tip, electrostatics
+/// on, 10 nm search steps and a −0.8 V set point; minimal β = 45°, van der Waals only, dry.
+#[test]
+fn the_shipped_scenes_are_what_the_readmes_table_says() {
+    let load = |name: &str| {
+        Scene::from_path(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../scenes")
+                .join(name),
+        )
+        .unwrap()
+    };
+    let latex = load("gold-latex-500nm.toml");
+    assert_eq!(latex.file.particles.len(), 3);
+    assert!(latex.file.particles.iter().all(|p| p.radius_nm == 500.0));
+    assert_eq!(latex.file.push.speed_um_per_s, 2.0);
+    let gold = load("gold-14nm.toml");
+    assert_eq!(2.0 * gold.pushed_particle().radius_nm, 14.0);
+    assert_eq!(gold.file.tip.radius_nm, 10.0);
+    assert!(gold.file.physics.electrostatic);
+    assert_eq!(
+        (gold.file.strategy.step_um, gold.file.strategy.set_point_v),
+        (0.01, -0.8)
+    );
+    let minimal = load("minimal.toml").file;
+    assert_eq!(minimal.push.contact_angle_deg, 45.0);
+    let ph = &minimal.physics;
+    assert!(ph.van_der_waals && !ph.capillary && !ph.electrostatic);
+    assert_eq!(minimal.environment.relative_humidity, 0.0);
+}

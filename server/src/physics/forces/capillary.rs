@@ -134,6 +134,20 @@ mod tests {
         assert!(kelvin_radius(1e-300).is_finite());
     }
 
+    /// The README's Eq 3 bounds: no meniscus where `r₁ < a₀`, i.e. below `P/Pₛ = exp(−0.54/0.165)`
+    /// = 3.8 % ≈ 4 % RH (no meniscus at 3.7 %, one at 3.9 %), and `r₁ ≤ 100 nm` near saturation.
+    #[test]
+    fn no_meniscus_below_4_percent_rh_and_r1_at_most_100_nm() {
+        let threshold = (-KELVIN_LENGTH / A0).exp();
+        assert!((threshold - 0.04).abs() < 0.005, "{threshold}");
+        let at = |rh: f64| Capillary::new(1e-6, 0.144, rh, 0.1e-9, A0);
+        assert!(!at(0.037).possible() && at(0.037).formation_gap == 0.0);
+        assert!(at(0.039).possible() && at(0.039).kelvin_radius >= A0);
+        assert_eq!(KELVIN_RADIUS_CAP, 100e-9);
+        assert_eq!(kelvin_radius(0.9999999), 100e-9);
+        assert!(kelvin_radius(0.99) < 100e-9);
+    }
+
     #[test]
     fn adhesion_as_is_905_nn() {
         // A_as = 4π Rₐ γ_L = 905 nN for Rₐ = 1 µm (ERRATA, "other figures"): the substrate form

@@ -318,3 +318,70 @@ fn a_failure_is_a_release_only_while_lifting() {
     assert!(matches!(run(-1e-9), Err(SimulationError::Chattering { count: 1, .. })));
     assert_eq!(run(1e-9).unwrap(), Advance::Released);
 }
+
+/// Steps and rejections of each 1 ms tick of a push at rtol 1e-6, from the start (Rodas4).
+fn steps_per_tick(model: PushModel, ticks: usize) -> Vec<(u64, u64)> {
+    let mut sim = Simulation::new(model, Method::Rodas4, Options::with_rtol(1e-6));
+    (1..=ticks)
+        .map(|k| {
+            let r = sim.advance_to(k as f64 * 1e-3).unwrap();
+            (r.stats.steps, r.stats.rejected)
+        })
+        .collect()
+}
+
+/// The README's steps per 1 ms tick of the quasi-static scenes (Rodas4, rtol 1e-6), exactly:
+/// the default scene takes 13 steps (and 1 rejection) in its first tick, 5 steps and 1
+/// rejection in the tick the benchmark times (the 21st, after 20 ms), and 3 by 50 ms; never more
+/// than 13 or fewer than 3. The minimal scene's benchmarked tick is 1 step of six model
+/// evaluations (Rodas4's six stages, the Jacobian from the dual numbers of the last).
+#[test]
+fn the_default_scene_takes_13_to_3_steps_per_tick_and_5_plus_1_rejection_at_20_ms() {
+    let ticks = steps_per_tick(scene("paper-default.toml"), 50);
+    assert_eq!(ticks[0], (13, 1), "first tick");
+    assert_eq!(ticks[20], (5, 1), "the benchmarked tick, 20-21 ms");
+    assert_eq!(ticks[49], (3, 0), "49-50 ms");
+    assert_eq!(ticks.iter().map(|t| t.0).max(), Some(13), "{ticks:?}");
+    assert_eq!(ticks.iter().map(|t| t.0).min(), Some(3), "{ticks:?}");
+
+    let mut sim = Simulation::new(scene("minimal.toml"), Method::Rodas4, Options::with_rtol(1e-6));
+    sim.advance_to(20e-3).unwrap();
+    let r = sim.advance_to(21e-3).unwrap();
+    assert_eq!((r.stats.steps, r.stats.rejected, r.stats.rhs_evals), (1, 0, 6));
+}
+
+/// The README's full model (`paper-full-dynamics`: 12 states) and its cost, rotation off: it
+/// shears at the reduced model's t* (6.2078 ms in both), and the 1 ms tick that holds the first
+/// slip, where the cantilever's 3.7 MHz lateral mode rings, takes 62 941 steps (and 6699
+/// rejections), ~16 ns a step, against the 6 steps of the tick before it. (~5 s in debug.)
+#[test]
+fn the_full_models_first_slip_takes_62_941_steps_in_one_tick_at_the_reduced_t_star() {
+    let rotation_off = |name: &str| {
+        let mut model = scene(name);
+        model.p.dofs.particle_rotation = crate::physics::pushing::params::Dof::Off;
+        PushModel::new(model.p)
+    };
+    let mut reduced = Simulation::new(
+        rotation_off("paper-default.toml"),
+        Method::Rodas4,
+        Options::with_rtol(1e-6),
+    );
+    reduced.advance_to(7e-3).unwrap();
+    let mut full = Simulation::new(
+        rotation_off("paper-full-dynamics.toml"),
+        Method::Rodas4,
+        Options::with_rtol(1e-6),
+    );
+    assert_eq!(scene("paper-full-dynamics.toml").len(), 12, "the full model");
+    assert_eq!(full.model.len(), 10, "12 states less the rotation's two");
+    let mut ticks = Vec::new();
+    for k in 1..=7 {
+        let r = full.advance_to(k as f64 * 1e-3).unwrap();
+        ticks.push((r.stats.steps, r.stats.rejected));
+    }
+    assert_eq!(ticks[5], (6, 0), "5-6 ms, before the shear");
+    assert_eq!(ticks[6], (62_941, 6_699), "6-7 ms, the first slip");
+    let (t_full, t_reduced) = (full.shearing_time.unwrap(), reduced.shearing_time.unwrap());
+    assert!((t_full - 6.2078e-3).abs() < 0.05e-6, "full t* {t_full:e} s");
+    assert!((t_reduced - 6.2078e-3).abs() < 0.05e-6, "reduced t* {t_reduced:e} s");
+}
