@@ -321,6 +321,26 @@ mod tests {
         }
     }
 
+    /// README, "Passivity": the damping is "capped at 80 % of the damping the device renders
+    /// (`m/T`)" and never applied "at `|v| < 0.1 mm/s`": the bridge's controller for the
+    /// simulated handle at 1, 2 and 4 kHz.
+    #[test]
+    fn the_bridges_passivity_cap_is_80_percent_of_m_over_t_and_its_speed_guard_0_1_mm_per_s() {
+        for rate in [1000.0, 2000.0, 4000.0] {
+            let period = 1.0 / rate;
+            let cfg = BridgeConfig {
+                rate_hz: rate,
+                ..BridgeConfig::default()
+            };
+            let b = Bridge::new(SimDevice::new(Script::Hold, period), cfg, 0);
+            let m_over_t = crate::sim::Handle::default().mass / period;
+            assert!((b.spec.max_damping - m_over_t).abs() <= 1e-12 * m_over_t);
+            assert!((b.pc.alpha_max - 0.8 * m_over_t).abs() <= 1e-12 * m_over_t);
+            assert_eq!(b.pc.v_min, 1e-4);
+            assert!(b.pc.enabled);
+        }
+    }
+
     #[test]
     fn the_bridge_clamps_whatever_the_server_sends_and_zeroes_a_silent_server() {
         let mut b = Bridge::new(SimDevice::new(Script::Hold, 1e-3), BridgeConfig::default(), 0);

@@ -224,4 +224,28 @@ mod tests {
         assert_eq!(pc.step(1.0, f64::INFINITY, f64::INFINITY, dt, 0.0, 1e9).force, 0.0);
         assert_eq!(pc.step(1.0, 0.01 * dt, 0.01, dt, f64::NAN, 1e9).force, 0.0);
     }
+
+    /// README, "Passivity": a deficit is dissipated "only when `E < −1 nJ`, never at
+    /// `|v| < 0.1 mm/s`": just past each edge the controller acts, just short of it not.
+    #[test]
+    fn damping_starts_beyond_a_1_nj_deficit_and_at_0_1_mm_per_s() {
+        assert_eq!(DEFICIT_FLOOR, 1e-9);
+        let dt = 1e-3;
+        // A force held over a 10 µm step along it: a deficit of force × 10 µm.
+        let deficit = |f: f64, v: f64| {
+            let mut pc = Passivity::new(1e3, 1e-4);
+            pc.step(f, 0.0, v, dt, 0.0, 1e9);
+            pc.step(f, 1e-5, v, dt, 0.0, 1e9)
+        };
+        let past = deficit(1.1e-4, 0.01);
+        assert!((past.energy + 1.1e-9).abs() < 1e-15 && past.damping > 0.0, "{past:?}");
+        let short = deficit(0.9e-4, 0.01);
+        assert!(
+            (short.energy + 0.9e-9).abs() < 1e-15 && short.damping == 0.0,
+            "{short:?}"
+        );
+        // A 1 µJ deficit: damped at 0.101 mm/s, not at 0.099 mm/s.
+        assert!(deficit(0.1, 1.01e-4).damping > 0.0);
+        assert_eq!(deficit(0.1, 0.99e-4).damping, 0.0);
+    }
 }

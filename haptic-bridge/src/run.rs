@@ -169,8 +169,8 @@ pub fn next_deadline(prev: u64, server: Option<nanopush_proto::haptic::ForceFeed
     (free as i64 + nudge) as u64
 }
 
-/// Runs the bridge; returns the summary to print.
-pub fn run(a: &RunArgs) -> anyhow::Result<String> {
+/// The arguments' ranges (refused before anything starts).
+fn check(a: &RunArgs) -> anyhow::Result<()> {
     if !(a.rate_hz.is_finite() && (500.0..=4000.0).contains(&a.rate_hz)) {
         bail!("--rate-hz {} is out of range; allowed: [500, 4000] Hz", a.rate_hz);
     }
@@ -185,6 +185,12 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
             a.server_timeout_ms
         );
     }
+    Ok(())
+}
+
+/// Runs the bridge; returns the summary to print.
+pub fn run(a: &RunArgs) -> anyhow::Result<String> {
+    check(a)?;
     let kind: DeviceKind = a.device.parse()?;
     if a.device != "sim" && a.operator != "hold" {
         bail!(
@@ -347,5 +353,58 @@ mod tests {
         assert!((600_000..700_000).contains(&phase), "phase {phase}");
         // Without a server, the free clock.
         assert_eq!(next_deadline(5, None, step), 5 + step);
+    }
+
+    /// README, "Two processes": the device cycle runs at 0.5-4 kHz (1 kHz by default) and the
+    /// bridge zeroes its force within 5 ms of a silent server by default: `--rate-hz` is
+    /// accepted in [500, 4000] Hz and refused just outside.
+    #[test]
+    fn the_device_rate_is_500_to_4000_hz_1000_by_default_and_the_server_timeout_5_ms() {
+        use clap::Parser;
+        #[derive(Parser)]
+        struct Cli {
+            #[command(flatten)]
+            run: RunArgs,
+        }
+        let parse = |args: &[&str]| {
+            Cli::try_parse_from(std::iter::once("nanopush-haptic").chain(args.iter().copied()))
+                .unwrap()
+                .run
+        };
+        let d = parse(&[]);
+        assert_eq!((d.rate_hz, d.server_timeout_ms), (1000.0, 5.0));
+        assert_eq!((d.device.as_str(), d.operator.as_str()), ("sim", "hold"));
+        check(&d).unwrap();
+        for ok in ["500", "4000"] {
+            check(&parse(&["--rate-hz", ok])).unwrap();
+        }
+        for bad in ["499", "4001"] {
+            let e = check(&parse(&["--rate-hz", bad])).unwrap_err();
+            assert!(e.to_string().contains("allowed: [500, 4000] Hz"), "{e}");
+        }
+    }
+
+    /// README, "Latency": "the device cycle locks 30 µs after the server's tick". A server
+    /// publishing at 0.6 ms past each millisecond, without jitter: the cycle settles at 0.63 ms
+    /// (to the nanosecond the quarter-step nudge leaves), at 1, 2 and 4 kHz.
+    #[test]
+    fn the_cycle_locks_30_us_after_the_servers_tick() {
+        assert_eq!(PHASE_LEAD_NS, 30_000);
+        for step in [1_000_000u64, 500_000, 250_000] {
+            let server = |k: u64| ForceFeedback {
+                time_ns: k * 1_000_000 + 600_000,
+                ..Default::default()
+            };
+            let mut d = 123_456u64;
+            for k in 0..200u64 {
+                d = next_deadline(d, Some(server(k * step / 1_000_000)), step);
+            }
+            let phase = (d % step) as i64;
+            let want = ((600_000 + PHASE_LEAD_NS) % step) as i64;
+            assert!(
+                (phase - want).abs() < 10,
+                "phase {phase} ns at a {step} ns cycle, want {want}"
+            );
+        }
     }
 }

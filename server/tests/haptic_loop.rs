@@ -233,7 +233,9 @@ fn the_local_model_makes_a_fast_device_steadier_than_a_held_force() {
 /// The README's table of the local model, cell by cell (deterministic: the simulated hand and
 /// instrument have fixed seeds): device rate × rendering × force scale, no controller; contact
 /// changes exactly and the lowest port energy to the README's two digits. At ×4 every combination
-/// chatters (more than 60 contact changes). Printed with `--nocapture`.
+/// chatters (more than 60 contact changes). Then the README's energy ratios (held force / local
+/// model) of the unrounded cells: five- to eightfold at ×1; 2.4×, 47× and 95× at ×2, to their
+/// last digit. Printed with `--nocapture`.
 #[test]
 fn rates_table() {
     // (device cycles per tick, local model, scale) → (contact changes, lowest port energy J).
@@ -254,10 +256,12 @@ fn rates_table() {
     ];
     println!("| device rate | rendering | force scale | contact changes | lowest port energy (J) |");
     println!("|---|---|---|---|---|");
+    let mut energy = std::collections::HashMap::new();
     for per_tick in [1u32, 2, 4] {
         for local in [false, true] {
             for scale in [1.0, 2.0, 4.0] {
                 let (t, e) = chatter(&run_at("press", false, local, per_tick, scale, 4.0, 14_000));
+                energy.insert((per_tick, local, scale.to_bits()), e);
                 let how = if local { "local model" } else { "held force" };
                 println!("| {per_tick} kHz | {how} | {scale} | {t} | {e:.2e} |");
                 let cell = format!("{per_tick} kHz, {how}, ×{scale}");
@@ -278,5 +282,24 @@ fn rates_table() {
                 );
             }
         }
+    }
+    // The README's ratios (held force / local model, lowest port energy), from the unrounded
+    // cells: five- to eightfold at ×1 at every rate; at ×2, 2.4× (1 kHz), 47× (2 kHz), 95×
+    // (4 kHz), each to its last digit.
+    let ratio = |per_tick: u32, scale: f64| {
+        energy[&(per_tick, false, scale.to_bits())] / energy[&(per_tick, true, scale.to_bits())]
+    };
+    for per_tick in [1, 2, 4] {
+        let r = ratio(per_tick, 1.0);
+        println!("{per_tick} kHz ×1: {r:.3}×");
+        assert!((5.0..=8.0).contains(&r), "{per_tick} kHz ×1: {r}×");
+    }
+    for (per_tick, readme, unit) in [(1, 2.4, 0.1), (2, 47.0, 1.0), (4, 95.0, 1.0)] {
+        let r = ratio(per_tick, 2.0);
+        println!("{per_tick} kHz ×2: {r:.3}×");
+        assert!(
+            (r - readme).abs() <= 0.5 * unit,
+            "{per_tick} kHz ×2: {r}×, README {readme}×"
+        );
     }
 }

@@ -42,6 +42,29 @@ fn free_port() -> u16 {
     TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
+/// README, "Lab monitoring": the shipped `prometheus.yml` "scrapes `127.0.0.1:8080` every 5 s"
+/// (`nanopush serve`'s default address and port) and loads `alerts.yml`. `promtool check
+/// config` checks its syntax only.
+#[test]
+fn the_shipped_config_scrapes_127_0_0_1_8080_every_5_s_with_the_alert_rules() {
+    let text = std::fs::read_to_string(workspace().join("deploy/prometheus/prometheus.yml")).unwrap();
+    let lines: Vec<&str> = text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.starts_with('#') && !l.is_empty())
+        .collect();
+    for want in [
+        "scrape_interval: 5s",
+        "- alerts.yml",
+        "- job_name: nanopush",
+        "metrics_path: /metrics",
+        "- targets: [\"127.0.0.1:8080\"]",
+    ] {
+        assert!(lines.contains(&want), "prometheus.yml has no line {want:?}");
+    }
+    assert_eq!(lines.iter().filter(|l| l.starts_with("- targets:")).count(), 1);
+}
+
 #[test]
 fn prometheus_scrapes_the_server_and_loads_the_alert_rules() {
     let dir = std::env::temp_dir().join(format!("nanopush-e2e-prometheus-{}", std::process::id()));

@@ -190,6 +190,27 @@ fn viewers_never_lock_the_operator_out_and_one_address_has_a_limit() {
     });
 }
 
+/// README, "Roles": "the operator token has 8 places of its own". With the viewer cap full,
+/// eight operator connections get in and a ninth is refused with 503; a viewer place is not an
+/// operator place (`--max-clients 1`, taken by a viewer, leaves all eight).
+#[test]
+fn the_operator_token_has_8_places_and_a_ninth_is_refused() {
+    let srv = start("operators", &["--max-clients", "1"]);
+    runtime().block_on(async {
+        let mut viewer = connect(&srv.addr, None).await;
+        until(&mut viewer, 5.0, |m| is(m, "welcome")).await;
+        let mut held = Vec::new();
+        for _ in 0..8 {
+            let mut op = connect(&srv.addr, Some(TOKEN)).await;
+            assert_eq!(until(&mut op, 5.0, |m| is(m, "welcome")).await["role"], "operator");
+            held.push(op);
+        }
+        let url = format!("ws://{}/ws?token={TOKEN}", srv.addr);
+        let e = tokio_tungstenite::connect_async(url).await.unwrap_err();
+        assert!(e.to_string().contains("503"), "{e}");
+    });
+}
+
 /// Issue 12.3: a slowloris client (headers that never finish) is closed after the header
 /// time-out, fifty of them do not keep anyone else out, and a WebSocket peer that stops
 /// answering pings is closed after the dead-peer time-out while a live one stays.

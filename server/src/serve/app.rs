@@ -1376,3 +1376,23 @@ pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiv
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// README, "The teleoperation server": the operator token's 8 places, idle HTTP connections
+    /// closed after 60 s, a 5 s send budget per frame, a client that reads no reply for 30 s
+    /// closed, messages up to 8 MiB refused with `too_large` (above it the connection closes),
+    /// SCHED_FIFO priority 50 for the loop. (The 8 places are also tested end to end:
+    /// `tests/e2e/serve.rs::the_operator_token_has_8_places_and_a_ninth_is_refused`.)
+    #[test]
+    fn the_readmes_server_limits_8_places_60_s_idle_5_s_send_30_s_replies_8_mib_fifo_50() {
+        assert_eq!(OPERATOR_PLACES, 8);
+        assert_eq!(crate::serve::IDLE_HTTP, Duration::from_secs(60));
+        assert_eq!(SEND_BUDGET, Duration::from_secs(5));
+        assert_eq!(REPLY_PATIENCE, Duration::from_secs(30));
+        assert_eq!(HARD_CAP, 8 * 1024 * 1024);
+        assert_eq!(crate::serve::control_loop::LOOP_PRIORITY, 50);
+    }
+}

@@ -30,6 +30,10 @@ use crate::instrument::{Afm, Reading};
 use crate::serve::haptic::{LINK_DOWN, LINK_UP, ServerLink, believable, phase_index};
 use crate::serve::metrics::LoopMetrics;
 
+/// The control loop's SCHED_FIFO priority, when the system grants it (the bridge's device loop
+/// runs at 45, below it).
+pub const LOOP_PRIORITY: i32 = 50;
+
 /// A push prepared off the loop (localization, model prediction, plan), ready to run.
 #[derive(Debug, Clone)]
 pub struct PushJob {
@@ -232,7 +236,9 @@ fn make_realtime(cpu: Option<usize>) -> bool {
         } else {
             tracing::info!("control loop: pinned to core {cpu}");
         }
-        let param = libc::sched_param { sched_priority: 50 };
+        let param = libc::sched_param {
+            sched_priority: LOOP_PRIORITY,
+        };
         if libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) != 0 {
             tracing::warn!(
                 "control loop: SCHED_FIFO refused ({}); running SCHED_OTHER with spin-sleep only",

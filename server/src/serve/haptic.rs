@@ -337,11 +337,24 @@ fn spawn_bridge(bin: &std::path::Path) -> std::io::Result<Child> {
     cmd.spawn()
 }
 
+/// The supervisor's first restart delay of the simulated bridge, and again once it has run
+/// [`BACKOFF_RESET`].
+pub const BACKOFF_FIRST: Duration = Duration::from_millis(200);
+/// The longest delay between two restarts.
+pub const BACKOFF_MAX: Duration = Duration::from_secs(5);
+/// A bridge that ran this long before it exited is restarted after [`BACKOFF_FIRST`] again.
+pub const BACKOFF_RESET: Duration = Duration::from_secs(10);
+
+/// The delay after `backoff` for the next restart: doubled, at most [`BACKOFF_MAX`].
+pub fn next_backoff(backoff: Duration) -> Duration {
+    (backoff * 2).min(BACKOFF_MAX)
+}
+
 fn monitor(bin: Option<&std::path::Path>, stop: &AtomicBool, slot: &Mutex<Option<Child>>, h: &HapticMetrics) {
     let cleaner = ipc_node("nanopush-serve-monitor").ok();
     let mut last_clean = Instant::now();
     let (mut downs, mut ups) = (0u64, 0u64);
-    let mut backoff = Duration::from_millis(200);
+    let mut backoff = BACKOFF_FIRST;
     let mut started = Instant::now();
     let mut respawn_at: Option<Instant> = bin.map(|_| Instant::now());
     let mut first = true;
@@ -370,15 +383,15 @@ fn monitor(bin: Option<&std::path::Path>, stop: &AtomicBool, slot: &Mutex<Option
                 && let Ok(Some(status)) = c.try_wait()
             {
                 *s = None;
-                if started.elapsed() > Duration::from_secs(10) {
-                    backoff = Duration::from_millis(200);
+                if started.elapsed() > BACKOFF_RESET {
+                    backoff = BACKOFF_FIRST;
                 }
                 tracing::warn!(
                     "haptic: the simulated bridge exited ({status}); restarting in {:.1} s",
                     backoff.as_secs_f64()
                 );
                 respawn_at = Some(Instant::now() + backoff);
-                backoff = (backoff * 2).min(Duration::from_secs(5));
+                backoff = next_backoff(backoff);
             }
             if respawn_at.is_some_and(|t| Instant::now() >= t) {
                 respawn_at = None;
@@ -404,7 +417,7 @@ fn monitor(bin: Option<&std::path::Path>, stop: &AtomicBool, slot: &Mutex<Option
                     Err(e) => {
                         tracing::error!("haptic: cannot start the bridge {}: {e}", bin.display());
                         respawn_at = Some(Instant::now() + backoff);
-                        backoff = (backoff * 2).min(Duration::from_secs(5));
+                        backoff = next_backoff(backoff);
                     }
                 }
             }
@@ -476,6 +489,20 @@ mod tests {
         assert_eq!(down_after_ns(100.0, 1e-3), 99_000_000);
         // Never below a tick (a link is not down between two samples).
         assert_eq!(down_after_ns(0.1, 1e-3), 1_000_000);
+    }
+
+    /// README, "Faults": under `--haptic sim` the supervisor restarts the bridge "with a back-off
+    /// (0.2 s doubling to 5 s)".
+    #[test]
+    fn the_supervisors_back_off_is_0_2_s_doubling_to_5_s() {
+        let mut b = BACKOFF_FIRST;
+        let mut seq = vec![b];
+        for _ in 0..6 {
+            b = next_backoff(b);
+            seq.push(b);
+        }
+        let ms: Vec<u128> = seq.iter().map(|d| d.as_millis()).collect();
+        assert_eq!(ms, [200, 400, 800, 1600, 3200, 5000, 5000]);
     }
 
     #[test]

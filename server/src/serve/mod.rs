@@ -20,6 +20,9 @@ use crate::scene::Scene;
 use app::{AppState, ServeConfig};
 use control_loop::{ControlLoop, LoopCommand, LoopConfig, Shared};
 
+/// A plain HTTP connection idle this long is closed (WebSockets keep themselves alive with pings).
+pub const IDLE_HTTP: Duration = Duration::from_secs(60);
+
 /// Why the server could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum ServeError {
@@ -161,7 +164,7 @@ pub async fn run(
     // next telemetry frames by 25-45 ms (the frame waited for the ACK of the reply).
     // Slowloris: each request's headers within the header time-out, a plain HTTP connection
     // idle for a minute closed (WebSockets keep themselves alive with pings).
-    let guarded = guard::GuardedListener::new(listener, state.cfg.header_timeout, Duration::from_secs(60));
+    let guarded = guard::GuardedListener::new(listener, state.cfg.header_timeout, IDLE_HTTP);
     let listener = axum::serve::ListenerExt::tap_io(guarded, |io: &mut guard::Guarded| {
         if let Err(e) = io.tcp().set_nodelay(true) {
             tracing::debug!("TCP_NODELAY refused on a connection: {e}");

@@ -13,6 +13,9 @@ use nanopush::physics::pushing::{Dof, PushModel};
 use nanopush_proto::accuracy::{AccuracyPoint, AccuracyReport, EqualError, PushOutcome, QuasiStaticCost, ReductionRow};
 use plotters::prelude::*;
 
+/// Most integrator steps a run of the report may take; beyond it the run is reported as failed.
+const MAX_STEPS: u64 = 2_000_000;
+
 /// Arguments of `nanopush accuracy`.
 #[derive(Args, Debug)]
 pub struct AccuracyArgs {
@@ -413,7 +416,7 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     }
     let scene = crate::load_scene(a.scene.as_ref())?;
     let model = PushModel::new(scene.push_params());
-    let max_steps = 2_000_000;
+    let max_steps = MAX_STEPS;
     let (reference, crosscheck) = push_reference(&model, a.duration).map_err(anyhow::Error::msg)?;
     let mut points = push_points("push", &model, a.duration, &reference, a.reps, max_steps, a.min_rtol);
     points.extend(classical_points(a.reps, max_steps, a.min_rtol));
@@ -585,4 +588,30 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
         a.out.display()
     )?;
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        accuracy: AccuracyArgs,
+    }
+
+    /// README, "`nanopush accuracy`": tolerances 1e-2 … 1e-10, a 20 ms push, 3 repetitions,
+    /// and the 2·10⁶-step limit beyond which a run is reported as failed.
+    #[test]
+    fn accuracy_defaults_are_a_20_ms_push_3_reps_down_to_1e_10_within_2e6_steps() {
+        let a = Cli::try_parse_from(["accuracy"]).unwrap().accuracy;
+        assert_eq!(a.duration, 0.02);
+        assert_eq!(a.reps, 3);
+        assert_eq!(a.min_rtol, 1e-10);
+        let tols: Vec<f64> = nanopush::accuracy::tolerances(a.min_rtol).collect();
+        assert_eq!(tols, nanopush::accuracy::TOLERANCES);
+        assert_eq!((tols[0], tols[tols.len() - 1]), (1e-2, 1e-10));
+        assert_eq!(MAX_STEPS, 2_000_000);
+    }
 }

@@ -142,8 +142,8 @@ fn haptic_mode(a: &ServeArgs) -> anyhow::Result<HapticMode> {
     })
 }
 
-/// Runs the server until SIGINT or SIGTERM.
-pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
+/// The arguments' ranges and the combinations refused (exit 2 before anything starts).
+fn check(a: &ServeArgs) -> anyhow::Result<()> {
     in_range("--rate-hz", a.rate_hz, 100.0, 10_000.0, " Hz")?;
     in_range(
         "--max-message-bytes",
@@ -181,6 +181,12 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
             a.rate_hz
         );
     }
+    Ok(())
+}
+
+/// Runs the server until SIGINT or SIGTERM.
+pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
+    check(a)?;
     let scene = crate::load_scene(a.scene.as_ref())?;
     let operator_token = match a
         .operator_token
@@ -273,4 +279,61 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         .await
     })?;
     Ok(String::new())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        serve: ServeArgs,
+    }
+
+    fn parse(args: &[&str]) -> ServeArgs {
+        Cli::try_parse_from(std::iter::once("serve").chain(args.iter().copied()))
+            .expect("arguments parse")
+            .serve
+    }
+
+    /// README, "The teleoperation server": the synopsis's defaults, `--bind 127.0.0.1 --port
+    /// 8080 --rate-hz 1000 --max-message-bytes 4096 --max-rate 50 --max-clients 1000
+    /// --max-clients-per-address 64 --header-timeout-s 10 --ws-ping-s 10 --ws-timeout-s 30
+    /// --data-dir records --scan-line-hz 32 --telemetry-hz 60 --haptic none
+    /// --haptic-timeout-ms 5`, and that they pass the range checks.
+    #[test]
+    fn serve_defaults_are_the_readmes_synopsis() {
+        let a = parse(&[]);
+        assert_eq!(a.bind, IpAddr::from([127, 0, 0, 1]));
+        assert_eq!(a.port, 8080);
+        assert_eq!(a.rate_hz, 1000.0);
+        assert_eq!(a.max_message_bytes, 4096);
+        assert_eq!(a.max_rate, 50.0);
+        assert_eq!(a.max_clients, 1000);
+        assert_eq!(a.max_clients_per_address, 64);
+        assert_eq!(a.header_timeout_s, 10.0);
+        assert_eq!(a.ws_ping_s, 10.0);
+        assert_eq!(a.ws_timeout_s, 30.0);
+        assert_eq!(a.data_dir, PathBuf::from("records"));
+        assert_eq!(a.scan_line_hz, 32.0);
+        assert_eq!(a.telemetry_hz, 60.0);
+        assert_eq!(a.haptic, "none");
+        assert_eq!(a.haptic_timeout_ms, 5.0);
+        assert_eq!(a.haptic_timeout_ms, nanopush::serve::haptic::DEFAULT_TIMEOUT_MS);
+        check(&a).unwrap();
+    }
+
+    /// README, "Faults": "`--haptic` needs a loop of at least 500 Hz": refused at 499 Hz with
+    /// either link, accepted at 500 Hz; without a link any rate in [100, 10000] Hz is fine.
+    #[test]
+    fn haptic_is_refused_below_a_500_hz_loop() {
+        for link in ["external", "sim"] {
+            let e = check(&parse(&["--haptic", link, "--rate-hz", "499"])).unwrap_err();
+            assert!(e.to_string().contains("at least 500 Hz"), "{e}");
+            check(&parse(&["--haptic", link, "--rate-hz", "500"])).unwrap();
+        }
+        check(&parse(&["--rate-hz", "100"])).unwrap();
+    }
 }

@@ -330,3 +330,50 @@ fn a_new_scale_ramps_in_again() {
     rig.handle.position -= 1e-3;
     rig.until(100, |r| (r.stage[2] - (z - 20e-9)).abs() < 1e-15);
 }
+
+/// README, "Haptic z-control": the force ramps in "once the force the hand would get has stayed
+/// below 0.2 N for 3 ticks", "over 1 s".
+#[test]
+fn engagement_waits_for_0_2_n_over_3_ticks_and_ramps_over_1_s() {
+    assert_eq!((ENGAGE_FORCE, ENGAGE_TICKS, RAMP), (0.2, 3, 1.0));
+}
+
+/// README, "Two processes" and "Passivity", on the paper scene (`[haptic]` at its defaults, 10
+/// nm/mm and 1 N): the tip stops where the lever reaches 80 % of the strategy's safety
+/// deflection — (−4.0 V − (−0.2 V)) / (−0.8 V/nm) = 4.75 nm, so 3.80 nm; `g_f` maps the scene's
+/// adhesion, 55.09 nN, to 1 N; the contact's stiffness at the hand `g_f k_z g_p` is 1.45 kN/m (2.90 kN/m
+/// at the force scale ×2 of the haptic loop's table), and the snap-in's stored energy at the
+/// hand, ½F²/K with F = 1 N, is 0.34 mJ.
+#[test]
+fn the_paper_scenes_hand_stops_at_3_80_nm_feels_1_n_and_a_1_45_kn_per_m_contact() {
+    let scene = Scene::default_scene();
+    let f = &scene.file;
+    assert_eq!(
+        (f.strategy.safety_limit_v, f.sensor.baseline_v, f.sensor.gain_v_per_nm),
+        (-4.0, -0.2, -0.8)
+    );
+    let p = scene.bilateral_params(1e-3);
+    let safety = 4.75e-9;
+    assert!((p.max_indent - 0.8 * safety).abs() < 1e-15, "{} nm", p.max_indent * 1e9);
+    assert!((p.max_indent - 3.80e-9).abs() < 0.005e-9);
+    assert_eq!(p.position_gain, 1e-5);
+    let adhesion = scene.tip_sample().adhesion();
+    assert!((adhesion - 55.09e-9).abs() <= 0.005e-9, "{} nN", adhesion * 1e9);
+    assert!(
+        (p.force_gain * adhesion - 1.0).abs() < 1e-12,
+        "{}",
+        p.force_gain * adhesion
+    );
+    let k_hand = p.force_gain * p.k_z * p.position_gain;
+    eprintln!(
+        "adhesion {:.4} nN, k_z {} N/m, K at the hand {:.4} kN/m, ½F²/K {:.4} mJ",
+        adhesion * 1e9,
+        p.k_z,
+        k_hand * 1e-3,
+        0.5 / k_hand * 1e3
+    );
+    assert!((k_hand - 1.45e3).abs() <= 5.0, "{k_hand} N/m");
+    assert!((2.0 * k_hand - 2.90e3).abs() <= 5.0, "{} N/m", 2.0 * k_hand);
+    let stored = 0.5 * 1.0f64.powi(2) / k_hand;
+    assert!((stored - 0.34e-3).abs() <= 0.005e-3, "{stored} J");
+}
