@@ -340,13 +340,20 @@ mod tests {
     use super::*;
 
     /// The reduced campaign (each validated range's ends, every friction zero, the Eq 16
-    /// bound): every case a plausible outcome or a refusal with its reason, and sound.
+    /// bound): every case a plausible outcome or a refusal with its reason, and sound; the
+    /// README's outcome counts: 5 `ok`, 6 `no_contact`, 1 `deflection_limit`, 1 `particle_lost`.
     #[test]
-    fn reduced_campaign_pushes_whole_and_physically() {
+    fn the_reduced_campaign_is_sound_with_5_ok_6_no_contact_1_deflection_limit_1_particle_lost() {
         let scene = Scene::default_scene();
         let mut bad = Vec::new();
+        let mut outcomes = std::collections::BTreeMap::new();
         for case in cases(true) {
             let r = run_case(&scene, &case);
+            *outcomes.entry(r.outcome.clone()).or_insert(0) += 1;
+            if case == [Edit::MuAsAtEq16(1.0)] {
+                // The README: at the Eq 16 bound (the bound for sliding) the push still succeeds.
+                assert_eq!(r.outcome, "ok", "at the Eq 16 bound: {}", r.reason);
+            }
             assert!(!r.outcome.is_empty());
             if r.outcome != "ok" {
                 assert!(!r.reason.is_empty(), "{}: {} without a reason", r.case, r.outcome);
@@ -356,6 +363,16 @@ mod tests {
             }
         }
         assert!(bad.is_empty(), "{}", bad.join("\n"));
+        let counts: Vec<(&str, i32)> = outcomes.iter().map(|(o, n)| (o.as_str(), *n)).collect();
+        assert_eq!(
+            counts,
+            [
+                ("deflection_limit", 1),
+                ("no_contact", 6),
+                ("ok", 5),
+                ("particle_lost", 1)
+            ]
+        );
     }
 
     proptest::proptest! {
@@ -398,5 +415,29 @@ mod tests {
         // The default scene's Eq 16 bound (k_y cot α + k_z tan α)/(k_y − k_z) = 3.7546.
         assert!((f.friction.particle_substrate_static - 3.7546).abs() < 1e-4);
         assert!(cases(false).len() > 60);
+    }
+
+    /// The README: the full campaign has 74 cases, 16 of them the corners of radius × `k_c` ×
+    /// humidity × speed; the reduced one, a unit test, 13.
+    #[test]
+    fn the_campaign_has_74_cases_16_corners_and_the_reduced_one_13() {
+        let full = cases(false);
+        assert_eq!(full.len(), 74);
+        assert_eq!(full.iter().filter(|c| c.len() == 4).count(), 16);
+        assert_eq!(cases(true).len(), 13);
+    }
+
+    /// The README: a 1 nm/s corner of the full campaign (5 µm particle, 0.01 N/m, dry) cannot
+    /// finish its contact search in the 120 s time-out and keeps its trace, 25 MB.
+    #[test]
+    fn a_1_nm_per_s_corner_times_out_after_120_s_with_a_25_mb_trace() {
+        use Edit::*;
+        let case = [RadiusNm(5000.0), StiffnessNPerM(0.01), Humidity(0.0), SpeedUmPerS(1e-3)];
+        assert!(cases(false).contains(&case.to_vec()), "a case of the full campaign");
+        let r = run_case(&Scene::default_scene(), &case);
+        assert_eq!(r.outcome, "timeout", "{}", r.reason);
+        assert!(r.reason.contains("120 s"), "{}", r.reason);
+        assert!(r.violations.is_empty(), "{:?}", r.violations);
+        assert!((r.trace_bytes as f64 - 25e6).abs() <= 0.5e6, "{} bytes", r.trace_bytes);
     }
 }

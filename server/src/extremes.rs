@@ -311,4 +311,23 @@ mod tests {
     fn full_grid_size() {
         assert_eq!(grid(&Scene::default_scene(), false).len(), 7 * 7 + 128);
     }
+
+    /// The README's run of the full grid (`nanopush accuracy --extremes`, which pushes each case
+    /// as here): all 177 cases finite and bounded; 65 slide after `t*`, 52 roll (the tip contact
+    /// slips first), 60 never slide within 20 nm; the most expensive case took 196 steps
+    /// (32 rejected); the largest error (against a rerun at rtol/100) was 4.8e-13 m.
+    #[test]
+    fn the_full_grid_slides_65_rolls_52_never_60_worst_196_steps_32_rejected_error_4_8e_13_m() {
+        let scene = Scene::default_scene();
+        let results: Vec<CaseResult> = grid(&scene, false).iter().map(|c| run_case(&scene, c, 1e-5)).collect();
+        assert_eq!(results.len(), 177);
+        let bad: Vec<_> = results.iter().filter(|r| r.refused || !r.finite_and_bounded).collect();
+        assert!(bad.is_empty(), "{bad:?}");
+        let count = |prefix: &str| results.iter().filter(|r| r.outcome.starts_with(prefix)).count();
+        assert_eq!((count("slides"), count("rolls"), count("never slides")), (65, 52, 60));
+        let worst = results.iter().max_by_key(|r| r.steps).unwrap();
+        assert_eq!((worst.steps, worst.rejected), (196, 32), "{worst:?}");
+        let largest = results.iter().map(|r| r.error).fold(0.0, f64::max);
+        assert!((largest - 4.8e-13).abs() <= 0.05e-13, "largest error {largest:e} m");
+    }
 }

@@ -18,8 +18,12 @@ fn json(args: &[&str]) -> Value {
     serde_json::from_slice(&out.stdout).expect("one JSON object")
 }
 
+/// The README's push table, row 1, and its Figs 9 and 15: `nanopush push --scene
+/// scenes/gold-latex-500nm.toml --distance-um 12 --pause-at-um 6 --out DIR` touches at step 43,
+/// ends 13.8 nm short after 15.6 s of simulated time, and its trace shows the stop and, at the
+/// restart, a static-friction peak of −1.80 V against a rolling level of about −1.1 V.
 #[test]
-fn a_12_um_push_with_a_stop_reaches_its_target_and_writes_figs_9_and_15() {
+fn a_12_um_push_with_a_stop_ends_minus_13_8_nm_and_writes_figs_9_and_15_with_a_minus_1_80_v_peak() {
     let dir = tmp("fig15");
     let d = dir.to_str().unwrap();
     let r = json(&[
@@ -41,6 +45,17 @@ fn a_12_um_push_with_a_stop_reaches_its_target_and_writes_figs_9_and_15() {
     assert_eq!(leg["retracted"], true);
     let err = r["final_error"].as_f64().unwrap();
     assert!(err < 25e-9, "final error {err:e} m");
+    // The README's figures, to their last digit: the error along the push, the simulated time.
+    let along = leg["true_distance"].as_f64().unwrap() - 12e-6;
+    assert!(
+        (along / 1e-9 + 13.8).abs() <= 0.05,
+        "distance error {along:e} m (README: −13.8 nm)"
+    );
+    let simulated = r["simulated_time"].as_f64().unwrap();
+    assert!(
+        (simulated - 15.6).abs() <= 0.05,
+        "simulated {simulated} s (README: 15.6 s)"
+    );
     for f in [
         "contact.csv",
         "contact.svg",
@@ -67,21 +82,34 @@ fn a_12_um_push_with_a_stop_reaches_its_target_and_writes_figs_9_and_15() {
     let push = std::fs::read_to_string(dir.join("push.csv")).unwrap();
     let rows: Vec<Vec<&str>> = push.lines().skip(1).map(|l| l.split(',').collect()).collect();
     let pushing: Vec<&Vec<&str>> = rows.iter().filter(|r| r[2] == "push").collect();
-    let still = pushing.windows(2).filter(|w| w[0][3] == w[1][3]).count();
+    let still: Vec<usize> = (1..pushing.len())
+        .filter(|&i| pushing[i - 1][3] == pushing[i][3])
+        .collect();
     assert!(
-        still >= 400,
-        "{still} ticks without stage motion during the 500 ms stop"
+        still.len() >= 400,
+        "{} ticks without stage motion during the 500 ms stop",
+        still.len()
     );
     let v: Vec<f64> = pushing.iter().map(|r| r[6].parse().unwrap()).collect();
-    let rolling = v[v.len() / 4];
-    let min = v.iter().cloned().fold(f64::INFINITY, f64::min);
-    assert!(min < rolling - 0.3, "peak {min} V against rolling {rolling} V");
+    // The rolling level before the stop (the mean of the rolling samples), and the peak after it.
+    let (stop, restart) = (still[0], still[still.len() - 1]);
+    let rolling: Vec<f64> = (0..stop).filter(|&i| pushing[i][10] == "roll").map(|i| v[i]).collect();
+    let rolling = rolling.iter().sum::<f64>() / rolling.len() as f64;
+    let peak = v[restart..].iter().cloned().fold(f64::INFINITY, f64::min);
+    assert!(peak < rolling - 0.3, "peak {peak} V against rolling {rolling} V");
+    assert!((peak + 1.80).abs() <= 0.005, "restart peak {peak} V (README: −1.80 V)");
+    assert!(
+        (rolling + 1.1).abs() <= 0.05,
+        "rolling level {rolling} V (README: about −1.1 V)"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The README's push table, row 4: `nanopush push --scene scenes/gold-latex-500nm.toml --to-um
+/// 40,55`, 25 µm in legs of at most 20 µm (the scene's `strategy.max_push_um`): two pushes of
+/// 12.5 µm, each touching at step 43, ending +1.6 nm and +3.1 nm long, 4.4 nm from the target.
 #[test]
-fn a_far_target_is_planned_as_several_pushes() {
-    // 25 µm in legs of at most 20 µm (the scene's strategy.max_push_um): two pushes.
+fn a_far_target_is_two_pushes_ending_plus_1_6_and_plus_3_1_nm_and_4_4_nm_from_it() {
     let r = json(&[
         "push",
         "--scene",
@@ -93,8 +121,23 @@ fn a_far_target_is_planned_as_several_pushes() {
     let legs = r["legs"].as_array().unwrap();
     assert_eq!(legs.len(), 2, "{r}");
     assert!(legs.iter().all(|l| l["outcome"] == "ok" && l["retracted"] == true));
+    for (leg, readme_nm) in legs.iter().zip([1.6, 3.1]) {
+        assert_eq!(leg["contact_step"], 43, "{leg}");
+        let xy = |k: &str| (leg[k][0].as_f64().unwrap(), leg[k][1].as_f64().unwrap());
+        let (from, to) = (xy("from"), xy("to"));
+        let asked = (to.0 - from.0).hypot(to.1 - from.1);
+        assert!((asked - 12.5e-6).abs() < 1e-9, "a leg of {asked:e} m");
+        let error = leg["true_distance"].as_f64().unwrap() - asked;
+        assert!(
+            (error / 1e-9 - readme_nm).abs() <= 0.05,
+            "leg error {error:e} m (README: +{readme_nm} nm)"
+        );
+    }
     let err = r["final_error"].as_f64().unwrap();
-    assert!(err < 60e-9, "final error {err:e} m over two legs");
+    assert!(
+        (err / 1e-9 - 4.4).abs() <= 0.05,
+        "final error {err:e} m (README: 4.4 nm)"
+    );
 }
 
 #[test]

@@ -192,4 +192,19 @@ mod tests {
         let e = plan_move(&scene, &surface, (20e-6, 20e-6), 1e-6, target).unwrap_err();
         assert!(matches!(e, MoveError::NotFound { .. }), "{e}");
     }
+
+    /// The README (and this module's doc): a 14 nm gold particle (Rₐ = 7 nm) under a 10 nm tip
+    /// gets a 544 nm local scan, `32 (Rₐ + Rₜ)`, with 4.25 nm pixels, where a fixed 4 µm scan's
+    /// pixels were 31 nm; a 10 µm particle gets the whole 100 µm stage.
+    #[test]
+    fn a_14_nm_particle_gets_a_544_nm_local_scan_with_4_25_nm_pixels() {
+        let size = local_scan_size(7e-9, 10e-9, 100e-6);
+        assert!((size - 544e-9).abs() < 1e-21, "{size:e}");
+        assert!((size / LOCAL_PIXELS as f64 - 4.25e-9).abs() < 1e-21);
+        assert!(
+            (4e-6 / LOCAL_PIXELS as f64 - 31e-9).abs() <= 0.5e-9,
+            "31 nm to the README's digit"
+        );
+        assert_eq!(local_scan_size(10e-6, 30e-9, 100e-6), 100e-6);
+    }
 }

@@ -223,49 +223,136 @@ fn reading_drift(run: &StrategyRun) -> f64 {
     mean(&v[v.len() - 200..]) - mean(&v[..200])
 }
 
+/// A push as `nanopush push --distance-um D --control C` makes it (`push_cmd::run` for one leg,
+/// without the overview scan, which only finds obstacles): the tip starts 8 µm behind the
+/// scene's particle, a local scan locates it, the model prediction takes the located radius, and
+/// the particle is pushed `distance` along +x from where it was located. Returns the run and the
+/// simulated time at its end (s), the README's push table's "simulated".
+fn push_as_the_cli_does(scene: &Scene, distance: f64) -> (StrategyRun, f64) {
+    let p = scene.pushed_particle();
+    let click = (p.x_um * UM, p.y_um * UM);
+    let mut afm = Afm::from_scene(scene, (click.0 - 8.0 * UM).max(0.0), click.1, 1e-3);
+    let (_, located) = crate::control::move_plan::locate_near(
+        &afm.surface(),
+        crate::scan::Tip::from_scene(scene),
+        crate::scan::ScanParams::from_scene(scene),
+        click,
+        p.radius_nm * 1e-9,
+        scene.file.stage.range_um * UM,
+    );
+    let found = located.expect("the local scan finds the particle");
+    let params = scene.strategy_params(1e-3);
+    let prepared = Prepared::new(scene, p.id, found.radius, &params).unwrap();
+    let request = prepared
+        .request(p.id, (found.x, found.y), (found.x + distance, found.y), None)
+        .unwrap();
+    let run = prepared.run(&mut afm, &request, params).unwrap();
+    (run, afm.time())
+}
+
+/// Asserts `value` is `readme` to the README's last printed digit: within `half_unit`, half a
+/// unit of that digit.
+#[track_caller]
+fn assert_digits(what: &str, value: f64, readme: f64, half_unit: f64) {
+    assert!(
+        (value - readme).abs() <= half_unit,
+        "{what}: {value} against the README's {readme} (± {half_unit})"
+    );
+}
+
+/// The README's push table, row "gold-latex, 6 µm, xy / z / xyz control", and its reading-drift
+/// paragraph: `nanopush push --scene scenes/gold-latex-500nm.toml --distance-um 6 --control C`
+/// (the same pushes, by [`push_as_the_cli_does`]). The scene's substrate rises 6 nm per µm:
+/// with the height fixed the reading drifts toward the baseline as the particle climbs
+/// (Fig 15, +0.134 V); the z loop holds it (−0.025 V) and raises the tip 48 nm for it. xy and
+/// xyz end 13.8 nm short; z-only control stops on stage travel, so it does not push the
+/// predicted retraction drag (−0.544 µm, the estimator's `retract_shift`) back and ends 552 nm
+/// short. The stick-phase peak the model predicts for these particles is 5.64 nm of `ζ_z`.
 #[test]
-fn z_position_control_holds_the_force_on_a_tilted_substrate() {
-    // The scene's substrate rises 6 nm per µm: with the height fixed the reading drifts toward
-    // the baseline as the particle climbs (Fig 15); the z loop holds it.
+fn gold_latex_6_um_ends_minus_13_8_nm_xy_minus_552_nm_z_and_drifts_0_134_v_xy_minus_0_025_v_xyz() {
+    use crate::scene::file::ControlFile;
     let base = scene(&[]);
-    let run_with = |control: crate::scene::file::ControlFile| {
+    let run_with = |control: ControlFile| {
         let mut f = base.file.clone();
         f.strategy.control = control;
         let s = Scene::from_file("gold-latex (control)", f).unwrap();
-        push(&s, 6.0 * UM, (0.0, 0.0))
+        push_as_the_cli_does(&s, 6.0 * UM).0
     };
-    let xy = run_with(crate::scene::file::ControlFile::Xy);
-    let xyz = run_with(crate::scene::file::ControlFile::Xyz);
-    let z = run_with(crate::scene::file::ControlFile::Z);
-    let (d_xy, d_xyz) = (reading_drift(&xy), reading_drift(&xyz));
-    assert!(
-        d_xy > 0.08,
-        "open-loop height: the reading rises toward −0.2 V by {d_xy:.3} V"
-    );
-    assert!(
-        d_xyz.abs() < 0.3 * d_xy,
-        "z loop: drift {d_xyz:.3} V against {d_xy:.3} V"
-    );
-    for run in [&xy, &xyz] {
-        assert_eq!(run.summary.failure, None);
-        let err = run.true_distance() - 6.0 * UM;
-        assert!(err.abs() < 25e-9, "error {:.1} nm", err * 1e9);
+    let xy = run_with(ControlFile::Xy);
+    let xyz = run_with(ControlFile::Xyz);
+    let z = run_with(ControlFile::Z);
+    let error_nm = |run: &StrategyRun| (run.true_distance() - 6.0 * UM) / 1e-9;
+    for (name, run, readme) in [("xy", &xy, -13.8), ("xyz", &xyz, -13.8)] {
+        assert_eq!(run.summary.failure, None, "{name}");
+        assert_eq!(run.summary.contact_step, Some(43), "{name}");
+        assert_digits(&format!("{name} distance error (nm)"), error_nm(run), readme, 0.05);
     }
-    // z-only control (issue 14: untested): it holds the force like xyz, but stops on stage
-    // travel, so it does not push the predicted retraction drag back: it ends short by it
-    // (−0.544 µm for these particles, the README's −552 nm over 10 µm).
     assert_eq!(z.summary.failure, None);
-    let d_z = reading_drift(&z);
+    assert_eq!(z.summary.contact_step, Some(43));
+    assert_digits("z distance error (nm)", error_nm(&z), -552.0, 0.5);
+    // The drift of the reading, toward the baseline with the height fixed, held by the z loop.
+    let (d_xy, d_xyz, d_z) = (reading_drift(&xy), reading_drift(&xyz), reading_drift(&z));
+    assert_digits("xy reading drift (V)", d_xy, 0.134, 0.0005);
+    assert_digits("xyz reading drift (V)", d_xyz, -0.025, 0.0005);
     assert!(d_z.abs() < 0.3 * d_xy, "z loop: drift {d_z:.3} V against {d_xy:.3} V");
-    let short = z.true_distance() - 6.0 * UM;
+    // How far the z loop raised the tip over the push.
+    let rise = |run: &StrategyRun| {
+        let z: Vec<f64> = run
+            .trace
+            .iter()
+            .filter(|r| r.phase == "push")
+            .map(|r| r.stage[2])
+            .collect();
+        z[z.len() - 1] - z[0]
+    };
+    assert_eq!(rise(&xy), 0.0, "the height is fixed under xy control");
+    assert_digits("xyz rise of the tip (nm)", rise(&xyz) / 1e-9, 48.0, 0.5);
+    // z control ends short by the predicted drag, which xy control pushes back.
     let drag = z.prediction.retract_shift;
-    assert!(drag < -0.5 * UM, "predicted drag {drag:e}");
+    assert_digits("predicted retraction drag (µm)", drag / UM, -0.544, 0.0005);
     assert!(
-        (short - drag).abs() < 30e-9,
+        (error_nm(&z) * 1e-9 - drag).abs() < 30e-9,
         "z control ends {:.1} nm off, the drag is {:.1} nm",
-        short * 1e9,
+        error_nm(&z),
         drag * 1e9
     );
+    assert_digits(
+        "predicted stick-phase peak ζ_z (nm)",
+        z.prediction.peak_deflection / 1e-9,
+        5.64,
+        0.005,
+    );
+}
+
+/// The README's push table, row "paper default (1 µm, rolling), 1 µm":
+/// `nanopush push --distance-um 1` (by [`push_as_the_cli_does`]) touches at step 43 and ends
+/// 1.1 nm long after 12.9 s of simulated time; the estimator's model predicts a retraction drag
+/// of −0.977 µm for the 1 µm particle and a stick-phase peak of 2.57 nm of `ζ_z`.
+#[test]
+fn paper_default_1_um_touches_at_step_43_ends_plus_1_1_nm_drag_minus_0_977_um_peak_2_57_nm() {
+    let (run, simulated) = push_as_the_cli_does(&default_scene(&[]), 1.0 * UM);
+    assert_eq!(run.summary.failure, None);
+    assert_eq!(run.summary.contact_step, Some(43));
+    assert_digits(
+        "distance error (nm)",
+        (run.true_distance() - 1.0 * UM) / 1e-9,
+        1.1,
+        0.05,
+    );
+    assert_digits("simulated time (s)", simulated, 12.9, 0.05);
+    assert_digits(
+        "predicted retraction drag (µm)",
+        run.prediction.retract_shift / UM,
+        -0.977,
+        0.0005,
+    );
+    assert_digits(
+        "predicted stick-phase peak ζ_z (nm)",
+        run.prediction.peak_deflection / 1e-9,
+        2.57,
+        0.005,
+    );
+    assert_retracted(&run);
 }
 
 /// Issue 14: the `no_separation` failure had no test. An estimator whose `t*` detector never
@@ -347,13 +434,17 @@ fn default_scene(edit: &[(&str, &str)]) -> Scene {
 /// had vanished and Newton's method walked the particle off to a far root (in the estimator's
 /// prediction as well, which then expected 3.7 cm of drag). Now the balance that vanished is a
 /// release where it vanished, the readout saturates at ±10 V, and such a lever, which cannot
-/// shear a 1 µm particle loose within the safety limit, fails with `deflection_limit`.
+/// shear a 1 µm particle loose within the safety limit, fails with `deflection_limit`, the
+/// particle 0.12 µm from where it was at 0.01 N/m (the README's figure).
 #[test]
-fn a_soft_lever_trips_the_deflection_limit_and_never_throws_the_particle() {
+fn a_soft_lever_trips_the_deflection_limit_and_leaves_the_particle_0_12_um_from_where_it_was() {
     for k in ["0.01", "0.02"] {
         let s = default_scene(&[("stiffness_n_per_m = 8.0", &format!("stiffness_n_per_m = {k}"))]);
         let run = push(&s, 1.0 * UM, (0.0, 0.0));
         let moved = run.true_distance();
+        if k == "0.01" {
+            assert_digits("k_c 0.01: |moved| (µm)", moved.abs() / UM, 0.12, 0.005);
+        }
         assert!(
             moved.abs() < 0.5 * UM,
             "k_c {k}: the particle moved {:.3} µm",
@@ -453,9 +544,10 @@ fn an_unphysical_instrument_state_fails_the_push_and_retracts() {
 /// Issue 13.3: zero friction on every pair failed at t = 0 ("step size 3.2e-21 s fell below the
 /// minimum", naming no field): with no torque on the particle its rotation is undetermined.
 /// The model leaves the rotation out; such a particle slides ahead of the tip, the reading
-/// never reaches ζ_set, and the outcome says the search pushed it.
+/// never reaches ζ_set, and the outcome says the search pushed it: 4.859 µm (the README's
+/// figure).
 #[test]
-fn a_frictionless_particle_is_pushed_by_the_search_and_the_outcome_says_so() {
+fn a_frictionless_particle_is_pushed_4_859_um_by_the_search_and_the_outcome_says_so() {
     let s = default_scene(&[
         ("particle_substrate_static = 0.3", "particle_substrate_static = 0.0"),
         ("particle_substrate_kinetic = 0.2", "particle_substrate_kinetic = 0.0"),
@@ -468,8 +560,9 @@ fn a_frictionless_particle_is_pushed_by_the_search_and_the_outcome_says_so() {
         "{:?}",
         run.summary.failure
     );
+    // The README's figure: "meanwhile the search pushed the particle 4.859 µm".
     let moved = run.search_distance();
-    assert!(moved > 1.0 * UM, "the search pushed it {:.3} µm", moved / UM);
+    assert_digits("search distance (µm)", moved / UM, 4.859, 0.0005);
     assert_eq!(moved, run.true_distance(), "all of it in the search");
     let text = run.failure_text().unwrap();
     assert!(text.contains("meanwhile the search pushed the particle"), "{text}");
@@ -537,4 +630,49 @@ fn every_shipped_scene_pushes_its_particle() {
         pushed += 1;
     }
     assert!(pushed >= 4, "{pushed} scenes");
+}
+
+/// The README on `gold-14nm`: it aims at β = 20° because the snap-in makes the detected
+/// substrate 3.0 nm high (the approach stops 1 nm a tick, at the first reading past
+/// `substrate_threshold_mv`), which raises the true contact angle to 31°: the tip centre parks
+/// `(Rₐ + Rₜ) sin β` above the particle's centre as the controller reckons it, 3.0 nm higher in
+/// truth.
+#[test]
+fn gold_14nm_detects_its_substrate_3_0_nm_high_and_meets_the_particle_at_31_deg() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/gold-14nm.toml");
+    let s = Scene::from_path(&path).unwrap();
+    let p = s.pushed_particle();
+    let (x, y, r) = (p.x_um * UM, p.y_um * UM, p.radius_nm * 1e-9);
+    let (run, _) = push_as_the_cli_does(&s, 0.1 * UM);
+    assert_eq!(run.summary.failure, None);
+    let ground = s.topography().height(x, y);
+    let detected = run.summary.substrate_z.expect("the snap-in found the substrate");
+    assert_digits("detected substrate (nm)", (detected - ground) / 1e-9, 3.0, 0.05);
+    let task = run.task;
+    let tip_centre = detected + task.parking_height() + task.tip_radius;
+    let angle = ((tip_centre - (ground + r)) / (r + task.tip_radius))
+        .asin()
+        .to_degrees();
+    assert_digits("true contact angle (°)", angle, 31.0, 0.5);
+    assert!(
+        (task.beta.to_degrees() - 20.0).abs() < 1e-9,
+        "aimed at {}",
+        task.beta.to_degrees()
+    );
+}
+
+/// The README's strategy defaults (`StrategyFile::default`, the constants of the strategy and
+/// the local scan): approach at 1 µm/s, steps of Δ = 0.1 µm with a 5 ms dwell, ζ_set = −1.5 V,
+/// a run-up of 4.25 µm, phases timed out after 120 s; hold 50 ms, back off 100 nm; a
+/// 128-pixel local scan.
+#[test]
+fn the_strategy_defaults_are_the_readmes() {
+    let f = crate::scene::file::StrategyFile::default();
+    assert_eq!(
+        (f.approach_speed_um_per_s, f.step_um, f.dwell_ms, f.set_point_v),
+        (1.0, 0.1, 5.0, -1.5)
+    );
+    assert_eq!((f.approach_distance_um, f.phase_timeout_s), (4.25, 120.0));
+    assert_eq!((strategy::HOLD, strategy::BACK_OFF), (0.05, 100e-9));
+    assert_eq!(crate::control::move_plan::LOCAL_PIXELS, 128);
 }

@@ -188,4 +188,16 @@ mod tests {
         let half = 2.0 * (g * g - (g - ra).powi(2)).sqrt();
         assert!((t.sphere_width_at(ra, 0.5) - half).abs() < 1e-18);
     }
+
+    /// The README: a sphere is imaged by the apex alone up to `Rₐ = Rₜ(1 − sin θ)/(1 + sin θ)`,
+    /// 14.7 nm for a 30 nm tip at 20°; beyond it, by the flank.
+    #[test]
+    fn the_apex_regime_ends_at_14_7_nm_for_a_30_nm_tip_at_20_deg() {
+        let t = tip(30.0, 20.0);
+        let s = 20f64.to_radians().sin();
+        let edge = 30.0 * NM * (1.0 - s) / (1.0 + s);
+        assert!((edge - 14.7 * NM).abs() <= 0.05 * NM, "{edge:e}");
+        assert!(t.apex_only(edge) && t.apex_only(14.70 * NM));
+        assert!(!t.apex_only(edge * (1.0 + 1e-12)) && !t.apex_only(14.72 * NM));
+    }
 }
