@@ -324,10 +324,61 @@ mod tests {
         );
     }
 
+    /// `CLOCK_MONOTONIC` read as a `Duration` by the standard library, an independent
+    /// conversion to nanoseconds.
+    fn clock_as_duration() -> std::time::Duration {
+        let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+        // SAFETY: clock_gettime writes the timespec we pass.
+        unsafe {
+            libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts);
+        }
+        std::time::Duration::new(ts.tv_sec as u64, ts.tv_nsec as u32)
+    }
+
+    /// The stamps are `CLOCK_MONOTONIC` in nanoseconds, seconds and all: read between two
+    /// readings of the clock through `Duration` (cargo-mutants: `sec * 1e9` as `sec + 1e9` or
+    /// `sec / 1e9`, and a constant, survived a test that only asked for an increase).
     #[test]
-    fn the_monotonic_clock_advances() {
+    fn the_monotonic_clock_is_clock_monotonic_in_nanoseconds() {
+        let before = clock_as_duration().as_nanos();
         let a = monotonic_ns();
         let b = monotonic_ns();
-        assert!(a > 0 && b >= a);
+        let after = clock_as_duration().as_nanos();
+        assert!(
+            before <= u128::from(a) && a <= b && u128::from(b) <= after,
+            "{before} {a} {b} {after}"
+        );
+    }
+
+    #[test]
+    fn device_codes_have_names() {
+        assert_eq!(device_name(DEVICE_SIM), "sim");
+        assert_eq!(device_name(DEVICE_SERIAL), "serial");
+        assert_eq!(device_name(0), "unknown");
+        assert_eq!(device_name(7), "unknown");
+    }
+
+    /// Namespaces: letters, digits, `-` and `_`, at most 32 (empty: the default link); the
+    /// config's file prefix carries a valid one, and an invalid one falls back to the default.
+    #[test]
+    fn a_namespace_is_at_most_32_letters_digits_dashes_and_underscores() {
+        for ok in ["", "lab1", "Lab-2_b", &"x".repeat(32)] {
+            assert!(valid_namespace(ok), "{ok:?}");
+        }
+        for bad in [&"x".repeat(33) as &str, "a b", "a/b", "a.b", "ü", "lab\n"] {
+            assert!(!valid_namespace(bad), "{bad:?}");
+        }
+        let prefix = |ns: &str| ipc_config_in(ns).global.prefix.to_string();
+        assert_eq!(prefix(""), "nanopush_");
+        assert_eq!(prefix("lab-2"), "nanopush_lab-2_");
+        assert_eq!(prefix("a b"), "nanopush_");
+    }
+
+    #[test]
+    fn a_taken_publisher_is_told_from_other_failures() {
+        use iceoryx2::port::publisher::PublisherCreateError as E;
+        assert!(is_publisher_taken(&E::ExceedsMaxSupportedPublishers));
+        assert!(!is_publisher_taken(&E::UnableToCreateDataSegment));
+        assert_eq!(LinkSetupError("no shm".into()).to_string(), "no shm");
     }
 }
