@@ -1385,7 +1385,7 @@ mod tests {
     /// closed after 60 s, a 5 s send budget per frame, a client that reads no reply for 30 s
     /// closed, messages up to 8 MiB refused with `too_large` (above it the connection closes),
     /// SCHED_FIFO priority 50 for the loop. (The 8 places are also tested end to end:
-    /// `tests/e2e/serve.rs::the_operator_token_has_8_places_and_a_ninth_is_refused`.)
+    /// `tests/e2e/serve_hostile.rs::the_operator_token_has_8_places_and_a_ninth_is_refused`.)
     #[test]
     fn the_readmes_server_limits_8_places_60_s_idle_5_s_send_30_s_replies_8_mib_fifo_50() {
         assert_eq!(OPERATOR_PLACES, 8);
