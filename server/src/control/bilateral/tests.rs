@@ -276,8 +276,18 @@ fn the_engage_button_toggles_and_no_surface_is_a_fault() {
     let start = rig.stage[2];
     rig.law.params.search_depth = 1.0 * UM;
     rig.law.engage(rig.stage);
-    rig.until(3_000, |r| r.law.phase() == Phase::Off);
+    let mut lowest = start;
+    rig.until(3_000, |r| {
+        lowest = lowest.min(r.stage[2]);
+        r.law.phase() == Phase::Off
+    });
     assert_eq!(rig.law.fault(), Some(Fault::NoSurface));
+    // It searched the whole 1 µm (one approach step past it), then backed up.
+    assert!(
+        (start - lowest - 1.0 * UM).abs() <= 1.5e-9,
+        "searched {} nm",
+        (start - lowest) * 1e9
+    );
     assert!(
         (rig.stage[2] - start).abs() < 1e-12,
         "left {} nm below the start",
@@ -376,4 +386,276 @@ fn the_paper_scenes_hand_stops_at_3_80_nm_feels_1_n_and_a_1_45_kn_per_m_contact(
     assert!((2.0 * k_hand - 2.90e3).abs() <= 5.0, "{} N/m", 2.0 * k_hand);
     let stored = 0.5 * 1.0f64.powi(2) / k_hand;
     assert!((stored - 0.34e-3).abs() <= 0.005e-3, "{stored} J");
+}
+
+/// `Scene::bilateral_params` from the paper scene's file by hand (`[haptic]` at its defaults): at
+/// most 300 nm above the surface; the approach searches the strategy's 10 µm below its 3 µm start;
+/// the tip touches when the lever bends by 5 σ of the readout's noise, at least 0.2 nm (5 mV at
+/// 0.8 V/nm is 6.25 pm, so 0.2 nm here; 100 mV is 0.625 nm). Before, only the scales and the
+/// deflection limit were checked (cargo-mutants).
+#[test]
+fn the_paper_scenes_limits_by_hand_300_nm_up_13_um_of_search_0_2_nm_to_touch() {
+    let mut scene = Scene::default_scene();
+    let p = scene.bilateral_params(1e-3);
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
+    assert!(close(p.max_height, 300e-9), "{}", p.max_height);
+    assert!(close(p.search_depth, 13e-6), "{}", p.search_depth);
+    assert_eq!(p.contact_deflection, 0.2e-9);
+    assert!(close(p.park_gap, 100e-9) && p.tick == 1e-3);
+    assert!(close(p.max_speed, 1e-6) && close(p.approach_speed, 1e-6));
+    scene.file.sensor.noise_rms_mv = 100.0;
+    let p = scene.bilateral_params(1e-3);
+    assert!(close(p.contact_deflection, 0.625e-9), "{}", p.contact_deflection);
+}
+
+#[test]
+fn every_phase_has_its_protocol_name() {
+    let names: Vec<&str> = [
+        Phase::Off,
+        Phase::Approach,
+        Phase::Park,
+        Phase::Settle { small: 2 },
+        Phase::Ramp { gain: 0.5 },
+        Phase::Engaged,
+        Phase::Clutched,
+        Phase::Pushing,
+        Phase::LinkLost,
+        Phase::Retract,
+    ]
+    .iter()
+    .map(Phase::name)
+    .collect();
+    assert_eq!(
+        names,
+        [
+            "off",
+            "approach",
+            "park",
+            "settle",
+            "ramp",
+            "engaged",
+            "clutched",
+            "pushing",
+            "link_lost",
+            "retract"
+        ]
+    );
+}
+
+/// The force ramps in linearly, a tick's worth of `RAMP` each tick, flagged as engaged from its
+/// first tick; the tip force is the lever's stiffness times the deflection read from the
+/// voltage, `k_z (V − V₀)/G` (Eqs 11-12), and the hand gets it times the ramp and `g_f`.
+#[test]
+fn the_ramp_adds_a_tick_over_1_s_each_tick_and_the_hand_feels_g_f_times_k_z_zeta() {
+    let mut rig = Rig::new();
+    let p = rig.law.params;
+    rig.law.engage(rig.stage);
+    rig.until(20_000, |r| matches!(r.law.phase(), Phase::Ramp { .. }));
+    assert_eq!(rig.last.unwrap().feedback.flags, FORCE_ENGAGED);
+    let mut k = 0;
+    while rig.law.phase() != Phase::Engaged {
+        k += 1;
+        let v = rig.volts;
+        let f = rig.tick().feedback;
+        let want = (k as f64 * 1e-3 / RAMP).min(1.0);
+        assert!((f.gain - want).abs() < 1e-12, "tick {k}: gain {} want {want}", f.gain);
+        assert_eq!((f.flags, f.active), (FORCE_ENGAGED, 1), "tick {k}");
+        let tip = p.k_z * (v - p.baseline) / p.sensor_gain;
+        assert!((f.tip_force - tip).abs() <= 1e-12 * tip.abs(), "{} {tip}", f.tip_force);
+        let hand = f.gain * p.force_gain * tip;
+        assert!((f.force - hand).abs() <= 1e-12 * hand.abs(), "{} {hand}", f.force);
+    }
+    assert_eq!(k, 1000);
+}
+
+/// `engaged()` is any phase but off; `recenter` moves the anchor to the hand so the tip stays
+/// and the next millimetre of hand is 10 nm from there; `link_lost` parks an engaged hand and
+/// leaves an idle law alone.
+#[test]
+fn engaged_recenter_and_link_lost_do_what_they_say() {
+    let mut rig = Rig::new();
+    assert!(!rig.law.engaged());
+    rig.law.link_lost();
+    assert_eq!(rig.law.phase(), Phase::Off);
+    rig.engaged();
+    assert!(rig.law.engaged());
+    let z = rig.stage[2];
+    rig.handle.position = 0.03;
+    rig.law.recenter(0.03);
+    for _ in 0..50 {
+        rig.tick();
+    }
+    assert!((rig.stage[2] - z).abs() < 1e-15, "the tip stayed");
+    rig.handle.position = 0.031;
+    rig.until(100, |r| (r.stage[2] - (z + 10e-9)).abs() < 1e-15);
+    rig.law.link_lost();
+    assert_eq!(rig.law.phase(), Phase::LinkLost);
+    assert!(rig.law.engaged());
+}
+
+/// The law alone over a flat surface at `zc`, through an ideal stage (the tip is where the law
+/// put it): the approach meets the surface at `zc`; after it the lever bends by `stiff` times
+/// the indentation `max(0, zc − z)` (0: a surface the lever does not feel), read through the
+/// scene's sensor.
+struct Ideal {
+    law: Bilateral,
+    z: f64,
+    zc: f64,
+    stiff: f64,
+    handle: HapticState,
+    pushing: bool,
+}
+
+impl Ideal {
+    fn engaged(stiff: f64) -> Ideal {
+        let p = Scene::default_scene().bilateral_params(1e-3);
+        let mut s = Ideal {
+            law: Bilateral::new(p),
+            z: 1e-6,
+            zc: 0.0,
+            stiff,
+            handle: HapticState {
+                max_force: 1e3,
+                ..Default::default()
+            },
+            pushing: false,
+        };
+        s.law.engage([0.0, 0.0, s.z]);
+        for _ in 0..5000 {
+            s.tick();
+            if s.law.phase() == Phase::Engaged {
+                return s;
+            }
+        }
+        panic!("not engaged: {:?}", s.law.phase());
+    }
+
+    fn tick(&mut self) -> Output {
+        let p = self.law.params;
+        let volts = if self.law.phase() == Phase::Approach {
+            p.baseline
+                + if self.z <= self.zc {
+                    2.0 * p.substrate_threshold
+                } else {
+                    0.0
+                }
+        } else {
+            p.baseline + p.sensor_gain * self.stiff * (self.zc - self.z).max(0.0)
+        };
+        let out = self.law.tick(&Input {
+            handle: Some(self.handle),
+            stage: [0.0, 0.0, self.z],
+            volts,
+            pushing: self.pushing,
+        });
+        if let Some(t) = out.target {
+            self.z = t[2];
+        }
+        out
+    }
+
+    /// Where the hand asks the tip to be: the anchor (the hand at 0, the parking height) plus
+    /// the scaled travel.
+    fn z_des(&self) -> f64 {
+        self.law.contact_z().unwrap() + self.law.params.park_gap + self.law.params.position_gain * self.handle.position
+    }
+
+    /// The hand's position that asks for the height `z`.
+    fn hand_for(&self, z: f64) -> f64 {
+        (z - self.law.contact_z().unwrap() - self.law.params.park_gap) / self.law.params.position_gain
+    }
+}
+
+/// Up, the hand takes the tip at most 300 nm above the surface and feels nothing there; down
+/// onto a surface the lever does not feel, the tip stops 20 nm past the deflection limit below
+/// it and the hand meets a wall `g_f k_z (z_lo − z_des)` with the wall's stiffness in the local
+/// model.
+#[test]
+fn the_tip_stays_between_300_nm_above_and_the_limit_plus_20_nm_below_and_the_hand_meets_a_wall() {
+    let mut s = Ideal::engaged(0.0);
+    let p = s.law.params;
+    let zc = s.law.contact_z().unwrap();
+    assert!((zc - s.zc).abs() <= p.approach_speed * p.tick, "met at {zc}");
+    // Not touching, no wall: no force, no stiffness.
+    let f = s.tick().feedback;
+    assert_eq!((f.force, f.stiffness), (0.0, 0.0));
+    s.handle.position = 1.0;
+    for _ in 0..1000 {
+        s.tick();
+    }
+    assert!((s.z - (zc + 300e-9)).abs() < 1e-14, "{} nm above", (s.z - zc) * 1e9);
+    assert_eq!(s.tick().feedback.force, 0.0);
+    s.handle.position = -0.05;
+    for _ in 0..1000 {
+        s.tick();
+    }
+    let lo = zc - p.max_indent - FLOOR_MARGIN;
+    assert!((s.z - lo).abs() < 1e-14, "{} nm below", (zc - s.z) * 1e9);
+    let f = s.tick().feedback;
+    let wall = p.force_gain * p.k_z * (lo - s.z_des());
+    assert!(
+        wall > 0.0 && (f.force - wall).abs() <= 1e-12 * wall,
+        "{} {wall}",
+        f.force
+    );
+    assert_eq!(f.stiffness, -p.force_gain * p.k_z * p.position_gain);
+}
+
+/// Pressing on a surface the lever feels one to one: the tip stops where the lever reaches its
+/// deflection limit, `zc − max_indent`, and the hand feels the tip force there plus the wall;
+/// lifting the hand above that floor lets the tip follow again. Touching within the limit sends
+/// the lever's scaled stiffness; during a push, none (the strategy owns z).
+#[test]
+fn the_lever_limit_is_a_floor_the_hand_leaves_by_lifting() {
+    let mut s = Ideal::engaged(1.0);
+    let p = s.law.params;
+    // 1 nm into the surface: touching, within the limit.
+    s.handle.position = s.hand_for(s.zc - 1e-9);
+    for _ in 0..200 {
+        s.tick();
+    }
+    assert!((s.z - (s.zc - 1e-9)).abs() < 1e-14, "{} nm in", (s.zc - s.z) * 1e9);
+    let f = s.tick().feedback;
+    let tip = p.k_z * 1e-9;
+    assert!((f.tip_force - tip).abs() < 1e-9 * tip && (f.force - p.force_gain * tip).abs() < 1e-9 * f.force);
+    assert_eq!(f.stiffness, -p.force_gain * p.k_z * p.position_gain);
+    // Far down: the floor where ζ = max_indent.
+    s.handle.position = -0.05;
+    for _ in 0..1000 {
+        s.tick();
+    }
+    assert!(
+        (s.z - (s.zc - p.max_indent)).abs() < 1e-14,
+        "{} nm in",
+        (s.zc - s.z) * 1e9
+    );
+    let f = s.tick().feedback;
+    let want = p.force_gain * p.k_z * (p.max_indent + (s.z - s.z_des()));
+    assert!((f.force - want).abs() <= 1e-9 * want, "{} {want}", f.force);
+    // Back up to 1 nm above the floor: the tip follows.
+    s.handle.position = s.hand_for(s.zc - p.max_indent + 1e-9);
+    for _ in 0..200 {
+        s.tick();
+    }
+    assert!(
+        (s.z - s.z_des()).abs() < 1e-14,
+        "{} nm from the hand",
+        (s.z - s.z_des()) * 1e9
+    );
+    // The floor went with the lift: where the surface is now 5 nm lower (a particle gone from
+    // under the tip), pressing again stops at the new limit, not the old floor.
+    s.zc -= 5e-9;
+    s.handle.position = -0.05;
+    for _ in 0..1000 {
+        s.tick();
+    }
+    assert!(
+        (s.z - (s.zc - p.max_indent)).abs() < 1e-14,
+        "{} nm in",
+        (s.zc - s.z) * 1e9
+    );
+    s.pushing = true;
+    let f = s.tick().feedback;
+    assert!(f.tip_force > 0.0);
+    assert_eq!((f.stiffness, f.flags), (0.0, FORCE_PUSHING));
 }
