@@ -440,4 +440,53 @@ mod tests {
         assert!(r.violations.is_empty(), "{:?}", r.violations);
         assert!((r.trace_bytes as f64 - 25e6).abs() <= 0.5e6, "{} bytes", r.trace_bytes);
     }
+
+    /// The README's refusals of the full campaign: a 7 nm particle under the scene's 30 nm tip
+    /// at β = 30° (the tip would park below the substrate: `Rₐ − Rₜ + (Rₐ + Rₜ) sin β ≤ 0`), and
+    /// the 1 mm/s corners of a 50 nm particle on a 0.01 N/m lever, dry and humid, whose model
+    /// prediction fails below the minimum step, naming the scene sections that drive it.
+    #[test]
+    fn a_7_nm_particle_under_a_30_nm_tip_at_30_deg_and_the_50_nm_soft_1_mm_per_s_corners_are_refused() {
+        use Edit::*;
+        let scene = Scene::default_scene();
+        let full = cases(false);
+        let small = [RadiusNm(7.0)];
+        assert!(full.contains(&small.to_vec()), "a case of the full campaign");
+        let r = run_case(&scene, &small);
+        assert_eq!(r.outcome, "refused", "{}", r.reason);
+        assert!(
+            r.reason.contains("push.contact_angle_deg = 30°")
+                && r.reason.contains("radius 30 nm")
+                && r.reason.contains("radius 7 nm"),
+            "{}",
+            r.reason
+        );
+        for rh in [0.0, 0.99] {
+            let corner = [RadiusNm(50.0), StiffnessNPerM(0.01), Humidity(rh), SpeedUmPerS(1000.0)];
+            assert!(full.contains(&corner.to_vec()), "a corner of the full campaign");
+            let r = run_case(&scene, &corner);
+            assert_eq!(r.outcome, "refused", "{}: {}", r.case, r.reason);
+            assert!(
+                r.reason.contains("fell below the minimum")
+                    && r.reason
+                        .contains("[friction], [cantilever], [particles], [environment], [push] and [physics]"),
+                "{}: {}",
+                r.case,
+                r.reason
+            );
+            assert!(r.violations.is_empty(), "{:?}", r.violations);
+        }
+    }
+
+    /// The README: a contact search at 1 pm/s (a case of the full campaign) cannot finish in the
+    /// 120 s time-out.
+    #[test]
+    fn a_1_pm_per_s_search_times_out_after_120_s() {
+        let case = [Edit::SpeedUmPerS(1e-6)];
+        assert!(cases(false).contains(&case.to_vec()), "a case of the full campaign");
+        let r = run_case(&Scene::default_scene(), &case);
+        assert_eq!(r.outcome, "timeout", "{}", r.reason);
+        assert!(r.reason.contains("contact_search took more than 120 s"), "{}", r.reason);
+        assert!(r.violations.is_empty(), "{:?}", r.violations);
+    }
 }

@@ -20,8 +20,9 @@ fn json(args: &[&str]) -> Value {
 
 /// The README's push table, row 1, and its Figs 9 and 15: `nanopush push --scene
 /// scenes/gold-latex-500nm.toml --distance-um 12 --pause-at-um 6 --out DIR` touches at step 43,
-/// ends 13.8 nm short after 15.6 s of simulated time, and its trace shows the stop and, at the
-/// restart, a static-friction peak of −1.80 V against a rolling level of about −1.1 V.
+/// ends 13.8 nm short after 15.6 s of simulated time, and its trace shows the 500 ms stop at
+/// 6 µm and, at the restart, a static-friction peak of −1.80 V against a rolling level of about
+/// −1.1 V.
 #[test]
 fn a_12_um_push_with_a_stop_ends_minus_13_8_nm_and_writes_figs_9_and_15_with_a_minus_1_80_v_peak() {
     let dir = tmp("fig15");
@@ -85,11 +86,12 @@ fn a_12_um_push_with_a_stop_ends_minus_13_8_nm_and_writes_figs_9_and_15_with_a_m
     let still: Vec<usize> = (1..pushing.len())
         .filter(|&i| pushing[i - 1][3] == pushing[i][3])
         .collect();
-    assert!(
-        still.len() >= 400,
-        "{} ticks without stage motion during the 500 ms stop",
-        still.len()
-    );
+    // The README's "500 ms stop at 6 µm" (`--pause-ms` 500 by default): 500 ticks of 1 ms in
+    // one stretch, from the tick the estimate of the distance pushed passes 6 µm.
+    assert_eq!(still.len(), 500, "ticks without stage motion during the 500 ms stop");
+    assert_eq!(still[still.len() - 1] - still[0], 499, "one stretch: {still:?}");
+    let at: f64 = pushing[still[0]][7].parse().unwrap();
+    assert!((6.0..6.01).contains(&at), "the stop began at an estimate of {at} µm");
     let v: Vec<f64> = pushing.iter().map(|r| r[6].parse().unwrap()).collect();
     // The rolling level before the stop (the mean of the rolling samples), and the peak after it.
     let (stop, restart) = (still[0], still[still.len() - 1]);

@@ -270,9 +270,7 @@ export class View3D {
     const wUm = scan.x_real * UM;
     const hUm = scan.y_real * UM;
     // Vertices at the centres of every `step`-th pixel (nx × ny of them).
-    const step = Math.max(1, Math.ceil(Math.max(xres, yres) / MAX_SIDE));
-    const nx = Math.max(2, Math.ceil(xres / step));
-    const ny = Math.max(2, Math.ceil(yres / step));
+    const { step, nx, ny } = surfaceGrid(xres, yres);
     const spanX = wUm * ((nx - 1) * step) / xres;
     const spanY = hUm * ((ny - 1) * step) / yres;
     const geom = new THREE.PlaneGeometry(spanX, spanY, nx - 1, ny - 1);
@@ -671,6 +669,13 @@ function softwareGl() {
   } catch {
     return false;
   }
+}
+
+/** The 3D surface of an `xres × yres` scan: a vertex at every `step`-th pixel, `nx × ny` of
+ * them, at most `MAX_SIDE` a side. */
+export function surfaceGrid(xres, yres) {
+  const step = Math.max(1, Math.ceil(Math.max(xres, yres) / MAX_SIDE));
+  return { step, nx: Math.max(2, Math.ceil(xres / step)), ny: Math.max(2, Math.ceil(yres / step)) };
 }
 
 /** A length (m) in nm or µm, for labels. */

@@ -321,6 +321,26 @@ mod tests {
         assert!((ts - 0.051).abs() <= 0.004, "t* = {ts}");
     }
 
+    /// The README's `t*` detector: "a 4-sample mean falling [the margin] below its running
+    /// maximum". From a level of 1 V with a margin of 0.25 V, one sample 0.99 V lower moves a
+    /// 4-sample mean by 0.2475 V (no peak), one 1.01 V lower by 0.2525 V (the peak, dated at the
+    /// level's first sample, where the running maximum was first reached); a 3-sample mean would
+    /// fire on the first, a 5-sample one on neither.
+    #[test]
+    fn the_t_star_detector_is_a_4_sample_mean_falling_the_margin_below_its_maximum() {
+        assert_eq!(WINDOW, 4);
+        for (drop, fires) in [(0.99, false), (1.01, true)] {
+            let mut d = PeakDetector::new(0.25);
+            for k in 0..10 {
+                assert_eq!(d.feed(k as f64 * 1e-3, 1.0), None);
+            }
+            assert_eq!(d.feed(10e-3, 1.0 - drop).is_some(), fires, "a drop of {drop} V");
+            if fires {
+                assert_eq!(d.peak, Some((0.0, 1.0)), "t* at the first sample of the level");
+            }
+        }
+    }
+
     #[test]
     fn no_peak_on_a_monotone_rise() {
         let mut d = PeakDetector::new(0.05);

@@ -408,9 +408,7 @@ impl Afm {
         let y = c.sim.x[c.sim.model.layout.particle_y.pos];
         let after = (c.particle0.0 + c.dir.0 * y, c.particle0.1 + c.dir.1 * y);
         let p = self.particles[c.index];
-        let stage_travel = (target[0] - self.stage[0])
-            .hypot(target[1] - self.stage[1])
-            .max(3.0 * self.speed_bound * self.tick);
+        let stage_travel = self.guard_travel(target);
         let states = &c.sim.x[..n];
         if let Some(u) = Unphysical::check(
             states,
@@ -439,6 +437,14 @@ impl Afm {
         Ok(())
     }
 
+    /// The stage's travel the guard allows for in a tick to `target` (m): the commanded one or,
+    /// when larger, three ticks at the fastest stage speed (see [`Unphysical`]).
+    fn guard_travel(&self, target: [f64; 3]) -> f64 {
+        (target[0] - self.stage[0])
+            .hypot(target[1] - self.stage[1])
+            .max(3.0 * self.speed_bound * self.tick)
+    }
+
     /// Ends a push: the particle stays where it is, the tip is free at `target`.
     fn release(&mut self, target: [f64; 3], t1: f64) {
         self.contact = None;
@@ -453,6 +459,7 @@ impl Afm {
 #[cfg(test)]
 mod tests {
     use super::Unphysical;
+    use crate::scene::Scene;
 
     const R: (f64, f64) = (1e-6, 30e-9);
 
@@ -482,9 +489,46 @@ mod tests {
         let out = Unphysical::check(&states, 0.0, (0.5e-6, 1e-6), (-10.5e-6, 1e-6), 11e-6, R, 100e-6).unwrap();
         assert_eq!(out.what, "particle x (m)");
         assert!((out.limit + 10e-6).abs() < 1e-18, "{out:?}");
+        // The margin's 1 µm floor: 10 Rₐ of a 50 nm particle would be 0.5 µm.
+        let small = (50e-9, 30e-9);
+        assert_eq!(
+            Unphysical::check(&states, 0.0, (0.5e-6, 1e-6), (-0.9e-6, 1e-6), 2e-6, small, 100e-6),
+            None
+        );
+        let out = Unphysical::check(&states, 0.0, (0.5e-6, 1e-6), (-1.1e-6, 1e-6), 2e-6, small, 100e-6).unwrap();
+        assert_eq!((out.what, out.limit), ("particle x (m)", -1e-6));
         // Non-finite states and deflection.
         let nan = Unphysical::check(&[1.0, f64::NAN], 0.0, (0.0, 0.0), (0.0, 0.0), 0.0, R, 100e-6).unwrap();
         assert_eq!(nan.what, "push model state");
         assert!(Unphysical::check(&states, f64::INFINITY, (0.0, 0.0), (0.0, 0.0), 0.0, R, 100e-6).is_some());
+    }
+
+    /// The README's guard ("Physics guarded every tick"): the particle may move, in one tick, the
+    /// stage's travel plus `Rₐ + Rₜ`, the travel being the command or, when larger, three ticks at
+    /// the scene's fastest speed (a dynamic stage lags its command and catches up after it
+    /// stops). The paper scene's fastest is its 10 µm/s travel: 30 nm in three 1 ms ticks.
+    #[test]
+    fn the_guard_allows_the_commanded_travel_or_three_ticks_at_the_fastest_speed() {
+        let s = Scene::default_scene();
+        let st = &s.file.strategy;
+        assert_eq!(
+            (
+                st.travel_speed_um_per_s,
+                st.approach_speed_um_per_s,
+                s.file.push.speed_um_per_s
+            ),
+            (10.0, 1.0, 1.0)
+        );
+        let afm = super::Afm::from_scene(&s, 40e-6, 50e-6, 1e-3);
+        let at = afm.stage;
+        assert!(
+            (afm.guard_travel(at) - 30e-9).abs() < 1e-21,
+            "{:e}",
+            afm.guard_travel(at)
+        );
+        let near = [at[0] + 20e-9, at[1], at[2]];
+        assert!((afm.guard_travel(near) - 30e-9).abs() < 1e-21);
+        let far = [at[0] + 3e-6, at[1] + 4e-6, at[2]];
+        assert!((afm.guard_travel(far) - 5e-6).abs() < 1e-18);
     }
 }

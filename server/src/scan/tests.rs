@@ -167,12 +167,13 @@ impl Figure {
     }
 }
 
-/// One row of the README's localization table: the worst particle of the scene, position error
-/// along x and across (nm; one figure for both on the level paper scene), radius error and
-/// radius from the half-height width (%).
+/// One row of the README's localization table: the pixel pitch (nm), the worst particle of the
+/// scene, position error along x and across (nm; one figure for both on the level paper scene),
+/// radius error and radius from the half-height width (%).
 struct Row {
     scene: &'static str,
     pixels: usize,
+    pitch: Figure,
     along: Figure,
     across: Figure,
     radius: Figure,
@@ -182,7 +183,7 @@ struct Row {
 /// Localization of every particle of the two shipped particle scenes, noise on (0.2 nm RMS, the
 /// seeded noise: every figure is deterministic), held to the README's table to its printed
 /// digits, row by row (issue 14: this test once allowed a whole pixel, 195-391 nm, then 4-25
-/// times the printed figures): the worst particle's position error (gold-latex: along its
+/// times the printed figures): the pixel pitch, the worst particle's position error (gold-latex: along its
 /// 6 mrad tilt, 1.4-1.5 nm at both pitches, the plane levelling tilting the sphere's image; and
 /// across), its radius error, and its radius from the half-height width; the 64-pixel row too.
 /// Then the `H/2` cross-check: 7 % off for the 0.5 µm particles at 128 pixels, 0.03-0.2 % at
@@ -194,6 +195,7 @@ fn shipped_particles_are_localized_as_the_readme_says() {
         Row {
             scene: "paper-default",
             pixels: 128,
+            pitch: f(391.0, 0.5),
             along: f(0.011, 0.0005),
             across: f(0.011, 0.0005),
             radius: f(0.002, 0.0005),
@@ -202,6 +204,7 @@ fn shipped_particles_are_localized_as_the_readme_says() {
         Row {
             scene: "paper-default",
             pixels: 256,
+            pitch: f(195.0, 0.5),
             along: f(0.005, 0.0005),
             across: f(0.005, 0.0005),
             radius: f(0.000, 0.0005),
@@ -210,6 +213,7 @@ fn shipped_particles_are_localized_as_the_readme_says() {
         Row {
             scene: "gold-latex-500nm",
             pixels: 64,
+            pitch: f(781.0, 0.5),
             along: f(93.0, 0.5),
             across: f(17.0, 0.5),
             radius: f(0.48, 0.005),
@@ -218,6 +222,7 @@ fn shipped_particles_are_localized_as_the_readme_says() {
         Row {
             scene: "gold-latex-500nm",
             pixels: 128,
+            pitch: f(391.0, 0.5),
             along: f(1.53, 0.005),
             across: f(0.12, 0.005),
             radius: f(0.039, 0.0005),
@@ -226,6 +231,7 @@ fn shipped_particles_are_localized_as_the_readme_says() {
         Row {
             scene: "gold-latex-500nm",
             pixels: 256,
+            pitch: f(195.0, 0.5),
             along: f(1.45, 0.005),
             across: f(0.04, 0.005),
             radius: f(0.007, 0.0005),
@@ -247,6 +253,8 @@ fn shipped_particles_are_localized_as_the_readme_says() {
             },
         );
         assert!(p.noise_rms > 0.0);
+        row.pitch
+            .check(&format!("{name} at {pixels} px: pitch (nm)"), p.pixel() / NM);
         let img = scan(&s, t, p);
         let found = find_particles(&img, &t);
         assert_eq!(found.len(), s.spheres.len(), "{name}: {found:?}");
@@ -407,6 +415,28 @@ fn no_blob_near_the_click_is_a_typed_error_naming_the_distance() {
     assert!(matches!(e, LocateError::OutsideImage { .. }), "{e}");
     // The same click with a search radius that reaches the particle finds it.
     assert!(localize(&img, &t, 3.5 * UM, 3.5 * UM, 2.5 * UM).is_ok());
+}
+
+/// The README's localization threshold `max(6σ, 0.5 nm)` above the levelled substrate (σ the
+/// image's noise, estimated robustly): a noiseless scan finds nothing above 0.5 nm, the floor;
+/// with 1 nm of noise, 6σ: 6 nm (the estimate of σ within 5 %).
+#[test]
+fn the_localization_threshold_is_6_sigma_or_at_least_0_5_nm() {
+    let t = tip();
+    let threshold = |noise: f64| {
+        let p = ScanParams {
+            noise_rms: noise,
+            ..quiet(4.0 * UM, 64)
+        };
+        let img = scan(&one_sphere(100.0 * NM), t, p);
+        match localize(&img, &t, 3.5 * UM, 3.5 * UM, 0.5 * UM).unwrap_err() {
+            LocateError::NoBlob { threshold, .. } => threshold,
+            e => panic!("{e}"),
+        }
+    };
+    assert_eq!(threshold(0.0), 0.5 * NM);
+    let six_sigma = threshold(1.0 * NM);
+    assert!((six_sigma / (6.0 * NM) - 1.0).abs() < 0.05, "{six_sigma:e} m");
 }
 
 fn with_scan(section: &str) -> Result<Scene, crate::scene::SceneError> {

@@ -371,3 +371,49 @@ fn the_shipped_scenes_are_what_the_readmes_table_says() {
     assert!(ph.van_der_waals && !ph.capillary && !ph.electrostatic);
     assert_eq!(minimal.environment.relative_humidity, 0.0);
 }
+
+fn shipped(name: &str) -> Scene {
+    Scene::from_path(
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../scenes")
+            .join(name),
+    )
+    .unwrap()
+}
+
+/// The README's paragraph on the sensor gains ("Pushes"): −0.8 V/nm in paper-default and
+/// gold-14nm, −0.4 V/nm in gold-latex-500nm, −0.2 V/nm in minimal, every baseline at −0.2 V;
+/// so `ζ_set = −1.5 V` is `(ζ_set − baseline)/gain` = 1.625 nm of deflection in paper-default
+/// and 3.25 nm in gold-latex-500nm.
+#[test]
+fn the_sensor_gains_are_minus_0_8_0_4_0_8_0_2_v_per_nm_and_the_set_point_1_625_and_3_25_nm() {
+    for (name, gain) in [
+        ("paper-default.toml", -0.8),
+        ("gold-latex-500nm.toml", -0.4),
+        ("gold-14nm.toml", -0.8),
+        ("minimal.toml", -0.2),
+    ] {
+        let s = shipped(name);
+        assert_eq!(s.file.sensor.gain_v_per_nm, gain, "{name}");
+        assert_eq!(s.file.sensor.baseline_v, -0.2, "{name}");
+    }
+    assert_eq!(Scene::default_scene().file, shipped("paper-default.toml").file);
+    for (name, readme_nm) in [("paper-default.toml", 1.625), ("gold-latex-500nm.toml", 3.25)] {
+        let s = shipped(name);
+        assert_eq!(s.file.strategy.set_point_v, -1.5, "{name}");
+        let nm = s.sensor().deflection(s.file.strategy.set_point_v) / 1e-9;
+        assert!(
+            (nm - readme_nm).abs() <= 0.0005,
+            "{name}: ζ_set is {nm} nm of deflection"
+        );
+    }
+}
+
+/// The README on gold-latex-500nm (Pushes, Fig 15, Scans): its substrate rises 6 mrad along x,
+/// and its reading carries a periodic perturbation of 20 mV at 3 Hz.
+#[test]
+fn gold_latex_rises_6_mrad_and_its_reading_is_perturbed_20_mv_at_3_hz() {
+    let f = shipped("gold-latex-500nm.toml").file;
+    assert_eq!((f.substrate.tilt_x_mrad, f.substrate.tilt_y_mrad), (6.0, 0.0));
+    assert_eq!((f.sensor.perturbation_mv, f.sensor.perturbation_hz), (20.0, 3.0));
+}
