@@ -374,6 +374,15 @@ mod tests {
         assert_eq!(prefix("a b"), "nanopush_");
     }
 
+    /// The link's configuration is ours, not iceoryx2's default (whose files would be
+    /// `iox2_*`), whatever namespace the environment names; a node of it can be made.
+    #[test]
+    fn the_link_uses_the_nanopush_prefix_and_makes_nodes() {
+        assert!(ipc_config().global.prefix.to_string().starts_with("nanopush_"));
+        let node = ipc_node("nanopush_proto_test").expect("a node of the link");
+        assert_eq!(node.name().as_str(), "nanopush_proto_test");
+    }
+
     #[test]
     fn a_taken_publisher_is_told_from_other_failures() {
         use iceoryx2::port::publisher::PublisherCreateError as E;
