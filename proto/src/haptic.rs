@@ -383,6 +383,56 @@ mod tests {
         assert_eq!(node.name().as_str(), "nanopush_proto_test");
     }
 
+    /// The dead nodes of a link (a process killed with SIGKILL leaves its node behind) are
+    /// removed by [`cleanup_dead_nodes_in`]. The test runs itself again as the process that
+    /// dies.
+    #[test]
+    fn a_killed_processs_node_is_cleaned_up() {
+        use iceoryx2::prelude::*;
+        if std::env::var_os("NANOPUSH_PROTO_TEST_DIE").is_some() {
+            let _node = ipc_node("nanopush_dying").expect("a node");
+            // SAFETY: kills this (child) process, which is the point.
+            unsafe {
+                libc::kill(libc::getpid(), libc::SIGKILL);
+            }
+        }
+        let ns = format!("prototest{}", std::process::id());
+        let status = std::process::Command::new(std::env::current_exe().unwrap())
+            .args([
+                "--exact",
+                "haptic::tests::a_killed_processs_node_is_cleaned_up",
+                "--nocapture",
+            ])
+            .env("NANOPUSH_PROTO_TEST_DIE", "1")
+            .env(NAMESPACE_ENV, &ns)
+            .status()
+            .unwrap();
+        assert!(!status.success(), "the child was to be killed");
+        let dead = || {
+            let mut n = 0;
+            iceoryx2::node::Node::<ipc::Service>::list(&ipc_config_in(&ns), |state| {
+                if matches!(state, iceoryx2::node::NodeState::Dead(_)) {
+                    n += 1;
+                }
+                CallbackProgression::Continue
+            })
+            .unwrap();
+            n
+        };
+        assert_eq!(dead(), 1);
+        cleanup_dead_nodes_in(&ns);
+        assert_eq!(dead(), 0);
+        // What iceoryx2 keeps of a prefix once it has been used (its 16-byte management segment).
+        let mine = format!("nanopush_{ns}_");
+        for dir in ["/dev/shm", "/tmp/iceoryx2/nodes", "/tmp/iceoryx2/services"] {
+            for e in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+                if e.file_name().to_string_lossy().starts_with(&mine) {
+                    let _ = std::fs::remove_file(e.path());
+                }
+            }
+        }
+    }
+
     #[test]
     fn a_taken_publisher_is_told_from_other_failures() {
         use iceoryx2::port::publisher::PublisherCreateError as E;
