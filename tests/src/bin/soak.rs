@@ -285,15 +285,21 @@ struct Window {
     stolen_seconds: usize,
     steal_ms: f64,
     irq_ms: f64,
+    /// Overruns in each whole minute of the window.
+    per_minute: Vec<f64>,
 }
 
 fn window(samples: &[Sample], from: Instant, to: Instant) -> Window {
     let w: Vec<&Sample> = samples.iter().filter(|s| s.at >= from && s.at <= to).collect();
     let jiffy_ms = 1e3 / unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
     let (mut overruns, mut in_stolen, mut stolen_seconds) = (0.0, 0.0, 0);
+    let mut per_minute = vec![0.0; ((to - from).as_secs_f64() / 60.0).floor() as usize];
     for p in w.windows(2) {
         let d = p[1].overruns - p[0].overruns;
         overruns += d;
+        if let Some(m) = per_minute.get_mut(((p[1].at - from).as_secs_f64() / 60.0) as usize) {
+            *m += d;
+        }
         if p[1].steal > p[0].steal {
             in_stolen += d;
             stolen_seconds += 1;
@@ -315,6 +321,7 @@ fn window(samples: &[Sample], from: Instant, to: Instant) -> Window {
         stolen_seconds,
         steal_ms: span(|s| s.steal),
         irq_ms: span(|s| s.irq),
+        per_minute,
     }
 }
 
@@ -516,6 +523,9 @@ fn main() {
             w.steal_ms,
             w.irq_ms
         );
+        if w.per_minute.len() > 1 {
+            println!("  in each minute: {:?}", w.per_minute);
+        }
     }
     drop(server);
 }
