@@ -38,6 +38,8 @@ fn apply_sets_the_field_and_keeps_the_rest() {
 #[test]
 fn mu_as_keeps_the_scene_ratio_of_kinetic_to_static() {
     // The paper's 0.2/0.3: μ_as^s = 0.6 gives μ_as^k = 0.4; the tip coefficients stay.
+    let f = &base().file.friction;
+    assert_eq!((f.particle_substrate_kinetic, f.particle_substrate_static), (0.2, 0.3));
     let s = Param::MuAs.apply(&base(), 0.6).unwrap();
     assert_eq!(s.file.friction.particle_substrate_static, 0.6);
     assert!((s.file.friction.particle_substrate_kinetic - 0.4).abs() < 1e-15);
