@@ -618,7 +618,6 @@ mod tests {
         }
     }
 
-
     /// README, "`nanopush accuracy`": a run beyond the step limit is reported as a failed point
     /// (no error, the integrator's message), and the other points are not affected. Van der Pol
     /// with Rodas4 takes 1069 + 8 rejected = 1077 step attempts at 1e-6 (the integrator's

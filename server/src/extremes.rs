@@ -316,7 +316,8 @@ mod tests {
     fn the_grid_is_7_sweeps_of_7_over_the_readmes_ranges_and_their_2_7_corners() {
         let cases = grid(&Scene::default_scene(), false);
         assert_eq!(cases.len(), 7 * 7 + 128);
-        let fields: [(&str, fn(&Case) -> f64, f64, f64); 7] = [
+        type Field = (&'static str, fn(&Case) -> f64, f64, f64);
+        let fields: [Field; 7] = [
             ("radius_nm", |c| c.radius_nm, 5.0, 5000.0),
             ("k_c", |c| c.stiffness_n_per_m, 0.1, 50.0),
             ("humidity", |c| c.humidity, 0.0, 0.95),

@@ -419,7 +419,10 @@ mod tests {
         assert!(off.shearing_time_error().unwrap() < 1e-6);
         assert_eq!(off.reduced.regime, Regime::Slides);
         assert_eq!(full.regime, Regime::StickSlip);
-        assert!(full.zeta_z > 0.0 && off.reduced.zeta_z < 0.0, "settled ζ_z of the other sign");
+        assert!(
+            full.zeta_z > 0.0 && off.reduced.zeta_z < 0.0,
+            "settled ζ_z of the other sign"
+        );
         // The third integration (rtol/100) confirms the full model's regime and t*.
         let fine = off.full_fine.as_ref().unwrap().as_ref().unwrap();
         assert_eq!(fine.regime, full.regime);

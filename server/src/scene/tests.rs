@@ -121,10 +121,7 @@ fn the_stage_speed_is_limited_to_1_mm_per_s() {
     assert!(with("speed_um_per_s = 1.0", "speed_um_per_s = 1000.0").is_ok());
     for bad in ["1000.001", "0.0"] {
         let e = err("speed_um_per_s = 1.0", &format!("speed_um_per_s = {bad}"));
-        assert!(
-            e.contains("push.speed_um_per_s") && e.contains("(0, 1000] µm/s"),
-            "{e}"
-        );
+        assert!(e.contains("push.speed_um_per_s") && e.contains("(0, 1000] µm/s"), "{e}");
     }
 }
 

@@ -380,7 +380,10 @@ fn fig10_dynamic_y_sliding_9_98_4_26_9_15_nm_rolling_1_20_to_0_235_nm_at_42_deg(
     let y12 = settled_nm(Param::Alpha, 12.0, true).0;
     for alpha in [10.5, 13.5] {
         let (got, _) = settled_nm(Param::Alpha, alpha, true);
-        assert!(got > y12, "sliding, α = {alpha}°: y {got} nm, not above {y12} nm at 12°");
+        assert!(
+            got > y12,
+            "sliding, α = {alpha}°: y {got} nm, not above {y12} nm at 12°"
+        );
     }
     let rolling: Vec<(f64, f64)> = grid(0.0, 45.0, 31)
         .into_iter()
@@ -438,7 +441,12 @@ fn fig11_sliding_y_least_4_41_nm_at_33_deg_and_stuck_from_51_deg_rolling_56_deg_
         .collect();
     assert_eq!(rolling.last().unwrap().0, 49.0);
     for w in rolling.windows(2) {
-        assert!(w[1].1 > w[0].1, "rolling y does not grow from β = {}° to {}°: {rolling:?}", w[0].0, w[1].0);
+        assert!(
+            w[1].1 > w[0].1,
+            "rolling y does not grow from β = {}° to {}°: {rolling:?}",
+            w[0].0,
+            w[1].0
+        );
     }
     let stuck = |beta: f64, pure_sliding: bool| dynamic_at(Param::Beta, beta, pure_sliding).unwrap().stuck;
     assert!(!stuck(50.0, false) && stuck(51.0, false), "rolling");

@@ -421,10 +421,26 @@ mod tests {
         assert_eq!(shard, Shard::parse("0/1").unwrap());
         assert_eq!(opts, PointOptions::default());
         assert_eq!(
-            (opts.duration, opts.sample, opts.tail, opts.method, opts.rtol, opts.pure_sliding),
-            (0.2, 1e-3, 0.25, nanopush::physics::integrate::Method::Rodas4, 1e-6, false)
+            (
+                opts.duration,
+                opts.sample,
+                opts.tail,
+                opts.method,
+                opts.rtol,
+                opts.pure_sliding
+            ),
+            (
+                0.2,
+                1e-3,
+                0.25,
+                nanopush::physics::integrate::Method::Rodas4,
+                1e-6,
+                false
+            )
         );
-        let a = Cli::try_parse_from(args.into_iter().chain(["--pure-sliding"])).unwrap().sweep;
+        let a = Cli::try_parse_from(args.into_iter().chain(["--pure-sliding"]))
+            .unwrap()
+            .sweep;
         let (_, _, opts) = check(&a).unwrap();
         assert_eq!(
             opts,
