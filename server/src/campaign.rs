@@ -427,6 +427,74 @@ mod tests {
         assert_eq!(cases(true).len(), 13);
     }
 
+    /// The README's ranges of the full campaign, one parameter at a time (their ends): particle
+    /// radius 7 nm … 10 µm (and 2 nm under a 1 nm tip, 7 nm under a 5 nm tip), tip radius 1 nm
+    /// … 1 µm, `k_c` 0.01 … 500 N/m, humidity 0 … 0.999, `μ_as` and `μ_ta` 0 … 2, all frictions
+    /// zero, tilt 0 … 75°, β 1 … 89°, stage speed 1 pm/s … 1 mm/s, `μ_as` at 0.999, 1 and 1.001
+    /// of the Eq 9 and Eq 16 bounds; and the 16 corners of radius (50 nm, 5 µm) × `k_c` ×
+    /// humidity × speed (1 nm/s, 1 mm/s).
+    #[test]
+    fn the_campaign_sweeps_the_readmes_ranges_and_16_corners() {
+        use Edit::*;
+        let full = cases(false);
+        let mut ends: std::collections::BTreeMap<&str, (f64, f64)> = Default::default();
+        for case in full.iter().filter(|c| c.len() == 1) {
+            let (name, v) = match case[0] {
+                RadiusNm(v) => ("radius_nm", v),
+                TipRadiusNm(v) => ("tip_radius_nm", v),
+                StiffnessNPerM(v) => ("k_c", v),
+                Humidity(v) => ("humidity", v),
+                MuAs(v) => ("mu_as", v),
+                MuTa(v) => ("mu_ta", v),
+                TiltDeg(v) => ("tilt_deg", v),
+                ContactAngleDeg(v) => ("beta_deg", v),
+                SpeedUmPerS(v) => ("speed_um_per_s", v),
+                MuAsAtEq16(v) => ("eq16", v),
+                MuAsAtEq9(v) => ("eq9", v),
+            };
+            let e = ends.entry(name).or_insert((f64::INFINITY, f64::NEG_INFINITY));
+            *e = (e.0.min(v), e.1.max(v));
+        }
+        let readme = [
+            ("beta_deg", (1.0, 89.0)),
+            ("eq16", (0.999, 1.001)),
+            ("eq9", (0.999, 1.001)),
+            ("humidity", (0.0, 0.999)),
+            ("k_c", (0.01, 500.0)),
+            ("mu_as", (0.0, 2.0)),
+            ("mu_ta", (0.0, 2.0)),
+            ("radius_nm", (7.0, 10_000.0)),
+            ("speed_um_per_s", (1e-6, 1000.0)),
+            ("tilt_deg", (0.0, 75.0)),
+            ("tip_radius_nm", (1.0, 1000.0)),
+        ];
+        assert_eq!(ends.into_iter().collect::<Vec<_>>(), readme);
+        for bound in [MuAsAtEq9, MuAsAtEq16] {
+            for k in [0.999, 1.0, 1.001] {
+                assert!(full.contains(&vec![bound(k)]), "{:?}", bound(k));
+            }
+        }
+        for pair in [
+            vec![RadiusNm(2.0), TipRadiusNm(1.0)],
+            vec![RadiusNm(7.0), TipRadiusNm(5.0)],
+            vec![MuAs(0.0), MuTa(0.0)],
+        ] {
+            assert!(full.contains(&pair), "{pair:?}");
+        }
+        let corners: Vec<&Case> = full.iter().filter(|c| c.len() == 4).collect();
+        assert_eq!(corners.len(), 16);
+        for r in [50.0, 5000.0] {
+            for k in [0.01, 500.0] {
+                for h in [0.0, 0.99] {
+                    for v in [1e-3, 1000.0] {
+                        let c = vec![RadiusNm(r), StiffnessNPerM(k), Humidity(h), SpeedUmPerS(v)];
+                        assert!(corners.contains(&&c), "{c:?}");
+                    }
+                }
+            }
+        }
+    }
+
     /// The README: a 1 nm/s corner of the full campaign (5 µm particle, 0.01 N/m, dry) cannot
     /// finish its contact search in the 120 s time-out and keeps its trace, 25 MB.
     #[test]

@@ -307,9 +307,40 @@ mod tests {
         assert!(r.outcome.starts_with("slides"), "{}", r.outcome);
     }
 
+    /// The README's grid: one-at-a-time sweeps of 7 values of each of 7 parameters, over
+    /// particle radius 5 nm … 5 µm, `k_c` 0.1 … 50 N/m, humidity 0 … 0.95, `μ_as` 0 … 1.5
+    /// (through the paper's unstable band: 0.6, 0.65 and 0.7), tilt 0 … 60°, contact angle 5 …
+    /// 80° and stage speed 1 nm/s … 100 µm/s, plus every corner of that box: the 2⁷ combinations
+    /// of the ends. 7·7 + 128 = 177 cases.
     #[test]
-    fn full_grid_size() {
-        assert_eq!(grid(&Scene::default_scene(), false).len(), 7 * 7 + 128);
+    fn the_grid_is_7_sweeps_of_7_over_the_readmes_ranges_and_their_2_7_corners() {
+        let cases = grid(&Scene::default_scene(), false);
+        assert_eq!(cases.len(), 7 * 7 + 128);
+        type Field = (&'static str, fn(&Case) -> f64, f64, f64);
+        let fields: [Field; 7] = [
+            ("radius_nm", |c| c.radius_nm, 5.0, 5000.0),
+            ("k_c", |c| c.stiffness_n_per_m, 0.1, 50.0),
+            ("humidity", |c| c.humidity, 0.0, 0.95),
+            ("mu_as", |c| c.mu_as, 0.0, 1.5),
+            ("tilt_deg", |c| c.tilt_deg, 0.0, 60.0),
+            ("beta_deg", |c| c.contact_angle_deg, 5.0, 80.0),
+            ("speed_um_per_s", |c| c.speed_um_per_s, 0.001, 100.0),
+        ];
+        for (name, f, lo, hi) in fields {
+            let min = cases.iter().map(f).fold(f64::INFINITY, f64::min);
+            let max = cases.iter().map(f).fold(f64::NEG_INFINITY, f64::max);
+            assert_eq!((min, max), (lo, hi), "{name}");
+        }
+        for mu in [0.6, 0.65, 0.7] {
+            assert!(cases.iter().any(|c| c.mu_as == mu), "μ_as {mu}");
+        }
+        let corners = &cases[49..];
+        for (i, c) in corners.iter().enumerate() {
+            for (name, f, lo, hi) in fields {
+                assert!(f(c) == lo || f(c) == hi, "corner {i}: {name} {}", f(c));
+            }
+            assert!(!corners[..i].contains(c), "corner {i} repeats");
+        }
     }
 
     /// The README's run of the full grid (`nanopush accuracy --extremes`, which pushes each case

@@ -240,7 +240,8 @@ pub struct CompareOptions {
     pub tail: f64,
     /// Relative tolerance of both models.
     pub rtol: f64,
-    /// Largest number of integrator steps per advance (the full model needs ~10⁴ per ms).
+    /// Largest number of integrator steps per advance (the full model rings after each slip,
+    /// at up to ~6·10⁴ steps per ms).
     pub max_steps: u64,
     /// Also run the full model at `rtol / 100`.
     pub fine_check: bool,
@@ -341,6 +342,23 @@ mod tests {
         assert_eq!(regime(&slides, Some(4.0), 0.5), (Regime::Slides, 1));
     }
 
+    /// README, "The quasi-static reduction against the full model", the report's settings for
+    /// its 20 ms push (`nanopush accuracy`'s default): 10 µs samples, the settled values the
+    /// mean of the last half, both models at rtol 1e-6 (Rodas4, [`run_summary`]) and the full
+    /// model again at rtol 1e-8; a jump is a drop of the offset `s − y` by more than 0.05 nm
+    /// between two samples (a 0.051 nm drop counts, a 0.049 nm drop does not).
+    #[test]
+    fn the_report_compares_at_rtol_1e_6_and_1e_8_10_us_samples_last_half_and_0_05_nm_jumps() {
+        let o = CompareOptions::report(0.02);
+        assert_eq!((o.duration, o.sample, o.tail, o.rtol), (0.02, 1e-5, 0.5, 1e-6));
+        assert!(o.fine_check);
+        assert_eq!(o.rtol / 100.0, 1e-8);
+        assert_eq!(JUMP, 0.05e-9);
+        let drop = |nm: f64| [row(0.0, 10e-9, 0.0, "stick"), row(1.0, 10e-9, nm * 1e-9, "stick")];
+        assert_eq!(jumps(&drop(0.051)), 1);
+        assert_eq!(jumps(&drop(0.049)), 0);
+    }
+
     /// The paper's scene driven fast (1 mm/s, ideal stage) so that the full 12-state model's
     /// shear comes after 6 µs and costs a few thousand steps. Reference: the hand-solved
     /// spring-slider of the module doc. Up to the shear the two models load the contact
@@ -377,9 +395,14 @@ mod tests {
         assert!(off.shearing_time_error().unwrap() < 0.01 * tr);
     }
 
-    /// The paper's scene at 1 µm/s over the report's 20 ms, both rotation settings: the regimes
-    /// and the rtol/100 check. Not run by `make test` (what it affords of this comparison, and
-    /// the README pins, is in the tests above). Slow in debug (the full model takes ~10⁵ steps per ms while it rings):
+    /// README, "The quasi-static reduction against the full model": the paper's scene at 1 µm/s
+    /// over the report's 20 ms, both rotation settings. Rotation off, the reduction slides and
+    /// the full model stick-slips, with the same t* and a settled `ζ_z` of the other sign
+    /// (positive, against the reduction's negative); rotation on, the reduction rolls and the
+    /// full model rolls in bursts (`stick-roll`), neither shearing. The rtol/100 run repeats
+    /// each full model's regime and t*. Not run by `make test` (what it affords of this
+    /// comparison, and the README pins, is in the tests above). Slow in debug (the full model
+    /// rings after each slip, at up to ~6·10⁴ steps per ms):
     /// `cargo test --release -p nanopush --lib -- --ignored paper_scene_reduction`.
     #[test]
     #[ignore = "runs the 12-state model for 20 ms of push, four times: ~10 s in release, more on a loaded machine"]
@@ -396,10 +419,26 @@ mod tests {
         assert!(off.shearing_time_error().unwrap() < 1e-6);
         assert_eq!(off.reduced.regime, Regime::Slides);
         assert_eq!(full.regime, Regime::StickSlip);
+        assert!(
+            full.zeta_z > 0.0 && off.reduced.zeta_z < 0.0,
+            "settled ζ_z of the other sign"
+        );
         // The third integration (rtol/100) confirms the full model's regime and t*.
         let fine = off.full_fine.as_ref().unwrap().as_ref().unwrap();
         assert_eq!(fine.regime, full.regime);
         assert!((fine.shearing_time.unwrap() - full.shearing_time.unwrap()).abs() < 1e-7);
+        // Rotation on: the reduction rolls steadily, the full model in bursts, at both
+        // tolerances; neither shears on the substrate.
+        let on = &c[1];
+        assert!(on.rotation);
+        let full = on.full.as_ref().unwrap();
+        let fine = on.full_fine.as_ref().unwrap().as_ref().unwrap();
+        assert_eq!(on.reduced.regime, Regime::Rolls);
+        assert_eq!((full.regime, fine.regime), (Regime::StickRoll, Regime::StickRoll));
+        assert_eq!(
+            (on.reduced.shearing_time, full.shearing_time, fine.shearing_time),
+            (None, None, None)
+        );
     }
 
     /// README, "The quasi-static reduction against the full model", the reduced rows of the
@@ -447,7 +486,7 @@ mod tests {
 
     /// README, "The quasi-static reduction against the full model" and "Which is right", rotation
     /// off, the paper scene at 1 µm/s up to 0.1 ms past the shear (the full model then rings at
-    /// ~10⁵ steps per ms, so the report's 20 ms are not run here). With the report's 10 µs
+    /// up to ~6·10⁴ steps per ms, so the report's 20 ms are not run here). With the report's 10 µs
     /// samples: until the shear the two models' traces agree to 1.0e-15 m (ζ_z; y far closer),
     /// and both shear at t* = 6.2078 ms, 0.3 ns apart. The first slip: the reduced particle
     /// jumps 1.77 nm onto the kinetic balance and slides (friction μᵏN); the full model's moves
@@ -455,7 +494,9 @@ mod tests {
     /// the next 0.1 ms at 0.18 µN, below μᵏN = 0.28 µN. The spring-slider's figures at the
     /// shear: ΔF = (μˢ − μᵏ)N = 0.14 µN released, the contact loaded at 90 N/m (the slope of
     /// the substrate friction against stage travel), so with the cantilever's 1.1e-11 kg the
-    /// critical drive `ΔF/√(km)` is 4.6 mm/s.
+    /// critical drive `ΔF/√(km)` is 4.6 mm/s. At the slip the tip slides up the particle: the
+    /// full model's contact angle grows 0.2° between the 6.20 and 6.21 ms samples and its ζ_z
+    /// turns from negative to +2.08 nm, where the reduction's is −1.98 nm.
     #[test]
     fn the_full_models_first_slip_moves_2_17_nm_where_the_reduction_jumps_1_77_nm() {
         let p = Scene::default_scene().push_params();
@@ -484,6 +525,23 @@ mod tests {
         let [.., a, b] = before[..] else { unreachable!() };
         let k = (b.friction_as - a.friction_as).abs() / (b.stage - a.stage);
         let m_c = p.cantilever.effective_mass();
+        // The tip slides up the particle at the slip: between the samples around it (6.20 and
+        // 6.21 ms) the full model's contact angle (−φ, the rotation being off) grows 0.2° and its
+        // ζ_z turns positive, +2.08 nm, where the reduction's is −1.98 nm.
+        let angle = |pr: &crate::physics::pushing::Probe<f64>| (-pr.contact_ta / (p.r_t + p.r_a)).to_degrees();
+        let (after, reduced_after) = (probe(&full), probe(&red));
+        let grew = angle(&after) - angle(&b);
+        eprintln!(
+            "contact angle {}° → {}°; ζ_z {:e} → {:e} m (reduced {:e} m)",
+            angle(&b),
+            angle(&after),
+            b.zeta_z,
+            after.zeta_z,
+            reduced_after.zeta_z
+        );
+        assert!((grew - 0.2).abs() <= 0.05, "the contact angle grows {grew}°");
+        assert!((after.zeta_z - 2.08e-9).abs() <= 0.005e-9 && b.zeta_z < 0.0);
+        assert!((reduced_after.zeta_z + 1.98e-9).abs() <= 0.005e-9);
         // The first slip, each model against itself from just before its shear to 0.1 µs after.
         let (mut red, mut full) = (simulation(&p, false, false), simulation(&p, true, false));
         let mut jump = [0.0; 2];
@@ -602,6 +660,38 @@ mod tests {
         assert!(red.trace.iter().all(|r| rolling(r) == (r.t > 5.22e-3 - 1e-9)));
         assert_eq!(regime(&full.trace, None, o.tail), (Regime::StickRoll, 7));
         assert!(full.trace.iter().all(|r| r.phase == "stick"));
+    }
+
+    /// README, "What this means": `nanopush sweep`'s `stuck` flag ([`crate::sweep::Settled`]),
+    /// which reads the friction phase at the sweep's 1 ms samples over the last quarter, calls
+    /// the full model (rotation off, the paper scene at 1 µm/s) stuck, while the report's
+    /// regime, from the jumps of the offset at its 10 µs samples, is stick-slip: it sheared at
+    /// t* and jumped again (2 jumps by 10 ms). Its slips last under a microsecond, so even every
+    /// 10 µs sample reads `stick`. A 10 ms push (its tail, 8-10 ms, is after the shear), not the
+    /// sweep's 0.2 s: the full model rings at up to ~6·10⁴ steps per ms after each slip.
+    #[test]
+    fn the_sweeps_stuck_flag_calls_the_full_model_stuck_where_the_report_sees_stick_slip() {
+        let p = variant(&Scene::default_scene().push_params(), true, false);
+        let o = CompareOptions::report(0.02);
+        let opts = Options {
+            max_steps: o.max_steps,
+            ..Options::with_rtol(o.rtol)
+        };
+        let run = run_push(PushModel::new(p), Method::Rodas4, opts, 10e-3, o.sample).unwrap();
+        assert_eq!(o.sample, 1e-5);
+        assert!(run.shearing_time.is_some(), "it shears");
+        assert_eq!(regime(&run.trace, run.shearing_time, o.tail), (Regime::StickSlip, 2));
+        assert!(run.trace.iter().all(|r| r.phase == "stick"), "a slip was sampled");
+        let sweep = crate::sweep::PointOptions::default();
+        let every = (sweep.sample / o.sample).round() as usize;
+        assert_eq!(every, 100, "the sweep samples every 1 ms");
+        let coarse = PushRun {
+            trace: run.trace.iter().step_by(every).copied().collect(),
+            ..run.clone()
+        };
+        assert_eq!(coarse.trace.len(), 11);
+        let settled = crate::sweep::Settled::from_run(&coarse, sweep.tail);
+        assert!(settled.stuck && !settled.unstable, "{settled:?}");
     }
 
     /// README, "Which is right", checked: with heavily damped contacts (`contact_damping_ratio`

@@ -114,6 +114,17 @@ fn angles_out_of_range() {
     );
 }
 
+/// README, "Which is right": the scenes' 1 mm/s limit on the stage speed, `(0, 1000] µm/s`:
+/// 1000 µm/s is accepted, 1000.001 µm/s and 0 are refused, naming the range.
+#[test]
+fn the_stage_speed_is_limited_to_1_mm_per_s() {
+    assert!(with("speed_um_per_s = 1.0", "speed_um_per_s = 1000.0").is_ok());
+    for bad in ["1000.001", "0.0"] {
+        let e = err("speed_um_per_s = 1.0", &format!("speed_um_per_s = {bad}"));
+        assert!(e.contains("push.speed_um_per_s") && e.contains("(0, 1000] µm/s"), "{e}");
+    }
+}
+
 #[test]
 fn kinetic_above_static_friction() {
     let e = err("particle_substrate_kinetic = 0.2", "particle_substrate_kinetic = 0.4");

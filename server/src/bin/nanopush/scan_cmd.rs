@@ -233,3 +233,23 @@ fn summary(out: &mut String, r: &ScanReport, p: &ScanParams) -> anyhow::Result<(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        scan: ScanArgs,
+    }
+
+    /// README, "Scans": a `--locate` click looks for a particle within `--search-um`, default
+    /// 2 µm.
+    #[test]
+    fn search_um_defaults_to_2() {
+        let a = Cli::try_parse_from(["scan", "--out", "x.gsf"]).unwrap().scan;
+        assert_eq!(a.search_um, 2.0);
+    }
+}

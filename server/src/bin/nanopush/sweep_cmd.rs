@@ -396,3 +396,58 @@ pub fn run(a: &SweepArgs) -> anyhow::Result<String> {
     }
     Ok(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        sweep: SweepArgs,
+    }
+
+    /// README, "The paper's figures": `nanopush sweep` integrates each point for `--duration`
+    /// 0.2 s at 1 ms samples and averages over the last quarter, Rodas4 at rtol 1e-6, the whole
+    /// sweep as one shard: the [`PointOptions::default`] that the Figs 10-13 tests pin their
+    /// figures on, with the rotation on unless `--pure-sliding`.
+    #[test]
+    fn sweep_defaults_are_point_options_default_0_2_s_1_ms_samples_the_last_quarter() {
+        let args = ["sweep", "--param", "beta", "--from", "5", "--to", "65", "--steps", "31"];
+        let a = Cli::try_parse_from(args).unwrap().sweep;
+        let (param, shard, opts) = check(&a).unwrap();
+        assert_eq!(param, Param::Beta);
+        assert_eq!(shard, Shard::parse("0/1").unwrap());
+        assert_eq!(opts, PointOptions::default());
+        assert_eq!(
+            (
+                opts.duration,
+                opts.sample,
+                opts.tail,
+                opts.method,
+                opts.rtol,
+                opts.pure_sliding
+            ),
+            (
+                0.2,
+                1e-3,
+                0.25,
+                nanopush::physics::integrate::Method::Rodas4,
+                1e-6,
+                false
+            )
+        );
+        let a = Cli::try_parse_from(args.into_iter().chain(["--pure-sliding"]))
+            .unwrap()
+            .sweep;
+        let (_, _, opts) = check(&a).unwrap();
+        assert_eq!(
+            opts,
+            PointOptions {
+                pure_sliding: true,
+                ..PointOptions::default()
+            }
+        );
+    }
+}
