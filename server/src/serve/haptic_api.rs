@@ -6,9 +6,9 @@ use std::sync::atomic::Ordering::Relaxed;
 
 use nanopush_proto::ws::{ErrorCode, HapticAction};
 
-use crate::serve::app::AppState;
 use crate::serve::control_loop::{HapticCommand, LoopCommand};
 use crate::serve::haptic::HapticMetrics;
+use crate::serve::state::AppState;
 use crate::serve::validate::{Refusal, number};
 
 /// The haptic handle for telemetry; `None` without a haptic link.

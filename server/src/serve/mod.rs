@@ -8,6 +8,9 @@ pub mod haptic;
 pub mod haptic_api;
 pub mod metrics;
 pub mod records;
+pub mod session;
+pub mod state;
+pub mod tasks;
 pub mod validate;
 
 use std::net::SocketAddr;
@@ -17,8 +20,8 @@ use std::time::{Duration, Instant};
 
 use crate::instrument::Afm;
 use crate::scene::Scene;
-use app::{AppState, ServeConfig};
 use control_loop::{ControlLoop, LoopCommand, LoopConfig, Shared};
+use state::{AppState, ServeConfig};
 
 /// A plain HTTP connection idle this long is closed (WebSockets keep themselves alive with pings).
 pub const IDLE_HTTP: Duration = Duration::from_secs(60);
@@ -119,7 +122,7 @@ pub async fn run(
     *state.addr.lock().expect("addr lock") = Some(addr);
     let url = format!("http://{addr}/?token={}", state.cfg.operator_token);
     started(&Started { addr, url });
-    let telemetry = tokio::spawn(app::telemetry_task(state.clone(), ev_rx));
+    let telemetry = tokio::spawn(tasks::telemetry_task(state.clone(), ev_rx));
 
     let st = state.clone();
     let graceful = async move {

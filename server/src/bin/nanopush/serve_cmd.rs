@@ -6,9 +6,9 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nanopush::serve::app::ServeConfig;
 use nanopush::serve::control_loop::LoopConfig;
 use nanopush::serve::haptic::HapticMode;
+use nanopush::serve::state::ServeConfig;
 
 /// Arguments of `nanopush serve`.
 #[derive(Args, Debug)]

@@ -1,0 +1,299 @@
+//! The server's shared state: its settings, the clients' places (viewers, operators, per
+//! address), the lease, the broadcasts, and what a client that joins late is told.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering::Relaxed};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use axum::extract::ws::{Message, Utf8Bytes};
+use axum::http::StatusCode;
+use nanopush_proto::ws::{ParticleNow, PushPath, Role, ScanNow, ServerMessage};
+use tokio::sync::{broadcast, watch};
+
+use crate::control::StrategyParams;
+use crate::scene::Scene;
+use crate::serve::control_loop::Shared;
+use crate::serve::metrics::NetMetrics;
+
+/// Server settings.
+#[derive(Debug, Clone)]
+pub struct ServeConfig {
+    /// Operator token.
+    pub operator_token: String,
+    /// Viewer token (None: viewers need none).
+    pub viewer_token: Option<String>,
+    /// Extra allowed browser origins.
+    pub allow_origins: Vec<String>,
+    /// Largest client message (bytes).
+    pub max_message_bytes: usize,
+    /// Messages per second per connection.
+    pub max_rate: f64,
+    /// Most viewer connections at once (operators have [`OPERATOR_PLACES`] of their own).
+    pub max_clients: u64,
+    /// Most viewer connections from one remote address.
+    pub max_clients_per_address: u64,
+    /// A WebSocket ping every this long.
+    pub ws_ping: Duration,
+    /// A WebSocket peer silent for longer than this (no pong, nothing) is closed.
+    pub ws_timeout: Duration,
+    /// An HTTP request's headers must arrive within this long.
+    pub header_timeout: Duration,
+    /// Record directory.
+    pub data_dir: PathBuf,
+    /// Static files of the web client.
+    pub web_dir: PathBuf,
+    /// The haptic link.
+    pub haptic: crate::serve::haptic::HapticMode,
+    /// Scan line rate (Hz).
+    pub scan_line_hz: f64,
+    /// Telemetry rate to browsers (Hz).
+    pub telemetry_hz: f64,
+}
+
+/// Everything the handlers share.
+pub struct AppState {
+    /// Settings.
+    pub cfg: ServeConfig,
+    /// The scene.
+    pub scene: Scene,
+    /// The loop's shared state.
+    pub shared: Arc<Shared>,
+    /// Network counters.
+    pub net: NetMetrics,
+    /// Strategy settings (for push preparation).
+    pub params: StrategyParams,
+    /// Lease holder.
+    pub lease: Mutex<Option<u32>>,
+    pub(crate) next_client: AtomicU32,
+    pub(crate) next_scan: AtomicU32,
+    /// Clients subscribed to `tip`.
+    pub tip_subscribers: AtomicU64,
+    /// Clients subscribed to `scan`.
+    pub scan_subscribers: AtomicU64,
+    /// Telemetry, serialized once per frame.
+    pub telemetry: broadcast::Sender<Utf8Bytes>,
+    /// Events for everyone (lease, run_done, shutdown).
+    pub events: broadcast::Sender<Utf8Bytes>,
+    /// Scan stream (text and binary frames).
+    pub scans: broadcast::Sender<Message>,
+    /// A scan runs.
+    pub scanning: AtomicBool,
+    /// Ask a running scan to stop.
+    pub scan_cancel: AtomicBool,
+    /// Shutdown signal for sessions and tasks.
+    pub shutdown: watch::Sender<bool>,
+    /// Bound address (for the Origin check).
+    pub addr: Mutex<Option<SocketAddr>>,
+    /// Where the controller believes each particle is (m): the scene's positions, then each
+    /// push's final estimate. A push starts its local scan here (the operator's "click").
+    pub estimates: Mutex<std::collections::HashMap<u32, (f64, f64)>>,
+    /// Shutdown has begun: commands are refused from now on.
+    pub stopping: AtomicBool,
+    /// Bumped by every `stop`: a push still being prepared when it changes is dropped.
+    pub generation: AtomicU64,
+    /// The push running now (its planned path), for clients that join during it.
+    pub push_now: Mutex<Option<PushPath>>,
+    /// The latest scan (running or finished), for clients that join after it.
+    pub latest_scan: Mutex<Option<ScanNow>>,
+    /// Places taken: viewers (up to `--max-clients`) and operators (up to [`OPERATOR_PLACES`],
+    /// apart, so viewers can never lock the operator out), and viewers per remote address.
+    places: Mutex<Places>,
+}
+
+/// Connections counted for admission.
+#[derive(Debug, Default)]
+struct Places {
+    viewers: u64,
+    operators: u64,
+    per_address: std::collections::HashMap<std::net::IpAddr, u64>,
+}
+
+/// Connections kept for the operator token, beyond `--max-clients` (which counts viewers).
+pub const OPERATOR_PLACES: u64 = 8;
+
+/// A place taken at the upgrade, given back when the connection ends (or fails to upgrade).
+pub(crate) struct Place {
+    st: Arc<AppState>,
+    role: Role,
+    ip: std::net::IpAddr,
+}
+
+impl Place {
+    /// Takes a place for `role` from `ip`, or says why not.
+    pub(crate) fn take(st: &Arc<AppState>, role: Role, ip: std::net::IpAddr) -> Result<Place, (StatusCode, String)> {
+        let mut p = st.places.lock().expect("places lock");
+        match role {
+            Role::Operator => {
+                if p.operators >= OPERATOR_PLACES {
+                    return Err((
+                        StatusCode::SERVICE_UNAVAILABLE,
+                        format!("{OPERATOR_PLACES} operator connections are open already"),
+                    ));
+                }
+                p.operators += 1;
+            }
+            Role::Viewer => {
+                let here = p.per_address.get(&ip).copied().unwrap_or(0);
+                if here >= st.cfg.max_clients_per_address {
+                    return Err((
+                        StatusCode::TOO_MANY_REQUESTS,
+                        format!(
+                            "{here} connections from {ip} already; allowed: {} per address (--max-clients-per-address)",
+                            st.cfg.max_clients_per_address
+                        ),
+                    ));
+                }
+                if p.viewers >= st.cfg.max_clients {
+                    return Err((
+                        StatusCode::SERVICE_UNAVAILABLE,
+                        "too many clients (--max-clients)".into(),
+                    ));
+                }
+                p.viewers += 1;
+                *p.per_address.entry(ip).or_insert(0) += 1;
+            }
+        }
+        st.net.clients.fetch_add(1, Relaxed);
+        Ok(Place {
+            st: st.clone(),
+            role,
+            ip,
+        })
+    }
+}
+
+impl Drop for Place {
+    fn drop(&mut self) {
+        let Ok(mut p) = self.st.places.lock() else { return };
+        match self.role {
+            Role::Operator => p.operators = p.operators.saturating_sub(1),
+            Role::Viewer => {
+                p.viewers = p.viewers.saturating_sub(1);
+                if let Some(n) = p.per_address.get_mut(&self.ip) {
+                    *n = n.saturating_sub(1);
+                    if *n == 0 {
+                        p.per_address.remove(&self.ip);
+                    }
+                }
+            }
+        }
+        self.st.net.clients.fetch_sub(1, Relaxed);
+    }
+}
+
+impl AppState {
+    /// The state of a server.
+    pub fn new(cfg: ServeConfig, scene: Scene, shared: Arc<Shared>, params: StrategyParams) -> AppState {
+        AppState {
+            cfg,
+            shared,
+            net: NetMetrics::default(),
+            params,
+            lease: Mutex::new(None),
+            next_client: AtomicU32::new(1),
+            next_scan: AtomicU32::new(1),
+            tip_subscribers: AtomicU64::new(0),
+            scan_subscribers: AtomicU64::new(0),
+            telemetry: broadcast::channel(64).0,
+            events: broadcast::channel(256).0,
+            scans: broadcast::channel(1024).0,
+            scanning: AtomicBool::new(false),
+            scan_cancel: AtomicBool::new(false),
+            shutdown: watch::channel(false).0,
+            addr: Mutex::new(None),
+            estimates: Mutex::new(
+                scene
+                    .file
+                    .particles
+                    .iter()
+                    .map(|p| (p.id, (p.x_um * 1e-6, p.y_um * 1e-6)))
+                    .collect(),
+            ),
+            stopping: AtomicBool::new(false),
+            generation: AtomicU64::new(0),
+            push_now: Mutex::new(None),
+            latest_scan: Mutex::new(None),
+            places: Mutex::new(Places::default()),
+            scene,
+        }
+    }
+
+    /// Records where a particle is believed to be after a push.
+    pub(crate) fn remember(&self, particle: u32, estimate: [f64; 2]) {
+        if estimate.iter().all(|v| v.is_finite())
+            && let Ok(mut e) = self.estimates.lock()
+        {
+            e.insert(particle, (estimate[0], estimate[1]));
+        }
+    }
+
+    pub(crate) fn broadcast_event(&self, m: &ServerMessage) {
+        if let Ok(s) = serde_json::to_string(m) {
+            let _ = self.events.send(s.into());
+        }
+    }
+
+    pub(crate) fn lease_holder(&self) -> Option<u32> {
+        *self.lease.lock().expect("lease lock")
+    }
+
+    /// The instrument as it is now, for a client that has just connected: the particles where
+    /// the controller believes they are, the tip, the phase, the lease, the push running and
+    /// the latest scan.
+    pub fn state_message(&self) -> ServerMessage {
+        let estimates = self.estimates.lock().map(|e| e.clone()).unwrap_or_default();
+        let particles = self
+            .scene
+            .file
+            .particles
+            .iter()
+            .map(|p| {
+                let (x, y) = estimates.get(&p.id).copied().unwrap_or((p.x_um * 1e-6, p.y_um * 1e-6));
+                ParticleNow {
+                    id: p.id,
+                    x,
+                    y,
+                    radius: p.radius_nm * 1e-9,
+                }
+            })
+            .collect();
+        let (stage, phase) = self
+            .shared
+            .snapshot
+            .lock()
+            .map(|s| (s.stage, s.phase))
+            .unwrap_or(([0.0; 3], "idle"));
+        let phase = if self.scanning.load(Relaxed) && phase == "idle" {
+            "scanning"
+        } else {
+            phase
+        };
+        ServerMessage::State {
+            particles,
+            stage,
+            phase: phase.into(),
+            lease: self.lease_holder(),
+            push: self.push_now.lock().ok().and_then(|p| p.clone()),
+            scan: self.latest_scan.lock().ok().and_then(|s| s.clone()),
+        }
+    }
+
+    /// A push ended: it no longer runs, and if it moved anything the latest scan is stale.
+    pub(crate) fn push_ended(&self, started: bool) {
+        if let Ok(mut p) = self.push_now.lock() {
+            *p = None;
+        }
+        if started && let Ok(mut s) = self.latest_scan.lock() {
+            if let Some(s) = s.as_mut() {
+                s.stale = true;
+            }
+        }
+    }
+}
+
+/// A server message as the text frame every client is sent, serialized once.
+pub(crate) fn to_text(m: &ServerMessage) -> Utf8Bytes {
+    serde_json::to_string(m).unwrap_or_else(|_| "{}".into()).into()
+}
