@@ -56,14 +56,16 @@ fn sample_step(duration: f64) -> f64 {
     (duration / PREDICTION_SAMPLES).max(1e-4)
 }
 
-/// The retraction part of [`predict`].
-fn predict_retract(model: PushModel, duration: f64, plan: RetractPlan) -> Result<f64, SimulationError> {
+/// The retraction part of [`predict`]: the push again for `duration` (s), then the stop, the
+/// back-off and the lift of `plan`; fails with [`SimulationError::Budget`] once the integrator
+/// has taken more than `budget` steps ([`PREDICTION_STEPS`] in [`predict`]).
+fn predict_retract(model: PushModel, duration: f64, plan: RetractPlan, budget: u64) -> Result<f64, SimulationError> {
     let beta = model.p.beta;
     let mut sim = Simulation::new(model, Method::Rodas4, Options::with_rtol(1e-6));
     let over = |sim: &Simulation| {
-        (sim.total.steps > PREDICTION_STEPS).then_some(SimulationError::Budget {
+        (sim.total.steps > budget).then_some(SimulationError::Budget {
             what: "integrator steps",
-            limit: PREDICTION_STEPS,
+            limit: budget,
             t: sim.t,
         })
     };
@@ -142,7 +144,7 @@ pub fn predict(
         sample_step(duration),
         PREDICTION_STEPS,
     )?;
-    let retract_shift = predict_retract(model, duration, retract)?;
+    let retract_shift = predict_retract(model, duration, retract, PREDICTION_STEPS)?;
     let n = run.trace.len();
     let tail = &run.trace[n / 2..];
     let lag = |r: &crate::push_run::TraceRow| r.stage_y - r.particle_y;
@@ -346,6 +348,30 @@ mod tests {
         let mut d = PeakDetector::new(0.05);
         for k in 0..500 {
             assert!(d.feed(k as f64 * 1e-3, k as f64 * 1e-3).is_none());
+        }
+    }
+
+    /// The retraction's step budget is checked while the push runs (cargo-mutants: the check as
+    /// `steps == budget` survived, since the steps pass any budget between two checks).
+    #[test]
+    fn the_retraction_stops_at_its_step_budget_and_names_it() {
+        let plan = RetractPlan {
+            hold: 0.05,
+            back_off: 100e-9,
+            speed: 1e-6,
+        };
+        let model = || PushModel::new(Scene::default_scene().push_params());
+        let shift = predict_retract(model(), 0.05, plan, PREDICTION_STEPS).expect("within the budget");
+        assert!(shift.is_finite());
+        // Every budget is met, also those the steps jump over between two checks.
+        for budget in 1..=300 {
+            match predict_retract(model(), 0.05, plan, budget) {
+                Err(SimulationError::Budget { what, limit, t }) => {
+                    assert_eq!((what, limit), ("integrator steps", budget));
+                    assert!(t < 0.05, "caught during the push, at t = {t} s");
+                }
+                other => panic!("a budget of {budget} steps: {other:?}"),
+            }
         }
     }
 
