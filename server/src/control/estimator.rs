@@ -375,6 +375,94 @@ mod tests {
         }
     }
 
+    /// A prediction whose settled reading is 0.5 V at a gain of 5e8 V/m, with its peak 20 nm
+    /// after the first touch and the contact search stopped 2 nm after it.
+    fn fallback_prediction() -> PushPrediction {
+        PushPrediction {
+            settle_offset: 1e-9,
+            periodic_amplitude: 0.0,
+            travel_to_deflection: Some(2e-9),
+            peak_deflection: 3e-9,
+            travel_to_peak: 20e-9,
+            settled_deflection: 1e-9,
+            phase: "roll",
+            retract_shift: 0.0,
+        }
+    }
+
+    /// A fast contact search that stopped past the peak leaves no peak to see: `t*` is taken
+    /// once the travel since the touch is past the model's peak plus 10 nm, the 4-sample mean
+    /// is within the margin of the settled level, and the window is full (cargo-mutants: every
+    /// part of this fallback and the detector's mean survived `control::`).
+    #[test]
+    fn a_search_stopped_past_the_peak_separates_once_settled_past_the_models_peak() {
+        let (margin, gain) = (0.05, 5e8);
+        // Past the peak from the first sample, at the settled level: the fourth sample fills
+        // the window, and only then is t* taken.
+        let mut h = Hxy::new(fallback_prediction(), margin, gain);
+        assert_eq!(h.settled_signal, 0.5);
+        for k in 0..4 {
+            let t = k as f64 * 1e-3;
+            let estimate = h.update(t, 0.5, 40e-9);
+            assert_eq!(h.separated(), k == 3, "sample {k}");
+            if k == 3 {
+                assert_eq!(h.detector.peak, Some((t, 0.5)));
+                assert_eq!(h.detector.mean(), 0.5);
+                assert!((estimate - (2e-9 + 40e-9 - 1e-9)).abs() < 1e-18, "{estimate:e}");
+            } else {
+                assert_eq!(estimate, 0.0, "no displacement before t*");
+            }
+        }
+        // Settled, travel rising 1 nm a sample from 0.5 nm: 2 + 28.5 nm is the first past
+        // 20 + 10 nm.
+        let mut h = Hxy::new(fallback_prediction(), margin, gain);
+        let first = (0..60)
+            .find(|&k| {
+                h.update(k as f64 * 1e-3, 0.5, (k as f64 + 0.5) * 1e-9);
+                h.separated()
+            })
+            .expect("separates");
+        assert_eq!(first, 28);
+        // Past the peak but not settled (0.1 V off the settled level, twice the margin): no t*.
+        let mut h = Hxy::new(fallback_prediction(), margin, gain);
+        for k in 0..20 {
+            h.update(k as f64 * 1e-3, 0.6, 40e-9);
+        }
+        assert!(!h.separated(), "0.6 V is not within 0.05 V of 0.5 V");
+    }
+
+    /// A peak the detector saw is t*, and later settled samples past the model's peak do not
+    /// move it.
+    #[test]
+    fn a_detected_peak_is_kept_while_the_push_goes_on() {
+        let mut h = Hxy::new(fallback_prediction(), 0.05, 5e8);
+        for k in 0..4 {
+            h.update(k as f64 * 1e-3, 1.0, 0.0);
+        }
+        assert!(!h.separated());
+        h.update(4e-3, 0.5, 40e-9);
+        assert_eq!(h.detector.peak, Some((0.0, 1.0)), "the mean fell 0.125 V below 1.0 V");
+        for k in 5..20 {
+            h.update(k as f64 * 1e-3, 0.5, 40e-9);
+        }
+        assert_eq!(h.detector.peak, Some((0.0, 1.0)));
+    }
+
+    /// "Falls by more than the margin": a mean exactly the margin below the maximum is not yet
+    /// the peak.
+    #[test]
+    fn a_fall_of_exactly_the_margin_is_not_the_peak() {
+        let mut d = PeakDetector::new(0.25);
+        assert_eq!(d.feed(0.0, 1.0), None);
+        for k in 1..=4 {
+            // Means 0.9375, 0.875, 0.8125, 0.75: exact in binary.
+            assert_eq!(d.feed(k as f64 * 1e-3, 0.75), None, "sample {k}");
+        }
+        assert_eq!(d.mean(), 0.75);
+        assert_eq!(d.feed(5e-3, 0.75), None, "still exactly the margin below");
+        assert!(d.feed(6e-3, 0.74).is_some(), "the mean 2.5 mV further down");
+    }
+
     #[test]
     fn the_model_prediction_of_the_default_push() {
         // Default scene: the particle rolls once the tip contact slips (about 5 ms at 1 µm/s);
