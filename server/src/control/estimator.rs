@@ -446,6 +446,20 @@ mod tests {
             h.update(k as f64 * 1e-3, 0.5, 40e-9);
         }
         assert_eq!(h.detector.peak, Some((0.0, 1.0)));
+        // A fall that lands the (then frozen) mean inside the settled band at once: 3 × 1.0
+        // and −0.9 V average 0.525 V, within 0.05 V of 0.5 V, past the model's peak. The
+        // fallback must not take t* again (cargo-mutants: its guard's `&&` as `||` survived).
+        let mut h = Hxy::new(fallback_prediction(), 0.05, 5e8);
+        for k in 0..4 {
+            h.update(k as f64 * 1e-3, 1.0, 0.0);
+        }
+        h.update(4e-3, -0.9, 40e-9);
+        assert_eq!(h.detector.peak, Some((0.0, 1.0)));
+        assert!((h.detector.mean() - 0.525).abs() < 1e-12);
+        for k in 5..10 {
+            h.update(k as f64 * 1e-3, 0.5, 40e-9);
+        }
+        assert_eq!(h.detector.peak, Some((0.0, 1.0)), "t* is where the peak was");
     }
 
     /// "Falls by more than the margin": a mean exactly the margin below the maximum is not yet
