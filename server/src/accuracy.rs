@@ -149,36 +149,51 @@ pub fn push_points(
     max_steps: u64,
     min_rtol: f64,
 ) -> Vec<Point> {
-    each_method_and_tolerance(min_rtol, max_steps, |method, rtol, opts| {
-        let (last, wall) = timed(reps, || run_push(model.clone(), method, opts, duration, 1e-4));
-        match last {
-            Ok(run) => {
-                let (fin, traj) = push_errors(model, &run, reference);
-                Point {
-                    problem: name.into(),
-                    method,
-                    rtol,
-                    final_error: fin,
-                    trajectory_error: traj,
-                    estimated_error: f64::NAN,
-                    estimate_rtol: f64::NAN,
-                    final_values: position_rows(model).into_iter().map(|i| run.final_state[i]).collect(),
-                    wall_time: wall,
-                    steps: run.stats.steps,
-                    rejected: run.stats.rejected,
-                    failure: None,
-                }
-            }
-            Err(e) => Point::failed(name, method, rtol, wall, e.to_string()),
-        }
+    each_method_and_tolerance(min_rtol, max_steps, |method, opts| {
+        push_point(name, model, duration, reference, reps, method, opts)
     })
+}
+
+/// One work-precision point of the push: `method` with `opts` (its tolerance is the point's),
+/// the best wall time of `reps` repetitions; a failed run is a failed point.
+pub fn push_point(
+    name: &str,
+    model: &PushModel,
+    duration: f64,
+    reference: &PushRun,
+    reps: usize,
+    method: Method,
+    opts: Options,
+) -> Point {
+    let rtol = opts.rtol;
+    let (last, wall) = timed(reps, || run_push(model.clone(), method, opts, duration, 1e-4));
+    match last {
+        Ok(run) => {
+            let (fin, traj) = push_errors(model, &run, reference);
+            Point {
+                problem: name.into(),
+                method,
+                rtol,
+                final_error: fin,
+                trajectory_error: traj,
+                estimated_error: f64::NAN,
+                estimate_rtol: f64::NAN,
+                final_values: position_rows(model).into_iter().map(|i| run.final_state[i]).collect(),
+                wall_time: wall,
+                steps: run.stats.steps,
+                rejected: run.stats.rejected,
+                failure: None,
+            }
+        }
+        Err(e) => Point::failed(name, method, rtol, wall, e.to_string()),
+    }
 }
 
 /// One point per method and tolerance (down to `min_rtol`), with at most `max_steps` steps.
 fn each_method_and_tolerance(
     min_rtol: f64,
     max_steps: u64,
-    mut point: impl FnMut(Method, f64, Options) -> Point,
+    mut point: impl FnMut(Method, Options) -> Point,
 ) -> Vec<Point> {
     let mut out = Vec::new();
     for method in Method::ALL {
@@ -187,36 +202,42 @@ fn each_method_and_tolerance(
                 max_steps,
                 ..Options::with_rtol(rtol)
             };
-            out.push(point(method, rtol, opts));
+            out.push(point(method, opts));
         }
     }
     out
 }
 
-#[allow(clippy::too_many_arguments)]
-fn reference_problem<P: Problem>(
-    name: &str,
-    p: &P,
-    y0: &[f64],
+/// A classical test problem with its published reference values at `t_end`.
+struct Classical<'a, P> {
+    name: &'a str,
+    problem: &'a P,
+    y0: &'a [f64],
     t_end: f64,
-    reference: &[f64],
-    reps: usize,
-    max_steps: u64,
-    min_rtol: f64,
-) -> Vec<Point> {
-    each_method_and_tolerance(min_rtol, max_steps, |method, rtol, opts| {
+    reference: &'a [f64],
+}
+
+impl<P: Problem> Classical<'_, P> {
+    /// Every method × tolerance down to `min_rtol`, with at most `max_steps` steps.
+    fn points(&self, reps: usize, max_steps: u64, min_rtol: f64) -> Vec<Point> {
+        each_method_and_tolerance(min_rtol, max_steps, |method, opts| self.point(reps, method, opts))
+    }
+
+    /// One point: `method` with `opts`, the best wall time of `reps` repetitions; the final
+    /// error is the largest relative error of a component.
+    fn point(&self, reps: usize, method: Method, opts: Options) -> Point {
         let ((r, y), wall) = timed(reps, || {
             let mut it = Integrator::new(method, opts);
-            let mut y = y0.to_vec();
+            let mut y = self.y0.to_vec();
             let mut t = 0.0;
-            (it.advance(p, &NoEvents, &mut t, &mut y, t_end), y)
+            (it.advance(self.problem, &NoEvents, &mut t, &mut y, self.t_end), y)
         });
         match r {
             Ok((_, st)) => Point {
-                problem: name.into(),
+                problem: self.name.into(),
                 method,
-                rtol,
-                final_error: max_relative_error(&y, reference),
+                rtol: opts.rtol,
+                final_error: max_relative_error(&y, self.reference),
                 trajectory_error: f64::NAN,
                 estimated_error: f64::NAN,
                 estimate_rtol: f64::NAN,
@@ -226,34 +247,32 @@ fn reference_problem<P: Problem>(
                 rejected: st.rejected,
                 failure: None,
             },
-            Err(e) => Point::failed(name, method, rtol, wall, e.to_string()),
+            Err(e) => Point::failed(self.name, method, opts.rtol, wall, e.to_string()),
         }
-    })
+    }
 }
+
+const VAN_DER_POL: Classical<'static, VanDerPol> = Classical {
+    name: "van-der-pol",
+    problem: &VanDerPol { eps: 1e-6 },
+    y0: &VanDerPol::Y0,
+    t_end: VanDerPol::T_END,
+    reference: &VanDerPol::REFERENCE,
+};
+
+const ROBERTSON: Classical<'static, Robertson> = Classical {
+    name: "robertson",
+    problem: &Robertson,
+    y0: &Robertson::Y0,
+    t_end: Robertson::T_END,
+    reference: &Robertson::REFERENCE,
+};
 
 /// Van der Pol (ε = 1e-6, t = 2) and Robertson (t = 1e11) against their published references;
 /// the final error is the largest relative error of a component.
 pub fn classical_points(reps: usize, max_steps: u64, min_rtol: f64) -> Vec<Point> {
-    let mut out = reference_problem(
-        "van-der-pol",
-        &VanDerPol { eps: 1e-6 },
-        &VanDerPol::Y0,
-        VanDerPol::T_END,
-        &VanDerPol::REFERENCE,
-        reps,
-        max_steps,
-        min_rtol,
-    );
-    out.extend(reference_problem(
-        "robertson",
-        &Robertson,
-        &Robertson::Y0,
-        Robertson::T_END,
-        &Robertson::REFERENCE,
-        reps,
-        max_steps,
-        min_rtol,
-    ));
+    let mut out = VAN_DER_POL.points(reps, max_steps, min_rtol);
+    out.extend(ROBERTSON.points(reps, max_steps, min_rtol));
     out
 }
 
@@ -445,43 +464,24 @@ mod tests {
         (x - readme).abs() <= 0.005
     }
 
-    /// The push's work-precision points for `method` at `rtols`, with their estimates (from the
-    /// same runs, as the report computes them).
+    /// The push's work-precision points for `method` at `rtols` (the report's [`push_point`]),
+    /// with their estimates (from the same runs, as the report computes them).
     fn push_rows(model: &PushModel, reference: &PushRun, method: Method, rtols: &[f64]) -> Vec<Point> {
         let mut pts: Vec<Point> = rtols
             .iter()
-            .map(|&rtol| {
-                let run = run_push(model.clone(), method, Options::with_rtol(rtol), 0.02, 1e-4).unwrap();
-                let (fin, _) = push_errors(model, &run, reference);
-                Point {
-                    method,
-                    final_error: fin,
-                    final_values: position_rows(model).into_iter().map(|i| run.final_state[i]).collect(),
-                    steps: run.stats.steps,
-                    ..point(rtol, Vec::new())
-                }
-            })
+            .map(|&rtol| push_point("push", model, 0.02, reference, 1, method, Options::with_rtol(rtol)))
             .collect();
-        estimate_errors(&mut pts, |_| None);
+        estimate_errors(&mut pts, classical_reference);
         pts
     }
 
-    /// The Rodas4 and TR-BDF2 work-precision points of a classical problem at every tolerance.
-    fn classical_rows<P: Problem>(name: &str, p: &P, y0: &[f64], t_end: f64, reference: &[f64]) -> Vec<Point> {
+    /// The Rodas4 and TR-BDF2 work-precision points of a classical problem at every tolerance
+    /// (the report's [`Classical::point`]), with their estimates.
+    fn classical_rows<P: Problem>(c: &Classical<'_, P>) -> Vec<Point> {
         let mut pts = Vec::new();
         for method in [Method::Rodas4, Method::TrBdf2] {
             for rtol in TOLERANCES {
-                let mut it = Integrator::new(method, Options::with_rtol(rtol));
-                let (mut t, mut y) = (0.0, y0.to_vec());
-                let (_, st) = it.advance(p, &NoEvents, &mut t, &mut y, t_end).unwrap();
-                pts.push(Point {
-                    problem: name.into(),
-                    method,
-                    final_error: max_relative_error(&y, reference),
-                    final_values: y,
-                    steps: st.steps,
-                    ..point(rtol, Vec::new())
-                });
+                pts.push(c.point(1, method, Options::with_rtol(rtol)));
             }
         }
         estimate_errors(&mut pts, classical_reference);
@@ -560,20 +560,7 @@ mod tests {
     /// below the one at 1e-3).
     #[test]
     fn estimate_over_error_is_0_89_to_1_02_on_robertson_and_1_00_to_1_56_on_van_der_pol() {
-        let vdp = classical_rows(
-            "van-der-pol",
-            &VanDerPol { eps: 1e-6 },
-            &VanDerPol::Y0,
-            VanDerPol::T_END,
-            &VanDerPol::REFERENCE,
-        );
-        let rob = classical_rows(
-            "robertson",
-            &Robertson,
-            &Robertson::Y0,
-            Robertson::T_END,
-            &Robertson::REFERENCE,
-        );
+        let (vdp, rob) = (classical_rows(&VAN_DER_POL), classical_rows(&ROBERTSON));
         let of = |pts: &[Point], m: Method| pts.iter().filter(|p| p.method == m).cloned().collect::<Vec<_>>();
         let (lo, hi) = ratio_range(of(&rob, Method::Rodas4).iter());
         assert!(
@@ -624,16 +611,7 @@ mod tests {
     /// pinned work): with a limit of 1076 that run fails, the looser ones do not.
     #[test]
     fn a_run_beyond_the_step_limit_is_reported_as_a_failed_point() {
-        let pts = reference_problem(
-            "van-der-pol",
-            &VanDerPol { eps: 1e-6 },
-            &VanDerPol::Y0,
-            VanDerPol::T_END,
-            &VanDerPol::REFERENCE,
-            1,
-            1076,
-            1e-6,
-        );
+        let pts = VAN_DER_POL.points(1, 1076, 1e-6);
         let rodas = |rtol: f64| {
             pts.iter()
                 .find(|p| p.method == Method::Rodas4 && p.rtol == rtol)
