@@ -593,19 +593,15 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::Parser;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        accuracy: AccuracyArgs,
-    }
+    use crate::Command;
 
     /// README, "`nanopush accuracy`": tolerances 1e-2 … 1e-10, a 20 ms push, 3 repetitions,
     /// and the 2·10⁶-step limit beyond which a run is reported as failed.
     #[test]
     fn accuracy_defaults_are_a_20_ms_push_3_reps_down_to_1e_10_within_2e6_steps() {
-        let a = Cli::try_parse_from(["accuracy"]).unwrap().accuracy;
+        let Command::Accuracy(a) = crate::parse(&["accuracy"]) else {
+            unreachable!()
+        };
         assert_eq!(a.duration, 0.02);
         assert_eq!(a.reps, 3);
         assert_eq!(a.min_rtol, 1e-10);

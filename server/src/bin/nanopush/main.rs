@@ -102,3 +102,12 @@ fn main() -> ExitCode {
         }
     }
 }
+
+/// `nanopush ARGS…` parsed by the real command line, for the subcommands' tests of their
+/// defaults.
+#[cfg(test)]
+fn parse(args: &[&str]) -> Command {
+    Cli::try_parse_from(std::iter::once("nanopush").chain(args.iter().copied()))
+        .expect("arguments parse")
+        .command
+}

@@ -236,20 +236,15 @@ fn summary(out: &mut String, r: &ScanReport, p: &ScanParams) -> anyhow::Result<(
 
 #[cfg(test)]
 mod tests {
-    use super::*;
-    use clap::Parser;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        scan: ScanArgs,
-    }
+    use crate::Command;
 
     /// README, "Scans": a `--locate` click looks for a particle within `--search-um`, default
     /// 2 µm.
     #[test]
     fn search_um_defaults_to_2() {
-        let a = Cli::try_parse_from(["scan", "--out", "x.gsf"]).unwrap().scan;
+        let Command::Scan(a) = crate::parse(&["scan", "--out", "x.gsf"]) else {
+            unreachable!()
+        };
         assert_eq!(a.search_um, 2.0);
     }
 }

@@ -284,18 +284,14 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::Parser;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        serve: ServeArgs,
-    }
+    use crate::Command;
 
     fn parse(args: &[&str]) -> ServeArgs {
-        Cli::try_parse_from(std::iter::once("serve").chain(args.iter().copied()))
-            .expect("arguments parse")
-            .serve
+        let argv: Vec<&str> = std::iter::once("serve").chain(args.iter().copied()).collect();
+        let Command::Serve(a) = crate::parse(&argv) else {
+            unreachable!("`serve` parses as Serve")
+        };
+        a
     }
 
     /// README, "The teleoperation server": the synopsis's defaults, `--bind 127.0.0.1 --port

@@ -226,19 +226,15 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::Parser;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        simulate: SimulateArgs,
-    }
+    use crate::Command;
 
     /// README, "`nanopush simulate`": the defaults its figures are of: the default scene, a 50 ms
     /// push, Rodas4 at rtol 1e-6, 0.1 ms samples (the 1 µm/s is the scene's).
     #[test]
     fn simulate_defaults_are_the_default_scene_50_ms_rodas4_at_1e_6_0_1_ms_samples() {
-        let a = Cli::try_parse_from(["simulate"]).unwrap().simulate;
+        let Command::Simulate(a) = crate::parse(&["simulate"]) else {
+            unreachable!()
+        };
         assert_eq!(a.scene, None);
         assert_eq!((a.duration, a.rtol, a.sample), (0.05, 1e-6, 1e-4));
         assert_eq!(check(&a).unwrap(), Method::Rodas4);

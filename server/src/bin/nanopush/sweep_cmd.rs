@@ -400,12 +400,13 @@ pub fn run(a: &SweepArgs) -> anyhow::Result<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::Parser;
+    use crate::Command;
 
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        sweep: SweepArgs,
+    fn parse(args: &[&str]) -> SweepArgs {
+        let Command::Sweep(a) = crate::parse(args) else {
+            unreachable!("`sweep` parses as Sweep")
+        };
+        a
     }
 
     /// README, "The paper's figures": `nanopush sweep` integrates each point for `--duration`
@@ -415,7 +416,7 @@ mod tests {
     #[test]
     fn sweep_defaults_are_point_options_default_0_2_s_1_ms_samples_the_last_quarter() {
         let args = ["sweep", "--param", "beta", "--from", "5", "--to", "65", "--steps", "31"];
-        let a = Cli::try_parse_from(args).unwrap().sweep;
+        let a = parse(&args);
         let (param, shard, opts) = check(&a).unwrap();
         assert_eq!(param, Param::Beta);
         assert_eq!(shard, Shard::parse("0/1").unwrap());
@@ -438,9 +439,8 @@ mod tests {
                 false
             )
         );
-        let a = Cli::try_parse_from(args.into_iter().chain(["--pure-sliding"]))
-            .unwrap()
-            .sweep;
+        let with: Vec<&str> = args.into_iter().chain(["--pure-sliding"]).collect();
+        let a = parse(&with);
         let (_, _, opts) = check(&a).unwrap();
         assert_eq!(
             opts,
