@@ -416,10 +416,9 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     }
     let scene = crate::load_scene(a.scene.as_ref())?;
     let model = PushModel::new(scene.push_params());
-    let max_steps = MAX_STEPS;
     let (reference, crosscheck) = push_reference(&model, a.duration).map_err(anyhow::Error::msg)?;
-    let mut points = push_points("push", &model, a.duration, &reference, a.reps, max_steps, a.min_rtol);
-    points.extend(classical_points(a.reps, max_steps, a.min_rtol));
+    let mut points = push_points("push", &model, a.duration, &reference, a.reps, MAX_STEPS, a.min_rtol);
+    points.extend(classical_points(a.reps, MAX_STEPS, a.min_rtol));
     estimate_errors(&mut points, classical_reference);
     let mut rows: Vec<AccuracyPoint> = points.iter().map(to_proto).collect();
     rows.extend(peer_points(a.reps, a.min_rtol).iter().map(peer_to_proto));

@@ -248,7 +248,7 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
     }
     // One worker per CPU the runtime may use (tokio counts them from the mask): two workers
     // sharing one core made the operator's telemetry wait for the scheduler to switch between
-    // them (soak: p99 gap +4.6 ms beyond the period with two, +1.2 ms with one). Work that takes
+    // them (60 s soaks: p99 gap +4.6 ms beyond the period with two, +1.6 ms with one). Work that takes
     // long (a push's preparation, a scan) runs on threads of its own.
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
