@@ -10,7 +10,7 @@ use futures_util::{SinkExt, StreamExt};
 use serde_json::json;
 use tokio_tungstenite::tungstenite::Message;
 
-use crate::serve::{TOKEN, connect, http_get, is, ok, reply, runtime, send, start, start_with, status, until};
+use crate::serve::{TOKEN, Ws, connect, http_get, is, ok, reply, runtime, send, start, start_with, status, until};
 
 /// Issue 12.1: a client that sends commands does not delay its own telemetry (the sockets have
 /// TCP_NODELAY): with a ping every 100 ms, the gaps between telemetry frames stay within 5 ms of
@@ -136,22 +136,7 @@ fn big_messages_are_refused_and_no_reply_is_lost() {
         for id in 100..400 {
             send(&mut ws, json!({"type": "ping", "id": id})).await;
         }
-        let mut seen = std::collections::HashSet::new();
-        let deadline = Instant::now() + Duration::from_secs(20);
-        while seen.len() < 300 {
-            let left = deadline.saturating_duration_since(Instant::now());
-            let Ok(Some(Ok(msg))) = tokio::time::timeout(left, ws.next()).await else {
-                panic!("{} of the 300 pings answered within 20 s", seen.len());
-            };
-            if let Message::Text(t) = msg {
-                let m: serde_json::Value = serde_json::from_str(&t).unwrap();
-                if is(&m, "ok") || is(&m, "error") {
-                    assert_eq!(m["type"], "ok", "{m}");
-                    seen.insert(m["id"].as_u64().unwrap());
-                }
-            }
-        }
-        assert!((100..400).all(|id| seen.contains(&id)));
+        every_ping_answered(&mut ws, 100..400).await;
     });
 }
 
@@ -429,21 +414,27 @@ fn a_slow_readers_replies_wait_for_room_and_none_is_lost() {
             send(&mut ws, json!({"type": "ping", "id": id})).await;
         }
         // Now read (well within the 5 s a frame may wait): every ping is answered.
-        let mut seen = std::collections::HashSet::new();
-        let deadline = Instant::now() + Duration::from_secs(20);
-        while seen.len() < 300 {
-            let left = deadline.saturating_duration_since(Instant::now());
-            let Ok(Some(Ok(msg))) = tokio::time::timeout(left, ws.next()).await else {
-                panic!("{} of the 300 pings answered within 20 s", seen.len());
-            };
-            if let Message::Text(t) = msg {
-                let m: serde_json::Value = serde_json::from_str(&t).unwrap();
-                if is(&m, "ok") || is(&m, "error") {
-                    assert_eq!(m["type"], "ok", "{m}");
-                    seen.insert(m["id"].as_u64().unwrap());
-                }
+        every_ping_answered(&mut ws, 100..400).await;
+    });
+}
+
+/// Reads until every ping of `ids` has its `ok` (an `error` reply fails), within 20 s.
+async fn every_ping_answered(ws: &mut Ws, ids: std::ops::Range<u64>) {
+    let mut seen = std::collections::HashSet::new();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let n = ids.clone().count();
+    while seen.len() < n {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let Ok(Some(Ok(msg))) = tokio::time::timeout(left, ws.next()).await else {
+            panic!("{} of the {n} pings answered within 20 s", seen.len());
+        };
+        if let Message::Text(t) = msg {
+            let m: serde_json::Value = serde_json::from_str(&t).unwrap();
+            if is(&m, "ok") || is(&m, "error") {
+                assert_eq!(m["type"], "ok", "{m}");
+                seen.insert(m["id"].as_u64().unwrap());
             }
         }
-        assert!((100..400).all(|id| seen.contains(&id)));
-    });
+    }
+    assert!(ids.into_iter().all(|id| seen.contains(&id)));
 }
