@@ -103,6 +103,7 @@ async fn status(State(st): State<Arc<AppState>>) -> Response {
             "ticks": m.ticks.load(Relaxed),
             "overruns": m.overruns.load(Relaxed),
             "realtime": m.realtime.load(Relaxed) == 1,
+            "no_halt": m.no_halt.load(Relaxed) == 1,
             "period_error_p50_bound_s": m.period_error.quantile_bound(0.5),
             "period_error_p99_bound_s": m.period_error.quantile_bound(0.99),
             "period_error_max_s": m.period_error.max(),

@@ -1,7 +1,8 @@
 //! The control loop: a dedicated OS thread stepping the instrument at 1 kHz (up to 10 kHz) on an
 //! absolute-deadline schedule — sleep until shortly before the deadline, then spin
-//! (spin_sleep) — with SCHED_FIFO and CPU affinity when the system grants them (logged fallback
-//! when not). Tokio's timer rounds to the millisecond, which is why this is not a task.
+//! (spin_sleep) — with SCHED_FIFO, CPU affinity and idle cores that poll instead of halting when
+//! the system grants them (logged fallback when not: [`crate::serve::realtime`]). Tokio's timer
+//! rounds to the millisecond, which is why this is not a task.
 //!
 //! Each tick, in order, each phase timed:
 //! 1. *control*: take pending commands (a bounded lock-free queue, never blocking) and the
@@ -29,10 +30,7 @@ use crate::control::{Leg, Prepared, Strategy, StrategyParams};
 use crate::instrument::{Afm, Reading};
 use crate::serve::haptic::{LINK_DOWN, LINK_UP, ServerLink, believable, phase_index};
 use crate::serve::metrics::LoopMetrics;
-
-/// The control loop's SCHED_FIFO priority, when the system grants it (the bridge's device loop
-/// runs at 45, below it).
-pub const LOOP_PRIORITY: i32 = 50;
+use crate::serve::realtime::{NoHalt, make_realtime};
 
 /// A push prepared off the loop (localization, model prediction, plan), ready to run.
 #[derive(Debug, Clone)]
@@ -214,42 +212,13 @@ pub struct LoopConfig {
     pub realtime: bool,
     /// CPU to pin to (None: the last one).
     pub cpu: Option<usize>,
+    /// With `realtime`, hold a zero CPU wake-up latency request while the loop runs, so that idle
+    /// cores poll instead of halting ([`NoHalt`]).
+    pub no_halt: bool,
     /// Connect the haptic link over iceoryx2.
     pub haptic: bool,
     /// The haptic link is down within this long of the last handle sample (ms).
     pub haptic_timeout_ms: f64,
-}
-
-/// Asks for SCHED_FIFO priority 50 and pins the thread to `cpu`; logs what was granted.
-fn make_realtime(cpu: Option<usize>) -> bool {
-    // SAFETY: plain libc calls on the calling thread with valid, initialized arguments.
-    unsafe {
-        let ncpu = libc::sysconf(libc::_SC_NPROCESSORS_ONLN).max(1) as usize;
-        let cpu = cpu.unwrap_or(ncpu - 1).min(ncpu - 1);
-        let mut set: libc::cpu_set_t = std::mem::zeroed();
-        libc::CPU_SET(cpu, &mut set);
-        if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
-            tracing::warn!(
-                "control loop: CPU affinity to core {cpu} refused ({}); running unpinned",
-                std::io::Error::last_os_error()
-            );
-        } else {
-            tracing::info!("control loop: pinned to core {cpu}");
-        }
-        let param = libc::sched_param {
-            sched_priority: LOOP_PRIORITY,
-        };
-        if libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) != 0 {
-            tracing::warn!(
-                "control loop: SCHED_FIFO refused ({}); running SCHED_OTHER with spin-sleep only",
-                std::io::Error::last_os_error()
-            );
-            false
-        } else {
-            tracing::info!("control loop: SCHED_FIFO priority 50");
-            true
-        }
-    }
 }
 
 /// A push in progress.
@@ -457,6 +426,21 @@ impl ControlLoop {
     pub fn run(mut self, shared: Arc<Shared>, cfg: LoopConfig) {
         let rt = cfg.realtime && make_realtime(cfg.cpu);
         shared.metrics.realtime.store(rt as u64, Relaxed);
+        // Held until the loop ends; the kernel withdraws it however the process ends.
+        let no_halt = (cfg.realtime && cfg.no_halt).then(NoHalt::request).and_then(|r| match r {
+            Ok(held) => {
+                tracing::info!("control loop: idle cores poll instead of halting (zero CPU latency request)");
+                Some(held)
+            }
+            Err(e) => {
+                tracing::warn!(
+                    "control loop: zero CPU latency refused ({}: {e}); the loop's core may halt between ticks and wake late",
+                    crate::serve::realtime::CPU_LATENCY_DEVICE
+                );
+                None
+            }
+        });
+        shared.metrics.no_halt.store(u64::from(no_halt.is_some()), Relaxed);
         let hm = &shared.metrics.haptic;
         hm.tip_z_m.store(f64::NAN.to_bits(), Relaxed);
         let haptic = if cfg.haptic {
@@ -681,5 +665,8 @@ impl ControlLoop {
             "control loop ended after {tick} ticks; tip at z = {:.3} µm",
             reading.stage[2] * 1e6
         );
+        // The cores may rest again.
+        drop(no_halt);
+        shared.metrics.no_halt.store(0, Relaxed);
     }
 }

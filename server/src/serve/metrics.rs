@@ -114,6 +114,8 @@ pub struct LoopMetrics {
     pub record_failures: AtomicU64,
     /// 1 when SCHED_FIFO was granted.
     pub realtime: AtomicU64,
+    /// 1 while the loop holds a zero CPU wake-up latency request (idle cores poll, never halt).
+    pub no_halt: AtomicU64,
 }
 
 /// Gauges and counters the network side keeps.
@@ -174,7 +176,7 @@ pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64, disk: Option<(f64, f
     };
     // (name, help, type, value)
     let (free, total) = disk.unwrap_or((f64::NAN, f64::NAN));
-    let scalars: [(&str, &str, &str, f64); 25] = [
+    let scalars: [(&str, &str, &str, f64); 26] = [
         (
             "nanopush_record_write_failures_total",
             "Records (push traces and summaries, scans) that could not be written.",
@@ -222,6 +224,12 @@ pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64, disk: Option<(f64, f
             "1 when the loop thread runs SCHED_FIFO.",
             "gauge",
             l.realtime.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_loop_no_halt",
+            "1 while the server holds a zero CPU wake-up latency request: idle cores poll instead of halting.",
+            "gauge",
+            l.no_halt.load(Relaxed) as f64,
         ),
         (
             "nanopush_haptic_link_age_seconds",

@@ -590,6 +590,6 @@ mod tests {
         assert_eq!(SEND_BUDGET, Duration::from_secs(5));
         assert_eq!(REPLY_PATIENCE, Duration::from_secs(30));
         assert_eq!(HARD_CAP, 8 * 1024 * 1024);
-        assert_eq!(crate::serve::control_loop::LOOP_PRIORITY, 50);
+        assert_eq!(crate::serve::realtime::LOOP_PRIORITY, 50);
     }
 }

@@ -69,9 +69,13 @@ pub struct ServeArgs {
     /// Telemetry rate to browsers (Hz), in [1, 1000].
     #[arg(long, default_value_t = 60.0)]
     telemetry_hz: f64,
-    /// Do not ask for SCHED_FIFO and CPU affinity.
+    /// Do not ask for SCHED_FIFO, CPU affinity and idle cores that poll.
     #[arg(long)]
     no_realtime: bool,
+    /// Let idle cores halt between ticks: no zero CPU wake-up latency request
+    /// (`/dev/cpu_dma_latency`) is held. Saves power; a halted core can wake the loop late.
+    #[arg(long)]
+    allow_cpu_halt: bool,
     /// CPU core for the control loop (default: the last one).
     #[arg(long)]
     cpu: Option<usize>,
@@ -226,6 +230,7 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         rate_hz: a.rate_hz,
         realtime: !a.no_realtime,
         cpu: a.cpu,
+        no_halt: !a.allow_cpu_halt,
         haptic: a.haptic != "none",
         haptic_timeout_ms: a.haptic_timeout_ms,
     };
@@ -318,6 +323,8 @@ mod tests {
         assert_eq!(a.haptic, "none");
         assert_eq!(a.haptic_timeout_ms, 5.0);
         assert_eq!(a.haptic_timeout_ms, nanopush::serve::haptic::DEFAULT_TIMEOUT_MS);
+        // Real-time by default, idle cores polling with it.
+        assert!(!a.no_realtime && !a.allow_cpu_halt);
         check(&a).unwrap();
     }
 
