@@ -3,20 +3,29 @@
 //!
 //! ```text
 //! cargo build --release --workspace --bins
-//! target/release/nanopush-soak [SECONDS] [--unconfined]      # default 600
+//! target/release/nanopush-soak [SECONDS] [--unconfined] [--allow-cpu-halt | --alternate PHASE_S]
 //! ```
 //!
-//! One server (`--haptic none`, the default scene); an idle window of 60 s for the loop's overrun
-//! rate alone; then, for SECONDS: 500 viewers subscribed to telemetry; one operator who holds the
-//! lease, subscribes to telemetry and sends a command (a ping) every 100 ms; 50 slowloris sockets
-//! that each send a partial request and, once the server closes them, start again; one client
-//! sending garbage (random bytes, arrays, unknown types, floods past the rate limit); then a
-//! second idle window of 60 s after the clients left. It reports: the operator's commands sent and
-//! answered, the operator's telemetry gaps (p50, p99, max, beyond the period), the frames the
-//! viewers received and the frames the server skipped for a lagging client, the server's open file
-//! descriptors and resident memory before the load, at its end and 10 s after
-//! the clients left, and the loop's overruns per minute in each window, split by whether the
-//! hypervisor took time from the loop's vCPU in that second (steal in `/proc/stat`).
+//! One server (`--haptic none`, the default scene); an idle window of SECONDS/2 (at least 60 s)
+//! for the loop's overrun rate alone; then, for SECONDS (default 600): 500 viewers subscribed to
+//! telemetry; one operator who holds the lease, subscribes to telemetry and sends a command (a
+//! ping) every 100 ms; 50 slowloris sockets that each send a partial request and, once the server
+//! closes them, start again; one client sending garbage (random bytes, arrays, unknown types,
+//! floods past the rate limit); then a second idle window as long as the first after the clients
+//! left, so that the idle rate is measured over as many ticks as the loaded one. It reports: the
+//! operator's commands sent and answered, the operator's telemetry gaps (p50, p99, max, beyond the
+//! period), the frames the viewers received and the frames the server skipped for a lagging
+//! client, the server's open file descriptors and resident memory before the load, at its end
+//! and 10 s after the clients left, and the loop's overruns per minute in each window (with how
+//! many of its ticks woke over 0.5 ms late and how many computed over 0.2 ms, and the steal and
+//! interrupt time of each CPU from `/proc/stat`), then the loaded rate against the idle one: the
+//! goal is met when it is no higher; a binomial tail says how likely a higher one is by chance.
+//!
+//! `--allow-cpu-halt` passes the flag to the server (idle cores may halt: the behaviour before the
+//! zero CPU latency request). `--alternate PHASE_S` runs the server so and holds the same request
+//! from this process in every other phase of PHASE_S seconds, from start to end, then reports
+//! each window once per regime: an A/B comparison under the same host, whose own load comes and
+//! goes over minutes (needs root, for `/dev/cpu_dma_latency`).
 //!
 //! The clients run on the same machine as the server, where a lab's would not. By default they
 //! are confined as if they were elsewhere: this process is kept off the loop's core (the last
@@ -36,6 +45,9 @@ use futures_util::{SinkExt, StreamExt};
 use nanopush_e2e::{bin, workspace};
 use serde_json::json;
 use tokio_tungstenite::tungstenite::Message;
+
+mod stats;
+use stats::{Regimes, Sample, Window, compare, cpu_jiffies, gaps, quantile, window};
 
 const TOKEN: &str = "nanopush-soak-operator";
 const VIEWERS: usize = 500;
@@ -66,11 +78,32 @@ fn get(addr: &str, path: &str) -> String {
 }
 
 fn metric(addr: &str, name: &str) -> f64 {
-    get(addr, "/metrics")
-        .lines()
+    value(&get(addr, "/metrics"), name)
+}
+
+/// The value of series `name` (with its labels, if any) in a Prometheus exposition.
+fn value(text: &str, name: &str) -> f64 {
+    text.lines()
         .find_map(|l| l.strip_prefix(&format!("{name} ")))
         .and_then(|v| v.parse().ok())
         .unwrap_or(f64::NAN)
+}
+
+/// How many values of histogram `name` (series labels `labels`, may be empty) exceeded `le`, one
+/// of its bucket bounds as the server writes it.
+fn above(text: &str, name: &str, labels: &str, le: &str) -> f64 {
+    let sep = if labels.is_empty() { "" } else { "," };
+    value(
+        text,
+        &format!(
+            "{name}_count{}",
+            if labels.is_empty() {
+                String::new()
+            } else {
+                format!("{{{labels}}}")
+            }
+        ),
+    ) - value(text, &format!("{name}_bucket{{{labels}{sep}le=\"{le}\"}}"))
 }
 
 /// Open file descriptors and resident memory (kB) of a process.
@@ -249,91 +282,87 @@ fn avoid_cpu(cpu: usize, ncpu: usize) -> bool {
     }
 }
 
-/// One second's reading: the loop's overruns so far, and the jiffies the loop's vCPU spent
-/// stolen by the hypervisor, in interrupts and in softirqs so far (`/proc/stat`).
-#[derive(Debug, Clone, Copy)]
-struct Sample {
-    at: Instant,
-    overruns: f64,
-    steal: u64,
-    irq: u64,
-}
-
-fn cpu_jiffies(cpu: usize) -> (u64, u64) {
-    let stat = std::fs::read_to_string("/proc/stat").unwrap_or_default();
-    let line = stat
-        .lines()
-        .find(|l| l.starts_with(&format!("cpu{cpu} ")))
-        .unwrap_or_default();
-    let f: Vec<u64> = line.split_whitespace().skip(1).filter_map(|v| v.parse().ok()).collect();
-    // user nice system idle iowait irq softirq steal
-    let at = |i: usize| f.get(i).copied().unwrap_or(0);
-    (at(7), at(5) + at(6))
-}
-
-/// Overruns per minute over the samples between `from` and `to`, and the share of them that
-/// fell in seconds when the loop's vCPU was stolen from; the steal and interrupt time (ms a minute).
-struct Window {
-    minutes: f64,
-    overruns: f64,
-    in_stolen_seconds: f64,
-    stolen_seconds: usize,
-    steal_ms: f64,
-    irq_ms: f64,
-    /// Overruns in each whole minute of the window.
-    per_minute: Vec<f64>,
-}
-
-fn window(samples: &[Sample], from: Instant, to: Instant) -> Window {
-    let w: Vec<&Sample> = samples.iter().filter(|s| s.at >= from && s.at <= to).collect();
-    let jiffy_ms = 1e3 / unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
-    let (mut overruns, mut in_stolen, mut stolen_seconds) = (0.0, 0.0, 0);
-    let mut per_minute = vec![0.0; ((to - from).as_secs_f64() / 60.0).floor() as usize];
-    for p in w.windows(2) {
-        let d = p[1].overruns - p[0].overruns;
-        overruns += d;
-        if let Some(m) = per_minute.get_mut(((p[1].at - from).as_secs_f64() / 60.0) as usize) {
-            *m += d;
-        }
-        if p[1].steal > p[0].steal {
-            in_stolen += d;
-            stolen_seconds += 1;
-        }
+/// Holds or withdraws a zero CPU wake-up latency request of this process's own
+/// (`/dev/cpu_dma_latency`, as the server does), for an alternating run.
+fn hold_no_halt(held: &mut Option<std::fs::File>, poll: bool) {
+    if !poll {
+        *held = None;
+    } else if held.is_none() {
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/cpu_dma_latency")
+            .expect("--alternate needs to write /dev/cpu_dma_latency (root)");
+        f.write_all(&0i32.to_ne_bytes()).expect("writing /dev/cpu_dma_latency");
+        *held = Some(f);
     }
-    let (first, last) = (w.first(), w.last());
-    let minutes = match (first, last) {
-        (Some(a), Some(b)) => (b.at - a.at).as_secs_f64() / 60.0,
-        _ => f64::NAN,
-    };
-    let span = |f: fn(&Sample) -> u64| match (first, last) {
-        (Some(a), Some(b)) => (f(b) - f(a)) as f64 * jiffy_ms / minutes,
-        _ => f64::NAN,
-    };
-    Window {
-        minutes,
-        overruns,
-        in_stolen_seconds: in_stolen,
-        stolen_seconds,
-        steal_ms: span(|s| s.steal),
-        irq_ms: span(|s| s.irq),
-        per_minute,
+}
+
+fn print_window(name: &str, w: &Window) {
+    let ms = |v: &[f64]| v.iter().map(|x| format!("{x:.0}")).collect::<Vec<_>>().join(" / ");
+    println!(
+        "loop overruns {name}: {:.1} a minute ({:.0} in {:.1} min; {:.0} of them in the {} seconds the loop's vCPU was stolen from); steal {} ms a minute, interrupts {} ms a minute (CPU 0 / 1 / ...)",
+        w.rate(),
+        w.overruns,
+        w.minutes,
+        w.in_stolen_seconds,
+        w.stolen_seconds,
+        ms(&w.steal_ms),
+        ms(&w.irq_ms)
+    );
+    println!(
+        "  ticks that woke over 0.5 ms late: {:.0}; ticks with a phase computing over 0.2 ms: {:.0}",
+        w.late, w.slow
+    );
+    if w.per_minute.len() > 1 {
+        println!("  in each minute: {:?}", w.per_minute);
     }
+}
+
+fn print_gaps(name: &str, gaps: &[f64]) {
+    let period = 1.0 / 60.0;
+    let p99 = quantile(gaps, 0.99);
+    println!(
+        "operator telemetry{name}: {} gaps, p50 {:.1} ms, p99 {:.1} ms ({:+.1} ms beyond the {:.1} ms period), max {:.1} ms",
+        gaps.len(),
+        quantile(gaps, 0.5) * 1e3,
+        p99 * 1e3,
+        (p99 - period) * 1e3,
+        period * 1e3,
+        gaps.last().copied().unwrap_or(f64::NAN) * 1e3
+    );
 }
 
 fn main() {
     let mut secs = 600.0;
     let mut confined = true;
-    for a in std::env::args().skip(1) {
+    let mut server_args: Vec<&str> = Vec::new();
+    let mut alternate: Option<f64> = None;
+    let usage =
+        "usage: nanopush-soak [SECONDS >= 10] [--unconfined] [--allow-cpu-halt | --alternate PHASE_SECONDS >= 5]";
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
         match a.as_str() {
             "--unconfined" => confined = false,
+            "--allow-cpu-halt" => server_args.push("--allow-cpu-halt"),
+            "--alternate" => match args.next().map(|v| v.parse::<f64>()) {
+                Some(Ok(v)) if v >= 5.0 && v.is_finite() => alternate = Some(v),
+                other => {
+                    eprintln!("{usage}; --alternate takes a phase length in seconds, at least 5; got {other:?}");
+                    std::process::exit(2);
+                }
+            },
             _ => match a.parse::<f64>() {
                 Ok(v) if v >= 10.0 && v.is_finite() => secs = v,
                 _ => {
-                    eprintln!("usage: nanopush-soak [SECONDS >= 10] [--unconfined]; got {a:?}");
+                    eprintln!("{usage}; got {a:?}");
                     std::process::exit(2);
                 }
             },
         }
+    }
+    if alternate.is_some() && !server_args.contains(&"--allow-cpu-halt") {
+        // The server holds no request of its own: the soak's decides the regime.
+        server_args.push("--allow-cpu-halt");
     }
     let ncpu = std::thread::available_parallelism().map_or(1, |n| n.get());
     let loop_cpu = ncpu - 1;
@@ -348,6 +377,7 @@ fn main() {
             "--data-dir",
         ])
         .arg(std::env::temp_dir().join(format!("nanopush-soak-{}", std::process::id())))
+        .args(&server_args)
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
@@ -373,6 +403,44 @@ fn main() {
             "unconfined (every core, ordinary threads)".to_string()
         }
     );
+    let status: serde_json::Value = serde_json::from_str(&get(&addr, "/api/status")).unwrap_or_default();
+    println!(
+        "server: SCHED_FIFO {}, idle cores {}",
+        if status["loop"]["realtime"] == true {
+            "granted"
+        } else {
+            "not granted"
+        },
+        if status["loop"]["no_halt"] == true {
+            "poll (zero CPU latency request held)"
+        } else {
+            "may halt (no CPU latency request)"
+        }
+    );
+
+    // An alternating run: this process holds the zero latency request in every other phase,
+    // from the start to the end, so that the host's own ups and downs fall on both regimes alike.
+    let regimes = Arc::new(std::sync::Mutex::new(Regimes::default()));
+    let alternating = Arc::new(AtomicBool::new(alternate.is_some()));
+    let alternator = alternate.map(|phase| {
+        let (regimes, alternating) = (regimes.clone(), alternating.clone());
+        std::thread::spawn(move || {
+            let mut held = None;
+            let (mut poll, mut next) = (false, Instant::now());
+            while alternating.load(Relaxed) {
+                if Instant::now() >= next {
+                    hold_no_halt(&mut held, poll);
+                    regimes.lock().unwrap().switches.push((Instant::now(), poll));
+                    poll = !poll;
+                    next += Duration::from_secs_f64(phase);
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        })
+    });
+    if let Some(phase) = alternate {
+        println!("alternating every {phase} s: idle cores may halt, then poll (this process's request), and so on");
+    }
 
     // A reading every second, for the whole run.
     let samples = Arc::new(std::sync::Mutex::new(Vec::<Sample>::new()));
@@ -382,13 +450,26 @@ fn main() {
         std::thread::spawn(move || {
             let mut next = Instant::now();
             while sampling.load(Relaxed) {
-                let overruns = metric(&addr, "nanopush_loop_overruns_total");
-                let (steal, irq) = cpu_jiffies(loop_cpu);
+                let text = get(&addr, "/metrics");
+                let overruns = value(&text, "nanopush_loop_overruns_total");
+                let late = above(&text, "nanopush_loop_period_error_seconds", "", "5e-4");
+                let slow = ["physics", "control", "publish"]
+                    .iter()
+                    .map(|p| {
+                        above(
+                            &text,
+                            "nanopush_loop_compute_seconds",
+                            &format!("phase=\"{p}\""),
+                            "2e-4",
+                        )
+                    })
+                    .sum();
                 samples.lock().unwrap().push(Sample {
                     at: Instant::now(),
                     overruns,
-                    steal,
-                    irq,
+                    late,
+                    slow,
+                    cpus: cpu_jiffies(ncpu),
                 });
                 next += Duration::from_secs(1);
                 std::thread::sleep(next.saturating_duration_since(Instant::now()));
@@ -396,8 +477,9 @@ fn main() {
         })
     };
 
-    // Idle: the loop alone.
-    let idle_window = Duration::from_secs(60);
+    // Idle: the loop alone, before and after the load, each window half as long as the load (at
+    // least a minute): the idle rate is then measured over as many ticks as the loaded one.
+    let idle_window = Duration::from_secs_f64((secs / 2.0).max(60.0));
     std::thread::sleep(Duration::from_secs(2));
     let idle0 = Instant::now();
     std::thread::sleep(idle_window);
@@ -472,26 +554,15 @@ fn main() {
     let idle1_end = Instant::now();
     sampling.store(false, Relaxed);
     let _ = sampler.join();
+    alternating.store(false, Relaxed);
+    if let Some(a) = alternator {
+        let _ = a.join();
+    }
     let samples = samples.lock().unwrap().clone();
+    let regimes = regimes.lock().unwrap().clone();
 
-    let mut gaps: Vec<f64> = arrivals.windows(2).map(|w| (w[1] - w[0]).as_secs_f64()).collect();
-    gaps.sort_by(f64::total_cmp);
-    let q = |p: f64| {
-        gaps.get(((gaps.len() as f64 * p) as usize).min(gaps.len().saturating_sub(1)))
-            .copied()
-            .unwrap_or(f64::NAN)
-    };
-    let period = 1.0 / 60.0;
     println!("operator: {sent} commands sent, {answered} answered");
-    println!(
-        "operator telemetry: {} frames, gap p50 {:.1} ms, p99 {:.1} ms ({:+.1} ms beyond the {:.1} ms period), max {:.1} ms",
-        gaps.len() + 1,
-        q(0.5) * 1e3,
-        q(0.99) * 1e3,
-        (q(0.99) - period) * 1e3,
-        period * 1e3,
-        gaps.last().copied().unwrap_or(f64::NAN) * 1e3
-    );
+    print_gaps("", &gaps(&arrivals, |_, _| true));
     let ((load0, load1), dropped) = load;
     println!(
         "viewers: {} telemetry frames received, {dropped} skipped by a lagging client while the operator ran; slowloris sockets closed by the server: {}; garbage messages sent: {}",
@@ -503,24 +574,34 @@ fn main() {
         "server fds / RSS: before {} / {} kB, under load {} / {} kB, 10 s after {} / {} kB",
         before.0, before.1, during.0, during.1, after.0, after.1
     );
-    for (name, w) in [
-        ("idle before", window(&samples, idle0, idle0_end)),
-        ("under the load", window(&samples, load0, load1)),
-        ("idle after", window(&samples, idle1, idle1_end)),
-    ] {
-        println!(
-            "loop overruns {name}: {:.1} a minute ({:.0} in {:.1} min; {:.0} of them in the {} seconds the loop's vCPU was stolen from); steal {:.0} ms a minute, interrupts {:.0} ms a minute",
-            w.overruns / w.minutes,
-            w.overruns,
-            w.minutes,
-            w.in_stolen_seconds,
-            w.stolen_seconds,
-            w.steal_ms,
-            w.irq_ms
-        );
-        if w.per_minute.len() > 1 {
-            println!("  in each minute: {:?}", w.per_minute);
+    let spans = [
+        ("idle before", idle0, idle0_end),
+        ("under the load", load0, load1),
+        ("idle after", idle1, idle1_end),
+    ];
+    // Every second, or (alternating) the seconds of one regime.
+    let regime_names: &[(&str, Option<bool>)] = if alternate.is_some() {
+        &[(" (cores may halt)", Some(false)), (" (cores poll)", Some(true))]
+    } else {
+        &[("", None)]
+    };
+    for &(suffix, regime) in regime_names {
+        let keep = |a: Instant, b: Instant| regime.is_none_or(|poll| regimes.within(a, b, poll));
+        if regime.is_some() {
+            print_gaps(suffix, &gaps(&arrivals, keep));
         }
+        let w: Vec<Window> = spans
+            .iter()
+            .map(|&(name, from, to)| {
+                let w = window(&samples, from, to, loop_cpu, keep);
+                print_window(&format!("{name}{suffix}"), &w);
+                w
+            })
+            .collect();
+        println!(
+            "loop overruns loaded against idle{suffix}: {}",
+            compare(&w[1], &[&w[0], &w[2]])
+        );
     }
     drop(server);
 }
