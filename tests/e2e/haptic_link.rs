@@ -69,13 +69,12 @@ impl Drop for Bench {
     }
 }
 
-/// A process killed (and reaped) on drop.
+/// A process stopped (SIGTERM, then SIGKILL after 10 s) and reaped on drop.
 struct Proc(Child);
 
 impl Drop for Proc {
     fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
+        nanopush_e2e::stop(&mut self.0);
     }
 }
 

@@ -15,8 +15,7 @@ struct Proc(Child, PathBuf);
 
 impl Drop for Proc {
     fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
+        nanopush_e2e::stop(&mut self.0);
         if std::thread::panicking() {
             eprintln!("--- log ---\n{}", std::fs::read_to_string(&self.1).unwrap_or_default());
         }

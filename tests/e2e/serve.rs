@@ -25,8 +25,7 @@ pub(crate) struct Server {
 
 impl Drop for Server {
     fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        nanopush_e2e::stop(&mut self.child);
         if std::thread::panicking() {
             // Show the server's log with the failure.
             let log = std::fs::read_to_string(self.dir.join("server.log")).unwrap_or_default();

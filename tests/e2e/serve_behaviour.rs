@@ -251,49 +251,63 @@ fn only_the_control_loop_runs_on_its_core() {
     }
 }
 
-/// The kernel's CPU latency QoS device (`Documentation/power/pm_qos_interface.rst`).
-const CPU_LATENCY: &str = "/dev/cpu_dma_latency";
+/// The loop's core (the last one), its PM QoS resume latency, and the server's record of it
+/// (`serve/no_halt.rs`).
+fn loop_core() -> (String, String) {
+    let last = std::thread::available_parallelism().map_or(1, |n| n.get()) - 1;
+    (
+        format!("/sys/devices/system/cpu/cpu{last}/power/pm_qos_resume_latency_us"),
+        format!("/run/nanopush/no-halt-cpu{last}"),
+    )
+}
 
-/// Does process `pid` hold [`CPU_LATENCY`] open?
-fn holds_cpu_latency(pid: u32) -> bool {
-    std::fs::read_dir(format!("/proc/{pid}/fd")).is_ok_and(|fds| {
-        fds.flatten()
-            .any(|fd| std::fs::read_link(fd.path()).is_ok_and(|p| p.as_os_str() == CPU_LATENCY))
-    })
+fn holders(record: &str) -> Vec<u32> {
+    std::fs::read_to_string(record)
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| l.strip_prefix("holder ")?.parse().ok())
+        .collect()
 }
 
 /// Issue 12's soak, traced with ftrace on the loop's core: most overruns under load were a tick
 /// whose core had halted while the loop slept and whose timer the hypervisor delivered 1-12 ms
-/// late. With realtime the server now holds a zero CPU wake-up latency request while it runs (idle
-/// cores poll instead of halting), reported as `no_halt` in the status and `nanopush_loop_no_halt`
-/// in the metrics; `--allow-cpu-halt` leaves the cores free to halt. The kernel itself withdraws
-/// the request when the file closes, so it is checked through the file the server holds.
+/// late. With realtime the server now keeps the loop's core polling while it runs (its PM QoS
+/// resume latency `n/a`, 0 µs), reported as `no_halt` in the status and `nanopush_loop_no_halt`
+/// in the metrics, and records itself as a holder; `--allow-cpu-halt` leaves the core alone. A
+/// holder killed with SIGKILL cannot give the core back: the next server drops it from the record
+/// (the last holder then restores the value from before: `no_halt::tests`).
 #[test]
-fn idle_cores_poll_while_the_server_runs_unless_it_may_let_them_halt() {
-    if std::fs::OpenOptions::new().write(true).open(CPU_LATENCY).is_err() {
-        eprintln!("{CPU_LATENCY} is not writable here (not root, or no PM QoS): nothing to check");
+fn the_loops_core_polls_while_the_server_runs_unless_it_may_halt() {
+    let (setting, record) = loop_core();
+    if std::fs::OpenOptions::new().write(true).open(&setting).is_err() {
+        eprintln!("{setting} is not writable here (not root, or no cpuidle): nothing to check");
         return;
     }
-    let polling = start("no-halt", &[]);
+    let mut polling = start("no-halt", &[]);
     let halting = start("halt", &["--allow-cpu-halt"]);
     for srv in [&polling, &halting] {
         wait_ticks(&srv.addr, 10);
     }
     let s = status(&polling.addr);
     assert_eq!(s["loop"]["no_halt"], true, "{s}");
-    assert!(holds_cpu_latency(polling.child.id()));
-    let now = std::fs::read(CPU_LATENCY).unwrap();
-    assert_eq!(
-        i32::from_ne_bytes(now[..4].try_into().unwrap()),
-        0,
-        "the kernel enforces 0 µs"
-    );
+    assert_eq!(std::fs::read_to_string(&setting).unwrap().trim(), "n/a");
+    assert!(holders(&record).contains(&polling.child.id()), "{record}");
     let (_, metrics) = crate::serve::http_get(&polling.addr, "/metrics");
     assert!(String::from_utf8_lossy(&metrics).contains("\nnanopush_loop_no_halt 1\n"));
 
     let s = status(&halting.addr);
     assert_eq!(s["loop"]["no_halt"], false, "{s}");
-    assert!(!holds_cpu_latency(halting.child.id()));
+    assert!(!holders(&record).contains(&halting.child.id()));
     let (_, metrics) = crate::serve::http_get(&halting.addr, "/metrics");
     assert!(String::from_utf8_lossy(&metrics).contains("\nnanopush_loop_no_halt 0\n"));
+
+    // Killed: it stays in the record until another server looks.
+    let killed = polling.child.id();
+    polling.child.kill().unwrap();
+    polling.child.wait().unwrap();
+    assert!(holders(&record).contains(&killed));
+    let next = start("no-halt-next", &[]);
+    wait_ticks(&next.addr, 10);
+    let h = holders(&record);
+    assert!(!h.contains(&killed) && h.contains(&next.child.id()), "{h:?}");
 }

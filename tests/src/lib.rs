@@ -76,3 +76,22 @@ pub fn sigterm(child: &Child) {
     let r = unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
     assert_eq!(r, 0, "kill(SIGTERM) of pid {}", child.id());
 }
+
+/// Stops a child as a service manager would: SIGTERM, up to 10 s to end, then SIGKILL; reaped
+/// either way. A server stopped so gives its loop's core back (`serve/no_halt.rs`); one killed
+/// outright leaves it polling until another server starts and ends.
+pub fn stop(child: &mut Child) {
+    if matches!(child.try_wait(), Ok(None)) {
+        // SAFETY: kill(2) on the pid of our own child, not yet reaped (so not reused).
+        unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
+        let t = std::time::Instant::now();
+        while matches!(child.try_wait(), Ok(None)) {
+            if t.elapsed() > std::time::Duration::from_secs(10) {
+                let _ = child.kill();
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+    }
+    let _ = child.wait();
+}

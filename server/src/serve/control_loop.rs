@@ -1,8 +1,9 @@
 //! The control loop: a dedicated OS thread stepping the instrument at 1 kHz (up to 10 kHz) on an
 //! absolute-deadline schedule — sleep until shortly before the deadline, then spin
-//! (spin_sleep) — with SCHED_FIFO, CPU affinity and idle cores that poll instead of halting when
-//! the system grants them (logged fallback when not: [`crate::serve::realtime`]). Tokio's timer
-//! rounds to the millisecond, which is why this is not a task.
+//! (spin_sleep) — with SCHED_FIFO, CPU affinity and a core that polls instead of halting when the
+//! system grants them (logged fallback when not: [`crate::serve::realtime`],
+//! [`crate::serve::no_halt`]). Tokio's timer rounds to the millisecond, which is why this is not
+//! a task.
 //!
 //! Each tick, in order, each phase timed:
 //! 1. *control*: take pending commands (a bounded lock-free queue, never blocking) and the
@@ -30,7 +31,8 @@ use crate::control::{Leg, Prepared, Strategy, StrategyParams};
 use crate::instrument::{Afm, Reading};
 use crate::serve::haptic::{LINK_DOWN, LINK_UP, ServerLink, believable, phase_index};
 use crate::serve::metrics::LoopMetrics;
-use crate::serve::realtime::{NoHalt, make_realtime};
+use crate::serve::no_halt::NoHalt;
+use crate::serve::realtime::make_realtime;
 
 /// A push prepared off the loop (localization, model prediction, plan), ready to run.
 #[derive(Debug, Clone)]
@@ -212,8 +214,8 @@ pub struct LoopConfig {
     pub realtime: bool,
     /// CPU to pin to (None: the last one).
     pub cpu: Option<usize>,
-    /// With `realtime`, hold a zero CPU wake-up latency request while the loop runs, so that idle
-    /// cores poll instead of halting ([`NoHalt`]).
+    /// With `realtime` and the loop pinned, keep the loop's core polling instead of halting
+    /// while the loop runs ([`NoHalt`]).
     pub no_halt: bool,
     /// Connect the haptic link over iceoryx2.
     pub haptic: bool,
@@ -424,22 +426,25 @@ impl ControlLoop {
 
     /// Runs the loop on this thread until shutdown (see the module docs).
     pub fn run(mut self, shared: Arc<Shared>, cfg: LoopConfig) {
-        let rt = cfg.realtime && make_realtime(cfg.cpu);
-        shared.metrics.realtime.store(rt as u64, Relaxed);
-        // Held until the loop ends; the kernel withdraws it however the process ends.
-        let no_halt = (cfg.realtime && cfg.no_halt).then(NoHalt::request).and_then(|r| match r {
-            Ok(held) => {
-                tracing::info!("control loop: idle cores poll instead of halting (zero CPU latency request)");
-                Some(held)
-            }
-            Err(e) => {
-                tracing::warn!(
-                    "control loop: zero CPU latency refused ({}: {e}); the loop's core may halt between ticks and wake late",
-                    crate::serve::realtime::CPU_LATENCY_DEVICE
-                );
-                None
-            }
-        });
+        let granted = cfg.realtime.then(|| make_realtime(cfg.cpu));
+        shared
+            .metrics
+            .realtime
+            .store(u64::from(granted.is_some_and(|g| g.fifo)), Relaxed);
+        // The loop's core polls while the loop runs (given back when it ends).
+        let no_halt = match granted.and_then(|g| g.core) {
+            Some(core) if cfg.no_halt => match NoHalt::request(core) {
+                Ok(held) => {
+                    tracing::info!("control loop: core {core} polls instead of halting between ticks");
+                    Some(held)
+                }
+                Err(e) => {
+                    tracing::warn!("control loop: core {core} may halt between ticks and wake the loop late: {e}");
+                    None
+                }
+            },
+            _ => None,
+        };
         shared.metrics.no_halt.store(u64::from(no_halt.is_some()), Relaxed);
         let hm = &shared.metrics.haptic;
         hm.tip_z_m.store(f64::NAN.to_bits(), Relaxed);

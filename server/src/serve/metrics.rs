@@ -114,7 +114,7 @@ pub struct LoopMetrics {
     pub record_failures: AtomicU64,
     /// 1 when SCHED_FIFO was granted.
     pub realtime: AtomicU64,
-    /// 1 while the loop holds a zero CPU wake-up latency request (idle cores poll, never halt).
+    /// 1 while the loop's core polls instead of halting between ticks ([`crate::serve::no_halt`]).
     pub no_halt: AtomicU64,
 }
 
@@ -227,7 +227,7 @@ pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64, disk: Option<(f64, f
         ),
         (
             "nanopush_loop_no_halt",
-            "1 while the server holds a zero CPU wake-up latency request: idle cores poll instead of halting.",
+            "1 while the control loop's core polls instead of halting between ticks.",
             "gauge",
             l.no_halt.load(Relaxed) as f64,
         ),

@@ -7,6 +7,7 @@ pub mod guard;
 pub mod haptic;
 pub mod haptic_api;
 pub mod metrics;
+pub mod no_halt;
 pub mod realtime;
 pub mod records;
 pub mod session;

@@ -26,8 +26,7 @@ struct Proc(Child);
 
 impl Drop for Proc {
     fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
+        nanopush_e2e::stop(&mut self.0);
     }
 }
 

@@ -39,13 +39,14 @@ const USAGE: &str = "\
 nanopush-load: load benchmark of `nanopush serve` (a benchmark: it asserts nothing)
 
 Usage: nanopush-load [--viewers 50,200,500] [--seconds 30] [--rate-hz 1000]
-                     [--server target/release/nanopush] [--json]
+                     [--server target/release/nanopush] [--allow-cpu-halt] [--json]
 
   --viewers LIST   levels of WebSocket viewers, comma-separated (a fresh server for each;
                    0 is a baseline: the server alone)
   --seconds S      measuring window per level, after every viewer has subscribed (default 30)
   --rate-hz HZ     control loop rate passed to the server (default 1000)
   --server PATH    the nanopush binary (default: this workspace's target/release/nanopush)
+  --allow-cpu-halt passed to the server: idle cores may halt (no zero CPU latency request)
   --json           print one JSON document instead of tables (progress still goes to stderr)
 ";
 
@@ -55,6 +56,7 @@ struct Opts {
     seconds: f64,
     rate_hz: f64,
     server: PathBuf,
+    allow_cpu_halt: bool,
     json: bool,
 }
 
@@ -64,6 +66,7 @@ fn parse_args() -> Result<Opts, String> {
         seconds: 30.0,
         rate_hz: 1000.0,
         server: nanopush_e2e::workspace().join("target/release/nanopush"),
+        allow_cpu_halt: false,
         json: false,
     };
     let mut args = std::env::args().skip(1);
@@ -88,6 +91,7 @@ fn parse_args() -> Result<Opts, String> {
             "--seconds" => o.seconds = value("--seconds")?.parse().map_err(|e| format!("--seconds: {e}"))?,
             "--rate-hz" => o.rate_hz = value("--rate-hz")?.parse().map_err(|e| format!("--rate-hz: {e}"))?,
             "--server" => o.server = PathBuf::from(value("--server")?),
+            "--allow-cpu-halt" => o.allow_cpu_halt = true,
             "--json" => o.json = true,
             "-h" | "--help" => {
                 print!("{USAGE}");
@@ -155,6 +159,7 @@ impl Server {
                 "--data-dir",
             ])
             .arg(dir.join("records"))
+            .args(o.allow_cpu_halt.then_some("--allow-cpu-halt"))
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(log)

@@ -69,11 +69,11 @@ pub struct ServeArgs {
     /// Telemetry rate to browsers (Hz), in [1, 1000].
     #[arg(long, default_value_t = 60.0)]
     telemetry_hz: f64,
-    /// Do not ask for SCHED_FIFO, CPU affinity and idle cores that poll.
+    /// Do not ask for SCHED_FIFO, CPU affinity and a loop core that polls.
     #[arg(long)]
     no_realtime: bool,
-    /// Let idle cores halt between ticks: no zero CPU wake-up latency request
-    /// (`/dev/cpu_dma_latency`) is held. Saves power; a halted core can wake the loop late.
+    /// Let the loop's core halt between ticks (its PM QoS resume latency is left as it is). Saves
+    /// power; a halted core can wake the loop late.
     #[arg(long)]
     allow_cpu_halt: bool,
     /// CPU core for the control loop (default: the last one).

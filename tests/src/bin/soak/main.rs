@@ -21,11 +21,12 @@
 //! interrupt time of each CPU from `/proc/stat`), then the loaded rate against the idle one: the
 //! goal is met when it is no higher; a binomial tail says how likely a higher one is by chance.
 //!
-//! `--allow-cpu-halt` passes the flag to the server (idle cores may halt: the behaviour before the
-//! zero CPU latency request). `--alternate PHASE_S` runs the server so and holds the same request
-//! from this process in every other phase of PHASE_S seconds, from start to end, then reports
-//! each window once per regime: an A/B comparison under the same host, whose own load comes and
-//! goes over minutes (needs root, for `/dev/cpu_dma_latency`).
+//! `--allow-cpu-halt` passes the flag to the server (the loop's core may halt between ticks: the
+//! behaviour before `serve/no_halt.rs`). `--alternate PHASE_S` runs the server so and sets the
+//! loop core's PM QoS resume latency from this process, `n/a` (polling, as the server would) in
+//! every other phase of PHASE_S seconds, from start to end, then restores it and reports each
+//! window once per regime: an A/B comparison under the same host, whose own load comes and goes
+//! over minutes (needs root).
 //!
 //! The clients run on the same machine as the server, where a lab's would not. By default they
 //! are confined as if they were elsewhere: this process is kept off the loop's core (the last
@@ -282,18 +283,11 @@ fn avoid_cpu(cpu: usize, ncpu: usize) -> bool {
     }
 }
 
-/// Holds or withdraws a zero CPU wake-up latency request of this process's own
-/// (`/dev/cpu_dma_latency`, as the server does), for an alternating run.
-fn hold_no_halt(held: &mut Option<std::fs::File>, poll: bool) {
-    if !poll {
-        *held = None;
-    } else if held.is_none() {
-        let mut f = std::fs::OpenOptions::new()
-            .write(true)
-            .open("/dev/cpu_dma_latency")
-            .expect("--alternate needs to write /dev/cpu_dma_latency (root)");
-        f.write_all(&0i32.to_ne_bytes()).expect("writing /dev/cpu_dma_latency");
-        *held = Some(f);
+/// The loop core's PM QoS resume latency: `n/a` (0 µs: the core polls, as the server keeps it)
+/// or the value found at the start (it may halt), for an alternating run.
+fn set_core_poll(setting: &str, original: &str, poll: bool) {
+    if let Err(e) = std::fs::write(setting, if poll { "n/a" } else { original }) {
+        panic!("--alternate needs to write {setting} (root): {e}");
     }
 }
 
@@ -405,16 +399,16 @@ fn main() {
     );
     let status: serde_json::Value = serde_json::from_str(&get(&addr, "/api/status")).unwrap_or_default();
     println!(
-        "server: SCHED_FIFO {}, idle cores {}",
+        "server: SCHED_FIFO {}, the loop's core {}",
         if status["loop"]["realtime"] == true {
             "granted"
         } else {
             "not granted"
         },
         if status["loop"]["no_halt"] == true {
-            "poll (zero CPU latency request held)"
+            "polls (kept so by the server)"
         } else {
-            "may halt (no CPU latency request)"
+            "may halt (left alone by the server)"
         }
     );
 
@@ -424,22 +418,24 @@ fn main() {
     let alternating = Arc::new(AtomicBool::new(alternate.is_some()));
     let alternator = alternate.map(|phase| {
         let (regimes, alternating) = (regimes.clone(), alternating.clone());
+        let setting = format!("/sys/devices/system/cpu/cpu{loop_cpu}/power/pm_qos_resume_latency_us");
+        let original = std::fs::read_to_string(&setting).map_or_else(|_| "0".into(), |v| v.trim().to_string());
         std::thread::spawn(move || {
-            let mut held = None;
             let (mut poll, mut next) = (false, Instant::now());
             while alternating.load(Relaxed) {
                 if Instant::now() >= next {
-                    hold_no_halt(&mut held, poll);
+                    set_core_poll(&setting, &original, poll);
                     regimes.lock().unwrap().switches.push((Instant::now(), poll));
                     poll = !poll;
                     next += Duration::from_secs_f64(phase);
                 }
                 std::thread::sleep(Duration::from_millis(20));
             }
+            set_core_poll(&setting, &original, false);
         })
     });
     if let Some(phase) = alternate {
-        println!("alternating every {phase} s: idle cores may halt, then poll (this process's request), and so on");
+        println!("alternating every {phase} s: the loop's core may halt, then polls (set by this process), and so on");
     }
 
     // A reading every second, for the whole run.
@@ -581,7 +577,7 @@ fn main() {
     ];
     // Every second, or (alternating) the seconds of one regime.
     let regime_names: &[(&str, Option<bool>)] = if alternate.is_some() {
-        &[(" (cores may halt)", Some(false)), (" (cores poll)", Some(true))]
+        &[(" (core may halt)", Some(false)), (" (core polls)", Some(true))]
     } else {
         &[("", None)]
     };
