@@ -62,10 +62,27 @@ pub(crate) async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, pe
         ping.tick().await;
         let mut events = st.events.subscribe();
         let mut telemetry = st.telemetry.subscribe();
+        // The lease holder's frames come first, on a channel of their own, subscribed only while
+        // this client holds the lease (the telemetry task yields to it when it has a receiver).
+        let mut lease_telemetry: Option<broadcast::Receiver<Utf8Bytes>> = None;
         let mut scans = st.scans.subscribe();
         let mut shutdown = st.shutdown.subscribe();
         let mut wants = HashSet::new();
         loop {
+            // Taking or losing the lease switches the telemetry channel, each from its newest
+            // frame on.
+            let holder = st.lease_holder() == Some(id);
+            if holder != lease_telemetry.is_some() {
+                lease_telemetry = holder.then(|| st.lease_telemetry.subscribe());
+                telemetry = telemetry.resubscribe();
+            }
+            let tip = wants.contains(&WsStream::Tip);
+            let first = async {
+                match lease_telemetry.as_mut() {
+                    Some(r) => r.recv().await,
+                    None => std::future::pending().await,
+                }
+            };
             let msg = tokio::select! {
                 r = reply_rx.recv() => match r {
                     Some(m) => Message::Text(m),
@@ -76,7 +93,15 @@ pub(crate) async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, pe
                     Err(broadcast::error::RecvError::Lagged(n)) => lagged(&st, n),
                     Err(broadcast::error::RecvError::Closed) => break,
                 },
-                r = telemetry.recv(), if wants.contains(&WsStream::Tip) => match r {
+                r = telemetry.recv(), if tip && !holder => match r {
+                    Ok(m) => {
+                        st.net.sent.fetch_add(1, Relaxed);
+                        Message::Text(m)
+                    }
+                    Err(broadcast::error::RecvError::Lagged(n)) => lagged(&st, n),
+                    Err(broadcast::error::RecvError::Closed) => break,
+                },
+                r = first, if tip && holder => match r {
                     Ok(m) => {
                         st.net.sent.fetch_add(1, Relaxed);
                         Message::Text(m)
@@ -96,6 +121,7 @@ pub(crate) async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, pe
                     wants = streams_rx.borrow_and_update().clone();
                     // Drop what queued before the subscription.
                     telemetry = telemetry.resubscribe();
+                    lease_telemetry = lease_telemetry.map(|r| r.resubscribe());
                     scans = scans.resubscribe();
                     continue;
                 }

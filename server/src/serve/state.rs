@@ -74,6 +74,9 @@ pub struct AppState {
     pub scan_subscribers: AtomicU64,
     /// Telemetry, serialized once per frame.
     pub telemetry: broadcast::Sender<Utf8Bytes>,
+    /// The same frames for the lease holder alone, sent before everyone else's
+    /// ([`crate::serve::tasks::telemetry_task`]).
+    pub lease_telemetry: broadcast::Sender<Utf8Bytes>,
     /// Events for everyone (lease, run_done, shutdown).
     pub events: broadcast::Sender<Utf8Bytes>,
     /// Scan stream (text and binary frames).
@@ -197,6 +200,7 @@ impl AppState {
             tip_subscribers: AtomicU64::new(0),
             scan_subscribers: AtomicU64::new(0),
             telemetry: broadcast::channel(64).0,
+            lease_telemetry: broadcast::channel(64).0,
             events: broadcast::channel(256).0,
             scans: broadcast::channel(1024).0,
             scanning: AtomicBool::new(false),
