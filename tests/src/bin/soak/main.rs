@@ -22,11 +22,12 @@
 //! goal is met when it is no higher; a binomial tail says how likely a higher one is by chance.
 //!
 //! `--allow-cpu-halt` passes the flag to the server (the loop's core may halt between ticks: the
-//! behaviour before `serve/no_halt.rs`). `--alternate PHASE_S` runs the server so and sets the
-//! loop core's PM QoS resume latency from this process, `n/a` (polling, as the server would) in
-//! every other phase of PHASE_S seconds, from start to end, then restores it and reports each
-//! window once per regime: an A/B comparison under the same host, whose own load comes and goes
-//! over minutes (needs root).
+//! behaviour before `serve/no_halt.rs`). `--alternate PHASE_S` runs the server so and, from this
+//! process, takes the machine through three regimes in turn, PHASE_S seconds each, from start to
+//! end: every core may halt; the loop's core polls (its PM QoS resume latency `n/a`, as the
+//! server would set it); every core polls (`/dev/cpu_dma_latency` = 0 held, as `cyclictest`
+//! does). It then restores the setting and reports each window once per regime: a comparison
+//! under the same host, whose own load comes and goes over minutes (needs root).
 //!
 //! The clients run on the same machine as the server, where a lab's would not. By default they
 //! are confined as if they were elsewhere: this process is kept off the loop's core (the last
@@ -48,7 +49,7 @@ use serde_json::json;
 use tokio_tungstenite::tungstenite::Message;
 
 mod stats;
-use stats::{Regimes, Sample, Window, compare, cpu_jiffies, gaps, quantile, window};
+use stats::{Regime, Regimes, Sample, Window, compare, cpu_jiffies, gaps, quantile, window};
 
 const TOKEN: &str = "nanopush-soak-operator";
 const VIEWERS: usize = 500;
@@ -283,11 +284,23 @@ fn avoid_cpu(cpu: usize, ncpu: usize) -> bool {
     }
 }
 
-/// The loop core's PM QoS resume latency: `n/a` (0 µs: the core polls, as the server keeps it)
-/// or the value found at the start (it may halt), for an alternating run.
-fn set_core_poll(setting: &str, original: &str, poll: bool) {
-    if let Err(e) = std::fs::write(setting, if poll { "n/a" } else { original }) {
+/// Puts the machine in `regime` for an alternating run: the loop core's PM QoS resume latency
+/// `n/a` (0 µs: it polls, as the server keeps it) or the value found at the start (`original`),
+/// and a system-wide zero latency request (`/dev/cpu_dma_latency`) held in `all` or not.
+fn enter(regime: Regime, setting: &str, original: &str, all: &mut Option<std::fs::File>) {
+    let value = if regime == Regime::CorePolls { "n/a" } else { original };
+    if let Err(e) = std::fs::write(setting, value) {
         panic!("--alternate needs to write {setting} (root): {e}");
+    }
+    if regime != Regime::AllPoll {
+        *all = None;
+    } else if all.is_none() {
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/cpu_dma_latency")
+            .expect("--alternate needs to write /dev/cpu_dma_latency (root)");
+        f.write_all(&0i32.to_ne_bytes()).expect("writing /dev/cpu_dma_latency");
+        *all = Some(f);
     }
 }
 
@@ -413,7 +426,7 @@ fn main() {
     );
 
     // An alternating run: this process holds the zero latency request in every other phase,
-    // from the start to the end, so that the host's own ups and downs fall on both regimes alike.
+    // from the start to the end, so that the host's own ups and downs fall on every regime alike.
     let regimes = Arc::new(std::sync::Mutex::new(Regimes::default()));
     let alternating = Arc::new(AtomicBool::new(alternate.is_some()));
     let alternator = alternate.map(|phase| {
@@ -421,21 +434,26 @@ fn main() {
         let setting = format!("/sys/devices/system/cpu/cpu{loop_cpu}/power/pm_qos_resume_latency_us");
         let original = std::fs::read_to_string(&setting).map_or_else(|_| "0".into(), |v| v.trim().to_string());
         std::thread::spawn(move || {
-            let (mut poll, mut next) = (false, Instant::now());
-            while alternating.load(Relaxed) {
-                if Instant::now() >= next {
-                    set_core_poll(&setting, &original, poll);
-                    regimes.lock().unwrap().switches.push((Instant::now(), poll));
-                    poll = !poll;
-                    next += Duration::from_secs_f64(phase);
+            let (mut all, mut next) = (None, Instant::now());
+            for &regime in Regime::ALL.iter().cycle() {
+                enter(regime, &setting, &original, &mut all);
+                regimes.lock().unwrap().switches.push((Instant::now(), regime));
+                next += Duration::from_secs_f64(phase);
+                while alternating.load(Relaxed) && Instant::now() < next {
+                    std::thread::sleep(Duration::from_millis(20));
                 }
-                std::thread::sleep(Duration::from_millis(20));
+                if !alternating.load(Relaxed) {
+                    break;
+                }
             }
-            set_core_poll(&setting, &original, false);
+            enter(Regime::Halt, &setting, &original, &mut all);
         })
     });
     if let Some(phase) = alternate {
-        println!("alternating every {phase} s: the loop's core may halt, then polls (set by this process), and so on");
+        println!(
+            "alternating every {phase} s: {}, and so on (set by this process)",
+            Regime::ALL.map(Regime::name).join(", then ")
+        );
     }
 
     // A reading every second, for the whole run.
@@ -576,13 +594,17 @@ fn main() {
         ("idle after", idle1, idle1_end),
     ];
     // Every second, or (alternating) the seconds of one regime.
-    let regime_names: &[(&str, Option<bool>)] = if alternate.is_some() {
-        &[(" (core may halt)", Some(false)), (" (core polls)", Some(true))]
+    let regime_names: Vec<(String, Option<Regime>)> = if alternate.is_some() {
+        Regime::ALL
+            .iter()
+            .map(|&r| (format!(" ({})", r.name()), Some(r)))
+            .collect()
     } else {
-        &[("", None)]
+        vec![(String::new(), None)]
     };
-    for &(suffix, regime) in regime_names {
-        let keep = |a: Instant, b: Instant| regime.is_none_or(|poll| regimes.within(a, b, poll));
+    for (suffix, regime) in &regime_names {
+        let (suffix, regime) = (suffix.as_str(), *regime);
+        let keep = |a: Instant, b: Instant| regime.is_none_or(|r| regimes.within(a, b, r));
         if regime.is_some() {
             print_gaps(suffix, &gaps(&arrivals, keep));
         }

@@ -108,23 +108,47 @@ pub fn window(
     w
 }
 
-/// The idle regime of an alternating run: from each switch on, the loop's CPUs poll (a zero
-/// CPU latency request held) or may halt.
+/// What the idle cores may do, in an alternating run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Regime {
+    /// Every core may halt (`nanopush serve --allow-cpu-halt` alone).
+    Halt,
+    /// The loop's core polls (its PM QoS resume latency `n/a`), as the server keeps it.
+    CorePolls,
+    /// Every core polls (`/dev/cpu_dma_latency` = 0 held, as `cyclictest` holds it).
+    AllPoll,
+}
+
+impl Regime {
+    /// In the order an alternating run takes them.
+    pub const ALL: [Regime; 3] = [Regime::Halt, Regime::CorePolls, Regime::AllPoll];
+
+    /// As the report names it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Regime::Halt => "cores may halt",
+            Regime::CorePolls => "the loop's core polls",
+            Regime::AllPoll => "every core polls",
+        }
+    }
+}
+
+/// The regimes of an alternating run over time.
 #[derive(Debug, Clone, Default)]
 pub struct Regimes {
-    /// (when, polling from then on), in time order.
-    pub switches: Vec<(Instant, bool)>,
+    /// (when, the regime from then on), in time order.
+    pub switches: Vec<(Instant, Regime)>,
 }
 
 impl Regimes {
     /// The regime at `t` (None before the first switch).
-    pub fn at(&self, t: Instant) -> Option<bool> {
-        self.switches.iter().rev().find(|(s, _)| *s <= t).map(|(_, p)| *p)
+    pub fn at(&self, t: Instant) -> Option<Regime> {
+        self.switches.iter().rev().find(|(s, _)| *s <= t).map(|(_, r)| *r)
     }
 
-    /// Whether the whole of `[a, b]` lies in one regime, and that regime is `poll`.
-    pub fn within(&self, a: Instant, b: Instant, poll: bool) -> bool {
-        self.at(a) == Some(poll) && !self.switches.iter().any(|(s, _)| *s > a && *s < b)
+    /// Whether the whole of `[a, b]` lies in one regime, and that regime is `r`.
+    pub fn within(&self, a: Instant, b: Instant, r: Regime) -> bool {
+        self.at(a) == Some(r) && !self.switches.iter().any(|(s, _)| *s > a && *s < b)
     }
 }
 
@@ -244,22 +268,24 @@ mod tests {
             .map(|(i, &o)| sample(s(i as u64), o, i as u64 / 3))
             .collect();
         // Polling from 0 s, halting from 2 s on.
+        let (poll, halt) = (Regime::CorePolls, Regime::Halt);
         let r = Regimes {
-            switches: vec![(s(0), true), (s(2), false)],
+            switches: vec![(s(0), poll), (s(2), halt)],
         };
         assert_eq!(
             (r.at(s(1)), r.at(s(2)), r.at(s(3))),
-            (Some(true), Some(false), Some(false))
+            (Some(poll), Some(halt), Some(halt))
         );
-        assert!(r.within(s(0), s(1), true) && r.within(s(1), s(2), true));
-        assert!(!r.within(s(1), s(3), true) && !r.within(s(1), s(3), false));
+        assert!(r.within(s(0), s(1), poll) && r.within(s(1), s(2), poll));
+        assert!(!r.within(s(1), s(3), poll) && !r.within(s(1), s(3), halt));
+        assert!(!r.within(s(0), s(1), Regime::AllPoll));
         let all = window(&samples, s(0), s(4), 1, |_, _| true);
         assert_eq!((all.overruns, all.late), (15.0, 15.0));
         assert!((all.minutes - 4.0 / 60.0).abs() < 1e-9);
         // The loop's CPU was stolen from once, in the second 2-3 (steal 0, 0, 0, 1, 1).
         assert_eq!((all.stolen_seconds, all.in_stolen_seconds), (1, 4.0));
-        let poll = window(&samples, s(0), s(4), 1, |a, b| r.within(a, b, true));
-        let halt = window(&samples, s(0), s(4), 1, |a, b| r.within(a, b, false));
+        let poll = window(&samples, s(0), s(4), 1, |a, b| r.within(a, b, Regime::CorePolls));
+        let halt = window(&samples, s(0), s(4), 1, |a, b| r.within(a, b, Regime::Halt));
         assert_eq!((poll.overruns, halt.overruns), (3.0, 12.0));
         assert!((poll.rate() - 90.0).abs() < 1e-9 && (halt.rate() - 360.0).abs() < 1e-9);
         // 1 jiffy of steal in 2 s of halting: 10 ms (at 100 Hz) over 1/30 min.
