@@ -14,9 +14,10 @@
 //!
 //! Only the loop's core: the kernel's system-wide request (`/dev/cpu_dma_latency` = 0, as
 //! `cyclictest` holds it) makes every core poll, and on this VM that cost more than it gave. In
-//! one idle run alternating 20 s phases, the loop overran 0.5 times a minute with every core free
-//! to halt, 2.5 with every core polling (and 110 ms of steal where the others had none), and 0.0
-//! with only its own core polling.
+//! two soaks alternating 20 s phases of each regime (`nanopush-soak 600 --alternate 20`), the
+//! loop's core alone polling was the best regime when idle: 4.7 and 0.6 overruns a minute,
+//! against 6.1 and 1.3 with every core free to halt and 13.3 and 1.3 with every core polling;
+//! under the load of the second, every core polling overran 1.6 a minute, the other two 0.0.
 //!
 //! The setting is the core's PM QoS resume latency,
 //! `/sys/devices/system/cpu/cpuN/power/pm_qos_resume_latency_us`: `n/a` means 0 µs, and the
