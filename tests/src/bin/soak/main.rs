@@ -3,14 +3,14 @@
 //!
 //! ```text
 //! cargo build --release --workspace --bins
-//! target/release/nanopush-soak [SECONDS] [--unconfined] [--allow-cpu-halt | --alternate PHASE_S]
+//! target/release/nanopush-soak [SECONDS] [--unconfined] [--allow-cpu-halt] [--alternate PHASE_S]
 //! ```
 //!
 //! One server (`--haptic none`, the default scene); an idle window of SECONDS/2 (at least 60 s)
 //! for the loop's overrun rate alone; then, for SECONDS (default 600): 500 viewers subscribed to
 //! telemetry; one operator who holds the lease, subscribes to telemetry and sends a command (a
 //! ping) every 100 ms; 50 slowloris sockets that each send a partial request and, once the server
-//! closes them, start again; one client sending garbage (random bytes, arrays, unknown types,
+//! closes them, start again; one client sending garbage (random printable text, arrays, unknown types,
 //! floods past the rate limit); then a second idle window as long as the first after the clients
 //! left, so that the idle rate is measured over as many ticks as the loaded one. It reports: the
 //! operator's commands sent and answered, the operator's telemetry gaps (p50, p99, max, beyond the
@@ -304,6 +304,53 @@ fn enter(regime: Regime, setting: &str, original: &str, all: &mut Option<std::fs
     }
 }
 
+/// The loop core's setting as found, written back if the run is interrupted (SIGINT, SIGTERM,
+/// SIGHUP): the path and the value, prepared before the handler is installed.
+static GIVE_BACK: std::sync::OnceLock<(std::ffi::CString, Vec<u8>)> = std::sync::OnceLock::new();
+
+/// The server's pid, for the signal handler to end it too.
+static SERVER_PID: std::sync::atomic::AtomicI32 = std::sync::atomic::AtomicI32::new(0);
+
+/// Writes the setting back with async-signal-safe calls only, asks the server to end (it gives
+/// its own state back), then ends the process.
+extern "C" fn give_back(sig: libc::c_int) {
+    let server = SERVER_PID.load(Relaxed);
+    if server > 0 {
+        // SAFETY: kill(2) is async-signal-safe; the pid is our child's, not yet reaped.
+        unsafe { libc::kill(server, libc::SIGTERM) };
+    }
+    if let Some((path, value)) = GIVE_BACK.get() {
+        // SAFETY: open/write/close/_exit are async-signal-safe; the buffers live forever.
+        unsafe {
+            let fd = libc::open(path.as_ptr(), libc::O_WRONLY);
+            if fd >= 0 {
+                libc::write(fd, value.as_ptr().cast(), value.len());
+                libc::close(fd);
+            }
+        }
+    }
+    // SAFETY: ends the process at once, as the signal's default action would have.
+    unsafe { libc::_exit(128 + sig) };
+}
+
+/// An alternating run sets the loop core's setting itself: it must give it back however the run
+/// ends. On a normal end and a panic the returned guard does; on a signal, the handler.
+fn give_back_at_the_end(setting: &str, original: &str) -> impl Drop {
+    struct Guard(String, String);
+    impl Drop for Guard {
+        fn drop(&mut self) {
+            let _ = std::fs::write(&self.0, &self.1);
+        }
+    }
+    let path = std::ffi::CString::new(setting).expect("a path without NUL");
+    let _ = GIVE_BACK.set((path, original.as_bytes().to_vec()));
+    for sig in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+        // SAFETY: installs a handler that uses async-signal-safe calls only.
+        unsafe { libc::signal(sig, give_back as *const () as libc::sighandler_t) };
+    }
+    Guard(setting.to_string(), original.to_string())
+}
+
 fn print_window(name: &str, w: &Window) {
     let ms = |v: &[f64]| v.iter().map(|x| format!("{x:.0}")).collect::<Vec<_>>().join(" / ");
     println!(
@@ -345,7 +392,7 @@ fn main() {
     let mut server_args: Vec<&str> = Vec::new();
     let mut alternate: Option<f64> = None;
     let usage =
-        "usage: nanopush-soak [SECONDS >= 10] [--unconfined] [--allow-cpu-halt | --alternate PHASE_SECONDS >= 5]";
+        "usage: nanopush-soak [SECONDS >= 10] [--unconfined] [--allow-cpu-halt] [--alternate PHASE_SECONDS >= 5]";
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -373,6 +420,19 @@ fn main() {
     }
     let ncpu = std::thread::available_parallelism().map_or(1, |n| n.get());
     let loop_cpu = ncpu - 1;
+    if alternate.is_some() {
+        // Found polling, the core could not halt in the "cores may halt" regime: the comparison
+        // would compare nothing. A server killed with SIGKILL leaves it so until the next one.
+        let setting = format!("/sys/devices/system/cpu/cpu{loop_cpu}/power/pm_qos_resume_latency_us");
+        if std::fs::read_to_string(&setting).is_ok_and(|v| v.trim() == "n/a") {
+            eprintln!(
+                "--alternate: core {loop_cpu} already polls ({setting} is n/a: a server still running, or one killed \
+                 with SIGKILL; see /run/nanopush/no-halt-cpu{loop_cpu}). Stop the server, or give the core back with \
+                 `echo 0 > {setting}`, and start again."
+            );
+            std::process::exit(2);
+        }
+    }
     let mut child = Command::new(bin("nanopush"))
         .current_dir(workspace())
         .args(["serve", "--port", "0", "--haptic", "none", "--operator-token", TOKEN])
@@ -389,6 +449,7 @@ fn main() {
         .stderr(Stdio::null())
         .spawn()
         .expect("starting nanopush serve");
+    SERVER_PID.store(child.id() as i32, Relaxed);
     // The server is started first: it inherits this process's CPUs.
     let confined = confined && ncpu > 1 && avoid_cpu(loop_cpu, ncpu);
     let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
@@ -429,10 +490,12 @@ fn main() {
     // from the start to the end, so that the host's own ups and downs fall on every regime alike.
     let regimes = Arc::new(std::sync::Mutex::new(Regimes::default()));
     let alternating = Arc::new(AtomicBool::new(alternate.is_some()));
+    let setting = format!("/sys/devices/system/cpu/cpu{loop_cpu}/power/pm_qos_resume_latency_us");
+    let original = std::fs::read_to_string(&setting).map_or_else(|_| "0".into(), |v| v.trim().to_string());
+    let _give_back = alternate.map(|_| give_back_at_the_end(&setting, &original));
     let alternator = alternate.map(|phase| {
         let (regimes, alternating) = (regimes.clone(), alternating.clone());
-        let setting = format!("/sys/devices/system/cpu/cpu{loop_cpu}/power/pm_qos_resume_latency_us");
-        let original = std::fs::read_to_string(&setting).map_or_else(|_| "0".into(), |v| v.trim().to_string());
+        let (setting, original) = (setting.clone(), original.clone());
         std::thread::spawn(move || {
             let (mut all, mut next) = (None, Instant::now());
             for &regime in Regime::ALL.iter().cycle() {

@@ -1,6 +1,6 @@
 //! The soak's figures: per-second readings of the loop's counters and of the CPUs, their
-//! windows (idle before, loaded, idle after; optionally split into the two idle regimes of an
-//! alternating run), the operator's telemetry gaps, and the test of whether the loaded window's
+//! windows (idle before, loaded, idle after; in an alternating run each split into the seconds
+//! of its three regimes), the operator's telemetry gaps, and the test of whether the loaded window's
 //! overrun rate is above the idle one's.
 
 use std::time::Instant;
