@@ -192,6 +192,11 @@ pub enum ErrorCode {
 pub struct Telemetry {
     /// Server time since start (s).
     pub t: f64,
+    /// The frame's number, from 1, one more for each frame the server produces: a client sees
+    /// each number at most once and in increasing order, and a number skipped is a frame it
+    /// lost (announced by `lagged`).
+    #[serde(default)]
+    pub seq: u64,
     /// Stage position: tip x, y and the undeflected apex height (m).
     pub stage: [f64; 3],
     /// Deflection reading (V).
@@ -518,6 +523,7 @@ mod tests {
         assert_eq!(s, r#"{"type":"error","id":3,"code":"out_of_range","message":"x"}"#);
         let t = serde_json::to_string(&ServerMessage::Telemetry(Telemetry {
             t: 1.0,
+            seq: 7,
             stage: [0.0; 3],
             volts: -0.2,
             phase: "idle".into(),
@@ -527,7 +533,7 @@ mod tests {
         }))
         .unwrap();
         assert!(t.contains(r#""tip_force_n":1e-9"#), "{t}");
-        assert!(t.starts_with(r#"{"type":"telemetry","t":1.0"#), "{t}");
+        assert!(t.starts_with(r#"{"type":"telemetry","t":1.0,"seq":7,"#), "{t}");
         // Without a haptic link, no `haptic` key at all.
         assert!(!t.contains("haptic"), "{t}");
     }

@@ -670,7 +670,7 @@ impl ControlLoop {
             "control loop ended after {tick} ticks; tip at z = {:.3} µm",
             reading.stage[2] * 1e6
         );
-        // The cores may rest again.
+        // The loop's core may rest again.
         drop(no_halt);
         shared.metrics.no_halt.store(0, Relaxed);
     }

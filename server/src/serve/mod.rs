@@ -3,6 +3,7 @@
 
 pub mod app;
 pub mod control_loop;
+pub mod frames;
 pub mod guard;
 pub mod haptic;
 pub mod haptic_api;
@@ -65,6 +66,17 @@ pub async fn run(
     started: impl FnOnce(&Started),
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> Result<(), ServeError> {
+    // Bound first: a port in use must stop the start before the loop takes its core.
+    let listener = tokio::net::TcpListener::bind(bind)
+        .await
+        .map_err(|source| ServeError::Io {
+            context: format!("binding {bind}"),
+            source,
+        })?;
+    let addr = listener.local_addr().map_err(|source| ServeError::Io {
+        context: "reading the bound address".into(),
+        source,
+    })?;
     let tick = 1.0 / loop_cfg.rate_hz;
     let params = scene.strategy_params(tick);
     let base = crate::scan::ScanParams::from_scene(&scene);
@@ -97,13 +109,21 @@ pub async fn run(
     let (ev_tx, ev_rx) = tokio::sync::mpsc::unbounded_channel();
     let rec_shared = shared.clone();
     let dir = cfg.data_dir.clone();
-    let recorder = std::thread::Builder::new()
+    let recorder = match std::thread::Builder::new()
         .name("recorder".into())
         .spawn(move || records::run_recorder(rec_shared, dir, ev_tx))
-        .map_err(|source| ServeError::Io {
-            context: "starting the recorder thread".into(),
-            source,
-        })?;
+    {
+        Ok(r) => r,
+        Err(source) => {
+            // The loop ends as at shutdown (the tip parked, its core given back).
+            let _ = shared.commands.push(LoopCommand::Shutdown);
+            let _ = loop_thread.join();
+            return Err(ServeError::Io {
+                context: "starting the recorder thread".into(),
+                source,
+            });
+        }
+    };
 
     let supervisor = match &cfg.haptic {
         haptic::HapticMode::Sim(bin) => Some(haptic::Supervisor::start(Some(bin.clone()), shared.clone())),
@@ -111,16 +131,6 @@ pub async fn run(
         haptic::HapticMode::None => None,
     };
     let state = Arc::new(AppState::new(cfg, scene, shared.clone(), params));
-    let listener = tokio::net::TcpListener::bind(bind)
-        .await
-        .map_err(|source| ServeError::Io {
-            context: format!("binding {bind}"),
-            source,
-        })?;
-    let addr = listener.local_addr().map_err(|source| ServeError::Io {
-        context: "reading the bound address".into(),
-        source,
-    })?;
     *state.addr.lock().expect("addr lock") = Some(addr);
     let url = format!("http://{addr}/?token={}", state.cfg.operator_token);
     started(&Started { addr, url });

@@ -72,9 +72,23 @@ fn io<T>(what: &'static str, path: &Path, r: std::io::Result<T>) -> Result<T, No
     })
 }
 
-/// A live server's pid: its process exists and is a `nanopush` (a recycled pid is not).
+/// A live server's pid: its process exists, is named `nanopush` (a pid recycled for another
+/// program, the haptic bridge `nanopush-haptic` included, is not) and is not a zombie.
 pub fn is_live_server(pid: u32) -> bool {
-    std::fs::read_to_string(format!("/proc/{pid}/comm")).is_ok_and(|c| c.starts_with("nanopush"))
+    is_live_named(pid, "nanopush")
+}
+
+/// Whether process `pid` exists, is named `name` (its `comm`) and is not a zombie.
+fn is_live_named(pid: u32, name: &str) -> bool {
+    let named = std::fs::read_to_string(format!("/proc/{pid}/comm")).is_ok_and(|c| c.trim_end() == name);
+    // The state follows the command name's closing parenthesis in /proc/PID/stat.
+    let zombie = std::fs::read_to_string(format!("/proc/{pid}/stat"))
+        .map(|s| {
+            s.rsplit_once(')')
+                .is_some_and(|(_, rest)| rest.trim_start().starts_with(['Z', 'X']))
+        })
+        .unwrap_or(true);
+    named && !zombie
 }
 
 /// The record's contents: the setting's value before the first holder, and the holders.
@@ -208,10 +222,17 @@ impl NoHalt {
             Some(o) => o,
             None => read_setting(setting)?,
         };
+        let alone = r.holders.is_empty();
         write_setting(setting, POLL)?;
-        r.original = Some(original);
+        r.original = Some(original.clone());
         r.holders.push(pid);
-        lock.write(&r)?;
+        if let Err(e) = lock.write(&r) {
+            // Without a record nobody would restore it: give the core back now.
+            if alone {
+                let _ = write_setting(setting, &original);
+            }
+            return Err(e);
+        }
         Ok(NoHalt {
             setting: setting.to_path_buf(),
             record: record.to_path_buf(),
@@ -348,13 +369,30 @@ mod tests {
     }
 
     #[test]
-    fn a_live_server_is_a_nanopush_process() {
-        // This test binary is `nanopush-<hash>`; `sleep` is not a server; a reaped child is gone.
-        assert!(is_live_server(std::process::id()));
+    fn a_live_server_is_a_process_named_nanopush_and_not_a_zombie() {
+        // This test binary is `nanopush-<hash>`: like the haptic bridge `nanopush-haptic`, not a
+        // server, though live under its own name.
+        let me = std::process::id();
+        let my_name = std::fs::read_to_string("/proc/self/comm").unwrap();
+        assert!(my_name.trim_end().starts_with("nanopush-"), "{my_name}");
+        assert!(!is_live_server(me));
+        assert!(is_live_named(me, my_name.trim_end()));
         let mut child = std::process::Command::new("sleep").arg("5").spawn().unwrap();
+        // Named `sleep` once it has exec'd.
+        let exec = (0..500).any(|_| {
+            std::thread::sleep(std::time::Duration::from_millis(2));
+            is_live_named(child.id(), "sleep")
+        });
+        assert!(exec, "the child runs as sleep");
         assert!(!is_live_server(child.id()));
+        // Killed and not yet reaped: a zombie, not live.
         let _ = child.kill();
+        let zombie = (0..500).any(|_| {
+            std::thread::sleep(std::time::Duration::from_millis(2));
+            !is_live_named(child.id(), "sleep")
+        });
+        assert!(zombie, "a killed child is a zombie until reaped");
         let _ = child.wait();
-        assert!(!is_live_server(child.id()));
+        assert!(!is_live_named(child.id(), "sleep"));
     }
 }

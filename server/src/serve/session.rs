@@ -17,6 +17,7 @@ use tokio::sync::{broadcast, mpsc, watch};
 use crate::control::MoveTarget;
 use crate::scan::ScanParams;
 use crate::serve::control_loop::LoopCommand;
+use crate::serve::frames::{Frames, Next};
 use crate::serve::haptic_api::haptic_command;
 use crate::serve::state::{AppState, to_text};
 use crate::serve::tasks::{on_stage, prepare_push, run_done_failed, run_scan};
@@ -61,28 +62,14 @@ pub(crate) async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, pe
         ping.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         ping.tick().await;
         let mut events = st.events.subscribe();
-        let mut telemetry = st.telemetry.subscribe();
-        // The lease holder's frames come first, on a channel of their own, subscribed only while
-        // this client holds the lease (the telemetry task yields to it when it has a receiver).
-        let mut lease_telemetry: Option<broadcast::Receiver<Utf8Bytes>> = None;
+        // Telemetry: the lease holder's frames come first, on a channel of its own read while
+        // this client holds the lease (`frames.rs`).
+        let mut telemetry = Frames::new(st.telemetry.subscribe());
         let mut scans = st.scans.subscribe();
         let mut shutdown = st.shutdown.subscribe();
         let mut wants = HashSet::new();
         loop {
-            // Taking or losing the lease switches the telemetry channel, each from its newest
-            // frame on.
-            let holder = st.lease_holder() == Some(id);
-            if holder != lease_telemetry.is_some() {
-                lease_telemetry = holder.then(|| st.lease_telemetry.subscribe());
-                telemetry = telemetry.resubscribe();
-            }
-            let tip = wants.contains(&WsStream::Tip);
-            let first = async {
-                match lease_telemetry.as_mut() {
-                    Some(r) => r.recv().await,
-                    None => std::future::pending().await,
-                }
-            };
+            telemetry.hold(st.lease_holder() == Some(id), &st.lease_telemetry);
             let msg = tokio::select! {
                 r = reply_rx.recv() => match r {
                     Some(m) => Message::Text(m),
@@ -93,21 +80,13 @@ pub(crate) async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, pe
                     Err(broadcast::error::RecvError::Lagged(n)) => lagged(&st, n),
                     Err(broadcast::error::RecvError::Closed) => break,
                 },
-                r = telemetry.recv(), if tip && !holder => match r {
-                    Ok(m) => {
+                r = telemetry.next(), if wants.contains(&WsStream::Tip) => match r {
+                    Next::Frame(_, m) => {
                         st.net.sent.fetch_add(1, Relaxed);
                         Message::Text(m)
                     }
-                    Err(broadcast::error::RecvError::Lagged(n)) => lagged(&st, n),
-                    Err(broadcast::error::RecvError::Closed) => break,
-                },
-                r = first, if tip && holder => match r {
-                    Ok(m) => {
-                        st.net.sent.fetch_add(1, Relaxed);
-                        Message::Text(m)
-                    }
-                    Err(broadcast::error::RecvError::Lagged(n)) => lagged(&st, n),
-                    Err(broadcast::error::RecvError::Closed) => break,
+                    Next::Lagged(n) => lagged(&st, n),
+                    Next::Closed => break,
                 },
                 r = scans.recv(), if wants.contains(&WsStream::Scan) => match r {
                     Ok(m) => m,
@@ -120,8 +99,7 @@ pub(crate) async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, pe
                     }
                     wants = streams_rx.borrow_and_update().clone();
                     // Drop what queued before the subscription.
-                    telemetry = telemetry.resubscribe();
-                    lease_telemetry = lease_telemetry.map(|r| r.resubscribe());
+                    telemetry.renew();
                     scans = scans.resubscribe();
                     continue;
                 }

@@ -72,11 +72,11 @@ pub struct AppState {
     pub tip_subscribers: AtomicU64,
     /// Clients subscribed to `scan`.
     pub scan_subscribers: AtomicU64,
-    /// Telemetry, serialized once per frame.
-    pub telemetry: broadcast::Sender<Utf8Bytes>,
+    /// Telemetry, serialized once per frame, with the frame's number.
+    pub telemetry: broadcast::Sender<(u64, Utf8Bytes)>,
     /// The same frames for the lease holder alone, sent before everyone else's
     /// ([`crate::serve::tasks::telemetry_task`]).
-    pub lease_telemetry: broadcast::Sender<Utf8Bytes>,
+    pub lease_telemetry: broadcast::Sender<(u64, Utf8Bytes)>,
     /// Events for everyone (lease, run_done, shutdown).
     pub events: broadcast::Sender<Utf8Bytes>,
     /// Scan stream (text and binary frames).

@@ -260,12 +260,18 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         .build()
         .context("starting the tokio runtime")?;
     rt.block_on(async move {
-        let shutdown = async {
-            let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
-                .expect("installing the SIGTERM handler");
+        // The handlers are installed before the loop starts (and takes its core): a signal
+        // during the start ends the server as one later does, its core given back. SIGHUP (its
+        // terminal or ssh session closed) too.
+        use tokio::signal::unix::{SignalKind, signal};
+        let mut term = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
+        let mut int = signal(SignalKind::interrupt()).context("installing the SIGINT handler")?;
+        let mut hup = signal(SignalKind::hangup()).context("installing the SIGHUP handler")?;
+        let shutdown = async move {
             tokio::select! {
-                _ = tokio::signal::ctrl_c() => tracing::info!("SIGINT"),
+                _ = int.recv() => tracing::info!("SIGINT"),
                 _ = term.recv() => tracing::info!("SIGTERM"),
+                _ = hup.recv() => tracing::info!("SIGHUP"),
             }
         };
         nanopush::serve::run(
@@ -281,7 +287,8 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
             },
             shutdown,
         )
-        .await
+        .await?;
+        anyhow::Ok(())
     })?;
     Ok(String::new())
 }
