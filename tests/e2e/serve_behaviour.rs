@@ -261,7 +261,7 @@ fn only_the_control_loop_runs_on_its_core() {
 fn loop_core() -> (String, String) {
     let last = std::thread::available_parallelism().map_or(1, |n| n.get()) - 1;
     (
-        format!("/sys/devices/system/cpu/cpu{last}/power/pm_qos_resume_latency_us"),
+        nanopush_e2e::pm_qos_setting(last),
         format!("/run/nanopush/no-halt-cpu{last}"),
     )
 }

@@ -115,6 +115,13 @@ mod tests {
         (seq, Utf8Bytes::from(format!("f{seq}")))
     }
 
+    /// The holder's channel, everyone's, and a session reading everyone's.
+    fn channels(capacity: usize) -> (broadcast::Sender<Frame>, broadcast::Sender<Frame>, Frames) {
+        let (lease, _) = broadcast::channel(capacity);
+        let (all, rx) = broadcast::channel(capacity);
+        (lease, all, Frames::new(rx))
+    }
+
     /// The telemetry task's order: the holder's channel, then everyone's.
     fn send(lease: &broadcast::Sender<Frame>, all: &broadcast::Sender<Frame>, seq: u64) {
         let _ = lease.send(frame(seq));
@@ -144,9 +151,7 @@ mod tests {
 
     #[tokio::test]
     async fn a_holder_sends_each_frame_once_from_whichever_channel_has_it_first() {
-        let (lease, _) = broadcast::channel(16);
-        let (all, rx) = broadcast::channel(16);
-        let mut f = Frames::new(rx);
+        let (lease, all, mut f) = channels(16);
         f.hold(true, &lease);
         assert!(f.holds());
         // Woken by the holder's channel before the viewers' copy exists.
@@ -162,9 +167,7 @@ mod tests {
 
     #[tokio::test]
     async fn giving_up_the_lease_between_the_two_sends_does_not_repeat_the_frame() {
-        let (lease, _) = broadcast::channel(16);
-        let (all, rx) = broadcast::channel(16);
-        let mut f = Frames::new(rx);
+        let (lease, all, mut f) = channels(16);
         f.hold(true, &lease);
         let _ = lease.send(frame(1));
         assert_eq!(numbers(&mut f, 1).await, [1]);
@@ -178,9 +181,7 @@ mod tests {
 
     #[tokio::test]
     async fn taking_the_lease_between_the_two_sends_does_not_lose_the_frame() {
-        let (lease, _) = broadcast::channel(16);
-        let (all, rx) = broadcast::channel(16);
-        let mut f = Frames::new(rx);
+        let (lease, all, mut f) = channels(16);
         send(&lease, &all, 1);
         // Frame 2 went to the holder's channel before this session subscribed to it, and
         // frame 3 is already there when it reads.
@@ -194,9 +195,7 @@ mod tests {
 
     #[tokio::test]
     async fn the_lease_passing_back_and_forth_keeps_every_number_once_in_order() {
-        let (lease, _) = broadcast::channel(64);
-        let (all, rx) = broadcast::channel(64);
-        let mut f = Frames::new(rx);
+        let (lease, all, mut f) = channels(64);
         let mut seen = Vec::new();
         for seq in 1..=40u64 {
             // The switch lands before, between or after the two sends.
@@ -225,9 +224,7 @@ mod tests {
 
     #[tokio::test]
     async fn an_overflow_is_reported_once_as_the_numbers_lost_and_renew_starts_afresh() {
-        let (lease, _) = broadcast::channel(4);
-        let (all, rx) = broadcast::channel(4);
-        let mut f = Frames::new(rx);
+        let (lease, all, mut f) = channels(4);
         f.hold(true, &lease);
         send(&lease, &all, 1);
         assert_eq!(numbers(&mut f, 1).await, [1]);

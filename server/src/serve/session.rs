@@ -69,7 +69,11 @@ pub(crate) async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, pe
         let mut shutdown = st.shutdown.subscribe();
         let mut wants = HashSet::new();
         loop {
-            telemetry.hold(st.lease_holder() == Some(id), &st.lease_telemetry);
+            // Only an operator can hold the lease: a viewer's session never looks (500 of them
+            // would each take the lease's lock for every message).
+            if role == Role::Operator {
+                telemetry.hold(st.lease_holder() == Some(id), &st.lease_telemetry);
+            }
             let msg = tokio::select! {
                 r = reply_rx.recv() => match r {
                     Some(m) => Message::Text(m),

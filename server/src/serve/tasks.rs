@@ -273,6 +273,7 @@ pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiv
     let mut tick = tokio::time::interval(Duration::from_secs_f64(1.0 / st.cfg.telemetry_hz));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut shutdown = st.shutdown.subscribe();
+    // The frames' numbers, from 1.
     let mut seq = 0;
     loop {
         tokio::select! {
@@ -284,13 +285,12 @@ pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiv
                     Ok(s) => Telemetry { t: s.t, seq: seq + 1, stage: s.stage, volts: s.volts, phase: if st.scanning.load(Relaxed) && s.phase == "idle" { "scanning".into() } else { s.phase.into() }, estimate: s.estimate, tip_force_n: st.shared.metrics.haptic.tip_force_n(), haptic: haptic_telemetry(&st.shared.metrics.haptic) },
                     Err(_) => continue,
                 };
-                // The operator's frame first: with hundreds of viewers on one core the fan-out
-                // takes milliseconds, and the lease holder's place in it varied from frame to
-                // frame (its gaps' p99 +6 ms beyond the period in a soak). Its session is woken
-                // first and, with this task yielding, normally sends before the viewers' are
-                // woken. Each frame goes into both channels; the holder's session reads both and
-                // sends each number once (`session::Frames`).
-                seq += 1;
+                // The operator's frame first: woken anywhere among 500 viewers on one core, the
+                // lease holder's gaps had a p99 of +6 ms beyond the period in a soak. Its session
+                // is woken first and, with this task yielding, normally sends before the viewers'
+                // are woken. Each frame goes into both channels; the holder's session reads both
+                // and sends each number once (`frames::Frames`).
+                seq = s.seq;
                 let frame = (seq, to_text(&ServerMessage::Telemetry(s)));
                 if st.lease_telemetry.send(frame.clone()).is_ok() {
                     tokio::task::yield_now().await;

@@ -420,11 +420,13 @@ fn main() {
     }
     let ncpu = std::thread::available_parallelism().map_or(1, |n| n.get());
     let loop_cpu = ncpu - 1;
+    // The loop core's setting as found: an alternating run sets it and gives it back.
+    let setting = nanopush_e2e::pm_qos_setting(loop_cpu);
+    let original = std::fs::read_to_string(&setting).map_or_else(|_| "0".into(), |v| v.trim().to_string());
     if alternate.is_some() {
         // Found polling, the core could not halt in the "cores may halt" regime: the comparison
         // would compare nothing. A server killed with SIGKILL leaves it so until the next one.
-        let setting = format!("/sys/devices/system/cpu/cpu{loop_cpu}/power/pm_qos_resume_latency_us");
-        if std::fs::read_to_string(&setting).is_ok_and(|v| v.trim() == "n/a") {
+        if original == "n/a" {
             eprintln!(
                 "--alternate: core {loop_cpu} already polls ({setting} is n/a: a server still running, or one killed \
                  with SIGKILL; see /run/nanopush/no-halt-cpu{loop_cpu}). Stop the server, or give the core back with \
@@ -486,12 +488,10 @@ fn main() {
         }
     );
 
-    // An alternating run: this process holds the zero latency request in every other phase,
-    // from the start to the end, so that the host's own ups and downs fall on every regime alike.
+    // An alternating run: this process cycles the three regimes from the start to the end, so
+    // that the host's own ups and downs fall on every regime alike.
     let regimes = Arc::new(std::sync::Mutex::new(Regimes::default()));
     let alternating = Arc::new(AtomicBool::new(alternate.is_some()));
-    let setting = format!("/sys/devices/system/cpu/cpu{loop_cpu}/power/pm_qos_resume_latency_us");
-    let original = std::fs::read_to_string(&setting).map_or_else(|_| "0".into(), |v| v.trim().to_string());
     let _give_back = alternate.map(|_| give_back_at_the_end(&setting, &original));
     let alternator = alternate.map(|phase| {
         let (regimes, alternating) = (regimes.clone(), alternating.clone());
@@ -509,7 +509,7 @@ fn main() {
                     break;
                 }
             }
-            enter(Regime::Halt, &setting, &original, &mut all);
+            // The system-wide request ends with `all`; `_give_back` restores the core's setting.
         })
     });
     if let Some(phase) = alternate {
