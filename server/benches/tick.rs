@@ -9,7 +9,7 @@ use std::hint::black_box;
 use std::path::Path;
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
-use nanopush::physics::integrate::{Method, Options};
+use nanopush::numerics::integrate::{Method, Options};
 use nanopush::physics::pushing::{PushModel, Simulation};
 use nanopush::scene::Scene;
 

@@ -1,7 +1,7 @@
 //! Runs many 1 ms ticks of a scene (for profilers such as `valgrind --tool=callgrind`):
 //! `cargo run --release -p nanopush --example ticks -- scenes/minimal.toml 2000`.
 
-use nanopush::physics::integrate::{Method, Options};
+use nanopush::numerics::integrate::{Method, Options};
 use nanopush::physics::pushing::{PushModel, Simulation};
 use nanopush::scene::Scene;
 

@@ -1,22 +1,23 @@
 //! nanopush: force-controlled pushing of nanoparticles with an AFM, after Sitti & Hashimoto,
 //! *Force Controlled Pushing of Nanoparticles: Modeling and Experiments*.
 //!
-//! - [`physics`]: the paper's Section 2, pure functions in SI units (corrected per the errata);
+//! - [`physics`]: the paper's Section 2, pure functions in SI units (corrected per the errata,
+//!   `docs/errata.md`), with [`physics::pushing::trace`], a push at constant speed sampled into a
+//!   trace (`nanopush simulate`);
+//! - [`numerics`]: dual numbers for exact Jacobians and the stiff integrators with events;
 //! - [`scene`]: the TOML scene format (units in field names), its validation, and the SI model
 //!   assembled from it;
-//! - [`report`]: the derived quantities printed by `nanopush model`;
-//! - [`files`]: result files written atomically (temporary name, then rename);
-//! - [`accuracy`]: the work-precision report (`nanopush accuracy`);
-//! - [`extremes`]: the stability grid (`nanopush accuracy --extremes`);
-//! - [`peers`]: peer solvers from crates.io (diffsol, russell_ode) on the report's classical
-//!   problems, for comparison at equal error;
-//! - [`push_run`]: a push at constant speed, sampled into a trace (`nanopush simulate`);
-//! - [`sweep`]: the parameter sweeps of Figs 10-13 (`nanopush sweep`);
 //! - [`scan`]: tapping-mode scans (tip dilation, raster, GSF/PNG) and particle localization
 //!   (`nanopush scan`);
 //! - [`instrument`]: the simulated AFM (stage, tip, substrate, particles) behind the controller;
-//! - [`control`]: the strategy of Sec 2.1, the Eq 19 estimator and multi-push planning
-//!   (`nanopush push`).
+//! - [`control`]: the strategy of Sec 2.1, the Eq 19 estimator, multi-push planning
+//!   (`nanopush push`) and the bilateral haptic law;
+//! - [`serve`]: the teleoperation server (`nanopush serve`): the 1 kHz control loop, the
+//!   WebSocket protocol, the haptic link, records and metrics;
+//! - [`files`]: result files written atomically (temporary name, then rename).
+//!
+//! The studies of the model (work-precision, extremes, campaign, sweeps, the model report, the
+//! peer solvers) are the `nanopush-study` crate; the command line is `nanopush-cli`.
 //!
 //! ```
 //! let scene = nanopush::scene::Scene::default_scene();
@@ -25,20 +26,14 @@
 //! ```
 #![deny(missing_docs)]
 
-pub mod accuracy;
-pub mod campaign;
 pub mod control;
-pub mod extremes;
 pub mod files;
 pub mod instrument;
-pub mod peers;
+pub mod numerics;
 pub mod physics;
-pub mod push_run;
-pub mod report;
 pub mod scan;
 pub mod scene;
 pub mod serve;
-pub mod sweep;
 
 /// The message of a caught panic's payload (`&str` or `String`), for reports that turn a
 /// panic in one case, run or push into a row with its reason.

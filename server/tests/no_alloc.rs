@@ -10,7 +10,7 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
-use nanopush::physics::integrate::{Method, Options};
+use nanopush::numerics::integrate::{Method, Options};
 use nanopush::physics::pushing::{PushModel, Simulation};
 use nanopush::scene::Scene;
 

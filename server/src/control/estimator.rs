@@ -14,9 +14,9 @@
 //! frame the tip moves over a fixed substrate, so "the stage position" of the paper, whose stage
 //! carries the particle, becomes "no displacement").
 
-use crate::physics::integrate::{Method, Options};
+use crate::numerics::integrate::{Method, Options};
+use crate::physics::pushing::trace::run_push_within;
 use crate::physics::pushing::{Advance, PushModel, PushParams, Simulation, SimulationError};
-use crate::push_run::run_push_within;
 
 /// What the model predicts for a push at constant speed, for the estimator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -147,7 +147,7 @@ pub fn predict(
     let retract_shift = predict_retract(model, duration, retract, PREDICTION_STEPS)?;
     let n = run.trace.len();
     let tail = &run.trace[n / 2..];
-    let lag = |r: &crate::push_run::TraceRow| r.stage_y - r.particle_y;
+    let lag = |r: &crate::physics::pushing::trace::TraceRow| r.stage_y - r.particle_y;
     let mean = tail.iter().map(lag).sum::<f64>() / tail.len() as f64;
     let (lo, hi) = tail
         .iter()

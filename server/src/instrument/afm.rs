@@ -15,8 +15,8 @@
 //! lateral instability of pushing a sphere off-centre is left out); outside a push the stage
 //! follows its command exactly (Eq 13 acts inside the push model, where its load matters).
 
+use crate::numerics::integrate::{Method, Options};
 use crate::physics::force_curve::{TipSample, TipTrack};
-use crate::physics::integrate::{Method, Options};
 pub use crate::physics::pushing::RELEASE_GAP;
 use crate::physics::pushing::{Advance, Drive, PushModel, PushParams, Simulation, SimulationError};
 use crate::physics::sensor::Readout;

@@ -11,10 +11,10 @@
 //! (Eq 3: forms at `L_t`, ruptures at `L_t + δ_b`) and the JKR contact (forms at `a₀`,
 //! breaks off its stable branch) keep their state between steps, so the two curves differ.
 
+use crate::numerics::dual::{Real, derivative};
 use crate::physics::contact::jkr::Jkr;
 use crate::physics::forces::capillary::Meniscus;
 use crate::physics::pushing::params::LongRange;
-use crate::physics::real::{Real, derivative};
 
 /// A tip facing a flat sample.
 #[derive(Debug, Clone, Copy, PartialEq)]

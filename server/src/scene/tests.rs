@@ -159,9 +159,8 @@ fn mu_at_the_eq16_bound_is_a_warning_and_infeasible() {
     .unwrap();
     let w: Vec<String> = at.warnings.iter().map(|w| w.to_string()).collect();
     assert!(w.iter().any(|w| w.contains("is at the Eq 16 upper bound")), "{w:?}");
-    let r = crate::report::model_report(&at);
-    assert!(!r.mu_feasible, "at the bound");
-    assert!(r.y_star.is_none_or(|y| y < 1e-3), "y* {:?}", r.y_star);
+    // The model report's verdict on the same scene is checked in nanopush-study's `report`
+    // tests (mu_at_the_eq16_bound_is_reported_infeasible).
 }
 
 #[test]

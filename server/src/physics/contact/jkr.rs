@@ -12,7 +12,7 @@
 //! The print has `3π` instead of `6π` in the first two, which makes `P(a(P)) ≠ P`.
 //! With `w = 0` all three reduce to Hertz. Positive `P` is compressive, positive `δ` is overlap.
 
-use crate::physics::real::Real;
+use crate::numerics::dual::Real;
 
 /// One JKR contact: effective radius, modulus and work of adhesion (SI).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -164,7 +164,7 @@ pub fn contact_modulus(e1: f64, nu1: f64, e2: f64, nu2: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::physics::real::derivative;
+    use crate::numerics::dual::derivative;
     use proptest::prelude::*;
 
     fn paper_contact() -> Jkr {

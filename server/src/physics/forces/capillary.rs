@@ -17,7 +17,7 @@
 //!   is not added here a second time;
 //! - the Kelvin radius uses the natural log (ERRATA item 4).
 
-use crate::physics::real::Real;
+use crate::numerics::dual::Real;
 
 /// `γV/RT` of water at 20 °C: the length in the Kelvin equation (m).
 pub const KELVIN_LENGTH: f64 = 0.54e-9;

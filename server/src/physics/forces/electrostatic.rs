@@ -1,6 +1,6 @@
 //! Electrostatic force from the work-function (contact) potential, Eq 4.
 
-use crate::physics::real::Real;
+use crate::numerics::dual::Real;
 
 /// Vacuum permittivity ε₀ (F/m).
 pub const EPSILON_0: f64 = 8.854_187_812_8e-12;

@@ -3,7 +3,7 @@
 //!
 //! Sign convention of the paper: a negative force is attractive.
 
-use crate::physics::real::Real;
+use crate::numerics::dual::Real;
 
 /// The sum `Σ_{n≥3} xⁿ (n−2)/(2n)`, which equals `(x/2)(1/(1−x) + 1) + ln(1−x)` for
 /// `0 ≤ x < 1`. Both energies below reduce to it; for small `x` the closed form cancels

@@ -6,6 +6,7 @@ pub mod model;
 pub mod params;
 pub mod simulation;
 pub mod steady;
+pub mod trace;
 
 pub use layout::{Layout, MAX_STATES};
 pub use model::{Drive, FrictionPhase, Mode, Probe, PushModel, SwitchKind, Switching, Tangential};

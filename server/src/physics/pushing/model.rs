@@ -42,11 +42,11 @@
 // Numerical kernels index several arrays with one loop variable: index loops are clearer.
 #![allow(clippy::needless_range_loop)]
 
+use crate::numerics::dual::{Dual, DualN, Real};
+use crate::numerics::integrate::linalg::Lu;
 use crate::physics::forces::capillary::Meniscus;
-use crate::physics::integrate::linalg::Lu;
 use crate::physics::pushing::layout::{Layout, MAX_STATES};
 use crate::physics::pushing::params::PushParams;
-use crate::physics::real::{Dual, DualN, Real};
 
 /// State of one frictional contact.
 #[derive(Debug, Clone, Copy, PartialEq)]

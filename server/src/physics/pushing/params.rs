@@ -1,11 +1,11 @@
 //! The SI parameter set of the pushing model, assembled from a scene (see `scene::Scene::model`).
 
+use crate::numerics::dual::Real;
 use crate::physics::cantilever::Cantilever;
 use crate::physics::contact::jkr::Jkr;
 use crate::physics::forces::capillary::{Capillary, Meniscus};
 use crate::physics::forces::electrostatic::Electrostatic;
 use crate::physics::forces::vdw;
-use crate::physics::real::Real;
 use crate::physics::stage::Stage;
 
 /// How a mechanical degree of freedom enters the model.

@@ -1,7 +1,7 @@
 //! The hybrid simulation of a push: the Eq 17 model integrated tick by tick, with the friction,
 //! meniscus and contact switches located as events and the mode changed at each.
 
-use crate::physics::integrate::{
+use crate::numerics::integrate::{
     Events, IntegrateError, Integrator, MAX_EVENTS, Method, Options, Outcome, Problem, Stats,
 };
 use crate::physics::pushing::layout::MAX_STATES;

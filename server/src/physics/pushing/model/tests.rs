@@ -543,9 +543,9 @@ fn drive_segments_are_continuous_and_reach_their_targets() {
     // 0.1 µm and 2 nm in 1 ms: 100 µm/s and 2 µm/s.
     assert!((b.vy - 1e-4).abs() < 1e-12 && (b.vz - 2e-6).abs() < 1e-12, "{b:?}");
     assert!((b.y_at(1.501) - 3.6e-6).abs() < 1e-18 && (b.z_at(1.501) - 3e-9).abs() < 1e-20);
-    let (y, dy) = crate::physics::real::derivative(|t| b.y(t), 1.5004);
+    let (y, dy) = crate::numerics::dual::derivative(|t| b.y(t), 1.5004);
     assert!((y - b.y_at(1.5004)).abs() < 1e-18 && (dy - b.vy).abs() < 1e-15);
-    let (z, dz) = crate::physics::real::derivative(|t| b.z(t), 1.5004);
+    let (z, dz) = crate::numerics::dual::derivative(|t| b.z(t), 1.5004);
     assert!((z - b.z_at(1.5004)).abs() < 1e-21 && (dz - b.vz).abs() < 1e-15);
     let c = Drive::constant_speed(2e-6);
     assert_eq!((c.y_at(0.25), c.z_at(0.25)), (0.5e-6, 0.0));

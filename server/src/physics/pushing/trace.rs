@@ -1,7 +1,7 @@
 //! A push at constant stage speed, sampled into a trace: what `nanopush simulate` runs and the
 //! accuracy report measures.
 
-use crate::physics::integrate::{Method, Options, Stats};
+use crate::numerics::integrate::{Method, Options, Stats};
 use crate::physics::pushing::{PushModel, Simulation, SimulationError};
 
 /// One sample of a push.
@@ -149,7 +149,7 @@ pub fn run_push_within(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::physics::integrate::{Method, Options};
+    use crate::numerics::integrate::{Method, Options};
     use crate::physics::pushing::{Dof, PushModel};
     use crate::scene::Scene;
 

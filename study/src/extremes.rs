@@ -14,11 +14,11 @@
 
 use std::time::Instant;
 
-use crate::physics::friction;
-use crate::physics::integrate::{Method, Options};
-use crate::physics::pushing::PushModel;
-use crate::push_run::run_push;
-use crate::scene::Scene;
+use nanopush::numerics::integrate::{Method, Options};
+use nanopush::physics::friction;
+use nanopush::physics::pushing::PushModel;
+use nanopush::physics::pushing::trace::run_push;
+use nanopush::scene::Scene;
 
 /// One parameter set (user units, as in the scene file).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -169,3 +169,11 @@ impl Problem for ProtheroRobinson {
         out[0] = -(self.lambda + 2.0 * e) * Self::dphi(t) + Self::ddphi(t);
     }
 }
+
+/// The largest relative component error of `y` against `reference`.
+pub fn max_relative_error(y: &[f64], reference: &[f64]) -> f64 {
+    y.iter()
+        .zip(reference)
+        .map(|(a, b)| ((a - b) / b.abs().max(1e-300)).abs())
+        .fold(0.0, f64::max)
+}

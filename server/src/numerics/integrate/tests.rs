@@ -130,7 +130,7 @@ fn robertson_matches_the_published_reference() {
             "{} at {rtol:e}",
             m.name()
         );
-        let err = crate::accuracy::max_relative_error(&y, &Robertson::REFERENCE);
+        let err = crate::numerics::integrate::test_problems::max_relative_error(&y, &Robertson::REFERENCE);
         let half_unit = 0.05 * 10f64.powf(error.log10().floor());
         assert!((err - error).abs() <= half_unit, "{}: error {err:e}", m.name());
         for i in 0..3 {
@@ -330,7 +330,7 @@ fn work_on_the_reference_problems_is_pinned() {
         let (y, st) = solve(&p, &VanDerPol::Y0, VanDerPol::T_END, m, rtol);
         assert_eq!(work(&st), expected, "Van der Pol, {} at {rtol:e}", m.name());
         if let Some(error) = error {
-            let err = crate::accuracy::max_relative_error(&y, &VanDerPol::REFERENCE);
+            let err = crate::numerics::integrate::test_problems::max_relative_error(&y, &VanDerPol::REFERENCE);
             let half_unit = 0.05 * 10f64.powf(error.log10().floor());
             assert!(
                 (err - error).abs() <= half_unit,

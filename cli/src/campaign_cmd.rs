@@ -1,11 +1,11 @@
 //! The whole-push stability campaign of `nanopush accuracy --extremes` (see
-//! `nanopush::campaign`): a table, `DIR/campaign.csv`, and a JSON value.
+//! `nanopush_study::campaign`): a table, `DIR/campaign.csv`, and a JSON value.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
-use nanopush::campaign::{PushCase, cases, peak_rss_bytes, run_case};
 use nanopush::scene::Scene;
+use nanopush_study::campaign::{PushCase, cases, peak_rss_bytes, run_case};
 use rayon::prelude::*;
 
 /// Runs the campaign around `scene` (in parallel, one case per thread) and reports it.

@@ -15,10 +15,10 @@
 
 use std::time::Instant;
 
-use crate::physics::integrate::test_problems::{Robertson, VanDerPol};
-use crate::physics::integrate::{Integrator, Method, NoEvents, Options, Problem};
-use crate::physics::pushing::PushModel;
-use crate::push_run::{PushRun, run_push};
+use nanopush::numerics::integrate::test_problems::{Robertson, VanDerPol};
+use nanopush::numerics::integrate::{Integrator, Method, NoEvents, Options, Problem};
+use nanopush::physics::pushing::PushModel;
+use nanopush::physics::pushing::trace::{PushRun, run_push};
 
 pub mod reduction;
 
@@ -91,13 +91,7 @@ pub fn timed<R>(reps: usize, mut f: impl FnMut() -> R) -> (R, f64) {
     (last.expect("at least one repetition"), times[times.len() / 2])
 }
 
-/// The largest relative component error of `y` against `reference`.
-pub fn max_relative_error(y: &[f64], reference: &[f64]) -> f64 {
-    y.iter()
-        .zip(reference)
-        .map(|(a, b)| ((a - b) / b.abs().max(1e-300)).abs())
-        .fold(0.0, f64::max)
-}
+pub use nanopush::numerics::integrate::test_problems::max_relative_error;
 
 fn position_rows(model: &PushModel) -> Vec<usize> {
     let m = model.mass_diagonal();
@@ -353,7 +347,7 @@ pub fn classical_reference(problem: &str) -> Option<Vec<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::Scene;
+    use nanopush::scene::Scene;
 
     fn point(rtol: f64, values: Vec<f64>) -> Point {
         Point {
@@ -630,7 +624,7 @@ mod tests {
     /// `MAX_STEPS`), the only classical runs that fail are implicit Euler's at 1e-10, on both Van
     /// der Pol and Robertson. Ignored: implicit Euler takes 1.5·10⁶ steps at 1e-9 on Van der
     /// Pol, and 2·10⁶ before failing at 1e-10, too slow for the debug build of `make test`
-    /// (~2 s in release): `cargo test --release -p nanopush --lib -- --ignored implicit_euler_at_1e_10`.
+    /// (~2 s in release): `cargo test --release -p nanopush-study --lib -- --ignored implicit_euler_at_1e_10`.
     #[test]
     #[ignore = "runs every method to 1e-10 on both classical problems, implicit Euler into 2e6 steps: ~2 s in release, a minute in debug"]
     fn implicit_euler_at_1e_10_is_the_only_classical_run_beyond_the_2e6_step_limit() {

@@ -5,12 +5,14 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nanopush::accuracy::reduction::{CompareOptions, Comparison, Summary, compare};
-use nanopush::accuracy::{Point, classical_points, classical_reference, estimate_errors, push_points, push_reference};
-use nanopush::peers::{PeerPoint, SOLVERS, peer_points};
-use nanopush::physics::integrate::Method;
+use nanopush::numerics::integrate::Method;
 use nanopush::physics::pushing::{Dof, PushModel};
 use nanopush_proto::accuracy::{AccuracyPoint, AccuracyReport, EqualError, PushOutcome, QuasiStaticCost, ReductionRow};
+use nanopush_study::accuracy::reduction::{CompareOptions, Comparison, Summary, compare};
+use nanopush_study::accuracy::{
+    Point, classical_points, classical_reference, estimate_errors, push_points, push_reference,
+};
+use nanopush_study::peers::{PeerPoint, SOLVERS, peer_points};
 use plotters::prelude::*;
 
 /// Most integrator steps a run of the report may take; beyond it the run is reported as failed.
@@ -50,7 +52,7 @@ pub struct AccuracyArgs {
 }
 
 fn extremes(a: &AccuracyArgs) -> anyhow::Result<String> {
-    use nanopush::extremes::{grid, run_case};
+    use nanopush_study::extremes::{grid, run_case};
     let scene = crate::load_scene(a.scene.as_ref())?;
     let cases = grid(&scene, a.reduced);
     let start = std::time::Instant::now();
@@ -120,7 +122,7 @@ fn extremes(a: &AccuracyArgs) -> anyhow::Result<String> {
         "  {:>8} {:>6} {:>5} {:>5} {:>5} {:>5} {:>8} {:>7} {:>5} {:>10}  outcome",
         "Ra/nm", "kc", "RH", "mu", "alpha", "beta", "V/um/s", "steps", "rej", "error/m"
     );
-    let row = |r: &nanopush::extremes::CaseResult| {
+    let row = |r: &nanopush_study::extremes::CaseResult| {
         let c = &r.case;
         format!(
             "  {:>8} {:>6} {:>5} {:>5} {:>5} {:>5} {:>8} {:>7} {:>5} {:>10.2e}  {}{}",
@@ -604,8 +606,8 @@ mod tests {
         assert_eq!(a.duration, 0.02);
         assert_eq!(a.reps, 3);
         assert_eq!(a.min_rtol, 1e-10);
-        let tols: Vec<f64> = nanopush::accuracy::tolerances(a.min_rtol).collect();
-        assert_eq!(tols, nanopush::accuracy::TOLERANCES);
+        let tols: Vec<f64> = nanopush_study::accuracy::tolerances(a.min_rtol).collect();
+        assert_eq!(tols, nanopush_study::accuracy::TOLERANCES);
         assert_eq!((tols[0], tols[tols.len() - 1]), (1e-2, 1e-10));
         assert_eq!(MAX_STEPS, 2_000_000);
     }

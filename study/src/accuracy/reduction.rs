@@ -35,9 +35,9 @@
 
 use std::time::Instant;
 
-use crate::physics::integrate::{Method, Options};
-use crate::physics::pushing::{Dof, PushModel, PushParams};
-use crate::push_run::{PushRun, TraceRow, run_push};
+use nanopush::numerics::integrate::{Method, Options};
+use nanopush::physics::pushing::trace::{PushRun, TraceRow, run_push};
+use nanopush::physics::pushing::{Dof, PushModel, PushParams};
 
 /// A drop of the offset `s − y` between two samples larger than this (m) is a jump of the
 /// particle (a slip or a roll burst): while it sticks the offset grows with the stage, while it
@@ -295,8 +295,8 @@ pub fn compare(p: &PushParams, o: &CompareOptions) -> Result<Vec<Comparison>, St
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::physics::pushing::Simulation;
-    use crate::scene::Scene;
+    use nanopush::physics::pushing::Simulation;
+    use nanopush::scene::Scene;
 
     fn row(t: f64, s: f64, y: f64, phase: &'static str) -> TraceRow {
         TraceRow {
@@ -403,7 +403,7 @@ mod tests {
     /// each full model's regime and t*. Not run by `make test` (what it affords of this
     /// comparison, and the README pins, is in the tests above). Slow in debug (the full model
     /// rings after each slip, at up to ~6·10⁴ steps per ms):
-    /// `cargo test --release -p nanopush --lib -- --ignored paper_scene_reduction`.
+    /// `cargo test --release -p nanopush-study --lib -- --ignored paper_scene_reduction`.
     #[test]
     #[ignore = "runs the 12-state model for 20 ms of push, four times: ~10 s in release, more on a loaded machine"]
     fn paper_scene_reduction_against_the_full_model() {
@@ -480,7 +480,7 @@ mod tests {
         s.x[s.model.layout.particle_y.pos]
     }
 
-    fn probe(s: &Simulation) -> crate::physics::pushing::Probe<f64> {
+    fn probe(s: &Simulation) -> nanopush::physics::pushing::Probe<f64> {
         s.model.probe(s.t, &s.x[..s.model.len()], &s.mode)
     }
 
@@ -528,7 +528,7 @@ mod tests {
         // The tip slides up the particle at the slip: between the samples around it (6.20 and
         // 6.21 ms) the full model's contact angle (−φ, the rotation being off) grows 0.2° and its
         // ζ_z turns positive, +2.08 nm, where the reduction's is −1.98 nm.
-        let angle = |pr: &crate::physics::pushing::Probe<f64>| (-pr.contact_ta / (p.r_t + p.r_a)).to_degrees();
+        let angle = |pr: &nanopush::physics::pushing::Probe<f64>| (-pr.contact_ta / (p.r_t + p.r_a)).to_degrees();
         let (after, reduced_after) = (probe(&full), probe(&red));
         let grew = angle(&after) - angle(&b);
         eprintln!(

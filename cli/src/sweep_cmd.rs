@@ -9,8 +9,8 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use nanopush::sweep::{Param, PointOptions, Shard, SweepPoint, compute_point, csv_header, csv_row, grid_value};
 use nanopush_proto::sweep::{FailedPoint, SeriesSummary, SweepReport};
+use nanopush_study::sweep::{Param, PointOptions, Shard, SweepPoint, compute_point, csv_header, csv_row, grid_value};
 use rayon::prelude::*;
 
 use crate::plot::{Mark, Panel, Series, stacked};
@@ -172,7 +172,7 @@ fn plot(path: &Path, param: Param, scene: &str, pure_sliding: bool, points: &[Sw
         .iter()
         .filter_map(|p| p.eq18_ok().map(|s| (p.value, s.y * nm, s.zeta_z * nm)))
         .collect();
-    let dynamic: Vec<(&SweepPoint, &nanopush::sweep::Settled)> = points
+    let dynamic: Vec<(&SweepPoint, &nanopush_study::sweep::Settled)> = points
         .iter()
         .filter_map(|p| p.dynamic.as_ref().ok().filter(|d| !d.stuck).map(|d| (p, d)))
         .collect();
@@ -184,7 +184,7 @@ fn plot(path: &Path, param: Param, scene: &str, pure_sliding: bool, points: &[Sw
     let panel = |name: &str,
                  mark: Mark,
                  eq: fn(&(f64, f64, f64)) -> f64,
-                 get: fn(&nanopush::sweep::Settled) -> nanopush::sweep::TailStats| Panel {
+                 get: fn(&nanopush_study::sweep::Settled) -> nanopush_study::sweep::TailStats| Panel {
         y_desc: format!("{name} (nm)"),
         series: vec![
             Series {
@@ -434,7 +434,7 @@ mod tests {
                 0.2,
                 1e-3,
                 0.25,
-                nanopush::physics::integrate::Method::Rodas4,
+                nanopush::numerics::integrate::Method::Rodas4,
                 1e-6,
                 false
             )

@@ -14,12 +14,12 @@
 
 use std::time::Instant;
 
-use crate::control::move_plan::{MoveTarget, plan_move};
-use crate::control::{Prepared, RunRow};
-use crate::instrument::Afm;
-use crate::physics::friction;
-use crate::scan::Surface;
-use crate::scene::Scene;
+use nanopush::control::move_plan::{MoveTarget, plan_move};
+use nanopush::control::{Prepared, RunRow};
+use nanopush::instrument::Afm;
+use nanopush::physics::friction;
+use nanopush::scan::Surface;
+use nanopush::scene::Scene;
 
 const UM: f64 = 1e-6;
 
@@ -68,7 +68,7 @@ impl Edit {
         }
     }
 
-    fn apply(&self, scene: &Scene, f: &mut crate::scene::file::SceneFile) {
+    fn apply(&self, scene: &Scene, f: &mut nanopush::scene::file::SceneFile) {
         let id = f.push.particle_id;
         let fr = &mut f.friction;
         match *self {
@@ -218,7 +218,7 @@ pub fn run_case(base: &Scene, case: &[Edit]) -> PushCase {
     };
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| push_whole(base, case, &mut out)));
     if let Err(p) = result {
-        out.violations.push(format!("panic: {}", crate::panic_message(&*p)));
+        out.violations.push(format!("panic: {}", nanopush::panic_message(&*p)));
     }
     out.wall_time = start.elapsed().as_secs_f64();
     out

@@ -41,9 +41,9 @@ pub fn parse_point_um(flag: &str, s: &str, example: &str) -> anyhow::Result<(f64
 }
 
 /// `--method NAME` as an integration method, with the allowed names in the error.
-pub fn parse_method(name: &str) -> anyhow::Result<nanopush::physics::integrate::Method> {
+pub fn parse_method(name: &str) -> anyhow::Result<nanopush::numerics::integrate::Method> {
     use anyhow::Context as _;
-    nanopush::physics::integrate::Method::parse(name)
+    nanopush::numerics::integrate::Method::parse(name)
         .with_context(|| format!("--method {name}: unknown; allowed: rodas4, trbdf2, implicit-euler"))
 }
 

@@ -2,11 +2,11 @@
 
 use nanopush_proto::model::{ForceCurvePoint, ForceCurveReport, ModelReport, SteadyStateReport};
 
-use crate::physics::force_curve::CurvePoint;
-use crate::physics::friction;
-use crate::physics::pushing::{PushModel, SteadyInputs, steady_state};
-use crate::physics::shearing::StaticPhase;
-use crate::scene::Scene;
+use nanopush::physics::force_curve::CurvePoint;
+use nanopush::physics::friction;
+use nanopush::physics::pushing::{PushModel, SteadyInputs, steady_state};
+use nanopush::physics::shearing::StaticPhase;
+use nanopush::scene::Scene;
 
 /// Everything `nanopush model` prints, computed from a validated scene.
 pub fn model_report(scene: &Scene) -> ModelReport {
@@ -119,6 +119,24 @@ pub fn force_curve_report(scene: &Scene, steps: usize) -> ForceCurveReport {
 mod tests {
     use super::*;
 
+    /// Issue 13.5: with μ_as exactly at the Eq 16 bound `model` reported the push feasible and
+    /// y* = 1.5·10⁷ m, with no warning (the warning is checked in the scene's tests).
+    #[test]
+    fn mu_at_the_eq16_bound_is_reported_infeasible() {
+        let s = Scene::default_scene();
+        let c = s.cantilever();
+        let upper = nanopush::physics::friction::mu_upper_bound(c.k_y(), c.k_z(), c.tilt);
+        let text = nanopush::scene::DEFAULT_SCENE.replacen(
+            "particle_substrate_static = 0.3",
+            &format!("particle_substrate_static = {upper:.17}"),
+            1,
+        );
+        let at = Scene::parse("test.toml", &text).unwrap();
+        let r = model_report(&at);
+        assert!(!r.mu_feasible, "at the bound");
+        assert!(r.y_star.is_none_or(|y| y < 1e-3), "y* {:?}", r.y_star);
+    }
+
     #[test]
     fn paper_figures_in_the_report() {
         let r = model_report(&Scene::default_scene());
@@ -141,7 +159,7 @@ mod tests {
     /// retraction runs out to 1.5 adhesion/k_c beyond the start.
     #[test]
     fn the_default_force_curve_snaps_in_at_3_60_nm_and_pulls_off_at_minus_55_09_nn_at_7_05_nm() {
-        use crate::physics::forces::vdw::sphere_plane_force;
+        use nanopush::physics::forces::vdw::sphere_plane_force;
         let scene = Scene::default_scene();
         let ts = scene.tip_sample();
         let meniscus = 4.0 * std::f64::consts::PI * ts.r_t * scene.file.environment.surface_tension_mj_per_m2 * 1e-3;

@@ -19,7 +19,7 @@
 //! [`shard_range`] splits the global index range into contiguous blocks for batch schedulers.
 //!
 //! ```
-//! use nanopush::sweep::{Param, grid};
+//! use nanopush_study::sweep::{Param, grid};
 //! let p = Param::parse("alpha").unwrap();
 //! assert_eq!(p.figure(), 10);
 //! assert_eq!(grid(0.0, 30.0, 4), vec![0.0, 10.0, 20.0, 30.0]);
@@ -27,11 +27,11 @@
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
-use crate::physics::integrate::{Method, Options};
-use crate::physics::pushing::steady::SteadyError;
-use crate::physics::pushing::{Dof, PushModel, PushParams, SteadyInputs, SteadyState, steady_state};
-use crate::push_run::{PushRun, run_push};
-use crate::scene::{Scene, SceneError, SceneFile};
+use nanopush::numerics::integrate::{Method, Options};
+use nanopush::physics::pushing::steady::SteadyError;
+use nanopush::physics::pushing::trace::{PushRun, run_push};
+use nanopush::physics::pushing::{Dof, PushModel, PushParams, SteadyInputs, SteadyState, steady_state};
+use nanopush::scene::{Scene, SceneError, SceneFile};
 
 /// A swept scene parameter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -486,7 +486,7 @@ pub fn compute_point(base: &Scene, param: Param, index: usize, value: f64, opts:
     let dynamic = match run {
         Ok(Ok(run)) => Ok(Settled::from_run(&run, opts.tail)),
         Ok(Err(e)) => Err(format!("simulating the push: {e}")),
-        Err(panic) => Err(format!("the model panicked: {}", crate::panic_message(&*panic))),
+        Err(panic) => Err(format!("the model panicked: {}", nanopush::panic_message(&*panic))),
     };
     SweepPoint {
         index,

@@ -4,7 +4,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use clap::Args;
-use nanopush::report::{force_curve_report, model_report};
+use nanopush_study::report::{force_curve_report, model_report};
 
 use crate::units::eng;
 
