@@ -2,7 +2,7 @@
 // and binary scan-line frames made by encodeScanLine), so the page can be shown and tried with
 // no server. A toy: particles are spheres on a slightly tilted plane, pushes move them in a
 // straight line. Not a simulation of anything in the paper.
-import { encodeScanLine } from './protocol.js';
+import { encodeScanLine } from './wire.js';
 
 export function demoScene() {
   return {

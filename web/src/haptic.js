@@ -2,21 +2,72 @@
 // link: `--haptic sim|external`): link up/down, the z-control phase (engaged or not), the
 // handle's position and the force at the hand, the tip force, the passivity controller, and a
 // scrolling plot of the force at the hand. The lease holder gets engage / release / re-centre
-// and the scales; the commands are built (and range-checked) by protocol.js.
+// and the scales; the commands are built (and range-checked) by wire.js. The plot is redrawn by
+// the page's frame scheduler (src/frame.js), at most ~7 times a second. `hapticFields` and
+// `HapticTrace` are pure (Node tests).
 import uPlot from 'uplot';
 
 const SECONDS = 10;
+/** Least time between two redraws of the plot (ms). */
+export const HAPTIC_PERIOD_MS = 150;
+
+/**
+ * What the panel's fields say for one telemetry frame's `haptic` object: {text, cls} per field
+ * (`cls` only where the field is coloured).
+ */
+export function hapticFields(h) {
+  return {
+    link: { text: h.link, cls: h.link === 'up' ? 'good' : 'bad' },
+    phase: { text: h.phase },
+    engaged: { text: h.phase === 'engaged' || h.phase === 'pushing' ? 'yes' : 'no' },
+    handle: { text: h.handle_m == null ? '–' : `${(h.handle_m * 1e3).toFixed(2)} mm` },
+    hand: { text: h.force_n == null ? '–' : `${h.force_n.toFixed(3)} N` },
+    tip: { text: `${(h.tip_force_n * 1e9).toFixed(2)} nN` },
+    pc: { text: h.pc_active ? 'damping' : 'idle' },
+  };
+}
+
+/** The force at the hand over the last `seconds` of server time (a restart starts it again). */
+export class HapticTrace {
+  constructor(seconds = SECONDS) {
+    this.seconds = seconds;
+    this.t = [];
+    this.f = [];
+  }
+
+  push(t, f) {
+    if (this.t.length && t < this.t[this.t.length - 1]) {
+      this.t.length = 0;
+      this.f.length = 0;
+    }
+    this.t.push(t);
+    this.f.push(f);
+    let drop = 0;
+    while (drop < this.t.length && this.t[drop] < t - this.seconds) drop++;
+    if (drop) {
+      this.t.splice(0, drop);
+      this.f.splice(0, drop);
+    }
+  }
+
+  /** uPlot's columns: time relative to the newest sample (s), force (N). */
+  data() {
+    const n = this.t.length;
+    const end = n ? this.t[n - 1] : 0;
+    return [Float64Array.from(this.t, (v) => v - end), Float64Array.from(this.f)];
+  }
+}
 
 export class HapticPanel {
   /**
    * @param {{panel: HTMLElement, plot: HTMLElement, fields: Record<string, HTMLElement>}} els
+   * @param {import('./frame.js').FrameScheduler} scheduler the page's animation-frame loop
    */
-  constructor(els) {
+  constructor(els, scheduler) {
     this.els = els;
-    this.t = [];
-    this.f = [];
+    this.trace = new HapticTrace(SECONDS);
     this.plot = null;
-    this.pending = null;
+    this.frame = scheduler.register('haptic', () => this.draw(), { period: HAPTIC_PERIOD_MS });
   }
 
   /** One telemetry frame's `haptic` (or null: no link on this server). */
@@ -24,57 +75,36 @@ export class HapticPanel {
     if (!h) return;
     const { panel, fields } = this.els;
     if (panel.hidden) panel.hidden = false;
-    fields.link.textContent = h.link;
-    fields.link.className = h.link === 'up' ? 'good' : 'bad';
-    fields.phase.textContent = h.phase;
-    fields.engaged.textContent = h.phase === 'engaged' || h.phase === 'pushing' ? 'yes' : 'no';
-    fields.handle.textContent = h.handle_m == null ? '–' : `${(h.handle_m * 1e3).toFixed(2)} mm`;
-    fields.hand.textContent = h.force_n == null ? '–' : `${h.force_n.toFixed(3)} N`;
-    fields.tip.textContent = `${(h.tip_force_n * 1e9).toFixed(2)} nN`;
-    fields.pc.textContent = h.pc_active ? 'damping' : 'idle';
+    for (const [k, v] of Object.entries(hapticFields(h))) {
+      fields[k].textContent = v.text;
+      if (v.cls !== undefined) fields[k].className = v.cls;
+    }
     if (t != null && h.force_n != null) {
-      if (this.t.length && t < this.t[this.t.length - 1]) {
-        this.t.length = 0;
-        this.f.length = 0;
-      }
-      this.t.push(t);
-      this.f.push(h.force_n);
-      let drop = 0;
-      while (drop < this.t.length && this.t[drop] < t - SECONDS) drop++;
-      if (drop) {
-        this.t.splice(0, drop);
-        this.f.splice(0, drop);
-      }
-      this.redraw();
+      this.trace.push(t, h.force_n);
+      this.frame.mark();
     }
   }
 
-  redraw() {
-    if (this.pending) return;
-    this.pending = setTimeout(() => {
-      this.pending = null;
-      const el = this.els.plot;
-      const n = this.t.length;
-      const end = n ? this.t[n - 1] : 0;
-      const x = Float64Array.from(this.t, (v) => v - end);
-      const y = Float64Array.from(this.f);
-      if (!this.plot) {
-        const axis = { stroke: '#c4ccd6', grid: { stroke: '#3a4554' }, ticks: { stroke: '#3a4554' } };
-        this.plot = new uPlot({
-          width: Math.max(200, el.clientWidth),
-          height: 120,
-          legend: { show: true, live: true },
-          cursor: { drag: { x: false, y: false } },
-          scales: { x: { time: false, range: (u, lo) => [Math.min(lo, -SECONDS), 0] } },
-          axes: [{ ...axis, label: 's before now', labelSize: 18, size: 30 }, { ...axis, label: 'N', labelSize: 18, size: 50 }],
-          series: [
-            { label: 't', value: (u, v) => (v == null ? '–' : `${v.toFixed(2)} s`) },
-            { label: 'force at the hand', stroke: '#b48cff', width: 1.5, value: (u, v) => (v == null ? '–' : `${v.toFixed(3)} N`) },
-          ],
-        }, [x, y], el);
-      } else {
-        this.plot.setData([x, y]);
-      }
-    }, 150);
+  /** Draws the plot of the force at the hand (called by the frame scheduler). */
+  draw() {
+    const el = this.els.plot;
+    const [x, y] = this.trace.data();
+    if (!this.plot) {
+      const axis = { stroke: '#c4ccd6', grid: { stroke: '#3a4554' }, ticks: { stroke: '#3a4554' } };
+      this.plot = new uPlot({
+        width: Math.max(200, el.clientWidth),
+        height: 120,
+        legend: { show: true, live: true },
+        cursor: { drag: { x: false, y: false } },
+        scales: { x: { time: false, range: (u, lo) => [Math.min(lo, -SECONDS), 0] } },
+        axes: [{ ...axis, label: 's before now', labelSize: 18, size: 30 }, { ...axis, label: 'N', labelSize: 18, size: 50 }],
+        series: [
+          { label: 't', value: (u, v) => (v == null ? '–' : `${v.toFixed(2)} s`) },
+          { label: 'force at the hand', stroke: '#b48cff', width: 1.5, value: (u, v) => (v == null ? '–' : `${v.toFixed(3)} N`) },
+        ],
+      }, [x, y], el);
+    } else {
+      this.plot.setData([x, y]);
+    }
   }
 }

@@ -3,9 +3,10 @@
 // bar, plane levelling (mean plane / line by line / none), a cursor readout of x, y and height,
 // and a line profile (drag a line across the image, see the height along it in nm).
 // The scan is the Session's scan object (heights in m, row 0 = lowest y); it grows line by line
-// and is drawn at most once per animation frame, only when something changed.
+// and is drawn at most once per animation frame (by the page's frame scheduler, src/frame.js),
+// only when something changed.
 import { viridisTable } from './colormap.js';
-import { lengthUnit } from './protocol.js';
+import { lengthUnit, formatLength } from './format.js';
 
 const SVG = 'http://www.w3.org/2000/svg';
 const M = { left: 58, right: 86, top: 10, bottom: 42 }; // margins (CSS px) around the image
@@ -121,13 +122,14 @@ export class Image2D {
   /**
    * @param {HTMLElement} container
    * @param {{cursorEl?: HTMLElement, profileEl?: HTMLElement, profileInfoEl?: HTMLElement}} opts
+   * @param {import('./frame.js').FrameScheduler} scheduler the page's animation-frame loop
    */
-  constructor(container, opts = {}) {
+  constructor(container, opts, scheduler) {
     this.container = container;
-    this.opts = opts;
+    this.opts = opts ?? {};
     this.scan = null;
     this.mode = 'plane';
-    this.dirty = false;
+    this.frame = scheduler.register('image2d', () => this.draw());
     this.drawnVersion = -1;
     this.levelled = null;
     this.range = null;
@@ -144,18 +146,11 @@ export class Image2D {
     this.empty.textContent = 'No scan yet';
     this.bindPointer();
     new ResizeObserver(() => this.invalidate()).observe(container);
-    const loop = () => {
-      if (this.dirty) {
-        this.dirty = false;
-        this.draw();
-      }
-      requestAnimationFrame(loop);
-    };
-    requestAnimationFrame(loop);
   }
 
+  /** Something shown changed: redraw in the next animation frame. */
   invalidate() {
-    this.dirty = true;
+    this.frame.mark();
   }
 
   /** A new scan (the Session's scan object, or null). */
@@ -314,7 +309,7 @@ export class Image2D {
     el('rect', { x: x - 4, y: y - 18, width: px + 8, height: 26, class: 'scalebar-bg' }, bar);
     el('rect', { x, y, width: px, height: 4, class: 'scalebar-bar' }, bar);
     const t = el('text', { x: x + px / 2, y: y - 5, 'text-anchor': 'middle' }, bar);
-    t.textContent = `${Number((len * u.scale).toPrecision(6))} ${u.name}`;
+    t.textContent = formatLength(len, { digits: 6, ref: Math.max(sc.x_real, sc.y_real) });
   }
 
   drawColourBar(g) {

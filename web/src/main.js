@@ -1,7 +1,7 @@
 // Boot: the operator page (src/app.js, which needs three and uPlot from node_modules) or the
-// monitoring view (`?view=monitor`, src/monitor.js, no packages). A page whose modules cannot
-// load says why (the packages are missing: `cd web && npm ci`) instead of saying "starting"
-// forever.
+// monitoring view (`?view=monitor`, src/monitor.js, no packages); each exports `start()`. A
+// page whose modules cannot load (or start) says why (the packages are missing: `cd web && npm
+// ci`) instead of saying "starting" forever.
 const view = new URLSearchParams(location.search).get('view');
 
 function bootError(e) {
@@ -17,4 +17,4 @@ function bootError(e) {
   console.warn(msg);
 }
 
-(view === 'monitor' ? import('./monitor.js') : import('./app.js')).catch(bootError);
+(view === 'monitor' ? import('./monitor.js') : import('./app.js')).then((page) => page.start()).catch(bootError);

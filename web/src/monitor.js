@@ -1,8 +1,10 @@
 // The monitoring view (`/?view=monitor`): compact and read-only, for a wall screen. The
 // instrument's phase, the control loop's health, the haptic link, clients and the lease (from
 // /api/status, every second), and the last runs (run_done events on a viewer WebSocket, with no
-// streams). No controls; needs no npm packages.
-import { Session, wsUrl, apiUrl, backoffMs, describeRun } from './protocol.js';
+// streams). No controls; needs no npm packages. Nothing animates: each update writes its text
+// at once. `statusTiles` is pure (Node tests); `start()` (src/main.js) builds the page.
+import { Session, describeRun } from './session.js';
+import { wsUrl, apiUrl, backoffMs } from './connection.js';
 
 const POLL_MS = 1000;
 
@@ -40,23 +42,33 @@ function set(id, text, cls = '') {
   e.className = cls;
 }
 
+/**
+ * The tiles for an /api/status document, in the order they are written: [element id, text,
+ * class] each.
+ */
+export function statusTiles(s) {
+  const l = s.loop ?? {};
+  const health = l.overruns > 0 ? `${l.ticks} ticks, ${l.overruns} overruns` : `${l.ticks} ticks, no overruns`;
+  const p99 = l.period_error_p99_bound_s;
+  const hp = s.haptic ?? {};
+  return [
+    ['m-scene', `· ${s.scene}`, ''],
+    ['m-phase', s.phase + (s.busy ? ' (busy)' : ''), ''],
+    ['m-loop', `${health}${l.realtime ? ', real-time' : ', not real-time'}`, l.overruns > 0 ? 'warn' : 'good'],
+    ['m-jitter', Number.isFinite(p99) ? `≤ ${(p99 * 1e6).toFixed(0)} µs` : '–', ''],
+    ['m-haptic', hp.link === 'off' || !hp.link ? 'off' : `${hp.link}${hp.engaged ? ', engaged' : ''}`, hp.link === 'down' ? 'bad' : ''],
+    ['m-clients', String(s.clients), ''],
+    ['m-lease', s.lease === null ? 'free' : `client ${s.lease}`, ''],
+    ['m-uptime', `${Math.floor(s.uptime_s / 60)} min ${Math.floor(s.uptime_s % 60)} s`, ''],
+  ];
+}
+
 async function poll() {
   try {
     const r = await fetch(apiUrl('/api/status', location));
     if (!r.ok) throw new Error(`HTTP ${r.status}`);
     const s = await r.json();
-    set('m-scene', `· ${s.scene}`);
-    set('m-phase', s.phase + (s.busy ? ' (busy)' : ''));
-    const l = s.loop ?? {};
-    const health = l.overruns > 0 ? `${l.ticks} ticks, ${l.overruns} overruns` : `${l.ticks} ticks, no overruns`;
-    set('m-loop', `${health}${l.realtime ? ', real-time' : ', not real-time'}`, l.overruns > 0 ? 'warn' : 'good');
-    const p99 = l.period_error_p99_bound_s;
-    set('m-jitter', Number.isFinite(p99) ? `≤ ${(p99 * 1e6).toFixed(0)} µs` : '–');
-    const hp = s.haptic ?? {};
-    set('m-haptic', hp.link === 'off' || !hp.link ? 'off' : `${hp.link}${hp.engaged ? ', engaged' : ''}`, hp.link === 'down' ? 'bad' : '');
-    set('m-clients', String(s.clients));
-    set('m-lease', s.lease === null ? 'free' : `client ${s.lease}`);
-    set('m-uptime', `${Math.floor(s.uptime_s / 60)} min ${Math.floor(s.uptime_s % 60)} s`);
+    for (const [id, text, cls] of statusTiles(s)) set(id, text, cls);
     set('m-conn', 'status: live', 'good');
   } catch (e) {
     set('m-conn', `status unavailable: ${e.message}`, 'bad');
@@ -90,7 +102,10 @@ function connect(attempt = 0) {
   ws.onclose = () => setTimeout(() => connect(attempt + 1), backoffMs(attempt + 1));
 }
 
-build();
-poll();
-setInterval(poll, POLL_MS);
-connect();
+/** Builds the monitoring page and starts polling and listening. */
+export function start() {
+  build();
+  poll();
+  setInterval(poll, POLL_MS);
+  connect();
+}

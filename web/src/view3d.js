@@ -1,10 +1,13 @@
 // The 3D view: the stage substrate with the scene's particles, the latest scan as a height-map
 // surface filled line by line, and the cantilever tip as a ball. World units: µm in x and y,
-// µm × exaggeration in z (z up). Renders on demand (the machine may have no GPU).
+// µm × exaggeration in z (z up). Renders on demand (the machine may have no GPU): it registers
+// with the page's frame scheduler (src/frame.js), which draws it in an animation frame after a
+// change and, after a slow frame, waits as long as that frame took.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { CSS2DRenderer, CSS2DObject } from 'three/addons/renderers/CSS2DRenderer.js';
 import { viridisTable } from './colormap.js';
+import { formatLength } from './format.js';
 
 const UM = 1e6; // metres → µm
 const LUT_N = 256;
@@ -19,13 +22,19 @@ export class View3D {
   /**
    * @param {HTMLElement} container
    * @param {{onPickPoint?: (xUm:number, yUm:number) => void, onPickParticle?: (id:number) => void}} handlers
+   * @param {import('./frame.js').FrameScheduler} scheduler the page's animation-frame loop
    */
-  constructor(container, handlers = {}) {
+  constructor(container, handlers, scheduler) {
     this.container = container;
-    this.handlers = handlers;
+    this.handlers = handlers ?? {};
     this.exaggeration = 1;
     this.stageUm = 100;
-    this.dirty = true;
+    // Render on change, at most once per animation frame; when a frame is slow (a software
+    // renderer, a big scan), wait as long as it took before the next, so at least half of the
+    // main thread stays free for input (a Stop click is never queued behind frames).
+    this.scheduler = scheduler;
+    this.frame = scheduler.register('view3d', () => this.render(), { waitAfterSlow: true });
+    this.frame.mark();
 
     // A software renderer (SwiftShader, llvmpipe: no GPU) gets no multisampling and one pixel
     // per CSS pixel: each frame costs it a fraction.
@@ -121,37 +130,34 @@ export class View3D {
     this.resize();
     this.setStage(100);
     this.frameStage();
-    // Render on change, at most once per animation frame; when a frame is slow (a software
-    // renderer, a big scan), wait as long as it took before the next, so at least half of the
-    // main thread stays free for input (a Stop click is never queued behind frames).
-    this.renderMs = 0;
-    this.frames = 0;
-    this.frameInterval = 16.7; // ms between animation frames, smoothed: how busy the browser is
-    let notBefore = 0;
-    let last = 0;
-    const loop = (now) => {
-      if (last) this.frameInterval += 0.2 * (Math.min(2000, now - last) - this.frameInterval);
-      last = now;
-      if (this.dirty && now >= notBefore) {
-        this.dirty = false;
-        const t0 = performance.now();
-        this.scaleTip();
-        this.renderer.render(this.scene, this.camera);
-        this.labels.render(this.scene, this.camera);
-        this.colourFull = false;
-        this.posFull = false;
-        const dt = performance.now() - t0;
-        this.renderMs = dt;
-        this.frames++;
-        notBefore = dt > 12 ? performance.now() + dt : 0;
-      }
-      requestAnimationFrame(loop);
-    };
-    requestAnimationFrame(loop);
+  }
+
+  /** Draws the scene (called by the frame scheduler when something changed). */
+  render() {
+    this.scaleTip();
+    this.renderer.render(this.scene, this.camera);
+    this.labels.render(this.scene, this.camera);
+    this.colourFull = false;
+    this.posFull = false;
   }
 
   requestRender() {
-    this.dirty = true;
+    this.frame.mark();
+  }
+
+  /** Frames rendered so far. */
+  get frames() {
+    return this.frame.frames;
+  }
+
+  /** How long the last render took (ms of main thread). */
+  get renderMs() {
+    return this.frame.ms;
+  }
+
+  /** ms between animation frames, smoothed: how busy the browser is (the scheduler's measure). */
+  get frameInterval() {
+    return this.scheduler.frameInterval;
   }
 
   buildLut() {
@@ -676,11 +682,4 @@ function softwareGl() {
 export function surfaceGrid(xres, yres) {
   const step = Math.max(1, Math.ceil(Math.max(xres, yres) / MAX_SIDE));
   return { step, nx: Math.max(2, Math.ceil(xres / step)), ny: Math.max(2, Math.ceil(yres / step)) };
-}
-
-/** A length (m) in nm or µm, for labels. */
-export function formatLength(m) {
-  const a = Math.abs(m);
-  if (a < 1e-6) return `${(m * 1e9).toFixed(a < 1e-8 ? 1 : 0)} nm`;
-  return `${(m * 1e6).toFixed(a < 1e-5 ? 2 : 1)} µm`;
 }

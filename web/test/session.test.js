@@ -1,117 +1,8 @@
-// node --test: the protocol module against the bytes and messages of proto/README.md.
+// node --test: the Session (src/session.js) over sequences of the server's messages.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import {
-  decodeScanLine, encodeScanLine, FrameError, commands, encodeCommand, wsUrl, apiUrl, backoffMs,
-  Session, controlState, sceneParticles, WS_VERSION, parseGsf, setPointForceN, describeRun, lengthUnit, formatLen,
-} from '../src/protocol.js';
-
-// The frame `ScanLineHeader { scan: 2, line: 5, xres: 3, yres: 8, y: 1.5e-6 }.encode(&[1.0, 2.0,
-// 3.0])` of proto/src/ws.rs, written out byte by byte.
-function handFrame() {
-  const bytes = [
-    0x4e, 0x50, 0x53, 0x4c, // "NPSL"
-    0x01, 0x00, // version 1
-    0x00, 0x00, // reserved
-    0x02, 0x00, 0x00, 0x00, // scan 2
-    0x05, 0x00, 0x00, 0x00, // line 5
-    0x03, 0x00, 0x00, 0x00, // xres 3
-    0x08, 0x00, 0x00, 0x00, // yres 8
-    // 1.5e-6 as f64 LE: 0x3EB92A737110E454
-    0x54, 0xe4, 0x10, 0x71, 0x73, 0x2a, 0xb9, 0x3e,
-    0x00, 0x00, 0x80, 0x3f, // 1.0f32
-    0x00, 0x00, 0x00, 0x40, // 2.0f32
-    0x00, 0x00, 0x40, 0x40, // 3.0f32
-  ];
-  return new Uint8Array(bytes);
-}
-
-test('decodes a scan line built by hand, byte by byte', () => {
-  const f = decodeScanLine(handFrame().buffer);
-  assert.equal(f.scan, 2);
-  assert.equal(f.line, 5);
-  assert.equal(f.xres, 3);
-  assert.equal(f.yres, 8);
-  assert.equal(f.y, 1.5e-6);
-  assert.deepEqual([...f.heights], [1, 2, 3]);
-  assert.ok(f.heights instanceof Float32Array);
-});
-
-test('decodes from a typed array that is a view into a larger buffer (Node Buffer)', () => {
-  const inner = handFrame();
-  const big = new Uint8Array(inner.length + 7);
-  big.set(inner, 5);
-  const f = decodeScanLine(big.subarray(5, 5 + inner.length));
-  assert.equal(f.line, 5);
-  assert.deepEqual([...f.heights], [1, 2, 3]);
-});
-
-test('the JS encoder makes the same bytes as the Rust encoder', () => {
-  const b = new Uint8Array(encodeScanLine({ scan: 2, line: 5, xres: 3, yres: 8, y: 1.5e-6 }, [1, 2, 3]));
-  assert.deepEqual([...b], [...handFrame()]);
-});
-
-test('rejects short frames, a bad magic, another version and a wrong length', () => {
-  const f = handFrame();
-  const err = (buf, reason, re) => assert.throws(() => decodeScanLine(buf), (e) => {
-    assert.ok(e instanceof FrameError, `FrameError, got ${e}`);
-    assert.equal(e.reason, reason);
-    assert.match(e.message, re);
-    return true;
-  });
-  err(f.slice(0, 20), 'short', /20 bytes, shorter than the 32-byte header/);
-  err(f.slice(0, 0), 'short', /0 bytes/);
-  err(f.slice(0, 40), 'short', /40 bytes, xres 3 needs 44/);
-  const long = new Uint8Array(48);
-  long.set(f);
-  err(long, 'short', /48 bytes, xres 3 needs 44/);
-  const bad = f.slice();
-  bad[0] = 'X'.charCodeAt(0);
-  err(bad, 'magic', /bad magic "XPSL"/);
-  const v2 = f.slice();
-  v2[4] = 2;
-  err(v2, 'version', /version 2/);
-  assert.throws(() => decodeScanLine('NPSL'), TypeError);
-});
-
-test('command builders make the documented JSON and refuse out-of-range values', () => {
-  assert.equal(encodeCommand(commands.subscribe(['tip', 'scan'])), '{"type":"subscribe","streams":["tip","scan"]}');
-  assert.equal(encodeCommand(commands.takeLease(3)), '{"type":"take_lease","id":3}');
-  assert.equal(encodeCommand(commands.releaseLease()), '{"type":"release_lease"}');
-  assert.deepEqual(JSON.parse(encodeCommand(commands.pushBy(1, 2.5, 90, 7))),
-    { type: 'push', id: 7, particle: 1, distance_um: 2.5, direction_deg: 90 });
-  assert.deepEqual(commands.pushTo(2, 30, 40.5), { type: 'push', particle: 2, to_x_um: 30, to_y_um: 40.5 });
-  assert.deepEqual(commands.scan({ centreXUm: 50, centreYUm: 45, sizeUm: 10, pixels: 128 }),
-    { type: 'scan', centre_x_um: 50, centre_y_um: 45, size_um: 10, pixels: 128 });
-  assert.deepEqual(commands.scan(), { type: 'scan' }); // the scene's defaults
-  assert.deepEqual(commands.scan({ pixels: 64 }), { type: 'scan', pixels: 64 });
-  assert.deepEqual(commands.stop(9), { type: 'stop', id: 9 });
-  assert.deepEqual(commands.ping(), { type: 'ping' });
-
-  assert.throws(() => commands.subscribe(['tip', 'video']), /unknown stream "video"/);
-  assert.throws(() => commands.pushBy(1, 0, 0), /distance_um must be in \(0, 100\]/);
-  assert.throws(() => commands.pushBy(1, 101, 0), /distance_um/);
-  assert.throws(() => commands.pushBy(1, 5, 361), /direction_deg must be in \[-360, 360\]/);
-  assert.throws(() => commands.pushBy(1, NaN, 0), /distance_um must be a finite number/);
-  assert.throws(() => commands.pushBy(1.5, 1, 0), /particle/);
-  assert.throws(() => commands.pushTo(1, -1, 5), /to_x_um must be in \[0, 100\]/);
-  assert.throws(() => commands.pushTo(1, 5, 60, undefined, 50), /to_y_um must be in \[0, 50\]/);
-  assert.throws(() => commands.scan({ pixels: 7 }), /pixels must be an integer in \[8, 512\]/);
-  assert.throws(() => commands.scan({ pixels: 64.5 }), /pixels/);
-  assert.throws(() => commands.scan({ sizeUm: 0 }), /size_um/);
-  assert.throws(() => commands.stop(-1), /id must be a u32/);
-  assert.throws(() => encodeCommand({}), TypeError);
-});
-
-test('the WebSocket URL carries the page token; without one the page is a viewer', () => {
-  assert.equal(wsUrl({ protocol: 'http:', host: '127.0.0.1:8080', search: '?token=abc%2Bd' }), 'ws://127.0.0.1:8080/ws?token=abc%2Bd');
-  assert.equal(wsUrl({ protocol: 'http:', host: 'localhost:9', search: '' }), 'ws://localhost:9/ws');
-  assert.equal(wsUrl({ protocol: 'https:', host: 'h', search: '?x=1&token=t' }), 'wss://h/ws?token=t');
-});
-
-test('reconnect backoff doubles from 0.5 s and stops at 15 s', () => {
-  assert.deepEqual([1, 2, 3, 4, 5, 6, 7, 10].map((n) => backoffMs(n)), [500, 1000, 2000, 4000, 8000, 15000, 15000, 15000]);
-});
+import { Session, controlState, sceneParticles, setPointForceN, describeRun } from '../src/session.js';
+import { WS_VERSION, encodeScanLine, commands } from '../src/wire.js';
 
 test('session: welcome, lease changes and who may command', () => {
   const s = new Session();
@@ -311,21 +202,6 @@ test('session: the scene gives particles in metres; run_done moves the pushed on
   assert.equal(s.state.shutdown, 'SIGTERM');
 });
 
-test('apiUrl passes the page token on to the JSON API', () => {
-  assert.equal(apiUrl('/api/scene', { search: '?token=abc%2Bd' }), '/api/scene?token=abc%2Bd');
-  assert.equal(apiUrl('/api/records/x.csv', { search: '' }), '/api/records/x.csv');
-  assert.equal(apiUrl('/api/records?a=1', { search: '?token=t' }), '/api/records?a=1&token=t');
-});
-
-test('haptic commands: the documented JSON, ranges checked before sending', () => {
-  assert.equal(encodeCommand(commands.haptic('engage', {}, 5)), '{"type":"haptic","action":"engage","id":5}');
-  assert.equal(encodeCommand(commands.haptic('scale', { nmPerMm: 20 })), '{"type":"haptic","action":"scale","nm_per_mm":20}');
-  assert.throws(() => commands.haptic('fly'), /engage, release, recenter or scale/);
-  assert.throws(() => commands.haptic('scale'), /nm_per_mm and\/or pull_off_at_hand_n/);
-  assert.throws(() => commands.haptic('scale', { nmPerMm: 5000 }), /\[0\.01, 1000\] nm\/mm, got 5000/);
-  assert.throws(() => commands.haptic('scale', { pullOffAtHandN: 0 }), /\[0\.01, 10\] N, got 0/);
-});
-
 function openSession(client = 4) {
   const s = new Session();
   s.setScene({ stage: { range_um: 100 }, particles: [{ id: 1, radius_nm: 500, x_um: 40, y_um: 30 }, { id: 2, radius_nm: 500, x_um: 55, y_um: 62 }] });
@@ -399,40 +275,9 @@ test('session: telemetry keeps the tip force (N) in the trace; a run_done after 
   assert.equal(s.state.scanStale, true);
 });
 
-// A GSF as `write_gsf` (server/src/scan) makes it: header, NUL padding to a multiple of 4, f32 LE.
-function gsf(header, values) {
-  const head = new TextEncoder().encode('Gwyddion Simple Field 1.0\n' + header);
-  const pad = 4 - (head.length % 4);
-  const out = new Uint8Array(head.length + pad + 4 * values.length);
-  out.set(head);
-  const v = new DataView(out.buffer, head.length + pad);
-  values.forEach((x, i) => v.setFloat32(4 * i, x, true));
-  return out.buffer;
-}
-
-test('parseGsf reads a record and refuses a wrong size or a foreign file, saying which', () => {
-  const g = parseGsf(gsf('XRes = 3\nYRes = 2\nXReal = 2e-06\nYReal = 2e-06\nXOffset = 1e-05\nYOffset = 2e-05\nTitle = scan\n', [1, 2, 3, 4, 5, 6]));
-  assert.equal(g.xres, 3);
-  assert.equal(g.yres, 2);
-  assert.equal(g.x_real, 2e-6);
-  assert.equal(g.y_offset, 2e-5);
-  assert.equal(g.title, 'scan');
-  assert.deepEqual([...g.heights], [1, 2, 3, 4, 5, 6]);
-  assert.throws(() => parseGsf(gsf('XRes = 3\nYRes = 3\n', [1, 2])), /3×3 needs/);
-  assert.throws(() => parseGsf(new TextEncoder().encode('hello').buffer), /not a Gwyddion Simple Field/);
-  assert.throws(() => parseGsf(gsf('XRes = x\nYRes = 2\n', [])), /XRes x/);
-});
-
 test('the set point as a force: the gold-latex scene\'s −1.5 V is 3.25 nm of deflection, 26 nN at 8 N/m', () => {
   // scenes/gold-latex-500nm.toml: set_point_v −1.5, baseline_v −0.2, gain_v_per_nm −0.4, k 8 N/m.
   const f = setPointForceN({ strategy: { set_point_v: -1.5 }, sensor: { baseline_v: -0.2, gain_v_per_nm: -0.4 }, cantilever: { stiffness_n_per_m: 8 } });
   assert.ok(Math.abs(f - 26e-9) < 1e-15, `${f}`);
   assert.equal(setPointForceN({ strategy: {} }), null);
-});
-
-test('lengths take nm below 2 µm and µm above', () => {
-  assert.deepEqual(lengthUnit(14e-9), { name: 'nm', scale: 1e9 });
-  assert.deepEqual(lengthUnit(16e-6), { name: 'µm', scale: 1e6 });
-  assert.equal(formatLen(250e-9), '250 nm');
-  assert.equal(formatLen(12.5e-6), '12.5 µm');
 });

@@ -1,0 +1,323 @@
+// The operator's controls: the lease, push (by distance or to a target picked in the 3D view,
+// with a preview), scan, Stop (on the pointer's press; Esc too) and the haptic handle; each
+// enabled only when the Session allows it, with the reason as a tooltip; the replies shown by
+// command id; the running push (everyone's view of it). What the forms mean (commands, the
+// preview, texts) is pure (Node tests); Controls binds them to the page.
+import { commands } from './wire.js';
+import { controlState } from './session.js';
+import { formatLength, formatStagePoint } from './format.js';
+import { pusher } from './eventlog.js';
+
+/** Where each command's reply shows (an `<output>` id). */
+export const REPLY_OUTPUT = Object.freeze({ take_lease: 'reply-lease', release_lease: 'reply-lease', push: 'reply-push', scan: 'reply-scan', stop: 'reply-stop', haptic: 'reply-haptic' });
+
+/** A form field's number: undefined when empty (the server's default), else Number (NaN for junk). */
+export function readNumber(text) {
+  const v = text.trim();
+  return v === '' ? undefined : Number(v);
+}
+
+/** A command's reply in its output: `#3 ok` or `#3 no_lease: push needs the lease`. */
+export function replyText(c) {
+  return c.status === 'ok' ? `#${c.id} ok` : `#${c.id} ${c.code}: ${c.message}`;
+}
+
+/** A particle in the push form's list: `#1 gold-coated latex (r 500 nm)`. */
+export function particleLabel(p) {
+  return `#${p.id}${p.material ? ` ${p.material}` : ''} (r ${formatLength(p.radius)})`;
+}
+
+/** The banner of the push running. */
+export function pushNowText(push, client) {
+  return `Pushing #${push.particle} (${pusher(push, client)}) to ${formatStagePoint(push.path[push.path.length - 1])}`;
+}
+
+/** A target picked in the 3D view (µm), kept on the stage [0, rangeUm]². */
+export function clampTarget(xUm, yUm, rangeUm) {
+  return [Math.min(rangeUm, Math.max(0, xUm)), Math.min(rangeUm, Math.max(0, yUm))];
+}
+
+/**
+ * The push form's command (throws a RangeError naming a field out of range).
+ * @param {'by' | 'to'} mode
+ * @param {number} particle
+ * @param {{distance?: number, direction?: number, toX?: number, toY?: number}} v the fields (µm, °)
+ * @param {number} rangeUm the stage's range
+ */
+export function pushCommand(mode, particle, v, rangeUm) {
+  return mode === 'by'
+    ? commands.pushBy(particle, v.distance, v.direction)
+    : commands.pushTo(particle, v.toX, v.toY, undefined, rangeUm);
+}
+
+/**
+ * The form's push preview in the 3D view: `target` {x, y} (µm) and `preview` {from {x, y, z},
+ * deg, lengthUm}, each null when not drawn. Only the lease holder's own, and only while no push
+ * runs (viewers see the operator's commanded path instead, from `push_started` / `state`).
+ * @param {{x: number, y: number, radius: number} | undefined} p the selected particle (m)
+ */
+export function pushPreview(p, { running, hasLease, mode, distance, direction, toX, toY }) {
+  const none = { target: null, preview: null };
+  if (!p || running || !hasLease) return none;
+  const from = { x: p.x * 1e6, y: p.y * 1e6, z: p.radius * 1e6 };
+  if (mode === 'by') return { target: null, preview: { from, deg: direction ?? 0, lengthUm: distance ?? 0 } };
+  if (toX === undefined || toY === undefined) return none;
+  const dx = toX - from.x;
+  const dy = toY - from.y;
+  return { target: { x: toX, y: toY }, preview: { from, deg: (Math.atan2(dy, dx) * 180) / Math.PI, lengthUm: Math.hypot(dx, dy) } };
+}
+
+/** The scan form's start from the scene's own scan (a 14 nm particle is not imaged 10 µm wide). */
+export function scanFormDefaults(scene) {
+  const out = {};
+  if (!scene.scan) return out;
+  if (Number.isFinite(scene.scan.size_um)) out.size = String(scene.scan.size_um);
+  if (Number.isFinite(scene.scan.pixels)) out.pixels = String(Math.min(512, Math.max(8, scene.scan.pixels)));
+  return out;
+}
+
+/** The replies of commands, each in its output, and only the latest command's per output. */
+export class Replies {
+  /** @param {(id: string) => HTMLElement} $ */
+  constructor($) {
+    this.$ = $;
+    this.lastIdByOutput = new Map(); // output element id → latest command id shown there
+  }
+
+  /** A command is about to go (it has its id). */
+  sent(m) {
+    const out = REPLY_OUTPUT[m.type];
+    if (out) {
+      this.lastIdByOutput.set(out, m.id);
+      this.show(out, 'pending', `#${m.id} sent…`);
+    }
+  }
+
+  /** A `reply` event of the Session. */
+  replied(ev) {
+    if (!ev.command) return;
+    const out = REPLY_OUTPUT[ev.command.type];
+    if (out && this.lastIdByOutput.get(out) === ev.id) this.show(out, ev.command.status, replyText(ev.command));
+  }
+
+  show(id, status, text) {
+    const el = this.$(id);
+    el.className = `reply ${status}`;
+    el.textContent = text;
+  }
+}
+
+export class Controls {
+  /**
+   * @param {(id: string) => HTMLElement} $ the page's elements by id
+   * @param {Document} doc
+   * @param {object} deps
+   * @param {import('./session.js').Session} deps.session
+   * @param {import('./view3d.js').View3D} deps.view
+   * @param {Replies} deps.replies
+   * @param {(msg: object) => object | null} deps.send sends a command (Connection.send)
+   * @param {() => void} deps.onScanRequested the operator asked for a scan
+   */
+  constructor($, doc, { session, view, replies, send, onScanRequested }) {
+    this.$ = $;
+    this.doc = doc;
+    this.session = session;
+    this.st = session.state;
+    this.view = view;
+    this.replies = replies;
+    this.send = send;
+    this.onScanRequested = onScanRequested;
+    this.selected = null; // the particle to push (id)
+    this.scanCentreTouched = false; // the operator typed a scan centre: keep it
+    this.scanFormTouched = false; // the operator typed a scan size or pixels: keep them
+    this.stopPressed = false; // Stop went on the pointer's press: ignore the click that follows
+    this.bind();
+  }
+
+  num(id) {
+    return readNumber(this.$(id).value);
+  }
+
+  mode() {
+    return this.doc.querySelector('input[name=mode]:checked').value;
+  }
+
+  setMode(m) {
+    this.$('by-fields').hidden = m !== 'by';
+    this.$('to-fields').hidden = m !== 'to';
+  }
+
+  /** Sends what `build` makes; a builder's range error shows in the output instead. */
+  guarded(out, build) {
+    try {
+      this.send(build());
+    } catch (e) {
+      this.replies.show(out, 'error', `not sent: ${e.message}`);
+    }
+  }
+
+  /** Enables what the Session allows, with the reason as a tooltip. */
+  render() {
+    const $ = this.$;
+    const c = controlState(this.st);
+    const set = (el, s) => {
+      el.disabled = !s.enabled;
+      el.title = s.why;
+    };
+    set($('take-lease'), c.takeLease);
+    set($('release-lease'), c.releaseLease);
+    set($('push-fs'), c.push);
+    set($('scan-fs'), c.scan);
+    set($('stop-btn'), c.stop);
+    set($('hap-fs'), c.haptic);
+    // Buttons inside a disabled fieldset: give them the reason as a tooltip too.
+    $('push-btn').title = c.push.why;
+    $('scan-btn').title = c.scan.why;
+    $('why').textContent = c.push.enabled ? '' : c.push.why;
+  }
+
+  /** The push running (everyone's view of it) or, for the lease holder, the form's preview. */
+  renderPush() {
+    const { st, view } = this;
+    const p = st.push;
+    const el = this.$('push-now');
+    if (p) {
+      view.setPushPath(p.path);
+      view.setPreview(null);
+      view.setTarget(null);
+      el.textContent = pushNowText(p, st.client);
+      el.hidden = false;
+    } else {
+      view.setPushPath(null);
+      el.hidden = true;
+      this.updatePreview();
+    }
+  }
+
+  updatePreview() {
+    const { st, view } = this;
+    const p = st.particles.find((q) => q.id === this.selected);
+    const { target, preview } = pushPreview(p, {
+      running: !!st.push, hasLease: this.session.hasLease, mode: this.mode(),
+      distance: this.num('distance'), direction: this.num('direction'), toX: this.num('to-x'), toY: this.num('to-y'),
+    });
+    if (target) view.setTarget(target.x, target.y);
+    else view.setTarget(null);
+    if (preview) view.setPreview(preview.from, preview.deg, preview.lengthUm);
+    else view.setPreview(null);
+  }
+
+  /** The scene's particles and stage in the forms (and the 3D view's particles). */
+  applyScene(scene) {
+    const { $, st, view } = this;
+    const range = st.stageRange * 1e6;
+    for (const id of ['to-x', 'to-y', 'scan-x', 'scan-y']) $(id).max = String(range);
+    const sel = $('particle');
+    sel.replaceChildren(...st.particles.map((p) => {
+      const o = this.doc.createElement('option');
+      o.value = String(p.id);
+      o.textContent = particleLabel(p);
+      return o;
+    }));
+    if (!st.particles.some((p) => p.id === this.selected)) this.selected = st.particles[0]?.id ?? null;
+    if (this.selected !== null) sel.value = String(this.selected);
+    view.setParticles(st.particles, this.selected);
+    if (!st.scan) view.frameStage();
+    if ($('scan-x').value === '') this.centreScanOnParticle();
+    if (!this.scanFormTouched) {
+      const d = scanFormDefaults(scene);
+      if (d.size !== undefined) $('scan-size').value = d.size;
+      if (d.pixels !== undefined) $('scan-px').value = d.pixels;
+    }
+    this.renderPush();
+  }
+
+  /** The server's `state` moved the particles: a scan centred on the selected one follows it. */
+  particlesMoved() {
+    if (this.selected !== null && this.$('scan-x').value !== '' && !this.scanCentreTouched) this.centreScanOnParticle();
+  }
+
+  selectParticle(id) {
+    this.selected = id;
+    this.$('particle').value = String(id);
+    this.view.updateParticles(this.st.particles, this.selected);
+    this.renderPush();
+  }
+
+  /** A finished push's outcome over the 3D view. */
+  showLastRun(run, text) {
+    const el = this.$('lastrun');
+    el.textContent = text;
+    el.className = `lastrun ${run.outcome === 'ok' ? 'good' : 'bad'}`;
+    el.hidden = false;
+  }
+
+  /** A point picked in the 3D view: the push target. */
+  pickTarget(xUm, yUm) {
+    const [x, y] = clampTarget(xUm, yUm, this.st.stageRange * 1e6);
+    this.$('to-x').value = x.toFixed(2);
+    this.$('to-y').value = y.toFixed(2);
+    this.doc.querySelector('input[name=mode][value=to]').checked = true;
+    this.setMode('to');
+    this.updatePreview();
+  }
+
+  centreScanOnParticle() {
+    const p = this.st.particles.find((q) => q.id === this.selected);
+    if (!p) return;
+    this.$('scan-x').value = (p.x * 1e6).toFixed(2);
+    this.$('scan-y').value = (p.y * 1e6).toFixed(2);
+  }
+
+  bind() {
+    const { $, doc } = this;
+    $('take-lease').addEventListener('click', () => this.guarded('reply-lease', () => commands.takeLease()));
+    $('release-lease').addEventListener('click', () => this.guarded('reply-lease', () => commands.releaseLease()));
+    // Stop goes on the pointer's press, not its release (a click): one event sooner. The click
+    // that follows is then ignored; a keyboard's Enter or Space still clicks.
+    $('stop-btn').addEventListener('pointerdown', (e) => {
+      if (e.button !== 0 || $('stop-btn').disabled) return;
+      this.stopPressed = true;
+      this.guarded('reply-stop', () => commands.stop());
+    });
+    $('stop-btn').addEventListener('click', () => {
+      if (this.stopPressed) {
+        this.stopPressed = false;
+        return;
+      }
+      this.guarded('reply-stop', () => commands.stop());
+    });
+    $('push-form').addEventListener('submit', (e) => {
+      e.preventDefault();
+      const particle = Number($('particle').value);
+      this.guarded('reply-push', () => pushCommand(this.mode(), particle,
+        { distance: this.num('distance'), direction: this.num('direction'), toX: this.num('to-x'), toY: this.num('to-y') },
+        this.st.stageRange * 1e6));
+    });
+    $('scan-form').addEventListener('submit', (e) => {
+      e.preventDefault();
+      this.onScanRequested();
+      this.guarded('reply-scan', () => commands.scan({ centreXUm: this.num('scan-x'), centreYUm: this.num('scan-y'), sizeUm: this.num('scan-size'), pixels: this.num('scan-px') }));
+    });
+    $('scan-centre').addEventListener('click', () => {
+      this.scanCentreTouched = false;
+      this.centreScanOnParticle();
+    });
+    $('particle').addEventListener('change', () => this.selectParticle(Number($('particle').value)));
+    for (const r of doc.querySelectorAll('input[name=mode]')) r.addEventListener('change', () => {
+      this.setMode(this.mode());
+      this.updatePreview();
+    });
+    for (const id of ['distance', 'direction', 'to-x', 'to-y']) $(id).addEventListener('input', () => this.updatePreview());
+    for (const a of ['engage', 'release', 'recenter']) $(`hap-${a}`).addEventListener('click', () => this.guarded('reply-haptic', () => commands.haptic(a)));
+    $('hap-scale').addEventListener('click', () => this.guarded('reply-haptic', () => commands.haptic('scale', { nmPerMm: this.num('hap-nm'), pullOffAtHandN: this.num('hap-po') })));
+    for (const id of ['scan-x', 'scan-y']) $(id).addEventListener('input', () => { this.scanCentreTouched = true; });
+    for (const id of ['scan-size', 'scan-px']) $(id).addEventListener('input', () => { this.scanFormTouched = true; });
+    doc.addEventListener('keydown', (e) => {
+      if (e.key === 'Escape' && !$('stop-btn').disabled) {
+        e.preventDefault();
+        $('stop-btn').click();
+      }
+    });
+  }
+}

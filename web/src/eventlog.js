@@ -1,0 +1,97 @@
+// The event log (the newest 60 lines, newest first, each with its time) and the screen-reader
+// announcements (only what matters: runs, the lease, shutdown). The texts of the server's
+// events are pure functions of the event and the Session's state (Node tests).
+import { formatLength, formatStagePoint } from './format.js';
+
+/** Lines the log keeps. */
+export const LOG_LINES = 60;
+
+/** Said when the connection closes while this page holds the lease. */
+export const LEASE_LOST_ON_CLOSE = 'you lost the lease: the connection closed (the server stops a push or scan whose lease holder is gone); take it again once reconnected';
+
+export function welcomeText(st) {
+  return `welcome: client ${st.client}, ${st.role}, scene ${st.scene}, ${st.tickHz} Hz`;
+}
+
+/** The server's `state` after a (re)connect, in one line. */
+export function stateText(st) {
+  return `state: phase ${st.phase ?? '–'}, ${st.lease === null ? 'lease free' : `lease held by client ${st.lease}`}${st.push ? `, pushing #${st.push.particle}` : ''}${st.scan ? `, latest scan ${st.scan.record ?? st.scan.id}${st.scanStale ? ' (stale)' : ''}` : ''}`;
+}
+
+/** A scan (the Session's, or a parsed record) by its size: `…: 32×32 px, 10.0 µm square`. */
+export function scanSize(sc) {
+  return `${sc.xres}×${sc.yres} px, ${formatLength(sc.x_real)} square`;
+}
+
+/** A `scan_done` event: {text, cls}. */
+export function scanDoneNote(ev) {
+  return {
+    text: ev.record ? `scan done: ${ev.record}` : ev.record_error ? `scan done, no record: ${ev.record_error}` : 'scan cancelled',
+    cls: ev.record ? 'good' : 'bad',
+  };
+}
+
+/** Who runs a push, for this client: `you` or `client N`. */
+export function pusher(push, client) {
+  return push.by === client ? 'you' : `client ${push.by}`;
+}
+
+export function pushStartedText(push, client) {
+  const end = push.path[push.path.length - 1];
+  return `push started: #${push.particle} by ${pusher(push, client)}, to ${formatStagePoint(end)} in ${push.path.length - 1} leg${push.path.length > 2 ? 's' : ''}`;
+}
+
+/** A `lease` event: {text, cls, announce} (`announce`: what to tell a screen reader, or null). */
+export function leaseNote(ev, st) {
+  const now = st.lease === null ? 'the lease is free' : st.lease === st.client ? 'you hold the lease' : `client ${st.lease} holds the lease`;
+  if (ev.lost) {
+    const t = `you lost the lease: ${ev.reason ?? now}`;
+    return { text: t, cls: 'bad', announce: t };
+  }
+  return { text: ev.reason ? `${now}: ${ev.reason}` : now, cls: ev.reason ? 'bad' : '', announce: ev.reason ?? null };
+}
+
+/** A reply `error` (`e` is the Session's lastError). */
+export function replyErrorText(ev, e) {
+  return `error${ev.id !== null ? ` #${ev.id}` : ''} ${e.code}: ${e.message}`;
+}
+
+export function closedText(ev) {
+  return `connection closed (code ${ev.code}${ev.reason ? `, ${ev.reason}` : ''})`;
+}
+
+export class EventLog {
+  /**
+   * @param {HTMLElement} list the log's `<ol>`
+   * @param {HTMLElement} live the polite live region for announcements
+   */
+  constructor(list, live) {
+    this.list = list;
+    this.live = live;
+  }
+
+  /** Adds a line (`cls`: '', 'good' or 'bad'). */
+  log(text, cls = '') {
+    const li = document.createElement('li');
+    const time = document.createElement('time');
+    const now = new Date();
+    time.dateTime = now.toISOString();
+    time.textContent = now.toLocaleTimeString();
+    const span = document.createElement('span');
+    span.className = cls;
+    span.textContent = text;
+    li.append(time, span);
+    const log = this.list;
+    log.prepend(li);
+    while (log.children.length > LOG_LINES) log.lastChild.remove();
+  }
+
+  /** Says something to screen readers. */
+  announce(text) {
+    const el = this.live;
+    el.textContent = '';
+    setTimeout(() => {
+      el.textContent = text;
+    }, 50);
+  }
+}

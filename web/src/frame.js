@@ -1,0 +1,111 @@
+// The page's one animation-frame loop. Views register a draw function and mark themselves dirty
+// when what they show changes (a message, a resize, a drag); each animation frame draws the dirty
+// ones, in the order they registered, never once per message. A view may ask to be drawn at most
+// every `period` ms, and to wait, after a slow draw, as long as that draw took ("renders on
+// change, and after a slow frame waits as long as it took"), so that at least half of the main
+// thread stays free for input (a Stop click is never queued behind frames).
+//
+// The loop runs every frame, dirty or not (as the 3D view's own loop did), so that
+// `frameInterval` measures how busy the browser is; a frame with nothing dirty costs a few
+// comparisons. No DOM: Node tests drive it with a fake requestAnimationFrame and clock.
+
+/**
+ * How often the live views (the tip, its readout, the plots) refresh while frames come every
+ * `frameIntervalMs`: every frame while the browser keeps up (≤ 40 ms); when its frames are slow
+ * (a software renderer, a busy machine) three frame times apart, at least 250 ms, at most 1 s, so
+ * frames stay free for what the operator does: a Stop click and its reply are never queued
+ * behind tip updates.
+ */
+export function livePeriodMs(frameIntervalMs) {
+  const f = frameIntervalMs;
+  return f > 40 ? Math.min(1000, Math.max(250, 3 * f)) : 0;
+}
+
+const report = globalThis.reportError?.bind(globalThis) ?? ((e) => setTimeout(() => { throw e; }));
+
+/** A draw slower than this (ms) makes its view wait as long again before the next. */
+export const SLOW_DRAW_MS = 12;
+
+export class FrameScheduler {
+  /**
+   * @param {{requestFrame?: (cb: (now: number) => void) => unknown, clock?: () => number, onError?: (e: unknown) => void}} [opts]
+   *   `requestFrame` defaults to `requestAnimationFrame`, `clock` to `performance.now` (the time
+   *   base of the frames' timestamps), `onError` (a draw threw) to reporting it as uncaught.
+   */
+  constructor({ requestFrame, clock, onError } = {}) {
+    this.requestFrame = requestFrame ?? ((cb) => requestAnimationFrame(cb));
+    this.clock = clock ?? (() => performance.now());
+    this.onError = onError ?? report;
+    this.views = [];
+    this.running = false;
+    this.last = 0; // the previous frame's timestamp
+    /** ms between animation frames, smoothed: how busy the browser is. */
+    this.frameInterval = 16.7;
+    this.frames = 0; // frames run
+    this.tick = this.tick.bind(this);
+  }
+
+  /**
+   * Registers a view; returns its handle: `mark(...parts)` makes it dirty (the parts, any
+   * values, are handed to the next draw as a Set), `frames` counts its draws and `ms` is how long
+   * the last one took.
+   * @param {string} name
+   * @param {(parts: Set<unknown>, now: number) => void} draw
+   * @param {{period?: number | (() => number), waitAfterSlow?: boolean}} [opts] `period`: at
+   *   least this long (ms) between draws; `waitAfterSlow`: after a draw slower than
+   *   SLOW_DRAW_MS, wait as long as it took.
+   */
+  register(name, draw, { period = 0, waitAfterSlow = false } = {}) {
+    const view = {
+      name,
+      draw,
+      period: typeof period === 'function' ? period : () => period,
+      waitAfterSlow,
+      dirty: false,
+      parts: new Set(),
+      lastDraw: 0, // timestamp of the frame that drew it last
+      notBefore: 0, // after a slow draw: not before this time
+      frames: 0,
+      ms: 0,
+      mark(...parts) {
+        view.dirty = true;
+        for (const p of parts) view.parts.add(p);
+      },
+    };
+    this.views.push(view);
+    return view;
+  }
+
+  /** Starts the loop (once). */
+  start() {
+    if (this.running) return;
+    this.running = true;
+    this.requestFrame(this.tick);
+  }
+
+  /** One animation frame: draws what is dirty and may be drawn now, then asks for the next. */
+  tick(now) {
+    if (this.last) this.frameInterval += 0.2 * (Math.min(2000, now - this.last) - this.frameInterval);
+    this.last = now;
+    this.frames++;
+    for (const v of this.views) {
+      if (!v.dirty || now < v.notBefore || now - v.lastDraw < v.period()) continue;
+      const parts = v.parts;
+      v.dirty = false;
+      v.parts = new Set();
+      v.lastDraw = now;
+      const t0 = this.clock();
+      try {
+        v.draw(parts, now);
+      } catch (e) {
+        // One view's error (reported as uncaught) must not stop the others, or the loop.
+        this.onError(e);
+      }
+      const dt = this.clock() - t0;
+      v.ms = dt;
+      v.frames++;
+      v.notBefore = v.waitAfterSlow && dt > SLOW_DRAW_MS ? this.clock() + dt : 0;
+    }
+    if (this.running) this.requestFrame(this.tick);
+  }
+}

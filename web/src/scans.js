@@ -1,0 +1,172 @@
+// Which scan the views show: the Session's live scan (filled line by line, or fetched whole from
+// its record for a late joiner) or a past scan opened from the records (shown until the next
+// live scan starts); the 3D legend (colour scale, progress, stale) and the image's title.
+// `progressText` and `scanTitle` are pure (Node tests).
+import { apiUrl } from './connection.js';
+import { parseGsf } from './gsf.js';
+import { Session } from './session.js';
+import { formatLength } from './format.js';
+import { viridisCss } from './colormap.js';
+import { scanSize, scanDoneNote } from './eventlog.js';
+
+/** The legend's progress line for the live scan. */
+export function progressText(sc, stale) {
+  return (sc.done ? `scan ${sc.id} complete` : `scan ${sc.id}: line ${sc.lines}/${sc.yres}`) + (stale ? ' · stale (a push ran since)' : '');
+}
+
+/** The height image's title: the record opened, else the live scan's id. */
+export function scanTitle(openedRecord, sc) {
+  return openedRecord ? `· record ${openedRecord}` : `· scan ${sc.id}`;
+}
+
+export class Scans {
+  /**
+   * @param {(id: string) => HTMLElement} $ the page's elements by id
+   * @param {object} deps
+   * @param {Session} deps.session
+   * @param {import('./view3d.js').View3D} deps.view
+   * @param {import('./image2d.js').Image2D} deps.image2d
+   * @param {import('./eventlog.js').EventLog} deps.log
+   * @param {import('./toolbar.js').Toolbar} deps.toolbar
+   * @param {Location} deps.loc
+   * @param {() => number | null} deps.selected the selected particle
+   * @param {() => void} deps.markLegend redraw the legend in the next frame
+   */
+  constructor($, { session, view, image2d, log, toolbar, loc, selected, markLegend }) {
+    this.$ = $;
+    this.session = session;
+    this.st = session.state;
+    this.view = view;
+    this.image2d = image2d;
+    this.log = log;
+    this.toolbar = toolbar;
+    this.loc = loc;
+    this.selected = selected;
+    this.markLegend = markLegend;
+    this.openedRecord = null; // a past scan opened from the records (not the live one)
+    this.framed = false; // the camera went to the scan since the operator asked for it
+    $('legend-bar').style.background = `linear-gradient(to right, ${viridisCss()})`;
+  }
+
+  /** The operator asked for a scan: frame it once it starts. */
+  requested() {
+    this.framed = false;
+  }
+
+  /** `scan_start`: the new scan replaces whatever was shown. */
+  started() {
+    const st = this.st;
+    this.openedRecord = null;
+    this.show();
+    this.log.log(`scan ${st.scan.id} started: ${scanSize(st.scan)}`);
+    this.frameOnce();
+  }
+
+  /** A scan line arrived (`ev` from the Session). */
+  line(ev) {
+    if (this.openedRecord) return; // a past scan is shown; the live one fills the Session only
+    this.view.scanLine(this.st.scan, ev.line);
+    this.image2d.invalidate();
+    this.markLegend();
+  }
+
+  /** `scan_done`. */
+  done(ev) {
+    const n = scanDoneNote(ev);
+    this.log.log(n.text, n.cls);
+    this.toolbar.scanFilled();
+    this.renderLegend();
+  }
+
+  /** The server's `state`: a scan other than the one shown is the latest; fetch it if done. */
+  stateChanged(ev) {
+    const st = this.st;
+    if (ev.scanChanged && !this.openedRecord) {
+      this.show();
+      if (st.scan.done && st.scan.record) this.loadLatest(st.scan.id, st.scan.record);
+    }
+  }
+
+  frameOnce() {
+    if (!this.framed) {
+      this.view.frameScan();
+      this.framed = true;
+    }
+  }
+
+  /** Shows the Session's scan (new, or refilled) in both views. */
+  show() {
+    const { st, view, $ } = this;
+    view.startScan(st.scan);
+    if (st.scan.lines) view.fillScan(st.scan);
+    this.image2d.setScan(st.scan);
+    $('legend').hidden = false;
+    $('img-title').textContent = scanTitle(this.openedRecord, st.scan);
+    view.updateParticles(st.particles, this.selected());
+    this.renderStale();
+    this.renderLegend();
+  }
+
+  /** A late joiner's latest scan: its heights from the record the server names. */
+  async loadLatest(id, record) {
+    try {
+      const r = await fetch(apiUrl(`/api/records/${encodeURIComponent(record)}`, this.loc));
+      if (!r.ok) throw new Error(`HTTP ${r.status}`);
+      const g = parseGsf(await r.arrayBuffer());
+      if (!this.session.fillScan(id, g.heights)) return; // another scan started meanwhile
+      this.view.fillScan(this.st.scan);
+      this.image2d.invalidate();
+      this.toolbar.scanFilled();
+      this.frameOnce();
+      this.renderLegend();
+    } catch (e) {
+      this.log.log(`could not load the latest scan ${record}: ${e.message}`, 'bad');
+    }
+  }
+
+  /** A past scan from the records, shown until the next live scan starts. */
+  async openRecord(name) {
+    const { view, $ } = this;
+    try {
+      const r = await fetch(apiUrl(`/api/records/${encodeURIComponent(name)}`, this.loc));
+      if (!r.ok) throw new Error(`HTTP ${r.status}`);
+      const g = parseGsf(await r.arrayBuffer());
+      const s = new Session();
+      s.startScan({ scan: -1, xres: g.xres, yres: g.yres, x_offset: g.x_offset, y_offset: g.y_offset, x_real: g.x_real, y_real: g.y_real });
+      s.fillScan(-1, g.heights);
+      this.openedRecord = name;
+      const sc = s.state.scan;
+      view.startScan(sc);
+      view.fillScan(sc);
+      this.image2d.setScan(sc);
+      $('img-title').textContent = scanTitle(name, sc);
+      $('img-stale').hidden = true;
+      view.frameScan();
+      this.log.log(`opened ${name}: ${scanSize(g)}`);
+    } catch (e) {
+      this.log.log(`could not open ${name}: ${e.message}`, 'bad');
+    }
+  }
+
+  /** The "stale: a push ran since this scan" marks (the live scan only). */
+  renderStale() {
+    const st = this.st;
+    const stale = st.scanStale && !this.openedRecord && !!st.scan;
+    this.$('img-stale').hidden = !stale;
+    this.$('scan-progress').classList.toggle('stale', stale);
+    this.markLegend();
+  }
+
+  /** The 3D legend: the colour scale in use and the live scan's progress. */
+  renderLegend() {
+    const { st, $ } = this;
+    const sc = st.scan;
+    if (!sc) return;
+    const r = this.view.colourScale();
+    if (r) {
+      $('legend-lo').textContent = formatLength(r.lo);
+      $('legend-hi').textContent = formatLength(r.hi);
+    }
+    $('scan-progress').textContent = progressText(sc, st.scanStale);
+  }
+}

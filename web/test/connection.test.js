@@ -1,0 +1,184 @@
+// node --test: the connection (src/connection.js): URLs, backoff, and the Connection's
+// reconnects and sends over a fake socket and fake timers.
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { wsUrl, apiUrl, backoffMs, reconnectText, Connection } from '../src/connection.js';
+import { Session } from '../src/session.js';
+import { commands } from '../src/wire.js';
+
+test('the WebSocket URL carries the page token; without one the page is a viewer', () => {
+  assert.equal(wsUrl({ protocol: 'http:', host: '127.0.0.1:8080', search: '?token=abc%2Bd' }), 'ws://127.0.0.1:8080/ws?token=abc%2Bd');
+  assert.equal(wsUrl({ protocol: 'http:', host: 'localhost:9', search: '' }), 'ws://localhost:9/ws');
+  assert.equal(wsUrl({ protocol: 'https:', host: 'h', search: '?x=1&token=t' }), 'wss://h/ws?token=t');
+});
+
+test('reconnect backoff doubles from 0.5 s and stops at 15 s', () => {
+  assert.deepEqual([1, 2, 3, 4, 5, 6, 7, 10].map((n) => backoffMs(n)), [500, 1000, 2000, 4000, 8000, 15000, 15000, 15000]);
+});
+
+test('apiUrl passes the page token on to the JSON API', () => {
+  assert.equal(apiUrl('/api/scene', { search: '?token=abc%2Bd' }), '/api/scene?token=abc%2Bd');
+  assert.equal(apiUrl('/api/records/x.csv', { search: '' }), '/api/records/x.csv');
+  assert.equal(apiUrl('/api/records?a=1', { search: '?token=t' }), '/api/records?a=1&token=t');
+});
+
+/** Fake timers: `run(ms)` moves the clock on and fires what is due, in order. */
+function fakeTimers() {
+  let now = 0;
+  let next = 1;
+  const due = new Map(); // id → {at, fn, every}
+  const t = {
+    now: () => now,
+    setTimeout: (fn, ms) => { due.set(next, { at: now + ms, fn }); return next++; },
+    clearTimeout: (id) => { due.delete(id); },
+    setInterval: (fn, ms) => { due.set(next, { at: now + ms, fn, every: ms }); return next++; },
+    clearInterval: (id) => { due.delete(id); },
+    get pending() { return due.size; },
+    run(ms) {
+      const end = now + ms;
+      for (;;) {
+        let id = null;
+        for (const [k, v] of due) if (v.at <= end && (id === null || v.at < due.get(id).at)) id = k;
+        if (id === null) break;
+        const v = due.get(id);
+        now = v.at;
+        if (v.every) v.at += v.every;
+        else due.delete(id);
+        v.fn();
+      }
+      now = end;
+    },
+  };
+  return t;
+}
+
+class FakeSocket {
+  constructor(url) {
+    this.url = url;
+    this.readyState = 0;
+    this.sent = [];
+  }
+
+  send(text) {
+    this.sent.push(text);
+  }
+
+  open() {
+    this.readyState = 1;
+    this.onopen();
+  }
+
+  close(code = 1006) {
+    this.readyState = 3;
+    this.onclose({ code, reason: '' });
+  }
+}
+
+function harness({ fail = 0 } = {}) {
+  const session = new Session();
+  const timers = fakeTimers();
+  const sockets = [];
+  const seen = [];
+  let failures = fail;
+  const conn = new Connection(session, {
+    url: 'ws://h/ws?token=t',
+    open: (url) => {
+      if (failures-- > 0) throw new Error('refused');
+      const s = new FakeSocket(url);
+      sockets.push(s);
+      return s;
+    },
+    onOpen: () => seen.push('open'),
+    onMessage: (d) => seen.push(`msg ${d}`),
+    onClose: (ev) => seen.push(`close ${ev.code} lease=${session.hasLease}`),
+    onCountdown: (text) => seen.push(text),
+    onSend: (m) => seen.push(`send #${m.id}`),
+    onChange: () => seen.push(`change ${session.state.connection}`),
+    timers,
+    now: timers.now,
+  });
+  return { session, timers, sockets, seen, conn };
+}
+
+test('a connection opens, passes messages on, and sends commands numbered by the Session', () => {
+  const h = harness();
+  h.conn.connect();
+  assert.equal(h.session.state.connection, 'connecting');
+  assert.equal(h.sockets.length, 1);
+  assert.equal(h.sockets[0].url, 'ws://h/ws?token=t');
+  assert.equal(h.sockets[0].binaryType, 'arraybuffer');
+  assert.equal(h.conn.send(commands.takeLease()), null, 'not open yet: not sent');
+  assert.equal(h.session.state.lastError.code, 'client_socket');
+  h.sockets[0].open();
+  assert.equal(h.session.state.connection, 'open');
+  h.sockets[0].onmessage({ data: '{"type":"ping"}' });
+  const m = h.conn.send(commands.takeLease());
+  assert.deepEqual(m, { type: 'take_lease', id: 1 });
+  assert.deepEqual(h.sockets[0].sent, ['{"type":"take_lease","id":1}']);
+  assert.deepEqual(h.seen, ['change connecting', 'change connecting', 'open', 'msg {"type":"ping"}', 'send #1']);
+});
+
+test('a closed connection reconnects after 0.5 s, 1 s, 2 s …, counting down; an open resets the count', () => {
+  const h = harness();
+  h.conn.connect();
+  h.sockets[0].open();
+  h.session.apply({ type: 'welcome', version: 1, client: 3, role: 'operator', lease: 3, scene: 's', tick_hz: 1000 });
+  h.seen.length = 0;
+  h.sockets[0].close(1006);
+  // onClose hears it while the Session still knows the lease was held.
+  assert.deepEqual(h.seen, ['close 1006 lease=true', 'change closed', 'reconnecting in 0.5 s (attempt 1)']);
+  assert.deepEqual(h.session.state.reconnect, { attempt: 1, delayMs: 500 });
+  assert.equal(h.session.state.client, null);
+  h.seen.length = 0;
+  h.timers.run(499);
+  assert.equal(h.sockets.length, 1, 'not before 0.5 s');
+  assert.deepEqual(h.seen, ['reconnecting in 0.3 s (attempt 1)']);
+  h.timers.run(1);
+  assert.equal(h.sockets.length, 2);
+  assert.deepEqual(h.seen.slice(1), ['reconnecting in 0.0 s (attempt 1)', 'change connecting']);
+  assert.equal(reconnectText(14960, 6), 'reconnecting in 15.0 s (attempt 6)');
+  // Closed again before it opened: 1 s, then 2 s.
+  h.sockets[1].close();
+  assert.equal(h.session.state.reconnect.delayMs, 1000);
+  h.timers.run(1000);
+  h.sockets[2].close();
+  assert.equal(h.session.state.reconnect.delayMs, 2000);
+  h.timers.run(2000);
+  assert.equal(h.sockets.length, 4);
+  h.sockets[3].open();
+  assert.equal(h.conn.attempt, 0);
+  h.sockets[3].close();
+  assert.equal(h.session.state.reconnect.delayMs, 500, 'counted from 1 again after an open');
+  // A socket that closes after being replaced is ignored.
+  h.timers.run(500);
+  assert.equal(h.sockets.length, 5);
+  h.sockets[3].onclose({ code: 1000, reason: '' });
+  assert.equal(h.conn.attempt, 1);
+  assert.equal(h.session.state.reconnect, null);
+  assert.equal(h.session.state.connection, 'connecting');
+});
+
+test('a socket that cannot be made is logged and retried', () => {
+  const h = harness({ fail: 2 });
+  h.conn.connect();
+  assert.equal(h.session.state.lastError.message, 'refused');
+  assert.equal(h.session.state.reconnect.attempt, 1);
+  h.timers.run(500);
+  assert.equal(h.session.state.reconnect.attempt, 2);
+  h.timers.run(1000);
+  assert.equal(h.sockets.length, 1);
+  assert.equal(h.timers.pending, 0, 'no countdown or retry left running');
+});
+
+test('a socket made asynchronously (the demo) is attached when it comes', async () => {
+  const session = new Session();
+  const s = new FakeSocket('u');
+  const conn = new Connection(session, { url: 'u', open: () => Promise.resolve(s), timers: fakeTimers() });
+  conn.connect();
+  assert.equal(conn.ws, null);
+  await null;
+  await null;
+  assert.equal(conn.ws, s);
+  s.open();
+  assert.equal(session.state.connection, 'open');
+});

@@ -1,0 +1,79 @@
+// node --test: what the operator's controls mean (src/controls.js): the push and scan commands
+// from the forms, the push preview, the target picked in the 3D view, the replies by command id.
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import {
+  REPLY_OUTPUT, Replies, readNumber, replyText, particleLabel, pushNowText, clampTarget, pushCommand, pushPreview, scanFormDefaults,
+} from '../src/controls.js';
+
+test('form numbers: empty is the server\'s default (undefined), junk is NaN (refused by the builders)', () => {
+  assert.equal(readNumber(''), undefined);
+  assert.equal(readNumber('  '), undefined);
+  assert.equal(readNumber(' 2.5 '), 2.5);
+  assert.ok(Number.isNaN(readNumber('abc')));
+  assert.throws(() => pushCommand('by', 1, { distance: readNumber('abc'), direction: 0 }, 100), /distance_um must be a finite number/);
+});
+
+test('the push form: by distance or to a target inside the stage', () => {
+  assert.deepEqual(pushCommand('by', 2, { distance: 5, direction: 90, toX: 1, toY: 1 }, 100),
+    { type: 'push', particle: 2, distance_um: 5, direction_deg: 90 });
+  assert.deepEqual(pushCommand('to', 2, { distance: 5, direction: 90, toX: 30, toY: 40.5 }, 100),
+    { type: 'push', particle: 2, to_x_um: 30, to_y_um: 40.5 });
+  assert.throws(() => pushCommand('to', 2, { toX: 60, toY: 10 }, 50), /to_x_um must be in \[0, 50\]/, 'the stage of the scene, not 100 µm');
+});
+
+test('a target picked in the 3D view stays on the stage', () => {
+  assert.deepEqual(clampTarget(-3, 120, 100), [0, 100]);
+  assert.deepEqual(clampTarget(12.5, 40, 50), [12.5, 40]);
+});
+
+test('the push preview: the lease holder\'s, while no push runs; by distance or towards the target', () => {
+  const p = { x: 40e-6, y: 30e-6, radius: 0.5e-6 };
+  const from = { x: 40, y: 30, z: 0.5 };
+  const base = { running: false, hasLease: true, mode: 'by', distance: 5, direction: 90 };
+  assert.deepEqual(pushPreview(p, base), { target: null, preview: { from, deg: 90, lengthUm: 5 } });
+  assert.deepEqual(pushPreview(p, { ...base, distance: undefined, direction: undefined }).preview, { from, deg: 0, lengthUm: 0 });
+  const none = { target: null, preview: null };
+  assert.deepEqual(pushPreview(p, { ...base, running: true }), none, 'a push runs: its path is shown instead');
+  assert.deepEqual(pushPreview(p, { ...base, hasLease: false }), none, 'viewers and operators without the lease');
+  assert.deepEqual(pushPreview(undefined, base), none, 'no particle selected');
+  const to = pushPreview(p, { ...base, mode: 'to', toX: 43, toY: 34 });
+  assert.deepEqual(to.target, { x: 43, y: 34 });
+  assert.equal(to.preview.lengthUm, 5);
+  assert.ok(Math.abs(to.preview.deg - (Math.atan2(4, 3) * 180) / Math.PI) < 1e-12);
+  assert.deepEqual(pushPreview(p, { ...base, mode: 'to', toX: 43, toY: undefined }), none, 'no target yet');
+});
+
+test('texts: particles in the list, the push running, replies', () => {
+  assert.equal(particleLabel({ id: 1, material: 'gold-coated latex', radius: 500e-9 }), '#1 gold-coated latex (r 500 nm)');
+  assert.equal(particleLabel({ id: 2, material: '', radius: 7e-9 }), '#2 (r 7.0 nm)');
+  const push = { particle: 1, path: [[40e-6, 30e-6], [45e-6, 30e-6], [45e-6, 32.5e-6]], by: 9 };
+  assert.equal(pushNowText(push, 9), 'Pushing #1 (you) to (45.000, 32.500) µm');
+  assert.equal(pushNowText(push, 4), 'Pushing #1 (client 9) to (45.000, 32.500) µm');
+  assert.equal(replyText({ id: 3, status: 'ok' }), '#3 ok');
+  assert.equal(replyText({ id: 4, status: 'error', code: 'no_lease', message: 'push needs the lease' }), '#4 no_lease: push needs the lease');
+});
+
+test('the scan form starts at the scene\'s own scan, pixels within [8, 512]', () => {
+  assert.deepEqual(scanFormDefaults({ scan: { size_um: 0.2, pixels: 1024 } }), { size: '0.2', pixels: '512' });
+  assert.deepEqual(scanFormDefaults({ scan: { pixels: 4 } }), { pixels: '8' });
+  assert.deepEqual(scanFormDefaults({}), {});
+});
+
+test('replies show in their command\'s output, only for the latest command sent there', () => {
+  const els = {};
+  const $ = (id) => (els[id] ??= { className: '', textContent: '' });
+  const r = new Replies($);
+  r.sent({ type: 'take_lease', id: 1 });
+  assert.deepEqual(els['reply-lease'], { className: 'reply pending', textContent: '#1 sent…' });
+  r.sent({ type: 'release_lease', id: 2 }); // the same output
+  r.replied({ id: 1, command: { id: 1, type: 'take_lease', status: 'ok' } });
+  assert.equal(els['reply-lease'].textContent, '#2 sent…', 'a stale reply does not overwrite');
+  r.replied({ id: 2, command: { id: 2, type: 'release_lease', status: 'error', code: 'no_lease', message: 'you do not hold it' } });
+  assert.deepEqual(els['reply-lease'], { className: 'reply error', textContent: '#2 no_lease: you do not hold it' });
+  r.sent({ type: 'subscribe', id: 3 });
+  r.replied({ id: 3, command: { id: 3, type: 'subscribe', status: 'ok' } });
+  r.replied({ id: 9, command: null });
+  assert.deepEqual(Object.keys(els), ['reply-lease'], 'subscribe has no output');
+  assert.deepEqual(new Set(Object.values(REPLY_OUTPUT)), new Set(['reply-lease', 'reply-push', 'reply-scan', 'reply-stop', 'reply-haptic']));
+});

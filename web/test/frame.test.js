@@ -1,0 +1,203 @@
+// node --test: the page's one animation-frame loop (src/frame.js) with a fake
+// requestAnimationFrame and a fake clock: what is drawn in which frame.
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { FrameScheduler, livePeriodMs, SLOW_DRAW_MS } from '../src/frame.js';
+
+/** A scheduler whose frames the test runs: `frame(t)` runs the pending callback at time t. */
+function fake() {
+  let pending = null;
+  let requests = 0;
+  const clock = { now: 0 };
+  const s = new FrameScheduler({
+    requestFrame: (cb) => {
+      assert.equal(pending, null, 'one frame requested at a time');
+      pending = cb;
+      requests++;
+    },
+    clock: () => clock.now,
+  });
+  return {
+    s,
+    clock,
+    get requests() { return requests; },
+    frame(t) {
+      assert.ok(pending, 'a frame was requested');
+      const cb = pending;
+      pending = null;
+      clock.now = t;
+      cb(t);
+    },
+  };
+}
+
+test('live views refresh every frame while frames are quick, else 3 frame times apart within [250 ms, 1 s]', () => {
+  assert.equal(livePeriodMs(16.7), 0);
+  assert.equal(livePeriodMs(40), 0);
+  assert.equal(livePeriodMs(41), 250);
+  assert.equal(livePeriodMs(100), 300);
+  assert.equal(livePeriodMs(250), 750);
+  assert.equal(livePeriodMs(400), 1000);
+  assert.equal(livePeriodMs(2000), 1000);
+});
+
+test('one loop: a view is drawn in the next frame after a mark, once however many marks, with the parts marked', () => {
+  const f = fake();
+  const drawn = [];
+  const a = f.s.register('a', (parts, now) => drawn.push(['a', [...parts].sort(), now]));
+  const b = f.s.register('b', (parts) => drawn.push(['b', [...parts]]));
+  f.s.start();
+  f.s.start(); // once
+  assert.equal(f.requests, 1);
+  f.frame(16);
+  assert.deepEqual(drawn, [], 'nothing dirty, nothing drawn');
+  assert.equal(f.requests, 2, 'the loop runs on, dirty or not');
+  a.mark('tip');
+  a.mark('charts');
+  a.mark('tip');
+  assert.deepEqual(drawn, [], 'not drawn on a mark');
+  f.frame(33);
+  assert.deepEqual(drawn, [['a', ['charts', 'tip'], 33]]);
+  assert.equal(a.frames, 1);
+  assert.equal(b.frames, 0);
+  f.frame(50);
+  assert.equal(drawn.length, 1, 'drawn once: the mark was used up');
+  b.mark();
+  a.mark();
+  f.frame(66);
+  assert.deepEqual(drawn.slice(1), [['a', [], 66], ['b', []]], 'in the order they registered');
+  assert.equal(f.s.frames, 4);
+});
+
+test('a view marked by an earlier view\'s draw is drawn in the same frame; by a later one\'s, in the next', () => {
+  const f = fake();
+  const log = [];
+  let late;
+  const first = f.s.register('first', () => {
+    log.push('first');
+    late.mark();
+  });
+  late = f.s.register('late', () => {
+    log.push('late');
+    first.mark();
+  });
+  f.s.start();
+  first.mark();
+  f.frame(16);
+  assert.deepEqual(log, ['first', 'late']);
+  f.frame(33);
+  assert.deepEqual(log, ['first', 'late', 'first', 'late']);
+});
+
+test('frameInterval follows the frames\' spacing (smoothed 0.2, gaps counted at most 2 s)', () => {
+  const f = fake();
+  f.s.start();
+  assert.equal(f.s.frameInterval, 16.7);
+  f.frame(1000);
+  assert.equal(f.s.frameInterval, 16.7, 'the first frame has no interval');
+  f.frame(1100);
+  assert.ok(Math.abs(f.s.frameInterval - (16.7 + 0.2 * (100 - 16.7))) < 1e-9, `${f.s.frameInterval}`);
+  for (let t = 1200; t <= 9000; t += 100) f.frame(t);
+  assert.ok(Math.abs(f.s.frameInterval - 100) < 0.01, `${f.s.frameInterval}`);
+  f.frame(19000);
+  assert.ok(Math.abs(f.s.frameInterval - (100 + 0.2 * (2000 - 100))) < 0.01, `${f.s.frameInterval}`);
+});
+
+test('a period spaces the draws: live views at livePeriodMs of the measured frame interval', () => {
+  const f = fake();
+  const at = [];
+  const live = f.s.register('live', (parts, now) => at.push(now), { period: () => livePeriodMs(f.s.frameInterval) });
+  f.s.start();
+  // Quick frames (16 ms): drawn every frame it is marked.
+  for (let t = 16; t <= 160; t += 16) {
+    live.mark('tip');
+    f.frame(t);
+  }
+  assert.equal(at.length, 10);
+  // Slow frames (100 ms apart): once frameInterval passes 40 ms, at least 250 ms apart (3 × the interval).
+  at.length = 0;
+  for (let t = 260; t <= 6000; t += 100) {
+    live.mark('tip');
+    f.frame(t);
+  }
+  const gaps = at.slice(1).map((t, i) => t - at[i]);
+  assert.ok(gaps.slice(-5).every((g) => g === 300), `late gaps ${gaps.slice(-5)}`);
+  assert.ok(gaps.every((g) => g === 100 || g >= 250), `${gaps}`);
+  assert.equal(at.at(-1), 5960);
+  live.mark('tip');
+  f.frame(6060);
+  assert.equal(at.at(-1), 5960, 'not yet: 100 ms after the last draw');
+  assert.ok(live.dirty, 'a mark waiting for its period stays');
+  f.frame(6160);
+  f.frame(6260);
+  assert.equal(at.at(-1), 6260);
+  // A fixed period (the plots: 120 ms) with 16 ms frames: every 8th frame (128 ms).
+  const g = fake();
+  const drawn = [];
+  const charts = g.s.register('charts', (p, now) => drawn.push(now), { period: 120 });
+  g.s.start();
+  for (let t = 1000; t <= 1512; t += 16) {
+    charts.mark();
+    g.frame(t);
+  }
+  assert.deepEqual(drawn, [1000, 1128, 1256, 1384, 1512]);
+});
+
+test('after a slow draw a view waits as long as it took; quick draws and other views do not wait', () => {
+  const f = fake();
+  let cost = 30;
+  const drawn = [];
+  const v3d = f.s.register('view3d', (p, now) => {
+    drawn.push(now);
+    f.clock.now += cost; // the draw takes `cost` ms of main thread
+  }, { waitAfterSlow: true });
+  const other = f.s.register('image2d', (p, now) => drawn.push(`other ${now}`));
+  f.s.start();
+  v3d.mark();
+  f.frame(1000); // drawn, took 30 ms: not before 1030 + 30 = 1060
+  assert.equal(v3d.ms, 30);
+  assert.equal(v3d.notBefore, 1060);
+  v3d.mark();
+  other.mark();
+  f.frame(1033);
+  f.frame(1050);
+  assert.deepEqual(drawn, [1000, 'other 1033'], 'the slow view waits; the other is drawn');
+  f.frame(1066);
+  assert.deepEqual(drawn, [1000, 'other 1033', 1066]);
+  // A quick draw (≤ SLOW_DRAW_MS): no wait.
+  cost = SLOW_DRAW_MS;
+  v3d.mark();
+  f.frame(1200);
+  v3d.mark();
+  f.frame(1216);
+  assert.deepEqual(drawn.slice(-2), [1200, 1216]);
+  assert.equal(v3d.frames, 4);
+  // Without waitAfterSlow, a slow view is drawn again in the next frame.
+  const g = fake();
+  const slow = g.s.register('slow', () => { g.clock.now += 50; });
+  g.s.start();
+  slow.mark();
+  g.frame(100);
+  slow.mark();
+  g.frame(116);
+  assert.equal(slow.frames, 2);
+});
+
+test('a draw that throws is reported; the other views and the loop go on', () => {
+  const errors = [];
+  let pending = null;
+  const s = new FrameScheduler({ requestFrame: (cb) => { pending = cb; }, clock: () => 0, onError: (e) => errors.push(e.message) });
+  const bad = s.register('bad', () => { throw new Error('boom'); });
+  let good = 0;
+  const ok = s.register('ok', () => { good++; });
+  s.start();
+  bad.mark();
+  ok.mark();
+  const cb = pending;
+  pending = null;
+  cb(16);
+  assert.deepEqual(errors, ['boom']);
+  assert.equal(good, 1);
+  assert.ok(pending, 'the next frame was requested');
+  assert.equal(bad.dirty, false);
+});

@@ -1,0 +1,40 @@
+// node --test: the haptic panel's texts from a telemetry frame's `haptic` object and its plot's
+// 10 s window (src/haptic.js; uPlot itself is not run).
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { hapticFields, HapticTrace } from '../src/haptic.js';
+
+test('the fields of an engaged handle on a live link', () => {
+  const f = hapticFields({ link: 'up', phase: 'engaged', handle_m: 0.01234, force_n: 0.5, tip_force_n: 2.5e-9, pc_active: true });
+  assert.deepEqual(f, {
+    link: { text: 'up', cls: 'good' },
+    phase: { text: 'engaged' },
+    engaged: { text: 'yes' },
+    handle: { text: '12.34 mm' },
+    hand: { text: '0.500 N' },
+    tip: { text: '2.50 nN' },
+    pc: { text: 'damping' },
+  });
+});
+
+test('a link down, not engaged, no handle reading', () => {
+  const f = hapticFields({ link: 'down', phase: 'idle', handle_m: null, force_n: undefined, tip_force_n: 0, pc_active: false });
+  assert.deepEqual([f.link.cls, f.engaged.text, f.handle.text, f.hand.text, f.tip.text, f.pc.text], ['bad', 'no', '–', '–', '0.00 nN', 'idle']);
+  assert.equal(hapticFields({ link: 'up', phase: 'pushing', tip_force_n: 0 }).engaged.text, 'yes', 'pushing is engaged');
+  assert.equal(hapticFields({ link: 'up', phase: 'approach', tip_force_n: 0 }).engaged.text, 'no');
+});
+
+test('the plot keeps the last 10 s of the force at the hand; a server restart starts it again', () => {
+  const tr = new HapticTrace();
+  for (let i = 0; i <= 300; i++) tr.push(i / 10, i);
+  assert.equal(tr.t[0], 20);
+  assert.equal(tr.t.length, 101);
+  const [x, y] = tr.data();
+  assert.equal(x[0], -10);
+  assert.equal(x[x.length - 1], 0);
+  assert.equal(y[y.length - 1], 300);
+  tr.push(1, 7);
+  assert.deepEqual([tr.t, tr.f], [[1], [7]]);
+  const [ex, ey] = new HapticTrace().data();
+  assert.deepEqual([ex.length, ey.length], [0, 0]);
+});
