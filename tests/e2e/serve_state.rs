@@ -115,7 +115,7 @@ fn issue_11_static_files_are_compressed() {
     let mut s = TcpStream::connect(&srv.addr).unwrap();
     write!(
         s,
-        "GET /src/protocol.js HTTP/1.1\r\nHost: {}\r\nAccept-Encoding: gzip\r\nConnection: close\r\n\r\n",
+        "GET /src/session.js HTTP/1.1\r\nHost: {}\r\nAccept-Encoding: gzip\r\nConnection: close\r\n\r\n",
         srv.addr
     )
     .unwrap();
@@ -126,7 +126,7 @@ fn issue_11_static_files_are_compressed() {
     assert!(head.starts_with("http/1.1 200"), "{head}");
     assert!(head.contains("content-encoding: gzip"), "{head}");
     // Without Accept-Encoding: plain.
-    let (status, body) = http_get(&srv.addr, "/src/protocol.js");
+    let (status, body) = http_get(&srv.addr, "/src/session.js");
     assert_eq!(status, 200);
-    assert!(String::from_utf8_lossy(&body).contains("parseGsf"));
+    assert!(String::from_utf8_lossy(&body).contains("export class Session"));
 }

@@ -13,7 +13,7 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use nanopush_proto::ws::{Role, ServerMessage};
 
-use crate::serve::haptic_api::haptic_status;
+use crate::serve::haptic::api::haptic_status;
 use crate::serve::metrics::render;
 use crate::serve::records;
 use crate::serve::session::{HARD_CAP, session};
@@ -98,7 +98,7 @@ async fn status(State(st): State<Arc<AppState>>) -> Response {
         "phase": s.phase,
         "stage": s.stage,
         "volts": s.volts,
-        "busy": st.shared.busy.load(Relaxed) || st.scanning.load(Relaxed),
+        "busy": st.shared.busy.load(Relaxed) || st.activity.scanning.load(Relaxed),
         "loop": {
             "ticks": m.ticks.load(Relaxed),
             "overruns": m.overruns.load(Relaxed),
@@ -210,7 +210,7 @@ async fn ws_upgrade(
     headers: HeaderMap,
     ws: WebSocketUpgrade,
 ) -> Response {
-    if *st.shutdown.borrow() {
+    if *st.channels.shutdown.borrow() {
         return (StatusCode::SERVICE_UNAVAILABLE, "shutting down").into_response();
     }
     if let Some(origin) = headers.get(header::ORIGIN) {

@@ -2,7 +2,7 @@
 //!
 //! Every frame goes into two broadcasts, numbered (`seq`, from 1): first the lease holder's
 //! channel, then, after the telemetry task yields, everyone's
-//! ([`crate::serve::tasks::telemetry_task`]). A session always reads everyone's channel, and
+//! ([`crate::serve::telemetry::telemetry_task`]). A session always reads everyone's channel, and
 //! while its client holds the lease also the holder's, which is woken first. Each number is sent
 //! once, in increasing order: a copy whose number was already sent is skipped. Taking or giving
 //! up the lease therefore neither loses nor repeats a frame, whichever way it races the two

@@ -13,6 +13,7 @@ use nanopush_proto::ws::{ParticleNow, PushPath, Role, ScanNow, ServerMessage};
 use tokio::sync::{broadcast, watch};
 
 use crate::control::StrategyParams;
+use crate::scan::{Sphere, Surface};
 use crate::scene::Scene;
 use crate::serve::control_loop::Shared;
 use crate::serve::metrics::NetMetrics;
@@ -52,57 +53,75 @@ pub struct ServeConfig {
     pub telemetry_hz: f64,
 }
 
-/// Everything the handlers share.
+/// Everything the handlers share, grouped by job.
 pub struct AppState {
     /// Settings.
     pub cfg: ServeConfig,
     /// The scene.
     pub scene: Scene,
+    /// Strategy settings (for push preparation).
+    pub params: StrategyParams,
     /// The loop's shared state.
     pub shared: Arc<Shared>,
     /// Network counters.
     pub net: NetMetrics,
-    /// Strategy settings (for push preparation).
-    pub params: StrategyParams,
+    /// Bound address (for the Origin check).
+    pub addr: Mutex<Option<SocketAddr>>,
+    /// Who is connected, with which places, subscriptions and the lease.
+    pub clients: Clients,
+    /// What goes out to every client.
+    pub channels: Channels,
+    /// What the instrument is doing beside the loop: scans, push preparation, shutdown.
+    pub activity: Activity,
+}
+
+/// The connected clients.
+pub struct Clients {
     /// Lease holder.
     pub lease: Mutex<Option<u32>>,
     pub(crate) next_client: AtomicU32,
-    pub(crate) next_scan: AtomicU32,
     /// Clients subscribed to `tip`.
     pub tip_subscribers: AtomicU64,
     /// Clients subscribed to `scan`.
     pub scan_subscribers: AtomicU64,
+    /// Places taken: viewers (up to `--max-clients`) and operators (up to [`OPERATOR_PLACES`],
+    /// apart, so viewers can never lock the operator out), and viewers per remote address.
+    places: Mutex<Places>,
+}
+
+/// The broadcasts every session reads.
+pub struct Channels {
     /// Telemetry, serialized once per frame, with the frame's number.
     pub telemetry: broadcast::Sender<(u64, Utf8Bytes)>,
     /// The same frames for the lease holder alone, sent before everyone else's
-    /// ([`crate::serve::tasks::telemetry_task`]).
+    /// ([`crate::serve::telemetry::telemetry_task`]).
     pub lease_telemetry: broadcast::Sender<(u64, Utf8Bytes)>,
     /// Events for everyone (lease, run_done, shutdown).
     pub events: broadcast::Sender<Utf8Bytes>,
     /// Scan stream (text and binary frames).
     pub scans: broadcast::Sender<Message>,
+    /// Shutdown signal for sessions and tasks.
+    pub shutdown: watch::Sender<bool>,
+}
+
+/// The instrument's work beside the control loop.
+pub struct Activity {
     /// A scan runs.
     pub scanning: AtomicBool,
     /// Ask a running scan to stop.
     pub scan_cancel: AtomicBool,
-    /// Shutdown signal for sessions and tasks.
-    pub shutdown: watch::Sender<bool>,
-    /// Bound address (for the Origin check).
-    pub addr: Mutex<Option<SocketAddr>>,
-    /// Where the controller believes each particle is (m): the scene's positions, then each
-    /// push's final estimate. A push starts its local scan here (the operator's "click").
-    pub estimates: Mutex<std::collections::HashMap<u32, (f64, f64)>>,
+    pub(crate) next_scan: AtomicU32,
     /// Shutdown has begun: commands are refused from now on.
     pub stopping: AtomicBool,
     /// Bumped by every `stop`: a push still being prepared when it changes is dropped.
     pub generation: AtomicU64,
+    /// Where the controller believes each particle is (m): the scene's positions, then each
+    /// push's final estimate. A push starts its local scan here (the operator's "click").
+    pub estimates: Mutex<std::collections::HashMap<u32, (f64, f64)>>,
     /// The push running now (its planned path), for clients that join during it.
     pub push_now: Mutex<Option<PushPath>>,
     /// The latest scan (running or finished), for clients that join after it.
     pub latest_scan: Mutex<Option<ScanNow>>,
-    /// Places taken: viewers (up to `--max-clients`) and operators (up to [`OPERATOR_PLACES`],
-    /// apart, so viewers can never lock the operator out), and viewers per remote address.
-    places: Mutex<Places>,
 }
 
 /// Connections counted for admission.
@@ -126,7 +145,7 @@ pub(crate) struct Place {
 impl Place {
     /// Takes a place for `role` from `ip`, or says why not.
     pub(crate) fn take(st: &Arc<AppState>, role: Role, ip: std::net::IpAddr) -> Result<Place, (StatusCode, String)> {
-        let mut p = st.places.lock().expect("places lock");
+        let mut p = st.clients.places.lock().expect("places lock");
         match role {
             Role::Operator => {
                 if p.operators >= OPERATOR_PLACES {
@@ -169,7 +188,9 @@ impl Place {
 
 impl Drop for Place {
     fn drop(&mut self) {
-        let Ok(mut p) = self.st.places.lock() else { return };
+        let Ok(mut p) = self.st.clients.places.lock() else {
+            return;
+        };
         match self.role {
             Role::Operator => p.operators = p.operators.saturating_sub(1),
             Role::Viewer => {
@@ -191,35 +212,41 @@ impl AppState {
     pub fn new(cfg: ServeConfig, scene: Scene, shared: Arc<Shared>, params: StrategyParams) -> AppState {
         AppState {
             cfg,
+            params,
             shared,
             net: NetMetrics::default(),
-            params,
-            lease: Mutex::new(None),
-            next_client: AtomicU32::new(1),
-            next_scan: AtomicU32::new(1),
-            tip_subscribers: AtomicU64::new(0),
-            scan_subscribers: AtomicU64::new(0),
-            telemetry: broadcast::channel(64).0,
-            lease_telemetry: broadcast::channel(64).0,
-            events: broadcast::channel(256).0,
-            scans: broadcast::channel(1024).0,
-            scanning: AtomicBool::new(false),
-            scan_cancel: AtomicBool::new(false),
-            shutdown: watch::channel(false).0,
             addr: Mutex::new(None),
-            estimates: Mutex::new(
-                scene
-                    .file
-                    .particles
-                    .iter()
-                    .map(|p| (p.id, (p.x_um * 1e-6, p.y_um * 1e-6)))
-                    .collect(),
-            ),
-            stopping: AtomicBool::new(false),
-            generation: AtomicU64::new(0),
-            push_now: Mutex::new(None),
-            latest_scan: Mutex::new(None),
-            places: Mutex::new(Places::default()),
+            clients: Clients {
+                lease: Mutex::new(None),
+                next_client: AtomicU32::new(1),
+                tip_subscribers: AtomicU64::new(0),
+                scan_subscribers: AtomicU64::new(0),
+                places: Mutex::new(Places::default()),
+            },
+            channels: Channels {
+                telemetry: broadcast::channel(64).0,
+                lease_telemetry: broadcast::channel(64).0,
+                events: broadcast::channel(256).0,
+                scans: broadcast::channel(1024).0,
+                shutdown: watch::channel(false).0,
+            },
+            activity: Activity {
+                scanning: AtomicBool::new(false),
+                scan_cancel: AtomicBool::new(false),
+                next_scan: AtomicU32::new(1),
+                stopping: AtomicBool::new(false),
+                generation: AtomicU64::new(0),
+                estimates: Mutex::new(
+                    scene
+                        .file
+                        .particles
+                        .iter()
+                        .map(|p| (p.id, (p.x_um * 1e-6, p.y_um * 1e-6)))
+                        .collect(),
+                ),
+                push_now: Mutex::new(None),
+                latest_scan: Mutex::new(None),
+            },
             scene,
         }
     }
@@ -227,7 +254,7 @@ impl AppState {
     /// Records where a particle is believed to be after a push.
     pub(crate) fn remember(&self, particle: u32, estimate: [f64; 2]) {
         if estimate.iter().all(|v| v.is_finite())
-            && let Ok(mut e) = self.estimates.lock()
+            && let Ok(mut e) = self.activity.estimates.lock()
         {
             e.insert(particle, (estimate[0], estimate[1]));
         }
@@ -235,19 +262,19 @@ impl AppState {
 
     pub(crate) fn broadcast_event(&self, m: &ServerMessage) {
         if let Ok(s) = serde_json::to_string(m) {
-            let _ = self.events.send(s.into());
+            let _ = self.channels.events.send(s.into());
         }
     }
 
     pub(crate) fn lease_holder(&self) -> Option<u32> {
-        *self.lease.lock().expect("lease lock")
+        *self.clients.lease.lock().expect("lease lock")
     }
 
     /// The instrument as it is now, for a client that has just connected: the particles where
     /// the controller believes they are, the tip, the phase, the lease, the push running and
     /// the latest scan.
     pub fn state_message(&self) -> ServerMessage {
-        let estimates = self.estimates.lock().map(|e| e.clone()).unwrap_or_default();
+        let estimates = self.activity.estimates.lock().map(|e| e.clone()).unwrap_or_default();
         let particles = self
             .scene
             .file
@@ -269,7 +296,7 @@ impl AppState {
             .lock()
             .map(|s| (s.stage, s.phase))
             .unwrap_or(([0.0; 3], "idle"));
-        let phase = if self.scanning.load(Relaxed) && phase == "idle" {
+        let phase = if self.activity.scanning.load(Relaxed) && phase == "idle" {
             "scanning"
         } else {
             phase
@@ -279,17 +306,31 @@ impl AppState {
             stage,
             phase: phase.into(),
             lease: self.lease_holder(),
-            push: self.push_now.lock().ok().and_then(|p| p.clone()),
-            scan: self.latest_scan.lock().ok().and_then(|s| s.clone()),
+            push: self.activity.push_now.lock().ok().and_then(|p| p.clone()),
+            scan: self.activity.latest_scan.lock().ok().and_then(|s| s.clone()),
+        }
+    }
+
+    /// The sample as it is now (the loop's snapshot of the particles).
+    pub(crate) fn surface_now(&self) -> Surface {
+        let particles = self
+            .shared
+            .snapshot
+            .lock()
+            .map(|s| s.particles.clone())
+            .unwrap_or_default();
+        Surface {
+            topography: self.scene.topography(),
+            spheres: particles.iter().map(|&(_, x, y, r)| Sphere { x, y, r }).collect(),
         }
     }
 
     /// A push ended: it no longer runs, and if it moved anything the latest scan is stale.
     pub(crate) fn push_ended(&self, started: bool) {
-        if let Ok(mut p) = self.push_now.lock() {
+        if let Ok(mut p) = self.activity.push_now.lock() {
             *p = None;
         }
-        if started && let Ok(mut s) = self.latest_scan.lock() {
+        if started && let Ok(mut s) = self.activity.latest_scan.lock() {
             if let Some(s) = s.as_mut() {
                 s.stale = true;
             }

@@ -6,10 +6,26 @@ use std::sync::atomic::Ordering::Relaxed;
 
 use nanopush_proto::ws::{ErrorCode, HapticAction};
 
-use crate::serve::control_loop::{HapticCommand, LoopCommand};
-use crate::serve::haptic::HapticMetrics;
-use crate::serve::state::AppState;
-use crate::serve::validate::{Refusal, number};
+use super::HapticMetrics;
+use crate::serve::command_checks::{Refusal, number};
+
+/// What the lease holder asks of haptic z-control.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum HapticCommand {
+    /// Approach, park, and give z to the hand.
+    Engage,
+    /// Park the tip and let the handle go.
+    Release,
+    /// Re-centre the handle: the tip stays, the hand gets its travel back.
+    Recenter,
+    /// New scales (each only when given).
+    Scale {
+        /// Tip metres per handle metre.
+        position_gain: Option<f64>,
+        /// Hand newtons per tip newton.
+        force_gain: Option<f64>,
+    },
+}
 
 /// The haptic handle for telemetry; `None` without a haptic link.
 pub fn haptic_telemetry(h: &HapticMetrics) -> Option<nanopush_proto::ws::HapticTelemetry> {
@@ -55,14 +71,16 @@ pub fn haptic_status(h: &HapticMetrics) -> serde_json::Value {
     })
 }
 
-/// A `haptic` command: checked here, carried out by the control loop.
+/// A `haptic` command, checked against the link's state (`h`), whether a push runs (`busy`)
+/// and the tip-sample pull-off force (`adhesion`, N); the control loop carries it out.
 pub fn haptic_command(
-    st: &AppState,
+    h: &HapticMetrics,
+    busy: bool,
+    adhesion: f64,
     action: HapticAction,
     nm_per_mm: Option<f64>,
     pull_off_at_hand_n: Option<f64>,
-) -> Result<(), Refusal> {
-    let h = &st.shared.metrics.haptic;
+) -> Result<HapticCommand, Refusal> {
     let cmd = match action {
         HapticAction::Engage | HapticAction::Recenter => {
             if !h.enabled.load(Relaxed) {
@@ -78,7 +96,7 @@ pub fn haptic_command(
                 ));
             }
             if action == HapticAction::Engage {
-                if st.shared.busy.load(Relaxed) {
+                if busy {
                     return Err(Refusal::new(
                         ErrorCode::Busy,
                         "a push is running (it owns z); engage haptic z-control after it",
@@ -101,7 +119,7 @@ pub fn haptic_command(
                 .map(|v| number("nm_per_mm", v, 0.01, 1000.0, false, "nm/mm"))
                 .transpose()?
                 .map(|v| v * 1e-9 / 1e-3);
-            let adhesion = st.scene.tip_sample().adhesion().max(1e-12);
+            let adhesion = adhesion.max(1e-12);
             let force_gain = pull_off_at_hand_n
                 .map(|v| number("pull_off_at_hand_n", v, 0.01, 10.0, false, "N"))
                 .transpose()?
@@ -112,12 +130,5 @@ pub fn haptic_command(
             }
         }
     };
-    if st.shared.commands.push(LoopCommand::Haptic(cmd)).is_err() {
-        st.shared.metrics.dropped_commands.fetch_add(1, Relaxed);
-        return Err(Refusal::new(
-            ErrorCode::Busy,
-            "the control loop's command queue is full; try again",
-        ));
-    }
-    Ok(())
+    Ok(cmd)
 }

@@ -1,5 +1,5 @@
 //! What the control loop asks of the operating system to keep its ticks on time: SCHED_FIFO
-//! priority and a core of its own (and, in [`crate::serve::no_halt`], a core that does not halt
+//! priority and a core of its own (and, in [`super::no_halt`], a core that does not halt
 //! between ticks).
 
 /// The control loop's SCHED_FIFO priority, when the system grants it (the bridge's device loop

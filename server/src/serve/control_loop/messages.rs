@@ -1,0 +1,85 @@
+//! What crosses between the control loop and the rest of the server: commands in, events and
+//! trace rows out.
+
+use crate::control::{Leg, Prepared};
+use crate::serve::haptic::HapticCommand;
+
+/// A push prepared off the loop (localization, model prediction, plan), ready to run.
+#[derive(Debug, Clone)]
+pub struct PushJob {
+    /// Run number (for the record's name).
+    pub run: u64,
+    /// Particle id.
+    pub particle: u32,
+    /// The legs, in order.
+    pub legs: Vec<Leg>,
+    /// The model prediction and geometry.
+    pub prepared: Prepared,
+}
+
+/// What the network side asks of the loop.
+#[derive(Debug)]
+pub enum LoopCommand {
+    /// Start a push.
+    Push(Box<PushJob>),
+    /// Stop the running push: the tip retracts.
+    Stop,
+    /// Finish: stop any push, retract, release the haptic force, end the thread.
+    Shutdown,
+    /// Haptic z-control.
+    Haptic(HapticCommand),
+}
+
+/// What the loop reports back.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LoopEvent {
+    /// A push ended.
+    RunDone {
+        /// Run number.
+        run: u64,
+        /// Particle.
+        particle: u32,
+        /// `ok` or a failure code.
+        outcome: &'static str,
+        /// The failure in words.
+        failure: Option<String>,
+        /// Estimated final centre (m).
+        estimate: [f64; 2],
+        /// True final centre (m), from the simulator, for the record.
+        truth: [f64; 2],
+        /// Legs run.
+        legs: usize,
+    },
+}
+
+/// One trace row for the recorder.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RecordMsg {
+    /// A push begins.
+    Begin {
+        /// Run number.
+        run: u64,
+        /// Particle.
+        particle: u32,
+    },
+    /// One tick of it.
+    Row {
+        /// Leg (1-based).
+        leg: u32,
+        /// Time (s).
+        t: f64,
+        /// Phase.
+        phase: &'static str,
+        /// Stage (m).
+        stage: [f64; 3],
+        /// Reading (V).
+        volts: f64,
+        /// Estimated displacement of this leg (m).
+        estimate: f64,
+    },
+    /// It ended (its summary follows as a [`LoopEvent::RunDone`]).
+    End {
+        /// Run number.
+        run: u64,
+    },
+}

@@ -1,0 +1,114 @@
+//! A push prepared off the loop and off the async workers: a quick local scan locates the
+//! particle, the move is planned and the model predicts it; then the job goes to the loop.
+
+use std::sync::atomic::Ordering::Relaxed;
+
+use nanopush_proto::ws::{ErrorCode, PushPath, ServerMessage};
+
+use crate::control::{MoveTarget, Prepared, plan_move};
+use crate::serve::command_checks::Refusal;
+use crate::serve::control_loop::{LoopCommand, PushJob};
+use crate::serve::state::AppState;
+
+/// Whether a particle of radius `r` (m) can be pushed to `p` (m): its centre at least a radius
+/// inside the stage's `[0, range]` square, so the particle stays on the stage and the tip, which
+/// stays inside it, can reach behind it.
+pub(crate) fn on_stage(p: (f64, f64), r: f64, range: f64) -> Result<(), Refusal> {
+    let inside = |v: f64| v >= r && v <= range - r;
+    if inside(p.0) && inside(p.1) {
+        return Ok(());
+    }
+    Err(Refusal::new(
+        ErrorCode::OutOfRange,
+        format!(
+            "target ({:.3}, {:.3}) µm is out of range for a particle {:.3} µm in radius; allowed: [{:.3}, {:.3}] µm in x and y",
+            p.0 * 1e6,
+            p.1 * 1e6,
+            r * 1e6,
+            r * 1e6,
+            (range - r) * 1e6
+        ),
+    ))
+}
+
+pub(crate) fn run_done_failed(st: &AppState, particle: u32, outcome: &str, failure: String) {
+    st.push_ended(false);
+    st.shared.busy.store(false, Relaxed);
+    st.broadcast_event(&ServerMessage::RunDone {
+        particle,
+        outcome: outcome.into(),
+        failure: Some(failure),
+        estimate: None,
+        record: None,
+        record_error: None,
+    });
+}
+
+/// Off the loop: locate the particle in a quick local scan, plan, predict; then hand the job
+/// to the loop.
+pub(crate) fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, generation: u64, by: u32) {
+    let f = &st.scene.file;
+    let Some(part) = f.particles.iter().find(|p| p.id == particle) else {
+        return;
+    };
+    let nominal = st
+        .activity
+        .estimates
+        .lock()
+        .ok()
+        .and_then(|e| e.get(&particle).copied())
+        .unwrap_or((part.x_um * 1e-6, part.y_um * 1e-6));
+    let plan = match plan_move(&st.scene, &st.surface_now(), nominal, part.radius_nm * 1e-9, target) {
+        Ok(p) => p,
+        Err(e) => return run_done_failed(st, particle, "plan", format!("particle {particle}: {e}")),
+    };
+    // A target the particle cannot reach whole, with the tip behind it, fails now, not after a
+    // push that runs into the stage's edge until its time-out.
+    if let Err(r) = on_stage(plan.target, plan.located.radius, f.stage.range_um * 1e-6) {
+        return run_done_failed(st, particle, "plan", format!("particle {particle}: {}", r.message));
+    }
+    let (located, legs) = (plan.located, plan.legs);
+    if legs.is_empty() {
+        // Already there (within 10 nm): nothing to push.
+        st.remember(particle, [located.x, located.y]);
+        st.push_ended(false);
+        st.shared.busy.store(false, Relaxed);
+        st.broadcast_event(&ServerMessage::RunDone {
+            particle,
+            outcome: "ok".into(),
+            failure: None,
+            estimate: Some([located.x, located.y]),
+            record: None,
+            record_error: None,
+        });
+        return;
+    }
+    let prepared = match Prepared::new(&st.scene, particle, located.radius, &st.params) {
+        Ok(p) => p,
+        Err(e) => return run_done_failed(st, particle, "error", e.to_string()),
+    };
+    if st.activity.generation.load(Relaxed) != generation || st.activity.stopping.load(Relaxed) {
+        return run_done_failed(st, particle, "stopped", "stopped before the push began".into());
+    }
+    let run = st.shared.runs.fetch_add(1, Relaxed) + 1;
+    let mut path = vec![[located.x, located.y]];
+    path.extend(legs.iter().map(|l| [l.to.0, l.to.1]));
+    let started = PushPath { particle, path, by };
+    let job = PushJob {
+        run,
+        particle,
+        legs,
+        prepared,
+    };
+    // Said after the job is queued: a `stop` sent on hearing `push_started` reaches the loop
+    // after the push, and stops it.
+    if let Ok(mut p) = st.activity.push_now.lock() {
+        *p = Some(started.clone());
+    }
+    if st.shared.commands.push(LoopCommand::Push(Box::new(job))).is_err() {
+        st.shared.metrics.dropped_commands.fetch_add(1, Relaxed);
+        run_done_failed(st, particle, "error", "the control loop's command queue is full".into());
+        return;
+    }
+    st.broadcast_event(&ServerMessage::PushStarted(started));
+}

@@ -1,0 +1,127 @@
+//! One WebSocket connection: a receive loop ([`receive`]: rate limit, size limit, one command
+//! per message, handled in [`commands`] under the roles and the [`lease`]) and a send loop
+//! ([`send`]: replies with back-pressure, events, telemetry and scan lines, keep-alive, the
+//! per-frame send budget). Both are generic over `Sink`/`Stream`, so a session runs over plain
+//! channels in the tests.
+
+mod commands;
+mod lease;
+mod receive;
+mod send;
+#[cfg(test)]
+pub(crate) mod tests;
+
+use std::collections::HashSet;
+use std::net::SocketAddr;
+use std::sync::atomic::Ordering::Relaxed;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use axum::extract::ws::{Message, Utf8Bytes, WebSocket};
+use futures_util::{Sink, Stream, StreamExt};
+use nanopush_proto::ws::{Role, ServerMessage, Stream as WsStream, WS_VERSION};
+use tokio::sync::{mpsc, watch};
+
+use crate::serve::state::{AppState, to_text};
+use receive::{Ended, Inbox};
+use send::Outbox;
+
+/// Longest a single frame may wait to be sent to a client before the client is dropped.
+pub const SEND_BUDGET: Duration = Duration::from_secs(5);
+
+/// The smallest scan side (µm): 10 nm.
+pub const MIN_SCAN_UM: f64 = 0.01;
+
+/// The largest WebSocket message a session reads (bytes): anything above `--max-message-bytes`
+/// and up to this gets `too_large` and the connection stays; above it the connection is closed.
+pub const HARD_CAP: usize = 8 << 20;
+
+/// How long a reply may wait for room in a client's reply queue before the client, which has
+/// read none of its replies for that long, is disconnected.
+pub const REPLY_PATIENCE: Duration = Duration::from_secs(30);
+
+/// Per-connection state for message handling.
+pub(crate) struct Client {
+    id: u32,
+    role: Role,
+    streams: HashSet<WsStream>,
+    /// The rate limit's token bucket.
+    tokens: f64,
+    /// When the bucket was last filled.
+    last: Instant,
+}
+
+/// One WebSocket connection from `peer`, with `role`.
+pub(crate) async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketAddr) {
+    let (sink, stream) = socket.split();
+    run(st, sink, stream, role, peer).await;
+}
+
+/// A session over any sink and stream of WebSocket messages: the welcome and the state first,
+/// then the receive loop here and the send loop on a task of its own; when either ends, the
+/// lease and the subscriptions are given back and the send loop is given 2 s to finish.
+pub(crate) async fn run<S, R, E>(st: Arc<AppState>, sink: S, stream: R, role: Role, peer: SocketAddr)
+where
+    S: Sink<Message> + Unpin + Send + 'static,
+    R: Stream<Item = Result<Message, E>> + Unpin,
+{
+    let id = st.clients.next_client.fetch_add(1, Relaxed);
+    tracing::info!("client {id} ({role:?}) connected from {peer}");
+    let (reply_tx, replies) = mpsc::channel::<Utf8Bytes>(64);
+    let (streams_tx, streams) = watch::channel(HashSet::<WsStream>::new());
+    let welcome = ServerMessage::Welcome {
+        version: WS_VERSION,
+        client: id,
+        role,
+        lease: st.lease_holder(),
+        scene: st.scene.file.name.clone(),
+        tick_hz: 1.0 / st.params.tick,
+    };
+    let _ = reply_tx.try_send(to_text(&welcome));
+    let _ = reply_tx.try_send(to_text(&st.state_message()));
+
+    // When the peer last sent anything (a command, a pong): the sender's keep-alive closes a
+    // connection whose peer stayed silent past the dead-peer time-out.
+    let heard = Arc::new(Mutex::new(Instant::now()));
+    let outbox = Outbox {
+        id,
+        role,
+        replies,
+        streams,
+        heard: heard.clone(),
+    };
+    let mut send = tokio::spawn(send::send_loop(st.clone(), sink, outbox));
+    let mut client = Client {
+        id,
+        role,
+        streams: HashSet::new(),
+        tokens: st.cfg.max_rate,
+        last: Instant::now(),
+    };
+    let inbox = Inbox {
+        replies: &reply_tx,
+        streams: &streams_tx,
+        heard: &heard,
+    };
+    let ended = receive::receive_loop(&st, stream, &mut client, inbox, &mut send).await;
+    lease::on_disconnect(&st, id);
+    for s in &client.streams {
+        commands::counter(&st, *s).fetch_sub(1, Relaxed);
+    }
+    // On shutdown the send task says `shutdown` and closes before the reply queue goes (else it
+    // could see the queue closed first and end silently); on a disconnect the closed queue is
+    // what ends it. (A finished JoinHandle must not be polled again.)
+    let mut send_done = ended == Ended::SenderDone;
+    if ended == Ended::ShuttingDown {
+        if tokio::time::timeout(Duration::from_secs(2), &mut send).await.is_err() {
+            send.abort();
+        }
+        send_done = true;
+    }
+    drop(reply_tx);
+    if !send_done && tokio::time::timeout(Duration::from_secs(2), &mut send).await.is_err() {
+        // A peer that stopped reading: do not leave its sender behind.
+        send.abort();
+    }
+    tracing::info!("client {id} disconnected");
+}

@@ -1,0 +1,139 @@
+//! The send loop of one session: replies (with back-pressure), events, telemetry and scan lines
+//! merged onto the socket, keep-alive pings, the dead-peer time-out and the per-frame send
+//! budget. A slow client skips telemetry and is told how many frames (`lagged`).
+
+use std::collections::HashSet;
+use std::sync::atomic::Ordering::Relaxed;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use axum::body::Bytes;
+use axum::extract::ws::{CloseFrame, Message, Utf8Bytes};
+use futures_util::{Sink, SinkExt};
+use nanopush_proto::ws::{Role, ServerMessage, Stream as WsStream};
+use tokio::sync::{broadcast, mpsc, watch};
+
+use super::SEND_BUDGET;
+use crate::serve::frames::{Frames, Next};
+use crate::serve::state::{AppState, to_text};
+
+/// What the send loop reads besides the server's broadcasts.
+pub(super) struct Outbox {
+    /// The client's id.
+    pub id: u32,
+    /// Its role (only an operator can hold the lease).
+    pub role: Role,
+    /// Replies to its commands, in order.
+    pub replies: mpsc::Receiver<Utf8Bytes>,
+    /// The streams it subscribed to.
+    pub streams: watch::Receiver<HashSet<WsStream>>,
+    /// When the peer last sent anything (a command, a pong).
+    pub heard: Arc<Mutex<Instant>>,
+}
+
+/// Sends until the replies close, the server shuts down (after saying so), the peer stays silent
+/// past the dead-peer time-out, or a frame waits past [`SEND_BUDGET`].
+pub(super) async fn send_loop<S>(st: Arc<AppState>, mut sink: S, mut out: Outbox)
+where
+    S: Sink<Message> + Unpin,
+{
+    let id = out.id;
+    let mut ping = tokio::time::interval(st.cfg.ws_ping);
+    ping.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    ping.tick().await;
+    let mut events = st.channels.events.subscribe();
+    // Telemetry: the lease holder's frames come first, on a channel of its own read while
+    // this client holds the lease (`frames.rs`).
+    let mut telemetry = Frames::new(st.channels.telemetry.subscribe());
+    let mut scans = st.channels.scans.subscribe();
+    let mut shutdown = st.channels.shutdown.subscribe();
+    let mut wants = HashSet::new();
+    loop {
+        // Only an operator can hold the lease: a viewer's session never looks (500 of them
+        // would each take the lease's lock for every message).
+        if out.role == Role::Operator {
+            telemetry.hold(st.lease_holder() == Some(id), &st.channels.lease_telemetry);
+        }
+        let msg = tokio::select! {
+            r = out.replies.recv() => match r {
+                Some(m) => Message::Text(m),
+                None => break,
+            },
+            r = events.recv() => match r {
+                Ok(m) => Message::Text(m),
+                Err(broadcast::error::RecvError::Lagged(n)) => lagged(&st, n),
+                Err(broadcast::error::RecvError::Closed) => break,
+            },
+            r = telemetry.next(), if wants.contains(&WsStream::Tip) => match r {
+                Next::Frame(_, m) => {
+                    st.net.sent.fetch_add(1, Relaxed);
+                    Message::Text(m)
+                }
+                Next::Lagged(n) => lagged(&st, n),
+                Next::Closed => break,
+            },
+            r = scans.recv(), if wants.contains(&WsStream::Scan) => match r {
+                Ok(m) => m,
+                Err(broadcast::error::RecvError::Lagged(n)) => lagged(&st, n),
+                Err(broadcast::error::RecvError::Closed) => break,
+            },
+            r = out.streams.changed() => {
+                if r.is_err() {
+                    break;
+                }
+                wants = out.streams.borrow_and_update().clone();
+                // Drop what queued before the subscription.
+                telemetry.renew();
+                scans = scans.resubscribe();
+                continue;
+            }
+            _ = ping.tick() => {
+                let silent = out.heard.lock().map_or(Duration::ZERO, |t| t.elapsed());
+                if silent > st.cfg.ws_timeout {
+                    tracing::info!("client {id}: nothing heard for {:.0} s; closing (a dead peer)", silent.as_secs_f64());
+                    let _ = sink.send(close(1001, "no answer to pings")).await;
+                    break;
+                }
+                Message::Ping(Bytes::from_static(b"nanopush"))
+            }
+            _ = shutdown.changed() => {
+                let bye = to_text(&ServerMessage::Shutdown { reason: "server shutting down".into() });
+                let _ = sink.send(Message::Text(bye)).await;
+                let _ = sink.send(close(1001, "server shutting down")).await;
+                break;
+            }
+        };
+        if !send_within_budget(&mut sink, msg, id).await {
+            break;
+        }
+    }
+}
+
+/// The send budget: a peer that takes more than [`SEND_BUDGET`] to take one frame (it stopped
+/// reading and its socket is full) is dropped; the others never wait for it.
+async fn send_within_budget<S: Sink<Message> + Unpin>(sink: &mut S, msg: Message, id: u32) -> bool {
+    match tokio::time::timeout(SEND_BUDGET, sink.send(msg)).await {
+        Ok(Ok(())) => true,
+        Ok(Err(_)) => false,
+        Err(_) => {
+            tracing::info!(
+                "client {id}: a frame waited over {} s to be sent; closing (a reader that stopped reading)",
+                SEND_BUDGET.as_secs()
+            );
+            false
+        }
+    }
+}
+
+fn close(code: u16, reason: &'static str) -> Message {
+    Message::Close(Some(CloseFrame {
+        code,
+        reason: reason.into(),
+    }))
+}
+
+/// Frames skipped by a slow client, counted and announced.
+fn lagged(st: &AppState, n: u64) -> Message {
+    st.net.dropped_frames.fetch_add(n, Relaxed);
+    Message::Text(to_text(&ServerMessage::Lagged { skipped: n }))
+}
