@@ -57,7 +57,7 @@ test: setup fmt-check clippy prometheus-check unit web-test
 ## MUTANTS_TESTS holds the library test filters the mutants run against, one or several (they go
 ## to the test binary: MUTANTS_TESTS='physics:: numerics::'). Test-only modules
 ## (tests.rs, *_tests.rs, the Eq 17 reference) are not mutated.
-MUTANTS_FILES ?= server/src/physics/**/*.rs server/src/numerics/**/*.rs server/src/control/**/*.rs server/src/serve/validate.rs proto/src/**/*.rs
+MUTANTS_FILES ?= server/src/physics/**/*.rs server/src/numerics/**/*.rs server/src/control/**/*.rs server/src/serve/command_checks.rs proto/src/**/*.rs
 MUTANTS_TESTS ?=
 CARGO_MUTANTS_ARGS ?=
 mutants:

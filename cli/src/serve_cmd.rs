@@ -6,9 +6,9 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args;
+use nanopush::serve::app_state::ServeConfig;
 use nanopush::serve::control_loop::LoopConfig;
 use nanopush::serve::haptic::HapticMode;
-use nanopush::serve::state::ServeConfig;
 
 /// Arguments of `nanopush serve`.
 #[derive(Args, Debug)]
@@ -232,7 +232,7 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         cpu: a.cpu,
         no_halt: !a.allow_cpu_halt,
         haptic: a.haptic != "none",
-        haptic_timeout_ms: a.haptic_timeout_ms,
+        haptic_timeout: std::time::Duration::from_secs_f64(a.haptic_timeout_ms * 1e-3),
     };
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)

@@ -1,8 +1,10 @@
 //! Every message type that crosses a nanopush process or network boundary.
 //!
-//! So far: the JSON documents the `nanopush` command line prints with `--json`
-//! ([`model::ModelReport`], [`model::ForceCurveReport`]). All quantities are SI (m, N, s, kg,
-//! rad, J, Pa); the key names carry no unit suffix because every value is SI. Each document
+//! The JSON documents the `nanopush` command line prints with `--json`
+//! ([`model::ModelReport`], [`model::ForceCurveReport`]), the WebSocket protocol ([`ws`]) and
+//! the haptic link's payloads ([`haptic`]). All quantities are SI (m, N, s, kg, rad, J, Pa); a
+//! key names its unit only where the value is not in SI base units, or where the operator's
+//! hand and the tip meet in one object (the convention: `proto/README.md`, "Units"). Each document
 //! carries `schema` (its name) and `version` ([`VERSION`]) so a reader can reject what it does
 //! not understand.
 //!

@@ -14,7 +14,7 @@
 
 use std::time::Instant;
 
-use nanopush::control::move_plan::{MoveTarget, plan_move};
+use nanopush::control::locate_and_plan::{MoveTarget, plan_move};
 use nanopush::control::{Prepared, RunRow};
 use nanopush::instrument::Afm;
 use nanopush::physics::friction;

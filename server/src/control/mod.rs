@@ -2,17 +2,17 @@
 
 pub mod bilateral;
 pub mod estimator;
-pub mod move_plan;
-pub mod plan;
-mod run;
+pub mod legs;
+pub mod locate_and_plan;
 pub mod strategy;
+mod strategy_run;
 
 pub use bilateral::{Bilateral, BilateralParams};
 pub use estimator::{Hxy, PeakDetector, PushPrediction, RetractPlan, predict};
-pub use plan::{Leg, Obstacle, PlanError, Planner};
-pub use run::{Prepared, PushRequest, RunError, RunRow, StrategyRun, push_once};
+pub use legs::{Leg, Obstacle, PlanError, Planner};
 pub use strategy::{Control, Failure, Phase, PushTask, Strategy, StrategyParams, Summary};
+pub use strategy_run::{Prepared, PushRequest, RunError, RunRow, StrategyRun, push_once};
 
 #[cfg(test)]
 mod tests;
-pub use move_plan::{MoveError, MovePlan, MoveTarget, locate_near, plan_move};
+pub use locate_and_plan::{MoveError, MovePlan, MoveTarget, locate_near, plan_move};

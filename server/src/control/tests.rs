@@ -232,7 +232,7 @@ fn push_as_the_cli_does(scene: &Scene, distance: f64) -> (StrategyRun, f64) {
     let p = scene.pushed_particle();
     let click = (p.x_um * UM, p.y_um * UM);
     let mut afm = Afm::from_scene(scene, (click.0 - 8.0 * UM).max(0.0), click.1, 1e-3);
-    let (_, located) = crate::control::move_plan::locate_near(
+    let (_, located) = crate::control::locate_and_plan::locate_near(
         &afm.surface(),
         crate::scan::Tip::from_scene(scene),
         crate::scan::ScanParams::from_scene(scene),
@@ -600,11 +600,11 @@ fn every_shipped_scene_pushes_its_particle() {
         let (x, y, r) = (p.x_um * UM, p.y_um * UM, p.radius_nm * 1e-9);
         let surface = crate::scan::Surface::from_scene(&s);
         let distance = (2.0 * r).clamp(0.1 * UM, 1.0 * UM);
-        let target = crate::control::move_plan::MoveTarget::Distance {
+        let target = crate::control::locate_and_plan::MoveTarget::Distance {
             distance,
             direction: (1.0, 0.0),
         };
-        let plan = crate::control::move_plan::plan_move(&s, &surface, (x, y), r, target)
+        let plan = crate::control::locate_and_plan::plan_move(&s, &surface, (x, y), r, target)
             .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         let found = plan.located;
         let start = x - (s.file.strategy.approach_distance_um + 2.0) * UM;
@@ -676,7 +676,7 @@ fn the_strategy_defaults_are_the_readmes() {
     );
     assert_eq!((f.approach_distance_um, f.phase_timeout_s), (4.25, 120.0));
     assert_eq!((strategy::HOLD, strategy::BACK_OFF), (0.05, 100e-9));
-    assert_eq!(crate::control::move_plan::LOCAL_PIXELS, 128);
+    assert_eq!(crate::control::locate_and_plan::LOCAL_PIXELS, 128);
 }
 
 /// The README on the shipped scenes: `minimal` aims at β = 45° because "at 30° its push bends

@@ -71,7 +71,7 @@ impl Cantilever {
         self.k_c / self.c3()
     }
 
-    /// Effective mass `m_c* = k_z/(4π² f_r²)` (kg) — the print omits the square (ERRATA item 8).
+    /// Effective mass `m_c* = k_z/(4π² f_r²)` (kg) — the print omits the square (docs/errata.md item 8).
     pub fn effective_mass(&self) -> f64 {
         self.k_z() / (4.0 * std::f64::consts::PI.powi(2) * self.f_r * self.f_r)
     }
@@ -136,7 +136,7 @@ mod tests {
 
     #[test]
     fn paper_stiffnesses() {
-        // ERRATA item 9.
+        // docs/errata.md item 9.
         let c = paper();
         assert!((c.c2() - 0.005605).abs() < 1e-6);
         assert!((c.c3() - 0.06484).abs() < 1e-5);

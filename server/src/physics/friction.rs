@@ -17,7 +17,7 @@ pub fn no_sticking_to_tip(r_a: f64, r_eff: f64, beta: f64) -> bool {
 /// `μ_as^s ≥ R̃ cos β / (2Rₐ) = cos β / (2(1 + Rₐ/Rₜ))`.
 ///
 /// For `Rₜ = 30 nm` it is `0.375 cos β` at `Rₐ = 10 nm` and `0.0146 cos β` at `Rₐ = 1 µm`
-/// (the print swaps the two numbers, ERRATA item 6).
+/// (the print swaps the two numbers, docs/errata.md item 6).
 pub fn mu_lower_bound(r_a: f64, r_t: f64, beta: f64) -> f64 {
     beta.cos() / (2.0 * (1.0 + r_a / r_t))
 }
@@ -25,7 +25,7 @@ pub fn mu_lower_bound(r_a: f64, r_t: f64, beta: f64) -> f64 {
 /// Eq 16 (upper part, from `y* ≥ 0` in Eq 15): `μ_as^s ≤ (k_y cot α + k_z tan α)/(k_y − k_z)`.
 ///
 /// 3.75 for `α = 15°`, `k_z = 8 N/m`, `k_y = 1427 N/m` (the print's 3.45 is an arithmetic slip,
-/// ERRATA item 7). Infinite when `α = 0` or `k_y ≤ k_z`: then the denominator of Eq 15 stays
+/// docs/errata.md item 7). Infinite when `α = 0` or `k_y ≤ k_z`: then the denominator of Eq 15 stays
 /// positive for every μ.
 pub fn mu_upper_bound(k_y: f64, k_z: f64, alpha: f64) -> f64 {
     if alpha <= 0.0 || k_y <= k_z {

@@ -1,7 +1,7 @@
 //! The paper's physics (Sec 2): pure functions and small types in SI units, no I/O, no async.
 //!
 //! Each module is named after the paper's concept and states its equations in its doc comments,
-//! with the corrections of `shared/paper/ERRATA.md` where the print is wrong.
+//! with the corrections of `docs/errata.md` where the print is wrong.
 
 pub mod cantilever;
 pub mod contact;

@@ -7,11 +7,11 @@
 
 mod error;
 pub mod file;
-mod validate;
+mod ranges;
 
 pub use error::{SceneError, SceneWarning};
 pub use file::SceneFile;
-pub use validate::{MAX_SCAN_PIXELS, MIN_SCAN_PIXELS, Range};
+pub use ranges::{MAX_SCAN_PIXELS, MIN_SCAN_PIXELS, Range};
 
 use crate::physics::cantilever::Cantilever;
 use crate::physics::contact::jkr::{Jkr, contact_modulus};
@@ -76,7 +76,7 @@ impl Scene {
 
     /// Validates a scene that is already parsed (e.g. a sweep's copy with one field changed).
     pub fn from_file(origin: &str, file: SceneFile) -> Result<Scene, SceneError> {
-        validate::validate(origin, &file)?;
+        ranges::validate(origin, &file)?;
         let mut scene = Scene {
             file,
             origin: origin.into(),

@@ -13,11 +13,11 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use nanopush_proto::ws::{Role, ServerMessage};
 
+use crate::serve::app_state::{AppState, Place};
 use crate::serve::haptic::api::haptic_status;
 use crate::serve::metrics::render;
 use crate::serve::records;
 use crate::serve::session::{HARD_CAP, session};
-use crate::serve::state::{AppState, Place};
 
 /// The router.
 pub fn router(state: Arc<AppState>) -> Router {

@@ -8,9 +8,9 @@ use std::time::{Duration, Instant};
 
 use crate::instrument::Afm;
 use crate::scene::Scene;
+use crate::serve::app_state::{AppState, ServeConfig};
 use crate::serve::control_loop::{ControlLoop, LoopCommand, LoopConfig, Shared};
 use crate::serve::haptic::{HapticMode, Supervisor};
-use crate::serve::state::{AppState, ServeConfig};
 use crate::serve::{app, guard, records, telemetry};
 
 /// A plain HTTP connection idle this long is closed (WebSockets keep themselves alive with pings).

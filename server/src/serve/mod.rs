@@ -2,6 +2,7 @@
 //! WebSocket protocol of `proto/README.md`, roles and the control lease, metrics, recording.
 
 pub mod app;
+pub mod app_state;
 pub mod command_checks;
 pub mod control_loop;
 pub mod frames;
@@ -14,7 +15,6 @@ pub mod push_job;
 pub mod records;
 pub mod scan_job;
 pub mod session;
-pub mod state;
 pub mod telemetry;
 
 pub use lifecycle::{IDLE_HTTP, ServeError, Started, run};

@@ -6,9 +6,9 @@ use std::sync::atomic::Ordering::Relaxed;
 use nanopush_proto::ws::{ErrorCode, PushPath, ServerMessage};
 
 use crate::control::{MoveTarget, Prepared, plan_move};
+use crate::serve::app_state::AppState;
 use crate::serve::command_checks::Refusal;
 use crate::serve::control_loop::{LoopCommand, PushJob};
-use crate::serve::state::AppState;
 
 /// Whether a particle of radius `r` (m) can be pushed to `p` (m): its centre at least a radius
 /// inside the stage's `[0, range]` square, so the particle stays on the stage and the tip, which

@@ -8,8 +8,8 @@ use axum::extract::ws::Message;
 use nanopush_proto::ws::{ScanLineHeader, ScanNow, ServerMessage};
 
 use crate::scan::{HeightImage, ScanParams, Scanner, Tip, find_particles, write_gsf};
+use crate::serve::app_state::{AppState, to_text};
 use crate::serve::records::{self, write_atomic};
-use crate::serve::state::{AppState, to_text};
 
 /// A scan on its own thread: lines at the scan line rate to the `scan` stream, then the GSF
 /// record. Tapping never moves particles: it images a snapshot of the sample.

@@ -7,10 +7,10 @@ use std::time::Duration;
 use nanopush_proto::ws::{ServerMessage, Telemetry};
 use tokio::sync::mpsc;
 
+use crate::serve::app_state::{AppState, to_text};
 use crate::serve::control_loop::LoopEvent;
 use crate::serve::haptic::api::haptic_telemetry;
 use crate::serve::records;
-use crate::serve::state::{AppState, to_text};
 
 /// A record's name, or the reason it is missing, as the two fields of a message.
 fn split(r: records::Recorded) -> (Option<String>, Option<String>) {

@@ -484,19 +484,12 @@ mod tests {
         s.model.probe(s.t, &s.x[..s.model.len()], &s.mode)
     }
 
-    /// README, "The quasi-static reduction against the full model" and "Which is right", rotation
-    /// off, the paper scene at 1 µm/s up to 0.1 ms past the shear (the full model then rings at
-    /// up to ~6·10⁴ steps per ms, so the report's 20 ms are not run here). With the report's 10 µs
-    /// samples: until the shear the two models' traces agree to 1.0e-15 m (ζ_z; y far closer),
-    /// and both shear at t* = 6.2078 ms, 0.3 ns apart. The first slip: the reduced particle
-    /// jumps 1.77 nm onto the kinetic balance and slides (friction μᵏN); the full model's moves
-    /// 2.17 nm within 0.1 µs, 1.23 times as far, and sticks again, its substrate friction over
-    /// the next 0.1 ms at 0.18 µN, below μᵏN = 0.28 µN. The spring-slider's figures at the
-    /// shear: ΔF = (μˢ − μᵏ)N = 0.14 µN released, the contact loaded at 90 N/m (the slope of
-    /// the substrate friction against stage travel), so with the cantilever's 1.1e-11 kg the
-    /// critical drive `ΔF/√(km)` is 4.6 mm/s. At the slip the tip slides up the particle: the
-    /// full model's contact angle grows 0.2° between the 6.20 and 6.21 ms samples and its ζ_z
-    /// turns from negative to +2.08 nm, where the reduction's is −1.98 nm.
+    /// Pins the figures of docs/validation.md, "The quasi-static reduction against the full
+    /// model": the paper scene, rotation off, at 1 µm/s up to 0.1 ms past the shear (the full
+    /// model then rings at ~6·10⁴ steps per ms, so the report's 20 ms are not run here). Until
+    /// the shear both models agree and shear together; at the first slip the full model's
+    /// particle moves farther than the reduction's jump and sticks again, and the tip slides
+    /// up the particle (ζ_z changes sign in the full model only). The numbers are asserted below.
     #[test]
     fn the_full_models_first_slip_moves_2_17_nm_where_the_reduction_jumps_1_77_nm() {
         let p = Scene::default_scene().push_params();

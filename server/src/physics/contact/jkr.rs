@@ -1,4 +1,4 @@
-//! JKR contact mechanics, **Eq 5 corrected** (ERRATA item 5).
+//! JKR contact mechanics, **Eq 5 corrected** (docs/errata.md item 5).
 //!
 //! For a sphere of radius `R` on a flat (or two spheres with the effective radius `R̃`), with
 //! work of adhesion `w` and the conventional contact modulus `K = (4/3)E*`,
@@ -185,7 +185,7 @@ mod tests {
 
     #[test]
     fn printed_eq5_is_not_self_consistent() {
-        // With the printed 3π in P(a) the round trip fails by tens of percent (ERRATA item 5).
+        // With the printed 3π in P(a) the round trip fails by tens of percent (docs/errata.md item 5).
         let j = paper_contact();
         let p = 1e-7;
         let a = j.radius_from_load(p).unwrap();

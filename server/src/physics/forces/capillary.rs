@@ -15,7 +15,7 @@
 //!   distance as the print's unconditional `− F_s-s` suggests; nanopush models it as the JKR
 //!   adhesion of the contact (Eq 5 with work of adhesion `w = γ_SL`, see `contact::jkr`), so it
 //!   is not added here a second time;
-//! - the Kelvin radius uses the natural log (ERRATA item 4).
+//! - the Kelvin radius uses the natural log (docs/errata.md item 4).
 
 use crate::numerics::dual::Real;
 
@@ -27,7 +27,7 @@ pub const KELVIN_LENGTH: f64 = 0.54e-9;
 pub const KELVIN_RADIUS_CAP: f64 = 100e-9;
 
 /// Kelvin radius of the meniscus (m) at relative humidity `rh` = P/Pₛ ∈ [0, 1):
-/// `r₁ = −0.54 nm / ln(P/Pₛ)` (natural log, ERRATA item 4); 0.78 nm at 50 % RH, 1.7 nm at
+/// `r₁ = −0.54 nm / ln(P/Pₛ)` (natural log, docs/errata.md item 4); 0.78 nm at 50 % RH, 1.7 nm at
 /// about 73 % RH. Returns 0 for `rh = 0` (no meniscus) and at most [`KELVIN_RADIUS_CAP`].
 pub fn kelvin_radius(rh: f64) -> f64 {
     if rh.is_nan() || rh <= 0.0 {
@@ -124,7 +124,7 @@ mod tests {
 
     #[test]
     fn kelvin_radius_values() {
-        // ERRATA item 4: 0.78 nm at 50 % RH; 1.7 nm at about 73 % RH.
+        // docs/errata.md item 4: 0.78 nm at 50 % RH; 1.7 nm at about 73 % RH.
         assert!((kelvin_radius(0.5) - 0.779e-9).abs() < 0.005e-9);
         let rh_paper = (-0.54f64 / 1.7).exp();
         assert!((rh_paper - 0.728).abs() < 0.002);
@@ -150,7 +150,7 @@ mod tests {
 
     #[test]
     fn adhesion_as_is_905_nn() {
-        // A_as = 4π Rₐ γ_L = 905 nN for Rₐ = 1 µm (ERRATA, "other figures"): the substrate form
+        // A_as = 4π Rₐ γ_L = 905 nN for Rₐ = 1 µm (docs/errata.md, "The paper's figures reproduced as tests"): the substrate form
         // of Eq 3 at contact.
         let c = Capillary::new(1e-6, 2.0 * 0.072, 0.73, 0.0, A0);
         let f = c.force(Meniscus::Formed, A0);

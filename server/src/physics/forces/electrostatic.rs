@@ -26,7 +26,7 @@ pub struct Electrostatic {
 }
 
 impl Electrostatic {
-    /// Eq 4: `F_el(h) = −ε₀U²S/(2h²)` (N, attractive), with `h` clamped to `a₀` (ERRATA item 3).
+    /// Eq 4: `F_el(h) = −ε₀U²S/(2h²)` (N, attractive), with `h` clamped to `a₀` (docs/errata.md item 3).
     pub fn force<T: Real>(&self, h: T) -> T {
         let h = h.max_c(self.a0);
         -(T::cst(EPSILON_0 * self.voltage * self.voltage * self.area * 0.5) / (h * h))
@@ -39,7 +39,7 @@ mod tests {
 
     #[test]
     fn paper_figures() {
-        // ERRATA: Rt = 30 nm, Ra = 250 nm, r1 = 1.7 nm, U = 0.25 V: 158 pN at 1 nm, 1.6 pN at 10 nm.
+        // docs/errata.md: Rt = 30 nm, Ra = 250 nm, r1 = 1.7 nm, U = 0.25 V: 158 pN at 1 nm, 1.6 pN at 10 nm.
         let r_eff = 30e-9 * 250e-9 / 280e-9;
         let e = Electrostatic {
             voltage: 0.25,

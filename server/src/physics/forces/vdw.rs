@@ -1,5 +1,5 @@
 //! Van der Waals forces: tip-particle (sphere-sphere, Eq 1) and particle-substrate
-//! (sphere-plane, Eq 2), both corrected (ERRATA items 1-3).
+//! (sphere-plane, Eq 2), both corrected (docs/errata.md items 1-3).
 //!
 //! Sign convention of the paper: a negative force is attractive.
 
@@ -33,7 +33,7 @@ fn hamaker_energy_kernel(x: f64) -> f64 {
 ///
 /// Written as `W = −H/6 · k(x)` with `x = 4RₐRₜ/(C²−r₋²)` and `k` from
 /// [`hamaker_energy_kernel`], which is the same expression without cancellation.
-/// `h` is taken as `max(h, a0)` (ERRATA item 3).
+/// `h` is taken as `max(h, a0)` (docs/errata.md item 3).
 pub fn sphere_sphere_energy(hamaker: f64, r_t: f64, r_a: f64, h: f64, a0: f64) -> f64 {
     let h = h.max(a0);
     let r_plus = r_t + r_a;
@@ -43,7 +43,7 @@ pub fn sphere_sphere_energy(hamaker: f64, r_t: f64, r_a: f64, h: f64, a0: f64) -
     -hamaker / 6.0 * hamaker_energy_kernel(4.0 * r_a * r_t / v)
 }
 
-/// Sphere-sphere van der Waals force (N), **Eq 1 corrected** (ERRATA item 1).
+/// Sphere-sphere van der Waals force (N), **Eq 1 corrected** (docs/errata.md item 1).
 ///
 /// `F = −H C/3 {2RₐRₜ/(h²(h+2r₊)²) + 2RₐRₜ/(C²−r₋²)² − 1/(h(h+2r₊)) + 1/(C²−r₋²)}`, the exact
 /// `−dW/dh` of [`sphere_sphere_energy`]; the print has the signs of the last two terms flipped.
@@ -74,7 +74,7 @@ pub fn sphere_plane_energy(hamaker: f64, r_a: f64, h: f64, a0: f64) -> f64 {
     -hamaker / 6.0 * hamaker_energy_kernel(2.0 * r_a / (h + 2.0 * r_a))
 }
 
-/// Sphere-plane van der Waals force (N), **Eq 2 corrected** (ERRATA item 2).
+/// Sphere-plane van der Waals force (N), **Eq 2 corrected** (docs/errata.md item 2).
 ///
 /// `F = −H/6 {Rₐ/h² + Rₐ/(h+2Rₐ)² − 1/h + 1/(h+2Rₐ)}`: the print's `ln 1/(h+2Rₐ)` is a misprint
 /// of `+1/(h+2Rₐ)`. The braces equal `4Rₐ³/(h(h+2Rₐ))²`, so it is evaluated as Hamaker's
@@ -141,7 +141,7 @@ mod tests {
     #[test]
     fn corrected_eq1_differs_from_print_and_matches_braces() {
         // The corrected brace form, term by term, equals the cancellation-free form; the printed
-        // signs give a force about 2x too strong at h = 10 nm (ERRATA item 1).
+        // signs give a force about 2x too strong at h = 10 nm (docs/errata.md item 1).
         let (rt, ra, h) = (30e-9, 1e-6, 10e-9);
         let rp = rt + ra;
         let rm = rt - ra;

@@ -36,7 +36,7 @@
 //! - stage: Eq 13 with the friction load `f_as`.
 //!
 //! Deviations from the print: Eq 17 mixes `γ = β − α` (an angle) with `γ_L` (a surface energy),
-//! named apart here (ERRATA item 10); the printed lines for `F_y^c`, `F_z^c` are the projections
+//! named apart here (docs/errata.md item 10); the printed lines for `F_y^c`, `F_z^c` are the projections
 //! of `F_tip` that this model computes from the geometry instead.
 
 // Numerical kernels index several arrays with one loop variable: index loops are clearer.

@@ -11,7 +11,7 @@
 //! expressions for `f_ta` (the torque balance and the kinetic law); we keep the paper's result.
 //! The remaining lines are linear in `(y, ζ_y, ζ_z)`; substituting Eq 17's
 //! `F_y^c = k_y cos α y − F_ta cos β + f_ta sin γ`, `F_z^c = k_z sin α y − F_ta sin β − f_ta cos γ`
-//! (`γ = β − α`, an angle: not the surface energy `γ_L`, ERRATA item 10) gives
+//! (`γ = β − α`, an angle: not the surface energy `γ_L`, docs/errata.md item 10) gives
 //! `ζ_y = a_y y + b_y`, `ζ_z = a_z y + b_z` and `y = (ζ_y, ζ_z)·(P, Q)`, solved in closed form.
 //! The last line `z = δ(β̃)` is the JKR indentation (Eq 5) under the normal load at the
 //! corrected contact angle `β̃`, `P_z = F_ta sin β̃ + f_ta cos β̃ + A_lr` (load plus the

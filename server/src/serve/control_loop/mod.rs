@@ -365,7 +365,7 @@ impl ControlLoop {
         };
         let haptic = link.map(|link| HandleLink {
             link,
-            down_after: down_after_ns(cfg.haptic_timeout_ms, 1.0 / cfg.rate_hz),
+            down_after: down_after_ns(cfg.haptic_timeout, 1.0 / cfg.rate_hz),
             handle: None,
             last_taken: 0,
             last_latency: 0,

@@ -1,23 +1,17 @@
 //! Keeps the control loop's core polling instead of halting while the loop runs.
 //!
-//! Why (issue 12's soak, traced with ftrace on the loop's core of the 2-vCPU VM): between two
-//! ticks the loop sleeps about 0.9 ms and its core has nothing else to run, so the kernel halts it
-//! (`HLT`, the `haltpoll idle` state). A halted virtual CPU runs again when the hypervisor
-//! delivers its timer interrupt, and with the other core busy that came late: of the 40 overruns
-//! of a 180 s soak (3 minutes loaded, 2 idle), 26 were a core that nothing ran on while its timer
-//! came 1.9-13 ms after the loop went to sleep (its work in those ticks: 3-12 µs). With the
-//! loop's core polling instead (the `POLL` state: the core spins in the kernel, checking for
-//! work), the same soak had 8 overruns in all, one of that kind; the rest were the virtual CPU
-//! stopped by the host while it ran, which no setting in the guest changes. On bare metal the
-//! same setting keeps the core out of deep C-states, whose exit latency (tens to hundreds of µs)
-//! would otherwise come on top of a tick's wake-up.
+//! Why: between two ticks the loop sleeps about 0.9 ms and its core has nothing else to run,
+//! so the kernel halts it. A halted virtual CPU runs again only when the hypervisor delivers its
+//! timer interrupt, which can come milliseconds late when the other core is busy: the tick
+//! overruns although its work takes microseconds. A polling core (the cpuidle `POLL` state: it
+//! spins in the kernel, checking for work) wakes on time. On bare metal the same setting keeps
+//! the core out of deep C-states, whose exit latency (tens to hundreds of µs) would otherwise
+//! come on top of a tick's wake-up.
 //!
-//! Only the loop's core: the kernel's system-wide request (`/dev/cpu_dma_latency` = 0, as
-//! `cyclictest` holds it) makes every core poll, and on this VM that cost more than it gave. In
-//! two soaks alternating 20 s phases of each regime (`nanopush-soak 600 --alternate 20`), the
-//! loop's core alone polling was the best regime when idle: 4.7 and 0.6 overruns a minute,
-//! against 6.1 and 1.3 with every core free to halt and 13.3 and 1.3 with every core polling;
-//! under the load of the second, every core polling overran 1.6 a minute, the other two 0.0.
+//! Only the loop's core: the system-wide request (`/dev/cpu_dma_latency` = 0, as `cyclictest`
+//! holds it) makes every core poll, which takes the host's time from the other vCPU and overran
+//! more. The traces and the soaks that chose between the three regimes are in
+//! `docs/benchmarks.md` ("Soak"; `nanopush-soak 600 --alternate 20` repeats them).
 //!
 //! The setting is the core's PM QoS resume latency,
 //! `/sys/devices/system/cpu/cpuN/power/pm_qos_resume_latency_us`: `n/a` means 0 µs, and the

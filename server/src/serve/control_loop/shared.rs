@@ -118,6 +118,6 @@ pub struct LoopConfig {
     pub no_halt: bool,
     /// Connect the haptic link over iceoryx2.
     pub haptic: bool,
-    /// The haptic link is down within this long of the last handle sample (ms).
-    pub haptic_timeout_ms: f64,
+    /// The haptic link is down within this long of the last handle sample.
+    pub haptic_timeout: std::time::Duration,
 }

@@ -13,7 +13,7 @@ const CFG: LoopConfig = LoopConfig {
     cpu: None,
     no_halt: false,
     haptic: false,
-    haptic_timeout_ms: 5.0,
+    haptic_timeout: std::time::Duration::from_millis(5),
 };
 
 fn default_loop() -> (ControlLoop, Arc<Shared>) {

@@ -14,13 +14,13 @@ pub const DEFAULT_TIMEOUT_MS: f64 = 5.0;
 /// The age of the newest sample — since the bridge read the handle, on the clock both
 /// processes share — at which a loop ticking every `tick` seconds declares the link down (ns):
 /// the tick that first sees `timeout − tick` is at most one tick later, within the time-out.
-pub fn down_after_ns(timeout_ms: f64, tick: f64) -> u64 {
-    ((timeout_ms * 1e-3 - tick).max(tick) * 1e9) as u64
+pub fn down_after_ns(timeout: std::time::Duration, tick: f64) -> u64 {
+    ((timeout.as_secs_f64() - tick).max(tick) * 1e9) as u64
 }
 /// Largest handle position a bridge may report (m): beyond it a sample is rejected.
-pub const MAX_HANDLE: f64 = 0.5;
+pub const MAX_HANDLE_M: f64 = 0.5;
 /// Largest device force limit a bridge may report (N).
-pub const MAX_DEVICE_FORCE: f64 = 50.0;
+pub const MAX_DEVICE_FORCE_N: f64 = 50.0;
 
 /// Link state codes in [`super::HapticMetrics::link`].
 pub const LINK_OFF: u64 = 0;
@@ -34,10 +34,10 @@ pub const LINK_UP: u64 = 2;
 pub fn believable(s: &HapticState) -> bool {
     s.position.is_finite()
         && s.velocity.is_finite()
-        && s.position.abs() <= MAX_HANDLE
+        && s.position.abs() <= MAX_HANDLE_M
         && s.max_force.is_finite()
         && s.max_force > 0.0
-        && s.max_force <= MAX_DEVICE_FORCE
+        && s.max_force <= MAX_DEVICE_FORCE_N
         && s.force.is_finite()
 }
 
@@ -101,6 +101,8 @@ impl ServerLink {
 
 #[cfg(test)]
 mod tests {
+    use std::time::Duration;
+
     use super::*;
     #[test]
     fn samples_that_cannot_be_believed_are_rejected() {
@@ -133,9 +135,9 @@ mod tests {
 
     #[test]
     fn the_down_threshold_keeps_detection_within_the_time_out() {
-        assert_eq!(down_after_ns(5.0, 1e-3), 4_000_000);
-        assert_eq!(down_after_ns(100.0, 1e-3), 99_000_000);
+        assert_eq!(down_after_ns(Duration::from_millis(5), 1e-3), 4_000_000);
+        assert_eq!(down_after_ns(Duration::from_millis(100), 1e-3), 99_000_000);
         // Never below a tick (a link is not down between two samples).
-        assert_eq!(down_after_ns(0.1, 1e-3), 1_000_000);
+        assert_eq!(down_after_ns(Duration::from_micros(100), 1e-3), 1_000_000);
     }
 }

@@ -11,12 +11,12 @@ use super::lease::{self, require_lease};
 use super::{Client, MIN_SCAN_UM};
 use crate::control::MoveTarget;
 use crate::scan::ScanParams;
+use crate::serve::app_state::AppState;
 use crate::serve::command_checks::{Refusal, number, push_target};
 use crate::serve::control_loop::LoopCommand;
 use crate::serve::haptic::api::haptic_command;
 use crate::serve::push_job::{on_stage, prepare_push, run_done_failed};
 use crate::serve::scan_job::run_scan;
-use crate::serve::state::AppState;
 
 /// Handles one valid-JSON command.
 pub(super) fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<(), Refusal> {

@@ -7,9 +7,9 @@ use std::sync::atomic::Ordering::Relaxed;
 use nanopush_proto::ws::{ErrorCode, Role, ServerMessage};
 
 use super::Client;
+use crate::serve::app_state::AppState;
 use crate::serve::command_checks::Refusal;
 use crate::serve::control_loop::LoopCommand;
-use crate::serve::state::AppState;
 
 /// A command that changes the instrument needs an operator holding the lease, and a server
 /// that is not shutting down.

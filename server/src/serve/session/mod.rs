@@ -22,7 +22,7 @@ use futures_util::{Sink, Stream, StreamExt};
 use nanopush_proto::ws::{Role, ServerMessage, Stream as WsStream, WS_VERSION};
 use tokio::sync::{mpsc, watch};
 
-use crate::serve::state::{AppState, to_text};
+use crate::serve::app_state::{AppState, to_text};
 use receive::{Ended, Inbox};
 use send::Outbox;
 

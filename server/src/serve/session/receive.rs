@@ -13,8 +13,8 @@ use tokio::task::JoinHandle;
 
 use super::commands::handle;
 use super::{Client, REPLY_PATIENCE};
+use crate::serve::app_state::{AppState, ServeConfig, to_text};
 use crate::serve::command_checks::parse_command;
-use crate::serve::state::{AppState, ServeConfig, to_text};
 
 /// Why the receive loop ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

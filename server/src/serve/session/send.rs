@@ -14,8 +14,8 @@ use nanopush_proto::ws::{Role, ServerMessage, Stream as WsStream};
 use tokio::sync::{broadcast, mpsc, watch};
 
 use super::SEND_BUDGET;
+use crate::serve::app_state::{AppState, to_text};
 use crate::serve::frames::{Frames, Next};
-use crate::serve::state::{AppState, to_text};
 
 /// What the send loop reads besides the server's broadcasts.
 pub(super) struct Outbox {

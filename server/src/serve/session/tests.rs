@@ -11,8 +11,8 @@ use nanopush_proto::ws::Role;
 
 use super::*;
 use crate::scene::Scene;
+use crate::serve::app_state::{OPERATOR_PLACES, ServeConfig};
 use crate::serve::control_loop::Shared;
-use crate::serve::state::{OPERATOR_PLACES, ServeConfig};
 
 /// A server's state on the default scene, with no loop running.
 pub(crate) fn test_state() -> Arc<AppState> {

@@ -427,7 +427,7 @@ fn validate_scan(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
     // when it is more than max(6σ, 0.5 nm) above the levelled substrate, σ the image's noise
     // (scan noise and roughness); a particle whose height 2Rₐ is not twice that cannot be found
     // before a push. (The local scan's pixels follow the particle and tip radii, see
-    // `control::move_plan::local_scan_size`, so the pitch never hides it.)
+    // `control::locate_and_plan::local_scan_size`, so the pitch never hides it.)
     let sigma = sc.noise_rms_nm.hypot(s.substrate.roughness_rms_nm);
     let threshold = (6.0 * sigma).max(0.5);
     for (k, p) in s.particles.iter().enumerate() {

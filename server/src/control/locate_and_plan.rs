@@ -3,7 +3,7 @@
 //! around the other particles the scene's overview scan shows. Used by `nanopush push` and by
 //! the server alike.
 
-use crate::control::plan::{Leg, Obstacle, PlanError, Planner};
+use crate::control::legs::{Leg, Obstacle, PlanError, Planner};
 use crate::scan::{HeightImage, LocateError, Located, ScanParams, Surface, Tip, find_particles, localize, scan};
 use crate::scene::Scene;
 

@@ -2,8 +2,8 @@
 //! `nanopush push` does, and what the server's loop will do one tick at a time.
 
 use crate::control::estimator::{Hxy, PushPrediction, RetractPlan, predict};
-use crate::control::move_plan::DONE_WITHIN;
-use crate::control::plan::Leg;
+use crate::control::legs::Leg;
+use crate::control::locate_and_plan::DONE_WITHIN;
 use crate::control::strategy::{BACK_OFF, Control, HOLD, PushTask, Strategy, StrategyParams, Summary};
 use crate::instrument::{Afm, AfmError};
 use crate::physics::pushing::SimulationError;
@@ -121,9 +121,9 @@ impl From<SimulationError> for RunError {
 impl Scene {
     /// Whether the instrument can push with this scene's model: not with a dynamic particle or
     /// cantilever, whose contact and cantilever modes (periods of nanoseconds to microseconds)
-    /// cost ~10⁴ integrator steps per 1 ms control tick (`paper-full-dynamics` ran past a
-    /// 2·10⁶-step budget in its first 0.13 s of push, after 9 minutes). Such a scene is the
-    /// reference of `simulate` and `accuracy`; pushes run the quasi-static reduction.
+    /// cost ~10⁴ integrator steps per 1 ms control tick, far too many for a real-time tick.
+    /// Such a scene is the reference of `simulate` and `accuracy`; pushes run the quasi-static
+    /// reduction.
     ///
     /// And the strategy's geometry (Sec 2.1): travel at the start height must clear every
     /// particle (the tip would run into it), and the parking height that gives the contact
