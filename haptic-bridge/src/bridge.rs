@@ -14,7 +14,7 @@
 use nanopush_proto::haptic::{FORCE_ENGAGED, ForceFeedback, HapticState, STALE_NS, STATE_SERVER_SILENT};
 
 use crate::device::{Device, DeviceSample, DeviceSpec, LinkView, clamp_force};
-use crate::passivity::Passivity;
+use crate::passivity::{Passivity, PassivityOutput};
 
 /// The two directions of the link, as the bridge sees them.
 pub trait Link {
@@ -149,20 +149,64 @@ impl<D: Device> Bridge<D> {
             && s.position <= hi + TRAVEL_MARGIN
     }
 
-    /// One device cycle at monotonic time `now_ns`.
+    /// One device cycle at monotonic time `now_ns`: read the handle, take the server's newest
+    /// force, judge the server, render (local model, passivity, clamp), write the force, and
+    /// publish the handle's state. Allocation-free: it runs in the device loop.
     pub fn cycle(&mut self, now_ns: u64, link: &mut impl Link) -> CycleRow {
         let dt = 1.0 / self.cfg.rate_hz;
         let t = now_ns.saturating_sub(self.start_ns) as f64 * 1e-9;
-        let read = self.device.read(dt);
-        // A sample that cannot be believed, or a device that failed to answer, is dropped and
-        // counted; nothing is published for it (the server's watchdog sees the silence).
-        let sample = match read {
+        let sample = self.read_sample(dt);
+        self.take_newest(now_ns, link);
+        let live = self.judge_server(now_ns);
+        let mut row = CycleRow {
+            t,
+            tip_z: self.force.map_or(f64::NAN, |f| f.tip_z),
+            tip_force: self.force.map_or(f64::NAN, |f| f.tip_force),
+            link: self.link_up,
+            ..CycleRow::default()
+        };
+        let Some(s) = sample else {
+            self.start_passivity_anew();
+            let _ = self.device.write_force(0.0);
+            row.handle = f64::NAN;
+            return row;
+        };
+        let out = self.render(live, &s, dt);
+        let force = clamp_force(out.force, self.spec.max_force);
+        if self.device.write_force(force).is_err() {
+            self.dropped += 1;
+        }
+        self.device.observe(&LinkView {
+            t,
+            up: self.link_up,
+            engaged: live.is_some_and(|f| f.flags & FORCE_ENGAGED != 0 && f.gain >= 1.0),
+            tip_z: row.tip_z,
+        });
+        self.publish(now_ns, &s, force, &out, link);
+        row.handle = s.position;
+        row.force = force;
+        row.pc_damping = out.damping;
+        row.port_energy = out.energy;
+        row.latency_ns = self.latency_ns;
+        row
+    }
+
+    /// The handle's sample, if it can be believed. A sample that cannot, or a device that failed
+    /// to answer, is dropped and counted; nothing is published for it (the server's watchdog sees
+    /// the silence).
+    fn read_sample(&mut self, dt: f64) -> Option<DeviceSample> {
+        match self.device.read(dt) {
             Ok(s) if self.believable(&s) => Some(s),
             _ => {
                 self.dropped += 1;
                 None
             }
-        };
+        }
+    }
+
+    /// Takes the server's newest force sample, if one arrived, and with it the end-to-end
+    /// latency of the handle sample it was computed from.
+    fn take_newest(&mut self, now_ns: u64, link: &mut impl Link) {
         if let Some(f) = link.newest() {
             if f.state_seq != u64::MAX
                 && f.state_seq != self.last_latency_seq
@@ -174,39 +218,58 @@ impl<D: Device> Bridge<D> {
             }
             self.force = Some(f);
         }
-        // A server is live while its newest sample is fresh; its force is live while it says so.
-        // Stamped in the future (more than a cycle ahead) is not believed: it would stay fresh.
+    }
+
+    /// Whether the server is heard (`link_up`: its newest sample is fresh) and its force, if live.
+    /// A server is live while its newest sample is fresh; its force is live while it says so.
+    /// Stamped in the future (more than a cycle ahead) is not believed: it would stay fresh.
+    /// Without a live force the passivity history starts anew.
+    fn judge_server(&mut self, now_ns: u64) -> Option<ForceFeedback> {
         let fresh = self
             .force
             .filter(|f| f.time_ns <= now_ns + 1_000_000 && now_ns.saturating_sub(f.time_ns) <= self.cfg.stale_ns);
         let live = fresh.filter(|f| f.active != 0);
         if live.is_none() {
-            self.pc.reset();
-            self.x_prev = None;
-            self.ref_prev = None;
+            self.start_passivity_anew();
         }
         self.link_up = fresh.is_some();
-        let mut row = CycleRow {
-            t,
-            tip_z: self.force.map_or(f64::NAN, |f| f.tip_z),
-            tip_force: self.force.map_or(f64::NAN, |f| f.tip_force),
-            link: self.link_up,
-            ..CycleRow::default()
-        };
-        let Some(s) = sample else {
-            self.pc.reset();
-            self.x_prev = None;
-            self.ref_prev = None;
-            let _ = self.device.write_force(0.0);
-            row.handle = f64::NAN;
-            return row;
-        };
-        // What the device renders: the server's local model with its stiffness capped at what the
-        // device renders stably (or its force held, without the local model). The passivity
-        // observer's reference is the environment as the server modelled it over the interval
-        // that just ended, uncapped: the work it would have done on the handle along that path.
+        live
+    }
+
+    /// Forgets the passivity controller's history, the previous position and the environment
+    /// model in force: the next good sample starts a new interval.
+    fn start_passivity_anew(&mut self) {
+        self.pc.reset();
+        self.x_prev = None;
+        self.ref_prev = None;
+    }
+
+    /// The force for sample `s` before the device's clamp: the environment ([`Self::environment`])
+    /// through the passivity controller against the reference work
+    /// ([`Self::reference_work`]), or none while no force is live. Starts the next interval at
+    /// `s` under `live`.
+    fn render(&mut self, live: Option<ForceFeedback>, s: &DeviceSample, dt: f64) -> PassivityOutput {
         let max = self.spec.max_force;
-        let env = match live {
+        let env = self.environment(live, s.position);
+        let (dx, w_ref) = self.reference_work(s.position);
+        self.x_prev = Some(s.position);
+        self.ref_prev = live;
+        if live.is_some() {
+            self.pc.step(env, dx, s.velocity, dt, w_ref, max)
+        } else {
+            PassivityOutput {
+                force: 0.0,
+                damping: 0.0,
+                energy: 0.0,
+            }
+        }
+    }
+
+    /// What the device renders at handle position `x`: the server's local model with its
+    /// stiffness capped at what the device renders stably (or its force held, without the local
+    /// model), clamped; zero without a live force.
+    fn environment(&self, live: Option<ForceFeedback>, x: f64) -> f64 {
+        match live {
             Some(f) => {
                 // A spring the hand presses into (≤ 0), no stiffer than the device renders: a
                 // positive stiffness would be an anti-spring, active by construction.
@@ -214,47 +277,33 @@ impl<D: Device> Bridge<D> {
                     stiffness: f.stiffness.clamp(-self.spec.max_stiffness, 0.0),
                     ..f
                 };
-                let x = if self.cfg.local_model { s.position } else { f.anchor };
-                clamp_force(capped.force_at(x), max)
+                let x = if self.cfg.local_model { x } else { f.anchor };
+                clamp_force(capped.force_at(x), self.spec.max_force)
             }
             None => 0.0,
-        };
-        let (dx, w_ref) = match (self.x_prev, self.ref_prev) {
+        }
+    }
+
+    /// The handle's motion since the previous good sample, to `x`, and the passivity observer's
+    /// reference: the work the environment as the server modelled it over the interval that just
+    /// ended, uncapped, would have done on the handle along that path.
+    fn reference_work(&self, x: f64) -> (f64, f64) {
+        match (self.x_prev, self.ref_prev) {
             (Some(x0), Some(f)) => {
                 let f = ForceFeedback {
                     stiffness: f.stiffness.min(0.0),
                     ..f
                 };
-                let reference = |x: f64| clamp_force(f.force_at(x), max);
-                (
-                    s.position - x0,
-                    0.5 * (reference(x0) + reference(s.position)) * (s.position - x0),
-                )
+                let reference = |x: f64| clamp_force(f.force_at(x), self.spec.max_force);
+                (x - x0, 0.5 * (reference(x0) + reference(x)) * (x - x0))
             }
-            (Some(x0), None) => (s.position - x0, 0.0),
+            (Some(x0), None) => (x - x0, 0.0),
             _ => (0.0, 0.0),
-        };
-        self.x_prev = Some(s.position);
-        self.ref_prev = live;
-        let out = if live.is_some() {
-            self.pc.step(env, dx, s.velocity, dt, w_ref, max)
-        } else {
-            crate::passivity::PassivityOutput {
-                force: 0.0,
-                damping: 0.0,
-                energy: 0.0,
-            }
-        };
-        let force = clamp_force(out.force, self.spec.max_force);
-        if self.device.write_force(force).is_err() {
-            self.dropped += 1;
         }
-        self.device.observe(&LinkView {
-            t,
-            up: self.link_up,
-            engaged: live.is_some_and(|f| f.flags & FORCE_ENGAGED != 0 && f.gain >= 1.0),
-            tip_z: row.tip_z,
-        });
+    }
+
+    /// Publishes the handle's state for this cycle and keeps its send time for the latency.
+    fn publish(&mut self, now_ns: u64, s: &DeviceSample, force: f64, out: &PassivityOutput, link: &mut impl Link) {
         let state = HapticState {
             seq: self.seq,
             time_ns: now_ns,
@@ -274,12 +323,6 @@ impl<D: Device> Bridge<D> {
         self.sent[(self.seq % LATENCY_RING as u64) as usize] = (self.seq, now_ns);
         link.publish(&state);
         self.seq += 1;
-        row.handle = s.position;
-        row.force = force;
-        row.pc_damping = out.damping;
-        row.port_energy = out.energy;
-        row.latency_ns = self.latency_ns;
-        row
     }
 
     /// Zeroes the force and lets the device go.

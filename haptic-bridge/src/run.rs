@@ -74,27 +74,24 @@ fn catch_signals() {
     }
 }
 
-/// Asks for SCHED_FIFO priority 45 (below the server's loop) on `cpu`; says what was granted.
+/// The device loop's SCHED_FIFO priority, when granted: below the server's control loop (50).
+const DEVICE_LOOP_PRIORITY: i32 = 45;
+
+/// Asks for SCHED_FIFO priority [`DEVICE_LOOP_PRIORITY`] on `cpu` (clamped to the online cores);
+/// says what was granted.
 fn make_realtime(cpu: usize) {
-    // SAFETY: plain libc calls on the calling thread with valid, initialized arguments.
-    unsafe {
-        let ncpu = libc::sysconf(libc::_SC_NPROCESSORS_ONLN).max(1) as usize;
-        let mut set: libc::cpu_set_t = std::mem::zeroed();
-        libc::CPU_SET(cpu.min(ncpu - 1), &mut set);
-        let pinned = libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) == 0;
-        let param = libc::sched_param { sched_priority: 45 };
-        let fifo = libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) == 0;
-        eprintln!(
-            "nanopush-haptic: device loop {} core {}, {}",
-            if pinned { "pinned to" } else { "not pinned to" },
-            cpu.min(ncpu - 1),
-            if fifo {
-                "SCHED_FIFO 45"
-            } else {
-                "SCHED_OTHER (SCHED_FIFO refused)"
-            }
-        );
-    }
+    let core = nanopush_rt::resolve_core(Some(cpu));
+    let pinned = nanopush_rt::pin_to_core(Some(cpu)).is_ok();
+    let fifo = nanopush_rt::sched_fifo(DEVICE_LOOP_PRIORITY).is_ok();
+    eprintln!(
+        "nanopush-haptic: device loop {} core {core}, {}",
+        if pinned { "pinned to" } else { "not pinned to" },
+        if fifo {
+            format!("SCHED_FIFO {DEVICE_LOOP_PRIORITY}")
+        } else {
+            "SCHED_OTHER (SCHED_FIFO refused)".to_string()
+        }
+    );
 }
 
 /// The trace's header.
@@ -201,9 +198,10 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
     catch_signals();
     let started = Instant::now();
     let deadline_total = a.duration.map(Duration::from_secs_f64);
+    let over = || deadline_total.is_some_and(|d| started.elapsed() >= d);
     if kind == DeviceKind::None {
         // Publishes nothing: for tests of the server without a handle.
-        while !STOP.load(Ordering::SeqCst) && deadline_total.is_none_or(|d| started.elapsed() < d) {
+        while !STOP.load(Ordering::SeqCst) && !over() {
             std::thread::sleep(Duration::from_millis(10));
         }
         return Ok(String::new());
@@ -211,82 +209,27 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
     let period = 1.0 / a.rate_hz;
     let (device, code) = open_device(&kind, &a.operator, period)?;
     let mut link = IpcLink::open()?;
-    let spec = device.spec();
-    eprintln!(
-        "nanopush-haptic: {} device ({} N, travel {:.0}..{:.0} mm) at {} Hz; waiting for nanopush serve",
-        spec.name,
-        spec.max_force,
-        spec.travel[0] * 1e3,
-        spec.travel[1] * 1e3,
-        a.rate_hz
-    );
+    announce(&*device, a.rate_hz);
     let trace = a.trace.clone().map(trace_writer).transpose()?;
     if !a.no_realtime {
         make_realtime(a.cpu);
     }
-    let cfg = BridgeConfig {
-        rate_hz: a.rate_hz,
-        local_model: !a.no_local_model,
-        passivity: !a.no_passivity,
-        device_code: code,
-        // Checked every cycle: the cycle that sees `timeout − period` is within the time-out.
-        stale_ns: ((a.server_timeout_ms * 1e-3 - period).max(period) * 1e9) as u64,
-    };
-    let mut bridge = Bridge::new(device, cfg, monotonic_ns());
+    let mut bridge = Bridge::new(device, bridge_config(a, code, period), monotonic_ns());
     let (log, logged) = mpsc::sync_channel::<String>(64);
     let logger = std::thread::spawn(move || {
         for line in logged {
             eprintln!("{line}");
         }
     });
-    let sleeper = spin_sleep::SpinSleeper::default();
     let step_ns = (period * 1e9).round() as u64;
-    let mut deadline = monotonic_ns();
-    let mut hist = Histogram::default();
-    let (mut cycles, mut overruns, mut dropped_rows, mut last_latency) = (0u64, 0u64, 0u64, 0u64);
-    let mut was_up = false;
-    let mut max_force_seen: f64 = 0.0;
-    while !STOP.load(Ordering::SeqCst) {
-        let now = monotonic_ns();
-        if deadline > now {
-            sleeper.sleep(Duration::from_nanos(deadline - now));
-        } else if now - deadline > step_ns {
-            overruns += 1;
-            deadline = now;
-        }
-        let row = bridge.cycle(monotonic_ns(), &mut link);
-        cycles += 1;
-        max_force_seen = max_force_seen.max(row.force.abs());
-        if row.latency_ns != last_latency && row.latency_ns != 0 {
-            hist.record(row.latency_ns);
-            last_latency = row.latency_ns;
-        }
-        if row.link != was_up {
-            // Said by the logger thread: no writes to stderr from the device loop.
-            let said = if row.link {
-                format!("nanopush-haptic: server live at t = {:.3} s", row.t)
-            } else {
-                let age = bridge
-                    .last_force()
-                    .map_or(f64::NAN, |f| monotonic_ns().saturating_sub(f.time_ns) as f64 * 1e-6);
-                format!(
-                    "nanopush-haptic: server silent at t = {:.3} s (its last sample {age:.1} ms old): force zeroed",
-                    row.t
-                )
-            };
-            let _ = log.try_send(said);
-            was_up = row.link;
-        }
-        if let Some((tx, _)) = &trace
-            && tx.try_send(row).is_err()
-        {
-            dropped_rows += 1;
-        }
-        if bridge.device.finished() || deadline_total.is_some_and(|d| started.elapsed() >= d) {
-            break;
-        }
-        deadline = next_deadline(deadline, bridge.last_force().filter(|_| row.link), step_ns);
-    }
+    let tally = device_loop(
+        &mut bridge,
+        &mut link,
+        step_ns,
+        &log,
+        trace.as_ref().map(|(tx, _)| tx),
+        over,
+    );
     bridge.close();
     drop(link);
     drop(log);
@@ -299,32 +242,145 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
         }
     }
     eprintln!(
-        "nanopush-haptic: {cycles} cycles, {} samples dropped, {overruns} overruns, {dropped_rows} trace rows \
-         dropped; end-to-end latency {}",
+        "nanopush-haptic: {} cycles, {} samples dropped, {} overruns, {} trace rows dropped; end-to-end latency {}",
+        tally.cycles,
         bridge.dropped(),
-        hist.summary()
+        tally.overruns,
+        tally.dropped_rows,
+        tally.hist.summary()
     );
     Ok(if a.json {
-        format!(
-            "{}\n",
-            serde_json::json!({
-                "cycles": cycles,
-                "dropped_samples": bridge.dropped(),
-                "overruns": overruns,
-                "dropped_rows": dropped_rows,
-                "max_force_n": max_force_seen,
-                "latency_ns": {
-                    "samples": hist.count(),
-                    "p50": hist.quantile(0.5),
-                    "p99": hist.quantile(0.99),
-                    "p999": hist.quantile(0.999),
-                    "max": hist.max(),
-                },
-            })
-        )
+        summary_json(&tally, bridge.dropped())
     } else {
         String::new()
     })
+}
+
+/// Says which device runs at what rate, and that the bridge waits for the server.
+fn announce(device: &dyn Device, rate_hz: f64) {
+    let spec = device.spec();
+    eprintln!(
+        "nanopush-haptic: {} device ({} N, travel {:.0}..{:.0} mm) at {} Hz; waiting for nanopush serve",
+        spec.name,
+        spec.max_force,
+        spec.travel[0] * 1e3,
+        spec.travel[1] * 1e3,
+        rate_hz
+    );
+}
+
+/// The bridge's settings from the arguments, for a device of `code` cycling every `period` s.
+fn bridge_config(a: &RunArgs, code: u32, period: f64) -> BridgeConfig {
+    BridgeConfig {
+        rate_hz: a.rate_hz,
+        local_model: !a.no_local_model,
+        passivity: !a.no_passivity,
+        device_code: code,
+        // Checked every cycle: the cycle that sees `timeout − period` is within the time-out.
+        stale_ns: ((a.server_timeout_ms * 1e-3 - period).max(period) * 1e9) as u64,
+    }
+}
+
+/// What the device loop counted.
+#[derive(Default)]
+struct Tally {
+    cycles: u64,
+    overruns: u64,
+    dropped_rows: u64,
+    max_force_seen: f64,
+    /// End-to-end latencies, each measured once.
+    hist: Histogram,
+}
+
+/// The device loop, from now until SIGINT/SIGTERM, the device's end or `over()`: one
+/// [`Bridge::cycle`] per deadline, the link's changes said through `log` (never written to
+/// stderr from here) and each row offered to `trace` (dropped and counted when it is full).
+fn device_loop(
+    bridge: &mut Bridge<Box<dyn Device>>,
+    link: &mut IpcLink,
+    step_ns: u64,
+    log: &mpsc::SyncSender<String>,
+    trace: Option<&mpsc::SyncSender<CycleRow>>,
+    over: impl Fn() -> bool,
+) -> Tally {
+    let sleeper = spin_sleep::SpinSleeper::default();
+    let mut deadline = monotonic_ns();
+    let mut tally = Tally::default();
+    let mut last_latency = 0u64;
+    let mut was_up = false;
+    while !STOP.load(Ordering::SeqCst) {
+        wait_for(&sleeper, &mut deadline, step_ns, &mut tally.overruns);
+        let row = bridge.cycle(monotonic_ns(), link);
+        tally.cycles += 1;
+        tally.max_force_seen = tally.max_force_seen.max(row.force.abs());
+        if row.latency_ns != last_latency && row.latency_ns != 0 {
+            tally.hist.record(row.latency_ns);
+            last_latency = row.latency_ns;
+        }
+        if row.link != was_up {
+            say_link_change(bridge, &row, log);
+            was_up = row.link;
+        }
+        if let Some(tx) = trace
+            && tx.try_send(row).is_err()
+        {
+            tally.dropped_rows += 1;
+        }
+        if bridge.device.finished() || over() {
+            break;
+        }
+        deadline = next_deadline(deadline, bridge.last_force().filter(|_| row.link), step_ns);
+    }
+    tally
+}
+
+/// Sleeps (then spins) until `deadline`; a cycle more than a period late is an overrun, and the
+/// schedule starts again from now.
+fn wait_for(sleeper: &spin_sleep::SpinSleeper, deadline: &mut u64, step_ns: u64, overruns: &mut u64) {
+    let now = monotonic_ns();
+    if *deadline > now {
+        sleeper.sleep(Duration::from_nanos(*deadline - now));
+    } else if now - *deadline > step_ns {
+        *overruns += 1;
+        *deadline = now;
+    }
+}
+
+/// Hands the logger thread the line that says the server came or went at `row`.
+fn say_link_change(bridge: &Bridge<Box<dyn Device>>, row: &CycleRow, log: &mpsc::SyncSender<String>) {
+    let said = if row.link {
+        format!("nanopush-haptic: server live at t = {:.3} s", row.t)
+    } else {
+        let age = bridge
+            .last_force()
+            .map_or(f64::NAN, |f| monotonic_ns().saturating_sub(f.time_ns) as f64 * 1e-6);
+        format!(
+            "nanopush-haptic: server silent at t = {:.3} s (its last sample {age:.1} ms old): force zeroed",
+            row.t
+        )
+    };
+    let _ = log.try_send(said);
+}
+
+/// The `--json` summary: cycles, drops, overruns, the largest force and the latency quantiles.
+fn summary_json(t: &Tally, dropped_samples: u64) -> String {
+    format!(
+        "{}\n",
+        serde_json::json!({
+            "cycles": t.cycles,
+            "dropped_samples": dropped_samples,
+            "overruns": t.overruns,
+            "dropped_rows": t.dropped_rows,
+            "max_force_n": t.max_force_seen,
+            "latency_ns": {
+                "samples": t.hist.count(),
+                "p50": t.hist.quantile(0.5),
+                "p99": t.hist.quantile(0.99),
+                "p999": t.hist.quantile(0.999),
+                "max": t.hist.max(),
+            },
+        })
+    )
 }
 
 #[cfg(test)]

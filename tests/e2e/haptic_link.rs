@@ -7,17 +7,24 @@
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::{Arc, Mutex};
+use std::process::{Command, Stdio};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use nanopush_e2e::{bin, workspace};
+use nanopush_e2e::{Proc, bin, workspace};
 use serde_json::{Value, json};
 
-use crate::serve::{TOKEN, connect, http_get, is, reply, runtime, send, until};
+use crate::util::{
+    TOKEN, http_get, is, reply, runtime, send, spawn_serve, status, tmp, until, wait_exit, wait_status, welcomed,
+};
 
 /// One haptic test at a time.
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+/// Holds the haptic tests' turn until dropped (taken over from a test that failed holding it).
+fn one_at_a_time() -> MutexGuard<'static, ()> {
+    ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
+}
 
 /// A test's directory and link namespace.
 struct Bench {
@@ -27,9 +34,7 @@ struct Bench {
 
 impl Bench {
     fn new(tag: &str) -> Bench {
-        let dir = std::env::temp_dir().join(format!("nanopush-e2e-haptic-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = tmp(&format!("haptic-{tag}"));
         // The paper's scene with the tip starting 2.2 µm above bare substrate at (20, 20) µm, away
         // from its particle at (50, 50) µm (the server starts the tip at the [scan] centre).
         let text = std::fs::read_to_string(workspace().join("scenes/paper-default.toml")).unwrap();
@@ -69,41 +74,22 @@ impl Drop for Bench {
     }
 }
 
-/// A process stopped (SIGTERM, then SIGKILL after 10 s) and reaped on drop.
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        nanopush_e2e::stop(&mut self.0);
-    }
-}
-
 /// `nanopush serve --haptic MODE` on a free port; its address. The log goes to `log`.
 fn serve(b: &Bench, mode: &str, log: &str) -> (Proc, String) {
     serve_with(b, mode, log, &[])
 }
 
+/// [`serve`] with `extra` arguments.
 fn serve_with(b: &Bench, mode: &str, log: &str, extra: &[&str]) -> (Proc, String) {
-    let mut child = Command::new(bin("nanopush"))
-        .current_dir(workspace())
-        .env("NANOPUSH_HAPTIC_NAMESPACE", &b.namespace)
-        .args(["serve", "--port", "0", "--haptic", mode, "--operator-token", TOKEN])
-        .args(extra)
-        .arg("--scene")
-        .arg(b.dir.join("scene.toml"))
-        .arg("--data-dir")
-        .arg(b.dir.join("records"))
-        .stdout(Stdio::piped())
-        .stderr(std::fs::File::create(b.dir.join(log)).unwrap())
-        .spawn()
-        .expect("starting nanopush serve");
-    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
-    let first = lines.next().expect("a first line").unwrap();
-    let addr = first
-        .strip_prefix("nanopush serve: listening on ")
-        .unwrap_or_else(|| panic!("unexpected first line {first:?}"))
-        .to_string();
-    std::thread::spawn(move || for _ in lines {});
+    let (child, addr) = spawn_serve(&b.dir.join(log), |c| {
+        c.env("NANOPUSH_HAPTIC_NAMESPACE", &b.namespace)
+            .args(["--haptic", mode, "--operator-token", TOKEN])
+            .args(extra)
+            .arg("--scene")
+            .arg(b.dir.join("scene.toml"))
+            .arg("--data-dir")
+            .arg(b.dir.join("records"));
+    });
     (Proc(child), addr)
 }
 
@@ -135,25 +121,6 @@ fn bridge(b: &Bench, args: &[&str]) -> (Proc, Arc<Mutex<Vec<String>>>) {
     (Proc(child), lines)
 }
 
-fn status(addr: &str) -> Value {
-    let (code, body) = http_get(addr, &format!("/api/status?token={TOKEN}"));
-    assert_eq!(code, 200);
-    serde_json::from_slice(&body).unwrap()
-}
-
-/// Waits until `pred` holds for the status, within `secs`.
-fn wait_status(addr: &str, secs: f64, what: &str, pred: impl Fn(&Value) -> bool) -> Value {
-    let deadline = Instant::now() + Duration::from_secs_f64(secs);
-    loop {
-        let s = status(addr);
-        if pred(&s) {
-            return s;
-        }
-        assert!(Instant::now() < deadline, "{what} not within {secs} s: {}", s["haptic"]);
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
 /// Waits until a line containing `text` appears, within `secs`; returns it.
 fn wait_line(lines: &Mutex<Vec<String>>, secs: f64, text: &str) -> String {
     wait_line_after(lines, 0, secs, text)
@@ -171,22 +138,10 @@ fn wait_line_after(lines: &Mutex<Vec<String>>, skip: usize, secs: f64, text: &st
     }
 }
 
-fn wait_exit(p: &mut Proc, secs: f64) -> std::process::ExitStatus {
-    let deadline = Instant::now() + Duration::from_secs_f64(secs);
-    loop {
-        if let Some(st) = p.0.try_wait().unwrap() {
-            return st;
-        }
-        assert!(Instant::now() < deadline, "the process did not exit within {secs} s");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
 /// As the lease holder: take the lease and send `haptic {action}`; the reply.
 fn haptic(addr: &str, action: &str) -> Value {
     runtime().block_on(async {
-        let mut ws = connect(addr, Some(TOKEN)).await;
-        until(&mut ws, 5.0, |m| is(m, "welcome")).await;
+        let (mut ws, _) = welcomed(addr, Some(TOKEN)).await;
         send(&mut ws, json!({"type": "take_lease", "id": 1})).await;
         assert_eq!(reply(&mut ws, 1).await["type"], "ok");
         send(&mut ws, json!({"type": "haptic", "id": 2, "action": action})).await;
@@ -228,7 +183,7 @@ fn pressing(b: &Bench, bridge_args: &[&str]) -> (Proc, String, Proc, Arc<Mutex<V
 /// reads its trace; with the index of the last cycle pressed with more than 0.3 N on a live link.
 fn end_press(br: &mut Proc, trace: &Path) -> (Vec<Row>, usize) {
     nanopush_e2e::sigterm(&br.0);
-    assert!(wait_exit(br, 5.0).success(), "the bridge exits 0 on SIGTERM");
+    assert!(wait_exit(&mut br.0, 5.0).success(), "the bridge exits 0 on SIGTERM");
     let rows = read_trace(trace);
     let pressed = rows
         .iter()
@@ -280,7 +235,7 @@ fn read_trace(path: &Path) -> Vec<Row> {
 /// processes for ~5 ms, which the default would rightly treat as a lost link.
 #[test]
 fn a_press_through_the_server_feels_the_snap_in_and_the_pull_off() {
-    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_at_a_time();
     let b = Bench::new("press");
     let (_srv, addr) = serve_with(&b, "external", "server.log", &["--haptic-timeout-ms", "100"]);
     let trace = b.dir.join("trace.csv");
@@ -301,7 +256,7 @@ fn a_press_through_the_server_feels_the_snap_in_and_the_pull_off() {
     assert_eq!(s["haptic"]["device"], "sim");
     assert_eq!(haptic(&addr, "engage")["type"], "ok");
     wait_status(&addr, 20.0, "engaged", |s| s["haptic"]["phase"] == "engaged");
-    let st = wait_exit(&mut br, 60.0);
+    let st = wait_exit(&mut br.0, 60.0);
     assert!(st.success(), "the bridge exits 0 when the press ends: {st}");
     let rows = read_trace(&trace);
     assert!(rows.len() > 5000, "{} rows", rows.len());
@@ -363,7 +318,7 @@ fn a_press_through_the_server_feels_the_snap_in_and_the_pull_off() {
 /// is up again and engages anew.
 #[test]
 fn a_killed_bridge_is_survived_restarted_and_engaged_again() {
-    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_at_a_time();
     let b = Bench::new("kill-bridge");
     let (_srv, addr) = serve(&b, "sim", "server.log");
     let s = wait_status(&addr, 10.0, "link up", |s| s["haptic"]["link"] == "up");
@@ -423,7 +378,7 @@ fn a_killed_bridge_is_survived_restarted_and_engaged_again() {
 /// sample, and takes up a new server on the same link without a restart.
 #[test]
 fn a_killed_server_zeroes_the_force_and_the_bridge_takes_up_a_new_one() {
-    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_at_a_time();
     let b = Bench::new("kill-server");
     // The server's own watchdog is not under test here (the kill-bridge test checks it): a long
     // one keeps a VM's pause from re-anchoring the hand mid-press. The bridge's is the default.
@@ -471,11 +426,11 @@ fn a_killed_server_zeroes_the_force_and_the_bridge_takes_up_a_new_one() {
 /// confused) and stays 0 while the hand keeps pressing; the server exits 0 with the tip parked.
 #[test]
 fn a_terminated_server_zeroes_the_hands_force_before_it_goes() {
-    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_at_a_time();
     let b = Bench::new("term");
     let (mut srv, _addr, mut br, lines, trace) = pressing(&b, &["--server-timeout-ms", "100"]);
     nanopush_e2e::sigterm(&srv.0);
-    assert!(wait_exit(&mut srv, 10.0).success(), "the server exits 0 on SIGTERM");
+    assert!(wait_exit(&mut srv.0, 10.0).success(), "the server exits 0 on SIGTERM");
     // The bridge notices the silence (100 ms later), then is stopped.
     wait_line(&lines, 5.0, "server silent");
     let (rows, pressed) = end_press(&mut br, &trace);
@@ -510,7 +465,7 @@ fn a_terminated_server_zeroes_the_hands_force_before_it_goes() {
 /// One bridge at a time: a second one on the same link is refused with a clear message.
 #[test]
 fn a_second_bridge_is_refused() {
-    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_at_a_time();
     let b = Bench::new("second");
     let (_first, lines) = bridge(&b, &["--operator", "hold", "--duration", "30"]);
     wait_line(&lines, 5.0, "waiting for nanopush serve");
@@ -527,7 +482,7 @@ fn a_second_bridge_is_refused() {
 /// Without a haptic link the command says so; bad scales name the field and the range.
 #[test]
 fn haptic_commands_are_refused_with_the_reason() {
-    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = one_at_a_time();
     let b = Bench::new("refuse");
     let (_srv, addr) = serve(&b, "none", "server.log");
     let r = haptic(&addr, "engage");
@@ -535,8 +490,7 @@ fn haptic_commands_are_refused_with_the_reason() {
     assert!(r["message"].as_str().unwrap().contains("--haptic sim"));
     assert_eq!(status(&addr)["haptic"]["link"], "off");
     runtime().block_on(async {
-        let mut ws = connect(&addr, Some(TOKEN)).await;
-        until(&mut ws, 5.0, |m| is(m, "welcome")).await;
+        let (mut ws, _) = welcomed(&addr, Some(TOKEN)).await;
         send(&mut ws, json!({"type": "haptic", "id": 1, "action": "engage"})).await;
         assert_eq!(reply(&mut ws, 1).await["code"], "no_lease");
         send(&mut ws, json!({"type": "take_lease", "id": 2})).await;

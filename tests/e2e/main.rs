@@ -1,4 +1,6 @@
-//! End-to-end tests: the real binaries, started as a user would start them.
+//! End-to-end tests: the real binaries, started as a user would start them. One module per
+//! command or concern; what they share (scratch directories, a server on a free port, its HTTP
+//! API and WebSocket) is in [`util`].
 
 mod haptic;
 mod haptic_link;
@@ -13,3 +15,4 @@ mod serve_scenes;
 mod serve_state;
 mod simulate;
 mod sweep;
+mod util;

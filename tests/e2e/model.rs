@@ -3,12 +3,7 @@
 use nanopush_e2e::{run, text};
 use serde_json::Value;
 
-fn json(args: &[&str]) -> Value {
-    let o = run("nanopush", args, None);
-    let (out, err) = text(&o);
-    assert!(o.status.success(), "nanopush {args:?} failed: {err}");
-    serde_json::from_str(&out).unwrap_or_else(|e| panic!("not one JSON object ({e}): {out}"))
-}
+use crate::util::{nanopush_json as json, tmp};
 
 #[test]
 fn default_scene_json_has_the_paper_figures() {
@@ -76,8 +71,7 @@ fn force_curve_shows_hysteresis() {
 
 #[test]
 fn bad_scene_gets_one_clear_error_and_no_panic() {
-    let dir = std::env::temp_dir().join(format!("nanopush-e2e-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = tmp("model-bad-scene");
     let good = std::fs::read_to_string(nanopush_e2e::workspace().join("scenes/paper-default.toml")).unwrap();
     let cases = [
         (
@@ -123,7 +117,7 @@ fn bad_scene_gets_one_clear_error_and_no_panic() {
 }
 
 #[test]
-fn missing_scene_file() {
+fn a_missing_scene_file_is_named_in_the_error() {
     let o = run("nanopush", &["model", "--scene", "/no/such/scene.toml"], None);
     let (_, err) = text(&o);
     assert_eq!(o.status.code(), Some(2));
@@ -132,8 +126,7 @@ fn missing_scene_file() {
 
 #[test]
 fn infeasible_friction_is_a_warning() {
-    let dir = std::env::temp_dir().join(format!("nanopush-e2e-mu-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = tmp("mu");
     let good = std::fs::read_to_string(nanopush_e2e::workspace().join("scenes/paper-default.toml")).unwrap();
     let path = dir.join("mu.toml");
     std::fs::write(

@@ -2,15 +2,17 @@
 //! `.ci/setup`) with the shipped alert rules scrapes a real `nanopush serve`, and a series and
 //! the rules are read back through Prometheus' HTTP API.
 
-use std::io::{Read, Write};
-use std::net::{TcpListener, TcpStream};
+use std::net::TcpListener;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use nanopush_e2e::{bin, workspace};
+use nanopush_e2e::workspace;
 use serde_json::Value;
 
+use crate::util::{spawn_serve, tmp};
+
+/// A process stopped on drop, its log shown after it stopped if the test failed.
 struct Proc(Child, PathBuf);
 
 impl Drop for Proc {
@@ -22,21 +24,13 @@ impl Drop for Proc {
     }
 }
 
+/// A GET of `path` from `addr`: the status and the body as text; None while nothing answers.
 fn get(addr: &str, path: &str) -> Option<(u16, String)> {
-    let mut s = TcpStream::connect(addr).ok()?;
-    // HTTP/1.0: a plain body, never chunked.
-    write!(s, "GET {path} HTTP/1.0\r\nHost: {addr}\r\n\r\n").ok()?;
-    let mut buf = String::new();
-    s.read_to_string(&mut buf).ok()?;
-    let status = buf.split_whitespace().nth(1)?.parse().ok()?;
-    Some((
-        status,
-        buf.split_once("\r\n\r\n")
-            .map(|(_, b)| b.to_string())
-            .unwrap_or_default(),
-    ))
+    let (status, body) = nanopush_e2e::client::get(addr, path).ok()?;
+    Some((status, String::from_utf8_lossy(&body).into_owned()))
 }
 
+/// A port nothing listens on now (for Prometheus' own web server).
 fn free_port() -> u16 {
     TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
@@ -66,28 +60,18 @@ fn the_shipped_config_scrapes_127_0_0_1_8080_every_5_s_with_the_alert_rules() {
 
 #[test]
 fn prometheus_scrapes_the_server_and_loads_the_alert_rules() {
-    let dir = std::env::temp_dir().join(format!("nanopush-e2e-prometheus-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let port = free_port();
+    let dir = tmp("prometheus");
     let server_log = dir.join("server.log");
-    let _server = Proc(
-        Command::new(bin("nanopush"))
-            .current_dir(workspace())
-            .args(["serve", "--haptic", "none", "--port", &port.to_string(), "--data-dir"])
-            .arg(dir.join("records"))
-            .stdout(Stdio::null())
-            .stderr(std::fs::File::create(&server_log).unwrap())
-            .spawn()
-            .expect("starting nanopush serve"),
-        server_log,
-    );
+    let (server, addr) = spawn_serve(&server_log, |c| {
+        c.args(["--haptic", "none", "--data-dir"]).arg(dir.join("records"));
+    });
+    let _server = Proc(server, server_log);
     let alerts = workspace().join("deploy/prometheus/alerts.yml");
     let config = dir.join("prometheus.yml");
     std::fs::write(
         &config,
         format!(
-            "global:\n  scrape_interval: 1s\n  evaluation_interval: 1s\nrule_files:\n  - {}\nscrape_configs:\n  - job_name: nanopush\n    static_configs:\n      - targets: [\"127.0.0.1:{port}\"]\n",
+            "global:\n  scrape_interval: 1s\n  evaluation_interval: 1s\nrule_files:\n  - {}\nscrape_configs:\n  - job_name: nanopush\n    static_configs:\n      - targets: [\"{addr}\"]\n",
             alerts.display()
         ),
     )

@@ -1,22 +1,9 @@
 //! `nanopush push`: a whole manipulation from the command line — the Fig 9 contact step, the
 //! distance reached, a planned multi-push move, the files written, and bad arguments refused.
 
-use std::path::PathBuf;
-
 use nanopush_e2e::{run, text};
-use serde_json::Value;
 
-fn tmp(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("nanopush-e2e-push-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
-}
-
-fn json(args: &[&str]) -> Value {
-    let out = run("nanopush", args, None);
-    assert!(out.status.success(), "nanopush {args:?} failed: {}", text(&out).1);
-    serde_json::from_slice(&out.stdout).expect("one JSON object")
-}
+use crate::util::{nanopush_json as json, tmp};
 
 /// The README's push table, row 1, and its Figs 9 and 15: `nanopush push --scene
 /// scenes/gold-latex-500nm.toml --distance-um 12 --pause-at-um 6 --out DIR` touches at step 43,
@@ -25,7 +12,7 @@ fn json(args: &[&str]) -> Value {
 /// −1.1 V.
 #[test]
 fn a_12_um_push_with_a_stop_ends_minus_13_8_nm_and_writes_figs_9_and_15_with_a_minus_1_80_v_peak() {
-    let dir = tmp("fig15");
+    let dir = tmp("push-fig15");
     let d = dir.to_str().unwrap();
     let r = json(&[
         "push",

@@ -1,16 +1,12 @@
 //! `nanopush scan`: the GSF it writes is read by Gwyddion itself, and bad arguments are refused.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use nanopush_e2e::{run, text};
 use serde_json::Value;
 
-fn tmp(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("nanopush-e2e-scan-{tag}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use crate::util::{nanopush_json, tmp};
 
 /// Width and height from a PNG's signature and IHDR chunk; panics if it is not a PNG.
 fn png_size(path: &Path) -> (u32, u32) {
@@ -66,7 +62,7 @@ fn thumbnail(gsf: &Path, png: &Path) {
 
 #[test]
 fn gwyddion_reads_the_scans_of_the_default_and_gold_latex_scenes() {
-    let dir = tmp("gwy");
+    let dir = tmp("scan-gwy");
     for (scene, n_particles) in [(None, 1), (Some("scenes/gold-latex-500nm.toml"), 3)] {
         let name = scene.map_or("default", |_| "gold");
         let gsf = dir.join(format!("{name}.gsf"));
@@ -74,13 +70,10 @@ fn gwyddion_reads_the_scans_of_the_default_and_gold_latex_scenes() {
         if let Some(s) = scene {
             args.extend(["--scene", s]);
         }
-        let o = run("nanopush", &args, None);
-        let (out, err) = text(&o);
-        assert!(o.status.success(), "nanopush {args:?}: {err}");
-        let v: Value = serde_json::from_str(&out).unwrap_or_else(|e| panic!("not JSON ({e}): {out}"));
+        let v = nanopush_json(&args);
         assert_eq!(v["schema"], "nanopush.scan");
         assert_eq!(v["pixels"], 128);
-        assert_eq!(v["found"].as_array().unwrap().len(), n_particles, "{out}");
+        assert_eq!(v["found"].as_array().unwrap().len(), n_particles, "{v}");
         let pixel = v["pixel"].as_f64().unwrap();
         for c in v["particles"].as_array().unwrap() {
             let l = &c["located"];
@@ -100,7 +93,7 @@ fn gwyddion_reads_the_scans_of_the_default_and_gold_latex_scenes() {
 
 #[test]
 fn summary_names_the_located_particle() {
-    let dir = tmp("summary");
+    let dir = tmp("scan-summary");
     let gsf = dir.join("s.gsf");
     let o = run(
         "nanopush",
@@ -125,7 +118,7 @@ fn summary_names_the_located_particle() {
 
 #[test]
 fn bad_arguments_exit_2_naming_the_allowed_range() {
-    let dir = tmp("bad");
+    let dir = tmp("scan-bad");
     let gsf = dir.join("bad.gsf");
     let g = gsf.to_str().unwrap();
     let cases: [(&[&str], &str); 7] = [

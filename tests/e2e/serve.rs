@@ -2,241 +2,23 @@
 //! tokio-tungstenite — telemetry, a push that moves a particle, roles, the lease, bad input, the
 //! metrics exposition, and a SIGTERM in the middle of a push.
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::net::TcpStream;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use futures_util::{SinkExt, StreamExt};
-use nanopush_e2e::{bin, workspace};
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
-pub(crate) const TOKEN: &str = "e2e-operator-token";
-
-/// A server on a free port, killed on drop.
-pub(crate) struct Server {
-    pub(crate) child: Child,
-    pub(crate) addr: String,
-    pub(crate) dir: PathBuf,
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        nanopush_e2e::stop(&mut self.child);
-        if std::thread::panicking() {
-            // Show the server's log with the failure.
-            let log = std::fs::read_to_string(self.dir.join("server.log")).unwrap_or_default();
-            eprintln!("--- server log ---\n{log}");
-        }
-        let _ = std::fs::remove_dir_all(&self.dir);
-    }
-}
-
-/// The gold-latex scene made quick for a test: a low start height, fast approaches and travel, a
-/// short run-up and a level substrate (the push itself at the paper's 2 µm/s), so a whole push
-/// takes a few seconds of real time; then each of `edits` `(from, to)` replaced once in its text.
-fn fast_scene_with(dir: &Path, edits: &[(&str, &str)]) -> PathBuf {
-    let text = std::fs::read_to_string(workspace().join("scenes/gold-latex-500nm.toml")).unwrap();
-    let text = text.replacen("tilt_x_mrad = 6.0", "tilt_x_mrad = 0.0", 1).replacen(
-        "roughness_rms_nm = 0.5",
-        "roughness_rms_nm = 0.0",
-        1,
-    );
-    let text = format!(
-        "{text}\n[strategy]\nstart_height_um = 1.2\napproach_speed_um_per_s = 5.0\ntravel_speed_um_per_s = 40.0\napproach_distance_um = 0.3\ndwell_ms = 2.0\n\n[scan]\ncentre_x_um = 40.0\ncentre_y_um = 32.0\nsize_um = 16.0\npixels = 32\n"
-    );
-    let mut text = text;
-    for (from, to) in edits {
-        assert!(text.contains(from), "the scene has {from:?}");
-        text = text.replacen(from, to, 1);
-    }
-    let path = dir.join("fast.toml");
-    std::fs::write(&path, text).unwrap();
-    path
-}
-
-pub(crate) fn start(tag: &str, extra: &[&str]) -> Server {
-    start_with(tag, |_| {}, extra)
-}
-
-/// [`start`], with `prepare` run on the records directory (created) before the server starts.
-pub(crate) fn start_with(tag: &str, prepare: impl FnOnce(&Path), extra: &[&str]) -> Server {
-    start_edited(tag, &[], prepare, extra)
-}
-
-/// [`start`] on the fast scene with `edits` (see [`fast_scene_with`]).
-pub(crate) fn start_scene(tag: &str, edits: &[(&str, &str)]) -> Server {
-    start_edited(tag, edits, |_| {}, &[])
-}
-
-fn start_edited(tag: &str, edits: &[(&str, &str)], prepare: impl FnOnce(&Path), extra: &[&str]) -> Server {
-    let dir = std::env::temp_dir().join(format!("nanopush-e2e-serve-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let scene = fast_scene_with(&dir, edits);
-    let records = dir.join("records");
-    std::fs::create_dir_all(&records).unwrap();
-    prepare(&records);
-    let mut child = Command::new(bin("nanopush"))
-        .current_dir(workspace())
-        .args([
-            "serve",
-            "--port",
-            "0",
-            "--haptic",
-            "none",
-            "--operator-token",
-            TOKEN,
-            "--scene",
-        ])
-        .arg(&scene)
-        .arg("--data-dir")
-        .arg(&records)
-        .args(extra)
-        .stdout(Stdio::piped())
-        .stderr(std::fs::File::create(dir.join("server.log")).unwrap())
-        .spawn()
-        .expect("starting nanopush serve");
-    let out = child.stdout.take().unwrap();
-    let mut lines = BufReader::new(out).lines();
-    let first = lines.next().expect("a first line").unwrap();
-    let addr = first
-        .strip_prefix("nanopush serve: listening on ")
-        .unwrap_or_else(|| panic!("unexpected first line {first:?}"))
-        .to_string();
-    std::thread::spawn(move || for _ in lines {});
-    Server { child, addr, dir }
-}
-
-/// A plain HTTP/1.1 GET: status and body.
-pub(crate) fn http_get(addr: &str, path: &str) -> (u16, Vec<u8>) {
-    let mut s = TcpStream::connect(addr).unwrap();
-    write!(s, "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n").unwrap();
-    let mut buf = Vec::new();
-    s.read_to_end(&mut buf).unwrap();
-    let head_end = buf.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
-    let head = String::from_utf8_lossy(&buf[..head_end]).to_string();
-    let status = head.split_whitespace().nth(1).unwrap().parse().unwrap();
-    let mut body = buf[head_end + 4..].to_vec();
-    if head.to_ascii_lowercase().contains("transfer-encoding: chunked") {
-        body = dechunk(&body);
-    }
-    (status, body)
-}
-
-fn dechunk(mut b: &[u8]) -> Vec<u8> {
-    let mut out = Vec::new();
-    while let Some(eol) = b.windows(2).position(|w| w == b"\r\n") {
-        let n = usize::from_str_radix(std::str::from_utf8(&b[..eol]).unwrap().trim(), 16).unwrap();
-        if n == 0 {
-            break;
-        }
-        out.extend_from_slice(&b[eol + 2..eol + 2 + n]);
-        b = &b[eol + 4 + n..];
-    }
-    out
-}
-
-pub(crate) type Ws = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
-
-pub(crate) async fn connect(addr: &str, token: Option<&str>) -> Ws {
-    let url = match token {
-        Some(t) => format!("ws://{addr}/ws?token={t}"),
-        None => format!("ws://{addr}/ws"),
-    };
-    let (ws, _) = tokio_tungstenite::connect_async(url.into_client_request().unwrap())
-        .await
-        .expect("upgrade");
-    ws
-}
-
-pub(crate) async fn send(ws: &mut Ws, v: Value) {
-    ws.send(Message::Text(v.to_string().into())).await.unwrap();
-}
-
-/// The next JSON message that satisfies `pred`, within `secs`.
-pub(crate) async fn until(ws: &mut Ws, secs: f64, pred: impl Fn(&Value) -> bool) -> Value {
-    let deadline = Instant::now() + Duration::from_secs_f64(secs);
-    loop {
-        let left = deadline.saturating_duration_since(Instant::now());
-        let msg = tokio::time::timeout(left, ws.next())
-            .await
-            .unwrap_or_else(|_| panic!("no matching message within {secs} s"))
-            .expect("socket open")
-            .expect("a frame");
-        if let Message::Text(t) = msg {
-            let v: Value = serde_json::from_str(&t).unwrap();
-            if pred(&v) {
-                return v;
-            }
-        }
-    }
-}
-
-pub(crate) fn is(v: &Value, ty: &str) -> bool {
-    v["type"] == ty
-}
-
-/// The reply (ok or error) to command `id`.
-pub(crate) async fn reply(ws: &mut Ws, id: u32) -> Value {
-    until(ws, 10.0, |v| (is(v, "ok") || is(v, "error")) && v["id"] == id).await
-}
-
-/// Sends command `v` and waits for its reply, which must be `ok` (the reply is matched by the
-/// command's `id`).
-pub(crate) async fn ok(ws: &mut Ws, v: Value) {
-    let id = v["id"].as_u64().expect("a command with an id") as u32;
-    send(ws, v).await;
-    let r = reply(ws, id).await;
-    assert_eq!(r["type"], "ok", "{r}");
-}
-
-/// The operator's usual start: connected with the token, welcomed as `operator`, subscribed to
-/// `stream` (command 1), holding the lease (command 2).
-pub(crate) async fn operator(addr: &str, stream: &str) -> Ws {
-    let mut op = connect(addr, Some(TOKEN)).await;
-    assert_eq!(until(&mut op, 5.0, |m| is(m, "welcome")).await["role"], "operator");
-    send(&mut op, json!({"type": "subscribe", "id": 1, "streams": [stream]})).await;
-    ok(&mut op, json!({"type": "take_lease", "id": 2})).await;
-    op
-}
-
-/// `/api/status` (no viewer token set).
-pub(crate) fn status(addr: &str) -> Value {
-    let (code, body) = http_get(addr, "/api/status");
-    assert_eq!(code, 200, "{}", String::from_utf8_lossy(&body));
-    serde_json::from_slice(&body).unwrap()
-}
-
-/// Waits (10 s at most) until the server's loop has made `n` ticks.
-pub(crate) fn wait_ticks(addr: &str, n: u64) {
-    let deadline = Instant::now() + Duration::from_secs(10);
-    loop {
-        let s = status(addr);
-        if s["loop"]["ticks"].as_u64().unwrap() >= n {
-            return;
-        }
-        assert!(Instant::now() < deadline, "fewer than {n} ticks in 10 s: {s}");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
-pub(crate) fn runtime() -> tokio::runtime::Runtime {
-    tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap()
-}
+use crate::util::{TOKEN, Ws, http_get, is, ok, operator, reply, runtime, send, start, until, wait_ticks, welcomed};
 
 #[test]
 fn a_viewer_receives_telemetry_and_cannot_command() {
     let srv = start("viewer", &[]);
     runtime().block_on(async {
-        let mut v = connect(&srv.addr, None).await;
-        let w = until(&mut v, 5.0, |m| is(m, "welcome")).await;
+        let (mut v, w) = welcomed(&srv.addr, None).await;
         assert_eq!(w["role"], "viewer");
         assert_eq!(w["tick_hz"], 1000.0);
         ok(&mut v, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
@@ -313,102 +95,10 @@ fn an_operator_pushes_a_particle_and_sees_it_move() {
 fn bad_messages_get_typed_errors_and_the_server_lives_on() {
     let srv = start("bad", &["--max-message-bytes", "1024"]);
     runtime().block_on(async {
-        let mut op = connect(&srv.addr, Some(TOKEN)).await;
-        until(&mut op, 5.0, |m| is(m, "welcome")).await;
-        let cases: Vec<(String, &str)> = vec![
-            ("{not json".into(), "malformed"),
-            (r#"{"type":"fly"}"#.into(), "malformed"),
-            // Issue 12.4: an array is not a command (serde read it as a push: `no_lease`), nor
-            // are two values in one message.
-            (r#"["push",13,1,0.2,0]"#.into(), "malformed"),
-            (r#"{"type":"ping","id":1} {"type":"ping","id":2}"#.into(), "malformed"),
-            (r#"{"type":"push","particle":1,"distance_um":NaN}"#.into(), "malformed"),
-            (
-                format!(r#"{{"type":"ping","pad":"{}"}}"#, "x".repeat(2000)),
-                "too_large",
-            ),
-            (
-                r#"{"type":"push","id":9,"particle":1,"distance_um":1.0}"#.into(),
-                "no_lease",
-            ),
-        ];
-        for (text, code) in cases {
-            op.send(Message::Text(text.clone().into())).await.unwrap();
-            let e = until(&mut op, 5.0, |m| is(m, "error")).await;
-            assert_eq!(e["code"], code, "{text:.60}: {e}");
-        }
-        op.send(Message::Binary(vec![1, 2, 3].into())).await.unwrap();
-        assert_eq!(until(&mut op, 5.0, |m| is(m, "error")).await["code"], "malformed");
+        let (mut op, _) = welcomed(&srv.addr, Some(TOKEN)).await;
+        malformed_and_oversized_messages_get_typed_errors(&mut op).await;
         ok(&mut op, json!({"type": "take_lease", "id": 1})).await;
-        for (id, cmd, code, words) in [
-            (
-                2,
-                json!({"type": "push", "id": 2, "particle": 1, "distance_um": 500.0}),
-                "out_of_range",
-                "allowed: (0, 100] µm",
-            ),
-            (
-                3,
-                json!({"type": "push", "id": 3, "particle": 1, "distance_um": 1e308, "direction_deg": 0}),
-                "out_of_range",
-                "distance_um",
-            ),
-            (
-                4,
-                json!({"type": "push", "id": 4, "particle": 1, "distance_um": 1.0, "direction_deg": 1e3}),
-                "out_of_range",
-                "[-360, 360]",
-            ),
-            (
-                5,
-                json!({"type": "push", "id": 5, "particle": 77, "distance_um": 1.0}),
-                "unknown_particle",
-                "ids: 1, 2, 3",
-            ),
-            (
-                6,
-                json!({"type": "push", "id": 6, "particle": 1, "distance_um": 1.0, "to_x_um": 3.0, "to_y_um": 3.0}),
-                "invalid",
-                "either",
-            ),
-            (
-                7,
-                json!({"type": "push", "id": 7, "particle": 1, "to_x_um": -1.0, "to_y_um": 3.0}),
-                "out_of_range",
-                "to_x_um",
-            ),
-            (
-                8,
-                json!({"type": "scan", "id": 8, "pixels": 4}),
-                "out_of_range",
-                "pixels",
-            ),
-            (
-                9,
-                json!({"type": "scan", "id": 9, "centre_x_um": 1.0, "size_um": 10.0}),
-                "out_of_range",
-                "within the stage",
-            ),
-            // Issue 12.7: a side of 5e-324 µm passed and wrote a GSF with XReal = 0; a target on
-            // the stage's edge ran ~200 s into a time-out.
-            (
-                10,
-                json!({"type": "scan", "id": 10, "size_um": 5e-324}),
-                "out_of_range",
-                "size_um",
-            ),
-            (
-                11,
-                json!({"type": "push", "id": 11, "particle": 1, "to_x_um": 100.0, "to_y_um": 50.0}),
-                "out_of_range",
-                "allowed: [0.500, 99.500] µm",
-            ),
-        ] {
-            send(&mut op, cmd).await;
-            let r = reply(&mut op, id).await;
-            assert_eq!(r["code"], code, "{r}");
-            assert!(r["message"].as_str().unwrap().contains(words), "{r}");
-        }
+        commands_out_of_range_name_the_field_and_the_range(&mut op).await;
         // Issue 12.7: the whole stage in one scan, about its centre, is allowed (it was refused
         // by a unit round trip's rounding).
         ok(
@@ -417,54 +107,158 @@ fn bad_messages_get_typed_errors_and_the_server_lives_on() {
         )
         .await;
         ok(&mut op, json!({"type": "stop", "id": 13})).await;
-        // Rate limit: 50 messages per second, burst 50; a burst of 80 pings: each gets exactly
-        // one reply, `ok` with its id or `rate_limited` (which cannot name it), and at least 20
-        // are refused (the bucket holds at most 50 and refills at 50/s).
-        let is_reply = |m: &Value| is(m, "ok") || (is(m, "error") && m["code"] == "rate_limited");
-        for k in 0..80 {
-            send(&mut op, json!({"type": "ping", "id": 1000 + k})).await;
-        }
-        let (mut answered, mut refused) = (0, 0);
-        for _ in 0..80 {
-            let m = until(&mut op, 5.0, is_reply).await;
-            if is(&m, "ok") {
-                answered += 1;
-            } else {
-                assert!(m["message"].as_str().unwrap().contains("50"), "{m}");
-                refused += 1;
-            }
-        }
-        assert!(
-            refused >= 20 && answered + refused == 80,
-            "{answered} answered, {refused} refused"
-        );
-        // The connection stays, and is served again as the bucket refills (retried until then).
-        let deadline = Instant::now() + Duration::from_secs(5);
-        loop {
-            send(&mut op, json!({"type": "ping", "id": 99})).await;
-            let m = until(&mut op, 5.0, is_reply).await;
-            if is(&m, "ok") {
-                assert_eq!(m["id"], 99);
-                break;
-            }
-            assert!(Instant::now() < deadline, "still rate limited after 5 s");
-            tokio::time::sleep(Duration::from_millis(20)).await;
-        }
+        a_burst_is_rate_limited_and_served_again_as_the_bucket_refills(&mut op).await;
     });
     // The loop ran on through all of it.
     wait_ticks(&srv.addr, 100);
+}
+
+/// Messages that are not one JSON command, or are larger than the server's `--max-message-bytes`
+/// (1024 here), each get an `error` with the right code; a push without the lease, `no_lease`.
+async fn malformed_and_oversized_messages_get_typed_errors(op: &mut Ws) {
+    let cases: Vec<(String, &str)> = vec![
+        ("{not json".into(), "malformed"),
+        (r#"{"type":"fly"}"#.into(), "malformed"),
+        // Issue 12.4: an array is not a command (serde read it as a push: `no_lease`), nor
+        // are two values in one message.
+        (r#"["push",13,1,0.2,0]"#.into(), "malformed"),
+        (r#"{"type":"ping","id":1} {"type":"ping","id":2}"#.into(), "malformed"),
+        (r#"{"type":"push","particle":1,"distance_um":NaN}"#.into(), "malformed"),
+        (
+            format!(r#"{{"type":"ping","pad":"{}"}}"#, "x".repeat(2000)),
+            "too_large",
+        ),
+        (
+            r#"{"type":"push","id":9,"particle":1,"distance_um":1.0}"#.into(),
+            "no_lease",
+        ),
+    ];
+    for (text, code) in cases {
+        op.send(Message::Text(text.clone().into())).await.unwrap();
+        let e = until(op, 5.0, |m| is(m, "error")).await;
+        assert_eq!(e["code"], code, "{text:.60}: {e}");
+    }
+    op.send(Message::Binary(vec![1, 2, 3].into())).await.unwrap();
+    assert_eq!(until(op, 5.0, |m| is(m, "error")).await["code"], "malformed");
+}
+
+/// Commands of the lease holder with a value out of range, or fields that do not go together,
+/// get `out_of_range` / `unknown_particle` / `invalid` naming the field and the allowed range.
+async fn commands_out_of_range_name_the_field_and_the_range(op: &mut Ws) {
+    for (id, cmd, code, words) in [
+        (
+            2,
+            json!({"type": "push", "id": 2, "particle": 1, "distance_um": 500.0}),
+            "out_of_range",
+            "allowed: (0, 100] µm",
+        ),
+        (
+            3,
+            json!({"type": "push", "id": 3, "particle": 1, "distance_um": 1e308, "direction_deg": 0}),
+            "out_of_range",
+            "distance_um",
+        ),
+        (
+            4,
+            json!({"type": "push", "id": 4, "particle": 1, "distance_um": 1.0, "direction_deg": 1e3}),
+            "out_of_range",
+            "[-360, 360]",
+        ),
+        (
+            5,
+            json!({"type": "push", "id": 5, "particle": 77, "distance_um": 1.0}),
+            "unknown_particle",
+            "ids: 1, 2, 3",
+        ),
+        (
+            6,
+            json!({"type": "push", "id": 6, "particle": 1, "distance_um": 1.0, "to_x_um": 3.0, "to_y_um": 3.0}),
+            "invalid",
+            "either",
+        ),
+        (
+            7,
+            json!({"type": "push", "id": 7, "particle": 1, "to_x_um": -1.0, "to_y_um": 3.0}),
+            "out_of_range",
+            "to_x_um",
+        ),
+        (
+            8,
+            json!({"type": "scan", "id": 8, "pixels": 4}),
+            "out_of_range",
+            "pixels",
+        ),
+        (
+            9,
+            json!({"type": "scan", "id": 9, "centre_x_um": 1.0, "size_um": 10.0}),
+            "out_of_range",
+            "within the stage",
+        ),
+        // Issue 12.7: a side of 5e-324 µm passed and wrote a GSF with XReal = 0; a target on
+        // the stage's edge ran ~200 s into a time-out.
+        (
+            10,
+            json!({"type": "scan", "id": 10, "size_um": 5e-324}),
+            "out_of_range",
+            "size_um",
+        ),
+        (
+            11,
+            json!({"type": "push", "id": 11, "particle": 1, "to_x_um": 100.0, "to_y_um": 50.0}),
+            "out_of_range",
+            "allowed: [0.500, 99.500] µm",
+        ),
+    ] {
+        send(op, cmd).await;
+        let r = reply(op, id).await;
+        assert_eq!(r["code"], code, "{r}");
+        assert!(r["message"].as_str().unwrap().contains(words), "{r}");
+    }
+}
+
+/// Rate limit: 50 messages per second, burst 50; a burst of 80 pings: each gets exactly one
+/// reply, `ok` with its id or `rate_limited` (which cannot name it), and at least 20 are refused
+/// (the bucket holds at most 50 and refills at 50/s).
+async fn a_burst_is_rate_limited_and_served_again_as_the_bucket_refills(op: &mut Ws) {
+    let is_reply = |m: &Value| is(m, "ok") || (is(m, "error") && m["code"] == "rate_limited");
+    for k in 0..80 {
+        send(op, json!({"type": "ping", "id": 1000 + k})).await;
+    }
+    let (mut answered, mut refused) = (0, 0);
+    for _ in 0..80 {
+        let m = until(op, 5.0, is_reply).await;
+        if is(&m, "ok") {
+            answered += 1;
+        } else {
+            assert!(m["message"].as_str().unwrap().contains("50"), "{m}");
+            refused += 1;
+        }
+    }
+    assert!(
+        refused >= 20 && answered + refused == 80,
+        "{answered} answered, {refused} refused"
+    );
+    // The connection stays, and is served again as the bucket refills (retried until then).
+    let deadline = Instant::now() + Duration::from_secs(5);
+    loop {
+        send(op, json!({"type": "ping", "id": 99})).await;
+        let m = until(op, 5.0, is_reply).await;
+        if is(&m, "ok") {
+            assert_eq!(m["id"], 99);
+            break;
+        }
+        assert!(Instant::now() < deadline, "still rate limited after 5 s");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
 }
 
 #[test]
 fn two_operators_contend_and_exactly_one_holds_the_lease() {
     let srv = start("lease", &[]);
     runtime().block_on(async {
-        let mut a = connect(&srv.addr, Some(TOKEN)).await;
-        let mut b = connect(&srv.addr, Some(TOKEN)).await;
-        let ida = until(&mut a, 5.0, |m| is(m, "welcome")).await["client"]
-            .as_u64()
-            .unwrap();
-        until(&mut b, 5.0, |m| is(m, "welcome")).await;
+        let (mut a, welcome) = welcomed(&srv.addr, Some(TOKEN)).await;
+        let ida = welcome["client"].as_u64().unwrap();
+        let (mut b, _) = welcomed(&srv.addr, Some(TOKEN)).await;
         send(&mut a, json!({"type": "take_lease", "id": 1})).await;
         let ra = reply(&mut a, 1).await;
         assert_eq!(ra["type"], "ok");
@@ -514,8 +308,8 @@ fn origins_and_tokens_are_checked_at_the_upgrade() {
             let e = tokio_tungstenite::connect_async(url).await.unwrap_err();
             assert!(e.to_string().contains("401"), "{e}");
         }
-        let mut v = connect(&srv.addr, Some("viewer-secret")).await;
-        assert_eq!(until(&mut v, 5.0, |m| is(m, "welcome")).await["role"], "viewer");
+        let (_v, welcome) = welcomed(&srv.addr, Some("viewer-secret")).await;
+        assert_eq!(welcome["role"], "viewer");
     });
     // The JSON API needs the token too, and a foreign Host name is refused (DNS rebinding).
     assert_eq!(http_get(&srv.addr, "/api/records").0, 401);
@@ -666,10 +460,8 @@ fn a_scan_streams_its_lines_and_records_a_complete_gsf() {
 fn clients_beyond_the_cap_are_refused_and_a_place_frees_when_one_leaves() {
     let srv = start("cap", &["--max-clients", "2"]);
     runtime().block_on(async {
-        let mut a = connect(&srv.addr, None).await;
-        let mut b = connect(&srv.addr, None).await;
-        until(&mut a, 5.0, |m| is(m, "welcome")).await;
-        until(&mut b, 5.0, |m| is(m, "welcome")).await;
+        let (mut a, _) = welcomed(&srv.addr, None).await;
+        let (_b, _) = welcomed(&srv.addr, None).await;
         let e = tokio_tungstenite::connect_async(format!("ws://{}/ws", srv.addr))
             .await
             .unwrap_err();

@@ -10,8 +10,9 @@ use futures_util::StreamExt;
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 
-use crate::serve::{
-    TOKEN, Ws, connect, is, ok, operator, reply, runtime, send, start, start_scene, status, until, wait_ticks,
+use crate::util::{
+    TOKEN, Ws, connect, http_get, is, ok, operator, reply, runtime, send, start, start_scene, status, until, wait_exit,
+    wait_ticks, welcomed,
 };
 
 #[test]
@@ -58,7 +59,7 @@ fn a_command_while_a_push_runs_is_busy_and_stop_ends_the_push() {
 
 /// The reply to command `id` and the first message `ty`, in whichever order they come (a scan's
 /// `scan_start` may overtake the command's reply).
-async fn reply_and(ws: &mut crate::serve::Ws, id: u32, ty: &str) -> (Value, Value) {
+async fn reply_and(ws: &mut Ws, id: u32, ty: &str) -> (Value, Value) {
     let (mut r, mut m) = (None, None);
     while r.is_none() || m.is_none() {
         let v = until(ws, 10.0, |v| v["id"] == id || is(v, ty)).await;
@@ -104,10 +105,8 @@ fn a_stop_during_a_scan_cancels_it_without_a_record() {
 fn on_sigterm_every_client_gets_shutdown_then_a_close_frame() {
     let mut srv = start_scene("close-frame", &[]);
     runtime().block_on(async {
-        let mut op = connect(&srv.addr, Some(TOKEN)).await;
-        let mut viewer = connect(&srv.addr, None).await;
-        until(&mut op, 5.0, |m| is(m, "welcome")).await;
-        until(&mut viewer, 5.0, |m| is(m, "welcome")).await;
+        let (mut op, _) = welcomed(&srv.addr, Some(TOKEN)).await;
+        let (mut viewer, _) = welcomed(&srv.addr, None).await;
         nanopush_e2e::sigterm(&srv.child);
         for ws in [&mut op, &mut viewer] {
             let mut saw_shutdown = false;
@@ -297,13 +296,13 @@ fn the_loops_core_polls_while_the_server_runs_unless_it_may_halt() {
     assert_eq!(s["loop"]["no_halt"], true, "{s}");
     assert_eq!(std::fs::read_to_string(&setting).unwrap().trim(), "n/a");
     assert!(holders(&record).contains(&polling.child.id()), "{record}");
-    let (_, metrics) = crate::serve::http_get(&polling.addr, "/metrics");
+    let (_, metrics) = http_get(&polling.addr, "/metrics");
     assert!(String::from_utf8_lossy(&metrics).contains("\nnanopush_loop_no_halt 1\n"));
 
     let s = status(&halting.addr);
     assert_eq!(s["loop"]["no_halt"], false, "{s}");
     assert!(!holders(&record).contains(&halting.child.id()));
-    let (_, metrics) = crate::serve::http_get(&halting.addr, "/metrics");
+    let (_, metrics) = http_get(&halting.addr, "/metrics");
     assert!(String::from_utf8_lossy(&metrics).contains("\nnanopush_loop_no_halt 0\n"));
 
     // Killed: it stays in the record until another server looks.
@@ -339,14 +338,7 @@ fn the_loops_core_polls_while_the_server_runs_unless_it_may_halt() {
     let hung_up = next.child.id();
     // SAFETY: kill(2) on the pid of our own child, not yet reaped (so not reused).
     unsafe { libc::kill(hung_up as libc::pid_t, libc::SIGHUP) };
-    let t = std::time::Instant::now();
-    let exit = loop {
-        if let Some(e) = next.child.try_wait().unwrap() {
-            break e;
-        }
-        assert!(t.elapsed() < Duration::from_secs(20), "no exit within 20 s of SIGHUP");
-        std::thread::sleep(Duration::from_millis(5));
-    };
+    let exit = wait_exit(&mut next.child, 20.0);
     assert!(exit.success(), "{exit:?}");
     assert!(!holders(&record).contains(&hung_up));
 }

@@ -7,10 +7,11 @@ use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
 use futures_util::{SinkExt, StreamExt};
+use nanopush_e2e::client::{text_frame, upgrade_request};
 use serde_json::json;
 use tokio_tungstenite::tungstenite::Message;
 
-use crate::serve::{TOKEN, Ws, connect, http_get, is, ok, reply, runtime, send, start, start_with, status, until};
+use crate::util::{TOKEN, Ws, http_get, is, ok, reply, runtime, send, start, start_with, status, until, welcomed};
 
 /// Issue 12.1: a client that sends commands does not delay its own telemetry (the sockets have
 /// TCP_NODELAY): with a ping every 100 ms, the gaps between telemetry frames stay within 5 ms of
@@ -19,8 +20,7 @@ use crate::serve::{TOKEN, Ws, connect, http_get, is, ok, reply, runtime, send, s
 fn commands_do_not_delay_telemetry() {
     let srv = start("nodelay", &[]);
     runtime().block_on(async {
-        let mut ws = connect(&srv.addr, None).await;
-        until(&mut ws, 5.0, |m| is(m, "welcome")).await;
+        let (mut ws, _) = welcomed(&srv.addr, None).await;
         send(&mut ws, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
         reply(&mut ws, 1).await;
         let mut arrivals = Vec::new();
@@ -94,8 +94,7 @@ fn records_are_served_safely_and_write_failures_say_why() {
     std::fs::remove_dir_all(&records).unwrap();
     std::fs::write(&records, b"not a directory").unwrap();
     runtime().block_on(async {
-        let mut op = connect(&srv.addr, Some(TOKEN)).await;
-        until(&mut op, 5.0, |m| is(m, "welcome")).await;
+        let (mut op, _) = welcomed(&srv.addr, Some(TOKEN)).await;
         send(&mut op, json!({"type": "subscribe", "id": 1, "streams": ["scan"]})).await;
         reply(&mut op, 1).await;
         send(&mut op, json!({"type": "take_lease", "id": 2})).await;
@@ -118,8 +117,7 @@ fn records_are_served_safely_and_write_failures_say_why() {
 fn big_messages_are_refused_and_no_reply_is_lost() {
     let srv = start("big", &["--max-rate", "10000"]);
     runtime().block_on(async {
-        let mut ws = connect(&srv.addr, None).await;
-        until(&mut ws, 5.0, |m| is(m, "welcome")).await;
+        let (mut ws, _) = welcomed(&srv.addr, None).await;
         send(&mut ws, json!({"type": "ping", "id": 1})).await;
         for kib in [65usize, 200, 5 * 1024] {
             let text = format!(r#"{{"type":"ping","id":9,"pad":"{}"}}"#, "x".repeat(kib * 1024));
@@ -146,17 +144,15 @@ fn big_messages_are_refused_and_no_reply_is_lost() {
 fn viewers_never_lock_the_operator_out_and_one_address_has_a_limit() {
     let srv = start("reserve", &["--max-clients", "2", "--max-clients-per-address", "3"]);
     runtime().block_on(async {
-        let mut a = connect(&srv.addr, None).await;
-        let mut b = connect(&srv.addr, None).await;
-        until(&mut a, 5.0, |m| is(m, "welcome")).await;
-        until(&mut b, 5.0, |m| is(m, "welcome")).await;
+        let (_a, _) = welcomed(&srv.addr, None).await;
+        let (_b, _) = welcomed(&srv.addr, None).await;
         let e = tokio_tungstenite::connect_async(format!("ws://{}/ws", srv.addr))
             .await
             .unwrap_err();
         assert!(e.to_string().contains("503"), "{e}");
         // The operator still gets in, takes the lease and is answered.
-        let mut op = connect(&srv.addr, Some(TOKEN)).await;
-        assert_eq!(until(&mut op, 5.0, |m| is(m, "welcome")).await["role"], "operator");
+        let (mut op, welcome) = welcomed(&srv.addr, Some(TOKEN)).await;
+        assert_eq!(welcome["role"], "operator");
         ok(&mut op, json!({"type": "take_lease", "id": 1})).await;
     });
     // Per address: a third viewer place is the address's limit here (3), a fourth is refused.
@@ -164,8 +160,7 @@ fn viewers_never_lock_the_operator_out_and_one_address_has_a_limit() {
     runtime().block_on(async {
         let mut held = Vec::new();
         for _ in 0..3 {
-            let mut c = connect(&srv.addr, None).await;
-            until(&mut c, 5.0, |m| is(m, "welcome")).await;
+            let (c, _) = welcomed(&srv.addr, None).await;
             held.push(c);
         }
         let e = tokio_tungstenite::connect_async(format!("ws://{}/ws", srv.addr))
@@ -182,12 +177,11 @@ fn viewers_never_lock_the_operator_out_and_one_address_has_a_limit() {
 fn the_operator_token_has_8_places_and_a_ninth_is_refused() {
     let srv = start("operators", &["--max-clients", "1"]);
     runtime().block_on(async {
-        let mut viewer = connect(&srv.addr, None).await;
-        until(&mut viewer, 5.0, |m| is(m, "welcome")).await;
+        let (_viewer, _) = welcomed(&srv.addr, None).await;
         let mut held = Vec::new();
         for _ in 0..8 {
-            let mut op = connect(&srv.addr, Some(TOKEN)).await;
-            assert_eq!(until(&mut op, 5.0, |m| is(m, "welcome")).await["role"], "operator");
+            let (op, welcome) = welcomed(&srv.addr, Some(TOKEN)).await;
+            assert_eq!(welcome["role"], "operator");
             held.push(op);
         }
         let url = format!("ws://{}/ws?token={TOKEN}", srv.addr);
@@ -228,10 +222,8 @@ fn slow_and_dead_connections_are_closed() {
     }
     assert!(t0.elapsed() < Duration::from_secs(8), "closed after {:?}", t0.elapsed());
     runtime().block_on(async {
-        let mut live = connect(&srv.addr, None).await;
-        let mut dead = connect(&srv.addr, None).await;
-        until(&mut live, 5.0, |m| is(m, "welcome")).await;
-        until(&mut dead, 5.0, |m| is(m, "welcome")).await;
+        let (mut live, _) = welcomed(&srv.addr, None).await;
+        let (mut dead, _) = welcomed(&srv.addr, None).await;
         // The live peer keeps reading (tungstenite answers each ping); the dead one does not.
         let end = Instant::now() + Duration::from_secs(3);
         while Instant::now() < end {
@@ -292,12 +284,7 @@ fn small_buffer_socket(addr: &str) -> TcpStream {
 /// fills it at once), upgraded to a WebSocket by hand, subscribed to telemetry.
 fn stalled_subscriber(addr: &str) -> TcpStream {
     let mut s = small_buffer_socket(addr);
-    write!(
-        s,
-        "GET /ws HTTP/1.1\r\nHost: {addr}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
-         Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n"
-    )
-    .unwrap();
+    s.write_all(upgrade_request(addr, "/ws").as_bytes()).unwrap();
     let mut head = Vec::new();
     let mut b = [0u8; 1];
     while !head.ends_with(b"\r\n\r\n") {
@@ -309,12 +296,8 @@ fn stalled_subscriber(addr: &str) -> TcpStream {
         "{}",
         String::from_utf8_lossy(&head)
     );
-    let p = br#"{"type":"subscribe","streams":["tip"]}"#;
-    let key = [7u8, 1, 3, 9];
-    let mut frame = vec![0x81, 0x80 | p.len() as u8];
-    frame.extend_from_slice(&key);
-    frame.extend(p.iter().enumerate().map(|(i, c)| c ^ key[i % 4]));
-    s.write_all(&frame).unwrap();
+    let subscribe = br#"{"type":"subscribe","streams":["tip"]}"#;
+    s.write_all(&text_frame(subscribe, [7, 1, 3, 9])).unwrap();
     s
 }
 
@@ -325,8 +308,7 @@ fn a_reader_that_stops_reading_is_dropped_without_slowing_the_others() {
     let srv = start("stalled", &["--telemetry-hz", "1000"]);
     let clients = |addr: &str| status(addr)["clients"].as_u64().unwrap();
     runtime().block_on(async {
-        let mut other = connect(&srv.addr, None).await;
-        until(&mut other, 5.0, |m| is(m, "welcome")).await;
+        let (mut other, _) = welcomed(&srv.addr, None).await;
         send(&mut other, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
         reply(&mut other, 1).await;
         let stalled = stalled_subscriber(&srv.addr);

@@ -5,7 +5,7 @@
 
 use serde_json::json;
 
-use crate::serve::{http_get, is, ok, operator, runtime, start_scene, until};
+use crate::util::{is, ok, operator, runtime, start_scene, status, until};
 
 fn push_and_still_answer(tag: &str, edits: &[(&str, &str)], expect: &[&str]) {
     let srv = start_scene(tag, edits);
@@ -24,8 +24,7 @@ fn push_and_still_answer(tag: &str, edits: &[(&str, &str)], expect: &[&str]) {
             "{tag}: a reason: {done}"
         );
         // The server lives on: status, telemetry, and a reply to the next command.
-        let (status, body) = http_get(&srv.addr, "/api/status");
-        assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
+        status(&srv.addr);
         until(&mut op, 5.0, |m| is(m, "telemetry")).await;
         ok(&mut op, json!({"type": "release_lease", "id": 4})).await;
     });

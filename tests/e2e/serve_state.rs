@@ -6,7 +6,7 @@ use std::net::TcpStream;
 
 use serde_json::json;
 
-use crate::serve::{TOKEN, connect, http_get, is, ok, runtime, send, start, until};
+use crate::util::{TOKEN, http_get, is, ok, runtime, send, start, until, welcomed};
 
 /// Issue 11, defects 2 and 5: a client that connects after a scan and a push gets, right after
 /// `welcome`, the instrument as it is: the moved particle, the lease, the phase, the latest scan
@@ -15,8 +15,7 @@ use crate::serve::{TOKEN, connect, http_get, is, ok, runtime, send, start, until
 fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
     let srv = start("late", &["--scan-line-hz", "400"]);
     runtime().block_on(async {
-        let mut op = connect(&srv.addr, Some(TOKEN)).await;
-        let w = until(&mut op, 5.0, |m| is(m, "welcome")).await;
+        let (mut op, w) = welcomed(&srv.addr, Some(TOKEN)).await;
         let me = w["client"].as_u64().unwrap();
         let first = until(&mut op, 5.0, |_| true).await;
         assert_eq!(first["type"], "state", "the message after welcome: {first}");
@@ -41,8 +40,7 @@ fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
         assert_eq!(path.len(), 2, "{started}");
         assert!((path[1][0].as_f64().unwrap() - 41e-6).abs() < 50e-9, "{started}");
         // A viewer joining during the push sees its path.
-        let mut during = connect(&srv.addr, None).await;
-        until(&mut during, 5.0, |m| is(m, "welcome")).await;
+        let (mut during, _) = welcomed(&srv.addr, None).await;
         let s = until(&mut during, 5.0, |_| true).await;
         assert_eq!(s["type"], "state");
         assert_eq!(s["push"]["particle"], 1, "{s}");
@@ -50,8 +48,7 @@ fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
         let run = until(&mut op, 30.0, |m| is(m, "run_done")).await;
         assert_eq!(run["outcome"], "ok", "{run}");
 
-        let mut late = connect(&srv.addr, None).await;
-        until(&mut late, 5.0, |m| is(m, "welcome")).await;
+        let (mut late, _) = welcomed(&srv.addr, None).await;
         let s = until(&mut late, 5.0, |_| true).await;
         assert_eq!(s["type"], "state", "{s}");
         assert!(s["push"].is_null(), "{s}");
@@ -81,12 +78,9 @@ fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
 fn issue_11_a_push_stops_when_its_lease_holder_disconnects() {
     let srv = start("holder-gone", &[]);
     runtime().block_on(async {
-        let mut watcher = connect(&srv.addr, None).await;
-        until(&mut watcher, 5.0, |m| is(m, "welcome")).await;
-        let mut op = connect(&srv.addr, Some(TOKEN)).await;
-        let me = until(&mut op, 5.0, |m| is(m, "welcome")).await["client"]
-            .as_u64()
-            .unwrap();
+        let (mut watcher, _) = welcomed(&srv.addr, None).await;
+        let (mut op, welcome) = welcomed(&srv.addr, Some(TOKEN)).await;
+        let me = welcome["client"].as_u64().unwrap();
         ok(&mut op, json!({"type": "take_lease", "id": 1})).await;
         ok(
             &mut op,

@@ -1,32 +1,25 @@
 //! `nanopush simulate` and `nanopush accuracy`.
 
 use nanopush_e2e::{run, text};
-use serde_json::Value;
+
+use crate::util::{nanopush_json, tmp};
 
 #[test]
 fn simulate_minimal_scene_shears_and_writes_a_trace() {
-    let dir = std::env::temp_dir().join(format!("nanopush-e2e-sim-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = tmp("sim");
     let csv = dir.join("trace.csv");
-    let o = run(
-        "nanopush",
-        &[
-            "simulate",
-            "--scene",
-            "scenes/minimal.toml",
-            "--duration",
-            "0.02",
-            "--sample",
-            "1e-3",
-            "--out",
-            csv.to_str().unwrap(),
-            "--json",
-        ],
-        None,
-    );
-    let (out, err) = text(&o);
-    assert!(o.status.success(), "{err}");
-    let v: Value = serde_json::from_str(&out).unwrap();
+    let v = nanopush_json(&[
+        "simulate",
+        "--scene",
+        "scenes/minimal.toml",
+        "--duration",
+        "0.02",
+        "--sample",
+        "1e-3",
+        "--out",
+        csv.to_str().unwrap(),
+        "--json",
+    ]);
     assert_eq!(v["schema"], "nanopush.simulate");
     // The minimal scene shears after a few nm of travel and then slides with the stage.
     let t_star = v["shearing_time"].as_f64().expect("it shears");
@@ -73,29 +66,22 @@ fn simulate_rejects_bad_arguments_clearly() {
 
 #[test]
 fn accuracy_report_writes_table_csv_and_plots() {
-    let dir = std::env::temp_dir().join(format!("nanopush-e2e-acc-{}", std::process::id()));
-    let o = run(
-        "nanopush",
-        &[
-            "accuracy",
-            "--scene",
-            "scenes/minimal.toml",
-            "--duration",
-            "0.002",
-            "--reps",
-            "1",
-            "--min-rtol",
-            "1e-4",
-            "--no-full-model",
-            "--out",
-            dir.to_str().unwrap(),
-            "--json",
-        ],
-        None,
-    );
-    let (out, err) = text(&o);
-    assert!(o.status.success(), "{err}");
-    let v: Value = serde_json::from_str(&out).unwrap();
+    let dir = tmp("acc");
+    let v = nanopush_json(&[
+        "accuracy",
+        "--scene",
+        "scenes/minimal.toml",
+        "--duration",
+        "0.002",
+        "--reps",
+        "1",
+        "--min-rtol",
+        "1e-4",
+        "--no-full-model",
+        "--out",
+        dir.to_str().unwrap(),
+        "--json",
+    ]);
     assert_eq!(v["schema"], "nanopush.accuracy");
     let points = v["points"].as_array().unwrap();
     // Ours: 3 methods x 3 tolerances x 3 problems; peers: 4 solvers x 3 tolerances x 2 problems.

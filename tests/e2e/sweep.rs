@@ -3,12 +3,7 @@
 use nanopush_e2e::{run, text};
 use serde_json::Value;
 
-fn temp_dir(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("nanopush-e2e-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use crate::util::tmp;
 
 const SWEEP: [&str; 12] = [
     "sweep",
@@ -27,7 +22,7 @@ const SWEEP: [&str; 12] = [
 
 #[test]
 fn shard_csvs_concatenate_to_the_unsharded_csv_byte_for_byte() {
-    let dir = temp_dir("sweep-shards");
+    let dir = tmp("sweep-shards");
     let out = dir.to_str().unwrap();
     let whole = run("nanopush", &[&SWEEP[..], &["--out", out]].concat(), None);
     assert!(whole.status.success(), "{}", text(&whole).1);
@@ -141,7 +136,7 @@ fn bad_arguments_exit_2_naming_the_value_and_the_allowed_range() {
 
 #[test]
 fn simulate_plot_draws_fig7() {
-    let dir = temp_dir("fig7");
+    let dir = tmp("fig7");
     let svg = dir.join("fig7.svg");
     let o = run(
         "nanopush",

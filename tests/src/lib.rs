@@ -1,11 +1,21 @@
-//! Helpers for the end-to-end tests: find the workspace's real binaries (building them if they
-//! are missing) and run them.
+//! Helpers for the end-to-end tests and the benchmarks (`nanopush-load`, `nanopush-soak`,
+//! `nanopush-haptic-latency`): find the workspace's real binaries (building them if they are
+//! missing) and run them; start and stop their processes ([`process`]); talk to a running
+//! `nanopush serve` ([`client`]); read its Prometheus exposition ([`metrics`]) and the kernel's
+//! accounts of it ([`procfs`]).
 #![deny(missing_docs)]
+
+pub mod client;
+pub mod metrics;
+pub mod process;
+pub mod procfs;
 
 use std::io::Write;
 use std::path::PathBuf;
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Command, Output, Stdio};
 use std::sync::Once;
+
+pub use process::{Proc, listening_addr, sigterm, stop};
 
 /// The workspace root.
 pub fn workspace() -> PathBuf {
@@ -68,32 +78,6 @@ pub fn text(o: &Output) -> (String, String) {
         String::from_utf8_lossy(&o.stdout).into_owned(),
         String::from_utf8_lossy(&o.stderr).into_owned(),
     )
-}
-
-/// Sends SIGTERM to a child process (the way an operator or a service manager stops it).
-pub fn sigterm(child: &Child) {
-    // SAFETY: kill(2) on the pid of our own child, not yet reaped (so not reused).
-    let r = unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
-    assert_eq!(r, 0, "kill(SIGTERM) of pid {}", child.id());
-}
-
-/// Stops a child as a service manager would: SIGTERM, up to 10 s to end, then SIGKILL; reaped
-/// either way. A server stopped so gives its loop's core back (`serve/no_halt.rs`); one killed
-/// outright leaves it polling until another server starts and ends.
-pub fn stop(child: &mut Child) {
-    if matches!(child.try_wait(), Ok(None)) {
-        // SAFETY: kill(2) on the pid of our own child, not yet reaped (so not reused).
-        unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
-        let t = std::time::Instant::now();
-        while matches!(child.try_wait(), Ok(None)) {
-            if t.elapsed() > std::time::Duration::from_secs(10) {
-                let _ = child.kill();
-                break;
-            }
-            std::thread::sleep(std::time::Duration::from_millis(5));
-        }
-    }
-    let _ = child.wait();
 }
 
 /// Core `cpu`'s PM QoS resume latency, which `nanopush serve` sets to `n/a` (poll, never halt)

@@ -13,33 +13,23 @@
 //! 3. the control loop's mean compute time per tick (the three phases, from `/metrics`) without
 //!    a haptic link and with one engaged, for the loop's tick budget.
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::net::TcpStream;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use nanopush_e2e::{bin, workspace};
+use nanopush_e2e::{Proc, bin, workspace};
 
 const TOKEN: &str = "latency-bench-token";
 
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        nanopush_e2e::stop(&mut self.0);
-    }
-}
-
+/// The body of a GET of `path` from the server.
 fn get(addr: &str, path: &str) -> String {
-    let mut s = TcpStream::connect(addr).expect("connect");
-    write!(s, "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n").unwrap();
-    let mut buf = String::new();
-    s.read_to_string(&mut buf).unwrap();
-    buf.split_once("\r\n\r\n")
-        .map(|(_, b)| b.to_string())
-        .unwrap_or_default()
+    let (_, body) = nanopush_e2e::client::get(addr, path).expect("a GET from the server");
+    String::from_utf8_lossy(&body).into_owned()
 }
 
+/// `nanopush serve --haptic MODE` on a free port, on link namespace `ns`: the server and its
+/// address.
 fn serve(mode: &str, ns: &str) -> (Proc, String) {
     let mut child = Command::new(bin("nanopush"))
         .current_dir(workspace())
@@ -49,10 +39,8 @@ fn serve(mode: &str, ns: &str) -> (Proc, String) {
         .stderr(Stdio::null())
         .spawn()
         .expect("starting nanopush serve");
-    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
-    let first = lines.next().unwrap().unwrap();
-    let addr = first.trim_start_matches("nanopush serve: listening on ").to_string();
-    std::thread::spawn(move || for _ in lines {});
+    let addr = nanopush_e2e::listening_addr(&mut child)
+        .unwrap_or_else(|first| panic!("nanopush serve did not start: its first line {first:?}"));
     (Proc(child), addr)
 }
 
@@ -62,49 +50,57 @@ struct Compute {
     counts: [f64; 3],
 }
 
+/// The compute phases' histogram sums and counts now.
 fn compute(addr: &str) -> Compute {
     let text = get(addr, "/metrics");
-    let mut c = Compute {
-        sums: [0.0; 3],
-        counts: [0.0; 3],
+    let series = |kind: &str, phase: &str| {
+        let name = format!("nanopush_loop_compute_seconds_{kind}{{phase=\"{phase}\"}}");
+        nanopush_e2e::metrics::series(&text, &name).unwrap_or(0.0)
     };
-    for (i, phase) in ["control", "physics", "publish"].iter().enumerate() {
-        for line in text.lines() {
-            let v = |l: &str| l.rsplit(' ').next().and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
-            if line.starts_with(&format!("nanopush_loop_compute_seconds_sum{{phase=\"{phase}\"}}")) {
-                c.sums[i] = v(line);
-            }
-            if line.starts_with(&format!("nanopush_loop_compute_seconds_count{{phase=\"{phase}\"}}")) {
-                c.counts[i] = v(line);
-            }
-        }
+    let phases = ["control", "physics", "publish"];
+    Compute {
+        sums: phases.map(|p| series("sum", p)),
+        counts: phases.map(|p| series("count", p)),
     }
-    c
+}
+
+/// Each phase's mean compute time (µs) between two readings.
+/// Each phase's mean compute time (µs) over `secs`, from a second on.
+fn mean_compute(addr: &str, secs: f64) -> [f64; 3] {
+    std::thread::sleep(Duration::from_secs(1));
+    let a = compute(addr);
+    std::thread::sleep(Duration::from_secs_f64(secs));
+    let b = compute(addr);
+    mean_between(&a, &b)
+}
+
+/// Waits until `/api/status` contains `needle` (read every `every_ms`), `secs` at most.
+fn wait_status(addr: &str, needle: &str, secs: u64, every_ms: u64, what: &str) {
+    let t0 = Instant::now();
+    while !get(addr, &format!("/api/status?token={TOKEN}")).contains(needle) {
+        assert!(t0.elapsed() < Duration::from_secs(secs), "{what}");
+        std::thread::sleep(Duration::from_millis(every_ms));
+    }
 }
 
 fn mean_between(a: &Compute, b: &Compute) -> [f64; 3] {
     std::array::from_fn(|i| (b.sums[i] - a.sums[i]) / (b.counts[i] - a.counts[i]).max(1.0) * 1e6)
 }
 
+/// As the lease holder, engages haptic z-control (and leaves the socket open 200 ms).
 fn engage(addr: &str) {
     // A bare WebSocket handshake and two text frames: take the lease, engage.
     let mut s = TcpStream::connect(addr).unwrap();
-    write!(
-        s,
-        "GET /ws?token={TOKEN} HTTP/1.1\r\nHost: {addr}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
-         Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n"
-    )
-    .unwrap();
+    let upgrade = nanopush_e2e::client::upgrade_request(addr, &format!("/ws?token={TOKEN}"));
+    s.write_all(upgrade.as_bytes()).unwrap();
     let mut head = [0u8; 512];
     let _ = s.read(&mut head);
     for msg in [
         r#"{"type":"take_lease","id":1}"#,
         r#"{"type":"haptic","id":2,"action":"engage"}"#,
     ] {
-        let p = msg.as_bytes();
-        let mut frame = vec![0x81, 0x80 | p.len() as u8, 1, 2, 3, 4];
-        frame.extend(p.iter().enumerate().map(|(i, b)| b ^ [1, 2, 3, 4][i % 4]));
-        s.write_all(&frame).unwrap();
+        s.write_all(&nanopush_e2e::client::text_frame(msg.as_bytes(), [1, 2, 3, 4]))
+            .unwrap();
     }
     std::thread::sleep(Duration::from_millis(200));
 }
@@ -127,11 +123,7 @@ fn main() {
 
     // 3a. The loop without a haptic link.
     let (srv, addr) = serve("none", &ns);
-    std::thread::sleep(Duration::from_secs(1));
-    let a = compute(&addr);
-    std::thread::sleep(Duration::from_secs_f64(secs));
-    let b = compute(&addr);
-    let without = mean_between(&a, &b);
+    let without = mean_compute(&addr, secs);
     drop(srv);
 
     // 2 and 3b. With a bridge, engaged.
@@ -146,29 +138,26 @@ fn main() {
         .spawn()
         .expect("starting nanopush-haptic");
     let mut bridge = Proc(bridge);
-    let t0 = Instant::now();
-    while !get(&addr, &format!("/api/status?token={TOKEN}")).contains("\"link\":\"up\"") {
-        assert!(t0.elapsed() < Duration::from_secs(10), "the link did not come up");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_status(&addr, "\"link\":\"up\"", 10, 20, "the link did not come up");
     engage(&addr);
-    let t0 = Instant::now();
-    while !get(&addr, &format!("/api/status?token={TOKEN}")).contains("\"phase\":\"engaged\"") {
-        assert!(
-            t0.elapsed() < Duration::from_secs(30),
-            "haptic z-control did not engage"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    std::thread::sleep(Duration::from_secs(1));
-    let a = compute(&addr);
-    std::thread::sleep(Duration::from_secs_f64(secs));
-    let b = compute(&addr);
-    let with = mean_between(&a, &b);
+    wait_status(
+        &addr,
+        "\"phase\":\"engaged\"",
+        30,
+        50,
+        "haptic z-control did not engage",
+    );
+    let with = mean_compute(&addr, secs);
     let mut summary = String::new();
     bridge.0.stdout.take().unwrap().read_to_string(&mut summary).unwrap();
     let _ = bridge.0.wait();
     let v: serde_json::Value = serde_json::from_str(summary.trim()).expect("the bridge's --json summary");
+    print_results(&v, &without, &with);
+}
+
+/// The bridge's latency and cycles (`v`, its `--json` summary), and the loop's compute per tick
+/// without a haptic link and with one engaged.
+fn print_results(v: &serde_json::Value, without: &[f64; 3], with: &[f64; 3]) {
     let l = &v["latency_ns"];
     let us = |k: &str| l[k].as_f64().unwrap_or(f64::NAN) / 1e3;
     println!(
@@ -187,17 +176,17 @@ fn main() {
         without[0],
         without[1],
         without[2],
-        total(&without)
+        total(without)
     );
     println!(
         "  with a bridge, engaged                     {:7.2}  {:7.2}  {:7.2}  {:6.2}",
         with[0],
         with[1],
         with[2],
-        total(&with)
+        total(with)
     );
     println!(
         "  difference                                                   {:+6.2}",
-        total(&with) - total(&without)
+        total(with) - total(without)
     );
 }

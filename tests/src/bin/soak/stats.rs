@@ -24,11 +24,7 @@ pub fn cpu_jiffies(ncpu: usize) -> Vec<(u64, u64)> {
     let stat = std::fs::read_to_string("/proc/stat").unwrap_or_default();
     (0..ncpu)
         .map(|cpu| {
-            let line = stat
-                .lines()
-                .find(|l| l.starts_with(&format!("cpu{cpu} ")))
-                .unwrap_or_default();
-            let f: Vec<u64> = line.split_whitespace().skip(1).filter_map(|v| v.parse().ok()).collect();
+            let f = nanopush_e2e::procfs::cpu_jiffies(&stat, Some(cpu)).unwrap_or_default();
             // user nice system idle iowait irq softirq steal
             let at = |i: usize| f.get(i).copied().unwrap_or(0);
             (at(7), at(5) + at(6))
