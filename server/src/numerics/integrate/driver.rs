@@ -143,28 +143,8 @@ impl Integrator {
                     max: self.opts.max_steps,
                 });
             }
-            // Data at the start of the step: f, ∂f/∂t, J (reused by every attempt).
-            let w = &mut self.work;
-            w.y0[..n].copy_from_slice(&y[..n]);
-            if have_start {
-                w.f0[..n].copy_from_slice(&w.f_next[..n]);
-                w.ft[..n].copy_from_slice(&w.ft_next[..n]);
-                w.jac[..n * n].copy_from_slice(&w.jac_next[..n * n]);
-            } else {
-                p.derivatives(*t, &w.y0[..n], &mut w.f0[..n], &mut w.ft[..n], &mut w.jac[..n * n]);
-                st.rhs_evals += 1;
-                st.jac_evals += 1;
-            }
-            w.rtol = self.opts.rtol;
-            for i in 0..n {
-                w.abs_tol[i] = self.opts.atol * p.scale(i);
-                w.scale[i] = w.abs_tol[i] + self.opts.rtol * w.y0[i].abs();
-            }
-            if !w.f0[..n].iter().all(|v| v.is_finite()) {
-                break Err(IntegrateError::NonFinite { t: *t });
-            }
-            if self.h <= 0.0 {
-                self.h = self.initial_step(p, n, remaining);
+            if let Err(e) = self.start_data(p, *t, y, n, have_start, remaining, &mut st) {
+                break Err(e);
             }
             let mut h = self.h;
             if self.opts.h_max > 0.0 {
@@ -174,53 +154,7 @@ impl Integrator {
             if h >= remaining || remaining - h < 0.01 * h {
                 h = remaining;
             }
-            let accepted = loop {
-                if h < self.opts.h_min {
-                    break Err(IntegrateError::StepTooSmall { t: *t, h });
-                }
-                let r0 = self.work.rhs_evals;
-                let f0 = self.work.factorizations;
-                let outcome = self.work.step(p, *t, h);
-                st.rhs_evals += self.work.rhs_evals - r0;
-                st.factorizations += self.work.factorizations - f0;
-                match outcome {
-                    Err(StepFailure::Newton) | Err(StepFailure::Singular) => {
-                        st.rejected += 1;
-                        h *= 0.25;
-                        self.last_rejected = true;
-                        continue;
-                    }
-                    Ok(()) => {}
-                }
-                let err = self.error_norm(n);
-                if !err.is_finite() || !self.work.y1[..n].iter().all(|v| v.is_finite()) {
-                    st.rejected += 1;
-                    h *= 0.25;
-                    self.last_rejected = true;
-                    continue;
-                }
-                // Step control (Hairer & Wanner IV.8, with Gustafsson's predictive controller).
-                let safe = 0.9;
-                let mut fac = (err.powf(1.0 / q) / safe).clamp(1.0 / 6.0, 5.0);
-                if err <= 1.0 {
-                    if self.h_old > 0.0 {
-                        let pred =
-                            ((self.h_old / h) * (err * err / self.err_old).powf(1.0 / q) / safe).clamp(1.0 / 6.0, 5.0);
-                        fac = fac.max(pred);
-                    }
-                    let mut h_new = h / fac;
-                    if self.last_rejected {
-                        h_new = h_new.min(h);
-                    }
-                    self.h_old = h;
-                    self.err_old = err.max(1e-2);
-                    self.last_rejected = false;
-                    break Ok((h, err, h_new));
-                }
-                st.rejected += 1;
-                self.last_rejected = true;
-                h /= fac;
-            };
+            let accepted = self.attempt(p, *t, h, q, &mut st);
             let (h, err, h_new) = match accepted {
                 Ok(v) => v,
                 Err(e) => break Err(e),
@@ -245,28 +179,7 @@ impl Integrator {
             }
             // Events: the earliest switching function that went from > 0 to ≤ 0.
             if ne > 0 {
-                let mut g1 = [f64::NAN; MAX_EVENTS];
-                let w = &self.work;
-                events.eval_at_step(
-                    t1,
-                    &w.y1[..n],
-                    &w.f_next[..n],
-                    &w.ft_next[..n],
-                    &w.jac_next[..n * n],
-                    &mut g1,
-                );
-                let mut first: Option<(usize, f64)> = None;
-                for k in 0..ne {
-                    // A crossing from positive to non-positive, or from exactly zero (a mode that
-                    // starts on its boundary, e.g. a static limit of zero) to negative.
-                    let crossed = (g0[k] > 0.0 && g1[k] <= 0.0) || (g0[k] == 0.0 && g1[k] < 0.0);
-                    if crossed
-                        && let Some(theta) = self.locate(p, events, k, *t, h, g0[k], g1[k], &mut st.event_evals)
-                        && first.is_none_or(|(_, th)| theta < th)
-                    {
-                        first = Some((k, theta));
-                    }
-                }
+                let (first, g1) = self.first_event(p, events, ne, *t, h, &g0, &mut st);
                 if let Some((k, theta)) = first {
                     let mut ye = [0.0; MAX_DIM];
                     self.work.dense(theta, &mut ye[..n]);
@@ -289,6 +202,148 @@ impl Integrator {
         }
         st.wall_time = start.elapsed().as_secs_f64();
         result.map(|o| (o, st))
+    }
+
+    /// The data at the start of a step from `(t, y)`: f, ∂f/∂t and J (reused by every attempt;
+    /// taken from the previous accepted step when `have_start`), the error weights, and a first
+    /// step size when there is none yet.
+    #[allow(clippy::too_many_arguments)]
+    fn start_data<P: Problem>(
+        &mut self,
+        p: &P,
+        t: f64,
+        y: &[f64],
+        n: usize,
+        have_start: bool,
+        remaining: f64,
+        st: &mut Stats,
+    ) -> Result<(), IntegrateError> {
+        // Data at the start of the step: f, ∂f/∂t, J (reused by every attempt).
+        let w = &mut self.work;
+        w.y0[..n].copy_from_slice(&y[..n]);
+        if have_start {
+            w.f0[..n].copy_from_slice(&w.f_next[..n]);
+            w.ft[..n].copy_from_slice(&w.ft_next[..n]);
+            w.jac[..n * n].copy_from_slice(&w.jac_next[..n * n]);
+        } else {
+            p.derivatives(t, &w.y0[..n], &mut w.f0[..n], &mut w.ft[..n], &mut w.jac[..n * n]);
+            st.rhs_evals += 1;
+            st.jac_evals += 1;
+        }
+        w.rtol = self.opts.rtol;
+        for i in 0..n {
+            w.abs_tol[i] = self.opts.atol * p.scale(i);
+            w.scale[i] = w.abs_tol[i] + self.opts.rtol * w.y0[i].abs();
+        }
+        if !w.f0[..n].iter().all(|v| v.is_finite()) {
+            return Err(IntegrateError::NonFinite { t });
+        }
+        if self.h <= 0.0 {
+            self.h = self.initial_step(p, n, remaining);
+        }
+        Ok(())
+    }
+
+    /// Attempts steps from `t` with `h`, shrinking it after each rejection (a failed Newton
+    /// iteration, a singular matrix, a non-finite result, or an error norm above 1), until one
+    /// is accepted. Step control: Hairer & Wanner IV.8, with Gustafsson's predictive
+    /// controller. Returns the accepted step, its error norm and the next step's size.
+    fn attempt<P: Problem>(
+        &mut self,
+        p: &P,
+        t: f64,
+        mut h: f64,
+        q: f64,
+        st: &mut Stats,
+    ) -> Result<(f64, f64, f64), IntegrateError> {
+        let n = self.work.n;
+        loop {
+            if h < self.opts.h_min {
+                break Err(IntegrateError::StepTooSmall { t, h });
+            }
+            let r0 = self.work.rhs_evals;
+            let f0 = self.work.factorizations;
+            let outcome = self.work.step(p, t, h);
+            st.rhs_evals += self.work.rhs_evals - r0;
+            st.factorizations += self.work.factorizations - f0;
+            match outcome {
+                Err(StepFailure::Newton) | Err(StepFailure::Singular) => {
+                    st.rejected += 1;
+                    h *= 0.25;
+                    self.last_rejected = true;
+                    continue;
+                }
+                Ok(()) => {}
+            }
+            let err = self.error_norm(n);
+            if !err.is_finite() || !self.work.y1[..n].iter().all(|v| v.is_finite()) {
+                st.rejected += 1;
+                h *= 0.25;
+                self.last_rejected = true;
+                continue;
+            }
+            // Step control (Hairer & Wanner IV.8, with Gustafsson's predictive controller).
+            let safe = 0.9;
+            let mut fac = (err.powf(1.0 / q) / safe).clamp(1.0 / 6.0, 5.0);
+            if err <= 1.0 {
+                if self.h_old > 0.0 {
+                    let pred =
+                        ((self.h_old / h) * (err * err / self.err_old).powf(1.0 / q) / safe).clamp(1.0 / 6.0, 5.0);
+                    fac = fac.max(pred);
+                }
+                let mut h_new = h / fac;
+                if self.last_rejected {
+                    h_new = h_new.min(h);
+                }
+                self.h_old = h;
+                self.err_old = err.max(1e-2);
+                self.last_rejected = false;
+                break Ok((h, err, h_new));
+            }
+            st.rejected += 1;
+            self.last_rejected = true;
+            h /= fac;
+        }
+    }
+
+    /// The earliest event in the accepted step `[t, t + h]`: the switching functions at its end
+    /// (from the next step's start data), and the first crossing located in it. Returns it (index,
+    /// fraction θ of the step) and the functions' values at the end.
+    #[allow(clippy::too_many_arguments)]
+    fn first_event<P: Problem, E: Events>(
+        &self,
+        p: &P,
+        events: &E,
+        ne: usize,
+        t: f64,
+        h: f64,
+        g0: &[f64; MAX_EVENTS],
+        st: &mut Stats,
+    ) -> (Option<(usize, f64)>, [f64; MAX_EVENTS]) {
+        let n = self.work.n;
+        let mut g1 = [f64::NAN; MAX_EVENTS];
+        let w = &self.work;
+        events.eval_at_step(
+            t + h,
+            &w.y1[..n],
+            &w.f_next[..n],
+            &w.ft_next[..n],
+            &w.jac_next[..n * n],
+            &mut g1,
+        );
+        let mut first: Option<(usize, f64)> = None;
+        for k in 0..ne {
+            // A crossing from positive to non-positive, or from exactly zero (a mode that
+            // starts on its boundary, e.g. a static limit of zero) to negative.
+            let crossed = (g0[k] > 0.0 && g1[k] <= 0.0) || (g0[k] == 0.0 && g1[k] < 0.0);
+            if crossed
+                && let Some(theta) = self.locate(p, events, k, t, h, g0[k], g1[k], &mut st.event_evals)
+                && first.is_none_or(|(_, th)| theta < th)
+            {
+                first = Some((k, theta));
+            }
+        }
+        (first, g1)
     }
 
     /// Illinois (modified regula falsi) on `θ ↦ g_k(t + θh, y(θ))` with the dense output, to
