@@ -4,6 +4,7 @@
 use std::fmt::Write as _;
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 
+use crate::serve::haptic::metrics::HapticMetrics;
 pub use crate::serve::histogram::{BUCKETS, Histogram};
 
 /// Everything the loop counts.
@@ -26,7 +27,7 @@ pub struct LoopMetrics {
     /// Trace rows dropped because the recorder's queue was full (should stay 0).
     pub dropped_rows: AtomicU64,
     /// The haptic link.
-    pub haptic: crate::serve::haptic::metrics::HapticMetrics,
+    pub haptic: HapticMetrics,
     /// Records (push traces and summaries, scans) that could not be written.
     pub record_failures: AtomicU64,
     /// 1 when SCHED_FIFO was granted.
@@ -85,15 +86,25 @@ pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64, disk: Option<(f64, f
         true,
         None,
     );
-    let last = h.last_ns.load(Relaxed);
-    let age = if last == 0 {
-        -1.0
-    } else {
-        now_ns.saturating_sub(last) as f64 * 1e-9
-    };
-    // (name, help, type, value)
     let (free, total) = disk.unwrap_or((f64::NAN, f64::NAN));
-    let scalars: [(&str, &str, &str, f64); 26] = [
+    for (name, help, kind, v) in loop_scalars(l, free, total)
+        .into_iter()
+        .chain(haptic_scalars(h, now_ns))
+        .chain(net_scalars(n))
+    {
+        let _ = writeln!(s, "# HELP {name} {help}");
+        let _ = writeln!(s, "# TYPE {name} {kind}");
+        let _ = writeln!(s, "{name} {v}");
+    }
+    s
+}
+
+/// A scalar family: name, help, type and value.
+type Scalar = (&'static str, &'static str, &'static str, f64);
+
+/// The loop's and the records' counters and gauges, and the data directory's space.
+fn loop_scalars(l: &LoopMetrics, free: f64, total: f64) -> [Scalar; 9] {
+    [
         (
             "nanopush_record_write_failures_total",
             "Records (push traces and summaries, scans) that could not be written.",
@@ -148,6 +159,18 @@ pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64, disk: Option<(f64, f
             "gauge",
             l.no_halt.load(Relaxed) as f64,
         ),
+    ]
+}
+
+/// The haptic link's gauges and counters; the link's age is −1 before any sample.
+fn haptic_scalars(h: &HapticMetrics, now_ns: u64) -> [Scalar; 13] {
+    let last = h.last_ns.load(Relaxed);
+    let age = if last == 0 {
+        -1.0
+    } else {
+        now_ns.saturating_sub(last) as f64 * 1e-9
+    };
+    [
         (
             "nanopush_haptic_link_age_seconds",
             "Time since the last haptic sample (-1 when none has arrived).",
@@ -226,6 +249,12 @@ pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64, disk: Option<(f64, f
             "counter",
             h.link_downs.load(Relaxed) as f64,
         ),
+    ]
+}
+
+/// The network side's gauges and counters.
+fn net_scalars(n: &NetMetrics) -> [Scalar; 4] {
+    [
         (
             "nanopush_clients",
             "Connected WebSocket clients.",
@@ -250,13 +279,7 @@ pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64, disk: Option<(f64, f
             "counter",
             n.sent.load(Relaxed) as f64,
         ),
-    ];
-    for (name, help, kind, v) in scalars {
-        let _ = writeln!(s, "# HELP {name} {help}");
-        let _ = writeln!(s, "# TYPE {name} {kind}");
-        let _ = writeln!(s, "{name} {v}");
-    }
-    s
+    ]
 }
 
 #[cfg(test)]
