@@ -9,6 +9,37 @@ use crate::serial::fixtures::{any_info, any_state, decode_all, info, state};
 fn the_crc_is_ccitt_false() {
     assert_eq!(crc16(b"123456789"), 0x29B1);
     assert_eq!(crc16(b""), 0xFFFF);
+    // The crate's algorithm is the one the constants (and the sketch) name.
+    let alg = CRC.algorithm;
+    assert_eq!((alg.width, alg.poly, alg.init), (16, CRC_POLY, CRC_INIT));
+    assert_eq!(
+        (alg.refin, alg.refout, alg.xorout, alg.check),
+        (false, false, 0, 0x29B1)
+    );
+}
+
+/// The bitwise definition (shift in each byte MSB first, xor the polynomial on carry), the one
+/// the firmware sketch runs: the crate's table must agree with it on every packet length.
+fn crc16_bitwise(bytes: &[u8]) -> u16 {
+    let mut crc = CRC_INIT;
+    for &b in bytes {
+        crc ^= u16::from(b) << 8;
+        for _ in 0..8 {
+            crc = if crc & 0x8000 != 0 {
+                (crc << 1) ^ CRC_POLY
+            } else {
+                crc << 1
+            };
+        }
+    }
+    crc
+}
+
+proptest! {
+    #[test]
+    fn the_crc_matches_its_bitwise_definition(bytes in proptest::collection::vec(any::<u8>(), 0..64)) {
+        prop_assert_eq!(crc16(&bytes), crc16_bitwise(&bytes));
+    }
 }
 
 #[test]
