@@ -332,7 +332,9 @@ impl Bilateral {
         (to - self.z_ref).abs() < 1e-15
     }
 
-    /// One control tick.
+    /// One control tick: the engage button, a push taking z or giving it back, the link's
+    /// loss, then the phase's step ([`Bilateral::step_phase`]), the force's gain
+    /// ([`Bilateral::gain_and_flags`]), and the force and local model sent to the hand.
     pub fn tick(&mut self, input: &Input) -> Output {
         let p = self.params;
         let was = self.phase;
@@ -340,9 +342,51 @@ impl Bilateral {
         let tip_force = p.k_z * zeta;
         let max_force = input.handle.map_or(0.0, |h| h.max_force.max(0.0));
         let handle = input.handle;
+        self.on_button(input);
+        self.on_push(input);
+        // The link went down while the hand moved the tip.
+        if handle.is_none()
+            && matches!(
+                self.phase,
+                Phase::Ramp { .. } | Phase::Engaged | Phase::Clutched | Phase::Settle { .. }
+            )
+        {
+            self.phase = Phase::LinkLost;
+        }
 
-        // The engage button toggles the engagement (a rising edge).
-        let button = handle.is_some_and(|h| h.buttons & BUTTON_ENGAGE != 0);
+        let limit_force = self.step_phase(input, tip_force, zeta);
+        let (gain, flags) = self.gain_and_flags(handle.is_some());
+        let touching = zeta.abs() > p.contact_deflection;
+        let force = (gain * p.force_gain * (tip_force + limit_force)).clamp(-max_force, max_force);
+        // A retraction that ends this tick still moves the tip there.
+        let owns_z = !matches!(self.phase, Phase::Off | Phase::Pushing) || was == Phase::Retract;
+        let stiffness = if (touching || limit_force > 0.0) && self.phase != Phase::Pushing {
+            -gain * p.force_gain * p.k_z * p.position_gain
+        } else {
+            0.0
+        };
+        Output {
+            target: owns_z.then_some([self.xy[0], self.xy[1], self.z_ref]),
+            feedback: ForceFeedback {
+                seq: 0,
+                time_ns: 0,
+                state_seq: handle.map_or(u64::MAX, |h| h.seq),
+                force,
+                stiffness,
+                anchor: handle.map_or(0.0, |h| h.position),
+                half_range: MODEL_HALF_RANGE,
+                tip_force,
+                tip_z: self.contact_z.map_or(f64::NAN, |zc| input.stage[2] - zc),
+                gain,
+                active: u32::from(gain > 0.0 && handle.is_some()),
+                flags,
+            },
+        }
+    }
+
+    /// The engage button toggles the engagement (a rising edge).
+    fn on_button(&mut self, input: &Input) {
+        let button = input.handle.is_some_and(|h| h.buttons & BUTTON_ENGAGE != 0);
         if button && !self.button_prev {
             if self.phase == Phase::Off {
                 self.engage(input.stage);
@@ -351,9 +395,11 @@ impl Bilateral {
             }
         }
         self.button_prev = button;
+    }
 
-        // A push owns z: the hand only feels (the force ramps in from zero). After it the hand
-        // gets the tip back only if it had it before.
+    /// A push owns z: the hand only feels (the force ramps in from zero). After it the hand
+    /// gets the tip back only if it had it before.
+    fn on_push(&mut self, input: &Input) {
         if input.pushing && !matches!(self.phase, Phase::Off | Phase::Pushing) {
             self.before_push = self.phase;
             self.push_gain = 0.0;
@@ -373,19 +419,14 @@ impl Bilateral {
                 self.engage(input.stage);
             }
         }
-        // The link went down while the hand moved the tip.
-        if handle.is_none()
-            && matches!(
-                self.phase,
-                Phase::Ramp { .. } | Phase::Engaged | Phase::Clutched | Phase::Settle { .. }
-            )
-        {
-            self.phase = Phase::LinkLost;
-        }
+    }
 
+    /// The phase's step this tick (approach, park, settle, retract, or the hand moving the
+    /// tip). Returns the virtual wall's force at the handle's range limit (N, tip side).
+    fn step_phase(&mut self, input: &Input, tip_force: f64, zeta: f64) -> f64 {
+        let p = self.params;
+        let handle = input.handle;
         let mut limit_force = 0.0;
-        let mut gain = 0.0;
-        let mut flags = 0;
         match self.phase {
             Phase::Off | Phase::Pushing => {}
             Phase::Approach => {
@@ -436,6 +477,15 @@ impl Bilateral {
                 }
             }
         }
+        limit_force
+    }
+
+    /// The force's gain (ramping in after engagement and during a push) and the flags the hand
+    /// is told, for the phase now.
+    fn gain_and_flags(&mut self, linked: bool) -> (f64, u32) {
+        let p = self.params;
+        let mut gain = 0.0;
+        let mut flags = 0;
         match self.phase {
             Phase::Ramp { gain: g } => {
                 gain = g;
@@ -447,7 +497,7 @@ impl Bilateral {
             }
             Phase::Clutched => flags |= FORCE_ENGAGED | FORCE_CLUTCHED,
             Phase::Pushing => {
-                if handle.is_some() {
+                if linked {
                     self.push_gain = (self.push_gain + p.tick / RAMP).min(1.0);
                 } else {
                     self.push_gain = 0.0;
@@ -457,32 +507,7 @@ impl Bilateral {
             }
             _ => {}
         }
-        let touching = zeta.abs() > p.contact_deflection;
-        let force = (gain * p.force_gain * (tip_force + limit_force)).clamp(-max_force, max_force);
-        // A retraction that ends this tick still moves the tip there.
-        let owns_z = !matches!(self.phase, Phase::Off | Phase::Pushing) || was == Phase::Retract;
-        let stiffness = if (touching || limit_force > 0.0) && self.phase != Phase::Pushing {
-            -gain * p.force_gain * p.k_z * p.position_gain
-        } else {
-            0.0
-        };
-        Output {
-            target: owns_z.then_some([self.xy[0], self.xy[1], self.z_ref]),
-            feedback: ForceFeedback {
-                seq: 0,
-                time_ns: 0,
-                state_seq: handle.map_or(u64::MAX, |h| h.seq),
-                force,
-                stiffness,
-                anchor: handle.map_or(0.0, |h| h.position),
-                half_range: MODEL_HALF_RANGE,
-                tip_force,
-                tip_z: self.contact_z.map_or(f64::NAN, |zc| input.stage[2] - zc),
-                gain,
-                active: u32::from(gain > 0.0 && handle.is_some()),
-                flags,
-            },
-        }
+        (gain, flags)
     }
 
     /// The hand moves the tip (ramp, engaged, clutch); returns the virtual wall's force at the
