@@ -80,7 +80,8 @@ fn main() -> ExitCode {
         Command::Sweep(args) => sweep_cmd::run(&args),
         Command::Scan(args) => scan_cmd::run(&args),
         Command::Push(args) => match push_cmd::run(&args) {
-            // A push that ran but failed exits 1 after its report (documented in the README).
+            // A push that ran but failed exits 1 after its report (docs/manipulation.md, "Outcomes
+            // that say what happened").
             Ok((text, false)) => {
                 let code = print_stdout(&text);
                 return if code == ExitCode::SUCCESS {

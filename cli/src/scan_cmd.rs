@@ -238,8 +238,8 @@ fn summary(out: &mut String, r: &ScanReport, p: &ScanParams) -> anyhow::Result<(
 mod tests {
     use crate::Command;
 
-    /// README, "Scans": a `--locate` click looks for a particle within `--search-um`, default
-    /// 2 µm.
+    /// docs/manipulation.md, "Scans": a `--locate` click looks for a particle within `--search-um`,
+    /// default 2 µm.
     #[test]
     fn search_um_defaults_to_2() {
         let Command::Scan(a) = crate::parse(&["scan", "--out", "x.gsf"]) else {

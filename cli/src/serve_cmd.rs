@@ -306,8 +306,8 @@ mod tests {
         a
     }
 
-    /// README, "The teleoperation server": the synopsis's defaults, `--bind 127.0.0.1 --port
-    /// 8080 --rate-hz 1000 --max-message-bytes 4096 --max-rate 50 --max-clients 1000
+    /// docs/server.md, "The teleoperation server": the synopsis's defaults, `--bind 127.0.0.1
+    /// --port 8080 --rate-hz 1000 --max-message-bytes 4096 --max-rate 50 --max-clients 1000
     /// --max-clients-per-address 64 --header-timeout-s 10 --ws-ping-s 10 --ws-timeout-s 30
     /// --data-dir records --scan-line-hz 32 --telemetry-hz 60 --haptic none
     /// --haptic-timeout-ms 5`, and that they pass the range checks.
@@ -335,8 +335,8 @@ mod tests {
         check(&a).unwrap();
     }
 
-    /// README, "Faults": "`--haptic` needs a loop of at least 500 Hz": refused at 499 Hz with
-    /// either link, accepted at 500 Hz; without a link any rate in [100, 10000] Hz is fine.
+    /// docs/haptics.md, "Faults": "`--haptic` needs a loop of at least 500 Hz": refused at 499 Hz
+    /// with either link, accepted at 500 Hz; without a link any rate in [100, 10000] Hz is fine.
     #[test]
     fn haptic_is_refused_below_a_500_hz_loop() {
         for link in ["external", "sim"] {

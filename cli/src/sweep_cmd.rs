@@ -409,10 +409,10 @@ mod tests {
         a
     }
 
-    /// README, "The paper's figures": `nanopush sweep` integrates each point for `--duration`
-    /// 0.2 s at 1 ms samples and averages over the last quarter, Rodas4 at rtol 1e-6, the whole
-    /// sweep as one shard: the [`PointOptions::default`] that the Figs 10-13 tests pin their
-    /// figures on, with the rotation on unless `--pure-sliding`.
+    /// docs/model.md, "The paper's figures": `nanopush sweep` integrates each point for
+    /// `--duration` 0.2 s at 1 ms samples and averages over the last quarter, Rodas4 at rtol 1e-6,
+    /// the whole sweep as one shard: the [`PointOptions::default`] that the Figs 10-13 tests pin
+    /// their figures on, with the rotation on unless `--pure-sliding`.
     #[test]
     fn sweep_defaults_are_point_options_default_0_2_s_1_ms_samples_the_last_quarter() {
         let args = ["sweep", "--param", "beta", "--from", "5", "--to", "65", "--steps", "31"];

@@ -168,8 +168,8 @@ fn a_force_scale_that_chatters_without_the_passivity_controller_rests_with_it() 
     assert!(touches(&off) > 3 * touches(&on));
     assert!(calm < 10e-6, "with the controller the hand should rest: {calm}");
     assert!(e_min > -20e-6, "{e_min}");
-    // The README's table, to its digits (the run is deterministic): 1565 µm, 90 contact changes,
-    // −15.3 mJ without the controller; 0.00 µm, 14, −12.5 µJ with it.
+    // docs/haptics.md's table ("Tests"), to its digits (the run is deterministic): 1565 µm, 90
+    // contact changes, −15.3 mJ without the controller; 0.00 µm, 14, −12.5 µJ with it.
     assert!((buzz - 1565e-6).abs() < 0.5e-6, "span {buzz:e}");
     assert!(calm < 0.005e-6, "span {calm:e}");
     assert_eq!((touches(&off), touches(&on)), (90, 14));
@@ -218,7 +218,8 @@ fn chatter(r: &Run) -> (usize, f64) {
 /// The nanoManipulator's local model, measured: with the passivity controller off, at twice the
 /// force scale and a 4 kHz device, rendering the server's local linear model between its 1 kHz
 /// samples generates a small fraction of the energy that holding its force does, and the contact
-/// chatters far less (the full table over rates and scales: `rates_table`, in the README).
+/// chatters far less (the full table over rates and scales: `rates_table`, in docs/haptics.md,
+/// "Tests").
 #[test]
 fn the_local_model_makes_a_fast_device_steadier_than_a_held_force() {
     let (t_hold, e_hold) = chatter(&run_at("press", false, false, 4, 2.0, 4.0, 14_000));
@@ -230,12 +231,12 @@ fn the_local_model_makes_a_fast_device_steadier_than_a_held_force() {
     assert!(2 * t_local < t_hold, "local {t_local} vs held {t_hold} contact changes");
 }
 
-/// The README's table of the local model, cell by cell (deterministic: the simulated hand and
-/// instrument have fixed seeds): device rate × rendering × force scale, no controller; contact
-/// changes exactly and the lowest port energy to the README's two digits. At ×4 every combination
-/// chatters (more than 60 contact changes). Then the README's energy ratios (held force / local
-/// model) of the unrounded cells: five- to eightfold at ×1; 2.4×, 47× and 95× at ×2, to their
-/// last digit. Printed with `--nocapture`.
+/// docs/haptics.md's table of the local model ("Tests"), cell by cell (deterministic: the simulated
+/// hand and instrument have fixed seeds): device rate × rendering × force scale, no controller;
+/// contact changes exactly and the lowest port energy to the table's two digits. At ×4 every
+/// combination chatters (more than 60 contact changes). Then docs/haptics.md's energy ratios (held
+/// force / local model) of the unrounded cells: five- to eightfold at ×1; 2.4×, 47× and 95× at ×2,
+/// to their last digit. Printed with `--nocapture`.
 #[test]
 fn rates_table() {
     // (device cycles per tick, local model, scale) → (contact changes, lowest port energy J).
@@ -283,9 +284,9 @@ fn rates_table() {
             }
         }
     }
-    // The README's ratios (held force / local model, lowest port energy), from the unrounded
-    // cells: five- to eightfold at ×1 at every rate; at ×2, 2.4× (1 kHz), 47× (2 kHz), 95×
-    // (4 kHz), each to its last digit.
+    // docs/haptics.md's ratios ("Tests"; held force / local model, lowest port energy), from the
+    // unrounded cells: five- to eightfold at ×1 at every rate; at ×2, 2.4× (1 kHz), 47× (2 kHz),
+    // 95× (4 kHz), each to its last digit.
     let ratio = |per_tick: u32, scale: f64| {
         energy[&(per_tick, false, scale.to_bits())] / energy[&(per_tick, true, scale.to_bits())]
     };

@@ -397,8 +397,8 @@ mod tests {
         assert!(same[0].estimated_error.is_nan());
     }
 
-    /// README, "`nanopush accuracy`": the estimate skips finer runs "that agree with it to
-    /// rounding (16 ulps)": 16 ulps of the larger magnitude is rounding, 17 is not.
+    /// docs/validation.md, "`nanopush accuracy`": the estimate skips finer runs "that agree with it
+    /// to rounding (16 ulps)": 16 ulps of the larger magnitude is rounding, 17 is not.
     #[test]
     fn runs_within_16_ulps_agree_to_rounding() {
         let ulps = |k: f64| [1.0 + k * f64::EPSILON];
@@ -489,15 +489,15 @@ mod tests {
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), r| (lo.min(r), hi.max(r)))
     }
 
-    /// README, "`nanopush accuracy`": the push rows of the work-precision table (default scene,
-    /// 20 ms, 0.1 ms samples, against Rodas4 at rtol 1e-12), as the report computes them —
-    /// steps exactly, final error and estimate to their two digits: Rodas4 4.0e-15 / 3.9e-15 /
-    /// 9.2e-18 m in 205 / 218 / 1228 steps at 1e-2 / 1e-6 / 1e-10 (the same 205 steps at 1e-2 …
+    /// docs/validation.md, "`nanopush accuracy`": the push rows of the work-precision table
+    /// (default scene, 20 ms, 0.1 ms samples, against Rodas4 at rtol 1e-12), as the report computes
+    /// them — steps exactly, final error and estimate to their two digits: Rodas4 4.0e-15 / 3.9e-15
+    /// / 9.2e-18 m in 205 / 218 / 1228 steps at 1e-2 / 1e-6 / 1e-10 (the same 205 steps at 1e-2 …
     /// 1e-4); TR-BDF2 9.0e-12 / 3.3e-12 / 1.2e-14 m in 205 / 459 / 7353 steps; implicit Euler
-    /// 1.9e-13 m in 3989 steps at 1e-6; the reference and its TR-BDF2 cross-check 1.2e-14 m
-    /// apart. Then the error falls with the tolerance for each method (implicit Euler down to
-    /// 1e-7: its finer runs, 4·10⁴ steps and more, are too slow for a debug build), and the
-    /// estimate / error ranges over the Rodas4 and TR-BDF2 rows: 0.88-1.00 and 0.77-1.00.
+    /// 1.9e-13 m in 3989 steps at 1e-6; the reference and its TR-BDF2 cross-check 1.2e-14 m apart.
+    /// Then the error falls with the tolerance for each method (implicit Euler down to 1e-7: its
+    /// finer runs, 4·10⁴ steps and more, are too slow for a debug build), and the estimate / error
+    /// ranges over the Rodas4 and TR-BDF2 rows: 0.88-1.00 and 0.77-1.00.
     #[test]
     fn the_readmes_push_work_precision_rows() {
         let model = PushModel::new(Scene::default_scene().push_params());
@@ -546,10 +546,10 @@ mod tests {
         assert!(two_decimals(lo, 0.77) && two_decimals(hi, 1.00), "TR-BDF2 {lo}-{hi}");
     }
 
-    /// README, "`nanopush accuracy`": estimate / true error on the classical problems, every
-    /// tolerance 1e-2 … 1e-10: Rodas4 0.89-1.02 (Robertson) and 1.00-1.56 (Van der Pol), TR-BDF2
-    /// within the 0.77-1.00 of its push rows; the estimates of the table's rows to their two
-    /// digits (Van der Pol 2.3e-7 and 1.5e-4 at 1e-6, Robertson 6.2e-9 and 1.1e-5 at 1e-8); the
+    /// docs/validation.md, "`nanopush accuracy`": estimate / true error on the classical problems,
+    /// every tolerance 1e-2 … 1e-10: Rodas4 0.89-1.02 (Robertson) and 1.00-1.56 (Van der Pol),
+    /// TR-BDF2 within the 0.77-1.00 of its push rows; the estimates of the table's rows to their
+    /// two digits (Van der Pol 2.3e-7 and 1.5e-4 at 1e-6, Robertson 6.2e-9 and 1.1e-5 at 1e-8); the
     /// error falls with the tolerance (TR-BDF2 on Van der Pol from 1e-3: its error at 1e-2 is
     /// below the one at 1e-3).
     #[test]
@@ -584,8 +584,8 @@ mod tests {
             for m in [Method::Rodas4, Method::TrBdf2] {
                 let rows = of(pts, m);
                 let from = if pts[0].problem == "van-der-pol" && m == Method::TrBdf2 {
-                    // The README's exception: TR-BDF2's error on Van der Pol at 1e-2 is below
-                    // the one at 1e-3.
+                    // docs/validation.md's exception ("`nanopush accuracy`"): TR-BDF2's error on
+                    // Van der Pol at 1e-2 is below the one at 1e-3.
                     assert!(rows[0].final_error < rows[1].final_error, "{rows:?}");
                     1
                 } else {
@@ -599,10 +599,10 @@ mod tests {
         }
     }
 
-    /// README, "`nanopush accuracy`": a run beyond the step limit is reported as a failed point
-    /// (no error, the integrator's message), and the other points are not affected. Van der Pol
-    /// with Rodas4 takes 1069 + 8 rejected = 1077 step attempts at 1e-6 (the integrator's
-    /// pinned work): with a limit of 1076 that run fails, the looser ones do not.
+    /// docs/validation.md, "`nanopush accuracy`": a run beyond the step limit is reported as a
+    /// failed point (no error, the integrator's message), and the other points are not affected.
+    /// Van der Pol with Rodas4 takes 1069 + 8 rejected = 1077 step attempts at 1e-6 (the
+    /// integrator's pinned work): with a limit of 1076 that run fails, the looser ones do not.
     #[test]
     fn a_run_beyond_the_step_limit_is_reported_as_a_failed_point() {
         let pts = VAN_DER_POL.points(1, 1076, 1e-6);
@@ -620,11 +620,12 @@ mod tests {
         }
     }
 
-    /// README, "`nanopush accuracy`": with the report's 2·10⁶-step limit (`nanopush accuracy`'s
-    /// `MAX_STEPS`), the only classical runs that fail are implicit Euler's at 1e-10, on both Van
-    /// der Pol and Robertson. Ignored: implicit Euler takes 1.5·10⁶ steps at 1e-9 on Van der
-    /// Pol, and 2·10⁶ before failing at 1e-10, too slow for the debug build of `make test`
-    /// (~2 s in release): `cargo test --release -p nanopush-study --lib -- --ignored implicit_euler_at_1e_10`.
+    /// docs/validation.md, "`nanopush accuracy`": with the report's 2·10⁶-step limit
+    /// (`nanopush accuracy`'s `MAX_STEPS`), the only classical runs that fail are implicit Euler's
+    /// at 1e-10, on both Van der Pol and Robertson. Ignored: implicit Euler takes 1.5·10⁶ steps at
+    /// 1e-9 on Van der Pol, and 2·10⁶ before failing at 1e-10, too slow for the debug build of
+    /// `make test` (~2 s in release):
+    /// `cargo test --release -p nanopush-study --lib -- --ignored implicit_euler_at_1e_10`.
     #[test]
     #[ignore = "runs every method to 1e-10 on both classical problems, implicit Euler into 2e6 steps: ~2 s in release, a minute in debug"]
     fn implicit_euler_at_1e_10_is_the_only_classical_run_beyond_the_2e6_step_limit() {
@@ -648,9 +649,9 @@ mod tests {
         }
     }
 
-    /// README, "`nanopush accuracy`": the push's reference is Rodas4 at rtol 1e-12 because at
-    /// 1e-13 double precision runs out on this problem: the step size falls below the minimum
-    /// within the first microsecond, while the run at 1e-12 completes.
+    /// docs/validation.md, "`nanopush accuracy`": the push's reference is Rodas4 at rtol 1e-12
+    /// because at 1e-13 double precision runs out on this problem: the step size falls below the
+    /// minimum within the first microsecond, while the run at 1e-12 completes.
     #[test]
     fn rodas4_on_the_push_fails_at_rtol_1e_13_so_the_reference_is_1e_12() {
         let model = PushModel::new(Scene::default_scene().push_params());

@@ -340,8 +340,9 @@ mod tests {
     use super::*;
 
     /// The reduced campaign (each validated range's ends, every friction zero, the Eq 16
-    /// bound): every case a plausible outcome or a refusal with its reason, and sound; the
-    /// README's outcome counts: 5 `ok`, 6 `no_contact`, 1 `deflection_limit`, 1 `particle_lost`.
+    /// bound): every case a plausible outcome or a refusal with its reason, and sound;
+    /// docs/validation.md's outcome counts ("Whole pushes: the campaign"): 5 `ok`, 6 `no_contact`,
+    /// 1 `deflection_limit`, 1 `particle_lost`.
     #[test]
     fn the_reduced_campaign_is_sound_with_5_ok_6_no_contact_1_deflection_limit_1_particle_lost() {
         let scene = Scene::default_scene();
@@ -351,7 +352,8 @@ mod tests {
             let r = run_case(&scene, &case);
             *outcomes.entry(r.outcome.clone()).or_insert(0) += 1;
             if case == [Edit::MuAsAtEq16(1.0)] {
-                // The README: at the Eq 16 bound (the bound for sliding) the push still succeeds.
+                // docs/validation.md, "Whole pushes: the campaign": at the Eq 16 bound (the bound
+                // for sliding) the push still succeeds.
                 assert_eq!(r.outcome, "ok", "at the Eq 16 bound: {}", r.reason);
             }
             assert!(!r.outcome.is_empty());
@@ -417,8 +419,8 @@ mod tests {
         assert!(cases(false).len() > 60);
     }
 
-    /// The README: the full campaign has 74 cases, 16 of them the corners of radius × `k_c` ×
-    /// humidity × speed; the reduced one, a unit test, 13.
+    /// docs/validation.md, "Whole pushes: the campaign": the full campaign has 74 cases, 16 of them
+    /// the corners of radius × `k_c` × humidity × speed; the reduced one, a unit test, 13.
     #[test]
     fn the_campaign_has_74_cases_16_corners_and_the_reduced_one_13() {
         let full = cases(false);
@@ -427,12 +429,12 @@ mod tests {
         assert_eq!(cases(true).len(), 13);
     }
 
-    /// The README's ranges of the full campaign, one parameter at a time (their ends): particle
-    /// radius 7 nm … 10 µm (and 2 nm under a 1 nm tip, 7 nm under a 5 nm tip), tip radius 1 nm
-    /// … 1 µm, `k_c` 0.01 … 500 N/m, humidity 0 … 0.999, `μ_as` and `μ_ta` 0 … 2, all frictions
-    /// zero, tilt 0 … 75°, β 1 … 89°, stage speed 1 pm/s … 1 mm/s, `μ_as` at 0.999, 1 and 1.001
-    /// of the Eq 9 and Eq 16 bounds; and the 16 corners of radius (50 nm, 5 µm) × `k_c` ×
-    /// humidity × speed (1 nm/s, 1 mm/s).
+    /// docs/validation.md's ranges of the full campaign ("Whole pushes: the campaign"), one
+    /// parameter at a time (their ends): particle radius 7 nm … 10 µm (and 2 nm under a 1 nm tip,
+    /// 7 nm under a 5 nm tip), tip radius 1 nm … 1 µm, `k_c` 0.01 … 500 N/m, humidity 0 … 0.999,
+    /// `μ_as` and `μ_ta` 0 … 2, all frictions zero, tilt 0 … 75°, β 1 … 89°, stage speed 1 pm/s …
+    /// 1 mm/s, `μ_as` at 0.999, 1 and 1.001 of the Eq 9 and Eq 16 bounds; and the 16 corners of
+    /// radius (50 nm, 5 µm) × `k_c` × humidity × speed (1 nm/s, 1 mm/s).
     #[test]
     fn the_campaign_sweeps_the_readmes_ranges_and_16_corners() {
         use Edit::*;
@@ -495,8 +497,9 @@ mod tests {
         }
     }
 
-    /// The README: a 1 nm/s corner of the full campaign (5 µm particle, 0.01 N/m, dry) cannot
-    /// finish its contact search in the 120 s time-out and keeps its trace, 25 MB.
+    /// docs/validation.md, "Whole pushes: the campaign": a 1 nm/s corner of the full campaign (5 µm
+    /// particle, 0.01 N/m, dry) cannot finish its contact search in the 120 s time-out and keeps
+    /// its trace, 25 MB.
     #[test]
     fn a_1_nm_per_s_corner_times_out_after_120_s_with_a_25_mb_trace() {
         use Edit::*;
@@ -509,10 +512,11 @@ mod tests {
         assert!((r.trace_bytes as f64 - 25e6).abs() <= 0.5e6, "{} bytes", r.trace_bytes);
     }
 
-    /// The README's refusals of the full campaign: a 7 nm particle under the scene's 30 nm tip
-    /// at β = 30° (the tip would park below the substrate: `Rₐ − Rₜ + (Rₐ + Rₜ) sin β ≤ 0`), and
-    /// the 1 mm/s corners of a 50 nm particle on a 0.01 N/m lever, dry and humid, whose model
-    /// prediction fails below the minimum step, naming the scene sections that drive it.
+    /// docs/validation.md's refusals of the full campaign ("Whole pushes: the campaign"): a 7 nm
+    /// particle under the scene's 30 nm tip at β = 30° (the tip would park below the substrate:
+    /// `Rₐ − Rₜ + (Rₐ + Rₜ) sin β ≤ 0`), and the 1 mm/s corners of a 50 nm particle on a 0.01 N/m
+    /// lever, dry and humid, whose model prediction fails below the minimum step, naming the scene
+    /// sections that drive it.
     #[test]
     fn a_7_nm_particle_under_a_30_nm_tip_at_30_deg_and_the_50_nm_soft_1_mm_per_s_corners_are_refused() {
         use Edit::*;
@@ -546,8 +550,8 @@ mod tests {
         }
     }
 
-    /// The README: a contact search at 1 pm/s (a case of the full campaign) cannot finish in the
-    /// 120 s time-out.
+    /// docs/validation.md, "Whole pushes: the campaign": a contact search at 1 pm/s (a case of the
+    /// full campaign) cannot finish in the 120 s time-out.
     #[test]
     fn a_1_pm_per_s_search_times_out_after_120_s() {
         let case = [Edit::SpeedUmPerS(1e-6)];

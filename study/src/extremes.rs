@@ -307,11 +307,12 @@ mod tests {
         assert!(r.outcome.starts_with("slides"), "{}", r.outcome);
     }
 
-    /// The README's grid: one-at-a-time sweeps of 7 values of each of 7 parameters, over
-    /// particle radius 5 nm … 5 µm, `k_c` 0.1 … 50 N/m, humidity 0 … 0.95, `μ_as` 0 … 1.5
-    /// (through the paper's unstable band: 0.6, 0.65 and 0.7), tilt 0 … 60°, contact angle 5 …
-    /// 80° and stage speed 1 nm/s … 100 µm/s, plus every corner of that box: the 2⁷ combinations
-    /// of the ends. 7·7 + 128 = 177 cases.
+    /// docs/validation.md's grid ("Stability on extreme cases:
+    /// `nanopush accuracy --extremes [--reduced]`"): one-at-a-time sweeps of 7 values of each of 7
+    /// parameters, over particle radius 5 nm … 5 µm, `k_c` 0.1 … 50 N/m, humidity 0 … 0.95, `μ_as`
+    /// 0 … 1.5 (through the paper's unstable band: 0.6, 0.65 and 0.7), tilt 0 … 60°, contact angle
+    /// 5 … 80° and stage speed 1 nm/s … 100 µm/s, plus every corner of that box: the 2⁷
+    /// combinations of the ends. 7·7 + 128 = 177 cases.
     #[test]
     fn the_grid_is_7_sweeps_of_7_over_the_readmes_ranges_and_their_2_7_corners() {
         let cases = grid(&Scene::default_scene(), false);
@@ -343,10 +344,11 @@ mod tests {
         }
     }
 
-    /// The README's run of the full grid (`nanopush accuracy --extremes`, which pushes each case
-    /// as here): all 177 cases finite and bounded; 65 slide after `t*`, 52 roll (the tip contact
-    /// slips first), 60 never slide within 20 nm; the most expensive case took 196 steps
-    /// (32 rejected); the largest error (against a rerun at rtol/100) was 4.8e-13 m.
+    /// docs/validation.md's run of the full grid (`nanopush accuracy --extremes`, which pushes each
+    /// case as here; "Stability on extreme cases: `nanopush accuracy --extremes [--reduced]`"): all
+    /// 177 cases finite and bounded; 65 slide after `t*`, 52 roll (the tip contact slips first), 60
+    /// never slide within 20 nm; the most expensive case took 196 steps (32 rejected); the largest
+    /// error (against a rerun at rtol/100) was 4.8e-13 m.
     #[test]
     fn the_full_grid_slides_65_rolls_52_never_60_worst_196_steps_32_rejected_error_4_8e_13_m() {
         let scene = Scene::default_scene();

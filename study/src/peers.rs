@@ -350,8 +350,8 @@ mod tests {
         assert_eq!(points.len(), 2 * SOLVERS.len() * tolerances(1e-6).count());
     }
 
-    /// The table for the README: `cargo test --release -p nanopush-study peer_table -- --ignored
-    /// --nocapture`.
+    /// The table for docs/validation.md ("Our default against the best peer at equal error"):
+    /// `cargo test --release -p nanopush-study peer_table -- --ignored --nocapture`.
     #[test]
     #[ignore = "slow: every peer down to rtol 1e-10, three repetitions"]
     fn peer_table() {

@@ -151,12 +151,12 @@ mod tests {
         assert!(r.steady_state.is_some());
     }
 
-    /// The README's force curve of the default scene (`nanopush model --force-curve`): snap-in
-    /// at 3.60 nm, pull-off −55.09 nN at 7.05 nm, the same at any `--steps` (root-finding, not
-    /// the grid). The pull-off is the closed form of a Hertz contact leaving at zero
-    /// indentation: the meniscus `4πRₜγ_L` (27 nN) plus van der Waals at contact `HRₜ/(6a₀²)`
-    /// with the scene's combined Hamaker constant; it lets go at `d = a₀ + |F|/k_c`. The
-    /// retraction runs out to 1.5 adhesion/k_c beyond the start.
+    /// docs/model.md's force curve of the default scene (`nanopush model --force-curve`;
+    /// "`nanopush model`"): snap-in at 3.60 nm, pull-off −55.09 nN at 7.05 nm, the same at any
+    /// `--steps` (root-finding, not the grid). The pull-off is the closed form of a Hertz contact
+    /// leaving at zero indentation: the meniscus `4πRₜγ_L` (27 nN) plus van der Waals at contact
+    /// `HRₜ/(6a₀²)` with the scene's combined Hamaker constant; it lets go at `d = a₀ + |F|/k_c`.
+    /// The retraction runs out to 1.5 adhesion/k_c beyond the start.
     #[test]
     fn the_default_force_curve_snaps_in_at_3_60_nm_and_pulls_off_at_minus_55_09_nn_at_7_05_nm() {
         use nanopush::physics::forces::vdw::sphere_plane_force;
@@ -193,9 +193,9 @@ mod tests {
         }
     }
 
-    /// The README's time scale of the particle's contacts in the default scene: `nanopush
-    /// model`'s `contact_period`, the substrate contact's tangential spring `k_as* = 8RₐG*`
-    /// against the particle's mass, `2π√(m_a/k_as*)` = 5.4 ns.
+    /// docs/model.md's time scale of the particle's contacts in the default scene ("The pushing
+    /// dynamics (Eq 17)"): `nanopush model`'s `contact_period`, the substrate contact's tangential
+    /// spring `k_as* = 8RₐG*` against the particle's mass, `2π√(m_a/k_as*)` = 5.4 ns.
     #[test]
     fn the_default_scenes_contact_period_is_5_4_ns() {
         let r = model_report(&Scene::default_scene());

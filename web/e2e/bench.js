@@ -1,7 +1,8 @@
-// The page's figures for the README, measured (not asserted): its transfer size (first load,
-// gzip as served) and its frame rate with a 512² scan on screen at 1600×1000 (headless chromium,
-// WebGL on SwiftShader), idle and during a push; Stop, from the press to the frame that shows its
-// reply, during a push (three presses); also the README's screenshot.
+// The page's figures for docs/benchmarks.md ("The Nano Visulator in a browser
+// (`node e2e/bench.js`)"), measured (not asserted): its transfer size (first load, gzip as
+// served) and its frame rate with a 512² scan on screen at 1600×1000 (headless chromium, WebGL on
+// SwiftShader), idle and during a push; Stop, from the press to the frame that shows its reply,
+// during a push (three presses); also the README's screenshot.
 //   cd web && node e2e/bench.js [--screenshot ../docs/visulator.png]
 import { startServer, launchBrowser, newPage, ready, timedStop } from './support.js';
 

@@ -227,7 +227,7 @@ test('Stop ends a push at once with a 512² scan on screen', async () => {
   // Three presses, each during a push (the tip moving, telemetry flowing, the 3D view redrawn):
   // each is answered `ok`, the push ends `stopped` and the page goes back to idle. How fast the
   // reply shows is a measurement, not a test (this machine is shared): it is printed here, and
-  // `node e2e/bench.js` measures it for the README.
+  // `node e2e/bench.js` measures it for docs/benchmarks.md ("The Nano Visulator in a browser").
   const runs = [];
   for (let k = 0; k < 3; k++) {
     await pushBy(op, 3, k % 2 ? 0 : 180);

@@ -323,7 +323,8 @@ mod tests {
         assert!((ts - 0.051).abs() <= 0.004, "t* = {ts}");
     }
 
-    /// The README's `t*` detector: "a 4-sample mean falling [the margin] below its running
+    /// docs/manipulation.md's `t*` detector ("Manipulation: `nanopush push` (Sec 2.1 strategy,
+    /// Sec 3 force control)"): "a 4-sample mean falling [the margin] below its running
     /// maximum". From a level of 1 V with a margin of 0.25 V, one sample 0.99 V lower moves a
     /// 4-sample mean by 0.2475 V (no peak), one 1.01 V lower by 0.2525 V (the peak, dated at the
     /// level's first sample, where the running maximum was first reached); a 3-sample mean would

@@ -193,9 +193,10 @@ mod tests {
         assert!(matches!(e, MoveError::NotFound { .. }), "{e}");
     }
 
-    /// The README (and this module's doc): a 14 nm gold particle (Rₐ = 7 nm) under a 10 nm tip
-    /// gets a 544 nm local scan, `32 (Rₐ + Rₜ)`, with 4.25 nm pixels, where a fixed 4 µm scan's
-    /// pixels were 31 nm; a 10 µm particle gets the whole 100 µm stage.
+    /// docs/manipulation.md, "Sensor gains and the shipped scenes" (and this module's doc): a 14 nm
+    /// gold particle (Rₐ = 7 nm) under a 10 nm tip gets a 544 nm local scan, `32 (Rₐ + Rₜ)`, with
+    /// 4.25 nm pixels, where a fixed 4 µm scan's pixels were 31 nm; a 10 µm particle gets the whole
+    /// 100 µm stage.
     #[test]
     fn a_14_nm_particle_gets_a_544_nm_local_scan_with_4_25_nm_pixels() {
         let size = local_scan_size(7e-9, 10e-9, 100e-6);

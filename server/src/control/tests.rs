@@ -227,7 +227,8 @@ fn reading_drift(run: &StrategyRun) -> f64 {
 /// without the overview scan, which only finds obstacles): the tip starts 8 µm behind the
 /// scene's particle, a local scan locates it, the model prediction takes the located radius, and
 /// the particle is pushed `distance` along +x from where it was located. Returns the run and the
-/// simulated time at its end (s), the README's push table's "simulated".
+/// simulated time at its end (s), docs/manipulation.md's push table's "simulated" ("Measured
+/// pushes").
 fn push_as_the_cli_does(scene: &Scene, distance: f64) -> (StrategyRun, f64) {
     let p = scene.pushed_particle();
     let click = (p.x_um * UM, p.y_um * UM);
@@ -250,8 +251,8 @@ fn push_as_the_cli_does(scene: &Scene, distance: f64) -> (StrategyRun, f64) {
     (run, afm.time())
 }
 
-/// Asserts `value` is `readme` to the README's last printed digit: within `half_unit`, half a
-/// unit of that digit.
+/// Asserts `value` is `readme` to docs/manipulation.md's last printed digit: within `half_unit`,
+/// half a unit of that digit.
 #[track_caller]
 fn assert_digits(what: &str, value: f64, readme: f64, half_unit: f64) {
     assert!(
@@ -260,12 +261,12 @@ fn assert_digits(what: &str, value: f64, readme: f64, half_unit: f64) {
     );
 }
 
-/// The README's push table, row "gold-latex, 6 µm, xy / z / xyz control", and its reading-drift
-/// paragraph: `nanopush push --scene scenes/gold-latex-500nm.toml --distance-um 6 --control C`
-/// (the same pushes, by [`push_as_the_cli_does`]). The scene's substrate rises 6 nm per µm:
-/// with the height fixed the reading drifts toward the baseline as the particle climbs
-/// (Fig 15, +0.134 V); the z loop holds it, −0.025 V under xyz control and −0.015 V under z
-/// control, and raises the tip 48 nm and 46 nm for it. xy and
+/// docs/manipulation.md's push table ("Measured pushes"), row "gold-latex, 6 µm, xy / z / xyz
+/// control", and its reading-drift paragraph: `nanopush push --scene scenes/gold-latex-500nm.toml
+/// --distance-um 6 --control C` (the same pushes, by [`push_as_the_cli_does`]). The scene's
+/// substrate rises 6 nm per µm: with the height fixed the reading drifts toward the baseline as the
+/// particle climbs (Fig 15, +0.134 V); the z loop holds it, −0.025 V under xyz control and −0.015 V
+/// under z control, and raises the tip 48 nm and 46 nm for it. xy and
 /// xyz end 13.8 nm short; z-only control stops on stage travel, so it does not push the
 /// predicted retraction drag (−0.544 µm, the estimator's `retract_shift`) back and ends 552 nm
 /// short. The stick-phase peak the model predicts for these particles is 5.64 nm of `ζ_z`.
@@ -326,10 +327,10 @@ fn gold_latex_6_um_ends_minus_13_8_nm_xy_minus_552_nm_z_drifts_0_134_v_xy_minus_
     );
 }
 
-/// The README's push table, row "paper default (1 µm, rolling), 1 µm":
-/// `nanopush push --distance-um 1` (by [`push_as_the_cli_does`]) touches at step 43 and ends
-/// 1.1 nm long after 12.9 s of simulated time; the estimator's model predicts a retraction drag
-/// of −0.977 µm for the 1 µm particle and a stick-phase peak of 2.57 nm of `ζ_z`.
+/// docs/manipulation.md's push table ("Measured pushes"), row "paper default (1 µm, rolling),
+/// 1 µm": `nanopush push --distance-um 1` (by [`push_as_the_cli_does`]) touches at step 43 and ends
+/// 1.1 nm long after 12.9 s of simulated time; the estimator's model predicts a retraction drag of
+/// −0.977 µm for the 1 µm particle and a stick-phase peak of 2.57 nm of `ζ_z`.
 #[test]
 fn paper_default_1_um_touches_at_step_43_ends_plus_1_1_nm_drag_minus_0_977_um_peak_2_57_nm() {
     let (run, simulated) = push_as_the_cli_does(&default_scene(&[]), 1.0 * UM);
@@ -437,7 +438,8 @@ fn default_scene(edit: &[(&str, &str)]) -> Scene {
 /// prediction as well, which then expected 3.7 cm of drag). Now the balance that vanished is a
 /// release where it vanished, the readout saturates at ±10 V, and such a lever, which cannot
 /// shear a 1 µm particle loose within the safety limit, fails with `deflection_limit`, the
-/// particle 0.12 µm from where it was at 0.01 N/m (the README's figure).
+/// particle 0.12 µm from where it was at 0.01 N/m (docs/manipulation.md's figure, "Physics
+/// guarded every tick").
 #[test]
 fn a_soft_lever_trips_the_deflection_limit_and_leaves_the_particle_0_12_um_from_where_it_was() {
     for k in ["0.01", "0.02"] {
@@ -546,8 +548,8 @@ fn an_unphysical_instrument_state_fails_the_push_and_retracts() {
 /// Issue 13.3: zero friction on every pair failed at t = 0 ("step size 3.2e-21 s fell below the
 /// minimum", naming no field): with no torque on the particle its rotation is undetermined.
 /// The model leaves the rotation out; such a particle slides ahead of the tip, the reading
-/// never reaches ζ_set, and the outcome says the search pushed it: 4.859 µm (the README's
-/// figure).
+/// never reaches ζ_set, and the outcome says the search pushed it: 4.859 µm (docs/manipulation.md's
+/// figure, "Outcomes that say what happened").
 #[test]
 fn a_frictionless_particle_is_pushed_4_859_um_by_the_search_and_the_outcome_says_so() {
     let s = default_scene(&[
@@ -562,7 +564,8 @@ fn a_frictionless_particle_is_pushed_4_859_um_by_the_search_and_the_outcome_says
         "{:?}",
         run.summary.failure
     );
-    // The README's figure: "meanwhile the search pushed the particle 4.859 µm".
+    // docs/manipulation.md's figure ("Outcomes that say what happened"): "meanwhile the search
+    // pushed the particle 4.859 µm".
     let moved = run.search_distance();
     assert_digits("search distance (µm)", moved / UM, 4.859, 0.0005);
     assert_eq!(moved, run.true_distance(), "all of it in the search");
@@ -634,11 +637,11 @@ fn every_shipped_scene_pushes_its_particle() {
     assert!(pushed >= 4, "{pushed} scenes");
 }
 
-/// The README on `gold-14nm`: it aims at β = 20° because the snap-in makes the detected
-/// substrate 3.0 nm high (the approach stops 1 nm a tick, at the first reading past
-/// `substrate_threshold_mv`), which raises the true contact angle to 31°: the tip centre parks
-/// `(Rₐ + Rₜ) sin β` above the particle's centre as the controller reckons it, 3.0 nm higher in
-/// truth.
+/// docs/manipulation.md on `gold-14nm` ("Sensor gains and the shipped scenes"): it aims at β = 20°
+/// because the snap-in makes the detected substrate 3.0 nm high (the approach stops 1 nm a tick, at
+/// the first reading past `substrate_threshold_mv`), which raises the true contact angle to 31°:
+/// the tip centre parks `(Rₐ + Rₜ) sin β` above the particle's centre as the controller reckons it,
+/// 3.0 nm higher in truth.
 #[test]
 fn gold_14nm_detects_its_substrate_3_0_nm_high_and_meets_the_particle_at_31_deg() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/gold-14nm.toml");
@@ -663,10 +666,10 @@ fn gold_14nm_detects_its_substrate_3_0_nm_high_and_meets_the_particle_at_31_deg(
     );
 }
 
-/// The README's strategy defaults (`StrategyFile::default`, the constants of the strategy and
-/// the local scan): approach at 1 µm/s, steps of Δ = 0.1 µm with a 5 ms dwell, ζ_set = −1.5 V,
-/// a run-up of 4.25 µm, phases timed out after 120 s; hold 50 ms, back off 100 nm; a
-/// 128-pixel local scan.
+/// docs/manipulation.md's strategy defaults ("Manipulation: `nanopush push` (Sec 2.1 strategy, Sec
+/// 3 force control)"; `StrategyFile::default`, the constants of the strategy and the local scan):
+/// approach at 1 µm/s, steps of Δ = 0.1 µm with a 5 ms dwell, ζ_set = −1.5 V, a run-up of 4.25 µm,
+/// phases timed out after 120 s; hold 50 ms, back off 100 nm; a 128-pixel local scan.
 #[test]
 fn the_strategy_defaults_are_the_readmes() {
     let f = crate::scene::file::StrategyFile::default();
@@ -679,11 +682,12 @@ fn the_strategy_defaults_are_the_readmes() {
     assert_eq!(crate::control::locate_and_plan::LOCAL_PIXELS, 128);
 }
 
-/// The README on the shipped scenes: `minimal` aims at β = 45° because "at 30° its push bends
-/// the lever down and the set point is never reached" (the scene file: "ζ_z → −1.15 nm"). With
-/// only van der Waals forces and no rotation, meniscus or particle z, the model's `ζ_z` at 30°
-/// never rises above zero and settles at −1.15 nm; the instrument's search pushes the particle
-/// ahead without the reading ever reaching ζ_set, and fails with `no_contact`.
+/// docs/manipulation.md on the shipped scenes ("Sensor gains and the shipped scenes"): `minimal`
+/// aims at β = 45° because "at 30° its push bends the lever down and the set point is never
+/// reached" (the scene file: "ζ_z → −1.15 nm"). With only van der Waals forces and no rotation,
+/// meniscus or particle z, the model's `ζ_z` at 30° never rises above zero and settles at −1.15 nm;
+/// the instrument's search pushes the particle ahead without the reading ever reaching ζ_set, and
+/// fails with `no_contact`.
 #[test]
 fn minimal_at_30_deg_bends_the_lever_down_to_minus_1_15_nm_and_never_reaches_the_set_point() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/minimal.toml");
@@ -717,11 +721,11 @@ fn minimal_at_30_deg_bends_the_lever_down_to_minus_1_15_nm_and_never_reaches_the
     assert_retracted(&run);
 }
 
-/// The README's `t*` detector (Sec 2.1, C → D): the peak is declared when the 4-sample mean of
-/// the reading falls below its running maximum by a third of the drop the model predicts
-/// (`peak_deflection − settled_deflection`, in volts), or by four times the readout noise when
-/// that is larger. Every shipped scene's margin is the third of its drop; a 200 mV noise makes
-/// it 0.8 V.
+/// docs/manipulation.md's `t*` detector ("Manipulation: `nanopush push` (Sec 2.1 strategy, Sec 3
+/// force control)", C → D): the peak is declared when the 4-sample mean of the reading falls below
+/// its running maximum by a third of the drop the model predicts
+/// (`peak_deflection − settled_deflection`, in volts), or by four times the readout noise when that
+/// is larger. Every shipped scene's margin is the third of its drop; a 200 mV noise makes it 0.8 V.
 #[test]
 fn the_t_star_margin_is_a_third_of_the_predicted_drop_or_four_times_the_noise() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");

@@ -503,9 +503,9 @@ mod tests {
         assert!(Unphysical::check(&states, f64::INFINITY, (0.0, 0.0), (0.0, 0.0), 0.0, R, 100e-6).is_some());
     }
 
-    /// The README's guard ("Physics guarded every tick"): the particle may move, in one tick, the
-    /// stage's travel plus `Rₐ + Rₜ`, the travel being the command or, when larger, three ticks at
-    /// the scene's fastest speed (a dynamic stage lags its command and catches up after it
+    /// docs/manipulation.md's guard ("Physics guarded every tick"): the particle may move, in one
+    /// tick, the stage's travel plus `Rₐ + Rₜ`, the travel being the command or, when larger, three
+    /// ticks at the scene's fastest speed (a dynamic stage lags its command and catches up after it
     /// stops). The paper scene's fastest is its 10 µm/s travel: 30 nm in three 1 ms ticks.
     #[test]
     fn the_guard_allows_the_commanded_travel_or_three_ticks_at_the_fastest_speed() {

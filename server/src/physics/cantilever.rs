@@ -116,10 +116,11 @@ mod tests {
         }
     }
 
-    /// The README's reason the default scene is quasi-static: the lever's lateral mode (the stiff
-    /// axis of `K = C_yz⁻¹`, the larger eigenvalue `(a+d)/2 + √(((a−d)/2)² + b²)` by hand) rings
-    /// at `√(λ/m_c*)/2π` = 3.7 MHz, and with the paper's `b_y = b_z` (the model damps both axes
-    /// alike) its quality factor `√(λ m_c*)/b_y` is ≈ 2700 (= Q_c √(λ/k_z), 2677).
+    /// docs/model.md's reason the default scene is quasi-static ("The pushing dynamics (Eq 17)"):
+    /// the lever's lateral mode (the stiff axis of `K = C_yz⁻¹`, the larger eigenvalue
+    /// `(a+d)/2 + √(((a−d)/2)² + b²)` by hand) rings at `√(λ/m_c*)/2π` = 3.7 MHz, and with the
+    /// paper's `b_y = b_z` (the model damps both axes alike) its quality factor `√(λ m_c*)/b_y` is
+    /// ≈ 2700 (= Q_c √(λ/k_z), 2677).
     #[test]
     fn the_default_levers_lateral_mode_rings_at_3_7_mhz_with_q_2700() {
         let c = crate::scene::Scene::default_scene().cantilever();

@@ -145,7 +145,8 @@ mod tests {
         // Inside the range the reading is linear (within the noise).
         assert!((r.read(0.0, 1e-9) - s.volts(1e-9)).abs() < 0.03);
         assert_eq!(Readout::new(s, 0.0, 50.0, 1).full_scale, FULL_SCALE);
-        // The README: `sensor.full_scale_v`, default ±10 V (no shipped scene sets it).
+        // docs/manipulation.md, "Physics guarded every tick": `sensor.full_scale_v`, default ±10 V
+        // (no shipped scene sets it).
         assert_eq!(FULL_SCALE, 10.0);
         assert_eq!(crate::scene::Scene::default_scene().readout().full_scale, 10.0);
     }

@@ -152,7 +152,8 @@ fn drift_and_hysteresis_shift_the_image_as_modelled() {
     assert!((img.at(100, 0) - img.at(0, 0) - 100.0 * 0.5 * NM).abs() < 1e-12);
 }
 
-/// A figure of the README's localization table and the half a unit of its last printed digit.
+/// A figure of docs/manipulation.md's localization table ("Scans (`nanopush scan`)") and the half
+/// a unit of its last printed digit.
 #[derive(Debug, Clone, Copy)]
 struct Figure(f64, f64);
 
@@ -167,9 +168,9 @@ impl Figure {
     }
 }
 
-/// One row of the README's localization table: the pixel pitch (nm), the worst particle of the
-/// scene, position error along x and across (nm; one figure for both on the level paper scene),
-/// radius error and radius from the half-height width (%).
+/// One row of docs/manipulation.md's localization table: the pixel pitch (nm), the worst particle
+/// of the scene, position error along x and across (nm; one figure for both on the level paper
+/// scene), radius error and radius from the half-height width (%).
 struct Row {
     scene: &'static str,
     pixels: usize,
@@ -181,13 +182,13 @@ struct Row {
 }
 
 /// Localization of every particle of the two shipped particle scenes, noise on (0.2 nm RMS, the
-/// seeded noise: every figure is deterministic), held to the README's table to its printed
-/// digits, row by row (issue 14: this test once allowed a whole pixel, 195-391 nm, then 4-25
-/// times the printed figures): the pixel pitch, the worst particle's position error (gold-latex: along its
-/// 6 mrad tilt, 1.4-1.5 nm at both pitches, the plane levelling tilting the sphere's image; and
-/// across), its radius error, and its radius from the half-height width; the 64-pixel row too.
-/// Then the `H/2` cross-check: 7 % off for the 0.5 µm particles at 128 pixels, 0.03-0.2 % at
-/// 256.
+/// seeded noise: every figure is deterministic), held to docs/manipulation.md's table ("Scans
+/// (`nanopush scan`)") to its printed digits, row by row (issue 14: this test once allowed a whole
+/// pixel, 195-391 nm, then 4-25 times the printed figures): the pixel pitch, the worst particle's
+/// position error (gold-latex: along its 6 mrad tilt, 1.4-1.5 nm at both pitches, the plane
+/// levelling tilting the sphere's image; and across), its radius error, and its radius from the
+/// half-height width; the 64-pixel row too. Then the `H/2` cross-check: 7 % off for the 0.5 µm
+/// particles at 128 pixels, 0.03-0.2 % at 256.
 #[test]
 fn shipped_particles_are_localized_as_the_readme_says() {
     let f = Figure;
@@ -285,7 +286,8 @@ fn shipped_particles_are_localized_as_the_readme_says() {
                 // The base width within two pixels of the model (pixel-limited).
                 assert!((l.base_width - l.expected_width).abs() < 2.0 * p.pixel(), "{l:?}");
                 if name == "gold-latex-500nm" {
-                    // The README: "a systematic 1.4-1.5 nm shift along the tilt at both pitches".
+                    // docs/manipulation.md, "Scans (`nanopush scan`)": "a systematic 1.4-1.5 nm
+                    // shift along the tilt at both pitches".
                     let along = (l.x - sp.x).abs() / NM;
                     assert!((1.35..=1.55).contains(&along), "{along} nm along the tilt");
                 }
@@ -311,11 +313,12 @@ fn shipped_particles_are_localized_as_the_readme_says() {
     Figure(0.2, 0.05).check("largest H/2 error at 256 px (%)", half_height_256.1);
 }
 
-/// The README: with 0.1 % hysteresis and 0.1 nm/s x drift the particles of gold-latex-500nm
-/// appear 18.0-24.1 nm from where they are at the scene's 256 pixels, each where the raster
-/// model puts it (`raster.rs`): shifted by `hS/2 · sin(π s)` in x and y (25 nm mid-sweep on the
-/// 50 µm frame) and by `−v t` in x, `t` the time the raster reaches it. Measured against the
-/// same scan without them (the levelling's 1.4 nm shift along the tilt), within 0.1 nm.
+/// docs/manipulation.md, "Scans (`nanopush scan`)": with 0.1 % hysteresis and 0.1 nm/s x drift the
+/// particles of gold-latex-500nm appear 18.0-24.1 nm from where they are at the scene's 256 pixels,
+/// each where the raster model puts it (`raster.rs`): shifted by `hS/2 · sin(π s)` in x and y (25
+/// nm mid-sweep on the 50 µm frame) and by `−v t` in x, `t` the time the raster reaches it.
+/// Measured against the same scan without them (the levelling's 1.4 nm shift along the tilt),
+/// within 0.1 nm.
 #[test]
 fn drift_and_hysteresis_put_the_gold_latex_particles_18_0_to_24_1_nm_off() {
     let sc = scene("gold-latex-500nm");
@@ -417,9 +420,10 @@ fn no_blob_near_the_click_is_a_typed_error_naming_the_distance() {
     assert!(localize(&img, &t, 3.5 * UM, 3.5 * UM, 2.5 * UM).is_ok());
 }
 
-/// The README's localization threshold `max(6σ, 0.5 nm)` above the levelled substrate (σ the
-/// image's noise, estimated robustly): a noiseless scan finds nothing above 0.5 nm, the floor;
-/// with 1 nm of noise, 6σ: 6 nm (the estimate of σ within 5 %).
+/// docs/manipulation.md's localization threshold `max(6σ, 0.5 nm)` ("Sensor gains and the
+/// shipped scenes") above the levelled substrate (σ the image's noise, estimated robustly): a
+/// noiseless scan finds nothing above 0.5 nm, the floor; with 1 nm of noise, 6σ: 6 nm (the estimate
+/// of σ within 5 %).
 #[test]
 fn the_localization_threshold_is_6_sigma_or_at_least_0_5_nm() {
     let t = tip();

@@ -189,8 +189,8 @@ mod tests {
         assert!((t.sphere_width_at(ra, 0.5) - half).abs() < 1e-18);
     }
 
-    /// The README: a sphere is imaged by the apex alone up to `Rₐ = Rₜ(1 − sin θ)/(1 + sin θ)`,
-    /// 14.7 nm for a 30 nm tip at 20°; beyond it, by the flank.
+    /// docs/manipulation.md, "Scans (`nanopush scan`)": a sphere is imaged by the apex alone up to
+    /// `Rₐ = Rₜ(1 − sin θ)/(1 + sin θ)`, 14.7 nm for a 30 nm tip at 20°; beyond it, by the flank.
     #[test]
     fn the_apex_regime_ends_at_14_7_nm_for_a_30_nm_tip_at_20_deg() {
         let t = tip(30.0, 20.0);

@@ -114,8 +114,9 @@ fn angles_out_of_range() {
     );
 }
 
-/// README, "Which is right": the scenes' 1 mm/s limit on the stage speed, `(0, 1000] µm/s`:
-/// 1000 µm/s is accepted, 1000.001 µm/s and 0 are refused, naming the range.
+/// docs/validation.md, "Which is right, and why they differ": the scenes' 1 mm/s limit on the
+/// stage speed, `(0, 1000] µm/s`: 1000 µm/s is accepted, 1000.001 µm/s and 0 are refused, naming
+/// the range.
 #[test]
 fn the_stage_speed_is_limited_to_1_mm_per_s() {
     assert!(with("speed_um_per_s = 1.0", "speed_um_per_s = 1000.0").is_ok());
@@ -350,7 +351,7 @@ fn a_particle_below_the_scan_noise_is_refused() {
     );
 }
 
-/// The README's table of shipped scenes ("Scenes"): gold-latex has three particles of 0.5 µm
+/// docs/model.md's table of shipped scenes ("Scenes"): gold-latex has three particles of 0.5 µm
 /// radius pushed at 2 µm/s; gold-14nm a 14 nm (diameter) colloid under a 10 nm tip, electrostatics
 /// on, 10 nm search steps and a −0.8 V set point; minimal β = 45°, van der Waals only, dry.
 #[test]
@@ -391,10 +392,10 @@ fn shipped(name: &str) -> Scene {
     .unwrap()
 }
 
-/// The README's paragraph on the sensor gains ("Pushes"): −0.8 V/nm in paper-default and
-/// gold-14nm, −0.4 V/nm in gold-latex-500nm, −0.2 V/nm in minimal, every baseline at −0.2 V;
-/// so `ζ_set = −1.5 V` is `(ζ_set − baseline)/gain` = 1.625 nm of deflection in paper-default
-/// and 3.25 nm in gold-latex-500nm.
+/// docs/manipulation.md's paragraph on the sensor gains ("Sensor gains and the shipped scenes"):
+/// −0.8 V/nm in paper-default and gold-14nm, −0.4 V/nm in gold-latex-500nm, −0.2 V/nm in minimal,
+/// every baseline at −0.2 V; so `ζ_set = −1.5 V` is `(ζ_set − baseline)/gain` = 1.625 nm of
+/// deflection in paper-default and 3.25 nm in gold-latex-500nm.
 #[test]
 fn the_sensor_gains_are_minus_0_8_0_4_0_8_0_2_v_per_nm_and_the_set_point_1_625_and_3_25_nm() {
     for (name, gain) in [
@@ -419,8 +420,9 @@ fn the_sensor_gains_are_minus_0_8_0_4_0_8_0_2_v_per_nm_and_the_set_point_1_625_a
     }
 }
 
-/// The README on gold-latex-500nm (Pushes, Fig 15, Scans): its substrate rises 6 mrad along x,
-/// and its reading carries a periodic perturbation of 20 mV at 3 Hz.
+/// docs/manipulation.md on gold-latex-500nm ("Measured pushes", "Figs 9 and 15", "Scans
+/// (`nanopush scan`)"): its substrate rises 6 mrad along x, and its reading carries a periodic
+/// perturbation of 20 mV at 3 Hz.
 #[test]
 fn gold_latex_rises_6_mrad_and_its_reading_is_perturbed_20_mv_at_3_hz() {
     let f = shipped("gold-latex-500nm.toml").file;

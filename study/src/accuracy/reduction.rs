@@ -342,10 +342,10 @@ mod tests {
         assert_eq!(regime(&slides, Some(4.0), 0.5), (Regime::Slides, 1));
     }
 
-    /// README, "The quasi-static reduction against the full model", the report's settings for
-    /// its 20 ms push (`nanopush accuracy`'s default): 10 µs samples, the settled values the
-    /// mean of the last half, both models at rtol 1e-6 (Rodas4, [`run_summary`]) and the full
-    /// model again at rtol 1e-8; a jump is a drop of the offset `s − y` by more than 0.05 nm
+    /// docs/validation.md, "The quasi-static reduction against the full model", the report's
+    /// settings for its 20 ms push (`nanopush accuracy`'s default): 10 µs samples, the settled
+    /// values the mean of the last half, both models at rtol 1e-6 (Rodas4, [`run_summary`]) and the
+    /// full model again at rtol 1e-8; a jump is a drop of the offset `s − y` by more than 0.05 nm
     /// between two samples (a 0.051 nm drop counts, a 0.049 nm drop does not).
     #[test]
     fn the_report_compares_at_rtol_1e_6_and_1e_8_10_us_samples_last_half_and_0_05_nm_jumps() {
@@ -395,14 +395,14 @@ mod tests {
         assert!(off.shearing_time_error().unwrap() < 0.01 * tr);
     }
 
-    /// README, "The quasi-static reduction against the full model": the paper's scene at 1 µm/s
-    /// over the report's 20 ms, both rotation settings. Rotation off, the reduction slides and
-    /// the full model stick-slips, with the same t* and a settled `ζ_z` of the other sign
-    /// (positive, against the reduction's negative); rotation on, the reduction rolls and the
+    /// docs/validation.md, "The quasi-static reduction against the full model": the paper's scene
+    /// at 1 µm/s over the report's 20 ms, both rotation settings. Rotation off, the reduction
+    /// slides and the full model stick-slips, with the same t* and a settled `ζ_z` of the other
+    /// sign (positive, against the reduction's negative); rotation on, the reduction rolls and the
     /// full model rolls in bursts (`stick-roll`), neither shearing. The rtol/100 run repeats
     /// each full model's regime and t*. Not run by `make test` (what it affords of this
-    /// comparison, and the README pins, is in the tests above). Slow in debug (the full model
-    /// rings after each slip, at up to ~6·10⁴ steps per ms):
+    /// comparison, and docs/validation.md pins, is in the tests above). Slow in debug (the full
+    /// model rings after each slip, at up to ~6·10⁴ steps per ms):
     /// `cargo test --release -p nanopush-study --lib -- --ignored paper_scene_reduction`.
     #[test]
     #[ignore = "runs the 12-state model for 20 ms of push, four times: ~10 s in release, more on a loaded machine"]
@@ -441,8 +441,8 @@ mod tests {
         );
     }
 
-    /// README, "The quasi-static reduction against the full model", the reduced rows of the
-    /// report's 20 ms run (10 µs samples, settled = mean of the last half): rotation off it
+    /// docs/validation.md, "The quasi-static reduction against the full model", the reduced rows of
+    /// the report's 20 ms run (10 µs samples, settled = mean of the last half): rotation off it
     /// slides after 1 jump, t* = 6.2078 ms, settled y 4.471 nm and ζ_z −1.976 nm (spread
     /// ±0.000); rotation on it rolls after 1 jump, never shears, 0.669 nm and +1.259 nm; 2005
     /// steps each.
@@ -581,11 +581,11 @@ mod tests {
         assert!((v_c - 4.6e-3).abs() <= 0.05e-3);
     }
 
-    /// README, "Which is right": the hand-solved spring-slider's closed forms for the paper
-    /// scene. The undamped-slider overshoot `1 + e^(−πζ/√(1−ζ²))` at the contacts' damping
-    /// ratio ζ = 0.05 is 1.85× the kinetic balance's distance; `V/ω` at V = 1 µm/s is 1.6e-12 m
-    /// at 0.1 MHz and 4.0e-14 m at 4 MHz; the cantilever (`m_c* = k_z/(4π²f_r²)`) is 2400 times
-    /// heavier than the particle.
+    /// docs/validation.md, "Which is right, and why they differ": the hand-solved spring-slider's
+    /// closed forms for the paper scene. The undamped-slider overshoot `1 + e^(−πζ/√(1−ζ²))` at the
+    /// contacts' damping ratio ζ = 0.05 is 1.85× the kinetic balance's distance; `V/ω` at V =
+    /// 1 µm/s is 1.6e-12 m at 0.1 MHz and 4.0e-14 m at 4 MHz; the cantilever
+    /// (`m_c* = k_z/(4π²f_r²)`) is 2400 times heavier than the particle.
     #[test]
     fn the_spring_slider_overshoots_1_85_times_and_the_cantilever_is_2400_times_the_particle() {
         let scene = Scene::default_scene();
@@ -602,9 +602,9 @@ mod tests {
         assert!((ratio - 2400.0).abs() <= 50.0, "{ratio}");
     }
 
-    /// README, "The quasi-static reduction against the full model", rotation on, up to 5.4 ms:
-    /// neither model shears on the substrate; the reduction starts rolling at 5.22 ms (its one
-    /// jump) and rolls steadily, the full model rolls in bursts: 7 jumps by 5.4 ms, each
+    /// docs/validation.md, "The quasi-static reduction against the full model", rotation on, up to
+    /// 5.4 ms: neither model shears on the substrate; the reduction starts rolling at 5.22 ms (its
+    /// one jump) and rolls steadily, the full model rolls in bursts: 7 jumps by 5.4 ms, each
     /// sampled as stick (`stick-roll`).
     #[test]
     fn with_rotation_the_full_model_rolls_in_bursts_where_the_reduction_rolls_steadily() {
@@ -655,13 +655,13 @@ mod tests {
         assert!(full.trace.iter().all(|r| r.phase == "stick"));
     }
 
-    /// README, "What this means": `nanopush sweep`'s `stuck` flag ([`crate::sweep::Settled`]),
-    /// which reads the friction phase at the sweep's 1 ms samples over the last quarter, calls
-    /// the full model (rotation off, the paper scene at 1 µm/s) stuck, while the report's
-    /// regime, from the jumps of the offset at its 10 µs samples, is stick-slip: it sheared at
-    /// t* and jumped again (2 jumps by 10 ms). Its slips last under a microsecond, so even every
-    /// 10 µs sample reads `stick`. A 10 ms push (its tail, 8-10 ms, is after the shear), not the
-    /// sweep's 0.2 s: the full model rings at up to ~6·10⁴ steps per ms after each slip.
+    /// docs/validation.md, "What this means": `nanopush sweep`'s `stuck` flag
+    /// ([`crate::sweep::Settled`]), which reads the friction phase at the sweep's 1 ms samples over
+    /// the last quarter, calls the full model (rotation off, the paper scene at 1 µm/s) stuck,
+    /// while the report's regime, from the jumps of the offset at its 10 µs samples, is stick-slip:
+    /// it sheared at t* and jumped again (2 jumps by 10 ms). Its slips last under a microsecond, so
+    /// even every 10 µs sample reads `stick`. A 10 ms push (its tail, 8-10 ms, is after the shear),
+    /// not the sweep's 0.2 s: the full model rings at up to ~6·10⁴ steps per ms after each slip.
     #[test]
     fn the_sweeps_stuck_flag_calls_the_full_model_stuck_where_the_report_sees_stick_slip() {
         let p = variant(&Scene::default_scene().push_params(), true, false);
@@ -687,9 +687,9 @@ mod tests {
         assert!(settled.stuck && !settled.unstable, "{settled:?}");
     }
 
-    /// README, "Which is right", checked: with heavily damped contacts (`contact_damping_ratio`
-    /// 3 instead of 0.05) and a cantilever of Q = 0.5 instead of 100, the full model still
-    /// stick-slips where the reduction slides. The fast setting of
+    /// docs/validation.md, "Which is right, and why they differ", checked: with heavily damped
+    /// contacts (`contact_damping_ratio` 3 instead of 0.05) and a cantilever of Q = 0.5 instead of
+    /// 100, the full model still stick-slips where the reduction slides. The fast setting of
     /// [`full_model_stick_slips_where_the_reduction_slides`]: 1 mm/s, an ideal stage, 20 µs.
     #[test]
     fn with_damping_ratio_3_and_a_q_0_5_cantilever_the_full_model_still_stick_slips() {

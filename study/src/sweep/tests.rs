@@ -122,9 +122,9 @@ fn shard_parse_rejects_what_a_scheduler_should_not_send() {
 #[test]
 fn default_point_agrees_with_eq18_of_the_model_report() {
     // The sweep's Eq 18 at the paper's α = 15° is `nanopush model`'s steady state (plumbing: the
-    // sweep sets up the same scene), and it is the README's figure, 9.47 nm and ζz −24.2 nm
-    // (Fig 7, item 5): Eq 18 itself is checked against a linear solve of the paper's lines in
-    // `physics::pushing::steady::tests`.
+    // sweep sets up the same scene), and it is docs/model.md's figure, 9.47 nm and ζz −24.2 nm
+    // ("The paper's figures", Fig 7, item 5): Eq 18 itself is checked against a linear solve of the
+    // paper's lines in `physics::pushing::steady::tests`.
     let b = base();
     let report = model_report(&b)
         .steady_state
@@ -166,7 +166,7 @@ fn csv_quotes_fields_with_commas() {
 }
 
 // The paper's Sec 5 trends, where this model reproduces them. Each names its figure; what it
-// does not reproduce is in the README ("The paper's figures").
+// does not reproduce is in docs/model.md ("The paper's figures").
 
 fn eq18_at(param: Param, value: f64) -> Option<SteadyState> {
     let s = param.apply(&base(), value).unwrap();
@@ -239,9 +239,9 @@ fn fig13_y_and_zeta_z_grow_with_the_radius() {
     assert!(dl.y.mean > 1.5 * ds.y.mean && dl.zeta_z.mean < ds.zeta_z.mean);
 }
 
-/// The README's Eq 18 figures for Figs 10, 12 and 13 (default scene, the README's digits):
-/// `y` and `ζ_z` at α = 0°, 15°, 18° and past the pole at 19.5°; `y` at μ_as^s = 0.1 and 0.7;
-/// `y` at Rₐ = 100 nm and 3 µm.
+/// docs/model.md's Eq 18 figures for Figs 10, 12 and 13 ("The paper's figures"; default scene, its
+/// digits): `y` and `ζ_z` at α = 0°, 15°, 18° and past the pole at 19.5°; `y` at μ_as^s = 0.1 and
+/// 0.7; `y` at Rₐ = 100 nm and 3 µm.
 #[test]
 fn the_readmes_eq18_figures() {
     let nm = |v: f64| v * 1e9;
@@ -284,8 +284,9 @@ fn eq18_sign_change(param: Param, mut lo: f64, mut hi: f64) -> f64 {
     0.5 * (lo + hi)
 }
 
-/// The README's pole of Eq 18 in α (Fig 10): `1 − a_y P − a_z Q = 0` at α = 18.5°, where `y`
-/// goes through infinity (above 1 µm a thousandth of a degree either side) and changes sign.
+/// docs/model.md's pole of Eq 18 in α ("The paper's figures", Fig 10): `1 − a_y P − a_z Q = 0` at
+/// α = 18.5°, where `y` goes through infinity (above 1 µm a thousandth of a degree either side) and
+/// changes sign.
 #[test]
 fn fig10_eq18_pole_at_alpha_18_5_deg() {
     let pole = eq18_sign_change(Param::Alpha, 18.0, 19.0);
@@ -294,10 +295,10 @@ fn fig10_eq18_pole_at_alpha_18_5_deg() {
     assert!(eq18_at(Param::Alpha, pole + 1e-3).unwrap().y < -1e-6);
 }
 
-/// The README's Eq 18 in β (Fig 11): a pole at β = 23.2° (`y` through infinity), which is the
-/// `y_argmin` of the Fig 11 sweep (23°, on its 31-point grid from 5° to 65°), not an optimum;
-/// and no kinetic steady state from β = 67.4° on, where `cos β/(1+sin β) ≤ μ_as^k(μ_ta^k cos β +
-/// sin β)` (the particle jams under the tip).
+/// docs/model.md's Eq 18 in β ("The paper's figures", Fig 11): a pole at β = 23.2° (`y` through
+/// infinity), which is the `y_argmin` of the Fig 11 sweep (23°, on its 31-point grid from 5° to
+/// 65°), not an optimum; and no kinetic steady state from β = 67.4° on, where
+/// `cos β/(1+sin β) ≤ μ_as^k(μ_ta^k cos β + sin β)` (the particle jams under the tip).
 #[test]
 fn fig11_eq18_pole_at_beta_23_2_deg_is_the_sweeps_argmin_and_it_jams_from_67_4_deg() {
     let pole = eq18_sign_change(Param::Beta, 22.0, 24.0);
@@ -324,10 +325,10 @@ fn fig11_eq18_pole_at_beta_23_2_deg_is_the_sweeps_argmin_and_it_jams_from_67_4_d
     assert!(matches!(jam, Err(SteadyError::Jammed { .. })), "{jam:?}");
 }
 
-/// The README's jam "at 0.577 if μ_as and μ_ta were varied together with μᵏ = μˢ": with one μ
-/// for all four coefficients the jam `cos β/(1+sin β) = μ(μ cos β + sin β)` at β = 30° is
-/// `0.866μ² + 0.5μ = 0.577`, whose root is 1/√3 = 0.577; the model's Eq 18 has a steady state
-/// at 0.577 and none at 0.578.
+/// docs/model.md's jam ("The paper's figures", Fig 12) "at 0.577 if μ_as and μ_ta were varied
+/// together with μᵏ = μˢ": with one μ for all four coefficients the jam
+/// `cos β/(1+sin β) = μ(μ cos β + sin β)` at β = 30° is `0.866μ² + 0.5μ = 0.577`, whose root is
+/// 1/√3 = 0.577; the model's Eq 18 has a steady state at 0.577 and none at 0.578.
 #[test]
 fn fig12_jam_at_0_577_when_one_mu_sets_both_contacts() {
     let (sb, cb) = 30f64.to_radians().sin_cos();
@@ -366,11 +367,11 @@ fn near(got: f64, want: f64, tol: f64) -> bool {
     (got - want).abs() <= tol
 }
 
-/// The README's dynamic model in Fig 10 (0.2 s pushes, as the sweep): sliding, `y` falls from
-/// 9.98 nm at α = 0° to 4.26 nm at 12° and rises again to 9.15 nm at 45° (12° is a minimum: `y`
-/// is larger at its neighbours 10.5° and 13.5° on the Fig 10 sweep's grid); rolling, over that
-/// grid (0° to 45° in 1.5° steps), it falls from 1.20 nm at 0° to its least, 0.235 nm, at 42°,
-/// and is 0.244 nm at 45°.
+/// docs/model.md's dynamic model in Fig 10 ("The paper's figures"; 0.2 s pushes, as the sweep):
+/// sliding, `y` falls from 9.98 nm at α = 0° to 4.26 nm at 12° and rises again to 9.15 nm at 45°
+/// (12° is a minimum: `y` is larger at its neighbours 10.5° and 13.5° on the Fig 10 sweep's grid);
+/// rolling, over that grid (0° to 45° in 1.5° steps), it falls from 1.20 nm at 0° to its least,
+/// 0.235 nm, at 42°, and is 0.244 nm at 45°.
 #[test]
 fn fig10_dynamic_y_sliding_9_98_4_26_9_15_nm_rolling_1_20_to_0_235_nm_at_42_deg() {
     for (alpha, y, tol) in [(0.0, 9.98, 0.005), (12.0, 4.26, 0.005), (45.0, 9.15, 0.005)] {
@@ -395,10 +396,10 @@ fn fig10_dynamic_y_sliding_9_98_4_26_9_15_nm_rolling_1_20_to_0_235_nm_at_42_deg(
     assert!(near(rolling[30].1, 0.244, 0.0005), "{rolling:?}");
 }
 
-/// The README's dynamic model in Fig 11 (0.2 s pushes). Without rotation the settled `y` is
-/// least, 4.41 nm, at β = 33° (less than at 32°, at 34° and at every point of the Fig 11
-/// sweep), with `ζ_z` = −2.07 nm there, which the default scene's −0.8 V/nm sensor reads as
-/// 1.66 V; it is 4.52 nm at 5° and 27.8 nm at 51°; at 34° the tip friction has reversed: 6.2 nm,
+/// docs/model.md's dynamic model in Fig 11 ("The paper's figures"; 0.2 s pushes). Without rotation
+/// the settled `y` is least, 4.41 nm, at β = 33° (less than at 32°, at 34° and at every point of
+/// the Fig 11 sweep), with `ζ_z` = −2.07 nm there, which the default scene's −0.8 V/nm sensor reads
+/// as 1.66 V; it is 4.52 nm at 5° and 27.8 nm at 51°; at 34° the tip friction has reversed: 6.2 nm,
 /// `ζ_z` = +2.2 nm. Rolling, `y` only grows with β over the Fig 11 sweep's grid (5° to 65° in
 /// 2° steps), from 0.04 nm at 5° to 3.4 nm at 49°. The particle is `stuck` (the tip never shears
 /// it within the run) from 51° rolling (50° still rolls) and from 56° sliding (54° still
@@ -461,10 +462,10 @@ fn fig11_sliding_y_least_4_41_nm_at_33_deg_and_stuck_from_51_deg_rolling_56_deg_
     assert!(near(t, 0.11, 0.005), "the contact breaks at t = {t} s: {e}");
 }
 
-/// The README's dynamic model in Fig 12 (0.2 s pushes over the Fig 12 sweep's grid, μ_as^s from
-/// 0.1 to 1.5): no stick-slip and no stuck point anywhere; sliding, `y` grows linearly from 1.8
-/// nm to 18.4 nm (the middle point within 1 % of the chord); rolling, it does not depend on
-/// μ_as at all: 0.669 nm and `ζ_z` 1.259 nm at every point.
+/// docs/model.md's dynamic model in Fig 12 ("The paper's figures"; 0.2 s pushes over the Fig 12
+/// sweep's grid, μ_as^s from 0.1 to 1.5): no stick-slip and no stuck point anywhere; sliding, `y`
+/// grows linearly from 1.8 nm to 18.4 nm (the middle point within 1 % of the chord); rolling, it
+/// does not depend on μ_as at all: 0.669 nm and `ζ_z` 1.259 nm at every point.
 #[test]
 fn fig12_sliding_y_1_8_to_18_4_nm_and_rolling_0_669_nm_at_any_mu() {
     let mus = grid(0.1, 1.5, 29);
@@ -489,9 +490,9 @@ fn fig12_sliding_y_1_8_to_18_4_nm_and_rolling_0_669_nm_at_any_mu() {
     }
 }
 
-/// The README's dynamic model in Fig 13 (0.2 s pushes): sliding, `y` from 0.75 nm at Rₐ =
-/// 100 nm to 10.1 nm at 3 µm; rolling, nearly flat over the Fig 13 sweep's grid (100 nm to
-/// 3 µm in 100 nm steps): from 0.645 nm (100 nm) to at most 0.670 nm.
+/// docs/model.md's dynamic model in Fig 13 ("The paper's figures"; 0.2 s pushes): sliding, `y` from
+/// 0.75 nm at Rₐ = 100 nm to 10.1 nm at 3 µm; rolling, nearly flat over the Fig 13 sweep's grid
+/// (100 nm to 3 µm in 100 nm steps): from 0.645 nm (100 nm) to at most 0.670 nm.
 #[test]
 fn fig13_sliding_y_0_75_to_10_1_nm_and_rolling_0_645_to_0_670_nm() {
     for (r, y, tol) in [(100.0, 0.75, 0.005), (3000.0, 10.1, 0.05)] {

@@ -341,15 +341,15 @@ fn a_new_scale_ramps_in_again() {
     rig.until(100, |r| (r.stage[2] - (z - 20e-9)).abs() < 1e-15);
 }
 
-/// README, "Haptic z-control": the force ramps in "once the force the hand would get has stayed
-/// below 0.2 N for 3 ticks", "over 1 s".
+/// docs/haptics.md, "Haptic z-control": the force ramps in "once the force the hand would get has
+/// stayed below 0.2 N for 3 ticks", "over 1 s".
 #[test]
 fn engagement_waits_for_0_2_n_over_3_ticks_and_ramps_over_1_s() {
     assert_eq!((ENGAGE_FORCE, ENGAGE_TICKS, RAMP), (0.2, 3, 1.0));
 }
 
-/// README, "Two processes" and "Passivity", on the paper scene (`[haptic]` at its defaults, 10
-/// nm/mm and 1 N): the tip stops where the lever reaches 80 % of the strategy's safety
+/// docs/haptics.md, "Two processes" and "Passivity", on the paper scene (`[haptic]` at its
+/// defaults, 10 nm/mm and 1 N): the tip stops where the lever reaches 80 % of the strategy's safety
 /// deflection — (−4.0 V − (−0.2 V)) / (−0.8 V/nm) = 4.75 nm, so 3.80 nm; `g_f` maps the scene's
 /// adhesion, 55.09 nN, to 1 N; the contact's stiffness at the hand `g_f k_z g_p` is 1.45 kN/m (2.90 kN/m
 /// at the force scale ×2 of the haptic loop's table), and the snap-in's stored energy at the

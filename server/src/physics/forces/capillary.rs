@@ -134,8 +134,9 @@ mod tests {
         assert!(kelvin_radius(1e-300).is_finite());
     }
 
-    /// The README's Eq 3 bounds: no meniscus where `r₁ < a₀`, i.e. below `P/Pₛ = exp(−0.54/0.165)`
-    /// = 3.8 % ≈ 4 % RH (no meniscus at 3.7 %, one at 3.9 %), and `r₁ ≤ 100 nm` near saturation.
+    /// docs/model.md's Eq 3 bounds ("The model, equation by equation"): no meniscus where
+    /// `r₁ < a₀`, i.e. below `P/Pₛ = exp(−0.54/0.165)` = 3.8 % ≈ 4 % RH (no meniscus at 3.7 %, one
+    /// at 3.9 %), and `r₁ ≤ 100 nm` near saturation.
     #[test]
     fn no_meniscus_below_4_percent_rh_and_r1_at_most_100_nm() {
         let threshold = (-KELVIN_LENGTH / A0).exp();

@@ -153,13 +153,14 @@ mod tests {
     use crate::physics::pushing::{Dof, PushModel};
     use crate::scene::Scene;
 
-    /// The README's `nanopush simulate` and Fig 7 figures, pinned (issue 14): the default scene
-    /// pushed 50 ms at 1 µm/s (Rodas4, rtol 1e-6) — the tip contact slips at 5.2 ms (the switch
-    /// located to 1 µs; the first 0.1 ms sample that rolls is 5.3 ms) and the particle rolls
-    /// from then on, 49.3 nm of travel for 50.0 nm of stage, the offset behind the stage
-    /// settling at 0.669 nm after peaking at 1.33 nm; with rotation off it shears at t* = 6.2 ms
-    /// and settles at 4.47 nm with a steady `ζ_z` (mean of the last 20 %, as `simulate` prints
-    /// it) of −1.98 nm. Each to half a unit of the README's last digit.
+    /// docs/model.md's `nanopush simulate` and Fig 7 figures ("`nanopush simulate`", "The paper's
+    /// figures"), pinned (issue 14): the default scene pushed 50 ms at 1 µm/s (Rodas4, rtol 1e-6) —
+    /// the tip contact slips at 5.2 ms (the switch located to 1 µs; the first 0.1 ms sample that
+    /// rolls is 5.3 ms) and the particle rolls from then on, 49.3 nm of travel for 50.0 nm of
+    /// stage, the offset behind the stage settling at 0.669 nm after peaking at 1.33 nm; with
+    /// rotation off it shears at t* = 6.2 ms and settles at 4.47 nm with a steady `ζ_z` (mean of
+    /// the last 20 %, as `simulate` prints it) of −1.98 nm. Each to half a unit of docs/model.md's
+    /// last digit.
     #[test]
     fn fig7_settling_and_the_simulate_figures() {
         let scene = Scene::default_scene();
@@ -219,10 +220,10 @@ mod tests {
         );
     }
 
-    /// The README's `nanopush simulate` run (its defaults: the default scene, 50 ms, Rodas4 at
-    /// rtol 1e-6, 0.1 ms samples): 518 steps, 50.0 nm of stage travel, and an estimated global
-    /// error of 1.5 fm: the difference in final particle y from the rerun at rtol/100 with the
-    /// same sampling, as `simulate` computes it.
+    /// docs/model.md, "`nanopush simulate`": the run (its defaults: the default scene, 50 ms,
+    /// Rodas4 at rtol 1e-6, 0.1 ms samples): 518 steps, 50.0 nm of stage travel, and an estimated
+    /// global error of 1.5 fm: the difference in final particle y from the rerun at rtol/100 with
+    /// the same sampling, as `simulate` computes it.
     #[test]
     fn simulate_takes_518_steps_for_50_0_nm_of_stage_with_an_estimated_error_of_1_5_fm() {
         let push = |rtol: f64| {

@@ -185,8 +185,8 @@ fn monitor(bin: Option<&std::path::Path>, stop: &AtomicBool, slot: &Mutex<Option
 mod tests {
     use super::*;
 
-    /// README, "Faults": under `--haptic sim` the supervisor restarts the bridge "with a back-off
-    /// (0.2 s doubling to 5 s)".
+    /// docs/haptics.md, "Faults": under `--haptic sim` the supervisor restarts the bridge "with a
+    /// back-off (0.2 s doubling to 5 s)".
     #[test]
     fn the_supervisors_back_off_is_0_2_s_doubling_to_5_s() {
         let mut b = BACKOFF_FIRST;

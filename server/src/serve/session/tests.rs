@@ -164,7 +164,7 @@ async fn a_shutdown_is_announced_and_the_socket_closed() {
         .unwrap();
 }
 
-/// README, "The teleoperation server": the operator token's 8 places, idle HTTP connections
+/// docs/server.md, "The teleoperation server": the operator token's 8 places, idle HTTP connections
 /// closed after 60 s, a 5 s send budget per frame, a client that reads no reply for 30 s
 /// closed, messages up to 8 MiB refused with `too_large` (above it the connection closes),
 /// SCHED_FIFO priority 50 for the loop. (The 8 places are also tested end to end:

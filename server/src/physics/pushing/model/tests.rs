@@ -271,10 +271,10 @@ fn shearing_point_tends_to_eq15_with_rigid_contacts() {
     // `physics::shearing::tests::eq15_limit_cases`.)
 }
 
-/// The README's shear travel with the real contacts: the default scene's physics (van der
-/// Waals and capillary, quasi-static particle and cantilever), rotation off as in Eq 15, ideal
-/// stage: the particle shears after 6.3 nm of stage travel, not Eq 15's y* = 0.22 nm; the tip's
-/// Hertz indentation into the soft latex takes up the difference.
+/// docs/model.md's shear travel with the real contacts ("The pushing dynamics (Eq 17)"): the
+/// default scene's physics (van der Waals and capillary, quasi-static particle and cantilever),
+/// rotation off as in Eq 15, ideal stage: the particle shears after 6.3 nm of stage travel, not Eq
+/// 15's y* = 0.22 nm; the tip's Hertz indentation into the soft latex takes up the difference.
 #[test]
 fn the_default_scene_shears_after_6_3_nm_of_travel_not_0_22_nm() {
     let p = scene_with(

@@ -330,11 +330,13 @@ fn steps_per_tick(model: PushModel, ticks: usize) -> Vec<(u64, u64)> {
         .collect()
 }
 
-/// The README's steps per 1 ms tick of the quasi-static scenes (Rodas4, rtol 1e-6), exactly:
-/// the default scene takes 13 steps (and 1 rejection) in its first tick, 5 steps and 1
-/// rejection in the tick the benchmark times (the 21st, after 20 ms), and 3 by 50 ms; never more
-/// than 13 or fewer than 3. The minimal scene's benchmarked tick is 1 step of six model
-/// evaluations (Rodas4's six stages, the Jacobian from the dual numbers of the last).
+/// The steps per 1 ms tick of the quasi-static scenes (Rodas4, rtol 1e-6) in docs/model.md, "The
+/// pushing dynamics (Eq 17)", and docs/benchmarks.md, "Cost of one 1 ms tick
+/// (`cargo bench -p nanopush --bench tick`)", exactly: the default scene takes 13 steps (and 1
+/// rejection) in its first tick, 5 steps and 1 rejection in the tick the benchmark times (the 21st,
+/// after 20 ms), and 3 by 50 ms; never more than 13 or fewer than 3. The minimal scene's
+/// benchmarked tick is 1 step of six model evaluations (Rodas4's six stages, the Jacobian from the
+/// dual numbers of the last).
 #[test]
 fn the_default_scene_takes_13_to_3_steps_per_tick_and_5_plus_1_rejection_at_20_ms() {
     let ticks = steps_per_tick(scene("paper-default.toml"), 50);
@@ -350,10 +352,11 @@ fn the_default_scene_takes_13_to_3_steps_per_tick_and_5_plus_1_rejection_at_20_m
     assert_eq!((r.stats.steps, r.stats.rejected, r.stats.rhs_evals), (1, 0, 6));
 }
 
-/// The README's full model (`paper-full-dynamics`: 12 states) and its cost, rotation off: it
-/// shears at the reduced model's t* (6.2078 ms in both), and the 1 ms tick that holds the first
-/// slip, where the cantilever's 3.7 MHz lateral mode rings, takes 62 941 steps (and 6699
-/// rejections), ~16 ns a step, against the 6 steps of the tick before it. (~5 s in debug.)
+/// docs/model.md's full model (`paper-full-dynamics`: 12 states) and its cost ("The pushing
+/// dynamics (Eq 17)"), rotation off: it shears at the reduced model's t* (6.2078 ms in both), and
+/// the 1 ms tick that holds the first slip, where the cantilever's 3.7 MHz lateral mode rings,
+/// takes 62 941 steps (and 6699 rejections), ~16 ns a step, against the 6 steps of the tick before
+/// it. (~5 s in debug.)
 #[test]
 fn the_full_models_first_slip_takes_62_941_steps_in_one_tick_at_the_reduced_t_star() {
     let rotation_off = |name: &str| {
