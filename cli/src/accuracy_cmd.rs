@@ -285,7 +285,7 @@ fn write_reduction(out: &mut String, rows: &[ReductionRow]) -> anyhow::Result<()
     }
     writeln!(
         out,
-        "  (After the first shear the full model's jump overshoots the kinetic balance and the contact sticks again, stick-slip; the reduction, which has no inertia, lands on the balance and slides or rolls steadily: README, `nanopush accuracy`.)"
+        "  (After the first shear the full model's jump overshoots the kinetic balance and the contact sticks again, stick-slip; the reduction, which has no inertia, lands on the balance and slides or rolls steadily: docs/validation.md, \"Which is right, and why they differ\".)"
     )?;
     Ok(())
 }

@@ -364,7 +364,7 @@ mod tests {
         }
     }
 
-    /// README, "Passivity": the damping is "capped at 80 % of the damping the device renders
+    /// docs/haptics.md, "Passivity": the damping is "capped at 80 % of the damping the device renders
     /// (`m/T`)" and never applied "at `|v| < 0.1 mm/s`": the bridge's controller for the
     /// simulated handle at 1, 2 and 4 kHz.
     #[test]

@@ -225,7 +225,7 @@ mod tests {
         assert_eq!(pc.step(1.0, 0.01 * dt, 0.01, dt, f64::NAN, 1e9).force, 0.0);
     }
 
-    /// README, "Passivity": a deficit is dissipated "only when `E < −1 nJ`, never at
+    /// docs/haptics.md, "Passivity": a deficit is dissipated "only when `E < −1 nJ`, never at
     /// `|v| < 0.1 mm/s`": just past each edge the controller acts, just short of it not.
     #[test]
     fn damping_starts_beyond_a_1_nj_deficit_and_at_0_1_mm_per_s() {

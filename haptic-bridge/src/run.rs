@@ -411,7 +411,7 @@ mod tests {
         assert_eq!(next_deadline(5, None, step), 5 + step);
     }
 
-    /// README, "Two processes": the device cycle runs at 0.5-4 kHz (1 kHz by default) and the
+    /// docs/haptics.md, "Two processes": the device cycle runs at 0.5-4 kHz (1 kHz by default) and the
     /// bridge zeroes its force within 5 ms of a silent server by default: `--rate-hz` is
     /// accepted in [500, 4000] Hz and refused just outside.
     #[test]
@@ -440,7 +440,7 @@ mod tests {
         }
     }
 
-    /// README, "Latency": "the device cycle locks 30 µs after the server's tick". A server
+    /// docs/benchmarks.md, "Haptic latency (`nanopush-haptic-latency`)": "the device cycle locks 30 µs after the server's tick". A server
     /// publishing at 0.6 ms past each millisecond, without jitter: the cycle settles at 0.63 ms
     /// (to the nanosecond the quarter-step nudge leaves), at 1, 2 and 4 kHz.
     #[test]

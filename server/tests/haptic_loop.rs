@@ -273,13 +273,13 @@ fn rates_table() {
                 let (_, (t_readme, e_readme)) = readme
                     .iter()
                     .find(|(k, _)| *k == (per_tick, local, scale))
-                    .expect("a README cell");
+                    .expect("a docs cell");
                 assert_eq!(t, *t_readme, "{cell}: contact changes");
                 // Two significant digits: within half a unit of the second.
                 let unit = 10f64.powf(e_readme.abs().log10().floor() - 1.0);
                 assert!(
                     (e - e_readme).abs() <= 0.5 * unit,
-                    "{cell}: {e:.3e} J, README {e_readme:e}"
+                    "{cell}: {e:.3e} J, docs {e_readme:e}"
                 );
             }
         }
@@ -300,7 +300,7 @@ fn rates_table() {
         println!("{per_tick} kHz ×2: {r:.3}×");
         assert!(
             (r - readme).abs() <= 0.5 * unit,
-            "{per_tick} kHz ×2: {r}×, README {readme}×"
+            "{per_tick} kHz ×2: {r}×, docs {readme}×"
         );
     }
 }

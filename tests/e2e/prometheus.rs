@@ -35,7 +35,7 @@ fn free_port() -> u16 {
     TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
-/// README, "Lab monitoring": the shipped `prometheus.yml` "scrapes `127.0.0.1:8080` every 5 s"
+/// docs/server.md, "Lab monitoring: Prometheus (`deploy/prometheus/`)": the shipped `prometheus.yml` "scrapes `127.0.0.1:8080` every 5 s"
 /// (`nanopush serve`'s default address and port) and loads `alerts.yml`. `promtool check
 /// config` checks its syntax only.
 #[test]

@@ -5,7 +5,7 @@ use nanopush_e2e::{run, text};
 
 use crate::util::{nanopush_json as json, tmp};
 
-/// The README's push table, row 1, and its Figs 9 and 15: `nanopush push --scene
+/// docs/manipulation.md's push table ("Measured pushes"), row 1, and its Figs 9 and 15: `nanopush push --scene
 /// scenes/gold-latex-500nm.toml --distance-um 12 --pause-at-um 6 --out DIR` touches at step 43,
 /// ends 13.8 nm short after 15.6 s of simulated time, and its trace shows the 500 ms stop at
 /// 6 µm and, at the restart, a static-friction peak of −1.80 V against a rolling level of about
@@ -33,16 +33,16 @@ fn a_12_um_push_with_a_stop_ends_minus_13_8_nm_and_writes_figs_9_and_15_with_a_m
     assert_eq!(leg["retracted"], true);
     let err = r["final_error"].as_f64().unwrap();
     assert!(err < 25e-9, "final error {err:e} m");
-    // The README's figures, to their last digit: the error along the push, the simulated time.
+    // docs/manipulation.md's figures, to their last digit: the error along the push, the simulated time.
     let along = leg["true_distance"].as_f64().unwrap() - 12e-6;
     assert!(
         (along / 1e-9 + 13.8).abs() <= 0.05,
-        "distance error {along:e} m (README: −13.8 nm)"
+        "distance error {along:e} m (docs/manipulation.md: −13.8 nm)"
     );
     let simulated = r["simulated_time"].as_f64().unwrap();
     assert!(
         (simulated - 15.6).abs() <= 0.05,
-        "simulated {simulated} s (README: 15.6 s)"
+        "simulated {simulated} s (docs/manipulation.md: 15.6 s)"
     );
     for f in [
         "contact.csv",
@@ -73,7 +73,7 @@ fn a_12_um_push_with_a_stop_ends_minus_13_8_nm_and_writes_figs_9_and_15_with_a_m
     let still: Vec<usize> = (1..pushing.len())
         .filter(|&i| pushing[i - 1][3] == pushing[i][3])
         .collect();
-    // The README's "500 ms stop at 6 µm" (`--pause-ms` 500 by default): 500 ticks of 1 ms in
+    // docs/manipulation.md's "500 ms stop at 6 µm" (`--pause-ms` 500 by default): 500 ticks of 1 ms in
     // one stretch, from the tick the estimate of the distance pushed passes 6 µm.
     assert_eq!(still.len(), 500, "ticks without stage motion during the 500 ms stop");
     assert_eq!(still[still.len() - 1] - still[0], 499, "one stretch: {still:?}");
@@ -86,15 +86,18 @@ fn a_12_um_push_with_a_stop_ends_minus_13_8_nm_and_writes_figs_9_and_15_with_a_m
     let rolling = rolling.iter().sum::<f64>() / rolling.len() as f64;
     let peak = v[restart..].iter().cloned().fold(f64::INFINITY, f64::min);
     assert!(peak < rolling - 0.3, "peak {peak} V against rolling {rolling} V");
-    assert!((peak + 1.80).abs() <= 0.005, "restart peak {peak} V (README: −1.80 V)");
+    assert!(
+        (peak + 1.80).abs() <= 0.005,
+        "restart peak {peak} V (docs/manipulation.md: −1.80 V)"
+    );
     assert!(
         (rolling + 1.1).abs() <= 0.05,
-        "rolling level {rolling} V (README: about −1.1 V)"
+        "rolling level {rolling} V (docs/manipulation.md: about −1.1 V)"
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// The README's push table, row 4: `nanopush push --scene scenes/gold-latex-500nm.toml --to-um
+/// docs/manipulation.md's push table ("Measured pushes"), row 4: `nanopush push --scene scenes/gold-latex-500nm.toml --to-um
 /// 40,55`, 25 µm in legs of at most 20 µm (the scene's `strategy.max_push_um`): two pushes of
 /// 12.5 µm, each touching at step 43, ending +1.6 nm and +3.1 nm long, 4.4 nm from the target.
 #[test]
@@ -119,13 +122,13 @@ fn a_far_target_is_two_pushes_ending_plus_1_6_and_plus_3_1_nm_and_4_4_nm_from_it
         let error = leg["true_distance"].as_f64().unwrap() - asked;
         assert!(
             (error / 1e-9 - readme_nm).abs() <= 0.05,
-            "leg error {error:e} m (README: +{readme_nm} nm)"
+            "leg error {error:e} m (docs/manipulation.md: +{readme_nm} nm)"
         );
     }
     let err = r["final_error"].as_f64().unwrap();
     assert!(
         (err / 1e-9 - 4.4).abs() <= 0.05,
-        "final error {err:e} m (README: 4.4 nm)"
+        "final error {err:e} m (docs/manipulation.md: 4.4 nm)"
     );
 }
 

@@ -170,7 +170,7 @@ fn viewers_never_lock_the_operator_out_and_one_address_has_a_limit() {
     });
 }
 
-/// README, "Roles": "the operator token has 8 places of its own". With the viewer cap full,
+/// docs/server.md, "The teleoperation server" (Roles): "the operator token has 8 places of its own". With the viewer cap full,
 /// eight operator connections get in and a ninth is refused with 503; a viewer place is not an
 /// operator place (`--max-clients 1`, taken by a viewer, leaves all eight).
 #[test]

@@ -30,7 +30,7 @@ export function chromiumPath() {
 }
 
 /**
- * The gold-latex scene made quick, as the Rust e2e tests make it (tests/e2e/serve.rs): a level
+ * The gold-latex scene made quick, as the Rust e2e tests make it (tests/e2e/util.rs): a level
  * substrate, a low start height, fast approaches and travel, a 16 µm default scan.
  */
 export function fastScene(dir) {

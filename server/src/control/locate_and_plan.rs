@@ -204,7 +204,7 @@ mod tests {
         assert!((size / LOCAL_PIXELS as f64 - 4.25e-9).abs() < 1e-21);
         assert!(
             (4e-6 / LOCAL_PIXELS as f64 - 31e-9).abs() <= 0.5e-9,
-            "31 nm to the README's digit"
+            "31 nm to the digit docs/manipulation.md gives"
         );
         assert_eq!(local_scan_size(10e-6, 30e-9, 100e-6), 100e-6);
     }

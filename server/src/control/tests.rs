@@ -257,7 +257,7 @@ fn push_as_the_cli_does(scene: &Scene, distance: f64) -> (StrategyRun, f64) {
 fn assert_digits(what: &str, value: f64, readme: f64, half_unit: f64) {
     assert!(
         (value - readme).abs() <= half_unit,
-        "{what}: {value} against the README's {readme} (± {half_unit})"
+        "{what}: {value} against the docs' {readme} (± {half_unit})"
     );
 }
 

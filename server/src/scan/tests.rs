@@ -163,7 +163,7 @@ impl Figure {
         let Figure(readme, half_unit) = self;
         assert!(
             (value - readme).abs() <= half_unit,
-            "{what}: {value} against the README's {readme} (± {half_unit})"
+            "{what}: {value} against the docs' {readme} (± {half_unit})"
         );
     }
 }

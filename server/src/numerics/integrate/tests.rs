@@ -114,7 +114,7 @@ fn van_der_pol_matches_the_published_reference() {
 
 /// Robertson to t = 1e11 against its published reference, and the work each method does there,
 /// exactly (see `work_on_the_reference_problems_is_pinned`): steps, rejections, right-hand
-/// sides, Jacobians and LUs (the README's 1545 and 6412 steps at 1e-8), and the README's final
+/// sides, Jacobians and LUs (docs/validation.md's 1545 and 6412 steps at 1e-8), and docs/validation.md's final
 /// errors at 1e-8 (`nanopush accuracy`'s largest relative component error): 6.2e-9 (Rodas4) and
 /// 1.1e-5 (TR-BDF2), to half a unit of the second digit.
 #[test]
@@ -311,11 +311,11 @@ fn crossing_from_exactly_zero_fires_at_once() {
 }
 
 /// The work each method does on Van der Pol, exactly (the runs are deterministic): accepted and
-/// rejected steps, right-hand sides, Jacobians and LU factorizations. These are the README's
+/// rejected steps, right-hand sides, Jacobians and LU factorizations. These are docs/validation.md's
 /// step counts (`nanopush accuracy`: 1069 and 2787 steps at 1e-6; Robertson's are pinned with
 /// its reference values), and they pin the step-size control: a change to the initial step,
 /// the controller or the rejection rule changes them, even where the error control still meets
-/// the tolerance. With them, the README's final errors at 1e-6 (the largest relative component
+/// the tolerance. With them, docs/validation.md's final errors at 1e-6 (the largest relative component
 /// error against the published reference, as `nanopush accuracy` reports it): 2.3e-7 (Rodas4)
 /// and 1.5e-4 (TR-BDF2), to half a unit of the second digit.
 #[test]

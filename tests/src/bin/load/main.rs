@@ -34,7 +34,7 @@ use report::{level_json, print_tables};
 const TOKEN: &str = "nanopush-load-operator-token";
 /// Viewers connecting at once (the rest wait their turn).
 const CONNECT_CONCURRENCY: usize = 32;
-/// The period-error threshold the README's goal names (s); a bucket bound of the histogram.
+/// The period-error threshold the goal in docs/benchmarks.md ("Load: `nanopush-load`") names (s); a bucket bound of the histogram.
 const GOAL_P99_S: f64 = 20e-6;
 
 const USAGE: &str = "\
