@@ -14,6 +14,12 @@
 //! the tip retracted. The strategy sees only what the instrument measures ([`Reading`]: stage
 //! position, deflection in volts), never the simulator's state.
 
+mod outcome;
+mod params;
+
+pub use outcome::{Failure, SearchStep, Summary};
+pub use params::{Control, PushTask, StrategyParams};
+
 use crate::control::estimator::Hxy;
 use crate::instrument::Reading;
 
@@ -25,198 +31,6 @@ pub const HOLD: f64 = 0.05;
 
 /// Samples after `t*` averaged into the z loop's reference.
 const Z_REFERENCE_SAMPLES: u32 = 20;
-
-/// How the push closes its loops (Sec 3).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Control {
-    /// xy-position control: stop when the Eq 19 estimate reaches the distance.
-    Xy,
-    /// z-position control: hold the deflection by moving the tip height; stop on stage travel.
-    Z,
-    /// Both.
-    Xyz,
-}
-
-/// The strategy's settings, SI.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct StrategyParams {
-    /// Control tick (s).
-    pub tick: f64,
-    /// Tip height above the (unknown) substrate to retract to (m): the start height.
-    pub start_height: f64,
-    /// z approach and retract speed (m/s).
-    pub approach_speed: f64,
-    /// Speed of travel moves (m/s).
-    pub travel_speed: f64,
-    /// Reading change that means the substrate was touched (V).
-    pub substrate_threshold: f64,
-    /// Contact-search step `Δ` (m).
-    pub step: f64,
-    /// Ticks of dwell after each step.
-    pub dwell_ticks: u32,
-    /// Push and contact-search speed `V` (m/s).
-    pub speed: f64,
-    /// Reading at zero deflection (V).
-    pub baseline: f64,
-    /// +1 when a push (ζ_z > 0) raises the reading, −1 when it lowers it (the gain's sign).
-    pub polarity: f64,
-    /// `ζ_set` (V).
-    pub set_point: f64,
-    /// Safety limit (V).
-    pub safety_limit: f64,
-    /// The readout's full scale (V): a reading at `±full_scale` is saturated, the force unknown.
-    pub full_scale: f64,
-    /// Distance from the baseline under which a pushed particle counts as lost (V).
-    pub lost_threshold: f64,
-    /// Readout noise RMS (V), for margins.
-    pub noise: f64,
-    /// Longest contact search (m).
-    pub search_range: f64,
-    /// Longest any phase may take (s).
-    pub timeout: f64,
-    /// Loop closure.
-    pub control: Control,
-    /// z-loop gain (m of height per V of error, per tick).
-    pub z_gain: f64,
-}
-
-impl StrategyParams {
-    /// The reading as a deflection signal (V): positive on the push's side of the baseline.
-    pub fn signal(&self, volts: f64) -> f64 {
-        (volts - self.baseline) * self.polarity
-    }
-}
-
-/// One push, as the operator asks for it, with what the controller knows of the particle (from
-/// a scan: its estimated centre and radius).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PushTask {
-    /// Estimated particle centre (m).
-    pub particle: (f64, f64),
-    /// Estimated particle radius (m).
-    pub radius: f64,
-    /// Unit push direction in the plane.
-    pub direction: (f64, f64),
-    /// Distance to push (m).
-    pub distance: f64,
-    /// Contact angle to aim for, `β` (rad).
-    pub beta: f64,
-    /// Tip radius (m).
-    pub tip_radius: f64,
-    /// Distance behind the contact point where the search starts (m).
-    pub approach_distance: f64,
-    /// A brief stop during the push (Fig 15: "a short stop interval"): at this push travel
-    /// (m), for this many ticks.
-    pub pause: Option<(f64, u32)>,
-}
-
-impl PushTask {
-    /// Horizontal distance between the tip's and the particle's centres at contact,
-    /// `(Rₐ + Rₜ) cos β` (m).
-    pub fn contact_reach(&self) -> f64 {
-        (self.radius + self.tip_radius) * self.beta.cos()
-    }
-
-    /// Tip apex height above the substrate that puts the contact at `β`:
-    /// `h = Rₐ − Rₜ + (Rₐ + Rₜ) sin β` (m).
-    pub fn parking_height(&self) -> f64 {
-        self.radius - self.tip_radius + (self.radius + self.tip_radius) * self.beta.sin()
-    }
-
-    /// Where the contact search starts (xy, m).
-    pub fn search_start(&self) -> (f64, f64) {
-        let back = self.contact_reach() + self.approach_distance;
-        (
-            self.particle.0 - self.direction.0 * back,
-            self.particle.1 - self.direction.1 * back,
-        )
-    }
-}
-
-/// Why a run failed. Each ends with the tip retracted.
-#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
-pub enum Failure {
-    /// The z approach went further than the start height plus margin without touching.
-    #[error("no substrate found within {range_um:.2} µm of z approach")]
-    NoSubstrate {
-        /// Approach travelled (µm).
-        range_um: f64,
-    },
-    /// The contact search travelled its whole range without reaching the set point.
-    #[error("no contact within range: {travel_um:.2} µm searched ({steps} steps) without reaching ζ_set")]
-    NoContact {
-        /// Search travel (µm).
-        travel_um: f64,
-        /// Steps made.
-        steps: u32,
-    },
-    /// The deflection fell back to the baseline during the push: the tip lost the particle.
-    #[error("particle lost after {travel_um:.3} µm of push: the deflection fell back to the baseline")]
-    ParticleLost {
-        /// Push travel (µm).
-        travel_um: f64,
-    },
-    /// The deflection went beyond the safety limit, or the reading saturated the readout on
-    /// either side (`limit` is then the rail): emergency retract.
-    #[error("deflection {volts:.3} V beyond the limit {limit:.3} V in phase {phase}: emergency retract")]
-    DeflectionLimit {
-        /// Reading (V).
-        volts: f64,
-        /// Limit (V).
-        limit: f64,
-        /// Phase it happened in.
-        phase: &'static str,
-    },
-    /// The push travelled well past its distance without a separation (`t*`) being seen.
-    #[error("no particle-substrate separation (t*) seen after {travel_um:.3} µm of push")]
-    NoSeparation {
-        /// Push travel (µm).
-        travel_um: f64,
-    },
-    /// The operator (or a shutdown) stopped the run.
-    #[error("stopped: {reason}")]
-    Stopped {
-        /// Who or what stopped it.
-        reason: &'static str,
-    },
-    /// The simulated instrument left physics (a solver-health guard tripped): see
-    /// [`crate::instrument::Unphysical`]. The push model is dropped where it last was physical.
-    #[error("unphysical state in phase {phase}: {what} = {value:e} beyond its bound {limit:e}")]
-    Unphysical {
-        /// What was out of bounds.
-        what: &'static str,
-        /// Its value (SI).
-        value: f64,
-        /// The bound (SI).
-        limit: f64,
-        /// Phase it happened in.
-        phase: &'static str,
-    },
-    /// A phase took longer than its time-out.
-    #[error("time-out: phase {phase} took more than {timeout_s} s")]
-    Timeout {
-        /// Phase.
-        phase: &'static str,
-        /// Limit (s).
-        timeout_s: f64,
-    },
-}
-
-impl Failure {
-    /// The failure's code in reports and the WebSocket protocol.
-    pub fn code(&self) -> &'static str {
-        match self {
-            Failure::NoSubstrate { .. } => "no_substrate",
-            Failure::NoContact { .. } => "no_contact",
-            Failure::ParticleLost { .. } => "particle_lost",
-            Failure::DeflectionLimit { .. } => "deflection_limit",
-            Failure::NoSeparation { .. } => "no_separation",
-            Failure::Stopped { .. } => "stopped",
-            Failure::Timeout { .. } => "timeout",
-            Failure::Unphysical { .. } => "unphysical",
-        }
-    }
-}
 
 /// The phases of Fig 2.
 #[derive(Debug, Clone, PartialEq)]
@@ -276,38 +90,6 @@ impl Phase {
             Phase::Done => "done",
         }
     }
-}
-
-/// One step of the contact search, as Fig 9 plots it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SearchStep {
-    /// Step number (1-based).
-    pub step: u32,
-    /// Reading at the end of the step (mean over the dwell), V.
-    pub volts: f64,
-}
-
-/// The strategy's result.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Summary {
-    /// Failure, if any (the tip is retracted either way).
-    pub failure: Option<Failure>,
-    /// Detected substrate height at the parking point (stage z, m).
-    pub substrate_z: Option<f64>,
-    /// Step at which the set point was reached.
-    pub contact_step: Option<u32>,
-    /// Stage position where the contact search stopped (m).
-    pub contact_stage: Option<[f64; 3]>,
-    /// Detected `t*` (s).
-    pub t_star: Option<f64>,
-    /// Estimated particle displacement at the end of the push (m).
-    pub estimated_distance: f64,
-    /// Stage travel of the push (m).
-    pub push_travel: f64,
-    /// Fig 9: the reading after each contact-search step.
-    pub search: Vec<SearchStep>,
-    /// Estimated particle centre at the end (m).
-    pub estimated_particle: (f64, f64),
 }
 
 /// The state machine.

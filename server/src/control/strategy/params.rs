@@ -1,0 +1,108 @@
+//! The strategy's settings and one push's task, as the operator and the scene give them.
+
+/// How the push closes its loops (Sec 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Control {
+    /// xy-position control: stop when the Eq 19 estimate reaches the distance.
+    Xy,
+    /// z-position control: hold the deflection by moving the tip height; stop on stage travel.
+    Z,
+    /// Both.
+    Xyz,
+}
+
+/// The strategy's settings, SI.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StrategyParams {
+    /// Control tick (s).
+    pub tick: f64,
+    /// Tip height above the (unknown) substrate to retract to (m): the start height.
+    pub start_height: f64,
+    /// z approach and retract speed (m/s).
+    pub approach_speed: f64,
+    /// Speed of travel moves (m/s).
+    pub travel_speed: f64,
+    /// Reading change that means the substrate was touched (V).
+    pub substrate_threshold: f64,
+    /// Contact-search step `Δ` (m).
+    pub step: f64,
+    /// Ticks of dwell after each step.
+    pub dwell_ticks: u32,
+    /// Push and contact-search speed `V` (m/s).
+    pub speed: f64,
+    /// Reading at zero deflection (V).
+    pub baseline: f64,
+    /// +1 when a push (ζ_z > 0) raises the reading, −1 when it lowers it (the gain's sign).
+    pub polarity: f64,
+    /// `ζ_set` (V).
+    pub set_point: f64,
+    /// Safety limit (V).
+    pub safety_limit: f64,
+    /// The readout's full scale (V): a reading at `±full_scale` is saturated, the force unknown.
+    pub full_scale: f64,
+    /// Distance from the baseline under which a pushed particle counts as lost (V).
+    pub lost_threshold: f64,
+    /// Readout noise RMS (V), for margins.
+    pub noise: f64,
+    /// Longest contact search (m).
+    pub search_range: f64,
+    /// Longest any phase may take (s).
+    pub timeout: f64,
+    /// Loop closure.
+    pub control: Control,
+    /// z-loop gain (m of height per V of error, per tick).
+    pub z_gain: f64,
+}
+
+impl StrategyParams {
+    /// The reading as a deflection signal (V): positive on the push's side of the baseline.
+    pub fn signal(&self, volts: f64) -> f64 {
+        (volts - self.baseline) * self.polarity
+    }
+}
+
+/// One push, as the operator asks for it, with what the controller knows of the particle (from
+/// a scan: its estimated centre and radius).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PushTask {
+    /// Estimated particle centre (m).
+    pub particle: (f64, f64),
+    /// Estimated particle radius (m).
+    pub radius: f64,
+    /// Unit push direction in the plane.
+    pub direction: (f64, f64),
+    /// Distance to push (m).
+    pub distance: f64,
+    /// Contact angle to aim for, `β` (rad).
+    pub beta: f64,
+    /// Tip radius (m).
+    pub tip_radius: f64,
+    /// Distance behind the contact point where the search starts (m).
+    pub approach_distance: f64,
+    /// A brief stop during the push (Fig 15: "a short stop interval"): at this push travel
+    /// (m), for this many ticks.
+    pub pause: Option<(f64, u32)>,
+}
+
+impl PushTask {
+    /// Horizontal distance between the tip's and the particle's centres at contact,
+    /// `(Rₐ + Rₜ) cos β` (m).
+    pub fn contact_reach(&self) -> f64 {
+        (self.radius + self.tip_radius) * self.beta.cos()
+    }
+
+    /// Tip apex height above the substrate that puts the contact at `β`:
+    /// `h = Rₐ − Rₜ + (Rₐ + Rₜ) sin β` (m).
+    pub fn parking_height(&self) -> f64 {
+        self.radius - self.tip_radius + (self.radius + self.tip_radius) * self.beta.sin()
+    }
+
+    /// Where the contact search starts (xy, m).
+    pub fn search_start(&self) -> (f64, f64) {
+        let back = self.contact_reach() + self.approach_distance;
+        (
+            self.particle.0 - self.direction.0 * back,
+            self.particle.1 - self.direction.1 * back,
+        )
+    }
+}
