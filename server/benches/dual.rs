@@ -18,14 +18,14 @@
 
 use std::hint::black_box;
 use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub};
-use std::path::Path;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use nanopush::numerics::dual::{Dual, DualN, Real, derivative};
 use nanopush::physics::forces::capillary::Meniscus;
 use nanopush::physics::pushing::params::PushParams;
-use nanopush::scene::Scene;
 use num_dual::{Dual64, DualNum, DualSVec64};
+
+mod common;
 
 /// num-dual's scalar dual, as a `Real`.
 #[derive(Clone, Copy, Debug)]
@@ -113,10 +113,7 @@ forward_ops!(Nd);
 forward_ops!(NdN, N);
 
 fn params() -> PushParams {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
-    Scene::from_path(&dir.join("paper-default.toml"))
-        .expect("shipped scene")
-        .push_params()
+    common::shipped_scene("paper-default").push_params()
 }
 
 /// Both long-range forces at gap `h` (N).

@@ -13,12 +13,10 @@
 //! Results and the decision: docs/own-or-crate.md.
 
 use std::hint::black_box;
-use std::path::Path;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use nanopush::numerics::integrate::{Method, Options};
-use nanopush::physics::pushing::{PushModel, Simulation};
-use nanopush::scene::Scene;
+
+mod common;
 
 /// What `linalg.rs`'s `use super::problem::MAX_DIM` finds.
 mod problem {
@@ -128,21 +126,34 @@ mod hand {
 }
 use hand::HandLu;
 
-/// Factor + `solves` solves with the hand-written LU.
-fn hand_written(lu: &mut HandLu, n: usize, a: &[f64], b: &[f64], solves: usize, x: &mut [f64]) -> bool {
-    if !lu.factor(n, a) {
-        return false;
-    }
-    for _ in 0..solves {
-        x[..n].copy_from_slice(&b[..n]);
-        lu.solve(&mut x[..n]);
-    }
-    true
+/// An LU to benchmark: factor an `n`×`n` column-major matrix, solve in place.
+trait Factor {
+    fn factor(&mut self, n: usize, a: &[f64]) -> bool;
+    fn solve(&self, b: &mut [f64]);
 }
 
-/// Factor + `solves` solves with nalgebra's fixed-size LU, as shipped (`linalg::Lu`: the run-time
-/// size dispatched to the compile-time one, a zero or non-finite pivot reported as singular).
-fn nalgebra(lu: &mut linalg::Lu, n: usize, a: &[f64], b: &[f64], solves: usize, x: &mut [f64]) -> bool {
+impl Factor for HandLu {
+    fn factor(&mut self, n: usize, a: &[f64]) -> bool {
+        HandLu::factor(self, n, a)
+    }
+    fn solve(&self, b: &mut [f64]) {
+        HandLu::solve(self, b)
+    }
+}
+
+/// nalgebra's fixed-size LU, as shipped (`linalg::Lu`: the run-time size dispatched to the
+/// compile-time one, a zero or non-finite pivot reported as singular).
+impl Factor for linalg::Lu {
+    fn factor(&mut self, n: usize, a: &[f64]) -> bool {
+        linalg::Lu::factor(self, n, a)
+    }
+    fn solve(&self, b: &mut [f64]) {
+        linalg::Lu::solve(self, b)
+    }
+}
+
+/// Factor + `solves` solves.
+fn factor_and_solve(lu: &mut impl Factor, n: usize, a: &[f64], b: &[f64], solves: usize, x: &mut [f64]) -> bool {
     if !lu.factor(n, a) {
         return false;
     }
@@ -156,14 +167,7 @@ fn nalgebra(lu: &mut linalg::Lu, n: usize, a: &[f64], b: &[f64], solves: usize, 
 /// The Rodas4 iteration matrix `M/(hγ) − J` (column-major) and a right-hand side `f(t, x)` of a
 /// shipped scene, 20 ms into a push.
 fn workload(scene: &str) -> (usize, Vec<f64>, Vec<f64>) {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
-    let s = Scene::from_path(&dir.join(format!("{scene}.toml"))).expect("shipped scene");
-    let mut sim = Simulation::new(
-        PushModel::new(s.push_params()),
-        Method::Rodas4,
-        Options::with_rtol(1e-6),
-    );
-    sim.advance_to(20e-3).expect("warm-up");
+    let sim = common::warmed_up(scene);
     let (m, t, x, mode) = (&sim.model, sim.t, sim.x, sim.mode);
     let n = m.len();
     let mut jac = vec![0.0; n * n];
@@ -195,17 +199,17 @@ fn lu(c: &mut Criterion) {
         // Same answer, bit for bit (same pivots, same operations in the same order).
         let (mut x1, mut x2) = ([0.0; 12], [0.0; 12]);
         let (mut ours, mut theirs) = (HandLu::default(), linalg::Lu::default());
-        assert!(hand_written(&mut ours, n, &a, &b, 1, &mut x1));
-        assert!(nalgebra(&mut theirs, n, &a, &b, 1, &mut x2));
+        assert!(factor_and_solve(&mut ours, n, &a, &b, 1, &mut x1));
+        assert!(factor_and_solve(&mut theirs, n, &a, &b, 1, &mut x2));
         assert_eq!(x1[..n], x2[..n], "{scene}: the two LUs disagree");
         for solves in [1, 6] {
             let name = format!("{scene}_n{n}/factor+{solves}solve");
             let mut x = [0.0; 12];
             group.bench_function(format!("{name}/hand_written"), |bch| {
-                bch.iter(|| hand_written(&mut ours, n, black_box(&a), black_box(&b), solves, &mut x))
+                bch.iter(|| factor_and_solve(&mut ours, n, black_box(&a), black_box(&b), solves, &mut x))
             });
             group.bench_function(format!("{name}/nalgebra_smatrix"), |bch| {
-                bch.iter(|| nalgebra(&mut theirs, n, black_box(&a), black_box(&b), solves, &mut x))
+                bch.iter(|| factor_and_solve(&mut theirs, n, black_box(&a), black_box(&b), solves, &mut x))
             });
         }
     }

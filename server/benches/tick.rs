@@ -6,18 +6,17 @@
 //! Run: `cargo bench -p nanopush --bench tick`. Criterion prints the median ("time: [lo median hi]").
 
 use std::hint::black_box;
-use std::path::Path;
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use nanopush::numerics::integrate::{Method, Options};
 use nanopush::physics::pushing::{PushModel, Simulation};
-use nanopush::scene::Scene;
+
+mod common;
 
 fn ticks(c: &mut Criterion) {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
     let mut group = c.benchmark_group("tick_1ms");
     for scene in ["paper-default", "minimal"] {
-        let s = Scene::from_path(&dir.join(format!("{scene}.toml"))).expect("shipped scene");
+        let s = common::shipped_scene(scene);
         for method in Method::ALL {
             let mut sim = Simulation::new(PushModel::new(s.push_params()), method, Options::with_rtol(1e-6));
             for k in 1..=20 {
@@ -39,16 +38,9 @@ fn ticks(c: &mut Criterion) {
 /// The parts of a step: one right-hand side, one exact Jacobian (one dual evaluation per
 /// column), the switching functions.
 fn parts(c: &mut Criterion) {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
     let mut group = c.benchmark_group("parts");
     for scene in ["paper-default", "minimal"] {
-        let s = Scene::from_path(&dir.join(format!("{scene}.toml"))).expect("shipped scene");
-        let mut sim = Simulation::new(
-            PushModel::new(s.push_params()),
-            Method::Rodas4,
-            Options::with_rtol(1e-6),
-        );
-        sim.advance_to(20e-3).expect("warm-up");
+        let sim = common::warmed_up(scene);
         let (m, t, x, mode) = (&sim.model, sim.t, sim.x, sim.mode);
         let n = m.len();
         let mut f = [0.0; 12];
