@@ -1,4 +1,5 @@
-//! `nanopush`: the command line of the nanopush model and (later) server.
+//! `nanopush`: the command line — the model and its studies (`model`, `simulate`, `sweep`,
+//! `accuracy`), the instrument (`scan`, `push`) and the teleoperation server (`serve`).
 
 mod accuracy_cmd;
 mod campaign_cmd;
