@@ -7,11 +7,13 @@ use anyhow::{Context, bail};
 use clap::Args;
 use nanopush::numerics::integrate::Method;
 use nanopush::physics::pushing::{Dof, PushModel};
+use nanopush::scene::Scene;
 use nanopush_proto::accuracy::{AccuracyPoint, AccuracyReport, EqualError, PushOutcome, QuasiStaticCost, ReductionRow};
 use nanopush_study::accuracy::reduction::{CompareOptions, Comparison, Summary, compare};
 use nanopush_study::accuracy::{
     Point, classical_points, classical_reference, estimate_errors, push_points, push_reference,
 };
+use nanopush_study::extremes::CaseResult;
 use nanopush_study::peers::{PeerPoint, SOLVERS, peer_points};
 use plotters::prelude::*;
 
@@ -59,31 +61,7 @@ fn extremes(a: &AccuracyArgs) -> anyhow::Result<String> {
     let results: Vec<_> = cases.iter().map(|c| run_case(&scene, c, 1e-5)).collect();
     let total = start.elapsed().as_secs_f64();
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    let mut csv = String::from(
-        "radius_nm,stiffness_n_per_m,humidity,mu_as,tilt_deg,contact_angle_deg,speed_um_per_s,finite_and_bounded,steps,rejected,error_m,wall_time_s,outcome,diagnoses\n",
-    );
-    for r in &results {
-        let c = &r.case;
-        writeln!(
-            csv,
-            "{},{},{},{},{},{},{},{},{},{},{:e},{:e},{},{}",
-            c.radius_nm,
-            c.stiffness_n_per_m,
-            c.humidity,
-            c.mu_as,
-            c.tilt_deg,
-            c.contact_angle_deg,
-            c.speed_um_per_s,
-            r.finite_and_bounded,
-            r.steps,
-            r.rejected,
-            r.error,
-            r.wall_time,
-            r.outcome.replace(',', ";"),
-            r.diagnoses.join("; ").replace(',', ";")
-        )?;
-    }
-    crate::units::write_file(&a.out.join("extremes.csv"), &csv)?;
+    crate::units::write_file(&a.out.join("extremes.csv"), extremes_csv(&results)?)?;
     let bad = results.iter().filter(|r| !r.finite_and_bounded && !r.refused).count();
     let refused = results.iter().filter(|r| r.refused).count();
     // Then the whole pushes (A → E) over the validated ranges.
@@ -118,14 +96,28 @@ fn extremes(a: &AccuracyArgs) -> anyhow::Result<String> {
         bad,
         total
     )?;
-    let header = format!(
-        "  {:>8} {:>6} {:>5} {:>5} {:>5} {:>5} {:>8} {:>7} {:>5} {:>10}  outcome",
-        "Ra/nm", "kc", "RH", "mu", "alpha", "beta", "V/um/s", "steps", "rej", "error/m"
+    write_worst_cases(&mut out, &results)?;
+    if bad > 0 {
+        writeln!(out, "Not finite or unbounded:")?;
+        for r in results.iter().filter(|r| !r.finite_and_bounded && !r.refused) {
+            writeln!(out, "{}", case_row(r))?;
+        }
+    }
+    writeln!(out, "Wrote {}/extremes.csv.", a.out.display())?;
+    out.push_str(&campaign_text);
+    Ok(out)
+}
+
+/// extremes.csv: a row per case of the stability grid.
+fn extremes_csv(results: &[CaseResult]) -> anyhow::Result<String> {
+    let mut csv = String::from(
+        "radius_nm,stiffness_n_per_m,humidity,mu_as,tilt_deg,contact_angle_deg,speed_um_per_s,finite_and_bounded,steps,rejected,error_m,wall_time_s,outcome,diagnoses\n",
     );
-    let row = |r: &nanopush_study::extremes::CaseResult| {
+    for r in results {
         let c = &r.case;
-        format!(
-            "  {:>8} {:>6} {:>5} {:>5} {:>5} {:>5} {:>8} {:>7} {:>5} {:>10.2e}  {}{}",
+        writeln!(
+            csv,
+            "{},{},{},{},{},{},{},{},{},{},{:e},{:e},{},{}",
             c.radius_nm,
             c.stiffness_n_per_m,
             c.humidity,
@@ -133,17 +125,24 @@ fn extremes(a: &AccuracyArgs) -> anyhow::Result<String> {
             c.tilt_deg,
             c.contact_angle_deg,
             c.speed_um_per_s,
+            r.finite_and_bounded,
             r.steps,
             r.rejected,
             r.error,
-            r.outcome,
-            if r.diagnoses.is_empty() {
-                String::new()
-            } else {
-                format!(" [{}]", r.diagnoses.join("; "))
-            }
-        )
-    };
+            r.wall_time,
+            r.outcome.replace(',', ";"),
+            r.diagnoses.join("; ").replace(',', ";")
+        )?;
+    }
+    Ok(csv)
+}
+
+/// The five worst cases of the grid by steps, by rejections and by error.
+fn write_worst_cases(out: &mut String, results: &[CaseResult]) -> anyhow::Result<()> {
+    let header = format!(
+        "  {:>8} {:>6} {:>5} {:>5} {:>5} {:>5} {:>8} {:>7} {:>5} {:>10}  outcome",
+        "Ra/nm", "kc", "RH", "mu", "alpha", "beta", "V/um/s", "steps", "rej", "error/m"
+    );
     for (title, key) in [("most steps", 0), ("most rejections", 1), ("largest error", 2)] {
         let mut sorted: Vec<_> = results.iter().collect();
         sorted.sort_by(|x, y| match key {
@@ -154,18 +153,34 @@ fn extremes(a: &AccuracyArgs) -> anyhow::Result<String> {
         writeln!(out, "Worst cases, {title}:")?;
         writeln!(out, "{header}")?;
         for r in sorted.iter().take(5) {
-            writeln!(out, "{}", row(r))?;
+            writeln!(out, "{}", case_row(r))?;
         }
     }
-    if bad > 0 {
-        writeln!(out, "Not finite or unbounded:")?;
-        for r in results.iter().filter(|r| !r.finite_and_bounded && !r.refused) {
-            writeln!(out, "{}", row(r))?;
+    Ok(())
+}
+
+/// One case of the stability grid, a line of the text report.
+fn case_row(r: &CaseResult) -> String {
+    let c = &r.case;
+    format!(
+        "  {:>8} {:>6} {:>5} {:>5} {:>5} {:>5} {:>8} {:>7} {:>5} {:>10.2e}  {}{}",
+        c.radius_nm,
+        c.stiffness_n_per_m,
+        c.humidity,
+        c.mu_as,
+        c.tilt_deg,
+        c.contact_angle_deg,
+        c.speed_um_per_s,
+        r.steps,
+        r.rejected,
+        r.error,
+        r.outcome,
+        if r.diagnoses.is_empty() {
+            String::new()
+        } else {
+            format!(" [{}]", r.diagnoses.join("; "))
         }
-    }
-    writeln!(out, "Wrote {}/extremes.csv.", a.out.display())?;
-    out.push_str(&campaign_text);
-    Ok(out)
+    )
 }
 
 fn to_proto(p: &Point) -> AccuracyPoint {
@@ -402,11 +417,47 @@ fn equal_error(rows: &[AccuracyPoint]) -> Vec<EqualError> {
     out
 }
 
+/// What the work-precision report computes, before it writes anything.
+struct Computed {
+    crosscheck: f64,
+    rows: Vec<AccuracyPoint>,
+    equal: Vec<EqualError>,
+    reduction: Vec<ReductionRow>,
+    quasi_static_cost: Option<QuasiStaticCost>,
+}
+
 /// Runs `nanopush accuracy`.
 pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     if a.extremes {
         return extremes(a);
     }
+    check(a)?;
+    let scene = crate::load_scene(a.scene.as_ref())?;
+    let c = compute(a, &scene)?;
+    write_files(a, &scene.file.name, &c.rows)?;
+    let report = AccuracyReport {
+        schema: "nanopush.accuracy".into(),
+        version: nanopush_proto::VERSION,
+        scene: scene.file.name.clone(),
+        duration: a.duration,
+        reference_crosscheck: c.crosscheck,
+        repetitions: a.reps,
+        points: c.rows,
+        quasi_static_cost: c.quasi_static_cost,
+        reduction: c.reduction,
+        equal_error: c.equal,
+    };
+    let mut out = String::new();
+    if a.json {
+        writeln!(out, "{}", serde_json::to_string(&report)?)?;
+        return Ok(out);
+    }
+    write_text(&mut out, a, &report)?;
+    Ok(out)
+}
+
+/// Checks `--duration`, `--reps` and `--min-rtol` against their ranges.
+fn check(a: &AccuracyArgs) -> anyhow::Result<()> {
     if !(a.duration.is_finite() && a.duration > 0.0 && a.duration <= 1.0) {
         bail!("--duration {} s is out of range; allowed: (0, 1] s", a.duration);
     }
@@ -416,7 +467,12 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     if !(a.min_rtol.is_finite() && (1e-10..=1e-2).contains(&a.min_rtol)) {
         bail!("--min-rtol {} is out of range; allowed: [1e-10, 1e-2]", a.min_rtol);
     }
-    let scene = crate::load_scene(a.scene.as_ref())?;
+    Ok(())
+}
+
+/// The work-precision points (ours, then the peers'), the equal-error times, and the
+/// quasi-static reduction against the full model with its cost.
+fn compute(a: &AccuracyArgs, scene: &Scene) -> anyhow::Result<Computed> {
     let model = PushModel::new(scene.push_params());
     let (reference, crosscheck) = push_reference(&model, a.duration).map_err(anyhow::Error::msg)?;
     let mut points = push_points("push", &model, a.duration, &reference, a.reps, MAX_STEPS, a.min_rtol);
@@ -433,15 +489,25 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     } else {
         compare(&model.p, &CompareOptions::report(a.duration)).map_err(anyhow::Error::msg)?
     };
-    let rows_red: Vec<ReductionRow> = reduction.iter().map(reduction_to_proto).collect();
     // Its cost, on the scene's own rotation setting.
     let scene_rotation = model.p.dofs.particle_rotation != Dof::Off;
-    let qs = reduction
+    Ok(Computed {
+        crosscheck,
+        rows,
+        equal,
+        reduction: reduction.iter().map(reduction_to_proto).collect(),
+        quasi_static_cost: quasi_static_cost(&reduction, scene_rotation, a.duration),
+    })
+}
+
+/// The cost of the reduction against the full model, on the scene's rotation setting.
+fn quasi_static_cost(reduction: &[Comparison], rotation: bool, duration: f64) -> Option<QuasiStaticCost> {
+    reduction
         .iter()
-        .find(|c| c.rotation == scene_rotation)
+        .find(|c| c.rotation == rotation)
         .map(|c| match &c.full {
             Ok(f) => QuasiStaticCost {
-                duration: a.duration,
+                duration,
                 final_difference: Some(
                     c.settled_y_error()
                         .unwrap_or(f64::NAN)
@@ -454,21 +520,24 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
                 failure: None,
             },
             Err(e) => QuasiStaticCost {
-                duration: a.duration,
+                duration,
                 final_difference: None,
                 reduced_wall_time: c.reduced.wall_time,
                 full_wall_time: 0.0,
                 full_steps: 0,
                 failure: Some(e.clone()),
             },
-        });
+        })
+}
 
+/// accuracy.csv and the three work-precision plots, into `--out`.
+fn write_files(a: &AccuracyArgs, scene_name: &str, rows: &[AccuracyPoint]) -> anyhow::Result<()> {
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let mut csv = String::from(
         "problem,method,rtol,final_error,trajectory_error,estimated_error,wall_time_s,steps,rejected,failure\n",
     );
     let num = |v: Option<f64>| v.map_or("NaN".to_string(), |v| format!("{v:e}"));
-    for p in &rows {
+    for p in rows {
         writeln!(
             csv,
             "{},{},{:e},{},{},{},{:e},{},{},{}",
@@ -488,31 +557,36 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     for (problem, unit) in [("push", "m"), ("van-der-pol", "relative"), ("robertson", "relative")] {
         let pts: Vec<&AccuracyPoint> = rows.iter().filter(|p| p.problem == problem).collect();
         let title = if problem == "push" {
-            format!("{}: error vs run time", scene.file.name)
+            format!("{scene_name}: error vs run time")
         } else {
             format!("{problem}: error vs run time")
         };
         plot(&a.out.join(format!("{problem}.svg")), &title, unit, &pts)
             .with_context(|| format!("plotting {problem}"))?;
     }
+    Ok(())
+}
 
-    let report = AccuracyReport {
-        schema: "nanopush.accuracy".into(),
-        version: nanopush_proto::VERSION,
-        scene: scene.file.name.clone(),
-        duration: a.duration,
-        reference_crosscheck: crosscheck,
-        repetitions: a.reps,
-        points: rows.clone(),
-        quasi_static_cost: qs,
-        reduction: rows_red,
-        equal_error: equal,
-    };
-    let mut out = String::new();
-    if a.json {
-        writeln!(out, "{}", serde_json::to_string(&report)?)?;
-        return Ok(out);
+/// The text report: the points, the equal-error times, the reduction's cost and table.
+fn write_text(out: &mut String, a: &AccuracyArgs, report: &AccuracyReport) -> anyhow::Result<()> {
+    write_points(out, a, report)?;
+    write_equal_error(out, &report.equal_error)?;
+    if let Some(q) = &report.quasi_static_cost {
+        write_quasi_static_cost(out, q)?;
     }
+    if !report.reduction.is_empty() {
+        write_reduction(out, &report.reduction)?;
+    }
+    writeln!(
+        out,
+        "Wrote {}/accuracy.csv and push.svg, van-der-pol.svg, robertson.svg.",
+        a.out.display()
+    )?;
+    Ok(())
+}
+
+/// The header, then a line per work-precision point.
+fn write_points(out: &mut String, a: &AccuracyArgs, report: &AccuracyReport) -> anyhow::Result<()> {
     writeln!(
         out,
         "Work-precision of scene \"{}\" ({} s push) and two classical stiff problems",
@@ -521,7 +595,7 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     writeln!(
         out,
         "Reference: rodas4 at rtol 1e-12; cross-check trbdf2 at rtol 1e-10 differs by {:.3e} m at the end.",
-        crosscheck
+        report.reference_crosscheck
     )?;
     writeln!(
         out,
@@ -532,63 +606,67 @@ pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
         "{:<12} {:<17} {:>7} {:>11} {:>11} {:>11} {:>11} {:>8} {:>6}",
         "problem", "method", "rtol", "final", "traj", "estimate", "time/s", "steps", "rej"
     )?;
-    let num = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3e}"));
-    for p in &rows {
+    for p in &report.points {
         writeln!(
             out,
             "{:<12} {:<17} {:>7.0e} {:>11} {:>11} {:>11} {:>11.3e} {:>8} {:>6}{}",
             p.problem,
             p.method,
             p.rtol,
-            num(p.final_error),
-            num(p.trajectory_error),
-            num(p.estimated_error),
+            sci3(p.final_error),
+            sci3(p.trajectory_error),
+            sci3(p.estimated_error),
             p.wall_time,
             p.steps,
             p.rejected,
             p.failure.as_ref().map(|f| format!("  FAILED: {f}")).unwrap_or_default()
         )?;
     }
+    Ok(())
+}
+
+/// Time to reach an error: rodas4 against the fastest peer.
+fn write_equal_error(out: &mut String, rows: &[EqualError]) -> anyhow::Result<()> {
     writeln!(
         out,
         "Time to reach an error, our default (rodas4) against the fastest peer:"
     )?;
-    for e in &report.equal_error {
+    for e in rows {
         writeln!(
             out,
             "  {:<12} error ≤ {:.0e}: rodas4 {} s, {} {} s, ratio {}",
             e.problem,
             e.error,
-            num(e.ours_time),
+            sci3(e.ours_time),
             e.best_peer.as_deref().unwrap_or("no peer"),
-            num(e.best_peer_time),
+            sci3(e.best_peer_time),
             e.ratio.map_or("-".into(), |r| format!("{r:.2}"))
         )?;
     }
-    if let Some(q) = &report.quasi_static_cost {
-        match (&q.final_difference, &q.failure) {
-            (Some(_), _) => writeln!(
-                out,
-                "Quasi-static reduction over {} s: {:.3e} s against {:.3e} s ({} steps) for the full 12-state model.",
-                q.duration, q.reduced_wall_time, q.full_wall_time, q.full_steps
-            )?,
-            (None, Some(f)) => writeln!(
-                out,
-                "Quasi-static reduction: the full model failed over {} s: {f}",
-                q.duration
-            )?,
-            _ => {}
-        }
+    Ok(())
+}
+
+/// The reduction's cost against the full model, or the full model's failure.
+fn write_quasi_static_cost(out: &mut String, q: &QuasiStaticCost) -> anyhow::Result<()> {
+    match (&q.final_difference, &q.failure) {
+        (Some(_), _) => writeln!(
+            out,
+            "Quasi-static reduction over {} s: {:.3e} s against {:.3e} s ({} steps) for the full 12-state model.",
+            q.duration, q.reduced_wall_time, q.full_wall_time, q.full_steps
+        )?,
+        (None, Some(f)) => writeln!(
+            out,
+            "Quasi-static reduction: the full model failed over {} s: {f}",
+            q.duration
+        )?,
+        _ => {}
     }
-    if !report.reduction.is_empty() {
-        write_reduction(&mut out, &report.reduction)?;
-    }
-    writeln!(
-        out,
-        "Wrote {}/accuracy.csv and push.svg, van-der-pol.svg, robertson.svg.",
-        a.out.display()
-    )?;
-    Ok(out)
+    Ok(())
+}
+
+/// An optional number as `1.234e-5`, or `-`.
+fn sci3(v: Option<f64>) -> String {
+    v.map_or("-".to_string(), |v| format!("{v:.3e}"))
 }
 
 #[cfg(test)]

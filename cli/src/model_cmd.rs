@@ -4,6 +4,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use clap::Args;
+use nanopush_proto::model::{ForceCurveReport, ModelReport};
 use nanopush_study::report::{force_curve_report, model_report};
 
 use crate::units::eng;
@@ -35,53 +36,92 @@ pub fn run(a: &ModelArgs) -> anyhow::Result<String> {
             writeln!(out, "{}", serde_json::to_string(&r)?)?;
             return Ok(out);
         }
-        writeln!(
-            out,
-            "Force curve of scene \"{}\" (tip Rₜ = {}, k_c = {}) against the bare substrate (Fig 3)",
-            r.scene,
-            eng(r.tip_radius, "m"),
-            eng(r.k_c, "N/m")
-        )?;
-        writeln!(
-            out,
-            "  snap-in at piezo distance   {}",
-            r.snap_in_distance.map_or("none".into(), |d| eng(d, "m"))
-        )?;
-        writeln!(out, "  pull-off force              {}", eng(r.pull_off_force, "N"))?;
-        writeln!(
-            out,
-            "  pull-off at piezo distance  {}",
-            r.pull_off_distance.map_or("none".into(), |d| eng(d, "m"))
-        )?;
-        writeln!(out)?;
-        writeln!(
-            out,
-            "{:>12} {:>12} {:>12} {:>12} {:>12}   branch",
-            "distance/nm", "gap/nm", "deflect/nm", "force/nN", "meniscus"
-        )?;
-        let every = (r.approach.len() / 40).max(1);
-        for (branch, pts) in [("approach", &r.approach), ("retract", &r.retraction)] {
-            for p in pts.iter().step_by(every) {
-                writeln!(
-                    out,
-                    "{:>12.3} {:>12.3} {:>12.3} {:>12.3} {:>12}   {branch}",
-                    p.distance * 1e9,
-                    p.gap * 1e9,
-                    p.deflection * 1e9,
-                    p.force * 1e9,
-                    if p.meniscus { "yes" } else { "no" }
-                )?;
-            }
-        }
-        return Ok(out);
+        return force_curve_table(&r);
     }
     let r = model_report(&scene);
     if a.json {
         writeln!(out, "{}", serde_json::to_string(&r)?)?;
         return Ok(out);
     }
+    model_table(&r)
+}
+
+/// `--force-curve`: the snap-in and pull-off, then the curve's points, about 40 a branch.
+fn force_curve_table(r: &ForceCurveReport) -> anyhow::Result<String> {
+    let mut out = String::new();
+    writeln!(
+        out,
+        "Force curve of scene \"{}\" (tip Rₜ = {}, k_c = {}) against the bare substrate (Fig 3)",
+        r.scene,
+        eng(r.tip_radius, "m"),
+        eng(r.k_c, "N/m")
+    )?;
+    writeln!(
+        out,
+        "  snap-in at piezo distance   {}",
+        r.snap_in_distance.map_or("none".into(), |d| eng(d, "m"))
+    )?;
+    writeln!(out, "  pull-off force              {}", eng(r.pull_off_force, "N"))?;
+    writeln!(
+        out,
+        "  pull-off at piezo distance  {}",
+        r.pull_off_distance.map_or("none".into(), |d| eng(d, "m"))
+    )?;
+    writeln!(out)?;
+    writeln!(
+        out,
+        "{:>12} {:>12} {:>12} {:>12} {:>12}   branch",
+        "distance/nm", "gap/nm", "deflect/nm", "force/nN", "meniscus"
+    )?;
+    let every = (r.approach.len() / 40).max(1);
+    for (branch, pts) in [("approach", &r.approach), ("retract", &r.retraction)] {
+        for p in pts.iter().step_by(every) {
+            writeln!(
+                out,
+                "{:>12.3} {:>12.3} {:>12.3} {:>12.3} {:>12}   {branch}",
+                p.distance * 1e9,
+                p.gap * 1e9,
+                p.deflection * 1e9,
+                p.force * 1e9,
+                if p.meniscus { "yes" } else { "no" }
+            )?;
+        }
+    }
+    Ok(out)
+}
+
+/// The derived quantities, a line each, then the Eq 18 steady state and the warnings.
+fn model_table(r: &ModelReport) -> anyhow::Result<String> {
+    let mut out = String::new();
     writeln!(out, "Scene \"{}\": derived quantities", r.scene)?;
-    let rows: Vec<(&str, String, &str)> = vec![
+    for (name, value, eq) in model_rows(r) {
+        writeln!(out, "  {name:<24} {value:>22}   {eq}")?;
+    }
+    match (&r.steady_state, &r.steady_state_error) {
+        (Some(s), _) => {
+            writeln!(
+                out,
+                "  Eq 18 steady state: F_ta = {}, f_ta = {}, y = {}, ζ_y = {}, ζ_z = {}, z = {}",
+                eng(s.normal_ta, "N"),
+                eng(s.friction_ta, "N"),
+                eng(s.y, "m"),
+                eng(s.zeta_y, "m"),
+                eng(s.zeta_z, "m"),
+                eng(s.z, "m")
+            )?;
+        }
+        (None, Some(e)) => writeln!(out, "  Eq 18 steady state: {e}")?,
+        (None, None) => {}
+    }
+    for w in &r.warnings {
+        writeln!(out, "  warning: {w}")?;
+    }
+    Ok(out)
+}
+
+/// The table's rows: name, value and where it comes from in the paper.
+fn model_rows(r: &ModelReport) -> Vec<(&'static str, String, &'static str)> {
+    vec![
         ("c1", format!("{:.6}", r.c1), "Eq 10"),
         ("c2", format!("{:.6}", r.c2), "Eq 10"),
         ("c3", format!("{:.6}", r.c3), "Eq 10"),
@@ -138,28 +178,5 @@ pub fn run(a: &ModelArgs) -> anyhow::Result<String> {
             format!("{} ({})", r.state_dimension, r.states.join(", ")),
             "Eq 17",
         ),
-    ];
-    for (name, value, eq) in rows {
-        writeln!(out, "  {name:<24} {value:>22}   {eq}")?;
-    }
-    match (&r.steady_state, &r.steady_state_error) {
-        (Some(s), _) => {
-            writeln!(
-                out,
-                "  Eq 18 steady state: F_ta = {}, f_ta = {}, y = {}, ζ_y = {}, ζ_z = {}, z = {}",
-                eng(s.normal_ta, "N"),
-                eng(s.friction_ta, "N"),
-                eng(s.y, "m"),
-                eng(s.zeta_y, "m"),
-                eng(s.zeta_z, "m"),
-                eng(s.z, "m")
-            )?;
-        }
-        (None, Some(e)) => writeln!(out, "  Eq 18 steady state: {e}")?,
-        (None, None) => {}
-    }
-    for w in &r.warnings {
-        writeln!(out, "  warning: {w}")?;
-    }
-    Ok(out)
+    ]
 }

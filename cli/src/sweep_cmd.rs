@@ -9,6 +9,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use nanopush::scene::Scene;
 use nanopush_proto::sweep::{FailedPoint, SeriesSummary, SweepReport};
 use nanopush_study::sweep::{Param, PointOptions, Shard, SweepPoint, compute_point, csv_header, csv_row, grid_value};
 use rayon::prelude::*;
@@ -234,15 +235,42 @@ fn plot(path: &Path, param: Param, scene: &str, pure_sliding: bool, points: &[Sw
     )
 }
 
+/// The points of one shard of a sweep, with what they are of.
+struct Computed {
+    param: Param,
+    shard: Shard,
+    first_index: usize,
+    points: Vec<SweepPoint>,
+}
+
 /// Runs `nanopush sweep`; returns what to print on stdout.
 pub fn run(a: &SweepArgs) -> anyhow::Result<String> {
     let started = Instant::now();
     let (param, shard, opts) = check(a)?;
     let scene = crate::load_scene(a.scene.as_ref())?;
+    let c = compute(a, &scene, param, shard, &opts)?;
+    let csv = csv_text(&c);
+    let files = write_files(a, &scene, &c, &csv)?;
+    let report = build_report(a, &scene, &c, files, started);
+    let mut out = String::new();
+    if a.json {
+        writeln!(out, "{}", serde_json::to_string(&report)?)?;
+        return Ok(out);
+    }
+    if a.out.is_none() {
+        // No directory: the CSV is the output, so it can be piped or redirected.
+        return Ok(csv);
+    }
+    summary_text(param, &report)
+}
+
+/// Checks the ends against the scene, creates `--out`, then computes the shard's points in
+/// parallel with progress on stderr.
+fn compute(a: &SweepArgs, scene: &Scene, param: Param, shard: Shard, opts: &PointOptions) -> anyhow::Result<Computed> {
     // Fail on a value the scene does not allow before spending time on the others.
     param
-        .apply(&scene, a.from)
-        .and_then(|_| param.apply(&scene, a.to))
+        .apply(scene, a.from)
+        .and_then(|_| param.apply(scene, a.to))
         .with_context(|| format!("--param {} from {} to {}", param.name(), a.from, a.to))?;
     if let Some(dir) = &a.out {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -254,21 +282,41 @@ pub fn run(a: &SweepArgs) -> anyhow::Result<String> {
         .clone()
         .into_par_iter()
         .map(|i| {
-            let p = compute_point(&scene, param, i, grid_value(a.from, a.to, a.steps, i), &opts);
+            let p = compute_point(scene, param, i, grid_value(a.from, a.to, a.steps, i), opts);
             progress.tick();
             p
         })
         .collect();
     progress.finish();
+    Ok(Computed {
+        param,
+        shard,
+        first_index: range.start,
+        points,
+    })
+}
 
-    let mut csv = if shard.index == 0 {
-        csv_header(param)
+/// The shard's CSV: the header on shard 0 only, then a row per point.
+fn csv_text(c: &Computed) -> String {
+    let mut csv = if c.shard.index == 0 {
+        csv_header(c.param)
     } else {
         String::new()
     };
-    for p in &points {
+    for p in &c.points {
         csv.push_str(&csv_row(p));
     }
+    csv
+}
+
+/// With `--out`, writes the CSV and, unsharded, the SVG; returns their paths.
+fn write_files(
+    a: &SweepArgs,
+    scene: &Scene,
+    c: &Computed,
+    csv: &str,
+) -> anyhow::Result<(Option<String>, Option<String>)> {
+    let (param, shard) = (c.param, c.shard);
     let (mut csv_path, mut svg_path) = (None, None);
     if let Some(dir) = &a.out {
         let path = if shard.count == 1 {
@@ -281,20 +329,31 @@ pub fn run(a: &SweepArgs) -> anyhow::Result<String> {
                 shard.count
             ))
         };
-        crate::units::write_file(&path, &csv)?;
+        crate::units::write_file(&path, csv)?;
         csv_path = Some(path.display().to_string());
         if shard.count == 1 {
             let svg = dir.join(format!("sweep-{}.svg", param.name()));
-            plot(&svg, param, &scene.file.name, a.pure_sliding, &points)
+            plot(&svg, param, &scene.file.name, a.pure_sliding, &c.points)
                 .with_context(|| format!("drawing {}", svg.display()))?;
             svg_path = Some(svg.display().to_string());
         }
     }
+    Ok((csv_path, svg_path))
+}
 
+/// The summary of the shard (`--json` prints it whole), its wall time measured from `started`.
+fn build_report(
+    a: &SweepArgs,
+    scene: &Scene,
+    c: &Computed,
+    (csv_path, svg_path): (Option<String>, Option<String>),
+    started: Instant,
+) -> SweepReport {
+    let (param, shard, points) = (c.param, c.shard, &c.points);
     let all: Vec<&SweepPoint> = points.iter().collect();
     let values =
         |f: &dyn Fn(&SweepPoint) -> bool| -> Vec<f64> { points.iter().filter(|p| f(p)).map(|p| p.value).collect() };
-    let report = SweepReport {
+    SweepReport {
         schema: "nanopush.sweep".into(),
         version: nanopush_proto::VERSION,
         scene: scene.file.name.clone(),
@@ -306,7 +365,7 @@ pub fn run(a: &SweepArgs) -> anyhow::Result<String> {
         steps: a.steps,
         shard: shard.index,
         shards: shard.count,
-        first_index: range.start,
+        first_index: c.first_index,
         points: points.len(),
         pure_sliding: a.pure_sliding,
         eq18: summary(&all, |p| p.eq18_ok().map(|s| (s.y, s.zeta_z))),
@@ -334,17 +393,12 @@ pub fn run(a: &SweepArgs) -> anyhow::Result<String> {
         threads: rayon::current_num_threads(),
         csv: csv_path,
         svg: svg_path,
-    };
+    }
+}
+
+/// The table printed with `--out` and without `--json`.
+fn summary_text(param: Param, r: &SweepReport) -> anyhow::Result<String> {
     let mut out = String::new();
-    if a.json {
-        writeln!(out, "{}", serde_json::to_string(&report)?)?;
-        return Ok(out);
-    }
-    if a.out.is_none() {
-        // No directory: the CSV is the output, so it can be piped or redirected.
-        return Ok(csv);
-    }
-    let r = &report;
     let u = if r.unit.is_empty() { "" } else { r.unit.as_str() };
     writeln!(
         out,
