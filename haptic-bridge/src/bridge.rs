@@ -11,9 +11,9 @@
 //! - the passivity controller removes energy the loop generates;
 //! - the force is clamped to the device's limit last ([`clamp_force`]), whatever the server sent.
 
-use nanopush_proto::haptic::{FORCE_ENGAGED, ForceFeedback, HapticState, STALE_NS, STATE_SERVER_SILENT};
+use nanopush_proto::haptic::{DeviceFaults, FORCE_ENGAGED, ForceFeedback, HapticState, STALE_NS, STATE_SERVER_SILENT};
 
-use crate::device::{Device, DeviceSample, DeviceSpec, LinkView, clamp_force};
+use crate::device::{Device, DeviceError, DeviceSample, DeviceSpec, LinkView, clamp_force};
 use crate::passivity::{Passivity, PassivityOutput};
 
 /// The two directions of the link, as the bridge sees them.
@@ -51,8 +51,12 @@ impl Default for BridgeConfig {
     }
 }
 
-/// Margin beyond the travel within which a position is still believed (m).
-pub const TRAVEL_MARGIN: f64 = 0.005;
+/// A pause of the bridge longer than this many periods (a stopped process, a long stall) ends
+/// with the force ramped in from zero over [`RESUME_RAMP_S`]: the device never gets the force
+/// from before the pause at once.
+pub const RESUME_AFTER_PERIODS: u64 = 3;
+/// How long the force takes to ramp in after a pause or a new device (s).
+pub const RESUME_RAMP_S: f64 = 0.02;
 /// Samples whose send times are kept for the latency measurement.
 const LATENCY_RING: usize = 4096;
 
@@ -79,6 +83,20 @@ pub struct CycleRow {
     pub latency_ns: u64,
 }
 
+/// Two sets of counters added up.
+fn sum(a: DeviceFaults, b: DeviceFaults) -> DeviceFaults {
+    DeviceFaults {
+        bad_packets: a.bad_packets + b.bad_packets,
+        timeouts: a.timeouts + b.timeouts,
+        seq_gaps: a.seq_gaps + b.seq_gaps,
+        out_of_range: a.out_of_range + b.out_of_range,
+        watchdog_trips: a.watchdog_trips + b.watchdog_trips,
+        overruns: a.overruns + b.overruns,
+        losses: a.losses + b.losses,
+        reopens: a.reopens + b.reopens,
+    }
+}
+
 /// The bridge's state between cycles.
 pub struct Bridge<D: Device> {
     /// The device.
@@ -99,6 +117,14 @@ pub struct Bridge<D: Device> {
     x_prev: Option<f64>,
     /// The environment model in force over the interval that is running.
     ref_prev: Option<ForceFeedback>,
+    /// When the previous cycle ran (monotonic ns), to see the bridge's own pauses.
+    last_cycle_ns: Option<u64>,
+    /// The force's gain while it ramps in after a pause or a new device, 0 → 1.
+    resume_gain: f64,
+    /// The bridge's own faults, and the device counters of devices it has let go.
+    faults: DeviceFaults,
+    /// The device was lost (a cable fault), and why, until it is replaced.
+    lost: Option<String>,
 }
 
 impl<D: Device> Bridge<D> {
@@ -123,7 +149,42 @@ impl<D: Device> Bridge<D> {
             pid: std::process::id(),
             x_prev: None,
             ref_prev: None,
+            last_cycle_ns: None,
+            resume_gain: 1.0,
+            faults: DeviceFaults::default(),
+            lost: None,
         }
+    }
+
+    /// Every fault so far: the bridge's own (overruns, losses, reopens) and the device's, those
+    /// of devices it let go included.
+    pub fn faults(&self) -> DeviceFaults {
+        sum(self.faults, self.device.faults())
+    }
+
+    /// A device cycle started more than a period late.
+    pub fn count_overrun(&mut self) {
+        self.faults.overruns += 1;
+    }
+
+    /// Why the device was lost, while it is (a cable fault: hang-up, I/O error, vanished path).
+    pub fn lost(&self) -> Option<&str> {
+        self.lost.as_deref()
+    }
+
+    /// Takes a reopened device in place of the lost one: its limits, a new passivity history,
+    /// and the force ramped in from zero. The lost device's counters are kept.
+    pub fn replace_device(&mut self, device: D) {
+        let gone = std::mem::replace(&mut self.device, device);
+        self.faults = sum(self.faults, gone.faults());
+        self.faults.reopens += 1;
+        self.spec = self.device.spec();
+        self.pc = Passivity::new(0.8 * self.spec.max_damping, 1e-4);
+        self.pc.enabled = self.cfg.passivity;
+        self.start_passivity_anew();
+        self.lost = None;
+        self.last_cycle_ns = None;
+        self.resume_gain = 0.0;
     }
 
     /// The device's limits.
@@ -143,10 +204,8 @@ impl<D: Device> Bridge<D> {
 
     fn believable(&self, s: &DeviceSample) -> bool {
         let [lo, hi] = self.spec.travel;
-        s.position.is_finite()
-            && s.velocity.is_finite()
-            && s.position >= lo - TRAVEL_MARGIN
-            && s.position <= hi + TRAVEL_MARGIN
+        let margin = crate::serial::travel_margin(self.spec.travel);
+        s.position.is_finite() && s.velocity.is_finite() && s.position >= lo - margin && s.position <= hi + margin
     }
 
     /// One device cycle at monotonic time `now_ns`: read the handle, take the server's newest
@@ -155,6 +214,7 @@ impl<D: Device> Bridge<D> {
     pub fn cycle(&mut self, now_ns: u64, link: &mut impl Link) -> CycleRow {
         let dt = 1.0 / self.cfg.rate_hz;
         let t = now_ns.saturating_sub(self.start_ns) as f64 * 1e-9;
+        self.ramp_after_pause(now_ns, dt);
         let sample = self.read_sample(dt);
         self.take_newest(now_ns, link);
         let live = self.judge_server(now_ns);
@@ -172,7 +232,7 @@ impl<D: Device> Bridge<D> {
             return row;
         };
         let out = self.render(live, &s, dt);
-        let force = clamp_force(out.force, self.spec.max_force);
+        let force = clamp_force(out.force * self.resume_gain, self.spec.max_force);
         if self.device.write_force(force).is_err() {
             self.dropped += 1;
         }
@@ -197,11 +257,35 @@ impl<D: Device> Bridge<D> {
     fn read_sample(&mut self, dt: f64) -> Option<DeviceSample> {
         match self.device.read(dt) {
             Ok(s) if self.believable(&s) => Some(s),
+            Err(DeviceError::Lost { why, .. }) => {
+                if self.lost.is_none() {
+                    self.faults.losses += 1;
+                }
+                self.lost = Some(why);
+                self.dropped += 1;
+                None
+            }
             _ => {
                 self.dropped += 1;
                 None
             }
         }
+    }
+
+    /// After a pause of the bridge (more than [`RESUME_AFTER_PERIODS`] periods since the previous
+    /// cycle) and after a new device, the force ramps in from zero over [`RESUME_RAMP_S`];
+    /// otherwise the ramp goes on (at the start there is no force from before to hold: gain 1).
+    fn ramp_after_pause(&mut self, now_ns: u64, dt: f64) {
+        let period_ns = (dt * 1e9) as u64;
+        if self
+            .last_cycle_ns
+            .is_some_and(|prev| now_ns.saturating_sub(prev) > RESUME_AFTER_PERIODS * period_ns)
+        {
+            self.resume_gain = 0.0;
+        } else {
+            self.resume_gain = (self.resume_gain + dt / RESUME_RAMP_S).min(1.0);
+        }
+        self.last_cycle_ns = Some(now_ns);
     }
 
     /// Takes the server's newest force sample, if one arrived, and with it the end-to-end
@@ -319,6 +403,8 @@ impl<D: Device> Bridge<D> {
             buttons: s.buttons,
             flags: if self.link_up { 0 } else { STATE_SERVER_SILENT },
             device: self.cfg.device_code,
+            rate_hz: self.cfg.rate_hz,
+            faults: self.faults(),
         };
         self.sent[(self.seq % LATENCY_RING as u64) as usize] = (self.seq, now_ns);
         link.publish(&state);
@@ -382,6 +468,61 @@ mod tests {
             assert_eq!(b.pc.v_min, 1e-4);
             assert!(b.pc.enabled);
         }
+    }
+
+    /// Issue 28, "a stale force after a host pause": after the bridge was stopped for 50 ms, its
+    /// first packet carried the force from before (505 mN) and the hand felt a kick. Now a pause
+    /// of more than 3 periods ramps the force in from zero over 20 ms.
+    #[test]
+    fn after_a_pause_the_force_ramps_in_from_zero_not_at_the_old_force() {
+        let mut b = Bridge::new(SimDevice::new(Script::Hold, 1e-3), BridgeConfig::default(), 0);
+        let mut link = Loop::default();
+        let ms = 1_000_000;
+        let mut t = 0;
+        for _ in 0..5 {
+            t += ms;
+            link.next = Some(live(0.5, t));
+            assert_eq!(b.cycle(t, &mut link).force, 0.5, "steady before the pause");
+        }
+        // The bridge is stopped 50 ms; the server's newest force is fresh when it resumes.
+        t += 50 * ms;
+        let mut forces = Vec::new();
+        for _ in 0..25 {
+            link.next = Some(live(0.5, t));
+            forces.push(b.cycle(t, &mut link).force);
+            t += ms;
+        }
+        assert!(
+            forces[0] <= 0.5 * 0.05 + 1e-12,
+            "first force after the pause: {}",
+            forces[0]
+        );
+        assert!(forces.windows(2).all(|w| w[1] >= w[0]), "it only grows: {forces:?}");
+        assert_eq!(forces[20], 0.5, "ramped in over 20 ms: {forces:?}");
+        // A pause of 3 periods or less is a late cycle, not a pause: no ramp.
+        t += 2 * ms;
+        link.next = Some(live(0.5, t));
+        assert_eq!(b.cycle(t, &mut link).force, 0.5);
+    }
+
+    /// Issue 28: a reopened device starts with the force ramped in, its limits taken anew, and
+    /// the lost device's counters kept (one reopen counted).
+    #[test]
+    fn a_replaced_device_ramps_in_and_the_counters_carry_over() {
+        let mut b = Bridge::new(SimDevice::new(Script::Hold, 1e-3), BridgeConfig::default(), 0);
+        let mut link = Loop::default();
+        let ms = 1_000_000;
+        b.count_overrun();
+        b.faults.losses += 1;
+        b.replace_device(SimDevice::new(Script::Hold, 1e-3));
+        let f = b.faults();
+        assert_eq!((f.overruns, f.losses, f.reopens), (1, 1, 1));
+        assert!(b.lost().is_none());
+        link.next = Some(live(1.0, ms));
+        let first = b.cycle(ms, &mut link).force;
+        assert!(first > 0.0 && first <= 0.05 + 1e-12, "{first}");
+        assert_eq!(link.published.last().unwrap().faults, f, "published with every state");
+        assert_eq!(link.published.last().unwrap().rate_hz, 1000.0);
     }
 
     #[test]

@@ -37,7 +37,7 @@ pub struct DeviceSample {
     pub buttons: u32,
 }
 
-pub use nanopush_proto::haptic::{BUTTON_CLUTCH, BUTTON_ENGAGE};
+pub use nanopush_proto::haptic::{BUTTON_CLUTCH, BUTTON_ENGAGE, DeviceFaults};
 
 /// Why a device failed.
 #[derive(Debug, thiserror::Error)]
@@ -65,6 +65,15 @@ pub enum DeviceError {
         /// Which device.
         device: String,
         /// What was wrong.
+        why: String,
+    },
+    /// The device is gone: it hung up, the port fails with an I/O error, or its path vanished
+    /// (an unplugged cable). Nothing more can be sent; the bridge reopens it by its path.
+    #[error("{device}: lost ({why})")]
+    Lost {
+        /// Which device.
+        device: String,
+        /// What the system said.
         why: String,
     },
     /// The device has not answered within its time-out.
@@ -100,6 +109,18 @@ pub trait Device: Send {
     fn close(&mut self) -> Result<(), DeviceError> {
         self.write_force(0.0)
     }
+    /// The fastest cycle rate the device and its link carry (Hz), when they limit it.
+    fn max_rate_hz(&self) -> Option<f64> {
+        None
+    }
+    /// The control rate the device declares (Hz), when it declares one.
+    fn declared_rate_hz(&self) -> Option<f64> {
+        None
+    }
+    /// What the device and its link counted so far (the device side of [`DeviceFaults`]).
+    fn faults(&self) -> DeviceFaults {
+        DeviceFaults::default()
+    }
 }
 
 impl Device for Box<dyn Device> {
@@ -120,6 +141,15 @@ impl Device for Box<dyn Device> {
     }
     fn close(&mut self) -> Result<(), DeviceError> {
         (**self).close()
+    }
+    fn max_rate_hz(&self) -> Option<f64> {
+        (**self).max_rate_hz()
+    }
+    fn declared_rate_hz(&self) -> Option<f64> {
+        (**self).declared_rate_hz()
+    }
+    fn faults(&self) -> DeviceFaults {
+        (**self).faults()
     }
 }
 

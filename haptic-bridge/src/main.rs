@@ -5,7 +5,9 @@
 //! handle, publishes its state to `nanopush serve` over iceoryx2, renders the server's newest
 //! force (its local linear model, through the passivity controller and the device's clamp), and
 //! writes the force. It exits 0 when a finite operator script ends, when `--duration` has passed,
-//! or on SIGINT/SIGTERM (the force is zeroed first).
+//! or on SIGINT/SIGTERM (the force is zeroed first); 2 on a bad argument or a device that cannot
+//! be used; 3 when the device was lost (an unplugged cable) and is not back at the end, or at
+//! once with `--exit-on-device-loss`.
 //!
 //! `nanopush-haptic render` reads a force curve (`nanopush model --force-curve --json`) on stdin
 //! and prints what the operator would feel under a scaling; `nanopush-haptic bench-transport`
@@ -48,6 +50,37 @@ enum Command {
     },
     /// Measure the iceoryx2 link between two processes (one-way and round trip).
     BenchTransport(bench::BenchArgs),
+    /// Check a serial device against the protocol, one PASS/FAIL line per rule (exit 0 when
+    /// every rule holds, 1 when one does not).
+    Conformance {
+        /// The device: `serial:PATH[@BAUD]`.
+        device: String,
+    },
+}
+
+/// Runs the conformance checks; the exit code says whether every one passed.
+fn conformance(device: &str) -> ExitCode {
+    let Some(arg) = device.strip_prefix("serial:") else {
+        eprintln!("error: conformance checks a serial device: serial:PATH[@BAUD], got {device:?}");
+        return ExitCode::from(2);
+    };
+    match nanopush_haptic::serial::conformance::run(arg) {
+        Ok(checks) => {
+            let failed = checks.iter().filter(|c| !c.pass).count();
+            let mut text: String = checks.iter().map(|c| format!("{c}\n")).collect();
+            text += &format!("{} checks, {failed} failed\n", checks.len());
+            let _ = print(&text);
+            if failed == 0 {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(1)
+            }
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(2)
+        }
+    }
 }
 
 fn render(nm_per_mm: f64, n_per_nn: f64, peak_n: f64) -> anyhow::Result<String> {
@@ -102,10 +135,17 @@ fn main() -> ExitCode {
             peak_n,
         }) => render(nm_per_mm, n_per_nn, peak_n),
         Some(Command::BenchTransport(a)) => bench::run(&a),
+        Some(Command::Conformance { device }) => return conformance(&device),
         None => run::run(&cli.run),
     };
     match result {
         Ok(text) => print(&text),
+        Err(e) if e.downcast_ref::<run::DeviceLostAtEnd>().is_some() => {
+            let lost = e.downcast_ref::<run::DeviceLostAtEnd>().expect("checked");
+            eprintln!("error: {lost}");
+            let _ = print(&lost.summary);
+            ExitCode::from(3)
+        }
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::from(2)

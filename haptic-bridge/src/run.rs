@@ -11,10 +11,11 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use clap::Args;
 use nanopush_haptic::bridge::{Bridge, BridgeConfig, CycleRow};
-use nanopush_haptic::device::{Device, DeviceKind};
+use nanopush_haptic::device::{Device, DeviceError, DeviceFaults, DeviceKind};
 use nanopush_haptic::latency::Histogram;
 use nanopush_haptic::link::IpcLink;
 use nanopush_haptic::operator::Script;
+use nanopush_haptic::serial::{SerialDevice, negotiate_rate};
 use nanopush_haptic::sim::SimDevice;
 use nanopush_proto::haptic::{DEVICE_SERIAL, DEVICE_SIM, monotonic_ns};
 
@@ -35,9 +36,14 @@ pub struct RunArgs {
     #[arg(long)]
     trace: Option<PathBuf>,
     /// Device cycle rate (Hz), in [500, 4000] (the link's 5 ms watchdogs need a sample per ms
-    /// or two).
+    /// or two). A serial device runs slower when its declared rate or its baud rate cannot carry
+    /// this one (never below 500 Hz: it is refused then, with the numbers).
     #[arg(long, default_value_t = 1000.0)]
     rate_hz: f64,
+    /// Exit (code 3) when the device is lost (unplugged, I/O error) instead of reopening it:
+    /// for supervisors that prefer a restart.
+    #[arg(long)]
+    exit_on_device_loss: bool,
     /// Hold the server's force between its samples instead of rendering its local linear model.
     #[arg(long)]
     no_local_model: bool,
@@ -129,17 +135,23 @@ fn trace_writer(
     Ok((tx, handle))
 }
 
-fn open_device(kind: &DeviceKind, operator: &str, period: f64) -> anyhow::Result<(Box<dyn Device>, u32)> {
+fn open_device(kind: &DeviceKind, operator: &str, period: f64) -> Result<(Box<dyn Device>, u32), DeviceError> {
     match kind {
         DeviceKind::Sim => {
-            let script = Script::parse(operator)?;
+            let script = Script::parse(operator).map_err(|e| DeviceError::BadSpec {
+                given: format!("--operator {operator}"),
+                why: e.to_string(),
+            })?;
             Ok((Box::new(SimDevice::new(script, period)), DEVICE_SIM))
         }
         DeviceKind::Serial(path) => {
-            let dev = nanopush_haptic::serial::SerialDevice::open(path)?;
+            let dev = SerialDevice::open(path)?;
             Ok((Box::new(dev), DEVICE_SERIAL))
         }
-        DeviceKind::None => bail!("no device"),
+        DeviceKind::None => Err(DeviceError::BadSpec {
+            given: "none".into(),
+            why: "no device".into(),
+        }),
     }
 }
 
@@ -206,15 +218,23 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
         }
         return Ok(String::new());
     }
-    let period = 1.0 / a.rate_hz;
-    let (device, code) = open_device(&kind, &a.operator, period)?;
+    let (device, code) = open_device(&kind, &a.operator, 1.0 / a.rate_hz)?;
+    let serial_arg = match &kind {
+        DeviceKind::Serial(arg) => Some(arg.as_str()),
+        _ => None,
+    };
+    let (rate_hz, slower) = negotiate_rate(&*device, serial_arg, a.rate_hz).map_err(anyhow::Error::msg)?;
+    let period = 1.0 / rate_hz;
     let mut link = IpcLink::open()?;
-    announce(&*device, a.rate_hz);
+    announce(&*device, rate_hz);
+    if let Some(why) = slower {
+        eprintln!("nanopush-haptic: {why}");
+    }
     let trace = a.trace.clone().map(trace_writer).transpose()?;
     if !a.no_realtime {
         make_realtime(a.cpu);
     }
-    let mut bridge = Bridge::new(device, bridge_config(a, code, period), monotonic_ns());
+    let mut bridge = Bridge::new(device, bridge_config(a, code, rate_hz), monotonic_ns());
     let (log, logged) = mpsc::sync_channel::<String>(64);
     let logger = std::thread::spawn(move || {
         for line in logged {
@@ -222,6 +242,7 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
         }
     });
     let step_ns = (period * 1e9).round() as u64;
+    let reopen = || open_device(&kind, &a.operator, period).map(|(d, _)| d);
     let tally = device_loop(
         &mut bridge,
         &mut link,
@@ -229,6 +250,7 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
         &log,
         trace.as_ref().map(|(tx, _)| tx),
         over,
+        (!a.exit_on_device_loss).then_some(reopen),
     );
     bridge.close();
     drop(link);
@@ -241,19 +263,47 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
             Err(_) => bail!("the trace writer panicked"),
         }
     }
+    let f = bridge.faults();
     eprintln!(
-        "nanopush-haptic: {} cycles, {} samples dropped, {} overruns, {} trace rows dropped; end-to-end latency {}",
+        "nanopush-haptic: {} cycles at {rate_hz} Hz, {} samples dropped, {} overruns, {} trace rows dropped; end-to-end latency {}; device faults: {} bad packets, {} late answers, {} sequence gaps, {} out of range; {} watchdog trips (the bridge silent); cable: {} losses, {} reopens",
         tally.cycles,
         bridge.dropped(),
         tally.overruns,
         tally.dropped_rows,
-        tally.hist.summary()
+        tally.hist.summary(),
+        f.bad_packets,
+        f.timeouts,
+        f.seq_gaps,
+        f.out_of_range,
+        f.watchdog_trips,
+        f.losses,
+        f.reopens,
     );
-    Ok(if a.json {
-        summary_json(&tally, bridge.dropped())
+    let summary = if a.json {
+        summary_json(&tally, bridge.dropped(), rate_hz, &f, bridge.lost())
     } else {
         String::new()
-    })
+    };
+    if let Some(why) = bridge.lost() {
+        return Err(anyhow::Error::new(DeviceLostAtEnd {
+            device: a.device.clone(),
+            why: why.to_string(),
+            summary,
+        }));
+    }
+    Ok(summary)
+}
+
+/// The run ended with the device lost and not back (or `--exit-on-device-loss`): exit code 3.
+#[derive(Debug, thiserror::Error)]
+#[error("the device {device} was lost ({why}) and is not back")]
+pub struct DeviceLostAtEnd {
+    /// Which device.
+    pub device: String,
+    /// What the system said.
+    pub why: String,
+    /// The `--json` summary, printed all the same.
+    pub summary: String,
 }
 
 /// Says which device runs at what rate, and that the bridge waits for the server.
@@ -270,9 +320,10 @@ fn announce(device: &dyn Device, rate_hz: f64) {
 }
 
 /// The bridge's settings from the arguments, for a device of `code` cycling every `period` s.
-fn bridge_config(a: &RunArgs, code: u32, period: f64) -> BridgeConfig {
+fn bridge_config(a: &RunArgs, code: u32, rate_hz: f64) -> BridgeConfig {
+    let period = 1.0 / rate_hz;
     BridgeConfig {
-        rate_hz: a.rate_hz,
+        rate_hz,
         local_model: !a.no_local_model,
         passivity: !a.no_passivity,
         device_code: code,
@@ -293,8 +344,11 @@ struct Tally {
 }
 
 /// The device loop, from now until SIGINT/SIGTERM, the device's end or `over()`: one
-/// [`Bridge::cycle`] per deadline, the link's changes said through `log` (never written to
-/// stderr from here) and each row offered to `trace` (dropped and counted when it is full).
+/// [`Bridge::cycle`] per deadline, the link's changes and the faults said through `log` (never
+/// written to stderr from here, each attributed to the device, the cable, the bridge or the
+/// server) and each row offered to `trace` (dropped and counted when it is full). A lost device
+/// (a cable fault) is reopened with `reopen`, backing off, while nothing is published (the
+/// server sees the link down); without `reopen` the loop ends there.
 fn device_loop(
     bridge: &mut Bridge<Box<dyn Device>>,
     link: &mut IpcLink,
@@ -302,14 +356,18 @@ fn device_loop(
     log: &mpsc::SyncSender<String>,
     trace: Option<&mpsc::SyncSender<CycleRow>>,
     over: impl Fn() -> bool,
+    mut reopen: Option<impl FnMut() -> Result<Box<dyn Device>, DeviceError>>,
 ) -> Tally {
     let sleeper = spin_sleep::SpinSleeper::default();
     let mut deadline = monotonic_ns();
     let mut tally = Tally::default();
     let mut last_latency = 0u64;
     let mut was_up = false;
+    let mut watch = FaultWatch::new(bridge.faults());
     while !STOP.load(Ordering::SeqCst) {
-        wait_for(&sleeper, &mut deadline, step_ns, &mut tally.overruns);
+        if wait_for(&sleeper, &mut deadline, step_ns, &mut tally.overruns) {
+            bridge.count_overrun();
+        }
         let row = bridge.cycle(monotonic_ns(), link);
         tally.cycles += 1;
         tally.max_force_seen = tally.max_force_seen.max(row.force.abs());
@@ -326,6 +384,24 @@ fn device_loop(
         {
             tally.dropped_rows += 1;
         }
+        watch.every_second(monotonic_ns(), bridge.faults(), log);
+        if let Some(why) = bridge.lost().map(str::to_string) {
+            let device = bridge.spec().name;
+            let _ = log.try_send(format!(
+                "nanopush-haptic: cable: the {device} device was lost ({why}): force zeroed{}",
+                if reopen.is_some() {
+                    "; reopening it by its path"
+                } else {
+                    ""
+                }
+            ));
+            let Some(open) = reopen.as_mut() else { break };
+            if !reopen_device(bridge, open, log, &over) {
+                break;
+            }
+            deadline = monotonic_ns();
+            continue;
+        }
         if bridge.device.finished() || over() {
             break;
         }
@@ -334,16 +410,110 @@ fn device_loop(
     tally
 }
 
+/// The first wait between attempts to reopen a lost device; it doubles up to [`REOPEN_MAX`].
+pub const REOPEN_FIRST: Duration = Duration::from_millis(100);
+/// The longest wait between attempts to reopen a lost device.
+pub const REOPEN_MAX: Duration = Duration::from_secs(2);
+
+/// Reopens the lost device with back-off until it answers (true) or the run ends (false).
+fn reopen_device(
+    bridge: &mut Bridge<Box<dyn Device>>,
+    open: &mut impl FnMut() -> Result<Box<dyn Device>, DeviceError>,
+    log: &mpsc::SyncSender<String>,
+    over: &impl Fn() -> bool,
+) -> bool {
+    let lost_at = Instant::now();
+    let mut wait = REOPEN_FIRST;
+    let mut said = None::<String>;
+    while !STOP.load(Ordering::SeqCst) && !over() {
+        match open() {
+            Ok(device) => {
+                bridge.replace_device(device);
+                let _ = log.try_send(format!(
+                    "nanopush-haptic: cable: the device is back after {:.1} s; the force ramps in",
+                    lost_at.elapsed().as_secs_f64()
+                ));
+                return true;
+            }
+            Err(e) => {
+                let why = e.to_string();
+                if said.as_deref() != Some(&why) {
+                    let _ = log.try_send(format!("nanopush-haptic: cable: reopening failed: {why}; trying again"));
+                    said = Some(why);
+                }
+            }
+        }
+        let until = Instant::now() + wait;
+        while Instant::now() < until && !STOP.load(Ordering::SeqCst) && !over() {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        wait = (wait * 2).min(REOPEN_MAX);
+    }
+    false
+}
+
+/// Says, at most once a second, which faults were counted since the last time, by side.
+struct FaultWatch {
+    last: DeviceFaults,
+    next_ns: u64,
+}
+
+impl FaultWatch {
+    fn new(now: DeviceFaults) -> FaultWatch {
+        FaultWatch {
+            last: now,
+            next_ns: monotonic_ns() + 1_000_000_000,
+        }
+    }
+
+    fn every_second(&mut self, now_ns: u64, f: DeviceFaults, log: &mpsc::SyncSender<String>) {
+        if now_ns < self.next_ns {
+            return;
+        }
+        self.next_ns = now_ns + 1_000_000_000;
+        let d = |a: u64, b: u64| a.saturating_sub(b);
+        let l = self.last;
+        let device = [
+            (d(f.bad_packets, l.bad_packets), "bad packets"),
+            (d(f.timeouts, l.timeouts), "late answers (the device overran)"),
+            (d(f.seq_gaps, l.seq_gaps), "sequence gaps"),
+            (d(f.out_of_range, l.out_of_range), "states out of range"),
+        ];
+        let said: Vec<String> = device
+            .iter()
+            .filter(|(n, _)| *n > 0)
+            .map(|(n, what)| format!("{n} {what}"))
+            .collect();
+        if !said.is_empty() {
+            let _ = log.try_send(format!(
+                "nanopush-haptic: device fault: {} in the last second",
+                said.join(", ")
+            ));
+        }
+        let trips = d(f.watchdog_trips, l.watchdog_trips);
+        let overruns = d(f.overruns, l.overruns);
+        if trips + overruns > 0 {
+            let _ = log.try_send(format!(
+                "nanopush-haptic: bridge fault: {overruns} late cycles, {trips} device watchdog trips (the bridge was silent for {} ms) in the last second",
+                nanopush_haptic::serial::DEVICE_SILENCE_MS
+            ));
+        }
+        self.last = f;
+    }
+}
+
 /// Sleeps (then spins) until `deadline`; a cycle more than a period late is an overrun, and the
 /// schedule starts again from now.
-fn wait_for(sleeper: &spin_sleep::SpinSleeper, deadline: &mut u64, step_ns: u64, overruns: &mut u64) {
+fn wait_for(sleeper: &spin_sleep::SpinSleeper, deadline: &mut u64, step_ns: u64, overruns: &mut u64) -> bool {
     let now = monotonic_ns();
     if *deadline > now {
         sleeper.sleep(Duration::from_nanos(*deadline - now));
     } else if now - *deadline > step_ns {
         *overruns += 1;
         *deadline = now;
+        return true;
     }
+    false
 }
 
 /// Hands the logger thread the line that says the server came or went at `row`.
@@ -355,19 +525,21 @@ fn say_link_change(bridge: &Bridge<Box<dyn Device>>, row: &CycleRow, log: &mpsc:
             .last_force()
             .map_or(f64::NAN, |f| monotonic_ns().saturating_sub(f.time_ns) as f64 * 1e-6);
         format!(
-            "nanopush-haptic: server silent at t = {:.3} s (its last sample {age:.1} ms old): force zeroed",
+            "nanopush-haptic: server: silent at t = {:.3} s (its last force sample {age:.1} ms old): force zeroed",
             row.t
         )
     };
     let _ = log.try_send(said);
 }
 
-/// The `--json` summary: cycles, drops, overruns, the largest force and the latency quantiles.
-fn summary_json(t: &Tally, dropped_samples: u64) -> String {
+/// The `--json` summary: cycles, the rate, drops, overruns, the largest force, the latency
+/// quantiles, the device's faults by side, and whether the device was lost at the end.
+fn summary_json(t: &Tally, dropped_samples: u64, rate_hz: f64, f: &DeviceFaults, lost: Option<&str>) -> String {
     format!(
         "{}\n",
         serde_json::json!({
             "cycles": t.cycles,
+            "rate_hz": rate_hz,
             "dropped_samples": dropped_samples,
             "overruns": t.overruns,
             "dropped_rows": t.dropped_rows,
@@ -379,8 +551,24 @@ fn summary_json(t: &Tally, dropped_samples: u64) -> String {
                 "p999": t.hist.quantile(0.999),
                 "max": t.hist.max(),
             },
+            "device_faults": faults_json(f),
+            "device_lost": lost,
         })
     )
+}
+
+/// The device's faults as JSON, by side (as `/api/status` shows them).
+pub fn faults_json(f: &DeviceFaults) -> serde_json::Value {
+    serde_json::json!({
+        "bad_packets": f.bad_packets,
+        "timeouts": f.timeouts,
+        "seq_gaps": f.seq_gaps,
+        "out_of_range": f.out_of_range,
+        "watchdog_trips": f.watchdog_trips,
+        "overruns": f.overruns,
+        "losses": f.losses,
+        "reopens": f.reopens,
+    })
 }
 
 #[cfg(test)]

@@ -13,7 +13,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use nanopush_haptic::device::{BUTTON_CLUTCH, BUTTON_ENGAGE, Device, DeviceError, DeviceSample};
-use nanopush_haptic::serial::{SerialDevice, SerialOptions, crc16};
+use nanopush_haptic::serial::{HOLD_CYCLES, SerialDevice, SerialOptions, conformance, crc16, negotiate_rate};
 
 /// How long any condition may take before the test fails.
 const PATIENCE: Duration = Duration::from_secs(20);
@@ -50,10 +50,13 @@ fn open_pty() -> (OwnedFd, OwnedFd, String) {
     assert_eq!(rc, 0, "ttyname_r failed");
     // SAFETY: ttyname_r wrote a NUL-terminated string.
     let path = unsafe { CStr::from_ptr(name.as_ptr()) }.to_str().unwrap().to_owned();
-    // SAFETY: plain fcntl on an open descriptor.
+    // SAFETY: plain fcntl on open descriptors. Close-on-exec: a bridge process the test starts
+    // must not hold the master open, or pulling the "cable" (closing it) would hang nothing up.
     unsafe {
         let flags = libc::fcntl(master.as_raw_fd(), libc::F_GETFL);
         libc::fcntl(master.as_raw_fd(), libc::F_SETFL, flags | libc::O_NONBLOCK);
+        libc::fcntl(master.as_raw_fd(), libc::F_SETFD, libc::FD_CLOEXEC);
+        libc::fcntl(slave.as_raw_fd(), libc::F_SETFD, libc::FD_CLOEXEC);
     }
     (master, slave, path)
 }
@@ -83,6 +86,15 @@ struct World {
     /// Protocol version of the packets it sends.
     version: u8,
     seq: u16,
+    /// Pace the wire like a UART at this baud: each answer leaves after the request's and its own
+    /// wire time (10 bits a byte).
+    baud: Option<u32>,
+    /// The control rate its info packet declares (Hz).
+    rate_hz: u16,
+    /// Its watchdog zeroes the force after 10 ms without a valid force packet.
+    watchdog: bool,
+    /// Skip this many of its own sequence numbers before the next state packet.
+    skip_seq: u16,
 }
 
 impl Default for World {
@@ -102,6 +114,10 @@ impl Default for World {
             garbage: Vec::new(),
             version: 1,
             seq: 0,
+            baud: None,
+            rate_hz: RATE_HZ,
+            watchdog: true,
+            skip_seq: 0,
         }
     }
 }
@@ -121,7 +137,7 @@ impl World {
     }
 
     fn next_seq(&mut self) -> u16 {
-        self.seq = self.seq.wrapping_add(1);
+        self.seq = self.seq.wrapping_add(1 + std::mem::take(&mut self.skip_seq));
         self.seq
     }
 
@@ -156,7 +172,7 @@ impl World {
         b.extend(TRAVEL_UM[1].to_le_bytes());
         b.extend(STIFFNESS_MN_M.to_le_bytes());
         b.extend(DAMPING_MNS_M.to_le_bytes());
-        b.extend(RATE_HZ.to_le_bytes());
+        b.extend(self.rate_hz.to_le_bytes());
         b.extend(crc16(&b).to_le_bytes());
         assert_eq!(b.len(), 32);
         b
@@ -273,11 +289,16 @@ impl Fake {
                 for (seq, flags, force) in take_force_packets(&mut buf) {
                     last_host = Instant::now();
                     let answer = world.on_force(seq, flags, force);
+                    if let Some(baud) = world.baud {
+                        // The request's wire time and the answer's, as a UART paces them.
+                        let bits = (12 + answer.len()) as f64 * 10.0;
+                        std::thread::sleep(Duration::from_secs_f64(bits / f64::from(baud)));
+                    }
                     if !world.mute {
                         write_all(&master, &answer);
                     }
                 }
-                if world.active && last_host.elapsed() >= DEVICE_SILENCE {
+                if world.watchdog && world.active && last_host.elapsed() >= DEVICE_SILENCE {
                     world.active = false;
                     world.applied_un = 0;
                     world.silent_latch = true;
@@ -471,28 +492,39 @@ fn a_corrupted_state_packet_is_skipped_and_counted() {
     assert_eq!(dev.bad_packets(), bad);
 }
 
+/// A device that stops answering: the previous state holds for `HOLD_CYCLES` late answers in a
+/// row (so one lost or late packet does not zero the force), then the read fails as silent.
 #[test]
-fn a_silent_device_is_reported_within_its_time_out() {
+fn a_silent_device_holds_the_last_state_for_3_cycles_then_is_silent() {
     let options = SerialOptions {
         open_timeout: PATIENCE,
         ..SerialOptions::default()
     };
-    let silent_after = options.silent_after;
     let (mut dev, fake, _slave) = setup(World::default(), options);
+    let mut prev = cycle(&mut dev, 0.3);
     fake.world().mute = true;
+    // A late answer already in flight may still arrive: wait until the answers stop.
     let muted = Instant::now();
+    let mut held = 0;
     let err = loop {
         dev.write_force(0.3).unwrap();
+        let timeouts = dev.timeouts();
         match dev.read(1e-3) {
-            Ok(_) => assert!(muted.elapsed() < PATIENCE, "the device never went silent"),
+            Ok(s) if dev.timeouts() > timeouts => {
+                held += 1;
+                assert!(held <= HOLD_CYCLES, "held {held} cycles");
+                assert_eq!(s, prev, "the previous state holds");
+            }
+            Ok(s) => {
+                assert!(muted.elapsed() < PATIENCE, "the device never went silent");
+                prev = s;
+            }
             Err(e) => break e,
         }
     };
-    match err {
-        DeviceError::Silent { ms, .. } => assert!(ms >= silent_after.as_millis() as u64, "{ms} ms"),
-        e => panic!("expected Silent, got {e}"),
-    }
-    assert!(dev.timeouts() > 0);
+    assert_eq!(held, HOLD_CYCLES);
+    assert!(matches!(err, DeviceError::Silent { .. }), "expected Silent, got {err}");
+    assert!(dev.timeouts() > u64::from(HOLD_CYCLES));
 }
 
 #[test]
@@ -554,8 +586,10 @@ fn a_state_out_of_the_devices_range_is_a_protocol_error() {
     assert!(err.to_string().contains("40.000 mm is outside the travel"), "{err}");
 }
 
+/// Issue 28: an unplugged cable is a fault, not a silence: the hang-up is [`DeviceError::Lost`],
+/// which the bridge answers by reopening the device.
 #[test]
-fn an_unplugged_device_is_an_io_error() {
+fn an_unplugged_device_is_lost() {
     let (mut dev, fake, _slave) = setup(World::default(), patient());
     cycle(&mut dev, 0.5);
     // The fake's thread owns the master side: stopping it closes it, which hangs the slave up.
@@ -567,7 +601,8 @@ fn an_unplugged_device_is_an_io_error() {
             Err(e) => break e,
         }
     };
-    assert!(matches!(err, DeviceError::Io { .. }), "{err}");
+    assert!(matches!(err, DeviceError::Lost { .. }), "{err}");
+    assert!(err.to_string().contains("lost"), "{err}");
 }
 
 #[test]
@@ -612,4 +647,234 @@ fn opening_what_does_not_answer_fails_with_a_typed_error() {
         SerialDevice::open("/dev/ttyACM0@1234"),
         Err(DeviceError::BadSpec { .. })
     ));
+}
+
+/// The conformance test a maker runs against their board passes on a fake that follows the
+/// specification, paced like a UART at 1 Mbaud.
+#[test]
+fn the_conformance_test_passes_on_a_device_that_follows_the_specification() {
+    let (master, _slave, path) = open_pty();
+    let _fake = Fake::start(
+        master,
+        World {
+            baud: Some(1_000_000),
+            ..World::default()
+        },
+    );
+    let checks = conformance::run(&path).expect("the board is there");
+    let failed: Vec<String> = checks.iter().filter(|c| !c.pass).map(|c| c.to_string()).collect();
+    assert!(failed.is_empty(), "{failed:#?}");
+    assert_eq!(checks.len(), 12, "{checks:#?}");
+}
+
+/// A board without a watchdog fails the conformance test, on that rule and no other.
+#[test]
+fn the_conformance_test_names_a_device_without_a_watchdog() {
+    let (master, _slave, path) = open_pty();
+    let _fake = Fake::start(
+        master,
+        World {
+            watchdog: false,
+            ..World::default()
+        },
+    );
+    let checks = conformance::run(&path).expect("the board is there");
+    let failed: Vec<&conformance::Check> = checks.iter().filter(|c| !c.pass).collect();
+    assert_eq!(failed.len(), 1, "{checks:#?}");
+    assert!(failed[0].name.contains("watchdog"), "{}", failed[0]);
+    assert!(failed[0].to_string().starts_with("FAIL "), "{}", failed[0]);
+}
+
+/// Issue 28, "rate and baud that fit": the rate is the lesser of `--rate-hz`, the device's
+/// declared rate and 80 % of what the baud carries, never below 500 Hz; a device that declares
+/// 100 Hz, or a link at 115 200 baud (256 Hz), is refused with the numbers.
+#[test]
+fn the_rate_fits_the_device_and_its_baud_or_is_refused_with_the_numbers() {
+    let open = |rate_hz: u16, baud: u32| {
+        let (master, slave, path) = open_pty();
+        let fake = Fake::start(
+            master,
+            World {
+                rate_hz,
+                ..World::default()
+            },
+        );
+        let options = SerialOptions { baud, ..patient() };
+        let dev = SerialDevice::open_with(&path, options).expect("open");
+        (dev, fake, slave, path)
+    };
+    let (dev, _f1, _s1, path) = open(1000, 1_000_000);
+    assert_eq!(negotiate_rate(&dev, Some(&path), 1000.0).unwrap(), (1000.0, None));
+    let (dev, _f0, _s0, path) = open(1000, 115_200);
+    let slow = negotiate_rate(&dev, Some(&format!("{path}@115200")), 1000.0).unwrap_err();
+    assert!(
+        slow.contains("115200 baud") && slow.contains("3.12 ms") && slow.contains("at most 256 Hz"),
+        "{slow}"
+    );
+    assert!(
+        slow.contains("the floor is 500 Hz") && slow.contains("@1000000"),
+        "{slow}"
+    );
+    let (dev, _f2, _s2, path) = open(800, 1_000_000);
+    let (rate, why) = negotiate_rate(&dev, Some(&path), 1000.0).unwrap();
+    assert_eq!(rate, 800.0);
+    assert!(why.unwrap().contains("the device declares 800 Hz"));
+    let (dev, _f3, _s3, path) = open(100, 1_000_000);
+    let refused = negotiate_rate(&dev, Some(&path), 1000.0).unwrap_err();
+    assert!(
+        refused.contains("declares 100 Hz") && refused.contains("floor is 500 Hz"),
+        "{refused}"
+    );
+}
+
+/// At 1 Mbaud, paced like a UART, 200 cycles at 1 kHz take their answers in time; at 115 200
+/// (3.1 ms an exchange) the same cycles are late, which is why the bridge refuses that baud.
+#[test]
+fn a_uart_at_1_mbaud_answers_every_cycle_and_one_at_115200_cannot() {
+    for (baud, late_expected) in [(1_000_000, false), (115_200, true)] {
+        let world = World {
+            baud: Some(baud),
+            ..World::default()
+        };
+        let (mut dev, _fake, _slave) = setup(world, patient());
+        let before = dev.timeouts();
+        for _ in 0..200 {
+            let start = Instant::now();
+            dev.write_force(0.0).unwrap();
+            let _ = dev.read(1e-3);
+            if let Some(rest) = Duration::from_millis(1).checked_sub(start.elapsed()) {
+                std::thread::sleep(rest);
+            }
+        }
+        let late = dev.timeouts() - before;
+        if late_expected {
+            assert!(late >= 150, "{baud} baud: only {late} of 200 late");
+        } else {
+            assert!(late <= 5, "{baud} baud: {late} of 200 late");
+        }
+    }
+}
+
+/// Issue 28, "faults where people look": each kind of device fault is counted apart, and one
+/// bad packet, one lost answer or one state out of range does not fail the read (the previous
+/// state holds, so the force does not drop to zero).
+#[test]
+fn each_device_fault_is_counted_apart_and_one_does_not_zero_the_force() {
+    let (mut dev, fake, _slave) = setup(World::default(), patient());
+    cycle(&mut dev, 0.1);
+    let zero = dev.faults();
+    fake.world().corrupt = 1;
+    cycle(&mut dev, 0.1);
+    fake.world().skip_seq = 3;
+    cycle(&mut dev, 0.1);
+    cycle(&mut dev, 0.1);
+    fake.world().pose = Some((40_000, 0));
+    cycle(&mut dev, 0.1);
+    fake.world().pose = None;
+    cycle_until(&mut dev, 0.1, "a good state again", |s| s.position.abs() < 0.03);
+    let f = dev.faults();
+    assert_eq!(f.bad_packets - zero.bad_packets, 1, "{f:?}");
+    assert_eq!(f.seq_gaps - zero.seq_gaps, 1, "{f:?}");
+    assert_eq!(f.out_of_range - zero.out_of_range, 1, "{f:?}");
+    assert_eq!(f.losses + f.reopens, 0, "the device side only: {f:?}");
+}
+
+/// The bridge process on a fake device behind a symlink (as a udev `/dev/serial/by-id/` link
+/// is): its stderr lines and its `--json` summary.
+struct BridgeRun {
+    child: std::process::Child,
+    link: std::path::PathBuf,
+}
+
+impl BridgeRun {
+    fn start(link: &std::path::Path, extra: &[&str]) -> BridgeRun {
+        let child = std::process::Command::new(env!("CARGO_BIN_EXE_nanopush-haptic"))
+            .args([
+                "--device",
+                &format!("serial:{}", link.display()),
+                "--no-realtime",
+                "--json",
+            ])
+            .args(extra)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("start nanopush-haptic");
+        BridgeRun {
+            child,
+            link: link.to_path_buf(),
+        }
+    }
+
+    /// Waits for the process to end; its exit code, stdout and stderr.
+    fn finish(mut self) -> (i32, String, String) {
+        let start = Instant::now();
+        loop {
+            if let Some(status) = self.child.try_wait().unwrap() {
+                let out = std::io::read_to_string(self.child.stdout.take().unwrap()).unwrap();
+                let err = std::io::read_to_string(self.child.stderr.take().unwrap()).unwrap();
+                return (status.code().unwrap_or(-1), out, err);
+            }
+            assert!(start.elapsed() < PATIENCE, "the bridge did not end");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+/// Points `link` at a new pseudo-terminal with a fake device on it (a plug-in).
+fn plug_in(link: &std::path::Path) -> (Fake, OwnedFd) {
+    let (master, slave, path) = open_pty();
+    let fake = Fake::start(master, World::default());
+    let _ = std::fs::remove_file(link);
+    std::os::unix::fs::symlink(&path, link).unwrap();
+    (fake, slave)
+}
+
+/// Issue 28, "a cable is a fault, not a silence": unplugged in the middle of a run, the bridge
+/// says so (naming the device and the side), zeroes the force, reopens the device by its path
+/// when it is plugged in again, and counts the loss and the reopen; `--exit-on-device-loss`
+/// ends the run with code 3 instead, and a device still lost at the end is exit code 3 too.
+#[test]
+fn an_unplugged_cable_is_reported_reopened_by_its_path_and_counted() {
+    let dir = std::env::temp_dir().join(format!("nanopush-cable-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let link = dir.join("by-id-hapkit");
+
+    // Unplugged for a second, then plugged in again: the run goes on.
+    let (fake, slave) = plug_in(&link);
+    let run = BridgeRun::start(&link, &["--duration", "3"]);
+    fake.wait_until("the bridge's active packets", |w| w.received.len() > 200);
+    drop(fake);
+    drop(slave);
+    std::fs::remove_file(&run.link).unwrap();
+    std::thread::sleep(Duration::from_millis(1000));
+    let (fake, _slave) = plug_in(&link);
+    let (code, out, err) = run.finish();
+    assert!(
+        fake.world().received.len() > 200,
+        "the bridge came back on the re-plugged device: {err}"
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("cable: the serial device was lost"), "{err}");
+    assert!(err.contains("reopening it by its path"), "{err}");
+    assert!(err.contains("cable: the device is back after"), "{err}");
+    let summary: serde_json::Value = serde_json::from_str(&out).expect(&out);
+    assert_eq!(summary["device_faults"]["losses"], 1, "{summary}");
+    assert_eq!(summary["device_faults"]["reopens"], 1, "{summary}");
+    assert!(summary["device_lost"].is_null(), "{summary}");
+    drop(fake);
+
+    // --exit-on-device-loss: code 3 at the loss.
+    let (fake, slave) = plug_in(&link);
+    let run = BridgeRun::start(&link, &["--duration", "30", "--exit-on-device-loss"]);
+    fake.wait_until("the bridge's packets", |w| w.received.len() > 100);
+    drop(fake);
+    drop(slave);
+    let (code, out, err) = run.finish();
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("was lost"), "{err}");
+    let summary: serde_json::Value = serde_json::from_str(&out).expect(&out);
+    assert_eq!(summary["device_faults"]["losses"], 1, "{summary}");
+    assert!(summary["device_lost"].is_string(), "{summary}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -56,9 +56,35 @@ pub fn device_name(code: u32) -> &'static str {
     }
 }
 
+/// What went wrong with the device so far, counted by the bridge and published in every
+/// [`HapticState`] (so `/api/status`, `/metrics` and the page see it). Each counter names the
+/// side at fault: the device, the cable between, or the bridge itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[type_name("nanopush::DeviceFaults1")]
+#[repr(C)]
+pub struct DeviceFaults {
+    /// Device: packets dropped for a bad checksum or cut short.
+    pub bad_packets: u64,
+    /// Device: answers that did not arrive within the answer deadline (the device overran).
+    pub timeouts: u64,
+    /// Device: jumps of the device's sequence number other than +1 (packets it sent that were
+    /// lost).
+    pub seq_gaps: u64,
+    /// Device: states out of the device's physical range, dropped.
+    pub out_of_range: u64,
+    /// Bridge: times the device zeroed its force because the bridge fell silent (its watchdog).
+    pub watchdog_trips: u64,
+    /// Bridge: device cycles that started more than a period late.
+    pub overruns: u64,
+    /// Cable: times the device was lost (hang-up, I/O error, the path vanished).
+    pub losses: u64,
+    /// Cable: times the device was opened again after a loss.
+    pub reopens: u64,
+}
+
 /// The handle's state, bridge → server, every device cycle.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("nanopush::HapticState2")]
+#[type_name("nanopush::HapticState3")]
 #[repr(C)]
 pub struct HapticState {
     /// Sequence number (increments by one per device cycle).
@@ -91,6 +117,10 @@ pub struct HapticState {
     pub flags: u32,
     /// `DEVICE_*` code.
     pub device: u32,
+    /// The device cycle's rate (Hz), as negotiated with the device.
+    pub rate_hz: f64,
+    /// The device's faults so far.
+    pub faults: DeviceFaults,
 }
 
 /// The force to render, server → bridge, every control tick: a local linear model of the

@@ -6,10 +6,10 @@ use std::time::{Duration, Instant};
 use super::decoder::Decoder;
 use super::port::{Port, parse_serial_arg};
 use super::protocol::{
-    DEFAULT_BAUD, DevicePacket, FLAG_ACTIVE, FLAG_HELLO, ForcePacket, PacketError, STATUS_HOST_SILENT,
-    newtons_to_micronewtons, state_in_si,
+    ANSWER_DEADLINE_MS, DEFAULT_BAUD, DevicePacket, FLAG_ACTIVE, FLAG_HELLO, ForcePacket, PacketError,
+    STATUS_HOST_SILENT, link_rate_limit_hz, newtons_to_micronewtons, state_in_si,
 };
-use crate::device::{Device, DeviceError, DeviceSample, DeviceSpec, clamp_force};
+use crate::device::{Device, DeviceError, DeviceFaults, DeviceSample, DeviceSpec, clamp_force};
 
 // Named by a link in the documentation of `SerialDevice::status`.
 #[cfg(doc)]
@@ -17,6 +17,10 @@ use super::protocol::STATUS_FORCE_LIMITED;
 
 /// How often a hello is repeated while opening.
 const HELLO_RETRY: Duration = Duration::from_millis(100);
+/// Cycles in a row without a good state (a late answer, an out-of-range state) during which the
+/// host keeps the previous state, so the force computed from it holds; then [`Device::read`]
+/// fails and the bridge zeroes the force until good states come again.
+pub const HOLD_CYCLES: u32 = 3;
 
 /// How a [`SerialDevice`] talks and how long it waits.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -36,7 +40,7 @@ impl Default for SerialOptions {
     fn default() -> SerialOptions {
         SerialOptions {
             baud: DEFAULT_BAUD,
-            read_wait: Duration::from_millis(2),
+            read_wait: Duration::from_millis(ANSWER_DEADLINE_MS),
             silent_after: Duration::from_millis(20),
             open_timeout: Duration::from_secs(3),
         }
@@ -59,6 +63,15 @@ pub struct SerialDevice {
     last_valid: Instant,
     timeouts: u64,
     watchdog_trips: u64,
+    seq_gaps: u64,
+    out_of_range: u64,
+    /// The device's newest sequence number, and the bad packets counted when it came.
+    device_seq: Option<u16>,
+    bad_at_seq: u64,
+    /// Cycles in a row without a good state.
+    missed: u32,
+    /// Why the newest state was refused, while it is.
+    refused: Option<String>,
     /// The last packet sent was active: dropping sends an inactive one.
     force_live: bool,
 }
@@ -138,6 +151,12 @@ impl SerialDevice {
             last_valid: Instant::now(),
             timeouts: 0,
             watchdog_trips: 0,
+            seq_gaps: 0,
+            out_of_range: 0,
+            device_seq: None,
+            bad_at_seq: 0,
+            missed: 0,
+            refused: None,
             force_live: false,
         };
         dev.send(0, 0)?;
@@ -190,6 +209,21 @@ impl SerialDevice {
         self.rate_hz
     }
 
+    /// The baud rate the port was opened at.
+    pub fn baud(&self) -> u32 {
+        self.options.baud
+    }
+
+    /// Jumps of the device's sequence number other than +1 (its packets that were lost).
+    pub fn seq_gaps(&self) -> u64 {
+        self.seq_gaps
+    }
+
+    /// States out of the device's physical range, dropped.
+    pub fn out_of_range(&self) -> u64 {
+        self.out_of_range
+    }
+
     fn protocol(&self, why: String) -> DeviceError {
         DeviceError::Protocol {
             device: self.port.device.clone(),
@@ -232,21 +266,47 @@ impl SerialDevice {
     }
 
     fn accept(&mut self, packet: Result<DevicePacket, PacketError>) -> Result<(), DeviceError> {
+        let seq = match &packet {
+            Ok(DevicePacket::Info(i)) => Some(i.seq),
+            Ok(DevicePacket::State(s)) => Some(s.seq),
+            Err(_) => None,
+        };
+        if let Some(seq) = seq {
+            // Packets dropped for their checksum are counted there, not again as a gap.
+            let bad = self.decoder.bad_packets();
+            if let Some(prev) = self.device_seq {
+                let missing = u64::from(seq.wrapping_sub(prev).wrapping_sub(1));
+                if missing > bad - self.bad_at_seq {
+                    self.seq_gaps += 1;
+                }
+            }
+            self.device_seq = Some(seq);
+            self.bad_at_seq = bad;
+        }
         match packet {
             // A late answer to a repeated hello.
             Ok(DevicePacket::Info(_)) => Ok(()),
             Ok(DevicePacket::State(s)) => {
-                let (sample, force) = state_in_si(&self.spec, &s).map_err(|why| self.protocol(why))?;
-                self.sample = sample;
-                self.applied_force = force;
-                self.status = s.status;
-                if s.status & STATUS_HOST_SILENT != 0 {
-                    self.watchdog_trips += 1;
-                }
                 if self.awaiting == Some(s.echo) {
                     self.awaiting = None;
                 }
-                self.last_valid = Instant::now();
+                if s.status & STATUS_HOST_SILENT != 0 {
+                    self.watchdog_trips += 1;
+                }
+                match state_in_si(&self.spec, &s) {
+                    Ok((sample, force)) => {
+                        self.sample = sample;
+                        self.applied_force = force;
+                        self.status = s.status;
+                        self.last_valid = Instant::now();
+                        self.refused = None;
+                    }
+                    // Dropped and counted; the previous state holds (see `read`).
+                    Err(why) => {
+                        self.out_of_range += 1;
+                        self.refused = Some(why);
+                    }
+                }
                 Ok(())
             }
             Err(e) => Err(self.protocol(e.to_string())),
@@ -260,18 +320,33 @@ impl Device for SerialDevice {
     }
 
     /// The newest valid state, after waiting at most [`SerialOptions::read_wait`] for the answer
-    /// to the last force packet. `dt` is ignored.
+    /// to the last force packet. A late answer or a state out of range leaves the previous state
+    /// in place for up to [`HOLD_CYCLES`] cycles in a row (the force computed from it holds);
+    /// past that the read fails ([`DeviceError::Silent`] for late answers, [`DeviceError::Protocol`]
+    /// for bad states) until good states come again. `dt` is ignored.
     fn read(&mut self, _dt: f64) -> Result<DeviceSample, DeviceError> {
+        let before = self.out_of_range;
         self.pump(self.options.read_wait)?;
-        if self.awaiting.is_some() {
+        let late = self.awaiting.is_some();
+        if late {
             self.timeouts += 1;
         }
+        if late || self.out_of_range != before {
+            self.missed += 1;
+        } else {
+            self.missed = 0;
+        }
         let quiet = self.last_valid.elapsed();
-        if quiet > self.options.silent_after {
+        if quiet > self.options.silent_after || (late && self.missed > HOLD_CYCLES) {
             return Err(DeviceError::Silent {
                 device: self.port.device.clone(),
                 ms: quiet.as_millis() as u64,
             });
+        }
+        if self.missed > HOLD_CYCLES
+            && let Some(why) = &self.refused
+        {
+            return Err(self.protocol(why.clone()));
         }
         Ok(self.sample)
     }
@@ -282,6 +357,27 @@ impl Device for SerialDevice {
         self.send(FLAG_ACTIVE, force_un)?;
         self.force_live = true;
         Ok(())
+    }
+
+    /// The fastest rate the device declares and its link carries: the lesser of its info
+    /// packet's rate and [`link_rate_limit_hz`] at the port's baud.
+    fn max_rate_hz(&self) -> Option<f64> {
+        Some(f64::from(self.rate_hz).min(link_rate_limit_hz(self.options.baud)))
+    }
+
+    fn declared_rate_hz(&self) -> Option<f64> {
+        Some(f64::from(self.rate_hz))
+    }
+
+    fn faults(&self) -> DeviceFaults {
+        DeviceFaults {
+            bad_packets: self.bad_packets(),
+            timeouts: self.timeouts,
+            seq_gaps: self.seq_gaps,
+            out_of_range: self.out_of_range,
+            watchdog_trips: self.watchdog_trips,
+            ..DeviceFaults::default()
+        }
     }
 
     /// Sends an inactive zero-force packet and waits up to [`SerialOptions::silent_after`] for the

@@ -73,12 +73,14 @@
 //! short shows up as one: its tail is the next packet's head) is skipped and counted in
 //! [`SerialDevice::bad_packets`].
 //!
-//! Wire time bounds the rate: an exchange is 12 + 24 = 36 bytes, 3.1 ms at 115 200 baud on a
-//! UART (10 bits a byte), so a board behind a USB-UART bridge (FTDI, CH340, an Uno's ATmega16U2)
-//! manages about 300 Hz at the default [`DEFAULT_BAUD`]; at 1 000 000 baud (exact for a 16 MHz
-//! AVR; set `BAUD` in the sketch and open `PATH@1000000`) the wire takes 0.36 ms and 1 kHz fits.
-//! A board whose MCU speaks USB itself (ATmega32U4, SAMD, RP2040, Teensy) ignores the baud rate;
-//! full-speed USB (1 ms frames) reaches 0.5-1 kHz request/response.
+//! Wire time bounds the rate: an exchange is [`EXCHANGE_BYTES`] = 12 + 24 = 36 bytes, 10 bits a
+//! byte on a UART ([`exchange_wire_time`]); the host uses at most [`LINK_SHARE`] (80 %) of the link
+//! ([`link_rate_limit_hz`]: 2222 Hz at the default [`DEFAULT_BAUD`] of 1 000 000, exact for a
+//! 16 MHz AVR; 256 Hz at 115 200). The bridge runs at the lesser of `--rate-hz`, the device's
+//! declared rate and that limit ([`negotiate_rate`]), and refuses a device that cannot carry
+//! [`MIN_RATE_HZ`] (500 Hz), naming the numbers. A board whose MCU speaks USB itself (ATmega32U4,
+//! SAMD, RP2040, Teensy) ignores the baud rate; full-speed USB (1 ms frames) reaches 0.5-1 kHz
+//! request/response.
 //!
 //! **FTDI adapters** hold received bytes up to their latency timer, 16 ms by default: about 62 Hz
 //! request/response, every read timing out. Set it to 1 ms (as root):
@@ -90,31 +92,41 @@
 //!   force) and converts it to µN with saturation, never wrapping; the device clamps it again.
 //! - The device zeroes its force when no valid force packet came for [`DEVICE_SILENCE_MS`]
 //!   (10 ms) and says so with [`STATUS_HOST_SILENT`].
-//! - The host reports [`DeviceError::Silent`] when no valid state packet came for
-//!   [`SerialOptions::silent_after`] (20 ms), and [`DeviceError::Protocol`] for a state out of the
-//!   device's physical range (a position outside its travel by more than [`TRAVEL_TOLERANCE`] of
-//!   it, a speed above [`MAX_SPEED`], a rendered force above its maximum) or of another protocol
-//!   version: such values are never passed on. (Fixed-point fields cannot carry NaN.)
+//! - A late answer or a state out of the device's physical range (a position outside its travel
+//!   by more than [`travel_margin`], a speed above [`MAX_SPEED`], a rendered force above its
+//!   maximum plus 1 µN) is counted and the previous state holds for up to [`HOLD_CYCLES`] cycles
+//!   (one lost packet does not zero the force); past that the read fails:
+//!   [`DeviceError::Silent`] (also when no valid state packet came for
+//!   [`SerialOptions::silent_after`], 20 ms) or [`DeviceError::Protocol`]. Another protocol
+//!   version is [`DeviceError::Protocol`]. Such values are never passed on.
+//! - A hang-up, an I/O error or a vanished path is [`DeviceError::Lost`] (an unplugged cable): the
+//!   bridge zeroes the force and reopens the device by its path ([`conformance`] checks a board).
 //! - [`Device::close`] sends an inactive zero-force packet and waits for the device to confirm it
 //!   renders nothing; dropping a [`SerialDevice`] that last sent a live force sends one too.
 //! - The port is opened exclusive (`TIOCEXCL`): a second bridge cannot drive the same motor.
 
+pub mod conformance;
 mod decoder;
 mod device;
 #[cfg(test)]
 mod fixtures;
 mod port;
 mod protocol;
+mod rate;
 
 pub use decoder::Decoder;
+pub use device::HOLD_CYCLES;
 pub use device::{SerialDevice, SerialOptions};
 pub use port::parse_serial_arg;
 pub use protocol::{
-    CRC_INIT, CRC_POLY, DEFAULT_BAUD, DEVICE_SILENCE_MS, DevicePacket, FLAG_ACTIVE, FLAG_HELLO, FORCE_LEN, ForcePacket,
-    INFO_LEN, InfoPacket, KIND_FORCE, KIND_INFO, KIND_STATE, MAX_SPEED, PROTOCOL_VERSION, PacketError, STATE_LEN,
-    STATUS_FORCE_LIMITED, STATUS_HOST_SILENT, SYNC, StatePacket, TRAVEL_TOLERANCE, crc16, newtons_to_micronewtons,
-    state_in_si,
+    ANSWER_DEADLINE_MS, CRC_INIT, CRC_POLY, DEFAULT_BAUD, DEVICE_SILENCE_MS, DevicePacket, EXCHANGE_BYTES, FLAG_ACTIVE,
+    FLAG_HELLO, FORCE_LEN, ForcePacket, INFO_LEN, InfoPacket, KIND_FORCE, KIND_INFO, KIND_STATE, LINK_SHARE, MAX_SPEED,
+    MIN_RATE_HZ, PLAUSIBLE_MAX_DAMPING, PLAUSIBLE_MAX_FORCE_N, PLAUSIBLE_MAX_RATE_HZ, PLAUSIBLE_MAX_STIFFNESS,
+    PLAUSIBLE_TRAVEL_END_M, PROTOCOL_VERSION, PacketError, STATE_LEN, STATUS_FORCE_LIMITED, STATUS_HOST_SILENT, SYNC,
+    StatePacket, TRAVEL_MARGIN_MIN, TRAVEL_TOLERANCE, UART_BITS_PER_BYTE, crc16, exchange_wire_time,
+    link_rate_limit_hz, newtons_to_micronewtons, state_in_si, travel_margin,
 };
+pub use rate::negotiate_rate;
 
 // Named by the links in the module documentation.
 #[cfg(doc)]

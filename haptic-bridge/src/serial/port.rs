@@ -139,8 +139,17 @@ impl Port {
         }
     }
 
+    /// A port that fails once open is a lost device (hang-up, EIO, ENXIO, ENODEV: an unplugged
+    /// cable, a board reset, a vanished path).
+    fn lost(&self, why: impl std::fmt::Display) -> DeviceError {
+        DeviceError::Lost {
+            device: self.device.clone(),
+            why: why.to_string(),
+        }
+    }
+
     /// Waits up to `timeout` for `events`; returns the events that happened. A hang-up or an error
-    /// on the port is an error.
+    /// on the port is [`DeviceError::Lost`].
     pub(super) fn poll(&self, events: libc::c_short, timeout: Duration) -> Result<libc::c_short, DeviceError> {
         let ms = timeout.as_micros().div_ceil(1000).min(libc::c_int::MAX as u128) as libc::c_int;
         let mut pfd = libc::pollfd {
@@ -155,20 +164,17 @@ impl Port {
             }
             let e = io::Error::last_os_error();
             if e.kind() != io::ErrorKind::Interrupted {
-                return Err(self.io(e));
+                return Err(self.lost(e));
             }
         }
         if pfd.revents & (libc::POLLERR | libc::POLLHUP | libc::POLLNVAL) != 0 {
-            return Err(self.io(io::Error::new(
-                io::ErrorKind::BrokenPipe,
-                "the device hung up (unplugged?)",
-            )));
+            return Err(self.lost("the device hung up (unplugged?)"));
         }
         Ok(pfd.revents)
     }
 
     /// Reads everything available into `decoder`. (With VMIN = VTIME = 0 a read returns 0 when
-    /// nothing is there; a hang-up shows in `poll` or as an error.)
+    /// nothing is there; a hang-up shows in `poll` or as an error: [`DeviceError::Lost`].)
     pub(super) fn read_into(&self, decoder: &mut Decoder) -> Result<(), DeviceError> {
         let mut buf = [0u8; 512];
         loop {
@@ -185,7 +191,7 @@ impl Port {
             match e.kind() {
                 io::ErrorKind::Interrupted => continue,
                 io::ErrorKind::WouldBlock => return Ok(()),
-                _ => return Err(self.io(e)),
+                _ => return Err(self.lost(e)),
             }
         }
     }
@@ -207,7 +213,7 @@ impl Port {
                 match e.kind() {
                     io::ErrorKind::Interrupted => continue,
                     io::ErrorKind::WouldBlock => {}
-                    _ => return Err(self.io(e)),
+                    _ => return Err(self.lost(e)),
                 }
             }
             let now = Instant::now();
@@ -229,12 +235,15 @@ mod tests {
 
     #[test]
     fn the_serial_argument_is_a_path_with_an_optional_baud_rate() {
-        assert_eq!(parse_serial_arg("/dev/ttyACM0").unwrap(), ("/dev/ttyACM0", 115_200));
+        assert_eq!(parse_serial_arg("/dev/ttyACM0").unwrap(), ("/dev/ttyACM0", 1_000_000));
         assert_eq!(
             parse_serial_arg("/dev/ttyUSB0@1000000").unwrap(),
             ("/dev/ttyUSB0", 1_000_000)
         );
-        assert_eq!(parse_serial_arg("/dev/by-id/a@b").unwrap(), ("/dev/by-id/a@b", 115_200));
+        assert_eq!(
+            parse_serial_arg("/dev/by-id/a@b").unwrap(),
+            ("/dev/by-id/a@b", 1_000_000)
+        );
         let e = |a: &str| parse_serial_arg(a).unwrap_err().to_string();
         assert!(e("/dev/ttyUSB0@").contains("no baud rate after '@'"));
         assert!(e("/dev/ttyUSB0@12345").contains("12345 baud is not supported"));

@@ -33,13 +33,59 @@ pub const STATUS_HOST_SILENT: u8 = 0x01;
 pub const STATUS_FORCE_LIMITED: u8 = 0x02;
 /// The device zeroes its force after this long without a valid force packet (ms).
 pub const DEVICE_SILENCE_MS: u64 = 10;
-/// Baud rate unless the path says otherwise (`PATH@BAUD`).
-pub const DEFAULT_BAUD: u32 = 115_200;
+/// Baud rate unless the path says otherwise (`PATH@BAUD`): exact for a 16 MHz AVR, and fast
+/// enough for 1 kHz ([`link_rate_limit_hz`]: 2222 Hz).
+pub const DEFAULT_BAUD: u32 = 1_000_000;
+/// Bytes on the wire per exchange: a force packet and its state packet.
+pub const EXCHANGE_BYTES: usize = FORCE_LEN + STATE_LEN;
+/// Bits a UART sends per byte (start, 8 data, stop).
+pub const UART_BITS_PER_BYTE: u32 = 10;
+/// The share of the link an exchange may take: the rest is the device's turnaround and the USB
+/// bridge's scheduling.
+pub const LINK_SHARE: f64 = 0.8;
+/// The slowest device cycle the bridge runs (Hz): the server declares the haptic link down when
+/// its newest handle sample is older than its time-out (5 ms by default, one server tick of it
+/// used), so the handle must be sampled at least every 2 ms.
+pub const MIN_RATE_HZ: f64 = 500.0;
+/// The answer to a force packet must arrive within this long of the packet's last byte leaving
+/// the host, the answer's own wire time included (ms).
+pub const ANSWER_DEADLINE_MS: u64 = 2;
 /// Fastest handle speed a report may claim (m/s): a hand moves a handle at 1-2 m/s at most.
 pub const MAX_SPEED: f64 = 10.0;
-/// How far outside its travel a reported position may lie, as a fraction of the travel (sensor
-/// calibration and the give of the end stops).
+/// How far outside its travel a reported position may lie, as a fraction of the travel's span
+/// (sensor calibration and the give of the end stops), and at least [`TRAVEL_MARGIN_MIN`] (m).
 pub const TRAVEL_TOLERANCE: f64 = 0.1;
+/// The least margin beyond the travel a position is still believed within (m).
+pub const TRAVEL_MARGIN_MIN: f64 = 0.005;
+
+/// The one range rule for a handle position, for every device: the travel `[lo, hi]` extended
+/// at each end by 10 % of its span, at least 5 mm.
+pub fn travel_margin(travel: [f64; 2]) -> f64 {
+    (TRAVEL_TOLERANCE * (travel[1] - travel[0])).max(TRAVEL_MARGIN_MIN)
+}
+
+/// The time one exchange (a force packet and its state packet) takes on a UART at `baud`.
+pub fn exchange_wire_time(baud: u32) -> std::time::Duration {
+    std::time::Duration::from_secs_f64(EXCHANGE_BYTES as f64 * f64::from(UART_BITS_PER_BYTE) / f64::from(baud.max(1)))
+}
+
+/// The fastest exchange rate a UART at `baud` carries with [`LINK_SHARE`] of it (Hz): 2222 Hz
+/// at 1 000 000 baud, 256 Hz at 115 200.
+pub fn link_rate_limit_hz(baud: u32) -> f64 {
+    LINK_SHARE / exchange_wire_time(baud).as_secs_f64()
+}
+
+/// The plausible ranges of an info packet's limits, each as (field, low, high, unit): a device
+/// reporting anything outside is refused.
+pub const PLAUSIBLE_MAX_FORCE_N: (f64, f64) = (0.0, 50.0);
+/// A travel end's distance from the centre (m): at least 1 mm, at most 0.5 m, on each side.
+pub const PLAUSIBLE_TRAVEL_END_M: (f64, f64) = (0.001, 0.5);
+/// The largest stiffness a device may claim to render stably (N/m).
+pub const PLAUSIBLE_MAX_STIFFNESS: f64 = 100_000.0;
+/// The largest damping a device may claim to render stably (N·s/m).
+pub const PLAUSIBLE_MAX_DAMPING: f64 = 1_000.0;
+/// The fastest control rate a device may claim (Hz).
+pub const PLAUSIBLE_MAX_RATE_HZ: u16 = 20_000;
 
 /// The packets' CRC: the `crc` crate's CRC-16/IBM-3740, the catalogue name of CRC-16/CCITT-FALSE
 /// ([`CRC_POLY`], [`CRC_INIT`], no reflection, no final xor), table-driven. It replaced a
@@ -277,32 +323,52 @@ impl InfoPacket {
         })
     }
 
-    /// The limits in SI as a [`DeviceSpec`], or why they are implausible.
+    /// The limits in SI as a [`DeviceSpec`], or why they are implausible (each check names the
+    /// field, the value and the allowed range).
     pub fn spec(&self) -> Result<DeviceSpec, String> {
         let [lo, hi] = self.travel_um;
-        if self.max_force_un <= 0 {
+        let max_force = f64::from(self.max_force_un) * 1e-6;
+        let (lo_m, hi_m) = (f64::from(lo) * 1e-6, f64::from(hi) * 1e-6);
+        let stiffness = f64::from(self.max_stiffness_mn_m) * 1e-3;
+        let damping = f64::from(self.max_damping_mns_m) * 1e-3;
+        let (f_lo, f_hi) = PLAUSIBLE_MAX_FORCE_N;
+        if !(max_force > f_lo && max_force <= f_hi) {
             return Err(format!(
-                "the device reports a maximum force of {} µN",
-                self.max_force_un
+                "the device reports a maximum force of {max_force} N; allowed: ({f_lo}, {f_hi}] N"
             ));
         }
-        if !(lo < 0 && hi > 0) {
+        let (t_lo, t_hi) = PLAUSIBLE_TRAVEL_END_M;
+        for (end, v) in [("lower", -lo_m), ("upper", hi_m)] {
+            if !(t_lo..=t_hi).contains(&v) {
+                return Err(format!(
+                    "the device reports a travel of [{lo}, {hi}] µm: its {end} end must lie {} to {} mm from the centre",
+                    t_lo * 1e3,
+                    t_hi * 1e3
+                ));
+            }
+        }
+        if !(stiffness > 0.0 && stiffness <= PLAUSIBLE_MAX_STIFFNESS) {
             return Err(format!(
-                "the device reports a travel of [{lo}, {hi}] µm, which does not contain 0"
+                "the device reports a largest stable stiffness of {stiffness} N/m; allowed: (0, {PLAUSIBLE_MAX_STIFFNESS}] N/m"
             ));
         }
-        if self.max_stiffness_mn_m == 0 || self.max_damping_mns_m == 0 || self.rate_hz == 0 {
+        if !(damping > 0.0 && damping <= PLAUSIBLE_MAX_DAMPING) {
             return Err(format!(
-                "the device reports a zero stiffness ({} mN/m), damping ({} mN·s/m) or rate ({} Hz)",
-                self.max_stiffness_mn_m, self.max_damping_mns_m, self.rate_hz
+                "the device reports a largest stable damping of {damping} N·s/m; allowed: (0, {PLAUSIBLE_MAX_DAMPING}] N·s/m"
+            ));
+        }
+        if self.rate_hz == 0 || self.rate_hz > PLAUSIBLE_MAX_RATE_HZ {
+            return Err(format!(
+                "the device reports a control rate of {} Hz; allowed: (0, {PLAUSIBLE_MAX_RATE_HZ}] Hz",
+                self.rate_hz
             ));
         }
         Ok(DeviceSpec {
             name: "serial",
-            max_force: f64::from(self.max_force_un) * 1e-6,
-            travel: [f64::from(lo) * 1e-6, f64::from(hi) * 1e-6],
-            max_damping: f64::from(self.max_damping_mns_m) * 1e-3,
-            max_stiffness: f64::from(self.max_stiffness_mn_m) * 1e-3,
+            max_force,
+            travel: [lo_m, hi_m],
+            max_damping: damping,
+            max_stiffness: stiffness,
         })
     }
 }
@@ -337,7 +403,7 @@ pub fn state_in_si(spec: &DeviceSpec, s: &StatePacket) -> Result<(DeviceSample, 
     let velocity = f64::from(s.velocity_um_s) * 1e-6;
     let force = f64::from(s.force_un) * 1e-6;
     let [lo, hi] = spec.travel;
-    let give = TRAVEL_TOLERANCE * (hi - lo);
+    let give = travel_margin(spec.travel);
     if !(lo - give..=hi + give).contains(&position) {
         return Err(format!(
             "position {:.3} mm is outside the travel [{:.3}, {:.3}] mm (was the handle centred when the board started?)",

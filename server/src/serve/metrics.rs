@@ -4,7 +4,7 @@
 use std::fmt::Write as _;
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 
-use crate::serve::haptic::metrics::HapticMetrics;
+use crate::serve::haptic::metrics::{DEVICE_FAULTS, HapticMetrics};
 pub use crate::serve::histogram::{BUCKETS, Histogram};
 
 /// Everything the loop counts.
@@ -96,7 +96,21 @@ pub fn render(l: &LoopMetrics, n: &NetMetrics, now_ns: u64, disk: Option<(f64, f
         let _ = writeln!(s, "# TYPE {name} {kind}");
         let _ = writeln!(s, "{name} {v}");
     }
+    device_faults(&mut s, h);
     s
+}
+
+/// The bridge's device faults, one labelled counter family: each kind with the side at fault.
+fn device_faults(s: &mut String, h: &HapticMetrics) {
+    let name = "nanopush_haptic_device_faults_total";
+    let _ = writeln!(
+        s,
+        "# HELP {name} Faults of the haptic device as the bridge counted them, by kind and the side at fault (device, bridge, cable)."
+    );
+    let _ = writeln!(s, "# TYPE {name} counter");
+    for ((kind, side), n) in DEVICE_FAULTS.iter().zip(&h.device_faults) {
+        let _ = writeln!(s, "{name}{{kind=\"{kind}\",side=\"{side}\"}} {}", n.load(Relaxed));
+    }
 }
 
 /// A scalar family: name, help, type and value.

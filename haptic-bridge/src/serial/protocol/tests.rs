@@ -246,59 +246,114 @@ fn a_state_is_converted_to_si_and_checked_against_the_device() {
     );
 }
 
+/// Issue 28: 2100 N, a ±1 µm or ±2 km travel, an absurd stiffness, damping or rate all passed;
+/// each is now refused, naming the value and the allowed range.
 #[test]
-fn implausible_limits_are_refused() {
+fn implausible_limits_are_refused_naming_the_allowed_range() {
+    let refused = |p: InfoPacket| p.spec().unwrap_err();
     assert!(
-        InfoPacket {
+        refused(InfoPacket {
             max_force_un: 0,
             ..info()
-        }
-        .spec()
-        .unwrap_err()
-        .contains("maximum force of 0")
+        })
+        .contains("maximum force of 0 N; allowed: (0, 50] N")
     );
     assert!(
-        InfoPacket {
+        refused(InfoPacket {
             max_force_un: -5,
             ..info()
-        }
-        .spec()
-        .is_err()
+        })
+        .contains("allowed: (0, 50] N")
     );
     assert!(
-        InfoPacket {
-            travel_um: [0, 10],
+        refused(InfoPacket {
+            max_force_un: 2_100_000_000,
             ..info()
-        }
-        .spec()
-        .unwrap_err()
-        .contains("does not contain 0")
+        })
+        .contains("2100 N")
     );
-    assert!(
-        InfoPacket {
-            travel_um: [-10, -1],
+    for travel in [
+        [0, 10],
+        [-10, -1],
+        [-1, 1],
+        [-2_000_000_000, 2_000_000_000],
+        [-30_000, 600_000],
+    ] {
+        let why = refused(InfoPacket {
+            travel_um: travel,
             ..info()
-        }
-        .spec()
-        .is_err()
-    );
+        });
+        assert!(
+            why.contains("must lie 1 to 500 mm from the centre"),
+            "{travel:?}: {why}"
+        );
+    }
     assert!(
-        InfoPacket {
+        refused(InfoPacket {
             max_stiffness_mn_m: 0,
             ..info()
-        }
-        .spec()
-        .is_err()
+        })
+        .contains("allowed: (0, 100000] N/m")
     );
     assert!(
-        InfoPacket {
+        refused(InfoPacket {
+            max_stiffness_mn_m: u32::MAX,
+            ..info()
+        })
+        .contains("N/m")
+    );
+    assert!(
+        refused(InfoPacket {
             max_damping_mns_m: 0,
+            ..info()
+        })
+        .contains("allowed: (0, 1000] N·s/m")
+    );
+    assert!(
+        refused(InfoPacket {
+            max_damping_mns_m: 2_000_000,
+            ..info()
+        })
+        .contains("2000 N·s/m")
+    );
+    assert!(refused(InfoPacket { rate_hz: 0, ..info() }).contains("allowed: (0, 20000] Hz"));
+    assert!(
+        refused(InfoPacket {
+            rate_hz: 30_000,
+            ..info()
+        })
+        .contains("30000 Hz")
+    );
+    // The edges are in.
+    assert!(
+        InfoPacket {
+            max_force_un: 50_000_000,
+            travel_um: [-1_000, 500_000],
+            rate_hz: 20_000,
             ..info()
         }
         .spec()
-        .is_err()
+        .is_ok()
     );
-    assert!(InfoPacket { rate_hz: 0, ..info() }.spec().is_err());
+}
+
+/// One range rule for every device: the travel extended by 10 % of its span, at least 5 mm.
+#[test]
+fn the_travel_margin_is_10_percent_of_the_span_and_at_least_5_mm() {
+    assert!((travel_margin([-0.03, 0.03]) - 0.006).abs() < 1e-15);
+    assert_eq!(travel_margin([-0.01, 0.01]), 0.005);
+}
+
+/// Issue 28: the documented 115 200 baud carried no 1 kHz. The link's limit is 80 % of
+/// baud / (36 bytes × 10 bits): 2222 Hz at the default 1 Mbaud, 256 Hz at 115 200.
+#[test]
+fn the_link_carries_2222_hz_at_1_mbaud_and_256_hz_at_115200() {
+    assert_eq!(DEFAULT_BAUD, 1_000_000);
+    assert!((exchange_wire_time(1_000_000).as_secs_f64() - 360e-6).abs() < 1e-12);
+    assert!((exchange_wire_time(115_200).as_secs_f64() - 3.125e-3).abs() < 1e-9);
+    assert_eq!(link_rate_limit_hz(1_000_000).round(), 2222.0);
+    assert_eq!(link_rate_limit_hz(115_200).round(), 256.0);
+    assert!(link_rate_limit_hz(115_200) < MIN_RATE_HZ && link_rate_limit_hz(DEFAULT_BAUD) >= 1000.0);
 }
 
 #[test]

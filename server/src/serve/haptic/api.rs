@@ -7,6 +7,7 @@ use std::sync::atomic::Ordering::Relaxed;
 use nanopush_proto::ws::{ErrorCode, HapticAction};
 
 use super::HapticMetrics;
+use super::metrics::DEVICE_FAULTS;
 use crate::serve::command_checks::{Refusal, number};
 
 /// What the lease holder asks of haptic z-control.
@@ -68,7 +69,22 @@ pub fn haptic_status(h: &HapticMetrics) -> serde_json::Value {
         "pc_damping": num(h.pc_damping()),
         "port_energy_j": num(h.port_energy()),
         "latency_p99_bound_s": (h.latency.count() > 0).then(|| h.latency.quantile_bound(0.99)),
+        "rate_hz": sampled.then(|| f64::from_bits(h.rate_hz.load(Relaxed))),
+        "device_faults": sampled.then(|| device_faults(h)),
     })
+}
+
+/// The bridge's device fault counters, by name (as the bridge's `--json` has them), and the
+/// side at fault of each.
+fn device_faults(h: &HapticMetrics) -> serde_json::Value {
+    let mut counts = serde_json::Map::new();
+    let mut sides = serde_json::Map::new();
+    for ((name, side), n) in DEVICE_FAULTS.iter().zip(&h.device_faults) {
+        counts.insert((*name).into(), n.load(Relaxed).into());
+        sides.insert((*name).into(), (*side).into());
+    }
+    counts.insert("side".into(), sides.into());
+    counts.into()
 }
 
 /// A `haptic` command, checked against the link's state (`h`), whether a push runs (`busy`)

@@ -3,10 +3,37 @@
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::Relaxed};
 
-use nanopush_proto::haptic::{HapticState, monotonic_ns};
+use nanopush_proto::haptic::{DeviceFaults, HapticState, monotonic_ns};
 
 use super::link::LINK_UP;
 use crate::serve::histogram::Histogram;
+
+/// The device's fault counters by name, each with the side at fault (`device`, `bridge`,
+/// `cable`), in the order of [`HapticMetrics::device_faults`].
+pub const DEVICE_FAULTS: [(&str, &str); 8] = [
+    ("bad_packets", "device"),
+    ("timeouts", "device"),
+    ("seq_gaps", "device"),
+    ("out_of_range", "device"),
+    ("watchdog_trips", "bridge"),
+    ("overruns", "bridge"),
+    ("losses", "cable"),
+    ("reopens", "cable"),
+];
+
+/// The counters of `f` in [`DEVICE_FAULTS`] order.
+pub fn fault_values(f: &DeviceFaults) -> [u64; 8] {
+    [
+        f.bad_packets,
+        f.timeouts,
+        f.seq_gaps,
+        f.out_of_range,
+        f.watchdog_trips,
+        f.overruns,
+        f.losses,
+        f.reopens,
+    ]
+}
 
 /// The haptic link's state, written by the control loop (and the supervisor), read by the
 /// status route, the metrics route and the telemetry task. Floats are stored as bits.
@@ -58,6 +85,10 @@ pub struct HapticMetrics {
     pub latency: Histogram,
     /// Whether a mode other than `none` runs.
     pub enabled: AtomicBool,
+    /// The bridge's device cycle rate (Hz), f64 bits.
+    pub rate_hz: AtomicU64,
+    /// The device's faults as the bridge counted them ([`DEVICE_FAULTS`] order).
+    pub device_faults: [AtomicU64; 8],
 }
 
 /// Names of the bilateral phases, in [`crate::control::bilateral::Phase`] order.
@@ -155,6 +186,10 @@ impl HapticMetrics {
         self.pc_damping.store(s.pc_damping.to_bits(), Relaxed);
         self.port_energy.store(s.port_energy.to_bits(), Relaxed);
         self.dropped_samples.store(s.dropped, Relaxed);
+        self.rate_hz.store(s.rate_hz.to_bits(), Relaxed);
+        for (slot, v) in self.device_faults.iter().zip(fault_values(&s.faults)) {
+            slot.store(v, Relaxed);
+        }
         if s.pc_damping > 0.0 {
             self.pc_active_samples.fetch_add(1, Relaxed);
             self.pc_last_ns.store(now_ns, Relaxed);
