@@ -294,6 +294,16 @@ test('with a haptic link, the haptic panel shows it and the lease holder can eng
     await p.waitForSelector('#haptic-panel', { state: 'visible', timeout: 20000 });
     await waitText(p, '#hap-link', /^up$/, 20000);
     await p.waitForSelector('#chart-hap canvas', { timeout: 10000 });
+    // The device's fault counters (issue 28), from /api/status every 2 s while the panel shows.
+    const dev = await waitText(p, '#hap-device', /faults: none|faults:/, 8000);
+    assert.match(dev, /^(\d+(\.\d+)? k?Hz · )?faults: /, dev);
+    assert.match(await p.getAttribute('#hap-device', 'class'), /^(|warn|bad)$/);
+    // The monitor shows the same line.
+    const m = await newPage(browser, { width: 1280, height: 800 });
+    await m.goto(hs.base + '/?view=monitor');
+    await waitText(m, '#m-hapdev', /faults: none|faults:/, 8000);
+    assert.deepEqual(m.errors, []);
+    await m.context().close();
     assert.equal(await p.$eval('#hap-fs', (e) => e.disabled), true, 'no lease: no haptic controls');
     await p.click('#take-lease');
     await p.waitForFunction(() => !document.querySelector('#hap-fs').disabled);

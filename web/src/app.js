@@ -2,7 +2,8 @@
 // (src/connection.js), the 3D view (src/view3d.js), the 2D height image with its line profile
 // (src/image2d.js), the force plots (src/charts.js), the haptic panel (src/haptic.js), the status
 // bar, controls, event log, records and the scan shown (src/status.js, controls.js, eventlog.js,
-// records.js, scans.js, toolbar.js). Messages change the Session and mark what is dirty; the one
+// records.js, scans.js, toolbar.js); the haptic panel polls /api/status for the device's faults
+// (src/devicefaults.js). Messages change the Session and mark what is dirty; the one
 // animation-frame loop (src/frame.js) redraws what is dirty, never once per message. This module
 // owns no logic of its own: it builds the parts, routes the Session's events to them and holds
 // the one piece of state no part owns (the phase the status bar last showed).
@@ -15,6 +16,7 @@ import { View3D } from './view3d.js';
 import { Image2D } from './image2d.js';
 import { Charts, downloadCsv } from './charts.js';
 import { HapticPanel } from './haptic.js';
+import { fetchStatus } from './devicefaults.js';
 import { StatusBar } from './status.js';
 import { Controls, Replies } from './controls.js';
 import { EventLog, LEASE_LOST_ON_CLOSE, welcomeText, stateText, pushStartedText, leaseNote, replyErrorText, closedText } from './eventlog.js';
@@ -57,7 +59,8 @@ export class App {
       panel: $('haptic-panel'),
       plot: $('chart-hap'),
       fields: { link: $('hap-link'), phase: $('hap-phase'), engaged: $('hap-engaged'), handle: $('hap-handle'), hand: $('hap-hand'), tip: $('hap-tip'), pc: $('hap-pc') },
-    }, frames);
+      device: $('hap-device'),
+    }, frames, { doc, fetchStatus: this.demo ? undefined : () => fetchStatus(loc) });
 
     this.status = new StatusBar($, { demo: this.demo });
     this.log = new EventLog($('log'), $('announce'));

@@ -1,15 +1,20 @@
 // The haptic panel, shown once telemetry carries a `haptic` object (the server runs a haptic
 // link: `--haptic sim|external`): link up/down, the z-control phase (engaged or not), the
 // handle's position and the force at the hand, the tip force, the passivity controller, and a
-// scrolling plot of the force at the hand. The lease holder gets engage / release / re-centre
+// scrolling plot of the force at the hand, and the device's fault counters (issue 28: the line
+// `deviceFaultsLine` of src/devicefaults.js makes, from /api/status every 2 s while the panel is
+// shown and the page is visible). The lease holder gets engage / release / re-centre
 // and the scales; the commands are built (and range-checked) by wire.js. The plot is redrawn by
 // the page's frame scheduler (src/frame.js), at most ~7 times a second. `hapticFields` and
 // `HapticTrace` are pure (Node tests).
 import uPlot from 'uplot';
+import { StatusPoller, deviceFaultsLine } from './devicefaults.js';
 
 const SECONDS = 10;
 /** Least time between two redraws of the plot (ms). */
 export const HAPTIC_PERIOD_MS = 150;
+/** How often the device's fault counters are fetched from /api/status while the panel shows (ms). */
+export const DEVICE_FAULTS_PERIOD_MS = 2000;
 
 /**
  * What the panel's fields say for one telemetry frame's `haptic` object: {text, cls} per field
@@ -60,21 +65,56 @@ export class HapticTrace {
 
 export class HapticPanel {
   /**
-   * @param {{panel: HTMLElement, plot: HTMLElement, fields: Record<string, HTMLElement>}} els
+   * @param {{panel: HTMLElement, plot: HTMLElement, fields: Record<string, HTMLElement>, device?: HTMLElement}} els
+   *   `device`: where the device's fault line goes
    * @param {import('./frame.js').FrameScheduler} scheduler the page's animation-frame loop
+   * @param {object} [opts]
+   * @param {() => Promise<object>} [opts.fetchStatus] GETs /api/status (none: no fault line)
+   * @param {Document} [opts.doc] the page's document: no fetches while it is hidden
+   * @param {{setTimeout, clearTimeout}} [opts.timers]
    */
-  constructor(els, scheduler) {
+  constructor(els, scheduler, { fetchStatus, doc, timers } = {}) {
     this.els = els;
     this.trace = new HapticTrace(SECONDS);
     this.plot = null;
     this.frame = scheduler.register('haptic', () => this.draw(), { period: HAPTIC_PERIOD_MS });
+    this.doc = doc;
+    this.poller = fetchStatus && els.device
+      ? new StatusPoller({
+        fetchStatus,
+        periodMs: DEVICE_FAULTS_PERIOD_MS,
+        timers,
+        onStatus: (s) => this.showDeviceFaults(s?.haptic ?? null),
+        onError: () => this.showDeviceFaults(null),
+      })
+      : null;
+    doc?.addEventListener?.('visibilitychange', () => this.syncPolling());
+  }
+
+  /** The device's fault line for `/api/status`'s `haptic` (null: unknown, "–"). */
+  showDeviceFaults(h) {
+    const el = this.els.device;
+    if (!el) return;
+    const { text, cls } = deviceFaultsLine(h);
+    el.textContent = text;
+    el.className = cls;
+  }
+
+  /** Polls /api/status while the panel is shown and the page visible; stops otherwise. */
+  syncPolling() {
+    if (!this.poller) return;
+    if (!this.els.panel.hidden && !this.doc?.hidden) this.poller.start();
+    else this.poller.stop();
   }
 
   /** One telemetry frame's `haptic` (or null: no link on this server). */
   update(t, h) {
     if (!h) return;
     const { panel, fields } = this.els;
-    if (panel.hidden) panel.hidden = false;
+    if (panel.hidden) {
+      panel.hidden = false;
+      this.syncPolling();
+    }
     for (const [k, v] of Object.entries(hapticFields(h))) {
       fields[k].textContent = v.text;
       if (v.cls !== undefined) fields[k].className = v.cls;

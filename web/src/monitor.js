@@ -1,10 +1,12 @@
 // The monitoring view (`/?view=monitor`): compact and read-only, for a wall screen. The
-// instrument's phase, the control loop's health, the haptic link, clients and the lease (from
-// /api/status, every second), and the last runs (run_done events on a viewer WebSocket, with no
+// instrument's phase, the control loop's health, the haptic link and its device's faults
+// (`deviceFaultsLine`, src/devicefaults.js), clients and the lease (from /api/status, every
+// second), and the last runs (run_done events on a viewer WebSocket, with no
 // streams). No controls; needs no npm packages. Nothing animates: each update writes its text
 // at once. `statusTiles` is pure (Node tests); `start()` (src/main.js) builds the page.
 import { Session, describeRun } from './session.js';
 import { wsUrl, apiUrl, backoffMs } from './connection.js';
+import { deviceFaultsLine } from './devicefaults.js';
 
 const POLL_MS = 1000;
 
@@ -18,7 +20,7 @@ function h(tag, attrs = {}, ...kids) {
 function build() {
   document.title = 'Monitor · Nano Visulator · nanopush';
   document.body.className = 'monitor';
-  const tile = (id, label) => h('div', { class: 'tile' }, h('dt', {}, label), h('dd', { id }, '–'));
+  const tile = (id, label, cls = 'tile') => h('div', { class: cls }, h('dt', {}, label), h('dd', { id }, '–'));
   const main = h('main', { class: 'mon' },
     h('h1', {}, 'nanopush monitor ', h('span', { class: 'sub', id: 'm-scene' }, '')),
     h('p', { id: 'm-conn', class: 'm-conn' }, 'connecting…'),
@@ -29,7 +31,8 @@ function build() {
       tile('m-haptic', 'Haptic link'),
       tile('m-clients', 'Clients'),
       tile('m-lease', 'Lease'),
-      tile('m-uptime', 'Uptime')),
+      tile('m-uptime', 'Uptime'),
+      tile('m-hapdev', 'Haptic device', 'tile wide')),
     h('section', { 'aria-labelledby': 'm-runs-h' },
       h('h2', { id: 'm-runs-h' }, 'Last runs'),
       h('ol', { id: 'm-runs', class: 'm-runs' }, h('li', {}, 'none yet'))));
@@ -51,6 +54,7 @@ export function statusTiles(s) {
   const health = l.overruns > 0 ? `${l.ticks} ticks, ${l.overruns} overruns` : `${l.ticks} ticks, no overruns`;
   const p99 = l.period_error_p99_bound_s;
   const hp = s.haptic ?? {};
+  const dev = deviceFaultsLine(s.haptic);
   return [
     ['m-scene', `· ${s.scene}`, ''],
     ['m-phase', s.phase + (s.busy ? ' (busy)' : ''), ''],
@@ -60,6 +64,7 @@ export function statusTiles(s) {
     ['m-clients', String(s.clients), ''],
     ['m-lease', s.lease === null ? 'free' : `client ${s.lease}`, ''],
     ['m-uptime', `${Math.floor(s.uptime_s / 60)} min ${Math.floor(s.uptime_s % 60)} s`, ''],
+    ['m-hapdev', dev.text, dev.cls],
   ];
 }
 
