@@ -44,8 +44,8 @@ pub struct AccuracyArgs {
     /// Finest tolerance of the sweep (1e-2 down to this), in [1e-10, 1e-2].
     #[arg(long, default_value_t = 1e-10)]
     min_rtol: f64,
-    /// Run the stability grid over extreme parameters instead (see `extremes` in the library),
-    /// then the campaign of whole pushes (`campaign` in the library).
+    /// Run the stability grid over extreme parameters instead (see `extremes` in nanopush-study),
+    /// then the campaign of whole pushes (`campaign` in nanopush-study).
     #[arg(long)]
     extremes: bool,
     /// With --extremes: the reduced grid (sweep end points and two corners).

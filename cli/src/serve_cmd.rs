@@ -312,7 +312,7 @@ mod tests {
     /// --data-dir records --scan-line-hz 32 --telemetry-hz 60 --haptic none
     /// --haptic-timeout-ms 5`, and that they pass the range checks.
     #[test]
-    fn serve_defaults_are_the_readmes_synopsis() {
+    fn serve_defaults_are_the_documented_synopsis() {
         let a = parse(&[]);
         assert_eq!(a.bind, IpAddr::from([127, 0, 0, 1]));
         assert_eq!(a.port, 8080);

@@ -40,8 +40,8 @@ pub struct SweepArgs {
     /// concatenated in order are the whole sweep's CSV (only shard 0 writes the header).
     #[arg(long, default_value = "0/1")]
     shard: String,
-    /// Write sweep-<param>.csv (and, unsharded, sweep-<param>.svg) into this directory; a
-    /// shard writes sweep-<param>.shard-<i>-of-<n>.csv.
+    /// Write `sweep-<param>.csv` (and, unsharded, `sweep-<param>.svg`) into this directory; a
+    /// shard writes `sweep-<param>.shard-<i>-of-<n>.csv`.
     #[arg(long)]
     out: Option<PathBuf>,
     /// Simulated push per point (s), in (0, 100]: long enough to shear and settle.

@@ -436,7 +436,7 @@ mod tests {
     /// 1 mm/s, `μ_as` at 0.999, 1 and 1.001 of the Eq 9 and Eq 16 bounds; and the 16 corners of
     /// radius (50 nm, 5 µm) × `k_c` × humidity × speed (1 nm/s, 1 mm/s).
     #[test]
-    fn the_campaign_sweeps_the_readmes_ranges_and_16_corners() {
+    fn the_campaign_sweeps_the_documented_ranges_and_16_corners() {
         use Edit::*;
         let full = cases(false);
         let mut ends: std::collections::BTreeMap<&str, (f64, f64)> = Default::default();

@@ -314,7 +314,7 @@ mod tests {
     /// 5 … 80° and stage speed 1 nm/s … 100 µm/s, plus every corner of that box: the 2⁷
     /// combinations of the ends. 7·7 + 128 = 177 cases.
     #[test]
-    fn the_grid_is_7_sweeps_of_7_over_the_readmes_ranges_and_their_2_7_corners() {
+    fn the_grid_is_7_sweeps_of_7_over_the_documented_ranges_and_their_2_7_corners() {
         let cases = grid(&Scene::default_scene(), false);
         assert_eq!(cases.len(), 7 * 7 + 128);
         type Field = (&'static str, fn(&Case) -> f64, f64, f64);

@@ -16,7 +16,7 @@
 //! between the tip and particle is y = 0").
 //!
 //! Points are independent: [`compute_point`] computes one, the caller runs them in parallel.
-//! [`shard_range`] splits the global index range into contiguous blocks for batch schedulers.
+//! [`Shard::range`] splits the global index range into contiguous blocks for batch schedulers.
 //!
 //! ```
 //! use nanopush_study::sweep::{Param, grid};

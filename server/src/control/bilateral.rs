@@ -333,8 +333,8 @@ impl Bilateral {
     }
 
     /// One control tick: the engage button, a push taking z or giving it back, the link's
-    /// loss, then the phase's step ([`Bilateral::step_phase`]), the force's gain
-    /// ([`Bilateral::gain_and_flags`]), and the force and local model sent to the hand.
+    /// loss, then the phase's step (`step_phase`), the force's gain (`gain_and_flags`), and the
+    /// force and local model sent to the hand.
     pub fn tick(&mut self, input: &Input) -> Output {
         let p = self.params;
         let was = self.phase;

@@ -671,7 +671,7 @@ fn gold_14nm_detects_its_substrate_3_0_nm_high_and_meets_the_particle_at_31_deg(
 /// approach at 1 µm/s, steps of Δ = 0.1 µm with a 5 ms dwell, ζ_set = −1.5 V, a run-up of 4.25 µm,
 /// phases timed out after 120 s; hold 50 ms, back off 100 nm; a 128-pixel local scan.
 #[test]
-fn the_strategy_defaults_are_the_readmes() {
+fn the_strategy_defaults_are_the_documented_ones() {
     let f = crate::scene::file::StrategyFile::default();
     assert_eq!(
         (f.approach_speed_um_per_s, f.step_um, f.dwell_ms, f.set_point_v),

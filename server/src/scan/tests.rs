@@ -190,7 +190,7 @@ struct Row {
 /// half-height width; the 64-pixel row too. Then the `H/2` cross-check: 7 % off for the 0.5 µm
 /// particles at 128 pixels, 0.03-0.2 % at 256.
 #[test]
-fn shipped_particles_are_localized_as_the_readme_says() {
+fn shipped_particles_are_localized_as_the_docs_say() {
     let f = Figure;
     let rows = [
         Row {

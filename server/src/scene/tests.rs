@@ -355,7 +355,7 @@ fn a_particle_below_the_scan_noise_is_refused() {
 /// radius pushed at 2 µm/s; gold-14nm a 14 nm (diameter) colloid under a 10 nm tip, electrostatics
 /// on, 10 nm search steps and a −0.8 V set point; minimal β = 45°, van der Waals only, dry.
 #[test]
-fn the_shipped_scenes_are_what_the_readmes_table_says() {
+fn the_shipped_scenes_are_what_the_docs_table_says() {
     let load = |name: &str| {
         Scene::from_path(
             &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))

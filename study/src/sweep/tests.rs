@@ -243,7 +243,7 @@ fn fig13_y_and_zeta_z_grow_with_the_radius() {
 /// digits): `y` and `ζ_z` at α = 0°, 15°, 18° and past the pole at 19.5°; `y` at μ_as^s = 0.1 and
 /// 0.7; `y` at Rₐ = 100 nm and 3 µm.
 #[test]
-fn the_readmes_eq18_figures() {
+fn the_documented_eq18_figures() {
     let nm = |v: f64| v * 1e9;
     let near = |got: f64, want: f64, tol: f64| (got - want).abs() <= tol;
     for (alpha, y, zeta_z, tol_y, tol_z) in [

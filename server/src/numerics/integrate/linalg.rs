@@ -4,9 +4,12 @@
 //! dispatched once to the compile-time one. It replaced a hand-written LU: on the shipped scenes'
 //! iteration matrices a Rodas4 step's factor + 6 solves takes 431 ns against 866 ns (n = 7,
 //! paper-default) and 1.38 µs against 1.39 µs (n = 12); factor + 1 solve is 217 ns against 198 ns
-//! (`benches/lu.rs`, one run on 2026-11-26, docs/own-or-crate.md). The two pick the same pivots
-//! and do the same operations in the same order: the solutions are the same bit for bit (the
-//! bench checks it on every shipped scene).
+//! (`benches/lu.rs`, one run on 2026-11-26, docs/own-or-crate.md). For finite matrices the two
+//! pick the same pivots and do the same operations in the same order: the solutions are the same
+//! bit for bit (the bench checks it on every shipped scene). A matrix holding a NaN can differ:
+//! the old LU skipped zero multipliers and could call it regular and solve to NaN, where
+//! nalgebra's LU carries the NaN to a pivot and [`Lu::factor`] reports it singular; either way the
+//! integrator's step is rejected.
 
 use nalgebra::linalg::LU;
 use nalgebra::{Const, SMatrix, SVectorViewMut};

@@ -32,7 +32,7 @@ fn hamaker_energy_kernel(x: f64) -> f64 {
 /// `C = h + r₊`, `r₊ = Rₜ + Rₐ`, `r₋ = Rₜ − Rₐ`.
 ///
 /// Written as `W = −H/6 · k(x)` with `x = 4RₐRₜ/(C²−r₋²)` and `k` from
-/// [`hamaker_energy_kernel`], which is the same expression without cancellation.
+/// `hamaker_energy_kernel`, which is the same expression without cancellation.
 /// `h` is taken as `max(h, a0)` (docs/errata.md item 3).
 pub fn sphere_sphere_energy(hamaker: f64, r_t: f64, r_a: f64, h: f64, a0: f64) -> f64 {
     let h = h.max(a0);
@@ -68,7 +68,7 @@ pub fn sphere_sphere_force<T: Real>(hamaker: f64, r_t: f64, r_a: f64, h: T, a0: 
 
 /// Sphere-plane van der Waals energy (J), the closed form behind Eq 2:
 /// `W(h) = −H/6 [Rₐ/h + Rₐ/(h+2Rₐ) + ln(h/(h+2Rₐ))]`, evaluated without cancellation as
-/// `−H/6 · k(2Rₐ/(h+2Rₐ))` ([`hamaker_energy_kernel`]). `h` is clamped to `a0`.
+/// `−H/6 · k(2Rₐ/(h+2Rₐ))` (`hamaker_energy_kernel`). `h` is clamped to `a0`.
 pub fn sphere_plane_energy(hamaker: f64, r_a: f64, h: f64, a0: f64) -> f64 {
     let h = h.max(a0);
     -hamaker / 6.0 * hamaker_energy_kernel(2.0 * r_a / (h + 2.0 * r_a))

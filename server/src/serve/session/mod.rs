@@ -1,6 +1,6 @@
-//! One WebSocket connection: a receive loop ([`receive`]: rate limit, size limit, one command
-//! per message, handled in [`commands`] under the roles and the [`lease`]) and a send loop
-//! ([`send`]: replies with back-pressure, events, telemetry and scan lines, keep-alive, the
+//! One WebSocket connection: a receive loop (`receive.rs`: rate limit, size limit, one command
+//! per message, handled in `commands.rs` under the roles and the lease, `lease.rs`) and a send
+//! loop (`send.rs`: replies with back-pressure, events, telemetry and scan lines, keep-alive, the
 //! per-frame send budget). Both are generic over `Sink`/`Stream`, so a session runs over plain
 //! channels in the tests.
 

@@ -170,7 +170,7 @@ async fn a_shutdown_is_announced_and_the_socket_closed() {
 /// SCHED_FIFO priority 50 for the loop. (The 8 places are also tested end to end:
 /// `tests/e2e/serve_hostile.rs::the_operator_token_has_8_places_and_a_ninth_is_refused`.)
 #[test]
-fn the_readmes_server_limits_8_places_60_s_idle_5_s_send_30_s_replies_8_mib_fifo_50() {
+fn the_documented_server_limits_8_places_60_s_idle_5_s_send_30_s_replies_8_mib_fifo_50() {
     assert_eq!(OPERATOR_PLACES, 8);
     assert_eq!(crate::serve::IDLE_HTTP, Duration::from_secs(60));
     assert_eq!(SEND_BUDGET, Duration::from_secs(5));

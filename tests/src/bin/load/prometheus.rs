@@ -62,7 +62,7 @@ fn label(labels: &str, key: &str) -> Option<String> {
 }
 
 /// A histogram over the window: counts per bucket (not cumulative), with the buckets' upper
-/// bounds; bucket i holds values in (bounds[i-1], bounds[i]].
+/// bounds; bucket `i` holds values in `(bounds[i-1], bounds[i]]`.
 #[derive(Debug, Default)]
 pub struct Window {
     bounds: Vec<f64>,
