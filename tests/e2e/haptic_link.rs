@@ -95,10 +95,15 @@ fn serve_with(b: &Bench, mode: &str, log: &str, extra: &[&str]) -> (Proc, String
 
 /// `nanopush-haptic --device sim` with `args`; its stderr lines are collected.
 fn bridge(b: &Bench, args: &[&str]) -> (Proc, Arc<Mutex<Vec<String>>>) {
+    bridge_on(b, "sim", args)
+}
+
+/// `nanopush-haptic --device DEVICE` with `args`; its stderr lines are collected.
+fn bridge_on(b: &Bench, device: &str, args: &[&str]) -> (Proc, Arc<Mutex<Vec<String>>>) {
     let mut child = Command::new(bin("nanopush-haptic"))
         .current_dir(workspace())
         .env("NANOPUSH_HAPTIC_NAMESPACE", &b.namespace)
-        .args(["--device", "sim"])
+        .args(["--device", device])
         .args(args)
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
@@ -510,4 +515,66 @@ fn haptic_commands_are_refused_with_the_reason() {
         assert_eq!(r["code"], "malformed");
         assert!(r["message"].as_str().unwrap().contains("wobble"), "{r}");
     });
+}
+
+/// Issue 28, done when: the reference sketch's settings (1 Mbaud, 1 kHz declared) render a felt
+/// press through the real server, and an unplug and re-plug in the middle of the press is
+/// logged (the bridge names the cable, the server the link), survived (the same bridge, no
+/// restart) and resumed (the link comes back, z-control engages again and the hand feels the
+/// press again); the counters are in /api/status, where the page's haptic panel reads them.
+#[test]
+fn a_serial_board_at_the_sketchs_settings_renders_a_press_and_survives_an_unplug() {
+    use nanopush_haptic::operator::Script;
+    use nanopush_haptic::serial::fake::FakeBoard;
+    let _one = one_at_a_time();
+    let b = Bench::new("serial");
+    let (_srv, addr) = serve_with(&b, "external", "server.log", &["--haptic-timeout-ms", "100"]);
+    let script = b.dir.join("press-and-stay.csv");
+    std::fs::write(&script, "t_s,handle_m\n0,0\n3,-0.0125\n60,-0.0125\n").unwrap();
+    let press = || Script::parse(&format!("file:{}", script.display())).unwrap();
+    let link = b.dir.join("by-id-hapkit");
+    let board = FakeBoard::plug_in(Some(&link), press()).expect("a fake board");
+    let device = format!("serial:{}", link.display());
+    let (mut br, lines) = bridge_on(&b, &device, &["--duration", "60", "--server-timeout-ms", "100"]);
+    let s = wait_status(&addr, 10.0, "link up", |s| s["haptic"]["link"] == "up");
+    assert_eq!(s["haptic"]["device"], "serial");
+    assert_eq!(
+        s["haptic"]["rate_hz"], 1000.0,
+        "the sketch's 1 Mbaud carries 1 kHz: {s}"
+    );
+    let pid = s["haptic"]["pid"].clone();
+    assert_eq!(haptic(&addr, "engage")["type"], "ok");
+    wait_status(&addr, 20.0, "engaged", |s| s["haptic"]["phase"] == "engaged");
+    board.engage();
+    wait_status(&addr, 10.0, "a felt press", |s| {
+        s["haptic"]["force_n"].as_f64().is_some_and(|f| f > 0.3)
+    });
+    // The cable is pulled in the middle of the press.
+    board.unplug();
+    wait_line(&lines, 5.0, "cable: the serial device was lost");
+    wait_status(&addr, 5.0, "link down", |s| s["haptic"]["link"] == "down");
+    std::thread::sleep(Duration::from_millis(300));
+    let board = FakeBoard::plug_in(Some(&link), press()).expect("plugged in again");
+    wait_line(&lines, 10.0, "cable: the device is back");
+    wait_status(&addr, 10.0, "link up again", |s| s["haptic"]["link"] == "up");
+    wait_status(&addr, 20.0, "engaged again", |s| s["haptic"]["phase"] == "engaged");
+    board.engage();
+    let s = wait_status(&addr, 10.0, "the press felt again", |s| {
+        s["haptic"]["force_n"].as_f64().is_some_and(|f| f > 0.3)
+    });
+    assert_eq!(s["haptic"]["pid"], pid, "the same bridge: no restart");
+    let faults = &s["haptic"]["device_faults"];
+    assert_eq!(
+        (faults["losses"].as_u64(), faults["reopens"].as_u64()),
+        (Some(1), Some(1)),
+        "{s}"
+    );
+    assert_eq!(faults["side"]["losses"], "cable", "{s}");
+    let log = std::fs::read_to_string(b.dir.join("server.log")).unwrap();
+    assert!(log.contains("haptic link down"), "{log}");
+    nanopush_e2e::sigterm(&br.0);
+    assert!(
+        wait_exit(&mut br.0, 5.0).success(),
+        "the bridge exits 0: the device is back"
+    );
 }

@@ -108,6 +108,7 @@
 pub mod conformance;
 mod decoder;
 mod device;
+pub mod fake;
 #[cfg(test)]
 mod fixtures;
 mod port;
