@@ -11,7 +11,9 @@
 //! - the passivity controller removes energy the loop generates;
 //! - the force is clamped to the device's limit last ([`clamp_force`]), whatever the server sent.
 
-use nanopush_proto::haptic::{DeviceFaults, FORCE_ENGAGED, ForceFeedback, HapticState, STALE_NS, STATE_SERVER_SILENT};
+use nanopush_proto::haptic::{
+    DeviceFaults, FORCE_ENGAGED, ForceFeedback, HapticState, STALE_NS, STATE_DEVICE_LOST, STATE_SERVER_SILENT,
+};
 
 use crate::device::{Device, DeviceError, DeviceSample, DeviceSpec, LinkView, clamp_force};
 use crate::passivity::{Passivity, PassivityOutput};
@@ -51,10 +53,14 @@ impl Default for BridgeConfig {
     }
 }
 
-/// A pause of the bridge longer than this many periods (a stopped process, a long stall) ends
-/// with the force ramped in from zero over [`RESUME_RAMP_S`]: the device never gets the force
-/// from before the pause at once.
+/// A gap between two force writes longer than this many periods, and at least
+/// [`RESUME_AFTER_MIN_NS`] (a stopped process, a long stall: by then a serial device's 10 ms
+/// watchdog may have zeroed its force), ends with the force ramped in from zero over
+/// [`RESUME_RAMP_S`]: the device never gets the force from before the pause at once. One late
+/// answer (up to the 2 ms answer wait, rounded up to the next ms) is not a pause.
 pub const RESUME_AFTER_PERIODS: u64 = 3;
+/// The least gap between two force writes that counts as a pause (ns).
+pub const RESUME_AFTER_MIN_NS: u64 = 5_000_000;
 /// How long the force takes to ramp in after a pause or a new device (s).
 pub const RESUME_RAMP_S: f64 = 0.02;
 /// Samples whose send times are kept for the latency measurement.
@@ -117,8 +123,14 @@ pub struct Bridge<D: Device> {
     x_prev: Option<f64>,
     /// The environment model in force over the interval that is running.
     ref_prev: Option<ForceFeedback>,
-    /// When the previous cycle ran (monotonic ns), to see the bridge's own pauses.
-    last_cycle_ns: Option<u64>,
+    /// When the previous force was written (monotonic ns), to see the bridge's own pauses.
+    last_write_ns: Option<u64>,
+    /// The device's watchdog trips counted so far (a new one ramps the force in again).
+    trips_seen: u64,
+    /// Why the newest sample was dropped (a device error), for the log.
+    last_error: Option<String>,
+    /// The previous read took at least a period: a late cycle after it is the device's doing.
+    read_was_slow: bool,
     /// The force's gain while it ramps in after a pause or a new device, 0 → 1.
     resume_gain: f64,
     /// The bridge's own faults, and the device counters of devices it has let go.
@@ -149,7 +161,10 @@ impl<D: Device> Bridge<D> {
             pid: std::process::id(),
             x_prev: None,
             ref_prev: None,
-            last_cycle_ns: None,
+            last_write_ns: None,
+            trips_seen: 0,
+            last_error: None,
+            read_was_slow: false,
             resume_gain: 1.0,
             faults: DeviceFaults::default(),
             lost: None,
@@ -162,9 +177,18 @@ impl<D: Device> Bridge<D> {
         sum(self.faults, self.device.faults())
     }
 
-    /// A device cycle started more than a period late.
+    /// A device cycle started more than a period late. When the previous read itself took a
+    /// period or more (the device answered late or slowly), the lateness is the device's, counted
+    /// there, not the bridge's.
     pub fn count_overrun(&mut self) {
-        self.faults.overruns += 1;
+        if !self.read_was_slow {
+            self.faults.overruns += 1;
+        }
+    }
+
+    /// Why the newest device sample was dropped (the device's error), if it was.
+    pub fn last_error(&self) -> Option<&str> {
+        self.last_error.as_deref()
     }
 
     /// Why the device was lost, while it is (a cable fault: hang-up, I/O error, vanished path).
@@ -183,7 +207,8 @@ impl<D: Device> Bridge<D> {
         self.pc.enabled = self.cfg.passivity;
         self.start_passivity_anew();
         self.lost = None;
-        self.last_cycle_ns = None;
+        self.last_write_ns = None;
+        self.trips_seen = 0;
         self.resume_gain = 0.0;
     }
 
@@ -208,14 +233,23 @@ impl<D: Device> Bridge<D> {
         s.position.is_finite() && s.velocity.is_finite() && s.position >= lo - margin && s.position <= hi + margin
     }
 
-    /// One device cycle at monotonic time `now_ns`: read the handle, take the server's newest
+    /// One device cycle at monotonic time `now_ns`, with no time passing in it (tests, the
+    /// simulated device): [`Bridge::cycle_timed`] on a clock that stands still.
+    pub fn cycle(&mut self, now_ns: u64, link: &mut impl Link) -> CycleRow {
+        self.cycle_timed(now_ns, || now_ns, link)
+    }
+
+    /// One device cycle started at monotonic time `start_ns`: read the handle, then, at `clock()`
+    /// after the read (a serial device's read waits for its answer), take the server's newest
     /// force, judge the server, render (local model, passivity, clamp), write the force, and
     /// publish the handle's state. Allocation-free: it runs in the device loop.
-    pub fn cycle(&mut self, now_ns: u64, link: &mut impl Link) -> CycleRow {
+    pub fn cycle_timed(&mut self, start_ns: u64, clock: impl Fn() -> u64, link: &mut impl Link) -> CycleRow {
         let dt = 1.0 / self.cfg.rate_hz;
+        let sample = self.read_sample(dt);
+        let now_ns = clock().max(start_ns);
+        self.read_was_slow = now_ns - start_ns >= (dt * 1e9) as u64;
         let t = now_ns.saturating_sub(self.start_ns) as f64 * 1e-9;
         self.ramp_after_pause(now_ns, dt);
-        let sample = self.read_sample(dt);
         self.take_newest(now_ns, link);
         let live = self.judge_server(now_ns);
         let mut row = CycleRow {
@@ -265,27 +299,41 @@ impl<D: Device> Bridge<D> {
                 self.dropped += 1;
                 None
             }
-            _ => {
+            Err(e) => {
+                self.last_error = Some(e.to_string());
+                self.dropped += 1;
+                None
+            }
+            Ok(s) => {
+                self.last_error = Some(format!(
+                    "a sample outside the travel or not finite: position {} m, velocity {} m/s",
+                    s.position, s.velocity
+                ));
                 self.dropped += 1;
                 None
             }
         }
     }
 
-    /// After a pause of the bridge (more than [`RESUME_AFTER_PERIODS`] periods since the previous
-    /// cycle) and after a new device, the force ramps in from zero over [`RESUME_RAMP_S`];
+    /// After a pause of the bridge (a gap between two force writes over [`RESUME_AFTER_PERIODS`]
+    /// periods and [`RESUME_AFTER_MIN_NS`]), after the device says its watchdog zeroed the
+    /// force, and after a new device, the force ramps in from zero over [`RESUME_RAMP_S`];
     /// otherwise the ramp goes on (at the start there is no force from before to hold: gain 1).
     fn ramp_after_pause(&mut self, now_ns: u64, dt: f64) {
-        let period_ns = (dt * 1e9) as u64;
-        if self
-            .last_cycle_ns
-            .is_some_and(|prev| now_ns.saturating_sub(prev) > RESUME_AFTER_PERIODS * period_ns)
-        {
+        let pause_ns = (RESUME_AFTER_PERIODS * (dt * 1e9) as u64).max(RESUME_AFTER_MIN_NS);
+        let paused = self
+            .last_write_ns
+            .is_some_and(|prev| now_ns.saturating_sub(prev) > pause_ns);
+        // The device's watchdog zeroed its force (it heard nothing valid for 10 ms): from zero.
+        let trips = self.device.faults().watchdog_trips;
+        let tripped = trips > self.trips_seen;
+        self.trips_seen = trips;
+        if paused || tripped {
             self.resume_gain = 0.0;
         } else {
             self.resume_gain = (self.resume_gain + dt / RESUME_RAMP_S).min(1.0);
         }
-        self.last_cycle_ns = Some(now_ns);
+        self.last_write_ns = Some(now_ns);
     }
 
     /// Takes the server's newest force sample, if one arrived, and with it the end-to-end
@@ -411,6 +459,38 @@ impl<D: Device> Bridge<D> {
         self.seq += 1;
     }
 
+    /// Publishes a state that carries no handle sample, only the faults and the rate, flagged
+    /// [`STATE_DEVICE_LOST`]: while the device is lost, the server still sees the counters.
+    pub fn publish_lost(&mut self, now_ns: u64, link: &mut impl Link) {
+        let state = HapticState {
+            seq: self.seq,
+            time_ns: now_ns,
+            position: f64::NAN,
+            velocity: f64::NAN,
+            max_force: self.spec.max_force,
+            pid: self.pid,
+            flags: STATE_DEVICE_LOST | if self.link_up { 0 } else { STATE_SERVER_SILENT },
+            device: self.cfg.device_code,
+            rate_hz: self.cfg.rate_hz,
+            faults: self.faults(),
+            dropped: self.dropped,
+            ..HapticState::default()
+        };
+        link.publish(&state);
+        self.seq += 1;
+    }
+
+    /// The device cycle's rate (Hz).
+    pub fn rate_hz(&self) -> f64 {
+        self.cfg.rate_hz
+    }
+
+    /// Runs at `rate_hz` from now on (a reopened device that carries a different rate); the
+    /// server's silence is judged within `stale_ns` as before.
+    pub fn set_rate(&mut self, rate_hz: f64) {
+        self.cfg.rate_hz = rate_hz;
+    }
+
     /// Zeroes the force and lets the device go.
     pub fn close(&mut self) {
         let _ = self.device.close();
@@ -468,6 +548,83 @@ mod tests {
             assert_eq!(b.pc.v_min, 1e-4);
             assert!(b.pc.enabled);
         }
+    }
+
+    /// A device whose answers take as long as its test says, and whose watchdog trips on demand.
+    struct Slow {
+        sim: SimDevice,
+        trips: u64,
+    }
+
+    impl Device for Slow {
+        fn spec(&self) -> DeviceSpec {
+            self.sim.spec()
+        }
+        fn read(&mut self, dt: f64) -> Result<DeviceSample, DeviceError> {
+            self.sim.read(dt)
+        }
+        fn write_force(&mut self, force: f64) -> Result<(), DeviceError> {
+            self.sim.write_force(force)
+        }
+        fn faults(&self) -> DeviceFaults {
+            DeviceFaults {
+                watchdog_trips: self.trips,
+                ..DeviceFaults::default()
+            }
+        }
+    }
+
+    /// Review of issue 28: a read that waited 2 ms for a late answer made the server's newest
+    /// sample, published meanwhile, look stamped in the future: the force was zeroed and the
+    /// server blamed. The server is judged after the read now.
+    #[test]
+    fn a_late_answer_neither_zeroes_the_force_nor_blames_the_server() {
+        let sim = SimDevice::new(Script::Hold, 1e-3);
+        let mut b = Bridge::new(Slow { sim, trips: 0 }, BridgeConfig::default(), 0);
+        let mut link = Loop::default();
+        let ms = 1_000_000;
+        link.next = Some(live(0.5, ms));
+        assert_eq!(b.cycle(ms, &mut link).force, 0.5);
+        // The next cycle starts at 2 ms; its read returns at 4.2 ms; the server's sample of 4 ms
+        // arrived during the read.
+        link.next = Some(live(0.5, 4 * ms));
+        let row = b.cycle_timed(2 * ms, || 4 * ms + 200_000, &mut link);
+        assert!(row.link, "the server is heard");
+        assert_eq!(row.force, 0.5, "no zero, no ramp: a late answer is not a pause");
+        // At 2 kHz a late answer is a 3.2 ms gap between writes: still not a pause.
+        let mut b = Bridge::new(
+            SimDevice::new(Script::Hold, 5e-4),
+            BridgeConfig {
+                rate_hz: 2000.0,
+                ..BridgeConfig::default()
+            },
+            0,
+        );
+        link.next = Some(live(0.5, ms));
+        b.cycle(ms, &mut link);
+        link.next = Some(live(0.5, 4 * ms));
+        assert_eq!(b.cycle_timed(ms + 500_000, || 4 * ms + 200_000, &mut link).force, 0.5);
+    }
+
+    /// Review of issue 28: after the device's watchdog zeroed its force (it heard nothing valid
+    /// for 10 ms while the bridge ran on), the force came back as a step. It ramps in now.
+    #[test]
+    fn after_the_devices_watchdog_tripped_the_force_ramps_in() {
+        let sim = SimDevice::new(Script::Hold, 1e-3);
+        let mut b = Bridge::new(Slow { sim, trips: 0 }, BridgeConfig::default(), 0);
+        let mut link = Loop::default();
+        let ms = 1_000_000;
+        let mut t = ms;
+        link.next = Some(live(0.5, t));
+        assert_eq!(b.cycle(t, &mut link).force, 0.5);
+        b.device.trips = 1;
+        t += ms;
+        link.next = Some(live(0.5, t));
+        assert_eq!(b.cycle(t, &mut link).force, 0.0, "from zero after the trip");
+        t += ms;
+        link.next = Some(live(0.5, t));
+        let f = b.cycle(t, &mut link).force;
+        assert!(f > 0.0 && f < 0.05, "ramping: {f}");
     }
 
     /// Issue 28, "a stale force after a host pause": after the bridge was stopped for 50 ms, its

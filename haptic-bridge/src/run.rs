@@ -136,6 +136,16 @@ fn trace_writer(
 }
 
 fn open_device(kind: &DeviceKind, operator: &str, period: f64) -> Result<(Box<dyn Device>, u32), DeviceError> {
+    open_device_within(kind, operator, period, Duration::from_secs(3))
+}
+
+/// [`open_device`], a serial device given at most `open_timeout` to answer its hello.
+fn open_device_within(
+    kind: &DeviceKind,
+    operator: &str,
+    period: f64,
+    open_timeout: Duration,
+) -> Result<(Box<dyn Device>, u32), DeviceError> {
     match kind {
         DeviceKind::Sim => {
             let script = Script::parse(operator).map_err(|e| DeviceError::BadSpec {
@@ -145,7 +155,7 @@ fn open_device(kind: &DeviceKind, operator: &str, period: f64) -> Result<(Box<dy
             Ok((Box::new(SimDevice::new(script, period)), DEVICE_SIM))
         }
         DeviceKind::Serial(path) => {
-            let dev = SerialDevice::open(path)?;
+            let dev = SerialDevice::open_within(path, open_timeout)?;
             Ok((Box::new(dev), DEVICE_SERIAL))
         }
         DeviceKind::None => Err(DeviceError::BadSpec {
@@ -242,7 +252,12 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
         }
     });
     let step_ns = (period * 1e9).round() as u64;
-    let reopen = || open_device(&kind, &a.operator, period).map(|(d, _)| d);
+    let reopen = Reopen {
+        label: a.device.clone(),
+        open: || open_device_within(&kind, &a.operator, period, REOPEN_OPEN_TIMEOUT).map(|(d, _)| d),
+        negotiate: |d: &dyn Device| negotiate_rate(d, serial_arg, a.rate_hz),
+        enabled: !a.exit_on_device_loss,
+    };
     let tally = device_loop(
         &mut bridge,
         &mut link,
@@ -250,7 +265,7 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
         &log,
         trace.as_ref().map(|(tx, _)| tx),
         over,
-        (!a.exit_on_device_loss).then_some(reopen),
+        reopen,
     );
     bridge.close();
     drop(link);
@@ -349,15 +364,19 @@ struct Tally {
 /// server) and each row offered to `trace` (dropped and counted when it is full). A lost device
 /// (a cable fault) is reopened with `reopen`, backing off, while nothing is published (the
 /// server sees the link down); without `reopen` the loop ends there.
-fn device_loop(
+fn device_loop<O, N>(
     bridge: &mut Bridge<Box<dyn Device>>,
     link: &mut IpcLink,
-    step_ns: u64,
+    mut step_ns: u64,
     log: &mpsc::SyncSender<String>,
     trace: Option<&mpsc::SyncSender<CycleRow>>,
     over: impl Fn() -> bool,
-    mut reopen: Option<impl FnMut() -> Result<Box<dyn Device>, DeviceError>>,
-) -> Tally {
+    mut reopen: Reopen<O, N>,
+) -> Tally
+where
+    O: FnMut() -> Result<Box<dyn Device>, DeviceError>,
+    N: Fn(&dyn Device) -> Result<(f64, Option<String>), String>,
+{
     let sleeper = spin_sleep::SpinSleeper::default();
     let mut deadline = monotonic_ns();
     let mut tally = Tally::default();
@@ -368,7 +387,7 @@ fn device_loop(
         if wait_for(&sleeper, &mut deadline, step_ns, &mut tally.overruns) {
             bridge.count_overrun();
         }
-        let row = bridge.cycle(monotonic_ns(), link);
+        let row = bridge.cycle_timed(monotonic_ns(), monotonic_ns, link);
         tally.cycles += 1;
         tally.max_force_seen = tally.max_force_seen.max(row.force.abs());
         if row.latency_ns != last_latency && row.latency_ns != 0 {
@@ -384,19 +403,18 @@ fn device_loop(
         {
             tally.dropped_rows += 1;
         }
-        watch.every_second(monotonic_ns(), bridge.faults(), log);
+        watch.every_second(monotonic_ns(), bridge.faults(), bridge.last_error(), log);
         if let Some(why) = bridge.lost().map(str::to_string) {
-            let device = bridge.spec().name;
             let _ = log.try_send(format!(
-                "nanopush-haptic: cable: the {device} device was lost ({why}): force zeroed{}",
-                if reopen.is_some() {
+                "nanopush-haptic: cable: {} was lost ({why}): force zeroed{}",
+                reopen.label,
+                if reopen.enabled {
                     "; reopening it by its path"
                 } else {
                     ""
                 }
             ));
-            let Some(open) = reopen.as_mut() else { break };
-            if !reopen_device(bridge, open, log, &over) {
+            if !reopen.enabled || !reopen_device(bridge, link, &mut reopen, &mut step_ns, log, &over) {
                 break;
             }
             deadline = monotonic_ns();
@@ -410,42 +428,84 @@ fn device_loop(
     tally
 }
 
+/// How a lost device is opened again: its name for the log, the opening, the rate negotiation,
+/// and whether to try at all (not with `--exit-on-device-loss`).
+struct Reopen<O, N> {
+    label: String,
+    open: O,
+    negotiate: N,
+    enabled: bool,
+}
+
+/// How long one reopening attempt waits for the device's hello answer: short, so a signal ends
+/// the back-off promptly.
+const REOPEN_OPEN_TIMEOUT: Duration = Duration::from_millis(500);
+
 /// The first wait between attempts to reopen a lost device; it doubles up to [`REOPEN_MAX`].
 pub const REOPEN_FIRST: Duration = Duration::from_millis(100);
 /// The longest wait between attempts to reopen a lost device.
 pub const REOPEN_MAX: Duration = Duration::from_secs(2);
 
 /// Reopens the lost device with back-off until it answers (true) or the run ends (false).
-fn reopen_device(
+/// Meanwhile a state without a handle sample, flagged lost, goes out every 10 ms, so the server
+/// shows the loss while it lasts. A device that answers but cannot be used (another version,
+/// implausible limits, too slow) is the device's fault, not the cable's, and is said so; one that
+/// carries another rate changes the cycle's rate, said so.
+fn reopen_device<O, N>(
     bridge: &mut Bridge<Box<dyn Device>>,
-    open: &mut impl FnMut() -> Result<Box<dyn Device>, DeviceError>,
+    link: &mut IpcLink,
+    reopen: &mut Reopen<O, N>,
+    step_ns: &mut u64,
     log: &mpsc::SyncSender<String>,
     over: &impl Fn() -> bool,
-) -> bool {
+) -> bool
+where
+    O: FnMut() -> Result<Box<dyn Device>, DeviceError>,
+    N: Fn(&dyn Device) -> Result<(f64, Option<String>), String>,
+{
     let lost_at = Instant::now();
     let mut wait = REOPEN_FIRST;
     let mut said = None::<String>;
+    let mut say_once = |why: String| {
+        if said.as_deref() != Some(&why) {
+            let _ = log.try_send(why.clone());
+            said = Some(why);
+        }
+    };
     while !STOP.load(Ordering::SeqCst) && !over() {
-        match open() {
-            Ok(device) => {
-                bridge.replace_device(device);
-                let _ = log.try_send(format!(
-                    "nanopush-haptic: cable: the device is back after {:.1} s; the force ramps in",
-                    lost_at.elapsed().as_secs_f64()
-                ));
-                return true;
-            }
-            Err(e) => {
-                let why = e.to_string();
-                if said.as_deref() != Some(&why) {
-                    let _ = log.try_send(format!("nanopush-haptic: cable: reopening failed: {why}; trying again"));
-                    said = Some(why);
+        bridge.publish_lost(monotonic_ns(), link);
+        match (reopen.open)() {
+            Ok(device) => match (reopen.negotiate)(&*device) {
+                Ok((rate_hz, why)) => {
+                    if rate_hz != bridge.rate_hz() {
+                        bridge.set_rate(rate_hz);
+                        *step_ns = (1e9 / rate_hz).round() as u64;
+                        let _ = log.try_send(format!(
+                            "nanopush-haptic: device: the reopened device runs at {rate_hz} Hz{}",
+                            why.map(|w| format!(" ({w})")).unwrap_or_default()
+                        ));
+                    }
+                    bridge.replace_device(device);
+                    let _ = log.try_send(format!(
+                        "nanopush-haptic: cable: {} is back after {:.1} s; the force ramps in",
+                        reopen.label,
+                        lost_at.elapsed().as_secs_f64()
+                    ));
+                    return true;
                 }
+                Err(why) => say_once(format!(
+                    "nanopush-haptic: device: the reopened device cannot be used: {why}; trying again"
+                )),
+            },
+            Err(e @ DeviceError::Protocol { .. }) => {
+                say_once(format!("nanopush-haptic: device: reopening failed: {e}; trying again"))
             }
+            Err(e) => say_once(format!("nanopush-haptic: cable: reopening failed: {e}; trying again")),
         }
         let until = Instant::now() + wait;
         while Instant::now() < until && !STOP.load(Ordering::SeqCst) && !over() {
             std::thread::sleep(Duration::from_millis(10));
+            bridge.publish_lost(monotonic_ns(), link);
         }
         wait = (wait * 2).min(REOPEN_MAX);
     }
@@ -466,7 +526,7 @@ impl FaultWatch {
         }
     }
 
-    fn every_second(&mut self, now_ns: u64, f: DeviceFaults, log: &mpsc::SyncSender<String>) {
+    fn every_second(&mut self, now_ns: u64, f: DeviceFaults, why: Option<&str>, log: &mpsc::SyncSender<String>) {
         if now_ns < self.next_ns {
             return;
         }
@@ -485,16 +545,22 @@ impl FaultWatch {
             .map(|(n, what)| format!("{n} {what}"))
             .collect();
         if !said.is_empty() {
+            let reason = why.map(|w| format!("; the latest: {w}")).unwrap_or_default();
             let _ = log.try_send(format!(
-                "nanopush-haptic: device fault: {} in the last second",
+                "nanopush-haptic: device fault: {} in the last second{reason}",
                 said.join(", ")
             ));
         }
         let trips = d(f.watchdog_trips, l.watchdog_trips);
         let overruns = d(f.overruns, l.overruns);
-        if trips + overruns > 0 {
+        if overruns > 0 {
             let _ = log.try_send(format!(
-                "nanopush-haptic: bridge fault: {overruns} late cycles, {trips} device watchdog trips (the bridge was silent for {} ms) in the last second",
+                "nanopush-haptic: bridge fault: {overruns} late cycles in the last second"
+            ));
+        }
+        if trips > 0 {
+            let _ = log.try_send(format!(
+                "nanopush-haptic: bridge fault: the device's watchdog zeroed its force {trips} times in the last second (it heard no valid packet for {} ms: the bridge stalled or packets were lost on the line); the force ramps in again",
                 nanopush_haptic::serial::DEVICE_SILENCE_MS
             ));
         }

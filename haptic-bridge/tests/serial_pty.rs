@@ -855,9 +855,15 @@ fn an_unplugged_cable_is_reported_reopened_by_its_path_and_counted() {
         "the bridge came back on the re-plugged device: {err}"
     );
     assert_eq!(code, 0, "{err}");
-    assert!(err.contains("cable: the serial device was lost"), "{err}");
+    assert!(
+        err.contains(&format!("cable: serial:{} was lost", link.display())),
+        "{err}"
+    );
     assert!(err.contains("reopening it by its path"), "{err}");
-    assert!(err.contains("cable: the device is back after"), "{err}");
+    assert!(
+        err.contains(&format!("cable: serial:{} is back after", link.display())),
+        "{err}"
+    );
     let summary: serde_json::Value = serde_json::from_str(&out).expect(&out);
     assert_eq!(summary["device_faults"]["losses"], 1, "{summary}");
     assert_eq!(summary["device_faults"]["reopens"], 1, "{summary}");

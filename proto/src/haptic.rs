@@ -34,6 +34,10 @@ pub const BUTTON_CLUTCH: u32 = 2;
 
 /// [`HapticState::flags`]: the bridge hears no server and renders zero force.
 pub const STATE_SERVER_SILENT: u32 = 1;
+/// [`HapticState::flags`]: the bridge has lost its device (an unplugged cable) and is reopening
+/// it: the state carries no handle sample, only [`HapticState::faults`] and the rate, so that
+/// the server shows the loss while it lasts.
+pub const STATE_DEVICE_LOST: u32 = 2;
 
 /// [`ForceFeedback::flags`]: haptic z-control is engaged (the hand moves the tip).
 pub const FORCE_ENGAGED: u32 = 1;

@@ -549,13 +549,44 @@ fn a_serial_board_at_the_sketchs_settings_renders_a_press_and_survives_an_unplug
     wait_status(&addr, 10.0, "a felt press", |s| {
         s["haptic"]["force_n"].as_f64().is_some_and(|f| f > 0.3)
     });
-    // The cable is pulled in the middle of the press.
+    // The bridge is stopped for 50 ms in the middle of the press (the board's watchdog zeroes
+    // its force meanwhile): it must not resume at the force from before the pause.
+    let pid_n = br.0.id() as libc::pid_t;
+    // SAFETY: plain kill(2) on our own child.
+    unsafe { libc::kill(pid_n, libc::SIGSTOP) };
+    let stopped = Instant::now();
+    std::thread::sleep(Duration::from_millis(50));
+    // SAFETY: as above.
+    unsafe { libc::kill(pid_n, libc::SIGCONT) };
+    std::thread::sleep(Duration::from_millis(200));
+    let forces = board.forces();
+    let before = forces
+        .iter()
+        .rev()
+        .find(|(t, _)| *t < stopped)
+        .map(|&(_, f)| f)
+        .unwrap();
+    let after: Vec<f64> = forces
+        .iter()
+        .filter(|(t, _)| *t > stopped + Duration::from_millis(40))
+        .map(|&(_, f)| f)
+        .collect();
+    assert!(before.abs() > 0.3, "pressing before the pause: {before} N");
+    assert!(
+        after[0].abs() <= 0.1 * before.abs(),
+        "no kick after the pause: {before} N then {:?}",
+        &after[..5.min(after.len())]
+    );
+    // The cable is pulled in the middle of the press: the server shows the loss while it lasts.
     board.unplug();
-    wait_line(&lines, 5.0, "cable: the serial device was lost");
+    wait_line(&lines, 5.0, &format!("cable: {device} was lost"));
     wait_status(&addr, 5.0, "link down", |s| s["haptic"]["link"] == "down");
+    wait_status(&addr, 5.0, "the loss shown while it lasts", |s| {
+        s["haptic"]["device_faults"]["losses"] == 1 && s["haptic"]["device_faults"]["reopens"] == 0
+    });
     std::thread::sleep(Duration::from_millis(300));
     let board = FakeBoard::plug_in(Some(&link), press()).expect("plugged in again");
-    wait_line(&lines, 10.0, "cable: the device is back");
+    wait_line(&lines, 10.0, &format!("cable: {device} is back"));
     wait_status(&addr, 10.0, "link up again", |s| s["haptic"]["link"] == "up");
     wait_status(&addr, 20.0, "engaged again", |s| s["haptic"]["phase"] == "engaged");
     board.engage();

@@ -80,11 +80,18 @@ impl SerialDevice {
     /// Opens `ARG` of `--device serial:ARG`: `PATH` at [`DEFAULT_BAUD`] or `PATH@BAUD`
     /// (`/dev/ttyUSB0@1000000`), with the default time-outs.
     pub fn open(arg: &str) -> Result<SerialDevice, DeviceError> {
+        SerialDevice::open_within(arg, SerialOptions::default().open_timeout)
+    }
+
+    /// [`SerialDevice::open`], waiting at most `open_timeout` for the device's answer (a reopen
+    /// after a loss tries often and briefly, so that a signal ends it promptly).
+    pub fn open_within(arg: &str, open_timeout: Duration) -> Result<SerialDevice, DeviceError> {
         let (path, baud) = parse_serial_arg(arg)?;
         SerialDevice::open_with(
             path,
             SerialOptions {
                 baud,
+                open_timeout,
                 ..SerialOptions::default()
             },
         )

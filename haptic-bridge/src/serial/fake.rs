@@ -31,7 +31,12 @@ struct Shared {
     received: AtomicU64,
     /// Handle position (µm) and the force rendered (µN), newest.
     newest: Mutex<(i32, i32)>,
+    /// Every active force packet: when it came and its force (µN), the last [`LOG_LEN`].
+    forces: Mutex<std::collections::VecDeque<(Instant, i32)>>,
 }
+
+/// How many force packets [`FakeBoard::forces`] keeps.
+const LOG_LEN: usize = 100_000;
 
 /// A fake board on a pseudo-terminal, answering in a thread of its own.
 pub struct FakeBoard {
@@ -119,6 +124,12 @@ impl FakeBoard {
         self.shared.received.load(Ordering::Relaxed)
     }
 
+    /// The active force packets received (when, force in N), oldest first.
+    pub fn forces(&self) -> Vec<(Instant, f64)> {
+        let log = self.shared.forces.lock().expect("board lock");
+        log.iter().map(|&(t, f)| (t, f64::from(f) * 1e-6)).collect()
+    }
+
     /// The handle position (m) and the force the motor renders (N), newest.
     pub fn newest(&self) -> (f64, f64) {
         let (x, f) = *self.shared.newest.lock().expect("board lock");
@@ -191,6 +202,13 @@ fn run(master: OwnedFd, mut sim: SimDevice, shared: &Shared) {
                 continue;
             }
             active = p.flags & FLAG_ACTIVE != 0;
+            if active {
+                let mut log = shared.forces.lock().expect("board lock");
+                if log.len() == LOG_LEN {
+                    log.pop_front();
+                }
+                log.push_back((Instant::now(), p.force_un));
+            }
             let force = if active { f64::from(p.force_un) * 1e-6 } else { 0.0 };
             let _ = sim.write_force(force.clamp(-spec.max_force, spec.max_force));
             sim.observe(&LinkView {

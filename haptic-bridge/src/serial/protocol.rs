@@ -417,8 +417,9 @@ pub fn state_in_si(spec: &DeviceSpec, s: &StatePacket) -> Result<(DeviceSample, 
             "velocity {velocity:.3} m/s is faster than a hand moves a handle ({MAX_SPEED} m/s)"
         ));
     }
-    // 1 µN of slack: the limit itself went through the same fixed point.
-    if force.abs() > spec.max_force + 1e-6 {
+    // 1 µN of slack (one unit of the field: the limit itself went through the same fixed point),
+    // compared in whole µN so that the float rounding of the limit cannot take it away.
+    if i64::from(s.force_un).abs() > i64::from(newtons_to_micronewtons(spec.max_force)) + 1 {
         return Err(format!(
             "the device renders {force:.6} N, more than its own maximum {:.6} N",
             spec.max_force

@@ -16,9 +16,12 @@ pub fn negotiate_rate(
     let Some(limit) = device.max_rate_hz() else {
         return Ok((wanted, None));
     };
-    let why = match serial_arg {
-        Some(arg) => {
-            let (path, baud) = parse_serial_arg(arg).map_err(|e| e.to_string())?;
+    let parsed = match serial_arg {
+        Some(arg) => Some(parse_serial_arg(arg).map_err(|e| e.to_string())?),
+        None => None,
+    };
+    let why = match parsed {
+        Some((path, baud)) => {
             format!(
                 "serial:{path} at {baud} baud: a {EXCHANGE_BYTES}-byte exchange takes {:.2} ms on the wire, so at most {:.0} Hz ({:.0} % of the link); the device declares {:.0} Hz",
                 exchange_wire_time(baud).as_secs_f64() * 1e3,
@@ -30,13 +33,13 @@ pub fn negotiate_rate(
         None => format!("the device carries at most {limit:.0} Hz"),
     };
     if limit < MIN_RATE_HZ {
-        let fix = match serial_arg {
-            Some(arg) => {
-                let path = arg.split('@').next().unwrap_or(arg);
-                format!(
-                    ": open serial:{path}@1000000 with BAUD = 1000000 in the sketch, use a board whose MCU speaks USB itself, or raise the device's rate"
-                )
-            }
+        let fix = match parsed {
+            // The link is what limits it: a faster baud.
+            Some((path, baud)) if link_rate_limit_hz(baud) < MIN_RATE_HZ => format!(
+                ": open serial:{path}@1000000 with BAUD = 1000000 in the sketch, or use a board whose MCU speaks USB itself"
+            ),
+            // The device's own rate is what limits it.
+            Some(_) => ": raise the control rate the device declares (its info packet) to at least 500 Hz".to_string(),
             None => String::new(),
         };
         return Err(format!(

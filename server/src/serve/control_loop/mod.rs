@@ -30,7 +30,7 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
 use std::time::{Duration, Instant};
 
-use nanopush_proto::haptic::{ForceFeedback, HapticState, monotonic_ns};
+use nanopush_proto::haptic::{ForceFeedback, HapticState, STATE_DEVICE_LOST, monotonic_ns};
 
 use crate::control::bilateral::{
     Bilateral, BilateralParams, Input as HapticInput, Output as HapticOutput, Phase as HapticPhase,
@@ -430,9 +430,13 @@ impl ControlLoop {
         let hm = &shared.metrics.haptic;
         let now_ns = monotonic_ns();
         if let (Some(s), _) = h.link.newest() {
+            // A bridge that lost its device says so: its faults are shown, but it carries no
+            // handle sample (the link goes down by the sample's age as for a silent bridge).
+            if s.flags & STATE_DEVICE_LOST != 0 {
+                hm.note_device(&s);
             // A sample stamped in the future (another clock, a bad bridge) is not
             // believed either: it would look fresh for ever.
-            if believable(&s) && s.time_ns <= now_ns + 1_000_000 {
+            } else if believable(&s) && s.time_ns <= now_ns + 1_000_000 {
                 hm.sample(&s, now_ns);
                 if s.latency_ns != 0 && s.latency_ns != h.last_latency {
                     hm.latency.record(s.latency_ns as f64 * 1e-9);

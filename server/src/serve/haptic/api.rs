@@ -50,6 +50,7 @@ pub fn haptic_telemetry(h: &HapticMetrics) -> Option<nanopush_proto::ws::HapticT
 pub fn haptic_status(h: &HapticMetrics) -> serde_json::Value {
     let link = h.link_name();
     let sampled = h.samples.load(Relaxed) > 0;
+    let noted = h.device_noted.load(Relaxed);
     let num = |v: f64| (sampled && v.is_finite()).then_some(v);
     serde_json::json!({
         "link": link,
@@ -69,8 +70,8 @@ pub fn haptic_status(h: &HapticMetrics) -> serde_json::Value {
         "pc_damping": num(h.pc_damping()),
         "port_energy_j": num(h.port_energy()),
         "latency_p99_bound_s": (h.latency.count() > 0).then(|| h.latency.quantile_bound(0.99)),
-        "rate_hz": sampled.then(|| f64::from_bits(h.rate_hz.load(Relaxed))),
-        "device_faults": sampled.then(|| device_faults(h)),
+        "rate_hz": noted.then(|| f64::from_bits(h.rate_hz.load(Relaxed))),
+        "device_faults": noted.then(|| device_faults(h)),
     })
 }
 

@@ -89,6 +89,8 @@ pub struct HapticMetrics {
     pub rate_hz: AtomicU64,
     /// The device's faults as the bridge counted them ([`DEVICE_FAULTS`] order).
     pub device_faults: [AtomicU64; 8],
+    /// A bridge has told its device's counters (a sample, or a lost device's state).
+    pub device_noted: AtomicBool,
 }
 
 /// Names of the bilateral phases, in [`crate::control::bilateral::Phase`] order.
@@ -175,6 +177,18 @@ impl HapticMetrics {
         last != 0 && monotonic_ns().saturating_sub(last) < 100_000_000
     }
 
+    /// The bridge's device counters and rate from `s` (also from a state that carries no handle
+    /// sample: a lost device).
+    pub fn note_device(&self, s: &HapticState) {
+        self.device.store(u64::from(s.device), Relaxed);
+        self.pid.store(u64::from(s.pid), Relaxed);
+        self.rate_hz.store(s.rate_hz.to_bits(), Relaxed);
+        for (slot, v) in self.device_faults.iter().zip(fault_values(&s.faults)) {
+            slot.store(v, Relaxed);
+        }
+        self.device_noted.store(true, Relaxed);
+    }
+
     /// Records a sample from the bridge (called by the loop).
     pub fn sample(&self, s: &HapticState, now_ns: u64) {
         self.samples.fetch_add(1, Relaxed);
@@ -186,10 +200,7 @@ impl HapticMetrics {
         self.pc_damping.store(s.pc_damping.to_bits(), Relaxed);
         self.port_energy.store(s.port_energy.to_bits(), Relaxed);
         self.dropped_samples.store(s.dropped, Relaxed);
-        self.rate_hz.store(s.rate_hz.to_bits(), Relaxed);
-        for (slot, v) in self.device_faults.iter().zip(fault_values(&s.faults)) {
-            slot.store(v, Relaxed);
-        }
+        self.note_device(s);
         if s.pc_damping > 0.0 {
             self.pc_active_samples.fetch_add(1, Relaxed);
             self.pc_last_ns.store(now_ns, Relaxed);
