@@ -591,7 +591,7 @@ fn say_link_change(bridge: &Bridge<Box<dyn Device>>, row: &CycleRow, log: &mpsc:
             .last_force()
             .map_or(f64::NAN, |f| monotonic_ns().saturating_sub(f.time_ns) as f64 * 1e-6);
         format!(
-            "nanopush-haptic: server: silent at t = {:.3} s (its last force sample {age:.1} ms old): force zeroed",
+            "nanopush-haptic: server silent at t = {:.3} s (its last sample {age:.1} ms old): force zeroed",
             row.t
         )
     };
