@@ -328,7 +328,9 @@ mod tests {
 
     #[test]
     fn payloads_are_plain_data_of_a_stable_size() {
-        assert_eq!(std::mem::size_of::<HapticState>(), 10 * 8 + 4 * 4);
+        // Ten 8-byte fields and four 4-byte ones, then the rate and the eight fault counters.
+        assert_eq!(std::mem::size_of::<DeviceFaults>(), 8 * 8);
+        assert_eq!(std::mem::size_of::<HapticState>(), 10 * 8 + 4 * 4 + 8 + 8 * 8);
         assert_eq!(std::mem::size_of::<ForceFeedback>(), 10 * 8 + 2 * 4);
     }
 
