@@ -246,11 +246,14 @@ impl<D: Device> Bridge<D> {
     pub fn cycle_timed(&mut self, start_ns: u64, clock: impl Fn() -> u64, link: &mut impl Link) -> CycleRow {
         let dt = 1.0 / self.cfg.rate_hz;
         let sample = self.read_sample(dt);
+        // The server's newest sample first, then the clock: a sample taken after the clock could
+        // look stamped in the future if the thread is preempted between the two.
+        let newest = link.newest();
         let now_ns = clock().max(start_ns);
         self.read_was_slow = now_ns - start_ns >= (dt * 1e9) as u64;
         let t = now_ns.saturating_sub(self.start_ns) as f64 * 1e-9;
         self.ramp_after_pause(now_ns, dt);
-        self.take_newest(now_ns, link);
+        self.take_newest(now_ns, newest);
         let live = self.judge_server(now_ns);
         let mut row = CycleRow {
             t,
@@ -266,6 +269,11 @@ impl<D: Device> Bridge<D> {
             return row;
         };
         let out = self.render(live, &s, dt);
+        // A pause between the clock above and the write (the process stopped there) is a pause
+        // too: seen at the write, the force starts from zero.
+        if clock().saturating_sub(now_ns) > RESUME_AFTER_MIN_NS {
+            self.resume_gain = 0.0;
+        }
         let force = clamp_force(out.force * self.resume_gain, self.spec.max_force);
         if self.device.write_force(force).is_err() {
             self.dropped += 1;
@@ -338,8 +346,8 @@ impl<D: Device> Bridge<D> {
 
     /// Takes the server's newest force sample, if one arrived, and with it the end-to-end
     /// latency of the handle sample it was computed from.
-    fn take_newest(&mut self, now_ns: u64, link: &mut impl Link) {
-        if let Some(f) = link.newest() {
+    fn take_newest(&mut self, now_ns: u64, newest: Option<ForceFeedback>) {
+        if let Some(f) = newest {
             if f.state_seq != u64::MAX
                 && f.state_seq != self.last_latency_seq
                 && let Some(&(seq, sent)) = self.sent.get((f.state_seq % LATENCY_RING as u64) as usize)
@@ -488,6 +496,10 @@ impl<D: Device> Bridge<D> {
     /// Runs at `rate_hz` from now on (a reopened device that carries a different rate); the
     /// server's silence is judged within `stale_ns` as before.
     pub fn set_rate(&mut self, rate_hz: f64) {
+        // The server's silence is judged at `time-out − period` (within the time-out at this
+        // rate): the threshold moves by the change of period.
+        let (old, new) = (1e9 / self.cfg.rate_hz, 1e9 / rate_hz);
+        self.cfg.stale_ns = (self.cfg.stale_ns as f64 + old - new).max(new) as u64;
         self.cfg.rate_hz = rate_hz;
     }
 

@@ -279,11 +279,12 @@ pub fn run(a: &RunArgs) -> anyhow::Result<String> {
         }
     }
     let f = bridge.faults();
+    let rate_hz = bridge.rate_hz();
     eprintln!(
-        "nanopush-haptic: {} cycles at {rate_hz} Hz, {} samples dropped, {} overruns, {} trace rows dropped; end-to-end latency {}; device faults: {} bad packets, {} late answers, {} sequence gaps, {} out of range; {} watchdog trips (the bridge silent); cable: {} losses, {} reopens",
+        "nanopush-haptic: {} cycles at {rate_hz} Hz, {} samples dropped, {} overruns (the bridge's own), {} trace rows dropped; end-to-end latency {}; device faults: {} bad packets, {} late answers, {} sequence gaps, {} out of range; {} watchdog trips (the device heard nothing for 10 ms); cable: {} losses, {} reopens",
         tally.cycles,
         bridge.dropped(),
-        tally.overruns,
+        f.overruns,
         tally.dropped_rows,
         tally.hist.summary(),
         f.bad_packets,
@@ -607,7 +608,7 @@ fn summary_json(t: &Tally, dropped_samples: u64, rate_hz: f64, f: &DeviceFaults,
             "cycles": t.cycles,
             "rate_hz": rate_hz,
             "dropped_samples": dropped_samples,
-            "overruns": t.overruns,
+            "overruns": f.overruns,
             "dropped_rows": t.dropped_rows,
             "max_force_n": t.max_force_seen,
             "latency_ns": {

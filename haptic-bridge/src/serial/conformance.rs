@@ -361,8 +361,11 @@ fn watchdog(host: &mut Host, max_un: i32, patient: Duration, checks: &mut Vec<Ch
     // silence really was (a loaded host may oversleep).
     let mut silent = |ms: u64| -> Result<(bool, bool, Duration), DeviceError> {
         settle(host, FLAG_ACTIVE, tenth, patient)?;
+        // The silence starts when the last packet was sent, not when its answer came.
+        let last = host.send(FLAG_ACTIVE, tenth)?;
         let quiet = Instant::now();
-        std::thread::sleep(Duration::from_millis(ms));
+        host.answer(last, patient)?;
+        std::thread::sleep(Duration::from_millis(ms).saturating_sub(quiet.elapsed()));
         let seq = host.send(FLAG_ACTIVE, tenth)?;
         let gap = quiet.elapsed();
         let first = host.answer(seq, patient)?.map(|(s, _)| s);

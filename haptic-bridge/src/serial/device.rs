@@ -70,6 +70,8 @@ pub struct SerialDevice {
     bad_at_seq: u64,
     /// Cycles in a row without a good state.
     missed: u32,
+    /// Status byte of the newest state packet, valid or not (to see the watchdog bit rise).
+    prev_status: u8,
     /// Why the newest state was refused, while it is.
     refused: Option<String>,
     /// The last packet sent was active: dropping sends an inactive one.
@@ -163,6 +165,7 @@ impl SerialDevice {
             device_seq: None,
             bad_at_seq: 0,
             missed: 0,
+            prev_status: 0,
             refused: None,
             force_live: false,
         };
@@ -297,9 +300,13 @@ impl SerialDevice {
                 if self.awaiting == Some(s.echo) {
                     self.awaiting = None;
                 }
-                if s.status & STATUS_HOST_SILENT != 0 {
+                // A trip is the bit rising: a device stuck with it set trips once, not each packet.
+                if s.status & STATUS_HOST_SILENT != 0 && self.prev_status & STATUS_HOST_SILENT == 0 {
                     self.watchdog_trips += 1;
                 }
+                self.prev_status = s.status;
+                // It answered: it is not silent, even if what it says cannot be true.
+                self.last_valid = Instant::now();
                 match state_in_si(&self.spec, &s) {
                     Ok((sample, force)) => {
                         self.sample = sample;
