@@ -89,20 +89,6 @@ pub struct CycleRow {
     pub latency_ns: u64,
 }
 
-/// Two sets of counters added up.
-fn sum(a: DeviceFaults, b: DeviceFaults) -> DeviceFaults {
-    DeviceFaults {
-        bad_packets: a.bad_packets + b.bad_packets,
-        timeouts: a.timeouts + b.timeouts,
-        seq_gaps: a.seq_gaps + b.seq_gaps,
-        out_of_range: a.out_of_range + b.out_of_range,
-        watchdog_trips: a.watchdog_trips + b.watchdog_trips,
-        overruns: a.overruns + b.overruns,
-        losses: a.losses + b.losses,
-        reopens: a.reopens + b.reopens,
-    }
-}
-
 /// The bridge's state between cycles.
 pub struct Bridge<D: Device> {
     /// The device.
@@ -174,7 +160,7 @@ impl<D: Device> Bridge<D> {
     /// Every fault so far: the bridge's own (overruns, losses, reopens) and the device's, those
     /// of devices it let go included.
     pub fn faults(&self) -> DeviceFaults {
-        sum(self.faults, self.device.faults())
+        self.faults + self.device.faults()
     }
 
     /// A device cycle started more than a period late. When the previous read itself took a
@@ -200,7 +186,7 @@ impl<D: Device> Bridge<D> {
     /// and the force ramped in from zero. The lost device's counters are kept.
     pub fn replace_device(&mut self, device: D) {
         let gone = std::mem::replace(&mut self.device, device);
-        self.faults = sum(self.faults, gone.faults());
+        self.faults = self.faults + gone.faults();
         self.faults.reopens += 1;
         self.spec = self.device.spec();
         self.pc = Passivity::new(0.8 * self.spec.max_damping, 1e-4);

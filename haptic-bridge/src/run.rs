@@ -352,7 +352,6 @@ fn bridge_config(a: &RunArgs, code: u32, rate_hz: f64) -> BridgeConfig {
 #[derive(Default)]
 struct Tally {
     cycles: u64,
-    overruns: u64,
     dropped_rows: u64,
     max_force_seen: f64,
     /// End-to-end latencies, each measured once.
@@ -385,7 +384,7 @@ where
     let mut was_up = false;
     let mut watch = FaultWatch::new(bridge.faults());
     while !STOP.load(Ordering::SeqCst) {
-        if wait_for(&sleeper, &mut deadline, step_ns, &mut tally.overruns) {
+        if wait_for(&sleeper, &mut deadline, step_ns) {
             bridge.count_overrun();
         }
         let row = bridge.cycle_timed(monotonic_ns(), monotonic_ns, link);
@@ -569,14 +568,13 @@ impl FaultWatch {
     }
 }
 
-/// Sleeps (then spins) until `deadline`; a cycle more than a period late is an overrun, and the
-/// schedule starts again from now.
-fn wait_for(sleeper: &spin_sleep::SpinSleeper, deadline: &mut u64, step_ns: u64, overruns: &mut u64) -> bool {
+/// Sleeps (then spins) until `deadline`. Returns whether the cycle started more than a period
+/// late (an overrun), in which case the schedule starts again from now.
+fn wait_for(sleeper: &spin_sleep::SpinSleeper, deadline: &mut u64, step_ns: u64) -> bool {
     let now = monotonic_ns();
     if *deadline > now {
         sleeper.sleep(Duration::from_nanos(*deadline - now));
     } else if now - *deadline > step_ns {
-        *overruns += 1;
         *deadline = now;
         return true;
     }
@@ -624,18 +622,15 @@ fn summary_json(t: &Tally, dropped_samples: u64, rate_hz: f64, f: &DeviceFaults,
     )
 }
 
-/// The device's faults as JSON, by side (as `/api/status` shows them).
+/// The device's faults as JSON by name, with each name's side (as `/api/status` shows them).
 pub fn faults_json(f: &DeviceFaults) -> serde_json::Value {
-    serde_json::json!({
-        "bad_packets": f.bad_packets,
-        "timeouts": f.timeouts,
-        "seq_gaps": f.seq_gaps,
-        "out_of_range": f.out_of_range,
-        "watchdog_trips": f.watchdog_trips,
-        "overruns": f.overruns,
-        "losses": f.losses,
-        "reopens": f.reopens,
-    })
+    let mut out = serde_json::Map::new();
+    for ((name, _), n) in DeviceFaults::KINDS.iter().zip(f.counts()) {
+        out.insert((*name).into(), n.into());
+    }
+    let sides = DeviceFaults::KINDS.iter().map(|(n, s)| ((*n).to_string(), (*s).into()));
+    out.insert("side".into(), serde_json::Map::from_iter(sides).into());
+    out.into()
 }
 
 #[cfg(test)]

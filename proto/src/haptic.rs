@@ -86,6 +86,52 @@ pub struct DeviceFaults {
     pub reopens: u64,
 }
 
+impl DeviceFaults {
+    /// Each counter's name and the side at fault (`device`, `bridge`, `cable`), in the order of
+    /// [`DeviceFaults::counts`]: the one list the bridge's summary, `/api/status` and `/metrics`
+    /// name the counters by.
+    pub const KINDS: [(&'static str, &'static str); 8] = [
+        ("bad_packets", "device"),
+        ("timeouts", "device"),
+        ("seq_gaps", "device"),
+        ("out_of_range", "device"),
+        ("watchdog_trips", "bridge"),
+        ("overruns", "bridge"),
+        ("losses", "cable"),
+        ("reopens", "cable"),
+    ];
+
+    /// The counters in [`DeviceFaults::KINDS`] order.
+    pub fn counts(&self) -> [u64; 8] {
+        [
+            self.bad_packets,
+            self.timeouts,
+            self.seq_gaps,
+            self.out_of_range,
+            self.watchdog_trips,
+            self.overruns,
+            self.losses,
+            self.reopens,
+        ]
+    }
+}
+
+impl std::ops::Add for DeviceFaults {
+    type Output = DeviceFaults;
+    fn add(self, b: DeviceFaults) -> DeviceFaults {
+        DeviceFaults {
+            bad_packets: self.bad_packets + b.bad_packets,
+            timeouts: self.timeouts + b.timeouts,
+            seq_gaps: self.seq_gaps + b.seq_gaps,
+            out_of_range: self.out_of_range + b.out_of_range,
+            watchdog_trips: self.watchdog_trips + b.watchdog_trips,
+            overruns: self.overruns + b.overruns,
+            losses: self.losses + b.losses,
+            reopens: self.reopens + b.reopens,
+        }
+    }
+}
+
 /// The handle's state, bridge → server, every device cycle.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[type_name("nanopush::HapticState3")]

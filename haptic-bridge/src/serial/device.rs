@@ -224,16 +224,6 @@ impl SerialDevice {
         self.options.baud
     }
 
-    /// Jumps of the device's sequence number other than +1 (its packets that were lost).
-    pub fn seq_gaps(&self) -> u64 {
-        self.seq_gaps
-    }
-
-    /// States out of the device's physical range, dropped.
-    pub fn out_of_range(&self) -> u64 {
-        self.out_of_range
-    }
-
     fn protocol(&self, why: String) -> DeviceError {
         DeviceError::Protocol {
             device: self.port.device.clone(),

@@ -8,7 +8,7 @@
 use std::ffi::CStr;
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -27,10 +27,6 @@ struct Shared {
     stop: AtomicBool,
     /// The hand starts its script (the person "sees" the engagement).
     engaged: AtomicBool,
-    /// Valid force packets received.
-    received: AtomicU64,
-    /// Handle position (µm) and the force rendered (µN), newest.
-    newest: Mutex<(i32, i32)>,
     /// Every active force packet: when it came and its force (µN), the last [`LOG_LEN`].
     forces: Mutex<std::collections::VecDeque<(Instant, i32)>>,
 }
@@ -119,21 +115,10 @@ impl FakeBoard {
         self.shared.engaged.store(true, Ordering::Relaxed);
     }
 
-    /// Valid force packets received so far.
-    pub fn received(&self) -> u64 {
-        self.shared.received.load(Ordering::Relaxed)
-    }
-
     /// The active force packets received (when, force in N), oldest first.
     pub fn forces(&self) -> Vec<(Instant, f64)> {
         let log = self.shared.forces.lock().expect("board lock");
         log.iter().map(|&(t, f)| (t, f64::from(f) * 1e-6)).collect()
-    }
-
-    /// The handle position (m) and the force the motor renders (N), newest.
-    pub fn newest(&self) -> (f64, f64) {
-        let (x, f) = *self.shared.newest.lock().expect("board lock");
-        (f64::from(x) * 1e-6, f64::from(f) * 1e-6)
     }
 
     /// Pulls the cable: the board stops, the terminal's master closes (a hang-up for whoever has
@@ -184,7 +169,6 @@ fn run(master: OwnedFd, mut sim: SimDevice, shared: &Shared) {
             buf.extend_from_slice(&chunk[..n as usize]);
         }
         for p in take_force_packets(&mut buf) {
-            shared.received.fetch_add(1, Ordering::Relaxed);
             let dt = last_packet.elapsed().as_secs_f64().clamp(1e-4, 5e-3);
             last_packet = Instant::now();
             seq = seq.wrapping_add(1);
@@ -232,7 +216,6 @@ fn run(master: OwnedFd, mut sim: SimDevice, shared: &Shared) {
                 buttons: s.buttons as u8,
                 force_un: rendered,
             };
-            *shared.newest.lock().expect("board lock") = (state.position_um, rendered);
             write_all(&master, &state.encode());
         }
         if active && last_packet.elapsed() >= Duration::from_millis(DEVICE_SILENCE_MS) {

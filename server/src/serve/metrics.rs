@@ -4,7 +4,9 @@
 use std::fmt::Write as _;
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 
-use crate::serve::haptic::metrics::{DEVICE_FAULTS, HapticMetrics};
+use nanopush_proto::haptic::DeviceFaults;
+
+use crate::serve::haptic::metrics::HapticMetrics;
 pub use crate::serve::histogram::{BUCKETS, Histogram};
 
 /// Everything the loop counts.
@@ -108,7 +110,7 @@ fn device_faults(s: &mut String, h: &HapticMetrics) {
         "# HELP {name} Faults of the haptic device as the bridge counted them, by kind and the side at fault (device, bridge, cable)."
     );
     let _ = writeln!(s, "# TYPE {name} counter");
-    for ((kind, side), n) in DEVICE_FAULTS.iter().zip(&h.device_faults) {
+    for ((kind, side), n) in DeviceFaults::KINDS.iter().zip(&h.device_faults) {
         let _ = writeln!(s, "{name}{{kind=\"{kind}\",side=\"{side}\"}} {}", n.load(Relaxed));
     }
 }

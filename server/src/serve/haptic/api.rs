@@ -7,8 +7,8 @@ use std::sync::atomic::Ordering::Relaxed;
 use nanopush_proto::ws::{ErrorCode, HapticAction};
 
 use super::HapticMetrics;
-use super::metrics::DEVICE_FAULTS;
 use crate::serve::command_checks::{Refusal, number};
+use nanopush_proto::haptic::DeviceFaults;
 
 /// What the lease holder asks of haptic z-control.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -80,7 +80,7 @@ pub fn haptic_status(h: &HapticMetrics) -> serde_json::Value {
 fn device_faults(h: &HapticMetrics) -> serde_json::Value {
     let mut counts = serde_json::Map::new();
     let mut sides = serde_json::Map::new();
-    for ((name, side), n) in DEVICE_FAULTS.iter().zip(&h.device_faults) {
+    for ((name, side), n) in DeviceFaults::KINDS.iter().zip(&h.device_faults) {
         counts.insert((*name).into(), n.load(Relaxed).into());
         sides.insert((*name).into(), (*side).into());
     }

@@ -3,37 +3,10 @@
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::Relaxed};
 
-use nanopush_proto::haptic::{DeviceFaults, HapticState, monotonic_ns};
+use nanopush_proto::haptic::{HapticState, monotonic_ns};
 
 use super::link::LINK_UP;
 use crate::serve::histogram::Histogram;
-
-/// The device's fault counters by name, each with the side at fault (`device`, `bridge`,
-/// `cable`), in the order of [`HapticMetrics::device_faults`].
-pub const DEVICE_FAULTS: [(&str, &str); 8] = [
-    ("bad_packets", "device"),
-    ("timeouts", "device"),
-    ("seq_gaps", "device"),
-    ("out_of_range", "device"),
-    ("watchdog_trips", "bridge"),
-    ("overruns", "bridge"),
-    ("losses", "cable"),
-    ("reopens", "cable"),
-];
-
-/// The counters of `f` in [`DEVICE_FAULTS`] order.
-pub fn fault_values(f: &DeviceFaults) -> [u64; 8] {
-    [
-        f.bad_packets,
-        f.timeouts,
-        f.seq_gaps,
-        f.out_of_range,
-        f.watchdog_trips,
-        f.overruns,
-        f.losses,
-        f.reopens,
-    ]
-}
 
 /// The haptic link's state, written by the control loop (and the supervisor), read by the
 /// status route, the metrics route and the telemetry task. Floats are stored as bits.
@@ -87,7 +60,7 @@ pub struct HapticMetrics {
     pub enabled: AtomicBool,
     /// The bridge's device cycle rate (Hz), f64 bits.
     pub rate_hz: AtomicU64,
-    /// The device's faults as the bridge counted them ([`DEVICE_FAULTS`] order).
+    /// The device's faults as the bridge counted them ([`nanopush_proto::haptic::DeviceFaults::KINDS`] order).
     pub device_faults: [AtomicU64; 8],
     /// A bridge has told its device's counters (a sample, or a lost device's state).
     pub device_noted: AtomicBool,
@@ -183,7 +156,7 @@ impl HapticMetrics {
         self.device.store(u64::from(s.device), Relaxed);
         self.pid.store(u64::from(s.pid), Relaxed);
         self.rate_hz.store(s.rate_hz.to_bits(), Relaxed);
-        for (slot, v) in self.device_faults.iter().zip(fault_values(&s.faults)) {
+        for (slot, v) in self.device_faults.iter().zip(s.faults.counts()) {
             slot.store(v, Relaxed);
         }
         self.device_noted.store(true, Relaxed);
@@ -193,8 +166,6 @@ impl HapticMetrics {
     pub fn sample(&self, s: &HapticState, now_ns: u64) {
         self.samples.fetch_add(1, Relaxed);
         self.last_ns.store(now_ns, Relaxed);
-        self.device.store(u64::from(s.device), Relaxed);
-        self.pid.store(u64::from(s.pid), Relaxed);
         self.handle_m.store(s.position.to_bits(), Relaxed);
         self.force_n.store(s.force.to_bits(), Relaxed);
         self.pc_damping.store(s.pc_damping.to_bits(), Relaxed);
