@@ -39,6 +39,10 @@ pub struct PushPrediction {
     pub phase: &'static str,
     /// Particle displacement along the push while the tip stops, backs off and lifts (m).
     pub retract_shift: f64,
+    /// Height the tip had to lift (after the back-off) before it let go of the particle (m);
+    /// `None` when it still held the particle at the end of the strategy's lift
+    /// ([`RetractPlan::lift`]).
+    pub release_lift: Option<f64>,
 }
 
 /// Samples of the model push the estimator reads its constants from, whatever the push's
@@ -56,10 +60,26 @@ fn sample_step(duration: f64) -> f64 {
     (duration / PREDICTION_SAMPLES).max(1e-4)
 }
 
+/// What the retraction does to the particle: how far it moves it along the push (m), and the
+/// lift at which the tip let go (m; `None` if it never did within the plan's lift).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Retraction {
+    shift: f64,
+    release_lift: Option<f64>,
+}
+
 /// The retraction part of [`predict`]: the push again for `duration` (s), then the stop, the
-/// back-off and the lift of `plan`; fails with [`SimulationError::Budget`] once the integrator
-/// has taken more than `budget` steps ([`PREDICTION_STEPS`] in [`predict`]).
-fn predict_retract(model: PushModel, duration: f64, plan: RetractPlan, budget: u64) -> Result<f64, SimulationError> {
+/// back-off and the lift of `plan`, lifted until the tip lets go or the strategy's whole lift
+/// ([`RetractPlan::lift`]) is done: a large particle under a wet meniscus holds the tip for
+/// micrometres, `(Rₐ + Rₜ)(1 − sin β)` and more, and rolls back with it all the way. Fails with
+/// [`SimulationError::Budget`] once the integrator has taken more than `budget` steps
+/// ([`PREDICTION_STEPS`] in [`predict`]).
+fn predict_retract(
+    model: PushModel,
+    duration: f64,
+    plan: RetractPlan,
+    budget: u64,
+) -> Result<Retraction, SimulationError> {
     let beta = model.p.beta;
     let mut sim = Simulation::new(model, Method::Rodas4, Options::with_rtol(1e-6));
     let over = |sim: &Simulation| {
@@ -87,8 +107,9 @@ fn predict_retract(model: PushModel, duration: f64, plan: RetractPlan, budget: u
     let (mut yr, mut zr) = (sim.model.drive.y_at(t), sim.model.drive.z_at(t));
     let hold_end = t + plan.hold;
     let back_end = hold_end + plan.back_off / plan.speed;
-    // Lift until released, at most 2 µm.
-    let lift_end = back_end + 2e-6 / plan.speed;
+    // Lift until released, at most the strategy's lift.
+    let lift_end = back_end + plan.lift / plan.speed;
+    let mut release_lift = None;
     while t < lift_end {
         let t1 = t + tick;
         if t1 > hold_end {
@@ -103,6 +124,7 @@ fn predict_retract(model: PushModel, duration: f64, plan: RetractPlan, budget: u
         let drive = sim.model.drive.ramp_to(t, t1, yr, zr);
         sim.set_drive(drive);
         if sim.advance_or_release(t1)? == Advance::Released {
+            release_lift = Some(((t1 - back_end) * plan.speed).max(0.0));
             break;
         }
         if let Some(e) = over(&sim) {
@@ -110,7 +132,10 @@ fn predict_retract(model: PushModel, duration: f64, plan: RetractPlan, budget: u
         }
         t = t1;
     }
-    Ok(y_of(&sim) - y0)
+    Ok(Retraction {
+        shift: y_of(&sim) - y0,
+        release_lift,
+    })
 }
 
 /// How the strategy ends a push (D → E), for the model to predict what it does to the particle.
@@ -122,6 +147,9 @@ pub struct RetractPlan {
     pub back_off: f64,
     /// Speed of the back-off and the lift (m/s).
     pub speed: f64,
+    /// How high the strategy lifts the tip after the back-off (m): from the parking height to
+    /// the start height.
+    pub lift: f64,
 }
 
 /// Runs the pushing model from the first touch at the push speed for `duration` (s) and
@@ -144,7 +172,7 @@ pub fn predict(
         sample_step(duration),
         PREDICTION_STEPS,
     )?;
-    let retract_shift = predict_retract(model, duration, retract, PREDICTION_STEPS)?;
+    let retraction = predict_retract(model, duration, retract, PREDICTION_STEPS)?;
     let n = run.trace.len();
     let tail = &run.trace[n / 2..];
     let lag = |r: &crate::physics::pushing::trace::TraceRow| r.stage_y - r.particle_y;
@@ -162,7 +190,8 @@ pub fn predict(
     let (peak, travel_to_peak) = (peak_row.zeta_z, peak_row.stage_y);
     let settled = tail.iter().map(|r| r.zeta_z).sum::<f64>() / tail.len() as f64;
     Ok(PushPrediction {
-        retract_shift,
+        retract_shift: retraction.shift,
+        release_lift: retraction.release_lift,
         settle_offset: mean,
         periodic_amplitude: hi - lo,
         travel_to_deflection,
@@ -360,10 +389,11 @@ mod tests {
             hold: 0.05,
             back_off: 100e-9,
             speed: 1e-6,
+            lift: 2e-6,
         };
         let model = || PushModel::new(Scene::default_scene().push_params());
-        let shift = predict_retract(model(), 0.05, plan, PREDICTION_STEPS).expect("within the budget");
-        assert!(shift.is_finite());
+        let r = predict_retract(model(), 0.05, plan, PREDICTION_STEPS).expect("within the budget");
+        assert!(r.shift.is_finite());
         // Every budget is met, also those the steps jump over between two checks.
         for budget in 1..=300 {
             match predict_retract(model(), 0.05, plan, budget) {
@@ -388,6 +418,7 @@ mod tests {
             settled_deflection: 1e-9,
             phase: "roll",
             retract_shift: 0.0,
+            release_lift: Some(0.0),
         }
     }
 
@@ -487,6 +518,7 @@ mod tests {
             hold: 0.05,
             back_off: 100e-9,
             speed: 1e-6,
+            lift: 2e-6,
         };
         let p = predict(scene.push_params(), 0.05, 1.0e-9, plan).unwrap();
         assert_eq!(p.phase, "roll");

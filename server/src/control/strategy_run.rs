@@ -256,10 +256,13 @@ impl Prepared {
         let set_deflection = sensor.deflection(params.set_point);
         // Long enough to pass the separation and settle: 40 nm of travel, at least 20 ms.
         let duration = (40e-9 / params.speed).max(0.02);
+        // The strategy lifts from the parking height (after the back-off) to the start height.
+        let parking = model.r_a - model.r_t + (model.r_a + model.r_t) * model.beta.sin();
         let retract = RetractPlan {
             hold: HOLD,
             back_off: BACK_OFF,
             speed: params.approach_speed,
+            lift: (params.start_height - parking - BACK_OFF * model.beta.sin()).max(0.0),
         };
         let prediction = predict(model, duration, set_deflection, retract)?;
         // The drop at t* that the model predicts, in volts; a third of it (at least 4σ of the

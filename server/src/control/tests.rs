@@ -748,3 +748,27 @@ fn the_t_star_margin_is_a_third_of_the_predicted_drop_or_four_times_the_noise() 
     assert!(noise > third, "4σ {noise} V, a third of the drop {third} V");
     assert!((m - 0.8).abs() < 1e-12, "margin {m} V");
 }
+
+/// Issue 24.1: a 10 µm particle (valid) under the paper's wet meniscus holds the tip for
+/// micrometres as it lifts, `(Rₐ + Rₜ)(1 − sin β)` ≈ 5 µm and more, and rolls back with it. The
+/// estimator's retraction prediction stopped lifting at 2 µm, so it did not see that drag: a
+/// 5 µm push ended 7.1 µm short (at −2.117 µm) and said `ok`. Predicted to the release, the
+/// push makes up for the drag.
+#[test]
+fn a_10_um_particle_dragged_back_by_the_lift_ends_where_it_was_sent() {
+    let s = default_scene(&[
+        ("radius_nm = 1000.0 ", "radius_nm = 10000.0 "),
+        ("[physics]", "[strategy]\nstart_height_um = 21.0\n\n[physics]"),
+    ]);
+    let (run, _) = push_as_the_cli_does(&s, 5.0 * UM);
+    assert_eq!(run.summary.failure, None);
+    let lift = run.prediction.release_lift.expect("the tip lets go within the lift");
+    assert!(lift > 2.0 * UM, "released after {:.3} µm of lift", lift / UM);
+    assert!(
+        run.prediction.retract_shift < -2.0 * UM,
+        "drag {:.3} µm",
+        run.prediction.retract_shift / UM
+    );
+    let moved = run.true_distance();
+    assert!((moved - 5.0 * UM).abs() < 25e-9, "moved {:.4} µm for 5 µm", moved / UM);
+}
