@@ -4,6 +4,7 @@
 mod accuracy_cmd;
 mod campaign_cmd;
 mod model_cmd;
+mod plan_cmd;
 mod plot;
 mod push_cmd;
 mod scan_cmd;
@@ -42,6 +43,9 @@ enum Command {
     /// One manipulation (Sec 2.1, Sec 3): scan, locate, plan, park, detect contact, push under
     /// force control, retract; the traces of Figs 9 and 15.
     Push(push_cmd::PushArgs),
+    /// The push strategy derived from the scene's model, each setting with its reason (or why
+    /// no strategy can push the particle, and the field to change).
+    Plan(plan_cmd::PlanArgs),
     /// The teleoperation server: the 1 kHz control loop, the WebSocket protocol, the web client.
     Serve(serve_cmd::ServeArgs),
 }
@@ -80,6 +84,7 @@ fn main() -> ExitCode {
         Command::Accuracy(args) => accuracy_cmd::run(&args),
         Command::Sweep(args) => sweep_cmd::run(&args),
         Command::Scan(args) => scan_cmd::run(&args),
+        Command::Plan(args) => plan_cmd::run(&args),
         Command::Push(args) => match push_cmd::run(&args) {
             // A push that ran but failed exits 1 after its report (docs/manipulation.md, "Outcomes
             // that say what happened").

@@ -7,9 +7,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nanopush::control::{Failure, MoveTarget, Prepared, RunRow, StrategyRun, locate_near, plan_move};
+use nanopush::control::strategy_plan::{self, DEFAULT_TOLERANCE, StrategyPlan};
+use nanopush::control::{DEFAULT_ATTEMPTS, Failure, MoveOptions, MoveTarget, RunRow, StrategyRun, move_particle};
 use nanopush::instrument::Afm;
-use nanopush::scan::{HeightImage, Located, ScanParams, Tip};
+use nanopush::scan::{HeightImage, Located};
 use nanopush::scene::Scene;
 use nanopush::scene::file::ControlFile;
 use nanopush_proto::push::{LegReport, LocatedParticle, PushReport};
@@ -29,8 +30,19 @@ pub struct PushArgs {
     #[arg(long, value_name = "D")]
     distance_um: Option<f64>,
     /// Direction of the push in the plane (degrees from +x), in [-360, 360].
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     direction_deg: f64,
+    /// The move is `ok` when the scan after it finds the particle within this of the target
+    /// (nm), in [1, 100000]; otherwise a correction is pushed, and after the last `missed`.
+    #[arg(long, value_name = "NM", default_value_t = DEFAULT_TOLERANCE * 1e9)]
+    tolerance_nm: f64,
+    /// Pushes at most, the first and the corrections, in [1, 10].
+    #[arg(long, default_value_t = DEFAULT_ATTEMPTS)]
+    attempts: u32,
+    /// Derive every strategy setting from the model, ignoring the scene's hand-set
+    /// `[strategy]`, contact angle and speed (to compare the two).
+    #[arg(long)]
+    derive_all: bool,
     /// Target position instead of a distance (µm), e.g. `--to-um 60,45`: planned as several
     /// pushes when one cannot reach it.
     #[arg(long, value_name = "X_UM,Y_UM")]
@@ -59,6 +71,8 @@ const TICK: f64 = 1e-3;
 /// What the operator asked for, checked.
 struct Request {
     id: u32,
+    tolerance: f64,
+    attempts: u32,
     target: MoveTarget,
     control: ControlFile,
     pause: Option<(f64, f64)>,
@@ -121,8 +135,19 @@ fn check(a: &PushArgs, scene: &Scene) -> anyhow::Result<Request> {
             Some((at * UM, a.pause_ms * 1e-3))
         }
     };
+    if !(a.tolerance_nm.is_finite() && (1.0..=100_000.0).contains(&a.tolerance_nm)) {
+        bail!(
+            "--tolerance-nm {} is out of range; allowed: [1, 100000] nm",
+            a.tolerance_nm
+        );
+    }
+    if !(1..=10).contains(&a.attempts) {
+        bail!("--attempts {} is out of range; allowed: [1, 10]", a.attempts);
+    }
     Ok(Request {
         id,
+        tolerance: a.tolerance_nm * 1e-9,
+        attempts: a.attempts,
         target,
         control,
         pause,
@@ -137,7 +162,7 @@ fn located(l: &Located) -> LocatedParticle {
     }
 }
 
-fn leg_report(run: &StrategyRun, from: (f64, f64), to: (f64, f64)) -> LegReport {
+fn leg_report(run: &StrategyRun, from: (f64, f64), to: (f64, f64), attempt: u32) -> LegReport {
     let s = &run.summary;
     LegReport {
         from: [from.0, from.1],
@@ -153,19 +178,27 @@ fn leg_report(run: &StrategyRun, from: (f64, f64), to: (f64, f64)) -> LegReport 
         settle_offset: run.prediction.settle_offset,
         retract_shift: run.prediction.retract_shift,
         retracted: run.retracted,
+        attempt,
     }
 }
 
-/// Exit status of a push that ran but whose outcome is not `ok` (a failure code: the tip is
-/// retracted and the report written). Errors (bad input, a failed simulation) exit 2.
+/// Exit status of a push that ran but whose outcome is not `ok` (a failure code, `missed`,
+/// `not_found`: the tip is retracted and the report written). Errors (bad input, a failed
+/// simulation, a scene no strategy can push) exit 2.
 pub const EXIT_FAILED_PUSH: u8 = 1;
 
-/// Runs the command: the report, and whether every leg ended `ok`.
+/// Runs the command: the report, and whether the move ended `ok` (within the tolerance, as the
+/// scan after it measured).
 pub fn run(a: &PushArgs) -> anyhow::Result<(String, bool)> {
     let scene = crate::load_scene(a.scene.as_ref())?;
     let req = check(a, &scene)?;
     let wall = std::time::Instant::now();
     let mut scene = scene;
+    if a.derive_all {
+        scene.hand_set = nanopush::scene::hand_set::HandSet::none();
+    }
+    let plan = strategy_plan::derive(&scene, req.id, req.tolerance)?;
+    plan.apply(&mut scene);
     scene.file.strategy.control = req.control;
     let f = &scene.file;
     let part = f.particles.iter().find(|p| p.id == req.id).expect("checked");
@@ -174,43 +207,32 @@ pub fn run(a: &PushArgs) -> anyhow::Result<(String, bool)> {
     // The operator's view: a local scan at the click, and the scene's overview for the plan.
     let start = (click.0 - 8.0 * UM, click.1);
     let mut afm = Afm::from_scene(&scene, start.0.max(0.0), start.1, TICK);
-    let plan = plan_move(&scene, &afm.surface(), click, part.radius_nm * 1e-9, req.target)?;
-    let (before_img, before) = (plan.local, plan.located);
-    let (from, radius, target) = ((before.x, before.y), before.radius, plan.target);
-    let params = scene.strategy_params(TICK);
-    let prepared = Prepared::new(&scene, req.id, radius, &params)?;
-
-    let mut reports = Vec::new();
-    let mut runs = Vec::new();
-    let mut estimate = from;
-    for (k, leg) in plan.legs.iter().enumerate() {
-        let pause = if k == 0 { req.pause } else { None };
-        let Some(request) = prepared.request(req.id, estimate, leg.to, pause) else {
-            continue;
-        };
-        let run = prepared.run(&mut afm, &request, params)?;
-        reports.push(leg_report(&run, estimate, leg.to));
-        estimate = run.summary.estimated_particle;
-        let failed = run.summary.failure.is_some();
-        runs.push(run);
-        if failed {
-            break;
-        }
-    }
-    let (after_img, after) = locate_near(
-        &afm.surface(),
-        Tip::from_scene(&scene),
-        ScanParams::from_scene(&scene),
-        estimate,
-        radius,
-        f.stage.range_um * UM,
-    );
-    let after = after.ok();
+    let options = MoveOptions {
+        tolerance: req.tolerance,
+        attempts: req.attempts,
+        pause: req.pause,
+    };
+    let moved = move_particle(
+        &scene,
+        &mut afm,
+        req.id,
+        click,
+        part.radius_nm * 1e-9,
+        req.target,
+        options,
+    )?;
+    let reports: Vec<LegReport> = moved
+        .legs
+        .iter()
+        .map(|l| leg_report(&l.run, l.from, l.to, l.attempt))
+        .collect();
     let truth = afm
         .particles()
         .iter()
         .find(|p| p.id == req.id)
         .expect("the particle exists");
+    let target = moved.target;
+    let after = moved.after.1.as_ref();
     let report = PushReport {
         schema: "push".into(),
         version: nanopush_proto::VERSION,
@@ -222,27 +244,36 @@ pub fn run(a: &PushArgs) -> anyhow::Result<(String, bool)> {
             ControlFile::Xyz => "xyz",
         }
         .into(),
-        located_before: located(&before),
-        located_after: after.as_ref().map(located),
+        located_before: located(&moved.before.1),
+        located_after: after.map(located),
         target: [target.0, target.1],
         legs: reports,
+        outcome: moved.verdict.code().into(),
+        tolerance: req.tolerance,
+        measured_error: after.map(|l| (l.x - target.0).hypot(l.y - target.1)),
+        attempts: moved.attempts,
+        warnings: plan.warnings.clone(),
         final_position: [truth.x, truth.y],
         final_error: (truth.x - target.0).hypot(truth.y - target.1),
         simulated_time: afm.time(),
         wall_time: wall.elapsed().as_secs_f64(),
     };
+    let runs: Vec<StrategyRun> = moved.legs.into_iter().map(|l| l.run).collect();
     if let Some(dir) = &a.out {
-        write_outputs(dir, &scene, &runs, &report, &before_img, &after_img)?;
+        write_outputs(dir, &scene, &runs, &report, &moved.before.0, &moved.after.0)?;
     }
-    let ok = report.legs.iter().all(|l| l.outcome == "ok");
+    let ok = report.outcome == "ok";
     if a.json {
         return Ok((serde_json::to_string_pretty(&report)? + "\n", ok));
     }
-    Ok((text(&report, &runs), ok))
+    Ok((text(&report, &runs, &plan), ok))
 }
 
-fn text(r: &PushReport, runs: &[StrategyRun]) -> String {
+fn text(r: &PushReport, runs: &[StrategyRun], plan: &StrategyPlan) -> String {
     let mut s = String::new();
+    for w in &plan.warnings {
+        let _ = writeln!(s, "warning: {w}");
+    }
     let um = |v: f64| v / UM;
     let _ = writeln!(
         s,
@@ -267,8 +298,13 @@ fn text(r: &PushReport, runs: &[StrategyRun]) -> String {
     for (k, (l, run)) in r.legs.iter().zip(runs).enumerate() {
         let _ = writeln!(
             s,
-            "  leg {}: {} | contact at step {} | t* {} | estimated {:.3} µm, true {:.3} µm (error {:+.1} nm) | retracted {}",
+            "  leg {}{}: {} | contact at step {} | t* {} | estimated {:.3} µm, true {:.3} µm (error {:+.1} nm) | retracted {}",
             k + 1,
+            if l.attempt > 1 {
+                format!(" (correction {})", l.attempt - 1)
+            } else {
+                String::new()
+            },
             l.failure.as_deref().unwrap_or("ok"),
             l.contact_step.map_or("-".into(), |v| v.to_string()),
             l.t_star.map_or("-".into(), |t| format!("{t:.3} s")),
@@ -288,6 +324,22 @@ fn text(r: &PushReport, runs: &[StrategyRun]) -> String {
     if let Some(a) = &r.located_after {
         let _ = writeln!(s, "  scan after: ({:.3}, {:.3}) µm", um(a.x), um(a.y));
     }
+    let verdict = match (r.outcome.as_str(), r.measured_error) {
+        ("ok", Some(e)) => format!(
+            "ok: the scan after finds it {:.1} nm from the target (tolerance {:.0} nm)",
+            e * 1e9,
+            r.tolerance * 1e9
+        ),
+        ("missed", Some(e)) => format!(
+            "missed: the scan after finds it {:.1} nm from the target, beyond the {:.0} nm tolerance, after {} push(es)",
+            e * 1e9,
+            r.tolerance * 1e9,
+            r.attempts
+        ),
+        ("not_found", _) => "not_found: the scan after the push does not find the particle".into(),
+        (code, _) => format!("{code}: a push failed (its leg says why)"),
+    };
+    let _ = writeln!(s, "  outcome {verdict}");
     let _ = writeln!(
         s,
         "  simulated {:.2} s in {:.2} s of wall time",

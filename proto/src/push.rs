@@ -46,6 +46,14 @@ pub struct LegReport {
     pub retract_shift: f64,
     /// The tip ended retracted.
     pub retracted: bool,
+    /// The attempt the leg belongs to: 1 for the first push, 2 and on for the corrections
+    /// made after a scan found the particle outside the tolerance.
+    #[serde(default = "first_attempt")]
+    pub attempt: u32,
+}
+
+fn first_attempt() -> u32 {
+    1
 }
 
 /// The whole run.
@@ -69,6 +77,24 @@ pub struct PushReport {
     pub target: [f64; 2],
     /// Legs, in order; the run stops at the first failed leg.
     pub legs: Vec<LegReport>,
+    /// The move's outcome: `ok` when the scan after the push found the particle within
+    /// `tolerance` of the target, `missed` when it found it further away after every attempt,
+    /// `not_found` when it did not find it, or the failed leg's code.
+    #[serde(default)]
+    pub outcome: String,
+    /// The tolerance the outcome was judged with (m).
+    #[serde(default)]
+    pub tolerance: f64,
+    /// The distance between the particle, as the scan after the push located it, and the
+    /// target (m).
+    #[serde(default)]
+    pub measured_error: Option<f64>,
+    /// Pushes made: the first and the corrections.
+    #[serde(default)]
+    pub attempts: u32,
+    /// What the strategy plan warned of (hand-set values that cannot work, risks).
+    #[serde(default)]
+    pub warnings: Vec<String>,
     /// The particle's true final position (m), from the simulator.
     pub final_position: [f64; 2],
     /// Distance between the true final position and the target (m).

@@ -5,7 +5,9 @@ pub mod estimator;
 pub mod legs;
 pub mod locate_and_plan;
 pub mod strategy;
-mod strategy_run;
+pub mod strategy_plan;
+pub mod strategy_run;
+pub mod whole_move;
 
 pub use bilateral::{Bilateral, BilateralParams};
 pub use estimator::{Hxy, PeakDetector, PushPrediction, RetractPlan, predict};
@@ -16,3 +18,4 @@ pub use strategy_run::{Prepared, PushRequest, RunError, RunRow, StrategyRun, pus
 #[cfg(test)]
 mod tests;
 pub use locate_and_plan::{MoveError, MovePlan, MoveTarget, locate_near, plan_move};
+pub use whole_move::{DEFAULT_ATTEMPTS, MoveOptions, MoveRun, MoveRunError, PushedLeg, Verdict, move_particle};

@@ -292,7 +292,7 @@ impl Strategy {
                     let zs = r.stage[2];
                     self.summary.substrate_z = Some(zs);
                     self.retract_z = zs + p.start_height;
-                    let z = zs + self.task.parking_height();
+                    let z = zs + self.task.parking_rise();
                     self.enter(Phase::ToParkingHeight { z }, r.t);
                 } else if self.retract_z - self.target[2] > 2.0 * p.start_height {
                     let range_um = (self.retract_z - self.target[2]) * 1e6;

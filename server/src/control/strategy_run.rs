@@ -237,6 +237,32 @@ pub struct Prepared {
     pub approach_distance: f64,
     /// Sensor gain (V/m).
     pub gain: f64,
+    /// How far above the substrate auto-parking will detect it (m): [`detection_offset`].
+    pub detect_offset: f64,
+}
+
+/// How far above the true substrate auto-parking detects it (m): the tip's piezo distance when
+/// the reading first passes `params.substrate_threshold`, approaching in steps of
+/// `approach_speed · tick` on the tip-sample force curve. The attraction snaps the tip in a few
+/// nm above the surface (3 nm for a 10 nm tip on 0.5 N/m), which on a 14 nm particle is a
+/// tenth of its height; a stiff lever that does not snap is detected pressed in
+/// (a negative offset of a fraction of a nm).
+pub fn detection_offset(scene: &Scene, params: &StrategyParams) -> f64 {
+    use crate::physics::force_curve::TipTrack;
+    let ts = scene.tip_sample();
+    let gain = scene.sensor().gain.abs();
+    let step = (params.approach_speed * params.tick).max(1e-12);
+    let mut d = 100e-9_f64.min(params.start_height);
+    let mut track = TipTrack::far(d);
+    // At most 100 nm down and 100 nm into the surface.
+    for _ in 0..(200e-9 / step).ceil().min(1e6) as u64 {
+        let point = ts.track(&mut track, d);
+        if (point.deflection * gain).abs() > params.substrate_threshold {
+            return d;
+        }
+        d -= step;
+    }
+    0.0
 }
 
 impl Prepared {
@@ -270,6 +296,7 @@ impl Prepared {
         let drop = (prediction.peak_deflection - prediction.settled_deflection) * sensor.gain.abs();
         let margin = (4.0 * params.noise).max(drop / 3.0).max(1e-4);
         Ok(Prepared {
+            detect_offset: detection_offset(scene, params),
             prediction,
             margin,
             beta: model.beta,
@@ -317,6 +344,7 @@ impl Prepared {
             tip_radius: self.tip_radius,
             approach_distance: self.approach_distance,
             pause: request.pause.map(|(at, secs)| (at, (secs / tick).round() as u32)),
+            detect_offset: self.detect_offset,
         }
     }
 }

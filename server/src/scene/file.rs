@@ -218,10 +218,22 @@ pub struct FrictionFile {
 pub struct PushFile {
     /// Id of the particle the model pushes.
     pub particle_id: u32,
-    /// Tip-particle contact angle `β` (degrees).
+    /// Tip-particle contact angle `β` (degrees); derived by the planner when absent (30°, the
+    /// paper's, until then).
+    #[serde(default = "default_contact_angle_deg")]
     pub contact_angle_deg: f64,
-    /// Stage speed `V` (µm/s).
+    /// Stage speed `V` (µm/s); derived by the planner when absent (1 µm/s, the paper's, until
+    /// then).
+    #[serde(default = "default_speed_um_per_s")]
     pub speed_um_per_s: f64,
+}
+
+fn default_contact_angle_deg() -> f64 {
+    30.0
+}
+
+fn default_speed_um_per_s() -> f64 {
+    1.0
 }
 
 /// `[stage]`.

@@ -7,6 +7,7 @@
 
 mod error;
 pub mod file;
+pub mod hand_set;
 mod ranges;
 
 pub use error::{SceneError, SceneWarning};
@@ -38,6 +39,8 @@ pub struct Scene {
     pub origin: String,
     /// What a valid scene does that may not work as intended.
     pub warnings: Vec<SceneWarning>,
+    /// The strategy settings the file gives by hand (the planner derives the others).
+    pub hand_set: hand_set::HandSet,
 }
 
 const NM: f64 = 1e-9;
@@ -67,20 +70,31 @@ fn tangential_modulus(e1: f64, nu1: f64, e2: f64, nu2: f64) -> f64 {
 impl Scene {
     /// Parses and validates a scene from TOML text.
     pub fn parse(origin: &str, text: &str) -> Result<Scene, SceneError> {
-        let file: SceneFile = toml::from_str(text).map_err(|e| SceneError::Parse {
+        let parse_error = |e: toml::de::Error| SceneError::Parse {
             origin: origin.into(),
             message: e.to_string().trim_end().to_string(),
-        })?;
-        Scene::from_file(origin, file)
+        };
+        let table: toml::Table = toml::from_str(text).map_err(parse_error)?;
+        let hand_set = hand_set::HandSet::from_table(&table);
+        let file: SceneFile = table.try_into().map_err(parse_error)?;
+        Scene::from_file_with(origin, file, hand_set)
     }
 
     /// Validates a scene that is already parsed (e.g. a sweep's copy with one field changed).
+    /// Every strategy setting counts as hand-set (see [`Scene::hand_set`]).
     pub fn from_file(origin: &str, file: SceneFile) -> Result<Scene, SceneError> {
-        ranges::validate(origin, &file)?;
+        Scene::from_file_with(origin, file, hand_set::HandSet::all())
+    }
+
+    /// Validates a parsed scene whose hand-set strategy settings are `hand_set` (the others are
+    /// the plan's to derive, and are not checked against the sensor).
+    pub fn from_file_with(origin: &str, file: SceneFile, hand_set: hand_set::HandSet) -> Result<Scene, SceneError> {
+        ranges::validate(origin, &file, &hand_set)?;
         let mut scene = Scene {
             file,
             origin: origin.into(),
             warnings: Vec::new(),
+            hand_set,
         };
         scene.warnings = scene.check_feasibility();
         Ok(scene)

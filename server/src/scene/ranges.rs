@@ -3,6 +3,7 @@
 
 use super::error::SceneError;
 use super::file::{DofFile, SceneFile};
+use super::hand_set::HandSet;
 
 /// An allowed interval with its unit, e.g. `(0, 10000] nm`.
 #[derive(Debug, Clone, Copy)]
@@ -91,7 +92,7 @@ const HAMAKER: Range = Range::closed(1.0, 1000.0, "zJ");
 const MU: Range = Range::closed(0.0, 5.0, "");
 
 /// Every range check of a scene, in file order; the first failure is returned.
-pub fn validate(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
+pub fn validate(origin: &str, s: &SceneFile, hand_set: &HandSet) -> Result<(), SceneError> {
     let c = |field: &str, v: f64, r: Range| check(origin, field, v, r);
     c("tip.radius_nm", s.tip.radius_nm, Range::closed(1.0, 1000.0, "nm"))?;
     c("tip.youngs_modulus_gpa", s.tip.youngs_modulus_gpa, MODULUS)?;
@@ -316,7 +317,7 @@ pub fn validate(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
         s.sensor.full_scale_v,
         Range::closed(1.0, 100.0, "V"),
     )?;
-    validate_strategy(origin, s)?;
+    validate_strategy(origin, s, hand_set)?;
     c(
         "sensor.perturbation_mv",
         s.sensor.perturbation_mv,
@@ -476,7 +477,7 @@ fn validate_haptic(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
 
 /// `[strategy]`: every number in range, and the set point and safety limit on the side of the
 /// baseline a push deflects to (`ζ_z > 0`, so the reading moves along the gain's sign).
-fn validate_strategy(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
+fn validate_strategy(origin: &str, s: &SceneFile, hand_set: &HandSet) -> Result<(), SceneError> {
     let c = |field: &str, v: f64, r: Range| check(origin, &format!("strategy.{field}"), v, r);
     let st = &s.strategy;
     c(
@@ -526,13 +527,16 @@ fn validate_strategy(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
         Range::open_closed(0.0, 3600.0, "s"),
     )?;
     c("z_gain_nm_per_v", st.z_gain_nm_per_v, Range::closed(0.0, 100.0, "nm/V"))?;
+    // The levels below are checked against the sensor when the scene gives them; otherwise the
+    // plan derives them from the sensor and the model (`control::strategy_plan`).
+    let given = |key: &str| hand_set.contains(key);
     // A push bends the lever up (ζ_z > 0): the reading moves from the baseline along the gain.
     let dir = s.sensor.gain_v_per_nm.signum();
     let base = s.sensor.baseline_v;
     let set = (st.set_point_v - base) * dir;
     let safety = (st.safety_limit_v - base) * dir;
     let side = if dir < 0.0 { "below" } else { "above" };
-    if set <= 0.0 {
+    if set <= 0.0 && given("strategy.set_point_v") {
         return Err(SceneError::Inconsistent {
             origin: origin.into(),
             field: "strategy.set_point_v".into(),
@@ -542,7 +546,7 @@ fn validate_strategy(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
             ),
         });
     }
-    if safety <= set {
+    if safety <= set && (given("strategy.set_point_v") || given("strategy.safety_limit_v")) {
         return Err(SceneError::Inconsistent {
             origin: origin.into(),
             field: "strategy.safety_limit_v".into(),
@@ -559,7 +563,7 @@ fn validate_strategy(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
         ("strategy.set_point_v", st.set_point_v),
         ("strategy.safety_limit_v", st.safety_limit_v),
     ] {
-        if v.abs() >= fs {
+        if v.abs() >= fs && (field == "sensor.baseline_v" || given(field)) {
             return Err(SceneError::Inconsistent {
                 origin: origin.into(),
                 field: field.into(),

@@ -298,18 +298,18 @@ fn tangential_stiffness_and_damping_by_hand() {
 fn strategy_values_are_checked_against_the_sensor() {
     // A push lowers the reading (negative gain): a set point above the −0.2 V baseline is never
     // reached.
-    let e = err("[physics]", "[strategy]\nset_point_v = 0.5\n\n[physics]");
+    let e = err("set_point_v = -1.5", "set_point_v = 0.5");
     assert!(
         e.contains("strategy.set_point_v") && e.contains("below the baseline -0.2 V"),
         "{e}"
     );
-    let e = err("[physics]", "[strategy]\nsafety_limit_v = -1.0\n\n[physics]");
+    let e = err("safety_limit_v = -4.0", "safety_limit_v = -1.0");
     assert!(
         e.contains("strategy.safety_limit_v") && e.contains("beyond the set point -1.5 V"),
         "{e}"
     );
     assert!(
-        with("[physics]", "[strategy]\nsafety_limit_v = -6.0\n\n[physics]").is_ok(),
+        with("safety_limit_v = -4.0", "safety_limit_v = -6.0").is_ok(),
         "a −6 V limit is inside the default ±10 V"
     );
     let e = err("noise_rms_mv = 5.0", "noise_rms_mv = 5.0\nfull_scale_v = 3.0");
@@ -319,11 +319,11 @@ fn strategy_values_are_checked_against_the_sensor() {
     );
     let e = err("noise_rms_mv = 5.0", "noise_rms_mv = 5.0\nfull_scale_v = 0.5");
     assert!(e.contains("sensor.full_scale_v") && e.contains("[1, 100] V"), "{e}");
-    let e = err("[physics]", "[strategy]\nstep_um = 0.0\n\n[physics]");
+    let e = err("step_um = 0.1", "step_um = 0.0");
     assert!(e.contains("strategy.step_um") && e.contains("[0.001, 10] µm"), "{e}");
-    let e = err("[physics]", "[strategy]\nsearch_rang_um = 5.0\n\n[physics]");
+    let e = err("step_um = 0.1", "step_um = 0.1\nsearch_rang_um = 5.0");
     assert!(e.contains("search_rang_um"), "{e}");
-    // The defaults are the paper's Δ and ζ_set.
+    // The paper's Δ and ζ_set (the default scene writes them out; they are the defaults too).
     let s = Scene::default_scene();
     assert_eq!(s.file.strategy.step_um, 0.1);
     assert_eq!(s.file.strategy.set_point_v, -1.5);
@@ -353,7 +353,8 @@ fn a_particle_below_the_scan_noise_is_refused() {
 
 /// docs/model.md's table of shipped scenes ("Scenes"): gold-latex has three particles of 0.5 µm
 /// radius pushed at 2 µm/s; gold-14nm a 14 nm (diameter) colloid under a 10 nm tip, electrostatics
-/// on, 10 nm search steps and a −0.8 V set point; minimal β = 45°, van der Waals only, dry.
+/// on, its strategy (steps, set point, β, V) derived from the model; minimal van der Waals only, dry,
+/// β derived (45°).
 #[test]
 fn the_shipped_scenes_are_what_the_docs_table_says() {
     let load = |name: &str| {
@@ -372,12 +373,11 @@ fn the_shipped_scenes_are_what_the_docs_table_says() {
     assert_eq!(2.0 * gold.pushed_particle().radius_nm, 14.0);
     assert_eq!(gold.file.tip.radius_nm, 10.0);
     assert!(gold.file.physics.electrostatic);
-    assert_eq!(
-        (gold.file.strategy.step_um, gold.file.strategy.set_point_v),
-        (0.01, -0.8)
-    );
-    let minimal = load("minimal.toml").file;
-    assert_eq!(minimal.push.contact_angle_deg, 45.0);
+    assert_eq!(gold.hand_set.keys().count(), 0, "gold-14nm sets no strategy by hand");
+    let minimal = load("minimal.toml");
+    let plan = crate::control::strategy_plan::derive(&minimal, 1, 25e-9).expect("a plan");
+    assert_eq!(plan.contact_angle_deg, 45.0);
+    let minimal = minimal.file;
     let ph = &minimal.physics;
     assert!(ph.van_der_waals && !ph.capillary && !ph.electrostatic);
     assert_eq!(minimal.environment.relative_humidity, 0.0);

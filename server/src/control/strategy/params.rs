@@ -82,6 +82,10 @@ pub struct PushTask {
     /// A brief stop during the push (Fig 15: "a short stop interval"): at this push travel
     /// (m), for this many ticks.
     pub pause: Option<(f64, u32)>,
+    /// How far above the true substrate auto-parking detects it (m): the snap-in (and the tick
+    /// the reading takes to pass the threshold) stops the approach early, by up to a few nm
+    /// ([`crate::control::strategy_run::detection_offset`]). The parking height makes up for it.
+    pub detect_offset: f64,
 }
 
 impl PushTask {
@@ -95,6 +99,12 @@ impl PushTask {
     /// `h = Rₐ − Rₜ + (Rₐ + Rₜ) sin β` (m).
     pub fn parking_height(&self) -> f64 {
         self.radius - self.tip_radius + (self.radius + self.tip_radius) * self.beta.sin()
+    }
+
+    /// The stage's rise from the detected substrate to the parking height (m): the parking
+    /// height less the detection offset.
+    pub fn parking_rise(&self) -> f64 {
+        self.parking_height() - self.detect_offset
     }
 
     /// Where the contact search starts (xy, m).

@@ -1,0 +1,117 @@
+//! What the strategy plan decided: one line per setting, with its reason, and how it is applied
+//! to a scene.
+
+use crate::control::estimator::PushPrediction;
+use crate::scene::Scene;
+use crate::scene::file::StrategyFile;
+
+/// One setting of the strategy: its scene key, its value in the scene file's unit, whether the
+/// scene gave it by hand, and why it has this value.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Choice {
+    /// `section.field` of the scene file (`strategy.set_point_v`), or `local_scan.*` for the
+    /// local scan, which the scene does not set.
+    pub key: &'static str,
+    /// The value, in the unit the key names.
+    pub value: f64,
+    /// Given by the scene (it wins over the derived value).
+    pub hand_set: bool,
+    /// Why, in one line.
+    pub why: String,
+}
+
+impl std::fmt::Display for Choice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let source = if self.hand_set { "hand-set" } else { "derived" };
+        write!(f, "{} = {} ({source}): {}", self.key, short(self.value), self.why)
+    }
+}
+
+/// A value with four significant digits, without trailing zeros.
+pub fn short(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return v.to_string();
+    }
+    let digits = (3 - v.abs().log10().floor() as i32).clamp(0, 12) as usize;
+    let s = format!("{v:.digits$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+/// The strategy for pushing one particle of a scene, derived from the scene's model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StrategyPlan {
+    /// The particle (id).
+    pub particle: u32,
+    /// How close to the target the particle must end for `ok` (m).
+    pub tolerance: f64,
+    /// Every setting with its reason, in the order the strategy uses them.
+    pub choices: Vec<Choice>,
+    /// Hand-set values that cannot work as they are, and risks the plan sees.
+    pub warnings: Vec<String>,
+    /// The resolved `[strategy]`.
+    pub strategy: StrategyFile,
+    /// The resolved contact angle β (degrees).
+    pub contact_angle_deg: f64,
+    /// The resolved stage speed V (µm/s).
+    pub speed_um_per_s: f64,
+    /// The local scan's side (m) and pixels.
+    pub local_scan: (f64, usize),
+    /// The model's prediction at the chosen β and V (retraction lifted to the release).
+    pub prediction: PushPrediction,
+}
+
+impl StrategyPlan {
+    /// Writes the resolved settings into the scene (hand-set ones are unchanged by
+    /// construction).
+    pub fn apply(&self, scene: &mut Scene) {
+        scene.file.strategy = self.strategy.clone();
+        scene.file.push.contact_angle_deg = self.contact_angle_deg;
+        scene.file.push.speed_um_per_s = self.speed_um_per_s;
+    }
+
+    /// The plan in words: a line per setting, then the warnings.
+    pub fn explain(&self) -> String {
+        let mut s = String::new();
+        for c in &self.choices {
+            s.push_str(&format!("  {c}\n"));
+        }
+        for w in &self.warnings {
+            s.push_str(&format!("  warning: {w}\n"));
+        }
+        s
+    }
+}
+
+/// Why no strategy can push the particle: what fails, and the scene field to change.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("no strategy can push particle {particle}: {reason}; change {field}")]
+pub struct Refusal {
+    /// The particle (id).
+    pub particle: u32,
+    /// A short code for tables: `geometry`, `unreadable`, `deflection_limit`,
+    /// `no_separation`, `stuck`, `too_tall`, `model`.
+    pub code: &'static str,
+    /// What fails, with the numbers.
+    pub reason: String,
+    /// The scene field(s) to change, and how.
+    pub field: String,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::short;
+
+    #[test]
+    fn values_print_with_four_significant_digits() {
+        assert_eq!(short(-1.5), "-1.5");
+        assert_eq!(short(0.1), "0.1");
+        assert_eq!(short(4.2512), "4.251");
+        assert_eq!(short(120.0), "120");
+        assert_eq!(short(0.012345), "0.01235");
+        assert_eq!(short(0.0), "0");
+    }
+}

@@ -1,0 +1,807 @@
+//! The strategy of Sec 2.1 derived from the scene's model, instead of tuned by hand for each
+//! scene (`nanopush plan`; `push` and the server use it for every setting the scene does not
+//! give by hand).
+//!
+//! The model's push at constant speed ([`predict`]) gives what the strategy needs: the
+//! stick-phase peak deflection `ζ_peak` before the particle-substrate separation `t*`, the tip
+//! travel to it, the settled deflection `ζ°` after it, and, lifting the tip until it lets go,
+//! the lift that takes and the drag it causes. From these, with the readout (gain `g`, noise
+//! `σ`, periodic perturbation `p`, full scale) and the stage (`f_y`):
+//!
+//! - **β**: the first of 30°, 45°, 20°, 60°, 15°, 70°, 10°, 80° whose parking height
+//!   `h = Rₐ − Rₜ + (Rₐ + Rₜ) sin β` keeps the apex above the substrate and whose predicted push
+//!   passes every check below (the paper's 30° first).
+//! - **set point** `ζ_set = 0.6 ζ_peak`: reached before the particle moves; its reading must be
+//!   at least `10 (σ + p)` from the baseline.
+//! - **safety limit**: `max(2.5 ζ_peak g, ζ_peak g + 10σ)` from the baseline, within 90 % of
+//!   the readout's room on the push side; the peak must fit with 30 % to spare.
+//! - **`t*` is seen**: the drop `(ζ_peak − ζ°) g` at least `12σ + 2p` (the detector's margin
+//!   is a third of it, at least 4σ); **particle lost** at half the settled reading, which
+//!   must be at least `8σ + 2p`.
+//! - **V**: at most the paper's 1 µm/s; at most the travel between the set point and the peak
+//!   in 1.5 ticks of 1 ms (the search stops before the particle shears); at most
+//!   `tolerance · 2π f_y / 4`, so the stage's ringing at the stop (`≈ V/(2π f_y)`) stays
+//!   within a quarter of the tolerance.
+//! - **Δ** `= (Rₐ + Rₜ)/4` within [5, 100] nm; **approach distance**: the clearance the tip
+//!   needs to touch down beside the particle, `2√(Rₐ Rₜ) − (Rₐ + Rₜ) cos β` when positive,
+//!   plus four local-scan pixels (where the scan may have put it) and two steps; **search
+//!   range**: twice that plus the model's travel to the set point and four steps.
+//! - **start height** (the retraction's): above the tallest particle by a quarter of its height
+//!   (at least 0.5 µm), and above the parking height plus 1.25 × the lift the model needs to
+//!   let go, plus 0.2 µm; at most 50 µm.
+//! - **time-out**: three times the longest phase (the longest push at V, the approach from
+//!   twice the start height), at least 120 s.
+//!
+//! A value the scene gives by hand ([`crate::scene::hand_set`]) wins; when it fails a check, the
+//! plan warns. When no derived strategy can pass, the plan is refused, naming the field to
+//! change and the value it would need ([`Refusal`]).
+
+mod choice;
+#[cfg(test)]
+mod tests;
+
+pub use choice::{Choice, Refusal, StrategyPlan, short};
+
+use crate::control::estimator::{PushPrediction, RetractPlan, predict};
+use crate::control::locate_and_plan::{LOCAL_PIXELS, local_scan_size};
+use crate::control::strategy::{BACK_OFF, HOLD};
+use crate::scene::Scene;
+use crate::scene::file::{ParticleFile, StrategyFile};
+
+/// The default tolerance of a push (m): `ok` within 25 nm of the target.
+pub const DEFAULT_TOLERANCE: f64 = 25e-9;
+
+/// The set point as a fraction of the stick-phase peak deflection.
+pub const SET_FRACTION: f64 = 0.6;
+
+/// Contact angles tried, in order (degrees): the paper's 30° first.
+pub const BETAS_DEG: [f64; 8] = [30.0, 45.0, 20.0, 60.0, 15.0, 70.0, 10.0, 80.0];
+
+/// Highest start height the scene allows (m), `strategy.start_height_um`'s upper bound.
+const MAX_START: f64 = 50e-6;
+
+/// Travel of the model push the plan reads its constants from (m), as the estimator's.
+const PREDICTED_TRAVEL: f64 = 40e-9;
+
+/// The paper's stage speed (m/s), the plan's upper bound.
+const PAPER_SPEED: f64 = 1e-6;
+
+/// Control tick (s).
+const TICK: f64 = 1e-3;
+
+/// The readout as the plan sees it (V).
+#[derive(Debug, Clone, Copy)]
+struct Readout {
+    /// |gain| (V/m).
+    gain: f64,
+    /// Sign of the gain: which way a push moves the reading.
+    sign: f64,
+    baseline: f64,
+    /// Noise RMS (V).
+    sigma: f64,
+    /// Periodic perturbation amplitude (V).
+    pert: f64,
+    /// From the baseline to the rail on the push side (V).
+    room: f64,
+}
+
+impl Readout {
+    fn of(scene: &Scene) -> Readout {
+        let s = &scene.file.sensor;
+        let sign = s.gain_v_per_nm.signum();
+        Readout {
+            gain: s.gain_v_per_nm.abs() * 1e9,
+            sign,
+            baseline: s.baseline_v,
+            sigma: s.noise_rms_mv * 1e-3,
+            pert: s.perturbation_mv * 1e-3,
+            room: s.full_scale_v - sign * s.baseline_v,
+        }
+    }
+
+    /// The reading of a deflection (V).
+    fn volts(&self, deflection: f64) -> f64 {
+        self.baseline + self.sign * self.gain * deflection
+    }
+}
+
+/// What a predicted push at one β says of the strategy: the numbers the settings derive from.
+#[derive(Debug, Clone, Copy)]
+struct Candidate {
+    beta_deg: f64,
+    parking: f64,
+    prediction: PushPrediction,
+}
+
+/// Why a candidate fails, before it is a [`Refusal`].
+struct Fails {
+    code: &'static str,
+    reason: String,
+    field: String,
+}
+
+/// Derives the strategy for pushing particle `id` of `scene` to within `tolerance` (m).
+pub fn derive(scene: &Scene, id: u32, tolerance: f64) -> Result<StrategyPlan, Refusal> {
+    Derivation::new(scene, id, tolerance)?.run()
+}
+
+struct Derivation<'a> {
+    scene: &'a Scene,
+    part: &'a ParticleFile,
+    tolerance: f64,
+    readout: Readout,
+    file: StrategyFile,
+    choices: Vec<Choice>,
+    warnings: Vec<String>,
+}
+
+impl<'a> Derivation<'a> {
+    fn new(scene: &'a Scene, id: u32, tolerance: f64) -> Result<Derivation<'a>, Refusal> {
+        let part = scene
+            .file
+            .particles
+            .iter()
+            .find(|p| p.id == id)
+            .ok_or_else(|| Refusal {
+                particle: id,
+                code: "geometry",
+                reason: format!("the scene has no particle with id {id}"),
+                field: "push.particle_id".into(),
+            })?;
+        Ok(Derivation {
+            scene,
+            part,
+            tolerance,
+            readout: Readout::of(scene),
+            file: scene.file.strategy.clone(),
+            choices: Vec::new(),
+            warnings: Vec::new(),
+        })
+    }
+
+    fn hand(&self, key: &str) -> bool {
+        self.scene.hand_set.contains(key)
+    }
+
+    fn refuse(&self, fails: Fails) -> Refusal {
+        Refusal {
+            particle: self.part.id,
+            code: fails.code,
+            reason: fails.reason,
+            field: fails.field,
+        }
+    }
+
+    /// Records a choice: the hand-set value when there is one (warned about if `check` says it
+    /// cannot work), else the derived one. Returns the value in force.
+    fn choose(&mut self, key: &'static str, hand_value: f64, derived: f64, why: String, check: Option<String>) -> f64 {
+        let hand_set = self.hand(key);
+        let value = if hand_set { hand_value } else { derived };
+        if hand_set && let Some(problem) = check {
+            self.warnings.push(format!(
+                "{key} = {} (hand-set): {problem}; the model suggests {}",
+                short(hand_value),
+                short(derived)
+            ));
+        }
+        let why = if hand_set && (hand_value - derived).abs() > 1e-12 * derived.abs().max(1e-30) {
+            format!("given by the scene; derived would be {}: {why}", short(derived))
+        } else {
+            why
+        };
+        self.choices.push(Choice {
+            key,
+            value,
+            hand_set,
+            why,
+        });
+        value
+    }
+
+    fn run(mut self) -> Result<StrategyPlan, Refusal> {
+        let f = &self.scene.file;
+        let (r_a, r_t) = (self.part.radius_nm * 1e-9, f.tip.radius_nm * 1e-9);
+        let ro = self.readout;
+
+        // Substrate detection during auto-parking.
+        let noise = 10.0 * ro.sigma + 2.0 * ro.pert;
+        let thr = noise.max(0.03);
+        let thr_check = (f.strategy.substrate_threshold_mv * 1e-3 < noise).then(|| {
+            format!(
+                "within 10σ + 2p = {:.1} mV of the readout's noise: the noise can trip it",
+                noise * 1e3
+            )
+        });
+        let thr = self.choose(
+            "strategy.substrate_threshold_mv",
+            f.strategy.substrate_threshold_mv,
+            (thr * 1e3).round(),
+            format!(
+                "10σ of the readout noise plus twice the perturbation, at least 30 mV: the touch is told from noise (the tip presses {:.2} nm before it is seen)",
+                thr / ro.gain * 1e9
+            ),
+            thr_check,
+        ) * 1e-3;
+        if thr >= 0.5 * ro.room {
+            return Err(self.refuse(Fails {
+                code: "unreadable",
+                reason: format!(
+                    "the substrate threshold {:.0} mV (10σ of the noise) is over half the readout's room {:.2} V on the push side",
+                    thr * 1e3,
+                    ro.room
+                ),
+                field: "sensor.noise_rms_mv (lower) or sensor.full_scale_v (higher)".into(),
+            }));
+        }
+        let press = thr / ro.gain;
+        if press > 10e-9 {
+            return Err(self.refuse(Fails {
+                code: "unreadable",
+                reason: format!(
+                    "the tip would press {:.1} nm into the substrate before the reading shows it ({:.0} mV at {} V/nm)",
+                    press * 1e9,
+                    thr * 1e3,
+                    short(ro.gain * 1e-9)
+                ),
+                field: format!("sensor.gain_v_per_nm: |gain| ≥ {} V/nm", short(thr / 10e-9 * 1e-9)),
+            }));
+        }
+
+        let approach_speed = f.strategy.approach_speed_um_per_s * 1e-6;
+        let v0 = if self.hand("push.speed_um_per_s") {
+            f.push.speed_um_per_s * 1e-6
+        } else {
+            PAPER_SPEED
+        };
+        let cand = self.contact_angle(r_a, r_t, v0, approach_speed)?;
+        let beta_hand = self.hand("push.contact_angle_deg");
+        let why_beta = format!(
+            "{}: the parking height {:.1} nm keeps the apex above the substrate, the push bends the lever up to a stick-phase peak of {:.3} nm before t*, and every check below passes",
+            if beta_hand {
+                "given by the scene".to_string()
+            } else {
+                format!("the first of {BETAS_DEG:?}° that works")
+            },
+            cand.parking * 1e9,
+            cand.prediction.peak_deflection * 1e9
+        );
+        self.choices.push(Choice {
+            key: "push.contact_angle_deg",
+            value: cand.beta_deg,
+            hand_set: beta_hand,
+            why: why_beta,
+        });
+        let beta = cand.beta_deg.to_radians();
+        let pred = cand.prediction;
+        let peak_v = pred.peak_deflection * ro.gain;
+        let settled_v = pred.settled_deflection * ro.gain;
+
+        // The set point, the safety limit and "particle lost".
+        let set_defl = SET_FRACTION * pred.peak_deflection;
+        let set_v = ro.volts(set_defl);
+        let hand_set_signal = (f.strategy.set_point_v - ro.baseline) * ro.sign;
+        let set_check = if hand_set_signal >= 0.95 * peak_v {
+            Some(format!(
+                "{:.3} V from the baseline, at or beyond the predicted peak {:.3} V: the search pushes the particle without reaching it",
+                hand_set_signal, peak_v
+            ))
+        } else if hand_set_signal < 5.0 * (ro.sigma + ro.pert) {
+            Some(format!(
+                "{hand_set_signal:.3} V from the baseline: within 5 × the noise, a false contact"
+            ))
+        } else {
+            None
+        };
+        self.choose(
+            "strategy.set_point_v",
+            f.strategy.set_point_v,
+            set_v,
+            format!(
+                "{:.0} % of the stick-phase peak deflection {:.3} nm ({:.3} V from the baseline): reached before the particle moves, {:.0} × the noise",
+                SET_FRACTION * 100.0,
+                pred.peak_deflection * 1e9,
+                peak_v,
+                SET_FRACTION * peak_v / (ro.sigma + ro.pert).max(1e-6)
+            ),
+            set_check,
+        );
+        let safety = (2.5 * peak_v).max(peak_v + 10.0 * ro.sigma).min(0.9 * ro.room);
+        let hand_safety = (f.strategy.safety_limit_v - ro.baseline) * ro.sign;
+        let safety_check = (hand_safety < 1.1 * peak_v).then(|| {
+            format!("{hand_safety:.3} V from the baseline, within 10 % of the predicted peak {peak_v:.3} V: an ordinary push trips it")
+        });
+        self.choose(
+            "strategy.safety_limit_v",
+            f.strategy.safety_limit_v,
+            ro.baseline + ro.sign * safety,
+            format!(
+                "2.5 × the peak reading {peak_v:.3} V (or the peak plus 10σ; the instrument's peak exceeds the model's where the snap-in lifts the detected substrate), within 90 % of the readout's {:.2} V on the push side",
+                ro.room
+            ),
+            safety_check,
+        );
+        let lost = settled_v / 2.0;
+        let lost_check = (f.strategy.lost_threshold_mv * 1e-3 >= 0.9 * settled_v).then(|| {
+            format!(
+                "at or above the settled reading {:.1} mV: an ordinary push looks lost",
+                settled_v * 1e3
+            )
+        });
+        self.choose(
+            "strategy.lost_threshold_mv",
+            f.strategy.lost_threshold_mv,
+            (lost * 1e3 * 10.0).round() / 10.0,
+            format!(
+                "half the settled reading {:.1} mV the model predicts after t*",
+                settled_v * 1e3
+            ),
+            lost_check,
+        );
+
+        // The speed: the search must stop between the set point and the peak.
+        let window = pred.travel_to_peak - pred.travel_to_deflection.unwrap_or(0.0);
+        let v_detect = window / (1.5 * TICK);
+        let omega = 2.0 * std::f64::consts::PI * f.stage.resonance_hz;
+        let v_ring = self.tolerance * omega / 4.0;
+        let v = PAPER_SPEED.min(v_detect).min(v_ring);
+        let hand_v = f.push.speed_um_per_s * 1e-6;
+        let v_check = (hand_v > 1.05 * v_detect.min(v_ring)).then(|| {
+            format!(
+                "faster than {:.3} µm/s: {}",
+                v_detect.min(v_ring) * 1e6,
+                if v_detect < v_ring {
+                    format!(
+                        "the search crosses the {:.2} nm between the set point and the peak in under 1.5 ticks",
+                        window * 1e9
+                    )
+                } else {
+                    format!(
+                        "the stage rings about V/(2π f_y) at the stop, over a quarter of the {:.0} nm tolerance",
+                        self.tolerance * 1e9
+                    )
+                }
+            )
+        });
+        let speed_um = self.choose(
+            "push.speed_um_per_s",
+            hand_v * 1e6,
+            round_down(v * 1e6),
+            format!(
+                "the least of the paper's 1 µm/s, the {:.2} nm from the set point to the peak in 1.5 ticks of 1 ms ({:.3} µm/s), and the tolerance × 2π f_y / 4 ({:.3} µm/s: the stage's ringing at the stop)",
+                window * 1e9,
+                v_detect * 1e6,
+                v_ring * 1e6
+            ),
+            v_check,
+        );
+        let v = speed_um * 1e-6;
+
+        // The contact search's geometry, from the local scan that finds the particle.
+        let range = f.stage.range_um * 1e-6;
+        let scan = local_scan_size(r_a, r_t, range);
+        let pitch = scan / LOCAL_PIXELS as f64;
+        self.choices.push(Choice {
+            key: "local_scan.size_um",
+            value: scan * 1e6,
+            hand_set: false,
+            why: "12 particle radii of substrate to level on, at least 4 µm, at most 32 (Rₐ + Rₜ) (four pixels across the particle's image) and the stage".into(),
+        });
+        self.choices.push(Choice {
+            key: "local_scan.pixels",
+            value: LOCAL_PIXELS as f64,
+            hand_set: false,
+            why: format!(
+                "a {:.1} nm pitch: the sphere fit locates the particle to a small fraction of it",
+                pitch * 1e9
+            ),
+        });
+        let step = ((r_a + r_t) / 4.0).clamp(5e-9, 100e-9);
+        let step = self.choose(
+            "strategy.step_um",
+            f.strategy.step_um,
+            round_nm(step) * 1e6,
+            "a quarter of Rₐ + Rₜ within [5, 100] nm (the paper's 0.1 µm for its 1 µm particles)".into(),
+            None,
+        ) * 1e-6;
+        let clearance = (2.0 * (r_a * r_t).sqrt() - (r_a + r_t) * beta.cos()).max(0.0);
+        let approach = clearance + 4.0 * pitch + 2.0 * step;
+        let approach = self.choose(
+            "strategy.approach_distance_um",
+            f.strategy.approach_distance_um,
+            round_nm(approach) * 1e6,
+            format!(
+                "{:.0} nm for the tip to touch down beside the particle, 2√(RₐRₜ) − (Rₐ + Rₜ) cos β, plus four local-scan pixels ({:.0} nm) and two steps",
+                clearance * 1e9,
+                4.0 * pitch * 1e9
+            ),
+            (f.strategy.approach_distance_um * 1e-6 < clearance).then(|| {
+                format!(
+                    "the tip touches down on the particle, not beside it: it needs {:.3} µm",
+                    clearance * 1e6
+                )
+            }),
+        ) * 1e-6;
+        let to_set = pred.travel_to_deflection.unwrap_or(pred.travel_to_peak);
+        let search = 2.0 * approach + to_set + 4.0 * step;
+        self.choose(
+            "strategy.search_range_um",
+            f.strategy.search_range_um,
+            round_nm(search) * 1e6,
+            format!(
+                "twice the approach distance, plus the model's {:.1} nm from the touch to the set point, plus four steps",
+                to_set * 1e9
+            ),
+            (f.strategy.search_range_um * 1e-6 < approach + to_set).then(|| "shorter than the approach distance and the travel to the set point".into()),
+        );
+
+        // The retraction: high enough to let go, and to clear every particle.
+        let tallest = f.particles.iter().map(|p| 2.0 * p.radius_nm * 1e-9).fold(0.0, f64::max);
+        let clear = tallest + (0.25 * tallest).max(0.5e-6);
+        let release = pred.release_lift.unwrap_or(0.0);
+        let lift_need = cand.parking + BACK_OFF * beta.sin() + 1.25 * release + 0.2e-6;
+        let start = clear.max(lift_need);
+        if start > MAX_START {
+            return Err(self.refuse(Fails {
+                code: "too_tall",
+                reason: format!(
+                    "the retraction needs a start height of {:.1} µm (the tallest particle {:.1} µm, the lift to let go {:.2} µm), above the {} µm allowed",
+                    start * 1e6,
+                    tallest * 1e6,
+                    release * 1e6,
+                    MAX_START * 1e6
+                ),
+                field: "particles[].radius_nm (smaller) or environment.relative_humidity (drier: a shorter meniscus)".into(),
+            }));
+        }
+        let start_check = (f.strategy.start_height_um * 1e-6 < lift_need).then(|| {
+            format!(
+                "below the {:.3} µm the tip needs to let go of the particle: it drags the particle back as it lifts",
+                lift_need * 1e6
+            )
+        });
+        let start = self.choose(
+            "strategy.start_height_um",
+            f.strategy.start_height_um,
+            (start * 1e7).ceil() / 10.0,
+            format!(
+                "above the tallest particle ({:.2} µm) by a quarter of it, at least 0.5 µm, and above the parking height plus 1.25 × the {:.3} µm the model lifts before the tip lets go",
+                tallest * 1e6,
+                release * 1e6
+            ),
+            start_check,
+        ) * 1e-6;
+
+        // Settings the model does not change, said with their reasons.
+        let fixed = |s: &mut Self, key: &'static str, value: f64, why: &str| {
+            s.choose(key, value, value, why.into(), None);
+        };
+        fixed(
+            &mut self,
+            "strategy.approach_speed_um_per_s",
+            f.strategy.approach_speed_um_per_s,
+            "the z approach and the lift: 1 nm a tick, gentle on the substrate",
+        );
+        fixed(
+            &mut self,
+            "strategy.travel_speed_um_per_s",
+            f.strategy.travel_speed_um_per_s,
+            "moves at the start height, clear of every particle",
+        );
+        fixed(
+            &mut self,
+            "strategy.dwell_ms",
+            f.strategy.dwell_ms,
+            "readings averaged after each search step (the contact is checked every tick regardless)",
+        );
+        fixed(
+            &mut self,
+            "strategy.max_push_um",
+            f.strategy.max_push_um,
+            "a longer move is planned as several pushes",
+        );
+        fixed(
+            &mut self,
+            "strategy.clearance_um",
+            f.strategy.clearance_um,
+            "kept between the pushed particle and the others when planning",
+        );
+        fixed(
+            &mut self,
+            "strategy.z_gain_nm_per_v",
+            f.strategy.z_gain_nm_per_v,
+            "the z force loop's gain (z and xyz control only)",
+        );
+        let longest = (f.strategy.max_push_um * 1e-6 / v)
+            .max(2.0 * start / approach_speed)
+            .max(search / v + search / step * f.strategy.dwell_ms * 1e-3);
+        let timeout = (3.0 * longest).max(120.0).ceil();
+        self.choose(
+            "strategy.phase_timeout_s",
+            f.strategy.phase_timeout_s,
+            timeout,
+            format!("three times the longest phase ({longest:.0} s), at least 120 s"),
+            (f.strategy.phase_timeout_s < longest).then(|| format!("shorter than the longest phase, {longest:.0} s")),
+        );
+        self.tolerance_warnings(&pred, pitch);
+        self.file = resolved(self.scene, &self.choices);
+        Ok(StrategyPlan {
+            particle: self.part.id,
+            tolerance: self.tolerance,
+            choices: self.choices,
+            warnings: self.warnings,
+            strategy: self.file,
+            contact_angle_deg: cand.beta_deg,
+            speed_um_per_s: speed_um,
+            local_scan: (scan, LOCAL_PIXELS),
+            prediction: pred,
+        })
+    }
+
+    /// The contact angle: the hand-set one, or the first of [`BETAS_DEG`] whose predicted push
+    /// passes [`Derivation::check`].
+    fn contact_angle(&mut self, r_a: f64, r_t: f64, v: f64, approach_speed: f64) -> Result<Candidate, Refusal> {
+        let hand = self.hand("push.contact_angle_deg");
+        let betas: Vec<f64> = if hand {
+            vec![self.scene.file.push.contact_angle_deg]
+        } else {
+            BETAS_DEG.to_vec()
+        };
+        let mut first_failure: Option<Fails> = None;
+        let mut tried = Vec::new();
+        for &beta_deg in &betas {
+            let beta = beta_deg.to_radians();
+            let parking = r_a - r_t + (r_a + r_t) * beta.sin();
+            let result = if parking <= 0.05 * r_a {
+                Err(Fails {
+                    code: "geometry",
+                    reason: format!(
+                        "at β = {beta_deg}° the parking height Rₐ − Rₜ + (Rₐ + Rₜ) sin β = {:.2} nm leaves the apex within 5 % of Rₐ of the substrate",
+                        parking * 1e9
+                    ),
+                    field: "tip.radius_nm (a sharper tip) or push.contact_angle_deg (steeper)".into(),
+                })
+            } else {
+                self.predict_at(beta, parking, v, approach_speed)
+                    .and_then(|c| self.check(&c).map(|()| c))
+            };
+            tried.push(beta_deg);
+            match result {
+                Ok(c) => return Ok(c),
+                Err(f) if hand => {
+                    // The hand-set angle wins; its failure is a warning, when the model could
+                    // say anything at all.
+                    let warning = format!(
+                        "push.contact_angle_deg = {beta_deg} (hand-set): {}; change {}",
+                        f.reason, f.field
+                    );
+                    if let Ok(c) = self.predict_at(beta, parking, v, approach_speed)
+                        && c.prediction.peak_deflection > 0.0
+                    {
+                        self.warnings.push(warning);
+                        return Ok(c);
+                    }
+                    return Err(self.refuse(f));
+                }
+                Err(f) => {
+                    if first_failure.is_none() {
+                        first_failure = Some(f);
+                    }
+                }
+            }
+        }
+        let f = first_failure.expect("at least one angle tried");
+        Err(self.refuse(Fails {
+            reason: format!("{} (and at every other contact angle tried: {tried:?}°)", f.reason),
+            ..f
+        }))
+    }
+
+    fn predict_at(&self, beta: f64, parking: f64, v: f64, approach_speed: f64) -> Result<Candidate, Fails> {
+        let mut params = self.scene.push_params_for(self.part);
+        params.beta = beta;
+        params.speed = v;
+        let duration = (PREDICTED_TRAVEL / v).max(0.02);
+        let retract = RetractPlan {
+            hold: HOLD,
+            back_off: BACK_OFF,
+            speed: approach_speed,
+            lift: MAX_START - parking,
+        };
+        // No set point yet: the travel to it is read once the peak is known.
+        let prediction = predict(params, duration, f64::INFINITY, retract).map_err(|e| Fails {
+            code: "model",
+            reason: format!("the model's push at β = {:.0}° failed: {e}", beta.to_degrees()),
+            field: crate::physics::pushing::MODEL_FIELDS.into(),
+        })?;
+        let set = SET_FRACTION * prediction.peak_deflection;
+        // The travel to the set point, from the same (deterministic) model push.
+        let prediction = if prediction.peak_deflection > 0.0 {
+            predict(params, duration, set, retract).map_err(|e| Fails {
+                code: "model",
+                reason: format!("the model's push at β = {:.0}° failed: {e}", beta.to_degrees()),
+                field: crate::physics::pushing::MODEL_FIELDS.into(),
+            })?
+        } else {
+            prediction
+        };
+        Ok(Candidate {
+            beta_deg: beta.to_degrees().round(),
+            parking,
+            prediction,
+        })
+    }
+
+    /// Whether the strategy can work on the predicted push: the reading shows the contact, the
+    /// peak fits the readout, `t*` is seen and the tip lets go.
+    fn check(&self, c: &Candidate) -> Result<(), Fails> {
+        let ro = self.readout;
+        let p = &c.prediction;
+        let k = self.scene.file.cantilever.stiffness_n_per_m;
+        let gain_nm = ro.gain * 1e-9;
+        if p.peak_deflection <= 0.0 {
+            return Err(Fails {
+                code: "unreadable",
+                reason: format!(
+                    "at β = {}° the push bends the lever away from the set point's side (peak ζ_z = {:.3} nm)",
+                    c.beta_deg,
+                    p.peak_deflection * 1e9
+                ),
+                field: "push.contact_angle_deg (steeper) or cantilever.tilt_deg".into(),
+            });
+        }
+        if p.travel_to_peak > 0.75 * PREDICTED_TRAVEL {
+            return Err(Fails {
+                code: "no_separation",
+                reason: format!(
+                    "at β = {}° the particle does not shear loose within {:.0} nm of push (ζ_z still rising at {:.2} nm, {:.2} nN on the lever)",
+                    c.beta_deg,
+                    0.75 * PREDICTED_TRAVEL * 1e9,
+                    p.peak_deflection * 1e9,
+                    p.peak_deflection * k * 1e9
+                ),
+                field: "cantilever.stiffness_n_per_m (stiffer) or friction.particle_substrate_static (lower)".into(),
+            });
+        }
+        let peak_v = p.peak_deflection * ro.gain;
+        if 1.3 * peak_v > 0.9 * ro.room {
+            let need_k = k * 1.3 * peak_v / (0.9 * ro.room);
+            return Err(Fails {
+                code: "deflection_limit",
+                reason: format!(
+                    "at β = {}° the lever's deflection limit is reached before the particle shears: the stick-phase peak {:.2} nm reads {:.2} V, and with 30 % to spare that is beyond 90 % of the readout's {:.2} V",
+                    c.beta_deg,
+                    p.peak_deflection * 1e9,
+                    peak_v,
+                    ro.room
+                ),
+                field: format!(
+                    "cantilever.stiffness_n_per_m: k_c ≥ {} N/m needed, or |sensor.gain_v_per_nm| ≤ {} V/nm",
+                    short(need_k),
+                    short(gain_nm * 0.9 * ro.room / (1.3 * peak_v))
+                ),
+            });
+        }
+        let floor = ro.sigma + ro.pert;
+        if SET_FRACTION * peak_v < 10.0 * floor {
+            return Err(Fails {
+                code: "unreadable",
+                reason: format!(
+                    "at β = {}° the set point, {:.0} % of the peak {:.4} nm, reads {:.1} mV: under 10 × the noise and perturbation ({:.1} mV)",
+                    c.beta_deg,
+                    SET_FRACTION * 100.0,
+                    p.peak_deflection * 1e9,
+                    SET_FRACTION * peak_v * 1e3,
+                    floor * 1e3
+                ),
+                field: format!(
+                    "sensor.gain_v_per_nm: |gain| ≥ {} V/nm, or a lower sensor.noise_rms_mv",
+                    short(gain_nm * 10.0 * floor / (SET_FRACTION * peak_v))
+                ),
+            });
+        }
+        let drop_v = (p.peak_deflection - p.settled_deflection) * ro.gain;
+        let need_drop = 12.0 * ro.sigma + 2.0 * ro.pert;
+        if drop_v < need_drop {
+            return Err(Fails {
+                code: "unreadable",
+                reason: format!(
+                    "at β = {}° the drop at t* ({:.3} nm, {:.1} mV) is under 12σ + 2p = {:.1} mV: the separation cannot be told from noise",
+                    c.beta_deg,
+                    (p.peak_deflection - p.settled_deflection) * 1e9,
+                    drop_v * 1e3,
+                    need_drop * 1e3
+                ),
+                field: format!(
+                    "sensor.gain_v_per_nm: |gain| ≥ {} V/nm, or a lower sensor.noise_rms_mv",
+                    short(gain_nm * need_drop / drop_v.max(1e-12))
+                ),
+            });
+        }
+        let settled_v = p.settled_deflection * ro.gain;
+        let need_settled = 8.0 * ro.sigma + 2.0 * ro.pert;
+        if settled_v < need_settled {
+            return Err(Fails {
+                code: "unreadable",
+                reason: format!(
+                    "at β = {}° the settled reading after t* ({:.1} mV) is under 8σ + 2p = {:.1} mV: the push could not be told from a lost particle",
+                    c.beta_deg,
+                    settled_v * 1e3,
+                    need_settled * 1e3
+                ),
+                field: format!(
+                    "sensor.gain_v_per_nm: |gain| ≥ {} V/nm",
+                    short(gain_nm * need_settled / settled_v.max(1e-12))
+                ),
+            });
+        }
+        if p.release_lift.is_none() {
+            return Err(Fails {
+                code: "stuck",
+                reason: format!(
+                    "at β = {}° the tip still holds the particle after a lift to {} µm: the adhesion outlasts any retraction",
+                    c.beta_deg,
+                    MAX_START * 1e6
+                ),
+                field: "environment.relative_humidity (drier) or physics.capillary".into(),
+            });
+        }
+        Ok(())
+    }
+
+    /// What the tolerance asks that the instrument may not give: said, not refused (the scan
+    /// after the push judges).
+    fn tolerance_warnings(&mut self, p: &PushPrediction, pitch: f64) {
+        if p.periodic_amplitude > self.tolerance {
+            self.warnings.push(format!(
+                "the model's push is stick-slip with a {:.1} nm amplitude, more than the {:.0} nm tolerance: pushes may end outside it and be corrected",
+                p.periodic_amplitude * 1e9,
+                self.tolerance * 1e9
+            ));
+        }
+        if pitch / 8.0 > self.tolerance {
+            self.warnings.push(format!(
+                "the local scan's {:.0} nm pitch is coarse for a {:.0} nm tolerance",
+                pitch * 1e9,
+                self.tolerance * 1e9
+            ));
+        }
+    }
+}
+
+/// The `[strategy]` in force: the scene's, with every choice's value written in.
+fn resolved(scene: &Scene, choices: &[Choice]) -> StrategyFile {
+    let mut s = scene.file.strategy.clone();
+    for c in choices {
+        let v = c.value;
+        match c.key {
+            "strategy.start_height_um" => s.start_height_um = v,
+            "strategy.approach_speed_um_per_s" => s.approach_speed_um_per_s = v,
+            "strategy.travel_speed_um_per_s" => s.travel_speed_um_per_s = v,
+            "strategy.substrate_threshold_mv" => s.substrate_threshold_mv = v,
+            "strategy.step_um" => s.step_um = v,
+            "strategy.dwell_ms" => s.dwell_ms = v,
+            "strategy.set_point_v" => s.set_point_v = v,
+            "strategy.approach_distance_um" => s.approach_distance_um = v,
+            "strategy.search_range_um" => s.search_range_um = v,
+            "strategy.safety_limit_v" => s.safety_limit_v = v,
+            "strategy.lost_threshold_mv" => s.lost_threshold_mv = v,
+            "strategy.max_push_um" => s.max_push_um = v,
+            "strategy.clearance_um" => s.clearance_um = v,
+            "strategy.phase_timeout_s" => s.phase_timeout_s = v,
+            "strategy.z_gain_nm_per_v" => s.z_gain_nm_per_v = v,
+            _ => {}
+        }
+    }
+    s
+}
+
+/// A speed rounded down to three significant digits (µm/s), so the plan prints what it uses.
+fn round_down(v: f64) -> f64 {
+    let scale = 10f64.powi(2 - v.log10().floor() as i32);
+    (v * scale).floor() / scale
+}
+
+/// A length rounded to the nanometre (m).
+fn round_nm(v: f64) -> f64 {
+    (v * 1e9).round().max(1.0) * 1e-9
+}

@@ -1,0 +1,130 @@
+//! The plan derived from the model, on the shipped scenes and on scenes it must refuse.
+
+use super::*;
+use crate::scene::hand_set::{DERIVABLE, HandSet};
+
+fn scene_text(name: &str) -> String {
+    std::fs::read_to_string(format!("{}/../scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"))).expect("a shipped scene")
+}
+
+/// A shipped scene with `edit` applied to its text and nothing hand-set: the plan derives all.
+fn untuned(name: &str, edit: &[(&str, &str)]) -> Scene {
+    let mut text = scene_text(name);
+    for (from, to) in edit {
+        assert!(text.contains(from), "{name} has {from:?}");
+        text = text.replacen(from, to, 1);
+    }
+    let mut s = Scene::parse(name, &text).expect("valid");
+    s.hand_set = HandSet::none();
+    s
+}
+
+fn value(plan: &StrategyPlan, key: &str) -> f64 {
+    plan.choices
+        .iter()
+        .find(|c| c.key == key)
+        .unwrap_or_else(|| panic!("{key}"))
+        .value
+}
+
+/// Every shipped scene that can be pushed gets a plan in which every derivable setting has a
+/// value and a reason; the set point is 60 % of the model's stick-phase peak, on the gain's side of
+/// the baseline; the safety limit lies beyond it; the start height clears the particles.
+#[test]
+fn every_shipped_scene_gets_a_plan_with_a_reason_for_every_setting() {
+    for name in ["paper-default", "gold-latex-500nm", "gold-14nm", "minimal"] {
+        let s = untuned(name, &[]);
+        let plan = derive(&s, s.file.push.particle_id, DEFAULT_TOLERANCE).unwrap_or_else(|e| panic!("{name}: {e}"));
+        for key in DERIVABLE.iter().filter(|k| **k != "strategy.control") {
+            let c = plan
+                .choices
+                .iter()
+                .find(|c| c.key == *key)
+                .unwrap_or_else(|| panic!("{name}: {key}"));
+            assert!(!c.hand_set && c.why.len() > 20, "{name}: {c}");
+        }
+        let sensor = &s.file.sensor;
+        let peak = plan.prediction.peak_deflection;
+        let set = value(&plan, "strategy.set_point_v");
+        let expect = sensor.baseline_v + sensor.gain_v_per_nm * 1e9 * SET_FRACTION * peak;
+        assert!(
+            (set - expect).abs() < 1e-3,
+            "{name}: set point {set} V, 60 % of the peak reads {expect} V"
+        );
+        let safety = value(&plan, "strategy.safety_limit_v");
+        assert!(
+            (safety - sensor.baseline_v).abs() > (set - sensor.baseline_v).abs(),
+            "{name}: {safety} V"
+        );
+        assert!(value(&plan, "strategy.start_height_um") > 2.0 * s.pushed_particle().radius_nm * 1e-3);
+        assert!(plan.warnings.is_empty(), "{name}: {:?}", plan.warnings);
+    }
+}
+
+/// `minimal` bends the lever down at 30° (the set point's side is never reached): the plan goes
+/// on to 45°, as the scene was once tuned by hand.
+#[test]
+fn minimal_is_planned_at_45_deg_because_30_bends_the_lever_down() {
+    let s = untuned("minimal", &[]);
+    let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
+    assert_eq!(plan.contact_angle_deg, 45.0);
+}
+
+/// Issue 24's example: a lever too soft to shear the particle loose within the readout is
+/// refused, naming the stiffness it would need (and the gain that would fit), at every angle.
+#[test]
+fn a_soft_lever_is_refused_naming_the_stiffness_it_needs() {
+    let s = untuned(
+        "paper-default",
+        &[("stiffness_n_per_m = 8.0", "stiffness_n_per_m = 0.01")],
+    );
+    let e = derive(&s, 1, DEFAULT_TOLERANCE).unwrap_err();
+    assert!(["deflection_limit", "no_separation"].contains(&e.code), "{e}");
+    assert!(e.field.contains("cantilever.stiffness_n_per_m"), "{e}");
+    assert!(e.reason.contains("every other contact angle tried"), "{e}");
+    assert!(e.to_string().contains("; change cantilever.stiffness_n_per_m"), "{e}");
+}
+
+/// A readout whose noise drowns the contact is refused naming the gain it would need.
+#[test]
+fn a_noisy_readout_is_refused_naming_the_gain_it_needs() {
+    let s = untuned("paper-default", &[("gain_v_per_nm = -0.8", "gain_v_per_nm = -0.005")]);
+    let e = derive(&s, 1, DEFAULT_TOLERANCE).unwrap_err();
+    assert_eq!(e.code, "unreadable", "{e}");
+    assert!(e.field.contains("sensor.gain_v_per_nm: |gain| ≥"), "{e}");
+}
+
+/// Hand-set values win; one that cannot work is warned about, with the model's suggestion.
+#[test]
+fn a_hand_set_set_point_beyond_the_peak_wins_and_is_warned_about() {
+    let mut s = untuned("paper-default", &[("set_point_v = -1.5", "set_point_v = -3.0")]);
+    s.hand_set.insert("strategy.set_point_v");
+    let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
+    assert_eq!(value(&plan, "strategy.set_point_v"), -3.0);
+    assert!(
+        plan.choices
+            .iter()
+            .any(|c| c.key == "strategy.set_point_v" && c.hand_set)
+    );
+    assert!(
+        plan.warnings
+            .iter()
+            .any(|w| w.starts_with("strategy.set_point_v = -3 (hand-set)") && w.contains("beyond the predicted peak")),
+        "{:?}",
+        plan.warnings
+    );
+    let mut scene = s.clone();
+    plan.apply(&mut scene);
+    assert_eq!(scene.file.strategy.set_point_v, -3.0);
+}
+
+/// A sensor whose gain is positive (a push raises the reading) and a scene without a
+/// `[strategy]`: it loads (the default −1.5 V set point is not the scene's), and the plan puts
+/// the set point above the baseline.
+#[test]
+fn a_positive_gain_scene_without_a_strategy_loads_and_gets_a_set_point_above_the_baseline() {
+    let text = scene_text("gold-14nm").replacen("gain_v_per_nm = -0.8", "gain_v_per_nm = 0.8", 1);
+    let s = Scene::parse("positive gain", &text).expect("loads: its strategy is derived");
+    let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
+    assert!(value(&plan, "strategy.set_point_v") > s.file.sensor.baseline_v);
+}
