@@ -107,3 +107,213 @@ pub fn run(scene: &Scene, reduced: bool, out: &Path) -> anyhow::Result<(String, 
     });
     Ok((text, json))
 }
+
+/// Arguments of `nanopush campaign`: random valid scenes nobody tuned, planned, pushed and
+/// judged (`nanopush_study::random_scenes`).
+#[derive(clap::Args, Debug)]
+pub struct CampaignArgs {
+    /// How many random scenes (seeds `--seed` … `--seed + N − 1`), in [1, 100000].
+    #[arg(long, value_name = "N", default_value_t = 100)]
+    random: u64,
+    /// The first seed.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// The generator's ranges: `lab` (the instruments and samples of a nanomanipulation lab) or
+    /// `validator` (every parameter across the scene validator's whole range).
+    #[arg(long, default_value = "lab")]
+    ranges: String,
+    /// Run only shard I of N (every N-th seed from the I-th), e.g. `--shard 0/4`.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<String>,
+    /// The pushes' tolerance (nm), in [1, 100000].
+    #[arg(long, value_name = "NM", default_value_t = nanopush::control::strategy_plan::DEFAULT_TOLERANCE * 1e9)]
+    tolerance_nm: f64,
+    /// Write `random.csv` (a row per scene) here.
+    #[arg(long, default_value = "campaign-out")]
+    out: std::path::PathBuf,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Parses `I/N` with `I < N`.
+fn parse_shard(s: &str) -> anyhow::Result<(u64, u64)> {
+    let bad = || anyhow::anyhow!("--shard {s:?}: expected I/N with 0 ≤ I < N ≤ 1000, e.g. 0/4");
+    let (i, n) = s.split_once('/').ok_or_else(bad)?;
+    let (i, n): (u64, u64) = (
+        i.trim().parse().map_err(|_| bad())?,
+        n.trim().parse().map_err(|_| bad())?,
+    );
+    if n == 0 || n > 1000 || i >= n {
+        return Err(bad());
+    }
+    Ok((i, n))
+}
+
+/// Runs the random-scene campaign and reports it: the accepted share, `ok` within the
+/// tolerance, the refusals by reason, the worst true error of an `ok`, and the cost.
+pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
+    use nanopush_study::random_scenes::{RandomCase, Ranges, run_random, shard_seeds};
+    let ranges = match a.ranges.as_str() {
+        "lab" => Ranges::Lab,
+        "validator" => Ranges::Validator,
+        other => anyhow::bail!("--ranges {other:?}: unknown; allowed: lab, validator"),
+    };
+    if !(1..=100_000).contains(&a.random) {
+        anyhow::bail!("--random {} is out of range; allowed: [1, 100000] scenes", a.random);
+    }
+    if !(a.tolerance_nm.is_finite() && (1.0..=100_000.0).contains(&a.tolerance_nm)) {
+        anyhow::bail!(
+            "--tolerance-nm {} is out of range; allowed: [1, 100000] nm",
+            a.tolerance_nm
+        );
+    }
+    let (i, n) = a.shard.as_deref().map(parse_shard).transpose()?.unwrap_or((0, 1));
+    let seeds = shard_seeds(a.seed, a.random, i, n);
+    let tolerance = a.tolerance_nm * 1e-9;
+    let start = std::time::Instant::now();
+    let cases: Vec<RandomCase> = seeds.par_iter().map(|&s| run_random(s, ranges, tolerance)).collect();
+    let total = start.elapsed().as_secs_f64();
+    let t = RandomTable::of(&cases);
+    let mut csv = String::from(
+        "seed,outcome,refusal,true_error_nm,measured_error_nm,attempts,distance_um,simulated_s,wall_s,violations,reason,scene\n",
+    );
+    for c in &cases {
+        let j = &c.judged;
+        writeln!(
+            csv,
+            "{},{},{},{},{},{},{},{:.3},{:.3},{},{},{}",
+            c.seed,
+            j.outcome,
+            j.refusal.as_deref().unwrap_or(""),
+            j.true_error.map_or(String::new(), |e| format!("{:.2}", e * 1e9)),
+            j.measured_error.map_or(String::new(), |e| format!("{:.2}", e * 1e9)),
+            j.attempts,
+            j.distance * 1e6,
+            j.simulated,
+            j.wall_time,
+            j.violations.join("; ").replace(',', ";"),
+            j.reason.replace([',', '\n'], ";"),
+            c.summary.replace(',', ";")
+        )?;
+    }
+    std::fs::create_dir_all(&a.out).map_err(|e| anyhow::anyhow!("creating {}: {e}", a.out.display()))?;
+    crate::units::write_file(&a.out.join("random.csv"), &csv)?;
+    if a.json {
+        let v = serde_json::json!({
+            "schema": "nanopush.random_campaign", "ranges": ranges.name(), "seeds": seeds.len(), "first_seed": a.seed, "shard": [i, n],
+            "tolerance": tolerance, "accepted": t.accepted, "ok": t.ok, "refused": t.refused,
+            "outcomes": t.outcomes, "refusals": t.refusals, "unsound": t.unsound,
+            "worst_ok_true_error": t.worst_ok, "median_wall_time": t.median_wall, "max_wall_time": t.max_wall,
+            "wall_time": total,
+        });
+        return Ok(serde_json::to_string_pretty(&v)? + "\n");
+    }
+    let mut s = String::new();
+    let pct = |k: usize, of: usize| if of == 0 { 0.0 } else { 100.0 * k as f64 / of as f64 };
+    writeln!(
+        s,
+        "Random valid scenes ({} ranges), seeds {}..{} (shard {i}/{n}: {} scenes), tolerance {} nm, {:.0} s on {} threads",
+        ranges.name(),
+        a.seed,
+        a.seed + a.random,
+        seeds.len(),
+        a.tolerance_nm,
+        total,
+        rayon::current_num_threads()
+    )?;
+    writeln!(
+        s,
+        "  accepted by the plan {} ({:.0} %); of those ok within the tolerance {} ({:.1} %)",
+        t.accepted,
+        pct(t.accepted, seeds.len()),
+        t.ok,
+        pct(t.ok, t.accepted)
+    )?;
+    writeln!(s, "  outcomes of the accepted: {}", counts_text(&t.outcomes))?;
+    writeln!(s, "  refused {} by reason: {}", t.refused, counts_text(&t.refusals))?;
+    writeln!(
+        s,
+        "  worst true error of an ok {:.2} nm; unsound {}; wall time per scene median {:.2} s, max {:.2} s",
+        t.worst_ok * 1e9,
+        t.unsound,
+        t.median_wall,
+        t.max_wall
+    )?;
+    for c in cases.iter().filter(|c| !c.judged.violations.is_empty()) {
+        writeln!(
+            s,
+            "  UNSOUND seed {}: {} {:?}",
+            c.seed, c.judged.outcome, c.judged.violations
+        )?;
+    }
+    for c in cases
+        .iter()
+        .filter(|c| c.judged.refusal.is_none() && c.judged.outcome != "ok")
+    {
+        writeln!(
+            s,
+            "  seed {} {}: {} [{}]",
+            c.seed,
+            c.judged.outcome,
+            c.judged.reason.chars().take(160).collect::<String>(),
+            c.summary
+        )?;
+    }
+    writeln!(s, "Wrote {}/random.csv.", a.out.display())?;
+    Ok(s)
+}
+
+fn counts_text(c: &[(String, usize)]) -> String {
+    if c.is_empty() {
+        return "none".into();
+    }
+    c.iter().map(|(k, n)| format!("{k} {n}")).collect::<Vec<_>>().join(", ")
+}
+
+/// The campaign's summary.
+struct RandomTable {
+    accepted: usize,
+    ok: usize,
+    refused: usize,
+    outcomes: Vec<(String, usize)>,
+    refusals: Vec<(String, usize)>,
+    unsound: usize,
+    worst_ok: f64,
+    median_wall: f64,
+    max_wall: f64,
+}
+
+impl RandomTable {
+    fn of(cases: &[nanopush_study::random_scenes::RandomCase]) -> RandomTable {
+        let count = |keys: Vec<String>| {
+            let mut v: Vec<(String, usize)> = Vec::new();
+            for k in keys {
+                match v.iter_mut().find(|(o, _)| *o == k) {
+                    Some((_, n)) => *n += 1,
+                    None => v.push((k, 1)),
+                }
+            }
+            v.sort_by_key(|c| std::cmp::Reverse(c.1));
+            v
+        };
+        let accepted: Vec<_> = cases.iter().filter(|c| c.judged.refusal.is_none()).collect();
+        let mut walls: Vec<f64> = cases.iter().map(|c| c.judged.wall_time).collect();
+        walls.sort_by(f64::total_cmp);
+        RandomTable {
+            accepted: accepted.len(),
+            ok: accepted.iter().filter(|c| c.judged.outcome == "ok").count(),
+            refused: cases.len() - accepted.len(),
+            outcomes: count(accepted.iter().map(|c| c.judged.outcome.clone()).collect()),
+            refusals: count(cases.iter().filter_map(|c| c.judged.refusal.clone()).collect()),
+            unsound: cases.iter().filter(|c| !c.judged.violations.is_empty()).count(),
+            worst_ok: accepted
+                .iter()
+                .filter(|c| c.judged.outcome == "ok")
+                .filter_map(|c| c.judged.true_error)
+                .fold(0.0, f64::max),
+            median_wall: walls.get(walls.len() / 2).copied().unwrap_or(0.0),
+            max_wall: walls.last().copied().unwrap_or(0.0),
+        }
+    }
+}

@@ -46,6 +46,9 @@ enum Command {
     /// The push strategy derived from the scene's model, each setting with its reason (or why
     /// no strategy can push the particle, and the field to change).
     Plan(plan_cmd::PlanArgs),
+    /// Random valid scenes nobody tuned: planned, pushed and judged (the plan's acceptance, ok
+    /// within the tolerance, refusals by reason, cost); `--shard I/N` splits the seeds.
+    Campaign(campaign_cmd::CampaignArgs),
     /// The teleoperation server: the 1 kHz control loop, the WebSocket protocol, the web client.
     Serve(serve_cmd::ServeArgs),
 }
@@ -85,6 +88,7 @@ fn main() -> ExitCode {
         Command::Sweep(args) => sweep_cmd::run(&args),
         Command::Scan(args) => scan_cmd::run(&args),
         Command::Plan(args) => plan_cmd::run(&args),
+        Command::Campaign(args) => campaign_cmd::run_random(&args),
         Command::Push(args) => match push_cmd::run(&args) {
             // A push that ran but failed exits 1 after its report (docs/manipulation.md, "Outcomes
             // that say what happened").

@@ -14,12 +14,15 @@
 
 use std::time::Instant;
 
-use nanopush::control::locate_and_plan::{MoveTarget, plan_move};
-use nanopush::control::{Prepared, RunRow};
+use nanopush::control::locate_and_plan::MoveTarget;
+use nanopush::control::strategy_plan::{self, DEFAULT_TOLERANCE};
+use nanopush::control::{
+    DEFAULT_ATTEMPTS, MoveOptions, MoveRun, MoveRunError, RunError, RunRow, Verdict, move_particle,
+};
 use nanopush::instrument::Afm;
 use nanopush::physics::friction;
-use nanopush::scan::Surface;
 use nanopush::scene::Scene;
+use nanopush::scene::hand_set::HandSet;
 
 const UM: f64 = 1e-6;
 
@@ -176,7 +179,7 @@ pub fn cases(reduced: bool) -> Vec<Case> {
 pub struct PushCase {
     /// The edits, described.
     pub case: String,
-    /// `ok`, a failure code, or `refused` (the scene, the scan or the preparation).
+    /// `ok`, `missed`, `not_found`, a failure code, or `refused` (the scene, the plan, the scan).
     pub outcome: String,
     /// The reason (empty for `ok`).
     pub reason: String,
@@ -192,14 +195,15 @@ pub struct PushCase {
     pub retracted: bool,
     /// Ticks run.
     pub ticks: usize,
-    /// Memory of the trace (bytes).
+    /// Memory of the traces (bytes).
     pub trace_bytes: usize,
     /// Wall time (s).
     pub wall_time: f64,
 }
 
 /// Pushes a case's scene whole: the particle found by a local scan and pushed `max(1 µm, 2Rₐ)`
-/// along +x from 2 µm plus the approach distance behind it, as `nanopush push` does.
+/// along +x, with the strategy the plan derives (β and V as the case sets them), judged as
+/// `nanopush push` judges ([`push_judged`]).
 pub fn run_case(base: &Scene, case: &[Edit]) -> PushCase {
     let start = Instant::now();
     let describe = case.iter().map(Edit::describe).collect::<Vec<_>>().join(" ");
@@ -229,100 +233,248 @@ fn push_whole(base: &Scene, case: &[Edit], out: &mut PushCase) {
     for e in case {
         e.apply(base, &mut f);
     }
-    let scene = match Scene::from_file("<campaign case>", f) {
+    // Nothing hand-set but what the case sets.
+    let mut hand = HandSet::none();
+    for e in case {
+        match e {
+            Edit::ContactAngleDeg(_) => hand.insert("push.contact_angle_deg"),
+            Edit::SpeedUmPerS(_) => hand.insert("push.speed_um_per_s"),
+            _ => {}
+        }
+    }
+    let scene = match Scene::from_file_with("<campaign case>", f, hand) {
         Ok(s) => s,
         Err(e) => {
             out.reason = format!("scene: {e}");
             return;
         }
     };
-    let tick = 1e-3;
-    let p = scene.pushed_particle();
-    let (x, y, r) = (p.x_um * UM, p.y_um * UM, p.radius_nm * 1e-9);
+    let r = scene.pushed_particle().radius_nm * 1e-9;
     let distance = (2.0 * r).max(1.0 * UM);
+    let j = push_judged(&scene, distance, (1.0, 0.0), DEFAULT_TOLERANCE);
+    out.outcome = j.outcome;
+    out.reason = j.reason;
     out.distance = distance;
-    let target = MoveTarget::Distance {
-        distance,
-        direction: (1.0, 0.0),
-    };
-    let plan = match plan_move(&scene, &Surface::from_scene(&scene), (x, y), r, target) {
+    out.moved = j.moved;
+    out.max_volts = j.max_volts;
+    out.violations = j.violations;
+    out.retracted = j.retracted;
+    out.ticks = j.ticks;
+    out.trace_bytes = j.trace_bytes;
+}
+
+/// A whole move planned, pushed and judged.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Judged {
+    /// `ok`, `missed`, `not_found`, a failure code, `refused` or `error`.
+    pub outcome: String,
+    /// Why it was refused (the plan's code, or `scene`, `locate`, `model`), when it was.
+    pub refusal: Option<String>,
+    /// The reason (empty for `ok`).
+    pub reason: String,
+    /// Distance asked for (m).
+    pub distance: f64,
+    /// The particle's true displacement along the push (m).
+    pub moved: f64,
+    /// The true distance from the target at the end (m), when pushed.
+    pub true_error: Option<f64>,
+    /// The distance from the target the scan after measured (m).
+    pub measured_error: Option<f64>,
+    /// Pushes made.
+    pub attempts: u32,
+    /// Largest |reading| (V).
+    pub max_volts: f64,
+    /// Checks that failed (empty when sound): no panic, rows finite, readings inside the
+    /// readout, the particle on the stage, and an `ok` truly within the tolerance, retracted.
+    pub violations: Vec<String>,
+    /// The tip ended retracted.
+    pub retracted: bool,
+    /// Ticks run.
+    pub ticks: usize,
+    /// Memory of the traces (bytes).
+    pub trace_bytes: usize,
+    /// Simulated time (s).
+    pub simulated: f64,
+    /// Wall time (s).
+    pub wall_time: f64,
+}
+
+impl Judged {
+    fn refused(code: &str, reason: String, distance: f64) -> Judged {
+        Judged {
+            outcome: "refused".into(),
+            refusal: Some(code.into()),
+            reason,
+            distance,
+            moved: 0.0,
+            true_error: None,
+            measured_error: None,
+            attempts: 0,
+            max_volts: 0.0,
+            violations: Vec::new(),
+            retracted: true,
+            ticks: 0,
+            trace_bytes: 0,
+            simulated: 0.0,
+            wall_time: 0.0,
+        }
+    }
+}
+
+/// Plans `scene`'s pushed particle (the plan derives what the scene does not set), moves it
+/// `distance` (m) along the unit `direction` from where a local scan finds it, and judges the
+/// move against `tolerance` (m) as `nanopush push` does; then checks it against the truth the
+/// simulation knows. Never panics on a valid scene: a panic is caught and reported as a
+/// violation.
+pub fn push_judged(scene: &Scene, distance: f64, direction: (f64, f64), tolerance: f64) -> Judged {
+    let start = Instant::now();
+    let caught = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        judge_inner(scene, distance, direction, tolerance)
+    }));
+    let mut j = caught.unwrap_or_else(|p| {
+        let mut j = Judged::refused("error", String::new(), distance);
+        j.outcome = "error".into();
+        j.refusal = None;
+        j.violations.push(format!("panic: {}", nanopush::panic_message(&*p)));
+        j
+    });
+    j.wall_time = start.elapsed().as_secs_f64();
+    j
+}
+
+fn judge_inner(scene: &Scene, distance: f64, direction: (f64, f64), tolerance: f64) -> Judged {
+    let p = scene.pushed_particle();
+    let plan = match strategy_plan::derive(scene, p.id, tolerance) {
         Ok(plan) => plan,
-        Err(e) => {
-            out.reason = format!("plan: {e}");
-            return;
+        Err(e) => return Judged::refused(e.code, e.to_string(), distance),
+    };
+    let mut scene = scene.clone();
+    plan.apply(&mut scene);
+    // With the plan's start height and angle (a dynamic particle or lever is refused here).
+    if let Err(e) = scene.pushable() {
+        return Judged::refused("scene", e.to_string(), distance);
+    }
+    let (x, y, r) = (p.x_um * UM, p.y_um * UM, p.radius_nm * 1e-9);
+    let range = scene.file.stage.range_um * UM;
+    let back = scene.file.strategy.approach_distance_um * UM + r + 2.0 * UM;
+    let clamp = |v: f64| v.clamp(0.0, range);
+    let mut afm = Afm::from_scene(
+        &scene,
+        clamp(x - direction.0 * back),
+        clamp(y - direction.1 * back),
+        1e-3,
+    );
+    let options = MoveOptions {
+        tolerance,
+        attempts: DEFAULT_ATTEMPTS,
+        pause: None,
+    };
+    let target = MoveTarget::Distance { distance, direction };
+    let moved = match move_particle(&scene, &mut afm, p.id, (x, y), r, target, options) {
+        Ok(m) => m,
+        Err(MoveRunError::Plan(e)) => return Judged::refused("locate", e.to_string(), distance),
+        Err(MoveRunError::Run(RunError::Predict(e))) => {
+            return Judged::refused("model", format!("the estimator's prediction failed: {e}"), distance);
+        }
+        Err(MoveRunError::Run(RunError::NotPushable(e))) => return Judged::refused("scene", e, distance),
+        Err(MoveRunError::Run(e)) => {
+            let mut j = Judged::refused("error", e.to_string(), distance);
+            j.outcome = "error".into();
+            j.refusal = None;
+            j.violations.push(format!("the run failed: {e}"));
+            return j;
         }
     };
-    let params = scene.strategy_params(tick);
-    let found = plan.located;
-    let prepared = match Prepared::new(&scene, p.id, found.radius, &params) {
-        Ok(prepared) => prepared,
-        Err(e) => {
-            out.reason = format!("prepare: {e}");
-            return;
+    let truth = afm
+        .particles()
+        .iter()
+        .find(|q| q.id == p.id)
+        .copied()
+        .expect("the particle exists");
+    let true_error = (truth.x - moved.target.0).hypot(truth.y - moved.target.1);
+    let before = (moved.before.1.x, moved.before.1.y);
+    let mut j = Judged {
+        outcome: moved.verdict.code().into(),
+        refusal: None,
+        reason: String::new(),
+        distance,
+        moved: (truth.x - x) * direction.0 + (truth.y - y) * direction.1,
+        true_error: Some(true_error),
+        measured_error: moved
+            .after
+            .1
+            .map(|l| (l.x - moved.target.0).hypot(l.y - moved.target.1)),
+        attempts: moved.attempts,
+        max_volts: 0.0,
+        violations: Vec::new(),
+        retracted: moved.legs.last().is_none_or(|l| l.run.retracted),
+        ticks: moved.legs.iter().map(|l| l.run.trace.len()).sum(),
+        trace_bytes: moved
+            .legs
+            .iter()
+            .map(|l| l.run.trace.capacity() * std::mem::size_of::<RunRow>())
+            .sum(),
+        simulated: afm.time(),
+        wall_time: 0.0,
+    };
+    let _ = before;
+    j.reason = match &moved.verdict {
+        Verdict::Ok { .. } => String::new(),
+        Verdict::Missed { error } => format!(
+            "the scan after the last of {} pushes finds it {:.1} nm from the target, beyond the {:.0} nm tolerance",
+            moved.attempts,
+            error * 1e9,
+            tolerance * 1e9
+        ),
+        Verdict::NotFound => "the scan after the push does not find the particle".into(),
+        Verdict::Failed { .. } => moved.legs.last().and_then(|l| l.run.failure_text()).unwrap_or_default(),
+    };
+    check_traces(&scene, &moved, r, &mut j);
+    if j.outcome == "ok" && true_error > tolerance {
+        j.violations.push(format!(
+            "ok, but the particle is truly {:.1} nm from the target (tolerance {:.0} nm)",
+            true_error * 1e9,
+            tolerance * 1e9
+        ));
+    }
+    // A failed push may leave a soft lever stuck to the surface by adhesion it cannot pull
+    // free within the retraction (a failure, said in the reason); an `ok` never.
+    if !j.retracted {
+        if j.outcome == "ok" {
+            j.violations.push("ok, but the tip did not end retracted".into());
+        } else {
+            j.reason.push_str("; the tip did not come free of the surface");
         }
-    };
-    let Some(request) = prepared.request(p.id, (found.x, found.y), plan.target, None) else {
-        out.reason = "already at the target".into();
-        return;
-    };
-    let start_x = (x - (scene.file.strategy.approach_distance_um + 2.0) * UM - r).max(0.0);
-    let mut afm = Afm::from_scene(&scene, start_x, y, tick);
-    let run = match prepared.run(&mut afm, &request, params) {
-        Ok(run) => run,
-        Err(e) => {
-            out.outcome = "error".into();
-            out.reason = e.to_string();
-            out.violations.push(format!("the run failed: {e}"));
-            return;
-        }
-    };
-    out.outcome = run.summary.failure.as_ref().map_or("ok", |f| f.code()).into();
-    out.reason = run.failure_text().unwrap_or_default();
-    out.moved = run.true_distance();
-    out.ticks = run.trace.len();
-    out.trace_bytes = run.trace.capacity() * std::mem::size_of::<RunRow>();
+    }
+    j
+}
+
+/// The soundness of every tick: finite, inside the readout, the particle on the stage.
+fn check_traces(scene: &Scene, moved: &MoveRun, r: f64, j: &mut Judged) {
     let range = scene.file.stage.range_um * UM;
     let full_scale = scene.file.sensor.full_scale_v;
-    for row in &run.trace {
-        out.max_volts = out.max_volts.max(row.volts.abs());
+    for row in moved.legs.iter().flat_map(|l| l.run.trace.iter()) {
+        j.max_volts = j.max_volts.max(row.volts.abs());
         let finite = row.volts.is_finite()
             && row.stage.iter().all(|v| v.is_finite())
             && row.particle.0.is_finite()
             && row.particle.1.is_finite();
         if !finite {
-            out.violations
-                .push(format!("non-finite row at t = {} s: {row:?}", row.t));
-            break;
+            j.violations.push(format!("non-finite row at t = {} s: {row:?}", row.t));
+            return;
         }
         if row.volts.abs() > full_scale {
-            out.violations
+            j.violations
                 .push(format!("reading {} V beyond the ±{full_scale} V readout", row.volts));
-            break;
+            return;
         }
         let inside = |v: f64| (-r..=range + r).contains(&v);
         if !(inside(row.particle.0) && inside(row.particle.1)) {
-            out.violations.push(format!(
+            j.violations.push(format!(
                 "particle outside the stage at t = {} s: {:?}",
                 row.t, row.particle
             ));
-            break;
-        }
-    }
-    if out.outcome == "ok" && (out.moved - distance).abs() > r + 0.1 * distance {
-        out.violations.push(format!(
-            "ok, but the particle moved {:.3} µm for {:.3} µm asked",
-            out.moved / UM,
-            distance / UM
-        ));
-    }
-    // A failed push may leave a soft lever stuck to the surface by adhesion it cannot pull
-    // free within the retraction (a failure, said in the reason); an `ok` never.
-    out.retracted = run.retracted;
-    if !run.retracted {
-        if out.outcome == "ok" {
-            out.violations.push("ok, but the tip did not end retracted".into());
-        } else {
-            out.reason.push_str("; the tip did not come free of the surface");
+            return;
         }
     }
 }

@@ -6,6 +6,8 @@
 //!   with [`accuracy::reduction`], the quasi-static reduction against the full model;
 //! - [`extremes`]: the stability grid on stiff and extreme cases (`nanopush accuracy --extremes`);
 //! - [`campaign`]: whole pushes over every valid scene parameter (`nanopush accuracy --campaign`);
+//! - [`random_scenes`]: random valid scenes nobody tuned, planned, pushed and judged
+//!   (`nanopush campaign --random N`);
 //! - [`sweep`]: the parameter sweeps of Figs 10-13 (`nanopush sweep`);
 //! - [`peers`] (feature `peers`, on by default): peer solvers from crates.io (diffsol,
 //!   russell_ode) on the report's classical problems, for comparison at equal error.
@@ -22,5 +24,6 @@ pub mod campaign;
 pub mod extremes;
 #[cfg(feature = "peers")]
 pub mod peers;
+pub mod random_scenes;
 pub mod report;
 pub mod sweep;

@@ -139,7 +139,24 @@ pub fn move_particle(
         }
         attempts += 1;
         let mut estimate = measured;
-        for leg in &plan.legs {
+        for (k, leg) in plan.legs.iter().enumerate() {
+            if k > 0 {
+                // Each later leg starts from where a local scan finds the particle, not from the
+                // estimate: its search starts a few pixels behind it.
+                match scan_after(scene, afm, estimate, prepared.radius) {
+                    (_, Ok(found)) => estimate = (found.x, found.y),
+                    (img, Err(_)) => {
+                        return Ok(MoveRun {
+                            before,
+                            target,
+                            legs,
+                            after: (img, None),
+                            verdict: Verdict::NotFound,
+                            attempts,
+                        });
+                    }
+                }
+            }
             let pause = if attempts == 1 && legs.is_empty() {
                 options.pause
             } else {

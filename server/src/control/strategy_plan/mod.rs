@@ -14,7 +14,7 @@
 //! - **set point** `ζ_set = 0.6 ζ_peak`: reached before the particle moves; its reading must be
 //!   at least `10 (σ + p)` from the baseline.
 //! - **safety limit**: `max(2.5 ζ_peak g, ζ_peak g + 10σ)` from the baseline, within 90 % of
-//!   the readout's room on the push side; the peak must fit with 30 % to spare.
+//!   the readout's room on the push side, which must hold twice the peak.
 //! - **`t*` is seen**: the drop `(ζ_peak − ζ°) g` at least `12σ + 2p` (the detector's margin
 //!   is a third of it, at least 4σ); **particle lost** at half the settled reading, which
 //!   must be at least `8σ + 2p`.
@@ -29,14 +29,29 @@
 //! - **start height** (the retraction's): above the tallest particle by a quarter of its height
 //!   (at least 0.5 µm), and above the parking height plus 1.25 × the lift the model needs to
 //!   let go, plus 0.2 µm; at most 50 µm.
+//! - **adhesion**: the pull-off from the substrate after auto-parking bends the lever the
+//!   other way by the tip's adhesion over `k_c`; that reading must stay within 90 % of the rail.
+//! - **stage**: stiff against the push, `m (2π f_y)² ≥ 20 max(k_y, k_z)` (the paper's: 86 times), and settled within
+//!   0.1 s of a step, `Q/(π f_y) ≤ 0.1 s` (the paper's stage: 25 ms).
+//! - **longest push**: the substrate's slope moves the contact angle by at most 5° a push,
+//!   `|slope| · L ≤ 0.087 (Rₐ + Rₜ) cos β`, within [0.2, 20] µm; longer moves are split and
+//!   each leg re-parks.
 //! - **time-out**: three times the longest phase (the longest push at V, the approach from
 //!   twice the start height), at least 120 s.
+//!
+//! Each angle whose predicted push passes these checks gets its settings and a **dry run**: the
+//! whole strategy (local scan, park, search, push, retract, scan after, corrections) on the
+//! scene's model with another noise and roughness realization, a push of `2Rₐ` within
+//! [0.3, 1] µm toward the stage's centre, judged like a real one. The first angle whose dry run
+//! ends `ok` is the plan; the checks say why a scene fails in the model's terms, the dry run
+//! catches what they do not (a true peak above twice the model's, a particle lost in the noise).
 //!
 //! A value the scene gives by hand ([`crate::scene::hand_set`]) wins; when it fails a check, the
 //! plan warns. When no derived strategy can pass, the plan is refused, naming the field to
 //! change and the value it would need ([`Refusal`]).
 
 mod choice;
+mod dry_run;
 #[cfg(test)]
 mod tests;
 
@@ -57,6 +72,12 @@ pub const SET_FRACTION: f64 = 0.6;
 /// Contact angles tried, in order (degrees): the paper's 30° first.
 pub const BETAS_DEG: [f64; 8] = [30.0, 45.0, 20.0, 60.0, 15.0, 70.0, 10.0, 80.0];
 
+/// The stage's stiffness against the push, at least this many times the lever's.
+pub const STAGE_STIFFNESS_RATIO: f64 = 20.0;
+
+/// The stage's ringing must die within this (s): the paper's stage (250 Hz, Q = 20) takes 25 ms.
+pub const STAGE_SETTLE: f64 = 0.1;
+
 /// Highest start height the scene allows (m), `strategy.start_height_um`'s upper bound.
 const MAX_START: f64 = 50e-6;
 
@@ -68,6 +89,10 @@ const PAPER_SPEED: f64 = 1e-6;
 
 /// Control tick (s).
 const TICK: f64 = 1e-3;
+
+/// The readout must hold this many times the model's stick-phase peak: the instrument's peak
+/// exceeds the model's where its contact angle or its substrate differ a little.
+const PEAK_SPARE: f64 = 2.0;
 
 /// The readout as the plan sees it (V).
 #[derive(Debug, Clone, Copy)]
@@ -247,13 +272,79 @@ impl<'a> Derivation<'a> {
             }));
         }
 
+        // The tip's pull-off from the substrate, rising to the parking height, bends the lever
+        // the other way by the adhesion over k_c: the reading must stay off the other rail.
+        let adhesion = self.scene.tip_sample().adhesion();
+        let k_c = f.cantilever.stiffness_n_per_m;
+        let pull_v = adhesion / k_c * ro.gain;
+        let other_room = f.sensor.full_scale_v + ro.sign * ro.baseline;
+        if pull_v.is_finite() && pull_v > 0.9 * other_room {
+            return Err(self.refuse(Fails {
+                code: "adhesion",
+                reason: format!(
+                    "the tip's adhesion to the substrate, {:.2} nN, bends the {} N/m lever {:.1} nm as it pulls off after auto-parking: {:.1} V, past the readout's rail ({:.2} V from the baseline on that side)",
+                    adhesion * 1e9,
+                    short(k_c),
+                    adhesion / k_c * 1e9,
+                    pull_v,
+                    other_room
+                ),
+                field: format!(
+                    "cantilever.stiffness_n_per_m: k_c ≥ {} N/m, or |sensor.gain_v_per_nm| ≤ {} V/nm, or a drier environment.relative_humidity",
+                    short(k_c * pull_v / (0.9 * other_room)),
+                    short(ro.gain * 1e-9 * 0.9 * other_room / pull_v)
+                ),
+            }));
+        }
+        self.check_stage()?;
         let approach_speed = f.strategy.approach_speed_um_per_s * 1e-6;
         let v0 = if self.hand("push.speed_um_per_s") {
             f.push.speed_um_per_s * 1e-6
         } else {
             PAPER_SPEED
         };
-        let cand = self.contact_angle(r_a, r_t, v0, approach_speed)?;
+        // Each angle that passes the checks is tried in a dry run of the whole strategy on the
+        // model; the first that ends `ok` is the plan.
+        let (base_choices, base_warnings) = (self.choices.clone(), self.warnings.clone());
+        let mut rejected: Vec<(f64, String)> = Vec::new();
+        loop {
+            let skip: Vec<f64> = rejected.iter().map(|r| r.0).collect();
+            let cand = match self.contact_angle(r_a, r_t, v0, approach_speed, &skip) {
+                Ok(c) => c,
+                Err(refusal) if rejected.is_empty() => return Err(refusal),
+                Err(_) => {
+                    let (beta, why) = &rejected[0];
+                    let angles: Vec<f64> = rejected.iter().map(|r| r.0).collect();
+                    return Err(self.refuse(Fails {
+                        code: "dry_run",
+                        reason: format!(
+                            "the strategy passes the model's checks but its dry run on the model fails at every such angle ({angles:?}°); at β = {beta}°: {why}"
+                        ),
+                        field: dry_run::field_for(why),
+                    }));
+                }
+            };
+            let mut plan = self.settings(cand, r_a, r_t, approach_speed)?;
+            match dry_run::dry_run(self.scene, &plan) {
+                Ok(()) => return Ok(plan),
+                Err(why) if self.hand("push.contact_angle_deg") => {
+                    plan.warnings
+                        .push(format!("the plan's dry run on the model fails: {why}"));
+                    return Ok(plan);
+                }
+                Err(why) => {
+                    rejected.push((cand.beta_deg, why));
+                    self.choices = base_choices.clone();
+                    self.warnings = base_warnings.clone();
+                }
+            }
+        }
+    }
+
+    /// Every setting that follows from the contact angle's predicted push.
+    fn settings(&mut self, cand: Candidate, r_a: f64, r_t: f64, approach_speed: f64) -> Result<StrategyPlan, Refusal> {
+        let f = &self.scene.file;
+        let ro = self.readout;
         let beta_hand = self.hand("push.contact_angle_deg");
         let why_beta = format!(
             "{}: the parking height {:.1} nm keeps the apex above the substrate, the push bends the lever up to a stick-phase peak of {:.3} nm before t*, and every check below passes",
@@ -305,7 +396,10 @@ impl<'a> Derivation<'a> {
             ),
             set_check,
         );
-        let safety = (2.5 * peak_v).max(peak_v + 10.0 * ro.sigma).min(0.9 * ro.room);
+        let safety = (2.5 * peak_v)
+            .max(peak_v + 10.0 * ro.sigma)
+            .min(0.9 * ro.room)
+            .max(PEAK_SPARE * peak_v);
         let hand_safety = (f.strategy.safety_limit_v - ro.baseline) * ro.sign;
         let safety_check = (hand_safety < 1.1 * peak_v).then(|| {
             format!("{hand_safety:.3} V from the baseline, within 10 % of the predicted peak {peak_v:.3} V: an ordinary push trips it")
@@ -340,7 +434,7 @@ impl<'a> Derivation<'a> {
 
         // The speed: the search must stop between the set point and the peak.
         let window = pred.travel_to_peak - pred.travel_to_deflection.unwrap_or(0.0);
-        let v_detect = window / (1.5 * TICK);
+        let v_detect = window.max(1e-12) / (1.5 * TICK);
         let omega = 2.0 * std::f64::consts::PI * f.stage.resonance_hz;
         let v_ring = self.tolerance * omega / 4.0;
         let v = PAPER_SPEED.min(v_detect).min(v_ring);
@@ -476,37 +570,51 @@ impl<'a> Derivation<'a> {
             s.choose(key, value, value, why.into(), None);
         };
         fixed(
-            &mut self,
+            self,
             "strategy.approach_speed_um_per_s",
             f.strategy.approach_speed_um_per_s,
             "the z approach and the lift: 1 nm a tick, gentle on the substrate",
         );
         fixed(
-            &mut self,
+            self,
             "strategy.travel_speed_um_per_s",
             f.strategy.travel_speed_um_per_s,
             "moves at the start height, clear of every particle",
         );
         fixed(
-            &mut self,
+            self,
             "strategy.dwell_ms",
             f.strategy.dwell_ms,
             "readings averaged after each search step (the contact is checked every tick regardless)",
         );
-        fixed(
-            &mut self,
+        // The substrate's slope changes the contact angle along a push held at one height: at
+        // most 5° a leg, `Δz = 0.087 (Rₐ + Rₜ) cos β`; a longer move re-parks for each leg.
+        let slope = (f.substrate.tilt_x_mrad.hypot(f.substrate.tilt_y_mrad)) * 1e-3;
+        let dz = 5f64.to_radians() * (r_a + r_t) * beta.cos();
+        let max_push = if slope > 0.0 {
+            (dz / slope).clamp(0.2e-6, 20e-6)
+        } else {
+            20e-6
+        };
+        self.choose(
             "strategy.max_push_um",
             f.strategy.max_push_um,
-            "a longer move is planned as several pushes",
+            (max_push * 1e8).floor() / 100.0,
+            format!(
+                "a longer move is planned as several pushes, each re-parked: the substrate's slope {:.1} mrad may change the contact angle by at most 5° a push ({:.1} nm of height), at most 20 µm",
+                slope * 1e3,
+                dz * 1e9
+            ),
+            None,
         );
         fixed(
-            &mut self,
+            self,
             "strategy.clearance_um",
             f.strategy.clearance_um,
             "kept between the pushed particle and the others when planning",
         );
         fixed(
-            &mut self,
+            self,
             "strategy.z_gain_nm_per_v",
             f.strategy.z_gain_nm_per_v,
             "the z force loop's gain (z and xyz control only)",
@@ -527,9 +635,9 @@ impl<'a> Derivation<'a> {
         Ok(StrategyPlan {
             particle: self.part.id,
             tolerance: self.tolerance,
-            choices: self.choices,
-            warnings: self.warnings,
-            strategy: self.file,
+            choices: self.choices.clone(),
+            warnings: self.warnings.clone(),
+            strategy: self.file.clone(),
             contact_angle_deg: cand.beta_deg,
             speed_um_per_s: speed_um,
             local_scan: (scan, LOCAL_PIXELS),
@@ -537,15 +645,73 @@ impl<'a> Derivation<'a> {
         })
     }
 
+    /// The stage must hold its position against the push and settle between the steps: its
+    /// stiffness `m (2π f_y)²` at least [`STAGE_STIFFNESS_RATIO`] times the lever's, and its
+    /// ringing `Q/(π f_y)` dying within [`STAGE_SETTLE`].
+    fn check_stage(&self) -> Result<(), Refusal> {
+        let f = &self.scene.file;
+        let st = &f.stage;
+        if f.physics.stage == crate::scene::file::DofFile::Off {
+            return Ok(());
+        }
+        let m = st.moving_mass_g * 1e-3;
+        let omega = 2.0 * std::f64::consts::PI * st.resonance_hz;
+        let k_stage = m * omega * omega;
+        let c = self.scene.cantilever();
+        let k_lever = c.k_y().max(c.k_z());
+        if k_stage < STAGE_STIFFNESS_RATIO * k_lever {
+            let need = (STAGE_STIFFNESS_RATIO * k_lever / m).sqrt() / (2.0 * std::f64::consts::PI);
+            return Err(self.refuse(Fails {
+                code: "stage",
+                reason: format!(
+                    "the stage, m (2π f_y)² = {} N/m, yields under the push like a spring of the lever's stiffness ({} N/m): the tip's position is not the stage's",
+                    short(k_stage),
+                    short(k_lever)
+                ),
+                field: format!("stage.resonance_hz: f_y ≥ {} Hz for this moving mass", short(need)),
+            }));
+        }
+        let settle = st.quality_factor / (std::f64::consts::PI * st.resonance_hz);
+        if settle > STAGE_SETTLE {
+            return Err(self.refuse(Fails {
+                code: "stage",
+                reason: format!(
+                    "the stage rings for Q/(π f_y) = {} s after every step and stop, more than {} s",
+                    short(settle),
+                    STAGE_SETTLE
+                ),
+                field: format!(
+                    "stage.quality_factor: Q ≤ {} at this resonance, or a higher stage.resonance_hz",
+                    short(STAGE_SETTLE * std::f64::consts::PI * st.resonance_hz)
+                ),
+            }));
+        }
+        Ok(())
+    }
+
     /// The contact angle: the hand-set one, or the first of [`BETAS_DEG`] whose predicted push
     /// passes [`Derivation::check`].
-    fn contact_angle(&mut self, r_a: f64, r_t: f64, v: f64, approach_speed: f64) -> Result<Candidate, Refusal> {
+    fn contact_angle(
+        &mut self,
+        r_a: f64,
+        r_t: f64,
+        v: f64,
+        approach_speed: f64,
+        skip: &[f64],
+    ) -> Result<Candidate, Refusal> {
         let hand = self.hand("push.contact_angle_deg");
         let betas: Vec<f64> = if hand {
             vec![self.scene.file.push.contact_angle_deg]
         } else {
-            BETAS_DEG.to_vec()
+            BETAS_DEG.iter().copied().filter(|b| !skip.contains(b)).collect()
         };
+        if betas.is_empty() {
+            return Err(self.refuse(Fails {
+                code: "dry_run",
+                reason: "no contact angle left to try".into(),
+                field: "push.contact_angle_deg".into(),
+            }));
+        }
         let mut first_failure: Option<Fails> = None;
         let mut tried = Vec::new();
         for &beta_deg in &betas {
@@ -663,12 +829,12 @@ impl<'a> Derivation<'a> {
             });
         }
         let peak_v = p.peak_deflection * ro.gain;
-        if 1.3 * peak_v > 0.9 * ro.room {
-            let need_k = k * 1.3 * peak_v / (0.9 * ro.room);
+        if PEAK_SPARE * peak_v > 0.9 * ro.room {
+            let need_k = k * PEAK_SPARE * peak_v / (0.9 * ro.room);
             return Err(Fails {
                 code: "deflection_limit",
                 reason: format!(
-                    "at β = {}° the lever's deflection limit is reached before the particle shears: the stick-phase peak {:.2} nm reads {:.2} V, and with 30 % to spare that is beyond 90 % of the readout's {:.2} V",
+                    "at β = {}° the lever's deflection limit is reached before the particle shears: the stick-phase peak {:.2} nm reads {:.2} V, and twice that is beyond 90 % of the readout's {:.2} V",
                     c.beta_deg,
                     p.peak_deflection * 1e9,
                     peak_v,
@@ -677,7 +843,7 @@ impl<'a> Derivation<'a> {
                 field: format!(
                     "cantilever.stiffness_n_per_m: k_c ≥ {} N/m needed, or |sensor.gain_v_per_nm| ≤ {} V/nm",
                     short(need_k),
-                    short(gain_nm * 0.9 * ro.room / (1.3 * peak_v))
+                    short(gain_nm * 0.9 * ro.room / (PEAK_SPARE * peak_v))
                 ),
             });
         }
@@ -797,6 +963,9 @@ fn resolved(scene: &Scene, choices: &[Choice]) -> StrategyFile {
 
 /// A speed rounded down to three significant digits (µm/s), so the plan prints what it uses.
 fn round_down(v: f64) -> f64 {
+    if !(v.is_finite() && v > 0.0) {
+        return v;
+    }
     let scale = 10f64.powi(2 - v.log10().floor() as i32);
     (v * scale).floor() / scale
 }

@@ -1,0 +1,89 @@
+//! The plan's dry run: the whole strategy on the scene's model, as a real push would run it,
+//! before the plan is given out.
+
+use super::StrategyPlan;
+use crate::control::locate_and_plan::MoveTarget;
+use crate::control::whole_move::{DEFAULT_ATTEMPTS, MoveOptions, Verdict, move_particle};
+use crate::instrument::Afm;
+use crate::scene::Scene;
+
+/// Runs `plan` on a copy of `scene` with other seeds for the readout's noise and the
+/// substrate's roughness (the plan knows their statistics, not their realization): one push of
+/// the longest leg the plan allows (within [0.3, 2] µm) up the substrate's slope, and one down it
+/// (the contact angle falls on the way up, rises on the way down), each from where a local scan
+/// finds the particle and judged with the plan's tolerance. `Err` says how one failed.
+pub fn dry_run(scene: &Scene, plan: &StrategyPlan) -> Result<(), String> {
+    let mut s = scene.clone();
+    plan.apply(&mut s);
+    s.file.sensor.noise_seed = s.file.sensor.noise_seed.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    s.file.substrate.roughness_seed = s.file.substrate.roughness_seed.wrapping_add(0x2545_f491_4f6c_dd1d);
+    s.pushable().map_err(|e| e.to_string())?;
+    let part = s
+        .file
+        .particles
+        .iter()
+        .find(|p| p.id == plan.particle)
+        .ok_or_else(|| format!("no particle {}", plan.particle))?;
+    let (x, y, r) = (part.x_um * 1e-6, part.y_um * 1e-6, part.radius_nm * 1e-9);
+    let range = s.file.stage.range_um * 1e-6;
+    let distance = (s.file.strategy.max_push_um * 1e-6).clamp(0.3e-6, 2e-6);
+    let (tx, ty) = (s.file.substrate.tilt_x_mrad, s.file.substrate.tilt_y_mrad);
+    let tilt = tx.hypot(ty);
+    let up = if tilt > 0.0 { (tx / tilt, ty / tilt) } else { (1.0, 0.0) };
+    // Up the slope, then down it, each from where the scan after the last found the particle.
+    let back = s.file.strategy.approach_distance_um * 1e-6 + r + 2e-6;
+    let start = ((x - up.0 * back).clamp(0.0, range), (y - up.1 * back).clamp(0.0, range));
+    let mut afm = Afm::from_scene(&s, start.0, start.1, 1e-3);
+    let mut at = (x, y);
+    for direction in [up, (-up.0, -up.1)] {
+        let end = (at.0 + direction.0 * distance, at.1 + direction.1 * distance);
+        if !(r..=range - r).contains(&end.0) || !(r..=range - r).contains(&end.1) {
+            continue;
+        }
+        let options = MoveOptions {
+            tolerance: plan.tolerance,
+            attempts: DEFAULT_ATTEMPTS,
+            pause: None,
+        };
+        let target = MoveTarget::Distance { distance, direction };
+        let moved = move_particle(&s, &mut afm, plan.particle, at, r, target, options).map_err(|e| e.to_string())?;
+        judge(&moved, plan)?;
+        if let Some(found) = moved.after.1 {
+            at = (found.x, found.y);
+        }
+    }
+    Ok(())
+}
+
+fn judge(moved: &crate::control::whole_move::MoveRun, plan: &StrategyPlan) -> Result<(), String> {
+    match moved.verdict {
+        Verdict::Ok { .. } => Ok(()),
+        Verdict::Missed { error } => Err(format!(
+            "missed: {:.1} nm from the target after {} pushes (tolerance {:.0} nm)",
+            error * 1e9,
+            moved.attempts,
+            plan.tolerance * 1e9
+        )),
+        Verdict::NotFound => Err("not_found: the scan after the push did not find the particle".into()),
+        Verdict::Failed { code } => Err(format!(
+            "{code}: {}",
+            moved.legs.last().and_then(|l| l.run.failure_text()).unwrap_or_default()
+        )),
+    }
+}
+
+/// The scene field a dry run's failure points to.
+pub fn field_for(why: &str) -> String {
+    let code = why.split(':').next().unwrap_or("");
+    match code {
+        "deflection_limit" => "cantilever.stiffness_n_per_m (stiffer) or sensor.gain_v_per_nm (smaller |gain|)",
+        "particle_lost" => "friction.tip_particle_static (higher) or sensor.noise_rms_mv (lower)",
+        "no_contact" => "sensor.gain_v_per_nm (larger |gain|) or friction.particle_substrate_static",
+        "no_separation" => "cantilever.stiffness_n_per_m (stiffer) or friction.particle_substrate_static (lower)",
+        "missed" => "stage.resonance_hz (a stiffer stage) or a looser --tolerance-nm",
+        "not_found" => "scan.noise_rms_nm or substrate.roughness_rms_nm (lower)",
+        "timeout" => "push.speed_um_per_s (faster) or strategy.phase_timeout_s",
+        _ => "the scene's physics (see the reason)",
+    }
+    .into()
+}
