@@ -298,6 +298,11 @@ pub enum ServerMessage {
         scene: String,
         /// Control loop rate (Hz).
         tick_hz: f64,
+        /// This run of the server: a client that reconnects and finds another knows the
+        /// server restarted (a push it saw running ended unrecorded, or in a record).
+        instance: String,
+        /// When this run of the server started (ms since the Unix epoch).
+        started_unix_ms: u64,
     },
     /// Second message on a connection, right after `welcome`: the instrument as it is now, so
     /// a client that joins late (or reloads) shows what the others see.

@@ -36,6 +36,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/scene", get(scene_json))
         .route("/api/records", get(records_list))
         .route("/api/records/{name}", get(record_get))
+        .route("/api/runs", get(runs))
         .route("/metrics", get(metrics))
         // Static files gzip-compressed when the browser accepts it (three.js's 1.3 MB module is
         // ~300 kB on the wire): a remote operator's page loads in seconds, not tens of seconds.
@@ -92,6 +93,8 @@ async fn status(State(st): State<Arc<AppState>>) -> Response {
     let m = &st.shared.metrics;
     let body = serde_json::json!({
         "scene": st.scene.file.name,
+        "instance": st.instance.id,
+        "started_unix_ms": st.instance.started_unix_ms,
         "uptime_s": st.shared.start.elapsed().as_secs_f64(),
         "clients": st.net.clients.load(Relaxed),
         "lease": st.lease_holder(),
@@ -128,6 +131,25 @@ async fn records_list(State(st): State<Arc<AppState>>) -> Response {
     match records::list(&st.cfg.data_dir) {
         Ok(l) => axum::Json(l).into_response(),
         Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("listing records: {e}")).into_response(),
+    }
+}
+
+/// The pushes recorded in the data directory, newest first (at most [`records::RUNS_MAX`]): the
+/// run history a page or a monitor shows, which survives restarts.
+async fn runs(State(st): State<Arc<AppState>>) -> Response {
+    let dir = st.cfg.data_dir.clone();
+    match tokio::task::spawn_blocking(move || records::run_history(&dir, records::RUNS_MAX)).await {
+        Ok(Ok(l)) => axum::Json(l).into_response(),
+        Ok(Err(e)) => (
+            StatusCode::INTERNAL_SERVER_ERROR,
+            format!("reading the run history: {e}"),
+        )
+            .into_response(),
+        Err(e) => (
+            StatusCode::INTERNAL_SERVER_ERROR,
+            format!("reading the run history: {e}"),
+        )
+            .into_response(),
     }
 }
 

@@ -73,6 +73,32 @@ pub struct AppState {
     pub channels: Channels,
     /// What the instrument is doing beside the loop: scans, push preparation, shutdown.
     pub activity: Activity,
+    /// When this server started (Unix ms) and its instance id: a page that reconnects to a
+    /// different instance knows the server restarted (and what it last saw is gone).
+    pub instance: Instance,
+}
+
+/// One run of the server: its start (Unix ms) and an id no other run shares (the start and the
+/// process id, in hex).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Instance {
+    /// This server's id.
+    pub id: String,
+    /// When it started (ms since the Unix epoch).
+    pub started_unix_ms: u64,
+}
+
+impl Instance {
+    /// This process, now.
+    pub fn now() -> Instance {
+        let started_unix_ms = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as u64);
+        Instance {
+            id: format!("{started_unix_ms:x}-{:x}", std::process::id()),
+            started_unix_ms,
+        }
+    }
 }
 
 /// The connected clients.
@@ -211,6 +237,7 @@ impl AppState {
     /// The state of a server.
     pub fn new(cfg: ServeConfig, scene: Scene, shared: Arc<Shared>, params: StrategyParams) -> AppState {
         AppState {
+            instance: Instance::now(),
             cfg,
             params,
             shared,

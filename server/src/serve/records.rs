@@ -78,6 +78,67 @@ pub fn list(dir: &Path) -> std::io::Result<Vec<RecordEntry>> {
     Ok(out)
 }
 
+/// How many runs `/api/runs` returns at most.
+pub const RUNS_MAX: usize = 50;
+
+/// One push of the run history (`/api/runs`), from its record's JSON summary.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunEntry {
+    /// The summary's file name (`push-….json`).
+    pub record: String,
+    /// When it was written (Unix seconds).
+    pub modified: u64,
+    /// Run number (per server run: numbers start again after a restart).
+    pub run: u64,
+    /// Particle id.
+    pub particle: u32,
+    /// `ok` or the failure code.
+    pub outcome: String,
+    /// The failure in words.
+    pub failure: Option<String>,
+    /// Estimated final centre (m).
+    pub estimate: [f64; 2],
+}
+
+/// The pushes recorded in `dir`, newest first, at most `max`: read from their JSON summaries (a
+/// summary that cannot be read or parsed is skipped), so the history survives restarts.
+pub fn run_history(dir: &Path, max: usize) -> std::io::Result<Vec<RunEntry>> {
+    let mut out = Vec::new();
+    for e in list(dir)? {
+        if out.len() >= max {
+            break;
+        }
+        if e.kind != "push" || !e.name.ends_with(".json") {
+            continue;
+        }
+        let Ok(bytes) = std::fs::read(dir.join(&e.name)) else {
+            continue;
+        };
+        let Ok(v) = serde_json::from_slice::<serde_json::Value>(&bytes) else {
+            continue;
+        };
+        let (Some(run), Some(particle), Some(outcome)) = (
+            v.get("run").and_then(serde_json::Value::as_u64),
+            v.get("particle").and_then(serde_json::Value::as_u64),
+            v.get("outcome").and_then(serde_json::Value::as_str),
+        ) else {
+            continue;
+        };
+        let est = v.get("estimate").and_then(serde_json::Value::as_array);
+        let at = |i: usize| est.and_then(|a| a.get(i)).and_then(serde_json::Value::as_f64);
+        out.push(RunEntry {
+            record: e.name,
+            modified: e.modified,
+            run,
+            particle: u32::try_from(particle).unwrap_or(u32::MAX),
+            outcome: outcome.to_string(),
+            failure: v.get("failure").and_then(serde_json::Value::as_str).map(str::to_string),
+            estimate: [at(0).unwrap_or(f64::NAN), at(1).unwrap_or(f64::NAN)],
+        });
+    }
+    Ok(out)
+}
+
 /// The JSON summary of a push record.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PushSummary {
@@ -308,6 +369,47 @@ mod tests {
         assert_eq!(l[0].name, "scan-1-1.json");
         assert_eq!(l[0].kind, "scan");
         assert_eq!(l[0].bytes, 2);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_run_history_reads_push_summaries_newest_first_and_skips_the_rest() {
+        let dir = std::env::temp_dir().join(format!("nanopush-runs-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let summary = |run: u64, outcome: &str, failure: Option<&str>| {
+            serde_json::to_vec(&PushSummary {
+                schema: "push-record",
+                run,
+                particle: 2,
+                outcome: outcome.into(),
+                failure: failure.map(str::to_string),
+                legs: 1,
+                estimate: [1e-6, 2e-6],
+                truth: [1e-6, 2e-6],
+                rows: 10,
+                trace: format!("push-1-r{run}-p2.csv"),
+            })
+            .unwrap()
+        };
+        std::fs::write(dir.join("push-1-r1-p2.json"), summary(1, "ok", None)).unwrap();
+        std::fs::write(
+            dir.join("push-2-r2-p2.json"),
+            summary(2, "stopped", Some("stopped: the lease holder disconnected")),
+        )
+        .unwrap();
+        std::fs::write(dir.join("push-3-r3-p2.json"), b"not json").unwrap();
+        std::fs::write(dir.join("push-1-r1-p2.csv"), b"t\n").unwrap();
+        std::fs::write(dir.join("scan-1-1.json"), b"{}").unwrap();
+        let h = run_history(&dir, 10).unwrap();
+        assert_eq!(h.len(), 2, "{h:?}");
+        // Same second: the newer name first.
+        assert_eq!(h[0].record, "push-2-r2-p2.json");
+        assert_eq!(h[0].outcome, "stopped");
+        assert_eq!(h[0].failure.as_deref(), Some("stopped: the lease holder disconnected"));
+        assert_eq!(h[1].run, 1);
+        assert_eq!(h[1].estimate, [1e-6, 2e-6]);
+        assert_eq!(run_history(&dir, 1).unwrap().len(), 1);
+        assert!(run_history(&dir.join("missing"), 10).unwrap().is_empty());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

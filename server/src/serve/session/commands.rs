@@ -13,7 +13,7 @@ use crate::control::MoveTarget;
 use crate::scan::ScanParams;
 use crate::serve::app_state::AppState;
 use crate::serve::command_checks::{Refusal, number, push_target};
-use crate::serve::control_loop::LoopCommand;
+use crate::serve::control_loop::{LoopCommand, StopReason};
 use crate::serve::haptic::api::haptic_command;
 use crate::serve::push_job::{on_stage, prepare_push, run_done_failed};
 use crate::serve::scan_job::run_scan;
@@ -49,7 +49,7 @@ pub(super) fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> 
             require_lease(st, c)?;
             st.activity.scan_cancel.store(true, Relaxed);
             st.activity.generation.fetch_add(1, Relaxed);
-            to_loop(st, LoopCommand::Stop)
+            to_loop(st, LoopCommand::Stop(StopReason::Operator))
         }
         ClientMessage::Push {
             particle,
