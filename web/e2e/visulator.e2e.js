@@ -318,7 +318,7 @@ test('with a haptic link, the haptic panel shows it and the lease holder can eng
   }
 });
 
-test('served without web/node_modules, the page says how to install them and the server warns at start', async () => {
+test('served without its build (web/dist), the page says how to build it and the server warns at start', async () => {
   const dir = mkdtempSync(join(tmpdir(), 'nanopush-web-bare-'));
   const web = process.env.E2E_WEB_DIR || WEB;
   symlinkSync(join(web, 'index.html'), join(dir, 'index.html'));
@@ -327,12 +327,12 @@ test('served without web/node_modules, the page says how to install them and the
   try {
     const p = await newPage(browser);
     await p.goto(`${bare.base}/?token=${TOKEN}`);
-    const text = await waitText(p, '#boot-error', /npm ci/, 15000);
+    const text = await waitText(p, '#boot-error', /npm run build/, 15000);
     assert.match(text, /could not start/);
     assert.equal(await p.isVisible('#boot-error'), true);
     assert.doesNotMatch(await p.textContent('#st-conn'), /starting/);
-    assert.match(bare.log(), /web client's packages are missing.*npm ci/);
-    await shot(p, '10-no-node-modules');
+    assert.match(bare.log(), /web client is not built.*npm run build/);
+    await shot(p, '10-not-built');
     await p.context().close();
   } finally {
     await bare.stop();
