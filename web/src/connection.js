@@ -1,6 +1,6 @@
 // The connection to `nanopush serve`, no DOM: the URLs (the page's token passed on to `/ws` and
 // the JSON API), the reconnect backoff, and a Connection that owns the WebSocket: it opens it,
-// hands messages on, reconnects with backoff (0.5 s doubling to 15 s) and sends commands with
+// hands messages on, reconnects with backoff (0.25 s doubling to 2 s) and sends commands with
 // an id from the Session. Runs in browsers and in Node (tests, with a fake socket and timers).
 import { encodeCommand } from './wire.js';
 
@@ -21,8 +21,12 @@ export function apiUrl(path, loc) {
   return path + (path.includes('?') ? '&' : '?') + `token=${encodeURIComponent(token)}`;
 }
 
-/** Reconnect delay (ms) for the n-th attempt (1-based): 0.5 s doubling to 15 s at most. */
-export function backoffMs(attempt, baseMs = 500, maxMs = 15000) {
+/**
+ * Reconnect delay (ms) for the n-th attempt (1-based): 0.25 s doubling to 2 s at most. The
+ * server is one instrument on the lab's network, not a crowded service: a page that waits
+ * longer than 2 s after it came back (7 s, as it did with a 15 s cap) shows a stale instrument.
+ */
+export function backoffMs(attempt, baseMs = 250, maxMs = 2000) {
   const n = Math.max(1, attempt);
   return Math.min(maxMs, baseMs * 2 ** (n - 1));
 }

@@ -4,7 +4,7 @@
 // command id; the running push (everyone's view of it). What the forms mean (commands, the
 // preview, texts) is pure (Node tests); Controls binds them to the page.
 import { commands } from './wire.js';
-import { controlState } from './session.js';
+import { controlState, runClass } from './session.js';
 import { formatLength, formatStagePoint } from './format.js';
 import { pusher } from './eventlog.js';
 
@@ -19,7 +19,9 @@ export function readNumber(text) {
 
 /** A command's reply in its output: `#3 ok` or `#3 no_lease: push needs the lease`. */
 export function replyText(c) {
-  return c.status === 'ok' ? `#${c.id} ok` : `#${c.id} ${c.code}: ${c.message}`;
+  // A push's `ok` means it was accepted: how it ended comes with `run_done`.
+  if (c.status === 'ok') return c.type === 'push' ? `#${c.id} accepted` : `#${c.id} ok`;
+  return `#${c.id} ${c.code}: ${c.message}`;
 }
 
 /** A particle in the push form's list: `#1 gold-coated latex (r 500 nm)`. */
@@ -118,12 +120,13 @@ export class Controls {
    * @param {(msg: object) => object | null} deps.send sends a command (Connection.send)
    * @param {() => void} deps.onScanRequested the operator asked for a scan
    */
-  constructor($, doc, { session, view, replies, send, onScanRequested }) {
+  constructor($, doc, { session, view, map = () => null, replies, send, onScanRequested }) {
     this.$ = $;
     this.doc = doc;
     this.session = session;
     this.st = session.state;
     this.view = view;
+    this.map = map;
     this.replies = replies;
     this.send = send;
     this.onScanRequested = onScanRequested;
@@ -160,20 +163,35 @@ export class Controls {
   render() {
     const $ = this.$;
     const c = controlState(this.st);
+    const focused = this.doc.activeElement;
     const set = (el, s) => {
       el.disabled = !s.enabled;
       el.title = s.why;
     };
+    // Viewers get no forms they cannot use: the reason says how to command instead.
+    const viewer = this.st.role === 'viewer';
+    $('push-form').hidden = viewer;
+    $('scan-form').hidden = viewer;
+    $('hap-fs').hidden = viewer;
     set($('take-lease'), c.takeLease);
     set($('release-lease'), c.releaseLease);
     set($('push-fs'), c.push);
     set($('scan-fs'), c.scan);
     set($('stop-btn'), c.stop);
     set($('hap-fs'), c.haptic);
+    set($('hap-engage'), c.hapticEngage);
     // Buttons inside a disabled fieldset: give them the reason as a tooltip too.
     $('push-btn').title = c.push.why;
     $('scan-btn').title = c.scan.why;
     $('why').textContent = c.push.enabled ? '' : c.push.why;
+    // A button that took the focus and is now disabled (Take lease, once taken) would drop it to
+    // the page: hand it to its counterpart.
+    if (focused && focused.disabled && focused !== this.doc.body) {
+      const next = { 'take-lease': 'release-lease', 'release-lease': 'take-lease', 'hap-engage': 'hap-release' }[focused.id];
+      const n = next && $(next);
+      if (n && !n.disabled) n.focus();
+      else $('stop-btn').disabled ? this.doc.querySelector('.map-svg')?.focus() : $('stop-btn').focus();
+    }
   }
 
   /** The push running (everyone's view of it) or, for the lease holder, the form's preview. */
@@ -181,6 +199,7 @@ export class Controls {
     const { st, view } = this;
     const p = st.push;
     const el = this.$('push-now');
+    this.map()?.invalidate();
     if (p) {
       view.setPushPath(p.path);
       view.setPreview(null);
@@ -203,6 +222,7 @@ export class Controls {
     });
     if (target) view.setTarget(target.x, target.y);
     else view.setTarget(null);
+    this.map()?.setTarget(target ? target.x : null, target ? target.y : null);
     if (preview) view.setPreview(preview.from, preview.deg, preview.lengthUm);
     else view.setPreview(null);
   }
@@ -244,12 +264,29 @@ export class Controls {
     this.renderPush();
   }
 
-  /** A finished push's outcome over the 3D view. */
+  /** A finished push's outcome under Stop, in its colour; the push's reply says it too. */
   showLastRun(run, text) {
+    this.showLastRunText(text, runClass(run));
+    const out = this.$('reply-push');
+    if (out.textContent) {
+      out.className = `reply ${runClass(run)}`;
+      out.textContent = `${out.textContent.replace(/ (accepted|ok)$/, '')} ${run.outcome}`;
+    }
+  }
+
+  /** The last run's line: `cls` good, neutral, warn, bad or unknown. */
+  showLastRunText(text, cls) {
     const el = this.$('lastrun');
     el.textContent = text;
-    el.className = `lastrun ${run.outcome === 'ok' ? 'good' : 'bad'}`;
+    el.className = `lastrun ${cls}`;
     el.hidden = false;
+  }
+
+  /** The server restarted: the last run shown was the previous server's. */
+  clearLastRun() {
+    const el = this.$('lastrun');
+    el.textContent = '';
+    el.hidden = true;
   }
 
   /** A point picked in the 3D view: the push target. */

@@ -73,8 +73,11 @@ export class HapticPanel {
    * @param {Document} [opts.doc] the page's document: no fetches while it is hidden
    * @param {{setTimeout, clearTimeout}} [opts.timers]
    */
-  constructor(els, scheduler, { fetchStatus, doc, timers } = {}) {
+  constructor(els, scheduler, { fetchStatus, doc, timers, onLinkChange } = {}) {
     this.els = els;
+    this.onLinkChange = onLinkChange;
+    this.link = null; // the link as last seen in telemetry
+    this.downs = null; // link losses the server counted (/api/status)
     this.trace = new HapticTrace(SECONDS);
     this.plot = null;
     this.frame = scheduler.register('haptic', () => this.draw(), { period: HAPTIC_PERIOD_MS });
@@ -84,7 +87,10 @@ export class HapticPanel {
         fetchStatus,
         periodMs: DEVICE_FAULTS_PERIOD_MS,
         timers,
-        onStatus: (s) => this.showDeviceFaults(s?.haptic ?? null),
+        onStatus: (s) => {
+          this.showDeviceFaults(s?.haptic ?? null);
+          this.showDowns(s?.haptic?.link_downs);
+        },
         onError: () => this.showDeviceFaults(null),
       })
       : null;
@@ -98,6 +104,13 @@ export class HapticPanel {
     const { text, cls } = deviceFaultsLine(h);
     el.textContent = text;
     el.className = cls;
+  }
+
+  /** The link losses the server counted since it started. */
+  showDowns(n) {
+    if (!Number.isFinite(n)) return;
+    this.downs = n;
+    if (this.els.downs) this.els.downs.textContent = String(n);
   }
 
   /** Polls /api/status while the panel is shown and the page visible; stops otherwise. */
@@ -115,6 +128,12 @@ export class HapticPanel {
       panel.hidden = false;
       this.syncPolling();
     }
+    if (this.link !== null && h.link !== this.link) {
+      // A loss counted now even before the next status poll confirms it.
+      if (h.link !== 'up' && this.downs !== null) this.showDowns(this.downs + 1);
+      this.onLinkChange?.(h.link, this.downs ?? undefined);
+    }
+    this.link = h.link;
     for (const [k, v] of Object.entries(hapticFields(h))) {
       fields[k].textContent = v.text;
       if (v.cls !== undefined) fields[k].className = v.cls;

@@ -5,7 +5,11 @@
 import { WS_VERSION, decodeScanLine } from './wire.js';
 import { formatPoint } from './format.js';
 
-/** What a finished push means, in words: `ok`, or the failure code, reason and record. */
+/**
+ * What a finished push means, in words: `ok`; `stopped` and who stopped it (a stop is not a
+ * failure: the server's `failure` already starts "stopped: "); `missed` (it ended outside the
+ * push's tolerance); else the failure code and reason; and the record.
+ */
 export function describeRun(r) {
   const rec = r.record ? `record ${r.record}` : r.record_error ? `no record: ${r.record_error}` : 'no record';
   if (r.outcome === 'ok') {
@@ -13,7 +17,19 @@ export function describeRun(r) {
     return `push of #${r.particle} ok${at} (${rec})`;
   }
   const never = Array.isArray(r.estimate) ? `, particle left at ${formatPoint(r.estimate)}` : ', it never started';
+  if (r.outcome === 'stopped' || r.outcome === 'missed') {
+    const why = String(r.failure ?? 'no reason given').replace(/^stopped: /, '');
+    return `push of #${r.particle} ${r.outcome}: ${why}${never} (${rec})`;
+  }
   return `push of #${r.particle} failed: ${r.outcome}: ${r.failure ?? 'no reason given'}${never} (${rec})`;
+}
+
+/**
+ * A run's colour class: `good` (ok), `neutral` (stopped: somebody's decision, not a fault),
+ * `warn` (missed: it ended outside the tolerance), `bad` (a failure).
+ */
+export function runClass(r) {
+  return r.outcome === 'ok' ? 'good' : r.outcome === 'stopped' ? 'neutral' : r.outcome === 'missed' ? 'warn' : 'bad';
 }
 
 /**
@@ -82,6 +98,10 @@ export function initialState({ traceSeconds = 10 } = {}) {
     particles: [], // from /api/scene, metres; moved by run_done estimates
     stageRange: 100e-6,
     shutdown: null,
+    instance: null, // the server's instance id (welcome): another one on a reconnect is a restart
+    startedUnixMs: null, // when that server started
+    restarted: false, // the last welcome came from another instance than the one before
+    lostPush: null, // the push that ran when the connection closed: its end was not seen
   };
 }
 
@@ -128,6 +148,7 @@ export class Session {
     s.role = null;
     s.lease = null;
     s.phase = null;
+    if (s.push) s.lostPush = { ...s.push, instance: s.instance };
     s.push = null;
     s.stateReceived = false;
     for (const c of s.commands.values()) {
@@ -199,7 +220,14 @@ export class Session {
         if (msg.version !== WS_VERSION) {
           this.logError('version', `the server speaks protocol ${msg.version}, this page ${WS_VERSION}`);
         }
-        return { kind: 'welcome' };
+        {
+          const previous = s.instance;
+          const instance = msg.instance ?? null;
+          s.restarted = previous !== null && instance !== null && instance !== previous;
+          s.instance = instance;
+          s.startedUnixMs = msg.started_unix_ms ?? null;
+          return { kind: 'welcome', restarted: s.restarted, previous };
+        }
       case 'state': {
         s.stateReceived = true;
         s.lease = msg.lease ?? null;
@@ -216,7 +244,7 @@ export class Session {
           }
         }
         s.serverParticles = (msg.particles ?? []).map((q) => ({ ...q }));
-        s.push = msg.push ?? null;
+        s.push = msg.push ? { ...msg.push, seenAtMs: Date.now() } : null;
         const sc = msg.scan ?? null;
         let scanChanged = false;
         if (sc && (!s.scan || s.scan.id !== sc.scan)) {
@@ -229,7 +257,7 @@ export class Session {
         return { kind: 'state', scan: sc, scanChanged };
       }
       case 'push_started':
-        s.push = { particle: msg.particle, path: msg.path ?? [], by: msg.by ?? null };
+        s.push = { particle: msg.particle, path: msg.path ?? [], by: msg.by ?? null, seenAtMs: Date.now() };
         return { kind: 'push_started', push: s.push };
       case 'ok': {
         const c = msg.id != null ? s.commands.get(msg.id) : undefined;
@@ -427,7 +455,9 @@ export function controlState(state) {
   if (!open) base = 'Not connected to the server';
   else if (!operator) base = 'Viewer connection: open the page with the operator token (?token=…) to command';
   const needLease = base ? no(base) : mine ? yes : state.lease === null ? no('Take the lease first') : no(`Client ${state.lease} holds the lease`);
+  const link = state.tip?.haptic?.link ?? null;
   return {
+    hapticEngage: !needLease.enabled ? needLease : link === 'up' ? yes : no(`The haptic link is ${link ?? 'not reported'}: engage once it is up`),
     takeLease: base ? no(base) : mine ? no('You hold the lease') : state.lease !== null ? no(`Client ${state.lease} holds the lease`) : yes,
     releaseLease: base ? no(base) : mine ? yes : no('You do not hold the lease'),
     push: needLease,

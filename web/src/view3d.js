@@ -132,8 +132,18 @@ export class View3D {
     this.frameStage();
   }
 
+  /**
+   * Shown or hidden (the 3D view is the height image's optional companion): hidden, it is not
+   * rendered at all; shown again, it is sized and drawn in the next frame.
+   */
+  setShown(on) {
+    this.shown = on;
+    if (on) this.resize();
+  }
+
   /** Draws the scene (called by the frame scheduler when something changed). */
   render() {
+    if (this.shown === false) return;
     this.scaleTip();
     this.renderer.render(this.scene, this.camera);
     this.labels.render(this.scene, this.camera);

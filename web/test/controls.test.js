@@ -51,6 +51,8 @@ test('texts: particles in the list, the push running, replies', () => {
   assert.equal(pushNowText(push, 9), 'Pushing #1 (you) to (45.000, 32.500) µm');
   assert.equal(pushNowText(push, 4), 'Pushing #1 (client 9) to (45.000, 32.500) µm');
   assert.equal(replyText({ id: 3, status: 'ok' }), '#3 ok');
+  // A push's ok means accepted, not done well (issue 26: a green "#3 ok" beside a push that failed to plan).
+  assert.equal(replyText({ id: 5, type: 'push', status: 'ok' }), '#5 accepted');
   assert.equal(replyText({ id: 4, status: 'error', code: 'no_lease', message: 'push needs the lease' }), '#4 no_lease: push needs the lease');
 });
 
