@@ -19,7 +19,7 @@ import { HapticPanel } from './haptic.js';
 import { fetchStatus } from './devicefaults.js';
 import { StatusBar } from './status.js';
 import { Controls, Replies } from './controls.js';
-import { EventLog, LEASE_LOST_ON_CLOSE, welcomeText, stateText, pushStartedText, leaseNote, replyErrorText, closedText, restartText, lostPushText, hapticLinkNote } from './eventlog.js';
+import { EventLog, LEASE_LOST_ON_CLOSE, welcomeText, stateText, pushStartedText, leaseNote, replyErrorText, closedText, restartText, lostPushText, hapticLinkNote, clockTime } from './eventlog.js';
 import { MapOverlay } from './mapoverlay.js';
 import { Records } from './records.js';
 import { Scans } from './scans.js';
@@ -213,6 +213,7 @@ export class App {
         this.loadScene();
         log.log(welcomeText(st));
         if (ev.restarted) this.onRestart();
+        if (!st.lastRun) this.showLastFromHistory();
         break;
       case 'state':
         this.onState(ev);
@@ -278,6 +279,23 @@ export class App {
         break;
     }
     this.render();
+  }
+
+  /**
+   * A page that has seen no push yet (just opened, reloaded) shows the newest recorded run, with
+   * its time: a lease holder who reloaded mid-push reads how that push ended.
+   */
+  async showLastFromHistory() {
+    if (this.demo) return;
+    try {
+      const r = await fetch(apiUrl('/api/runs', this.loc));
+      if (!r.ok) return;
+      const [run] = await r.json();
+      if (!run || this.st.lastRun || this.st.push) return;
+      this.controls.showLastRunText(`last recorded run (${clockTime(run.modified * 1000)}): ${describeRun(run)}`, runClass(run));
+    } catch {
+      // (no history: nothing to show)
+    }
   }
 
   /** The server restarted while this page was away: say so; what it showed is gone. */

@@ -300,7 +300,8 @@ export class MapOverlay {
       const i = ps.findIndex((p) => p.id === this.opts.selected());
       const j = ev.key === ']' ? (i + 1) % ps.length : (i - 1 + ps.length) % ps.length;
       this.opts.onPickParticle(ps[j].id);
-      this.cursor = [ps[j].x, ps[j].y];
+      // On the particle, or as near as the image goes (a particle outside the scan).
+      this.cursor = [Math.min(e.x_offset + e.x_real, Math.max(e.x_offset, ps[j].x)), Math.min(e.y_offset + e.y_real, Math.max(e.y_offset, ps[j].y))];
     } else if (ev.key === 's' || ev.key === 'e') {
       this.image.profileEnd(ev.key === 's' ? 'start' : 'end', this.cursor[0], this.cursor[1]);
     } else {

@@ -1,0 +1,118 @@
+// The Nano Visulator stays honest when the server goes away (issue 26), in a real browser
+// against the real `nanopush serve`: a server killed with SIGKILL mid-push and started again on
+// the same port and records (the page says "unknown" while it is down, then that the server
+// restarted and that the push's outcome is unknown; the monitor says "server down since" and
+// keeps the run history from disk), and a lease holder who reloads mid-push (warned first; the
+// push ends "stopped: the lease holder disconnected", in a neutral colour). Run by `npm run e2e`.
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import { startServer, launchBrowser, newPage, getJson, shot, ready, WEB } from './support.js';
+
+let srv;
+let browser;
+
+before(async () => {
+  srv = await startServer({ webDir: process.env.E2E_WEB_DIR || WEB });
+  browser = await launchBrowser();
+});
+
+after(async () => {
+  await browser?.close();
+  await srv?.stop();
+});
+
+async function waitText(page, sel, re, timeout = 30000) {
+  await page.waitForFunction(([s, src]) => new RegExp(src).test(document.querySelector(s)?.textContent ?? ''), [sel, re.source], { timeout });
+  return page.textContent(sel);
+}
+
+async function pushBy(page, distanceUm, directionDeg) {
+  await page.check('input[name=mode][value=by]');
+  await page.fill('#distance', String(distanceUm));
+  await page.fill('#direction', String(directionDeg));
+  await page.click('#push-btn');
+}
+
+const running = (page) => page.waitForFunction(() => window.nanopush.session.state.push && !['idle', 'scanning'].includes(window.nanopush.session.state.phase), null, { timeout: 30000 });
+
+test('kill -9 mid-push and a restart: "unknown" while down, the restart and the lost push told; the monitor says "down since" and keeps the history', async () => {
+  const op = await newPage(browser, { width: 1280, height: 720 });
+  await op.goto(srv.url);
+  await ready(op);
+  await op.click('#take-lease');
+  await op.waitForFunction(() => window.nanopush.session.hasLease);
+  await pushBy(op, 1, 0);
+  await waitText(op, '#lastrun', /^push of #1 ok/, 60000);
+  // The wall screen, on a phone.
+  const mon = await newPage(browser, { width: 390, height: 844 });
+  await mon.goto(srv.base + '/?view=monitor');
+  await waitText(mon, '#m-runs', /push of #1 ok/, 15000);
+  await waitText(mon, '#m-conn', /^live/, 10000);
+  await pushBy(op, 20, 180);
+  await running(op);
+  assert.equal(await op.isVisible('#push-now'), true);
+  await srv.kill('SIGKILL');
+  // While it is down: nothing the server said is shown as if it still held.
+  await op.waitForFunction(() => document.body.classList.contains('offline'), null, { timeout: 10000 });
+  assert.equal(await op.textContent('#st-phase'), 'unknown');
+  assert.equal(await op.textContent('#st-lease'), 'unknown');
+  assert.equal(await op.isVisible('#push-now'), false, 'no "Pushing #1 (you)" while disconnected');
+  assert.equal(await op.isVisible('#offline'), true);
+  await waitText(mon, '#m-conn', /^server down since \d\d:\d\d:\d\d/, 10000);
+  assert.equal(await mon.evaluate(() => document.body.classList.contains('offline')), true, 'the tiles are greyed');
+  await shot(op, '20-server-killed');
+  await shot(mon, '21-monitor-server-down');
+  // Started again, same port, same records.
+  const port = Number(srv.addr.split(':').pop());
+  srv = await startServer({ webDir: process.env.E2E_WEB_DIR || WEB, port, dir: srv.dir });
+  await waitText(op, '#log', /the server restarted/, 15000);
+  const lost = await waitText(op, '#lastrun', /outcome unknown/, 10000);
+  assert.match(lost, /push of #1: outcome unknown: the server restarted while it ran/);
+  assert.equal(await op.getAttribute('#lastrun', 'class'), 'lastrun unknown');
+  assert.equal(await op.evaluate(() => document.body.classList.contains('offline')), false);
+  assert.notEqual(await op.textContent('#st-phase'), 'unknown');
+  // The monitor after the restart: live, and the history from disk still there.
+  await waitText(mon, '#m-conn', /^live · the server restarted at \d\d:\d\d:\d\d/, 15000);
+  await waitText(mon, '#m-runs', /push of #1 ok/, 10000);
+  const w = await mon.evaluate(() => ({ scroll: document.documentElement.scrollWidth, inner: window.innerWidth }));
+  assert.ok(w.scroll <= w.inner, `the monitor is ${w.scroll} px wide at ${w.inner} px`);
+  await shot(mon, '22-monitor-after-restart');
+  assert.deepEqual(op.errors.filter((e) => !/ERR_CONNECTION_REFUSED|Failed to load resource/.test(e)), []);
+  assert.deepEqual(mon.errors.filter((e) => !/ERR_CONNECTION_REFUSED|Failed to load resource/.test(e)), []);
+  await mon.context().close();
+  await op.context().close();
+});
+
+test('a lease holder who reloads mid-push is warned first; the push ends "stopped: the lease holder disconnected", not an operator\'s stop', async () => {
+  const op = await newPage(browser);
+  await op.goto(srv.url);
+  await ready(op);
+  const viewer = await newPage(browser);
+  await viewer.goto(srv.base + '/');
+  await ready(viewer);
+  await op.click('#take-lease');
+  await op.waitForFunction(() => window.nanopush.session.hasLease);
+  await pushBy(op, 20, 0);
+  await running(op);
+  const dialogs = [];
+  op.on('dialog', (d) => {
+    dialogs.push(d.type());
+    d.accept();
+  });
+  await op.reload();
+  assert.deepEqual(dialogs, ['beforeunload'], 'warned before leaving mid-push');
+  const text = await waitText(viewer, '#lastrun', /^push of #1 stopped/, 30000);
+  assert.match(text, /^push of #1 stopped: the lease holder disconnected/);
+  assert.equal(await viewer.getAttribute('#lastrun', 'class'), 'lastrun neutral');
+  const [newest] = await getJson(srv.base, '/api/runs');
+  assert.equal(newest.outcome, 'stopped');
+  assert.equal(newest.failure, 'stopped: the lease holder disconnected');
+  // The reloaded page reads how its push ended.
+  await ready(op);
+  await waitText(op, '#lastrun', /stopped: the lease holder disconnected/, 10000);
+  await shot(op, '23-reloaded-mid-push');
+  assert.deepEqual(op.errors, []);
+  assert.deepEqual(viewer.errors, []);
+  await viewer.context().close();
+  await op.context().close();
+});
