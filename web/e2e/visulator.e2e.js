@@ -55,9 +55,9 @@ test('the operator page loads with no console errors, and axe finds no violation
 
 test('the tip is on screen, drawn over everything, and no label or panel covers it', async () => {
   // On the height image (the map) first: the tip's mark sits inside the image.
-  await op.waitForFunction(() => getComputedStyle(document.querySelector('.map-svg .tip')).display !== 'none', null, { timeout: 10000 });
+  await op.waitForFunction(() => !document.querySelector('.map-dot.tip').hidden, null, { timeout: 10000 });
   const onMap = await op.evaluate(() => {
-    const t = document.querySelector('.map-svg .tip').getBoundingClientRect();
+    const t = document.querySelector('.map-dot.tip').getBoundingClientRect();
     const i = document.querySelector('#image2d').getBoundingClientRect();
     return t.left >= i.left && t.right <= i.right && t.top >= i.top && t.bottom <= i.bottom && t.width > 4;
   });

@@ -50,6 +50,11 @@ export class App {
     this.statusFrame = frames.register('status', () => this.status.render(this.st));
     this.legendFrame = frames.register('legend', () => this.scans.renderLegend());
     this.liveFrame = frames.register('live', (parts) => this.drawLive(parts), { period: () => livePeriodMs(frames.frameInterval) });
+    // The tip's numbers: read by people, so 5 a second (at 60 a second the text's repaint cost a
+    // software renderer a third of its frames).
+    this.tipTextFrame = frames.register('tiptext', () => {
+      if (this.st.tip && this.st.connection === 'open') this.$('tipinfo').textContent = formatTip(this.st.tip);
+    }, { period: 200 });
 
     this.view = new View3D($('view3d'), {
       onPickPoint: (x, y) => this.controls.pickTarget(x, y),
@@ -179,7 +184,7 @@ export class App {
     if (parts.has('tip')) {
       this.view.setTip(st.tip);
       this.map.tipMoved();
-      if (st.tip) this.$('tipinfo').textContent = formatTip(st.tip);
+      this.tipTextFrame.mark();
       this.haptic.update(st.tip?.t, st.tip?.haptic);
     }
     if (parts.has('charts')) this.charts.update(st.trace);
