@@ -3,11 +3,10 @@
 // served) and its frame rate with a 512² scan on screen at 1600×1000 (headless chromium, WebGL on
 // SwiftShader), idle and during a push, with the height image as the live map (the default) and
 // with the 3D companion view shown too; Stop, from the press to the frame that shows its reply,
-// during a push (three presses); also the README's screenshot.
-//   cd web && node e2e/bench.js [--screenshot ../docs/visulator.png]
+// during a push (three presses). (The docs' screenshots: e2e/screenshots.js.)
+//   cd web && node e2e/bench.js
 import { startServer, launchBrowser, newPage, ready, timedStop } from './support.js';
 
-const shotPath = process.argv.includes('--screenshot') ? process.argv[process.argv.indexOf('--screenshot') + 1] : null;
 const srv = await startServer();
 const browser = await launchBrowser();
 try {
@@ -87,21 +86,6 @@ try {
   }
   const inPage = stops.map((r) => r.inPage).sort((x, y) => x - y);
   console.log(`Stop during a push, 512² scan at 1600×1000: median ${inPage[1].toFixed(0)} ms in the page (${stops.map((r) => `${r.inPage.toFixed(0)}/${r.outside}`).join(', ')} ms in the page / from outside)`);
-  if (shotPath) {
-    // A line profile across the particle for the picture.
-    const g = await page.evaluate(() => window.nanopush.image2d.geometry());
-    const box = await page.$eval('#image2d', (e) => { const r = e.getBoundingClientRect(); return { x: r.left, y: r.top }; });
-    const at = (fx, fy) => [box.x + g.x + fx * g.w, box.y + g.y + g.h - fy * g.h];
-    await page.mouse.move(...at(0.2, 0.35));
-    await page.mouse.down();
-    await page.mouse.move(...at(0.8, 0.55), { steps: 5 });
-    await page.mouse.up();
-    await page.waitForTimeout(1500);
-    await page.setViewportSize({ width: 1440, height: 900 });
-    await page.waitForTimeout(1500);
-    await page.screenshot({ path: shotPath });
-    console.log(`screenshot: ${shotPath}`);
-  }
 } finally {
   await browser.close();
   await srv.stop();

@@ -176,6 +176,10 @@ test('a viewer cannot command and sees the operator\'s push path, not its own fo
   for (const sel of ['#push-fs', '#scan-fs', '#stop-btn', '#take-lease', '#push-btn', '#scan-btn']) {
     assert.equal(await v.$eval(sel, (e) => e.disabled || e.closest('fieldset')?.disabled), true, `${sel} disabled for a viewer`);
   }
+  // A viewer gets no forms it cannot use, only the reason.
+  assert.equal(await v.isVisible('#push-form'), false);
+  assert.equal(await v.isVisible('#scan-form'), false);
+  assert.match(await v.textContent('#why'), /Viewer connection/);
   // The viewer's own form would preview 5 µm along +x: it must not be drawn.
   assert.equal(await v.evaluate(() => window.nanopush.view.preview.visible), false);
   const from = (await getJson(srv.base, '/api/status')).particles.find((p) => p.id === 1);
@@ -415,8 +419,11 @@ test('with a haptic link, the haptic panel shows it and the lease holder can eng
     assert.deepEqual(m.errors, []);
     await m.context().close();
     assert.equal(await p.$eval('#hap-fs', (e) => e.disabled), true, 'no lease: no haptic controls');
-    await p.click('#take-lease');
+    // By keyboard: Enter on "Take lease" (disabled once taken) hands the focus on, not to the page.
+    await p.focus('#take-lease');
+    await p.keyboard.press('Enter');
     await p.waitForFunction(() => !document.querySelector('#hap-fs').disabled);
+    assert.equal(await p.evaluate(() => document.activeElement?.id), 'release-lease');
     await p.click('#hap-engage');
     await waitText(p, '#reply-haptic', /ok/, 10000);
     await waitText(p, '#hap-phase', /approach|park|settle|ramp|engaged/, 20000);

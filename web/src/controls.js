@@ -69,12 +69,24 @@ export function pushPreview(p, { running, hasLease, mode, distance, direction, t
   return { target: { x: toX, y: toY }, preview: { from, deg: (Math.atan2(dy, dx) * 180) / Math.PI, lengthUm: Math.hypot(dx, dy) } };
 }
 
-/** The scan form's start from the scene's own scan (a 14 nm particle is not imaged 10 µm wide). */
+/**
+ * The scan form's start from the scene's own scan, made small enough that the smallest particle
+ * spans at least 2 pixels (a 14 nm particle is not seen in a 50 µm, 256 px scan).
+ */
 export function scanFormDefaults(scene) {
   const out = {};
   if (!scene.scan) return out;
-  if (Number.isFinite(scene.scan.size_um)) out.size = String(scene.scan.size_um);
-  if (Number.isFinite(scene.scan.pixels)) out.pixels = String(Math.min(512, Math.max(8, scene.scan.pixels)));
+  const pixels = Number.isFinite(scene.scan.pixels) ? Math.min(512, Math.max(8, scene.scan.pixels)) : null;
+  if (pixels !== null) out.pixels = String(pixels);
+  if (Number.isFinite(scene.scan.size_um)) {
+    let size = scene.scan.size_um;
+    const radii = (scene.particles ?? []).map((p) => p.radius_nm).filter((r) => Number.isFinite(r) && r > 0);
+    if (radii.length && pixels !== null) {
+      const most = (2 * Math.min(...radii) * 1e-3 * pixels) / 2; // µm
+      if (most < size) size = Number(most.toPrecision(2));
+    }
+    out.size = String(size);
+  }
   return out;
 }
 

@@ -91,7 +91,7 @@ export function statusTiles(s) {
     ['m-phase', s.phase + (s.busy ? ' (busy)' : ''), ''],
     ['m-alerts', alerts.length ? alerts.join('; ') : 'none', alerts.length ? 'bad' : 'good'],
     ['m-loop', `${health}${l.realtime ? ', real-time' : ', not real-time'}`, l.overruns > 0 ? 'warn' : 'good'],
-    ['m-jitter', Number.isFinite(p99) ? `≤ ${(p99 * 1e6).toFixed(0)} µs` : '–', ''],
+    ['m-jitter', Number.isFinite(p99) ? (p99 < 1e-3 ? `≤ ${(p99 * 1e6).toFixed(0)} µs` : `≤ ${(p99 * 1e3).toPrecision(3)} ms`) : '–', p99 > 1e-3 ? 'warn' : ''],
     ['m-haptic', (hp.link === 'off' || !hp.link ? 'off' : `${hp.link}${hp.engaged ? ', engaged' : ''}`) + downs, hp.link === 'down' ? 'bad' : ''],
     ['m-clients', String(s.clients), ''],
     ['m-lease', s.lease === null ? 'free' : `client ${s.lease}`, ''],

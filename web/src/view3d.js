@@ -613,10 +613,19 @@ export class View3D {
 
   // ----- camera -----
 
+  /**
+   * Looks at the box from the south, 42° up, from far enough that the whole box fits the
+   * narrower of the two fields of view with a margin (a tall, narrow view cut the scan's edges
+   * off when only the vertical field was counted).
+   */
   frameBox(x0, y0, w, h) {
     const cx = x0 + w / 2;
     const cy = y0 + h / 2;
-    const d = Math.max(w, h) * 1.25;
+    const vHalf = ((this.camera.fov / 2) * Math.PI) / 180;
+    const hHalf = Math.atan(Math.tan(vHalf) * this.camera.aspect);
+    const radius = 0.5 * Math.hypot(w, h); // the box's corners, seen from any side
+    const dist = (radius * 1.08) / Math.sin(Math.min(vHalf, hHalf));
+    const d = dist / Math.hypot(0.95, 0.85);
     this.controls.target.set(cx, cy, 0);
     this.camera.position.set(cx, cy - d * 0.95, d * 0.85);
     this.camera.near = d / 1000;

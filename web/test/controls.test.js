@@ -60,6 +60,10 @@ test('the scan form starts at the scene\'s own scan, pixels within [8, 512]', ()
   assert.deepEqual(scanFormDefaults({ scan: { size_um: 0.2, pixels: 1024 } }), { size: '0.2', pixels: '512' });
   assert.deepEqual(scanFormDefaults({ scan: { pixels: 4 } }), { pixels: '8' });
   assert.deepEqual(scanFormDefaults({}), {});
+  // Issue 26: 50 µm at 256 px (195 nm a pixel) cannot show a 14 nm particle: the default scan
+  // is made small enough for the smallest particle to span 2 pixels (14 nm × 256 / 2 = 1.8 µm).
+  assert.deepEqual(scanFormDefaults({ scan: { size_um: 50, pixels: 256 }, particles: [{ radius_nm: 7 }, { radius_nm: 50 }] }), { size: '1.8', pixels: '256' });
+  assert.deepEqual(scanFormDefaults({ scan: { size_um: 16, pixels: 32 }, particles: [{ radius_nm: 500 }] }), { size: '16', pixels: '32' }, 'big enough already');
 });
 
 test('replies show in their command\'s output, only for the latest command sent there', () => {

@@ -48,6 +48,7 @@ test('alerts: healthy is "none"; overruns, a lost haptic link (worse while engag
   assert.deepEqual(t.get('m-alerts'), ['none', 'good']);
   assert.equal(t.get('m-haptic')[0], 'up, 2 link losses');
   assert.match(t.get('m-uptime')[0], /^\d\d:\d\d:\d\d \(10 min\)$/);
+  assert.deepEqual(statusTiles({ loop: { period_error_p99_bound_s: 0.1 } }).find((x) => x[0] === 'm-jitter'), ['m-jitter', '≤ 100 ms', 'warn']);
 });
 
 test('the down banner names the time, and a run of the history reads as the page\'s', () => {
