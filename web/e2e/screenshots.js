@@ -32,7 +32,7 @@ try {
   await op.fill('#distance', '3');
   await op.fill('#direction', '0');
   await op.click('#push-btn');
-  await op.waitForFunction(() => window.nanopush.map.trail.pts.length > 25, null, { timeout: 30000 });
+  await op.waitForFunction(() => window.nanopush.map.trail.pts.length > 15 && window.nanopush.session.state.push, null, { timeout: 90000, polling: 50 });
   await op.mouse.move(...at(0.6, 0.5));
   await op.waitForTimeout(400);
   await op.screenshot({ path: join(out, 'visulator.png') });
@@ -40,7 +40,7 @@ try {
 
   const mon = await newPage(browser, { width: 1280, height: 800 });
   await mon.goto(srv.base + '/?view=monitor');
-  await mon.waitForFunction(() => /push of #1/.test(document.querySelector('#m-runs').textContent) && /scan 1/.test(document.querySelector('#m-thumb-cap').textContent), null, { timeout: 20000 });
+  await mon.waitForFunction(() => /push of #1/.test(document.querySelector('#m-runs')?.textContent ?? '') && /scan 1/.test(document.querySelector('#m-thumb-cap')?.textContent ?? ''), null, { timeout: 20000 });
   await mon.waitForTimeout(600);
   await mon.screenshot({ path: join(out, 'monitor.png') });
 
