@@ -292,11 +292,12 @@ export class App {
    */
   async showLastFromHistory() {
     if (this.demo) return;
+    const version = this.controls.lastRunVersion; // anything shown meanwhile wins
     try {
       const r = await fetch(apiUrl('/api/runs', this.loc));
       if (!r.ok) return;
       const [run] = await r.json();
-      if (!run || this.st.lastRun || this.st.push) return;
+      if (!run || this.st.lastRun || this.st.push || this.controls.lastRunVersion !== version) return;
       this.controls.showLastRunText(`last recorded run (${clockTime(run.modified * 1000)}): ${describeRun(run)}`, runClass(run));
     } catch {
       // (no history: nothing to show)
@@ -309,6 +310,7 @@ export class App {
     this.log.log(text, 'warn');
     this.log.announce(text);
     this.controls.clearLastRun();
+    this.st.lastRun = null; // the previous server's: the history says what it recorded
     this.charts.restartFd(-Infinity);
   }
 

@@ -146,6 +146,7 @@ export class Controls {
     this.scanCentreTouched = false; // the operator typed a scan centre: keep it
     this.scanFormTouched = false; // the operator typed a scan size or pixels: keep them
     this.stopPressed = false; // Stop went on the pointer's press: ignore the click that follows
+    this.lastRunVersion = 0; // bumped by every change of the last run's line
     this.bind();
   }
 
@@ -288,6 +289,7 @@ export class Controls {
 
   /** The last run's line: `cls` good, neutral, warn, bad or unknown. */
   showLastRunText(text, cls) {
+    this.lastRunVersion = (this.lastRunVersion ?? 0) + 1;
     const el = this.$('lastrun');
     el.textContent = text;
     el.className = `lastrun ${cls}`;
@@ -296,6 +298,7 @@ export class Controls {
 
   /** The server restarted: the last run shown was the previous server's. */
   clearLastRun() {
+    this.lastRunVersion = (this.lastRunVersion ?? 0) + 1;
     const el = this.$('lastrun');
     el.textContent = '';
     el.hidden = true;

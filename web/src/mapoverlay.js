@@ -82,6 +82,13 @@ function el(name, attrs = {}, parent = null) {
 
 const r1 = (v) => Math.round(v * 10) / 10;
 
+/** Sets an attribute only when its value changes: an SVG attribute set, even to the value it had,
+ * repaints the layer (a software renderer's frames halved during a push). */
+function setA(node, name, value) {
+  const v = String(value);
+  if (node.getAttribute(name) !== v) node.setAttribute(name, v);
+}
+
 export class MapOverlay {
   /**
    * @param {import('./image2d.js').Image2D} image the height image it sits on
@@ -189,40 +196,41 @@ export class MapOverlay {
     const svg = this.svg;
     const W = this.image.container.clientWidth;
     const H = this.image.container.clientHeight;
-    svg.setAttribute('width', W);
-    svg.setAttribute('height', H);
-    svg.setAttribute('viewBox', `0 0 ${W} ${H}`);
+    setA(svg, 'width', W);
+    setA(svg, 'height', H);
+    setA(svg, 'viewBox', `0 0 ${W} ${H}`);
     if (!g) return;
     const e = this.image.extent();
     const st = this.opts.state();
     const px = (x, y) => toPx(g, e, x, y);
     const k = g.w / e.x_real; // CSS px per m
-    for (const [a, v] of Object.entries({ x: g.x, y: g.y, width: g.w, height: g.h })) this.clipRect.setAttribute(a, r1(v));
+    for (const [a, v] of Object.entries({ x: g.x, y: g.y, width: g.w, height: g.h })) setA(this.clipRect, a, r1(v));
     const rings = (group, ps, cls, sel) => {
       while (group.childElementCount > ps.length) group.lastChild.remove();
       while (group.childElementCount < ps.length) el('circle', {}, group);
       ps.forEach((p, i) => {
         const c = group.children[i];
         const [x, y] = px(p.x, p.y);
-        c.setAttribute('cx', r1(x));
-        c.setAttribute('cy', r1(y));
-        c.setAttribute('r', r1(Math.max(4, p.radius * k)));
-        c.setAttribute('class', `${cls}${sel !== null && p.id === sel ? ' selected' : ''}`);
-        if (p.id !== undefined) c.dataset.id = p.id;
+        setA(c, 'cx', r1(x));
+        setA(c, 'cy', r1(y));
+        setA(c, 'r', r1(Math.max(4, p.radius * k)));
+        setA(c, 'class', `${cls}${sel !== null && p.id === sel ? ' selected' : ''}`);
+        if (p.id !== undefined) setA(c, 'data-id', p.id);
       });
     };
     rings(this.gScan, this.scanParticles, 'found', null);
     rings(this.gBelief, st.particles ?? [], 'particle', this.opts.selected());
     const line = (poly, pts) => {
-      poly.setAttribute('points', pts ? pts.map(([x, y]) => px(x, y).map(r1).join(',')).join(' ') : '');
+      setA(poly, 'points', pts ? pts.map(([x, y]) => px(x, y).map(r1).join(',')).join(' ') : '');
     };
     line(this.path, st.push?.path ?? null);
     line(this.trailLine, st.push || this.trail.pts.length ? this.trail.pts : null);
     const place = (node, pt) => {
-      node.style.display = pt ? '' : 'none';
+      const d = pt ? '' : 'none';
+      if (node.style.display !== d) node.style.display = d;
       if (pt) {
         const [x, y] = px(pt[0], pt[1]);
-        node.setAttribute('transform', `translate(${r1(x)} ${r1(y)})`);
+        setA(node, 'transform', `translate(${r1(x)} ${r1(y)})`);
       }
     };
     place(this.targetMark, st.push ? null : this.target);
