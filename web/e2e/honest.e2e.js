@@ -6,7 +6,7 @@
 // push ends "stopped: the lease holder disconnected", in a neutral colour). Run by `npm run e2e`.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { startServer, launchBrowser, newPage, getJson, shot, ready, WEB } from './support.js';
+import { startServer, launchBrowser, newPage, getJson, shot, ready, waitText, pushBy, WEB } from './support.js';
 
 let srv;
 let browser;
@@ -20,18 +20,6 @@ after(async () => {
   await browser?.close();
   await srv?.stop();
 });
-
-async function waitText(page, sel, re, timeout = 30000) {
-  await page.waitForFunction(([s, src]) => new RegExp(src).test(document.querySelector(s)?.textContent ?? ''), [sel, re.source], { timeout });
-  return page.textContent(sel);
-}
-
-async function pushBy(page, distanceUm, directionDeg) {
-  await page.check('input[name=mode][value=by]');
-  await page.fill('#distance', String(distanceUm));
-  await page.fill('#direction', String(directionDeg));
-  await page.click('#push-btn');
-}
 
 const running = (page) => page.waitForFunction(() => window.nanopush.session.state.push && !['idle', 'scanning'].includes(window.nanopush.session.state.phase), null, { timeout: 30000 });
 

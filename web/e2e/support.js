@@ -172,3 +172,17 @@ export async function timedStop(page) {
   const t = await page.evaluate(() => window.stopTiming);
   return { inPage: t.shown - t.down, outside };
 }
+
+/** Waits until the text of `sel` matches `re`; returns the text. */
+export async function waitText(page, sel, re, timeout = 30000) {
+  await page.waitForFunction(([s, src]) => new RegExp(src).test(document.querySelector(s)?.textContent ?? ''), [sel, re.source], { timeout });
+  return page.textContent(sel);
+}
+
+/** Pushes the selected particle by a distance (µm) in a direction (°), through the form. */
+export async function pushBy(page, distanceUm, directionDeg) {
+  await page.check('input[name=mode][value=by]');
+  await page.fill('#distance', String(distanceUm));
+  await page.fill('#direction', String(directionDeg));
+  await page.click('#push-btn');
+}

@@ -8,7 +8,7 @@ import assert from 'node:assert/strict';
 import { mkdtempSync, symlinkSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
-import { startServer, launchBrowser, newPage, getJson, shot, axe, ready, timedStop, WEB, TOKEN } from './support.js';
+import { startServer, launchBrowser, newPage, getJson, shot, axe, ready, timedStop, waitText, pushBy, WEB, TOKEN } from './support.js';
 
 let srv;
 let browser;
@@ -28,18 +28,6 @@ const state = (page) => page.evaluate(() => {
   const s = window.nanopush.session.state;
   return { particles: s.particles, lease: s.lease, client: s.client, scan: s.scan && { id: s.scan.id, lines: s.scan.lines, yres: s.scan.yres, x_real: s.scan.x_real, y_real: s.scan.y_real, done: s.scan.done, record: s.scan.record }, stale: s.scanStale, push: s.push };
 });
-
-async function waitText(page, sel, re, timeout = 30000) {
-  await page.waitForFunction(([s, src]) => new RegExp(src).test(document.querySelector(s)?.textContent ?? ''), [sel, re.source], { timeout });
-  return page.textContent(sel);
-}
-
-async function pushBy(page, distanceUm, directionDeg) {
-  await page.check('input[name=mode][value=by]');
-  await page.fill('#distance', String(distanceUm));
-  await page.fill('#direction', String(directionDeg));
-  await page.click('#push-btn');
-}
 
 test('the operator page loads with no console errors, and axe finds no violations', async () => {
   op = await newPage(browser);
