@@ -54,7 +54,7 @@ export class App {
     // software renderer a third of its frames).
     this.tipTextFrame = frames.register('tiptext', () => {
       if (this.st.tip && this.st.connection === 'open') this.$('tipinfo').textContent = formatTip(this.st.tip);
-    }, { period: 200 });
+    }, { period: 200, aligned: true });
 
     this.view = new View3D($('view3d'), {
       onPickPoint: (x, y) => this.controls.pickTarget(x, y),
@@ -68,6 +68,9 @@ export class App {
       onPickParticle: (id) => this.controls.selectParticle(id),
       onPickPoint: (x, y) => this.controls.pickTarget(x, y),
       canTarget: () => this.session.hasLease,
+      // A software renderer (no GPU) pays for a whole frame whenever anything moves: the tip 20
+      // times a second there, every frame on a GPU.
+      livePeriod: () => (this.view.software ? 50 : 0),
     }, frames);
     this.charts = new Charts($('chart-force'), $('chart-z'), $('chart-fd'), frames);
     this.haptic = new HapticPanel({

@@ -102,7 +102,7 @@ export class Charts {
     this.setPointN = null; // the strategy's contact set point as a force (N), drawn dashed
     this.since = -Infinity; // the force-distance plot starts here (s, server time)
     this.trace = null; // the Session's trace, drawn in the next frame that may
-    this.frame = scheduler.register('charts', () => this.draw(), { period: CHART_PERIOD_MS });
+    this.frame = scheduler.register('charts', () => this.draw(), { period: CHART_PERIOD_MS, aligned: true });
     const els = [forceEl, zEl, fdEl];
     new ResizeObserver(() => {
       for (const [c, e] of [[this.force, els[0]], [this.z, els[1]], [this.fd, els[2]]]) c.setSize({ width: Math.max(200, e.clientWidth), height: 140 });

@@ -8,7 +8,9 @@
 // when something changed, at most 10 times a second; the tip and the pushed particle's estimate,
 // which move every frame, are small elements of their own moved by a CSS transform (no repaint
 // of the SVG layer: a software renderer redrew the whole layer each frame, 28 frames/s instead
-// of 60 at 1600×1000).
+// of 60 at 1600×1000). On a software renderer the tip moves 20 times a second, in the same
+// frames as the map and the plots (the frame loop's aligned periods), so every other frame is
+// free.
 // `toPx`, `toStage`, `nearestParticle`, `stepCursor` and `TrailBuffer` are pure (Node tests).
 
 const SVG = 'http://www.w3.org/2000/svg';
@@ -98,6 +100,7 @@ export class MapOverlay {
    * @param {(id: number) => void} opts.onPickParticle
    * @param {(xUm: number, yUm: number) => void} opts.onPickPoint a push target (µm)
    * @param {() => boolean} opts.canTarget whether a target may be picked now (the lease holder)
+   * @param {() => number} [opts.livePeriod] ms between moves of the tip (0: every frame)
    * @param {import('./frame.js').FrameScheduler} scheduler
    */
   constructor(image, opts, scheduler) {
@@ -107,8 +110,8 @@ export class MapOverlay {
     this.trail = new TrailBuffer();
     this.target = null; // [x, y] m
     this.cursor = null; // the keyboard cursor [x, y] m, null until the map has focus
-    this.frame = scheduler.register('map', () => this.draw(), { period: 100 });
-    this.liveFrame = scheduler.register('map-live', () => this.drawLive());
+    this.frame = scheduler.register('map', () => this.draw(), { period: 100, aligned: true });
+    this.liveFrame = scheduler.register('map-live', () => this.drawLive(), { period: opts.livePeriod ?? 0, aligned: true });
     const svg = el('svg', { class: 'map-svg', tabindex: 0, role: 'application', 'aria-roledescription': 'map', 'aria-describedby': 'map-help' });
     svg.setAttribute('aria-label', 'Height image map: particles, tip and push path');
     this.svg = svg;
