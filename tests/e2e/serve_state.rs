@@ -69,6 +69,23 @@ fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
         assert_eq!(s["scan"]["stale"], true, "a push ran since the scan: {s}");
         let (status, _) = http_get(&srv.addr, &format!("/api/records/{scan_record}"));
         assert_eq!(status, 200);
+        // The server's run (issue 26: a page tells a restart from a network blip by it) and the
+        // run history read from the records on disk.
+        let instance = w["instance"].as_str().expect("welcome names the instance");
+        assert!(!instance.is_empty(), "{w}");
+        let st = crate::util::status(&srv.addr);
+        assert_eq!(st["instance"], instance, "{st}");
+        assert_eq!(st["started_unix_ms"], w["started_unix_ms"], "{st}");
+        assert!(
+            w["started_unix_ms"].as_u64().is_some_and(|ms| ms > 1_700_000_000_000),
+            "{w}"
+        );
+        let (code, body) = http_get(&srv.addr, "/api/runs");
+        assert_eq!(code, 200);
+        let runs: serde_json::Value = serde_json::from_slice(&body).unwrap();
+        assert_eq!(runs[0]["outcome"], "ok", "{runs}");
+        assert_eq!(runs[0]["particle"], 1, "{runs}");
+        assert_eq!(runs[0]["estimate"], run["estimate"], "{runs}");
     });
 }
 
@@ -98,6 +115,9 @@ fn issue_11_a_push_stops_when_its_lease_holder_disconnects() {
         );
         let run = until(&mut watcher, 20.0, |m| is(m, "run_done")).await;
         assert_eq!(run["outcome"], "stopped", "{run}");
+        // A disconnect is not the operator's Stop (issue 26: the record said "stop requested by
+        // the operator").
+        assert_eq!(run["failure"], "stopped: the lease holder disconnected", "{run}");
         assert!(run["record"].is_string(), "the stopped push is recorded: {run}");
     });
 }
