@@ -60,7 +60,12 @@ export class App {
       onPickPoint: (x, y) => this.controls.pickTarget(x, y),
       onPickParticle: (id) => this.controls.selectParticle(id),
     }, frames);
-    this.image2d = new Image2D($('image2d'), { cursorEl: $('img-cursor'), profileEl: $('profile'), profileInfoEl: $('profile-info'), onDrawn: () => this.map?.invalidate() }, frames);
+    this.image2d = new Image2D($('image2d'), { cursorEl: $('img-cursor'), profileEl: $('profile'), profileInfoEl: $('profile-info'), onDrawn: () => this.map?.invalidate(),
+      // The 3D view coloured as the image: one colour, one height, in both.
+      onLevelled: (values, range) => {
+        this.view.setColourSource(range ? { values, lo: range.lo, hi: range.hi } : null);
+        this.legendFrame?.mark();
+      } }, frames);
     // The live map on the height image: particles, tip, path, trail; picking by mouse and keys.
     this.map = new MapOverlay(this.image2d, {
       state: () => this.st,

@@ -212,6 +212,7 @@ export class Image2D {
       }
     }
     this.range = lo <= hi ? { lo, hi: hi > lo ? hi : lo + 1e-12 } : null;
+    this.opts.onLevelled?.(this.levelled, this.range);
   }
 
   draw() {
@@ -358,7 +359,7 @@ export class Image2D {
       t.textContent = `${Number(v.toPrecision(4))}`;
     }
     const tl = el('text', { x: x + w + 48, y: g.y + g.h / 2, class: 'axis-label', 'text-anchor': 'middle', transform: `rotate(90 ${x + w + 48} ${g.y + g.h / 2})` }, cb);
-    // The levelled heights: the 3D view's legend (raw heights) has other numbers for a colour.
+    // The levelled heights (the 3D view is coloured by them too).
     tl.textContent = this.mode === 'none' ? 'raw height (nm)' : 'levelled height (nm)';
   }
 

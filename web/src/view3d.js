@@ -413,17 +413,33 @@ export class View3D {
     this.updateDrawRange(scan);
   }
 
+  /**
+   * Colours by the height image's levelled heights and its colour scale (`values` indexed as the
+   * scan's heights, `lo`, `hi` in m), so one colour means one height in both views; null: by
+   * the raw heights (the shape is always the raw heights).
+   */
+  setColourSource(src) {
+    this.colourSource = src;
+    const scan = this.scanState;
+    if (this.scanMesh && scan && (!src || src.values.length === scan.xres * scan.yres)) {
+      this.recolour(scan);
+      this.requestRender();
+    }
+  }
+
   /** Colours mesh row `b` (scan line b·step). */
   colourRow(scan, b) {
     const { xres } = scan;
     const { nx, ny, step } = this.scanMesh.userData;
     const col = this.scanMesh.geometry.getAttribute('color').array;
-    const { lo, hi } = this.colourRange;
+    const src = this.colourSource && this.colourSource.values.length === xres * scan.yres ? this.colourSource : null;
+    const { lo, hi } = src ?? this.colourRange;
+    const heights = src ? src.values : scan.heights;
     const inv = (LUT_N - 1) / Math.max(hi - lo, 1e-18);
     const row = ny - 1 - b;
     const line = b * step;
     for (let a = 0; a < nx; a++) {
-      const h = scan.heights[line * xres + Math.min(xres - 1, a * step)];
+      const h = heights[line * xres + Math.min(xres - 1, a * step)];
       let k = Math.round((h - lo) * inv);
       k = k > 0 ? (k < LUT_N ? k : LUT_N - 1) : 0;
       const o = 3 * (row * nx + a);
@@ -442,9 +458,11 @@ export class View3D {
     this.colourFull = true;
   }
 
-  /** The colour scale now in use (m), for the legend. */
+  /** The colour scale now in use (m), for the legend: the height image's when coloured by it. */
   colourScale() {
-    return this.colourRange;
+    const src = this.colourSource;
+    const scan = this.scanState;
+    return src && scan && src.values.length === scan.xres * scan.yres ? { lo: src.lo, hi: src.hi } : this.colourRange;
   }
 
   // ----- the tip -----
