@@ -412,6 +412,13 @@ test('with a haptic link, the haptic panel shows it and the lease holder can eng
     await p.keyboard.press('Enter');
     await p.waitForFunction(() => !document.querySelector('#hap-fs').disabled);
     assert.equal(await p.evaluate(() => document.activeElement?.id), 'release-lease');
+    // The scales in force (the scene's), then as set: shown and in the Events log.
+    await waitText(p, '#hap-scales', /^10 nm per mm · pull-off felt as 1 N$/, 8000);
+    await p.fill('#hap-nm', '20');
+    await p.click('#hap-scale');
+    await waitText(p, '#reply-haptic', /ok/, 10000);
+    await waitText(p, '#hap-scales', /^20 nm per mm/, 8000);
+    await waitText(p, '#log', /haptic scales now 20 nm per mm/, 5000);
     await p.click('#hap-engage');
     await waitText(p, '#reply-haptic', /ok/, 10000);
     await waitText(p, '#hap-phase', /approach|park|settle|ramp|engaged/, 20000);

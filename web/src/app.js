@@ -84,6 +84,9 @@ export class App {
       fields: { link: $('hap-link'), phase: $('hap-phase'), engaged: $('hap-engaged'), handle: $('hap-handle'), hand: $('hap-hand'), tip: $('hap-tip'), pc: $('hap-pc') },
       device: $('hap-device'),
       downs: $('hap-downs'),
+      scales: $('hap-scales'),
+      nmInput: $('hap-nm'),
+      poInput: $('hap-po'),
     }, frames, {
       doc,
       fetchStatus: this.demo ? undefined : () => fetchStatus(loc),
@@ -93,6 +96,7 @@ export class App {
         this.log.announce(n.text);
         this.controls.render();
       },
+      onScalesChange: (text) => this.log.log(`haptic scales now ${text}`),
     });
 
     this.status = new StatusBar($, { demo: this.demo });

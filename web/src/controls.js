@@ -364,6 +364,7 @@ export class Controls {
     for (const a of ['engage', 'release', 'recenter']) $(`hap-${a}`).addEventListener('click', () => this.guarded('reply-haptic', () => commands.haptic(a)));
     $('hap-scale').addEventListener('click', () => this.guarded('reply-haptic', () => commands.haptic('scale', { nmPerMm: this.num('hap-nm'), pullOffAtHandN: this.num('hap-po') })));
     for (const id of ['scan-x', 'scan-y']) $(id).addEventListener('input', () => { this.scanCentreTouched = true; });
+    for (const id of ['hap-nm', 'hap-po']) $(id).addEventListener('input', () => { delete $(id).dataset.fromServer; });
     for (const id of ['scan-size', 'scan-px']) $(id).addEventListener('input', () => { this.scanFormTouched = true; });
     doc.addEventListener('keydown', (e) => {
       if (e.key === 'Escape' && !$('stop-btn').disabled) {

@@ -32,6 +32,12 @@ export function hapticFields(h) {
   };
 }
 
+/** The haptic scales in force (`/api/status`'s `haptic_scales`), in words; "–" when unknown. */
+export function scalesText(sc) {
+  if (!sc || !Number.isFinite(sc.nm_per_mm) || !Number.isFinite(sc.pull_off_at_hand_n)) return '–';
+  return `${Number(sc.nm_per_mm.toPrecision(4))} nm per mm · pull-off felt as ${Number(sc.pull_off_at_hand_n.toPrecision(4))} N`;
+}
+
 /** The force at the hand over the last `seconds` of server time (a restart starts it again). */
 export class HapticTrace {
   constructor(seconds = SECONDS) {
@@ -73,9 +79,11 @@ export class HapticPanel {
    * @param {Document} [opts.doc] the page's document: no fetches while it is hidden
    * @param {{setTimeout, clearTimeout}} [opts.timers]
    */
-  constructor(els, scheduler, { fetchStatus, doc, timers, onLinkChange } = {}) {
+  constructor(els, scheduler, { fetchStatus, doc, timers, onLinkChange, onScalesChange } = {}) {
     this.els = els;
     this.onLinkChange = onLinkChange;
+    this.onScalesChange = onScalesChange;
+    this.scales = null; // the scales in force, as last read (words)
     this.link = null; // the link as last seen in telemetry
     this.downs = null; // link losses the server counted (/api/status)
     this.trace = new HapticTrace(SECONDS);
@@ -90,6 +98,7 @@ export class HapticPanel {
         onStatus: (s) => {
           this.showDeviceFaults(s?.haptic ?? null);
           this.showDowns(s?.haptic?.link_downs);
+          this.showScales(s?.haptic_scales);
         },
         onError: () => this.showDeviceFaults(null),
       })
@@ -104,6 +113,21 @@ export class HapticPanel {
     const { text, cls } = deviceFaultsLine(h);
     el.textContent = text;
     el.className = cls;
+  }
+
+  /** The scales in force: shown, the form's fields filled while untouched, a change reported. */
+  showScales(sc) {
+    const text = scalesText(sc);
+    if (text === '–') return;
+    if (this.els.scales) this.els.scales.textContent = text;
+    for (const [el, v] of [[this.els.nmInput, sc.nm_per_mm], [this.els.poInput, sc.pull_off_at_hand_n]]) {
+      if (el && (el.value === '' || el.dataset.fromServer === '1') && this.doc?.activeElement !== el) {
+        el.value = String(v);
+        el.dataset.fromServer = '1';
+      }
+    }
+    if (this.scales !== null && this.scales !== text) this.onScalesChange?.(text);
+    this.scales = text;
   }
 
   /** The link losses the server counted since it started. */

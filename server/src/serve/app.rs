@@ -114,6 +114,7 @@ async fn status(State(st): State<Arc<AppState>>) -> Response {
         "telemetry_sent": st.net.sent.load(Relaxed),
         "dropped_frames": st.net.dropped_frames.load(Relaxed),
         "haptic": haptic_status(&m.haptic),
+        "haptic_scales": st.haptic_scales.lock().map(|s| *s).ok(),
         // Where the controller believes each particle is (m), as the `state` message says.
         "particles": match st.state_message() {
             ServerMessage::State { particles, .. } => serde_json::to_value(particles).unwrap_or_default(),

@@ -76,6 +76,18 @@ pub struct AppState {
     /// When this server started (Unix ms) and its instance id: a page that reconnects to a
     /// different instance knows the server restarted (and what it last saw is gone).
     pub instance: Instance,
+    /// The haptic scales in force, in the protocol's units: the scene's, then each accepted
+    /// `haptic scale` (`/api/status`'s `haptic_scales`).
+    pub haptic_scales: Mutex<HapticScales>,
+}
+
+/// The haptic scales in force, as the operator sets them.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct HapticScales {
+    /// Tip nanometres per handle millimetre.
+    pub nm_per_mm: f64,
+    /// The force the hand feels at the pull-off force (N).
+    pub pull_off_at_hand_n: f64,
 }
 
 /// One run of the server: its start (Unix ms) and an id no other run shares (the start and the
@@ -238,6 +250,10 @@ impl AppState {
     pub fn new(cfg: ServeConfig, scene: Scene, shared: Arc<Shared>, params: StrategyParams) -> AppState {
         AppState {
             instance: Instance::now(),
+            haptic_scales: Mutex::new(HapticScales {
+                nm_per_mm: scene.file.haptic.nm_per_mm,
+                pull_off_at_hand_n: scene.file.haptic.pull_off_at_hand_n,
+            }),
             cfg,
             params,
             shared,
