@@ -5,8 +5,15 @@
 // with the 3D companion view shown too; Stop, from the press to the frame that shows its reply,
 // during a push (three presses). (The docs' screenshots: e2e/screenshots.js.)
 //   cd web && node e2e/bench.js
-import { startServer, launchBrowser, newPage, ready, timedStop } from './support.js';
+import { existsSync } from 'node:fs';
+import { join, resolve } from 'node:path';
+import { startServer, launchBrowser, newPage, ready, timedStop, serverBin, ROOT } from './support.js';
 
+// The server an operator runs (`make run`: release) when it is built: a debug server's push
+// takes a core of its own, which a 2-core machine's browser then lacks. $NANOPUSH_BIN wins.
+const release = join(process.env.CARGO_TARGET_DIR ? resolve(ROOT, process.env.CARGO_TARGET_DIR) : join(ROOT, 'target'), 'release', 'nanopush');
+if (!process.env.NANOPUSH_BIN && existsSync(release)) process.env.NANOPUSH_BIN = release;
+console.log(`server: ${serverBin()}`);
 const srv = await startServer();
 const browser = await launchBrowser();
 try {
