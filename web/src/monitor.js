@@ -117,6 +117,7 @@ class Monitor {
     this.session = new Session();
     this.downSince = null;
     this.instance = null;
+    this.note = null; // a restart or an outage this screen saw
     this.drawn = -1;
     this.dirty = false;
   }
@@ -131,9 +132,12 @@ class Monitor {
       const restarted = this.instance !== null && s.instance !== this.instance;
       this.instance = s.instance;
       const back = this.downSince !== null;
+      // What this screen saw happen stays said (a wall screen is read now and then).
+      if (restarted) this.note = `the server restarted at ${clockTime(s.started_unix_ms)}`;
+      else if (back) this.note = `the server was unreachable from ${clockTime(this.downSince)} to ${clockTime(Date.now())}`;
       this.downSince = null;
       document.body.classList.remove('offline');
-      set('m-conn', restarted ? `live · the server restarted at ${clockTime(s.started_unix_ms)}` : back ? 'live · back' : 'live', 'good');
+      set('m-conn', this.note ? `live · ${this.note}` : 'live', 'good');
       if (restarted || back) this.runs();
       this.dirty = true;
     } catch (e) {
