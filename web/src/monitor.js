@@ -243,13 +243,17 @@ class Monitor {
     ctx.imageSmoothingEnabled = false;
     ctx.drawImage(this.off, 0, 0, W, W);
     const px = (x, y) => [((x - sc.x_offset) / sc.x_real) * W, W - ((y - sc.y_offset) / sc.y_real) * W];
-    ctx.lineWidth = 2;
-    ctx.strokeStyle = '#ffe08a';
+    // The particles as rings that show on any colour of the scan: white over a dark edge.
     for (const p of st.serverParticles ?? []) {
       const [x, y] = px(p.x, p.y);
-      ctx.beginPath();
-      ctx.arc(x, y, Math.max(5, (p.radius / sc.x_real) * W), 0, 2 * Math.PI);
-      ctx.stroke();
+      const r = Math.max(6, (p.radius / sc.x_real) * W) + 3;
+      for (const [w, c] of [[5, 'rgba(0,0,0,.7)'], [2, '#ffffff']]) {
+        ctx.lineWidth = w;
+        ctx.strokeStyle = c;
+        ctx.beginPath();
+        ctx.arc(x, y, r, 0, 2 * Math.PI);
+        ctx.stroke();
+      }
     }
     if (st.tip) {
       const [x, y] = px(st.tip.stage[0], st.tip.stage[1]);
