@@ -71,6 +71,30 @@ test('kill -9 mid-push and a restart: "unknown" while down, the restart and the 
   await op.context().close();
 });
 
+test('kill -9 mid-scan and a restart: the killed scan is shown as interrupted and from before the restart, and the refused reconnects do not flood the log (review of issue 26)', async () => {
+  const op = await newPage(browser, { width: 1280, height: 720 });
+  await op.goto(srv.url);
+  await ready(op);
+  await op.click('#take-lease');
+  await op.waitForFunction(() => window.nanopush.session.hasLease);
+  await op.evaluate(() => window.nanopush.app.conn.send({ type: 'scan', size_um: 16, pixels: 512 }));
+  await op.waitForFunction(() => (window.nanopush.session.state.scan?.lines ?? 0) > 5, null, { timeout: 20000 });
+  await srv.kill('SIGKILL');
+  // Down long enough for a few refused attempts (0.25 s, 0.5 s, 1 s …).
+  await op.waitForFunction(() => window.nanopush.app.conn.attempt >= 4, null, { timeout: 15000 });
+  const closed = await op.$$eval('#log li', (ls) => ls.filter((l) => /connection closed \(code/.test(l.textContent)).length);
+  assert.equal(closed, 1, 'one "connection closed", not one per attempt');
+  const port = Number(srv.addr.split(':').pop());
+  srv = await startServer({ webDir: process.env.E2E_WEB_DIR || WEB, port, dir: srv.dir });
+  await waitText(op, '#log', /the server restarted/, 15000);
+  const progress = await waitText(op, '#scan-progress', /interrupted/, 5000);
+  assert.match(progress, /^scan 1 interrupted at line \d+\/512 · from before the server restarted$/);
+  assert.equal(await op.isVisible('#img-stale'), true);
+  assert.match(await op.textContent('#img-stale'), /from before the server restarted/);
+  assert.deepEqual(op.errors.filter((e) => !/ERR_CONNECTION_REFUSED|Failed to load resource/.test(e)), []);
+  await op.context().close();
+});
+
 test('a lease holder who reloads mid-push is warned first; the push ends "stopped: the lease holder disconnected", not an operator\'s stop', async () => {
   const op = await newPage(browser);
   await op.goto(srv.url);

@@ -114,7 +114,7 @@ export class App {
         this.render();
       },
       onMessage: (data) => this.onMessage(data),
-      onClose: (ev) => this.onClose(ev),
+      onClose: (ev, info) => this.onClose(ev, info),
       onCountdown: (text) => this.status.setConn('closed', text),
       onSend: (m) => this.replies.sent(m),
       onChange: () => this.render(),
@@ -202,9 +202,11 @@ export class App {
     if (parts.has('charts')) this.charts.update(st.trace);
   }
 
-  onClose(ev) {
-    // The shutdown message was logged when it came: do not say it twice.
-    if (this.st.shutdown === null) this.log.log(closedText(ev), 'bad');
+  onClose(ev, { wasOpen = true } = {}) {
+    // The shutdown message was logged when it came: do not say it twice. A refused attempt to
+    // reconnect is no news (the status bar counts the attempts): once every 2 s, it would push
+    // everything else out of the log while the server is down.
+    if (this.st.shutdown === null && wasOpen) this.log.log(closedText(ev), 'bad');
     // What the server said no longer holds: grey the live views, mark them "unknown".
     this.doc.body.classList.add('offline');
     this.$('offline').hidden = false;

@@ -51,7 +51,8 @@ export class Connection {
    * @param {(url: string) => WebSocket | Promise<WebSocket>} opts.open makes a socket (may throw)
    * @param {() => void} [opts.onOpen] the socket opened (after `session.opened()`)
    * @param {(data: string | ArrayBuffer) => void} [opts.onMessage] a message arrived
-   * @param {(ev: CloseEvent) => void} [opts.onClose] the socket closed (before `session.closed()`)
+   * @param {(ev: CloseEvent, info: {wasOpen: boolean}) => void} [opts.onClose] the socket closed
+   *   (before `session.closed()`); `wasOpen`: it had opened (else: an attempt the server refused)
    * @param {(text: string) => void} [opts.onCountdown] the time left until the next attempt, in words
    * @param {(msg: object) => void} [opts.onSend] a command got its id and is about to go
    * @param {() => void} [opts.onChange] the Session's connection state changed
@@ -91,7 +92,9 @@ export class Connection {
   attach(sock) {
     this.ws = sock;
     sock.binaryType = 'arraybuffer';
+    let wasOpen = false;
     sock.onopen = () => {
+      wasOpen = true;
       this.attempt = 0;
       this.session.opened();
       this.on.onOpen();
@@ -100,7 +103,7 @@ export class Connection {
     sock.onclose = (ev) => {
       if (this.ws !== sock) return;
       this.ws = null;
-      this.on.onClose(ev);
+      this.on.onClose(ev, { wasOpen });
       this.scheduleReconnect();
     };
     sock.onerror = () => {};

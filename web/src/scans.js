@@ -11,7 +11,9 @@ import { scanSize, scanDoneNote } from './eventlog.js';
 
 /** The legend's progress line for the live scan. */
 export function progressText(sc, stale) {
-  return (sc.done ? `scan ${sc.id} complete` : `scan ${sc.id}: line ${sc.lines}/${sc.yres}`) + (stale ? ' · stale (a push ran since)' : '');
+  const what = sc.done ? `scan ${sc.id} complete` : sc.interrupted ? `scan ${sc.id} interrupted at line ${sc.lines}/${sc.yres}` : `scan ${sc.id}: line ${sc.lines}/${sc.yres}`;
+  // A scan from before a restart is stale whatever ran since: the new server's sample is the scene's.
+  return what + (sc.previousRun ? ' · from before the server restarted' : stale ? ' · stale (a push ran since)' : '');
 }
 
 /** The height image's title: the record opened, else the live scan's id. */
@@ -107,6 +109,14 @@ export class Scans {
   /** The server's `state`: a scan other than the one shown is the latest; fetch it if done. */
   stateChanged(ev) {
     const st = this.st;
+    if (ev.scanFinished && !this.openedRecord) {
+      // It ended while this page was away: the lines missed come from its record.
+      this.toolbar.scanFilled();
+      if (st.scan.record) {
+        if (st.scan.lines < st.scan.yres) this.loadLatest(st.scan.id, st.scan.record);
+        this.loadFound(st.scan.record);
+      }
+    }
     if (ev.scanChanged && !this.openedRecord) {
       this.show();
       this.map?.setScanParticles([]);
@@ -184,6 +194,7 @@ export class Scans {
     const st = this.st;
     const stale = st.scanStale && !this.openedRecord && !!st.scan;
     this.$('img-stale').hidden = !stale;
+    this.$('img-stale').textContent = st.scan?.previousRun ? 'stale: from before the server restarted' : 'stale: a push ran since this scan';
     this.$('scan-progress').classList.toggle('stale', stale);
     this.markLegend();
   }

@@ -88,7 +88,7 @@ export function initialState({ traceSeconds = 10 } = {}) {
     leaseNote: null, // why the lease changed, when the server said
     stateReceived: false, // the server's `state` arrived on this connection
     lagged: { events: 0, skipped: 0 },
-    scan: null, // {id, xres, yres, x_offset, y_offset, x_real, y_real, heights, received, lines, min, max, done, record}
+    scan: null, // {id, xres, yres, x_offset, y_offset, x_real, y_real, heights, received, lines, min, max, done, record, previousRun, interrupted}
     strayLines: 0, // scan lines of no current scan
     runs: [], // run_done messages, newest last
     errors: [], // {at, id, code, message, command}
@@ -225,6 +225,13 @@ export class Session {
           const instance = msg.instance ?? null;
           s.restarted = previous !== null && instance !== null && instance !== previous;
           s.instance = instance;
+          if (s.restarted && s.scan) {
+            // The previous run's scan: one it never finished never will be, and the restarted
+            // server's sample (the scene's) is not what it shows. Its scan ids start again.
+            s.scan.previousRun = true;
+            s.scan.interrupted = !s.scan.done;
+            s.scanStale = true;
+          }
           s.startedUnixMs = msg.started_unix_ms ?? null;
           return { kind: 'welcome', restarted: s.restarted, previous };
         }
@@ -247,14 +254,21 @@ export class Session {
         s.push = msg.push ? { ...msg.push, seenAtMs: Date.now() } : null;
         const sc = msg.scan ?? null;
         let scanChanged = false;
-        if (sc && (!s.scan || s.scan.id !== sc.scan)) {
+        let scanFinished = false;
+        if (sc && (!s.scan || s.scan.id !== sc.scan || s.scan.previousRun)) {
           this.startScan({ ...sc, type: 'scan_start' });
           s.scan.done = !!sc.done;
           s.scan.record = sc.record ?? null;
           scanChanged = true;
+        } else if (sc && sc.done && !s.scan.done) {
+          // The scan shown ended while this page was away: done, and its record has the lines
+          // this page missed.
+          s.scan.done = true;
+          s.scan.record = sc.record ?? null;
+          scanFinished = true;
         }
-        s.scanStale = !!sc?.stale;
-        return { kind: 'state', scan: sc, scanChanged };
+        s.scanStale = sc ? !!sc.stale : !!s.scan?.previousRun;
+        return { kind: 'state', scan: sc, scanChanged, scanFinished };
       }
       case 'push_started':
         s.push = { particle: msg.particle, path: msg.path ?? [], by: msg.by ?? null, seenAtMs: Date.now() };
@@ -378,6 +392,8 @@ export class Session {
           max: -Infinity,
           done: false,
           record: null,
+          previousRun: false, // shown from before a server restart
+          interrupted: false, // that server never finished it
           version: 0, // bumped by every change of the heights
         };
         return true;

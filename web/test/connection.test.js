@@ -184,3 +184,30 @@ test('a socket made asynchronously (the demo) is attached when it comes', async 
   s.open();
   assert.equal(session.state.connection, 'open');
 });
+
+test('onClose says whether the socket had opened: a refused reconnect attempt is no new "connection closed" (review of issue 26)', () => {
+  const session = new Session();
+  const timers = fakeTimers();
+  const sockets = [];
+  const closes = [];
+  const conn = new Connection(session, {
+    url: 'ws://h/ws',
+    open: (url) => {
+      const s = new FakeSocket(url);
+      sockets.push(s);
+      return s;
+    },
+    onClose: (ev, info) => closes.push(info?.wasOpen),
+    timers,
+    now: timers.now,
+  });
+  conn.connect();
+  sockets[0].open();
+  sockets[0].close();
+  // The server stays down: each attempt is refused (closed before it opened).
+  for (let i = 1; i <= 5; i++) {
+    timers.run(2000);
+    sockets[i].close();
+  }
+  assert.deepEqual(closes, [true, false, false, false, false, false]);
+});

@@ -327,3 +327,42 @@ test('the haptic handle may be engaged only while its link is up', () => {
   c = controlState(s.state);
   assert.equal(c.hapticEngage.enabled, true);
 });
+
+// Found by the review of issue 26: the scan shown across a reconnect.
+const welcomeOf = (instance, client = 5) => ({ type: 'welcome', version: WS_VERSION, client, role: 'viewer', lease: null, scene: 'g', tick_hz: 1000, instance, started_unix_ms: 1000 });
+const scanOf = (id, extra = {}) => ({ scan: id, xres: 4, yres: 3, x_offset: 0, y_offset: 0, x_real: 1e-6, y_real: 1e-6, done: false, record: null, stale: false, ...extra });
+const stateWith = (scan) => ({ type: 'state', particles: [], stage: [0, 0, 1e-6], phase: 'idle', lease: null, push: null, scan });
+
+test('a scan that ended while the page was away (same server) is marked done and fetched whole, not left at its last line', () => {
+  const s = openSession(5);
+  s.apply(welcomeOf('a-1'));
+  s.apply(stateWith(scanOf(3)));
+  s.apply(encodeScanLine({ scan: 3, line: 0, xres: 4, yres: 3, y: 0 }, [1e-9, 2e-9, 3e-9, 4e-9]));
+  s.closed(1, 250);
+  s.opened();
+  s.apply(welcomeOf('a-1', 6));
+  const ev = s.apply(stateWith(scanOf(3, { done: true, record: 'scan-1-3.gsf' })));
+  assert.equal(s.state.scan.done, true, 'the server says scan 3 is done');
+  assert.equal(s.state.scan.record, 'scan-1-3.gsf');
+  assert.equal(ev.scanFinished, true, 'the page is told to fetch the lines it missed');
+  assert.equal(ev.scanChanged, false);
+});
+
+test('after a server restart the previous run\'s scan is never taken for the new one\'s: an unfinished one is interrupted, and the same id is another scan', () => {
+  const s = openSession(5);
+  s.apply(welcomeOf('a-1'));
+  s.apply(stateWith(scanOf(1)));
+  s.apply(encodeScanLine({ scan: 1, line: 0, xres: 4, yres: 3, y: 0 }, [1e-9, 2e-9, 3e-9, 4e-9]));
+  s.closed(1, 250);
+  s.opened();
+  s.apply(welcomeOf('b-2', 1));
+  s.apply(stateWith(null));
+  assert.equal(s.state.scan.interrupted, true, 'scan 1 of the killed server never ends');
+  assert.equal(s.state.scanStale, true, 'the restarted server\'s sample is not what it shows');
+  // The new server's scan 1 is another scan, though it has the same number.
+  const ev = s.apply(stateWith(scanOf(1, { done: true, record: 'scan-9-1.gsf' })));
+  assert.equal(ev.scanChanged, true);
+  assert.equal(s.state.scan.interrupted, false);
+  assert.equal(s.state.scan.record, 'scan-9-1.gsf');
+  assert.equal(s.state.scanStale, false);
+});
