@@ -95,6 +95,30 @@ test('kill -9 mid-scan and a restart: the killed scan is shown as interrupted an
   await op.context().close();
 });
 
+test('a hung server (SIGSTOP: no close, no answer) is shown as down by the page and the monitor within seconds, and both come back when it resumes (review of issue 26)', async () => {
+  const mon = await newPage(browser, { width: 800, height: 600 });
+  await mon.goto(srv.base + '/?view=monitor');
+  await waitText(mon, '#m-conn', /^live/, 15000);
+  const op = await newPage(browser, { width: 1280, height: 720 });
+  await op.goto(srv.url);
+  await ready(op);
+  process.kill(srv.pid, 'SIGSTOP');
+  try {
+    await waitText(mon, '#m-conn', /^server down since \d\d:\d\d:\d\d \(no answer within 3 s\)/, 10000);
+    await op.waitForFunction(() => document.body.classList.contains('offline'), null, { timeout: 10000 });
+    await waitText(op, '#log', /connection closed \(no word from the server for 5 s\)/, 1000);
+  } finally {
+    process.kill(srv.pid, 'SIGCONT');
+  }
+  await ready(op);
+  await waitText(mon, '#m-conn', /^live · the server was unreachable from/, 10000);
+  assert.equal(await op.evaluate(() => document.body.classList.contains('offline')), false);
+  assert.deepEqual(op.errors, []);
+  assert.deepEqual(mon.errors, []);
+  await mon.context().close();
+  await op.context().close();
+});
+
 test('a lease holder who reloads mid-push is warned first; the push ends "stopped: the lease holder disconnected", not an operator\'s stop', async () => {
   const op = await newPage(browser);
   await op.goto(srv.url);

@@ -39,6 +39,14 @@ export function reconnectText(leftMs, attempt) {
 const noop = () => {};
 
 /**
+ * Silence (ms) after which a socket is given up and another tried: the server streams telemetry
+ * all the time (tens of frames a second), so this long without a frame is a hung server or a
+ * network that drops packets without closing; a handshake that takes this long too. The
+ * server gives a client the same 5 s to take a frame.
+ */
+export const SILENCE_MS = 5000;
+
+/**
  * The page's WebSocket: one at a time, reopened after it closes (the n-th attempt after
  * `backoffMs(n)`; an open resets the count). The Session hears of every change (`connecting`,
  * `opened`, `closed`) and numbers the commands sent.
@@ -58,8 +66,9 @@ export class Connection {
    * @param {() => void} [opts.onChange] the Session's connection state changed
    * @param {{setTimeout, clearTimeout, setInterval, clearInterval}} [opts.timers]
    * @param {() => number} [opts.now] wall clock (ms)
+   * @param {number} [opts.silenceMs] a socket silent this long is given up (0: never)
    */
-  constructor(session, { url, open, onOpen = noop, onMessage = noop, onClose = noop, onCountdown = noop, onSend = noop, onChange = noop, timers = globalThis, now = Date.now }) {
+  constructor(session, { url, open, onOpen = noop, onMessage = noop, onClose = noop, onCountdown = noop, onSend = noop, onChange = noop, timers = globalThis, now = Date.now, silenceMs = SILENCE_MS }) {
     this.session = session;
     this.url = url;
     this.open = open;
@@ -70,6 +79,8 @@ export class Connection {
     this.attempt = 0; // reconnect attempts since the last open
     this.reconnectTimer = null;
     this.countdownTimer = null;
+    this.silenceMs = silenceMs;
+    this.watchdog = null; // checks the socket's silence once a second
   }
 
   /** Opens a socket (now: the reconnect timer, if any, is cancelled). */
@@ -85,28 +96,52 @@ export class Connection {
       this.scheduleReconnect();
       return;
     }
-    if (sock && typeof sock.then === 'function') sock.then((s) => this.attach(s));
-    else this.attach(sock);
+    if (sock && typeof sock.then === 'function') {
+      sock.then((s) => this.attach(s), (e) => {
+        this.session.logError('client_socket', e?.message ?? String(e));
+        this.scheduleReconnect();
+      });
+    } else this.attach(sock);
   }
 
   attach(sock) {
     this.ws = sock;
     sock.binaryType = 'arraybuffer';
     let wasOpen = false;
+    let heard = this.now();
     sock.onopen = () => {
       wasOpen = true;
+      heard = this.now();
       this.attempt = 0;
       this.session.opened();
       this.on.onOpen();
     };
-    sock.onmessage = (ev) => this.on.onMessage(ev.data);
-    sock.onclose = (ev) => {
+    sock.onmessage = (ev) => {
+      heard = this.now();
+      this.on.onMessage(ev.data);
+    };
+    const gone = (ev) => {
       if (this.ws !== sock) return;
       this.ws = null;
+      this.timers.clearInterval(this.watchdog);
       this.on.onClose(ev, { wasOpen });
       this.scheduleReconnect();
     };
+    sock.onclose = gone;
     sock.onerror = () => {};
+    this.timers.clearInterval(this.watchdog);
+    if (this.silenceMs > 0) {
+      this.watchdog = this.timers.setInterval(() => {
+        if (this.now() - heard <= this.silenceMs) return;
+        const reason = `no word from the server for ${this.silenceMs / 1000} s`;
+        gone({ code: null, reason });
+        try {
+          sock.close();
+        } catch {
+          // (closing a dead socket: nothing to do)
+        }
+      }, 1000);
+    }
   }
 
   scheduleReconnect() {

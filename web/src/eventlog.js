@@ -57,6 +57,7 @@ export function replyErrorText(ev, e) {
 }
 
 export function closedText(ev) {
+  if (ev.code === null || ev.code === undefined) return `connection closed (${ev.reason || 'no reason'})`;
   return `connection closed (code ${ev.code}${ev.reason ? `, ${ev.reason}` : ''})`;
 }
 

@@ -19,6 +19,20 @@ import { level } from './image2d.js';
 
 const POLL_MS = 1000;
 const RUNS_MS = 5000;
+/** A request unanswered this long means the server is down (hung, or cut off without a close). */
+const ANSWER_MS = 3000;
+
+/** GET within `ANSWER_MS`; a late answer is an error that says so. */
+async function get(path) {
+  try {
+    const r = await fetch(apiUrl(path, location), { signal: AbortSignal.timeout(ANSWER_MS) });
+    if (!r.ok) throw new Error(`HTTP ${r.status}`);
+    return await r.json();
+  } catch (e) {
+    if (e?.name === 'TimeoutError') throw new Error(`no answer within ${ANSWER_MS / 1000} s`);
+    throw e;
+  }
+}
 
 function h(tag, attrs = {}, ...kids) {
   const e = document.createElement(tag);
@@ -119,14 +133,15 @@ class Monitor {
     this.instance = null;
     this.note = null; // a restart or an outage this screen saw
     this.drawn = -1;
+    this.polling = false; // a status request is out
     this.dirty = false;
   }
 
   async poll() {
+    if (this.polling) return; // one at a time: a hung server would pile them up
+    this.polling = true;
     try {
-      const r = await fetch(apiUrl('/api/status', location));
-      if (!r.ok) throw new Error(`HTTP ${r.status}`);
-      const s = await r.json();
+      const s = await get('/api/status');
       for (const [id, text, cls] of statusTiles(s)) set(id, text, cls);
       this.status = s;
       const restarted = this.instance !== null && s.instance !== this.instance;
@@ -144,15 +159,15 @@ class Monitor {
       if (this.downSince === null) this.downSince = Date.now();
       document.body.classList.add('offline');
       set('m-conn', downText(this.downSince, e.message), 'down');
+    } finally {
+      this.polling = false;
     }
   }
 
   async runs() {
     const ol = document.getElementById('m-runs');
     try {
-      const r = await fetch(apiUrl('/api/runs', location));
-      if (!r.ok) throw new Error(`HTTP ${r.status}`);
-      const list = await r.json();
+      const list = await get('/api/runs');
       ol.replaceChildren(...(list.length ? list.slice(0, 12).map((x) => h('li', { class: runClass(x) }, runLine(x))) : [h('li', {}, 'no pushes recorded yet')]));
     } catch {
       // (the banner says the server is down; the list stays as it was, greyed)

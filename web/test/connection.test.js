@@ -169,7 +169,7 @@ test('a socket that cannot be made is logged and retried', () => {
   assert.equal(h.session.state.reconnect.attempt, 2);
   h.timers.run(1000);
   assert.equal(h.sockets.length, 1);
-  assert.equal(h.timers.pending, 0, 'no countdown or retry left running');
+  assert.equal(h.timers.pending, 1, 'no countdown or retry left running: only the new socket\'s silence watchdog');
 });
 
 test('a socket made asynchronously (the demo) is attached when it comes', async () => {
@@ -210,4 +210,66 @@ test('onClose says whether the socket had opened: a refused reconnect attempt is
     sockets[i].close();
   }
   assert.deepEqual(closes, [true, false, false, false, false, false]);
+});
+
+test('a server that goes silent (hung, or a network that drops packets without closing) is given up after 5 s and tried again; a handshake that never finishes too (review of issue 26)', () => {
+  const session = new Session();
+  const timers = fakeTimers();
+  const sockets = [];
+  const closes = [];
+  const conn = new Connection(session, {
+    url: 'ws://h/ws',
+    open: (url) => {
+      const s = new FakeSocket(url);
+      s.close = () => { s.readyState = 3; s.closedByPage = true; };
+      sockets.push(s);
+      return s;
+    },
+    onClose: (ev, info) => closes.push([ev.reason, info.wasOpen]),
+    timers,
+    now: timers.now,
+  });
+  conn.connect();
+  sockets[0].open();
+  // Messages keep it alive.
+  for (let i = 0; i < 10; i++) {
+    timers.run(1000);
+    sockets[0].onmessage({ data: '{"type":"telemetry"}' });
+  }
+  assert.deepEqual(closes, []);
+  assert.equal(session.state.connection, 'open');
+  // Then nothing: given up within a second of 5 s.
+  timers.run(5000);
+  assert.equal(closes.length, 0, 'not before 5 s');
+  timers.run(1000);
+  assert.deepEqual(closes, [['no word from the server for 5 s', true]]);
+  assert.equal(sockets[0].closedByPage, true);
+  assert.equal(session.state.connection, 'closed');
+  // A late close event of the dropped socket changes nothing.
+  sockets[0].onclose({ code: 1006, reason: '' });
+  assert.equal(closes.length, 1);
+  // The next attempt's handshake never finishes: dropped too, and tried again.
+  timers.run(250);
+  assert.equal(sockets.length, 2);
+  timers.run(6000);
+  assert.equal(sockets[1].closedByPage, true);
+  assert.deepEqual(closes[1], ['no word from the server for 5 s', false]);
+  timers.run(500);
+  assert.equal(sockets.length, 3);
+  sockets[2].open();
+  assert.equal(session.state.connection, 'open');
+});
+
+test('a socket promised and refused (the demo\'s module did not load) is logged and retried, not an unhandled rejection (review of issue 26)', async () => {
+  const session = new Session();
+  const timers = fakeTimers();
+  let tries = 0;
+  const conn = new Connection(session, { url: 'u', open: () => { tries++; return Promise.reject(new Error('no module')); }, timers, now: timers.now });
+  conn.connect();
+  await new Promise((r) => setImmediate(r));
+  assert.equal(session.state.lastError.message, 'no module');
+  assert.equal(session.state.connection, 'closed');
+  timers.run(250);
+  assert.equal(tries, 2);
+  await new Promise((r) => setImmediate(r));
 });
