@@ -36,6 +36,7 @@ fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
         let started = until(&mut op, 20.0, |m| is(m, "push_started")).await;
         assert_eq!(started["particle"], 1);
         assert_eq!(started["by"], me);
+        assert_eq!(started["run"], 1, "its run number, as its record will say: {started}");
         let path = started["path"].as_array().unwrap();
         assert_eq!(path.len(), 2, "{started}");
         assert!((path[1][0].as_f64().unwrap() - 41e-6).abs() < 50e-9, "{started}");
@@ -44,6 +45,7 @@ fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
         let s = until(&mut during, 5.0, |_| true).await;
         assert_eq!(s["type"], "state");
         assert_eq!(s["push"]["particle"], 1, "{s}");
+        assert_eq!(s["push"]["run"], 1, "{s}");
         assert_eq!(s["lease"], me);
         let run = until(&mut op, 30.0, |m| is(m, "run_done")).await;
         assert_eq!(run["outcome"], "ok", "{run}");
@@ -86,6 +88,10 @@ fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
         assert_eq!(runs[0]["outcome"], "ok", "{runs}");
         assert_eq!(runs[0]["particle"], 1, "{runs}");
         assert_eq!(runs[0]["estimate"], run["estimate"], "{runs}");
+        // Its record names the server run and run number push_started gave (review of issue 26:
+        // a page that lost sight of a push read an earlier push of the particle as its outcome).
+        assert_eq!(runs[0]["instance"], instance, "{runs}");
+        assert_eq!(runs[0]["run"], 1, "{runs}");
     });
 }
 

@@ -8,7 +8,7 @@
 // owns no logic of its own: it builds the parts, routes the Session's events to them and holds
 // the one piece of state no part owns (the phase the status bar last showed).
 import { commands, STREAMS } from './wire.js';
-import { Session, describeRun, runClass, setPointForceN } from './session.js';
+import { Session, describeRun, runClass, setPointForceN, lostPushRun } from './session.js';
 import { Connection, wsUrl, apiUrl } from './connection.js';
 import { FrameScheduler, livePeriodMs } from './frame.js';
 import { formatTip } from './format.js';
@@ -329,8 +329,8 @@ export class App {
   }
 
   /**
-   * A push ran when the connection closed and its end was not seen: read its outcome from the
-   * run history (a record of that particle written since it was seen), else say it is unknown.
+   * A push ran when the connection closed and its end was not seen: read its outcome from its
+   * record in the run history (that server run's, that run number), else say it is unknown.
    */
   async settleLostPush() {
     const st = this.st;
@@ -340,10 +340,7 @@ export class App {
     let run = null;
     try {
       const r = await fetch(apiUrl('/api/runs', this.loc));
-      if (r.ok) {
-        const runs = await r.json();
-        run = runs.find((x) => x.particle === lost.particle && x.modified * 1000 >= (lost.seenAtMs ?? 0) - 2000) ?? null;
-      }
+      if (r.ok) run = lostPushRun(await r.json(), lost);
     } catch {
       // (no history: unknown)
     }

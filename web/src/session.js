@@ -33,6 +33,18 @@ export function runClass(r) {
 }
 
 /**
+ * The record of a push this page lost sight of (`lost`: the Session's `lostPush`, with the
+ * server run it ran on and its run number), among /api/runs entries: the one that server run
+ * wrote for that run, else null (a killed server writes none). Never matched by time or
+ * particle alone: an earlier push of the same particle, or the next server's run of the same
+ * number, is another push.
+ */
+export function lostPushRun(runs, lost) {
+  if (!Array.isArray(runs) || !lost || lost.instance == null || lost.run == null) return null;
+  return runs.find((x) => x.instance === lost.instance && x.run === lost.run && x.particle === lost.particle) ?? null;
+}
+
+/**
  * The strategy's contact set point as a tip force (N), from an /api/scene document: the set
  * point reading `ζ_set` (V) is a deflection (`set_point_v` − `baseline_v`) / `gain_v_per_nm`,
  * and the force `k_z ζ` (positive repulsive, as telemetry's `tip_force_n`). Null when the scene
@@ -251,7 +263,7 @@ export class Session {
           }
         }
         s.serverParticles = (msg.particles ?? []).map((q) => ({ ...q }));
-        s.push = msg.push ? { ...msg.push, seenAtMs: Date.now() } : null;
+        s.push = msg.push ? { ...msg.push } : null;
         const sc = msg.scan ?? null;
         let scanChanged = false;
         let scanFinished = false;
@@ -271,7 +283,7 @@ export class Session {
         return { kind: 'state', scan: sc, scanChanged, scanFinished };
       }
       case 'push_started':
-        s.push = { particle: msg.particle, path: msg.path ?? [], by: msg.by ?? null, seenAtMs: Date.now() };
+        s.push = { particle: msg.particle, path: msg.path ?? [], by: msg.by ?? null, run: msg.run ?? null };
         return { kind: 'push_started', push: s.push };
       case 'ok': {
         const c = msg.id != null ? s.commands.get(msg.id) : undefined;

@@ -1,7 +1,7 @@
 // node --test: the Session (src/session.js) over sequences of the server's messages.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { Session, controlState, sceneParticles, setPointForceN, describeRun, runClass } from '../src/session.js';
+import { Session, controlState, sceneParticles, setPointForceN, describeRun, runClass, lostPushRun } from '../src/session.js';
 import { WS_VERSION, encodeScanLine, commands } from '../src/wire.js';
 
 test('session: welcome, lease changes and who may command', () => {
@@ -365,4 +365,25 @@ test('after a server restart the previous run\'s scan is never taken for the new
   assert.equal(s.state.scan.interrupted, false);
   assert.equal(s.state.scan.record, 'scan-9-1.gsf');
   assert.equal(s.state.scanStale, false);
+});
+
+test('a push lost from sight is matched to its own record (server run and run number), never to an earlier push of that particle (review of issue 26)', () => {
+  const s = openSession(4);
+  s.apply({ type: 'welcome', version: WS_VERSION, client: 4, role: 'operator', lease: 4, scene: 'g', tick_hz: 1000, instance: 'a-1', started_unix_ms: 1000 });
+  s.apply({ type: 'push_started', particle: 1, path: [[40e-6, 30e-6], [41e-6, 30e-6]], by: 4, run: 2 });
+  s.closed(1, 250);
+  const lost = s.state.lostPush;
+  assert.equal(lost.run, 2);
+  assert.equal(lost.instance, 'a-1');
+  const now = Date.now() / 1000;
+  // Run 1 of the same particle ended a second before run 2 began; run 2 was killed (no record);
+  // the restarted server ('b-2') already has a run 2 of that particle too.
+  const runs = [
+    { record: 'push-9-r2-p1.json', modified: Math.floor(now) + 5, instance: 'b-2', run: 2, particle: 1, outcome: 'ok' },
+    { record: 'push-8-r1-p1.json', modified: Math.floor(now) - 1, instance: 'a-1', run: 1, particle: 1, outcome: 'ok' },
+  ];
+  assert.equal(lostPushRun(runs, lost), null, 'killed: no record of it');
+  const own = { record: 'push-8-r2-p1.json', modified: Math.floor(now), instance: 'a-1', run: 2, particle: 1, outcome: 'stopped', failure: 'stopped: the lease holder disconnected' };
+  assert.equal(lostPushRun([runs[0], own, runs[1]], lost), own);
+  assert.equal(lostPushRun(null, lost), null);
 });

@@ -88,6 +88,8 @@ pub struct RunEntry {
     pub record: String,
     /// When it was written (Unix seconds).
     pub modified: u64,
+    /// The server run that wrote it (`welcome`'s `instance`; none in older records).
+    pub instance: Option<String>,
     /// Run number (per server run: numbers start again after a restart).
     pub run: u64,
     /// Particle id.
@@ -119,7 +121,9 @@ pub fn run_history(dir: &Path, max: usize) -> std::io::Result<Vec<RunEntry>> {
         };
         let (Some(run), Some(particle), Some(outcome)) = (
             v.get("run").and_then(serde_json::Value::as_u64),
-            v.get("particle").and_then(serde_json::Value::as_u64),
+            v.get("particle")
+                .and_then(serde_json::Value::as_u64)
+                .and_then(|p| u32::try_from(p).ok()),
             v.get("outcome").and_then(serde_json::Value::as_str),
         ) else {
             continue;
@@ -129,8 +133,9 @@ pub fn run_history(dir: &Path, max: usize) -> std::io::Result<Vec<RunEntry>> {
         out.push(RunEntry {
             record: e.name,
             modified: e.modified,
+            instance: v.get("instance").and_then(serde_json::Value::as_str).map(str::to_string),
             run,
-            particle: u32::try_from(particle).unwrap_or(u32::MAX),
+            particle,
             outcome: outcome.to_string(),
             failure: v.get("failure").and_then(serde_json::Value::as_str).map(str::to_string),
             estimate: [at(0).unwrap_or(f64::NAN), at(1).unwrap_or(f64::NAN)],
@@ -144,6 +149,9 @@ pub fn run_history(dir: &Path, max: usize) -> std::io::Result<Vec<RunEntry>> {
 pub struct PushSummary {
     /// `"push-record"`.
     pub schema: &'static str,
+    /// The server run that wrote it (`welcome`'s `instance`): run numbers start again after a
+    /// restart, the pair names one push.
+    pub instance: String,
     /// Run number.
     pub run: u64,
     /// Particle id.
@@ -184,10 +192,15 @@ pub fn clean_partials(dir: &Path) -> usize {
         .count()
 }
 
-/// Drains the loop's trace rows and events, writes the records, and forwards each event with
-/// its record's name — or the reason it could not be written. Ends when the loop has finished
-/// and everything is written.
-pub fn run_recorder(shared: Arc<Shared>, dir: PathBuf, out: tokio::sync::mpsc::UnboundedSender<(LoopEvent, Recorded)>) {
+/// Drains the loop's trace rows and events, writes the records (each summary names `instance`,
+/// the server run), and forwards each event with its record's name — or the reason it could not
+/// be written. Ends when the loop has finished and everything is written.
+pub fn run_recorder(
+    shared: Arc<Shared>,
+    dir: PathBuf,
+    instance: String,
+    out: tokio::sync::mpsc::UnboundedSender<(LoopEvent, Recorded)>,
+) {
     if let Err(e) = std::fs::create_dir_all(&dir) {
         tracing::error!("records: cannot create {}: {e}", dir.display());
     }
@@ -228,6 +241,7 @@ pub fn run_recorder(shared: Arc<Shared>, dir: PathBuf, out: tokio::sync::mpsc::U
                 let stem = trace.trim_end_matches(".csv").to_string();
                 let summary = PushSummary {
                     schema: "push-record",
+                    instance: instance.clone(),
                     run,
                     particle,
                     outcome: outcome.into(),
@@ -379,6 +393,7 @@ mod tests {
         let summary = |run: u64, outcome: &str, failure: Option<&str>| {
             serde_json::to_vec(&PushSummary {
                 schema: "push-record",
+                instance: "18f-2a".into(),
                 run,
                 particle: 2,
                 outcome: outcome.into(),
@@ -398,6 +413,12 @@ mod tests {
         )
         .unwrap();
         std::fs::write(dir.join("push-3-r3-p2.json"), b"not json").unwrap();
+        // A particle id no particle has (beyond u32) is no run, not particle 4294967295.
+        std::fs::write(
+            dir.join("push-3-r4-p2.json"),
+            br#"{"run":4,"particle":99999999999,"outcome":"ok"}"#,
+        )
+        .unwrap();
         std::fs::write(dir.join("push-1-r1-p2.csv"), b"t\n").unwrap();
         std::fs::write(dir.join("scan-1-1.json"), b"{}").unwrap();
         let h = run_history(&dir, 10).unwrap();
@@ -407,6 +428,7 @@ mod tests {
         assert_eq!(h[0].outcome, "stopped");
         assert_eq!(h[0].failure.as_deref(), Some("stopped: the lease holder disconnected"));
         assert_eq!(h[1].run, 1);
+        assert_eq!(h[1].instance.as_deref(), Some("18f-2a"), "which server run wrote it");
         assert_eq!(h[1].estimate, [1e-6, 2e-6]);
         assert_eq!(run_history(&dir, 1).unwrap().len(), 1);
         assert!(run_history(&dir.join("missing"), 10).unwrap().is_empty());
