@@ -8,10 +8,11 @@ CARGO ?= cargo
 run: release web
 	./target/release/nanopush serve
 
-## The web client: its packages (three, uPlot, esbuild) from npm, once, and the minified page
-## (web/dist/, by esbuild).
+## The web client: its packages (three, uPlot, esbuild) from npm, again whenever
+## package-lock.json is newer than what npm installed (a checkout from before esbuild had
+## node_modules without it: `esbuild: not found`), and the minified page (web/dist/, by esbuild).
 web:
-	@test -d web/node_modules || (cd web && npm ci --no-audit --no-fund)
+	@test web/node_modules/.package-lock.json -nt web/package-lock.json || (cd web && npm ci --no-audit --no-fund)
 	cd web && npm run build
 
 release:
