@@ -128,29 +128,34 @@ async fn scene_json(State(st): State<Arc<AppState>>) -> Response {
     axum::Json(&st.scene.file).into_response()
 }
 
+/// The records in the data directory, newest first. Read on a blocking thread: a directory of
+/// ten thousand records takes a tenth of a second to list, which an async worker (one of two
+/// on the lab's machine) would not spend on the clients' telemetry.
 async fn records_list(State(st): State<Arc<AppState>>) -> Response {
-    match records::list(&st.cfg.data_dir) {
-        Ok(l) => axum::Json(l).into_response(),
-        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("listing records: {e}")).into_response(),
-    }
+    let dir = st.cfg.data_dir.clone();
+    off_runtime("listing records", move || records::list(&dir)).await
 }
 
 /// The pushes recorded in the data directory, newest first (at most [`records::RUNS_MAX`]): the
 /// run history a page or a monitor shows, which survives restarts.
 async fn runs(State(st): State<Arc<AppState>>) -> Response {
     let dir = st.cfg.data_dir.clone();
-    match tokio::task::spawn_blocking(move || records::run_history(&dir, records::RUNS_MAX)).await {
-        Ok(Ok(l)) => axum::Json(l).into_response(),
-        Ok(Err(e)) => (
-            StatusCode::INTERNAL_SERVER_ERROR,
-            format!("reading the run history: {e}"),
-        )
-            .into_response(),
-        Err(e) => (
-            StatusCode::INTERNAL_SERVER_ERROR,
-            format!("reading the run history: {e}"),
-        )
-            .into_response(),
+    off_runtime("reading the run history", move || {
+        records::run_history(&dir, records::RUNS_MAX)
+    })
+    .await
+}
+
+/// `read` (file system work) on a blocking thread, its result as JSON, or a 500 that says
+/// `what` failed and why.
+async fn off_runtime<T: serde::Serialize + Send + 'static>(
+    what: &str,
+    read: impl FnOnce() -> std::io::Result<T> + Send + 'static,
+) -> Response {
+    match tokio::task::spawn_blocking(read).await {
+        Ok(Ok(v)) => axum::Json(v).into_response(),
+        Ok(Err(e)) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{what}: {e}")).into_response(),
+        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{what}: {e}")).into_response(),
     }
 }
 

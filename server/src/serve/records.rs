@@ -133,7 +133,10 @@ pub fn run_history(dir: &Path, max: usize) -> std::io::Result<Vec<RunEntry>> {
         out.push(RunEntry {
             record: e.name,
             modified: e.modified,
-            instance: v.get("instance").and_then(serde_json::Value::as_str).map(str::to_string),
+            instance: v
+                .get("instance")
+                .and_then(serde_json::Value::as_str)
+                .map(str::to_string),
             run,
             particle,
             outcome: outcome.to_string(),
