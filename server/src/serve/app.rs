@@ -19,15 +19,40 @@ use crate::serve::metrics::render;
 use crate::serve::records;
 use crate::serve::session::{HARD_CAP, session};
 
+/// What is wrong with the built web client in `web_dir`, in words, or None: not built (the page
+/// cannot start), or built before a change of its sources (`web/src/`, after a `git pull`: the
+/// page served is the old one). Both name the command that builds it.
+pub fn web_build_problem(web_dir: &std::path::Path) -> Option<String> {
+    let built = web_dir.join("dist").join("main.js");
+    let how = format!(
+        "build it with `cd {} && npm ci && npm run build` (or `make web`)",
+        web_dir.display()
+    );
+    let Ok(built_at) = std::fs::metadata(&built).and_then(|m| m.modified()) else {
+        return Some(format!(
+            "the web client is not built ({} is missing): the page cannot start; {how}",
+            built.display()
+        ));
+    };
+    let newer = std::fs::read_dir(web_dir.join("src"))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter(|e| e.metadata().and_then(|m| m.modified()).is_ok_and(|t| t > built_at))
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .min();
+    newer.map(|name| {
+        format!(
+            "the web client is older than its sources (src/{name} changed since {} was built): the page served is the old one; {how}",
+            built.display()
+        )
+    })
+}
+
 /// The router.
 pub fn router(state: Arc<AppState>) -> Router {
-    let built = state.cfg.web_dir.join("dist").join("main.js");
-    if !built.is_file() {
-        tracing::warn!(
-            "the web client is not built ({} is missing): the page cannot start; build it with `cd {} && npm ci && npm run build` (or `make web`)",
-            built.display(),
-            state.cfg.web_dir.display()
-        );
+    if let Some(problem) = web_build_problem(&state.cfg.web_dir) {
+        tracing::warn!("{problem}");
     }
     let web = tower_http::services::ServeDir::new(&state.cfg.web_dir).append_index_html_on_directories(true);
     Router::new()
@@ -275,4 +300,42 @@ async fn ws_upgrade(
             session(st, socket, role, peer).await;
             drop(held);
         })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::web_build_problem;
+
+    /// A web client not built, or built before its sources changed, is said at start with the
+    /// command that builds it (review of issue 26: after a `git pull`, the old page was served
+    /// without a word).
+    #[test]
+    fn a_web_client_missing_or_older_than_its_sources_is_named_with_the_build_command() {
+        let web = std::env::temp_dir().join(format!("nanopush-webbuild-{}", std::process::id()));
+        std::fs::create_dir_all(web.join("src")).unwrap();
+        std::fs::create_dir_all(web.join("dist")).unwrap();
+        std::fs::write(web.join("src/app.js"), "1").unwrap();
+        let p = web_build_problem(&web).expect("not built");
+        assert!(p.contains("is not built") && p.contains("npm run build"), "{p}");
+        std::fs::write(web.join("dist/main.js"), "1").unwrap();
+        let built = std::fs::metadata(web.join("dist/main.js")).unwrap().modified().unwrap();
+        let before = built - std::time::Duration::from_secs(60);
+        let after = built + std::time::Duration::from_secs(60);
+        std::fs::File::options()
+            .write(true)
+            .open(web.join("src/app.js"))
+            .unwrap()
+            .set_modified(before)
+            .unwrap();
+        assert_eq!(web_build_problem(&web), None, "built after its sources");
+        std::fs::File::options()
+            .write(true)
+            .open(web.join("src/app.js"))
+            .unwrap()
+            .set_modified(after)
+            .unwrap();
+        let p = web_build_problem(&web).expect("older than its sources");
+        assert!(p.contains("src/app.js changed") && p.contains("make web"), "{p}");
+        std::fs::remove_dir_all(&web).unwrap();
+    }
 }
