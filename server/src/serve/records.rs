@@ -81,6 +81,10 @@ pub fn list(dir: &Path) -> std::io::Result<Vec<RecordEntry>> {
 /// How many runs `/api/runs` returns at most.
 pub const RUNS_MAX: usize = 50;
 
+/// A push summary is well under a kilobyte: a file of its name larger than this is not one, and
+/// is not read (the monitors ask for the history every 5 s).
+pub const SUMMARY_MAX_BYTES: u64 = 64 * 1024;
+
 /// One push of the run history (`/api/runs`), from its record's JSON summary.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RunEntry {
@@ -103,14 +107,15 @@ pub struct RunEntry {
 }
 
 /// The pushes recorded in `dir`, newest first, at most `max`: read from their JSON summaries (a
-/// summary that cannot be read or parsed is skipped), so the history survives restarts.
+/// summary that cannot be read or parsed, or is larger than [`SUMMARY_MAX_BYTES`], is skipped),
+/// so the history survives restarts.
 pub fn run_history(dir: &Path, max: usize) -> std::io::Result<Vec<RunEntry>> {
     let mut out = Vec::new();
     for e in list(dir)? {
         if out.len() >= max {
             break;
         }
-        if e.kind != "push" || !e.name.ends_with(".json") {
+        if e.kind != "push" || !e.name.ends_with(".json") || e.bytes > SUMMARY_MAX_BYTES {
             continue;
         }
         let Ok(bytes) = std::fs::read(dir.join(&e.name)) else {
@@ -416,6 +421,12 @@ mod tests {
         )
         .unwrap();
         std::fs::write(dir.join("push-3-r3-p2.json"), b"not json").unwrap();
+        // A file of a summary's name but megabytes long (copied there by hand) is not read: the
+        // monitors ask for the history every 5 s.
+        let mut big = br#"{"run":5,"particle":2,"outcome":"ok","pad":""#.to_vec();
+        big.extend(std::iter::repeat_n(b'x', SUMMARY_MAX_BYTES as usize));
+        big.extend(br#""}"#);
+        std::fs::write(dir.join("push-3-r5-p2.json"), big).unwrap();
         // A particle id no particle has (beyond u32) is no run, not particle 4294967295.
         std::fs::write(
             dir.join("push-3-r4-p2.json"),
