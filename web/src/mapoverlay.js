@@ -11,7 +11,8 @@
 // of 60 at 1600×1000). On a software renderer the tip moves 20 times a second, in the same
 // frames as the map and the plots (the frame loop's aligned periods), so every other frame is
 // free.
-// `toPx`, `toStage`, `nearestParticle`, `stepCursor` and `TrailBuffer` are pure (Node tests).
+// `toPx`, `toStage`, `nearestParticle`, `stepCursor`, `foundParticles` and `TrailBuffer` are pure
+// (Node tests).
 
 const SVG = 'http://www.w3.org/2000/svg';
 
@@ -52,6 +53,15 @@ export function stepCursor(cur, key, shift, e) {
   if (!d) return null;
   const clamp = (v, lo, span) => Math.min(lo + span, Math.max(lo, v));
   return [clamp(cur[0] + d[0] * f * e.x_real, e.x_offset, e.x_real), clamp(cur[1] + d[1] * f * e.y_real, e.y_offset, e.y_real)];
+}
+
+/**
+ * The particles a scan record's summary says it found ({x, y, radius} m), those whose numbers
+ * are numbers: a damaged summary must not draw rings at NaN.
+ */
+export function foundParticles(ps) {
+  if (!Array.isArray(ps)) return [];
+  return ps.filter((p) => p && Number.isFinite(p.x) && Number.isFinite(p.y) && Number.isFinite(p.radius) && p.radius >= 0);
 }
 
 /** The live push trail: the tip's recent x, y (m), a point kept when it moved at least `minM`. */
@@ -149,7 +159,7 @@ export class MapOverlay {
 
   /** The particles the shown scan found (its record's summary), m. */
   setScanParticles(ps) {
-    this.scanParticles = Array.isArray(ps) ? ps : [];
+    this.scanParticles = foundParticles(ps);
     this.invalidate();
   }
 

@@ -1,7 +1,7 @@
 // node --test: the map layer's geometry and picking (src/mapoverlay.js; its SVG is not built).
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { toPx, toStage, nearestParticle, stepCursor, TrailBuffer } from '../src/mapoverlay.js';
+import { toPx, toStage, nearestParticle, stepCursor, TrailBuffer, foundParticles } from '../src/mapoverlay.js';
 
 const g = { x: 50, y: 10, w: 400, h: 200 };
 const e = { x_offset: 30e-6, y_offset: 20e-6, x_real: 20e-6, y_real: 10e-6 };
@@ -39,4 +39,11 @@ test('the push trail keeps a point once the tip moved a pixel, and at most its l
   assert.deepEqual(t.pts.map((p) => p[0]), [2e-6, 3e-6, 4e-6]);
   t.clear();
   assert.equal(t.pts.length, 0);
+});
+
+test('the particles a scan record says it found are kept only when they are numbers (a hand-edited or damaged summary drew NaN rings and console errors)', () => {
+  const good = { x: 1e-6, y: 2e-6, radius: 5e-7 };
+  assert.deepEqual(foundParticles([good, { x: 'a', y: 2e-6, radius: 5e-7 }, { x: 1e-6, y: null, radius: 1 }, { x: 1, y: 1, radius: -1 }, null, 7]), [good]);
+  assert.deepEqual(foundParticles('particles'), []);
+  assert.deepEqual(foundParticles(undefined), []);
 });
