@@ -2,8 +2,11 @@
 // against the real `nanopush serve`: a server killed with SIGKILL mid-push and started again on
 // the same port and records (the page says "unknown" while it is down, then that the server
 // restarted and that the push's outcome is unknown; the monitor says "server down since" and
-// keeps the run history from disk), and a lease holder who reloads mid-push (warned first; the
-// push ends "stopped: the lease holder disconnected", in a neutral colour). Run by `npm run e2e`.
+// keeps the run history from disk), a server killed mid-scan (its scan "interrupted", one
+// "connection closed" however many attempts fail), a viewer away while a scan ends (it gets the
+// whole scan when back), a hung server (SIGSTOP: shown as down, then back), and a lease holder who
+// reloads mid-push (warned first; the push ends "stopped: the lease holder disconnected", in a
+// neutral colour). Run by `npm run e2e`.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { startServer, launchBrowser, newPage, getJson, shot, ready, waitText, pushBy, WEB } from './support.js';
@@ -92,6 +95,43 @@ test('kill -9 mid-scan and a restart: the killed scan is shown as interrupted an
   assert.equal(await op.isVisible('#img-stale'), true);
   assert.match(await op.textContent('#img-stale'), /from before the server restarted/);
   assert.deepEqual(op.errors.filter((e) => !/ERR_CONNECTION_REFUSED|Failed to load resource/.test(e)), []);
+  await op.context().close();
+});
+
+test('a viewer away while a scan ends (same server) gets it whole when back, not the lines it saw (review of issue 26)', async () => {
+  const op = await newPage(browser);
+  await op.goto(srv.url);
+  await ready(op);
+  const viewer = await newPage(browser);
+  await viewer.goto(srv.base + '/');
+  await ready(viewer);
+  await op.click('#take-lease');
+  await op.waitForFunction(() => window.nanopush.session.hasLease);
+  await op.evaluate(() => window.nanopush.app.conn.send({ type: 'scan', size_um: 16, pixels: 512 }));
+  await viewer.waitForFunction(() => (window.nanopush.session.state.scan?.lines ?? 0) > 5);
+  // The viewer's network goes: its reconnects fail until the scan has ended.
+  const url = await viewer.evaluate(() => {
+    const c = window.nanopush.app.conn;
+    const u = c.url;
+    c.url = 'ws://127.0.0.1:1/ws';
+    c.ws.close();
+    return u;
+  });
+  await op.waitForFunction(() => window.nanopush.session.state.scan?.done, null, { timeout: 30000 });
+  const away = await viewer.evaluate(() => window.nanopush.session.state.scan.lines);
+  assert.ok(away < 512, `the viewer saw ${away} lines`);
+  await viewer.evaluate((u) => {
+    window.nanopush.app.conn.url = u;
+    window.nanopush.app.conn.connect();
+  }, url);
+  await ready(viewer);
+  await viewer.waitForFunction(() => {
+    const sc = window.nanopush.session.state.scan;
+    return sc.done && sc.lines === 512;
+  }, null, { timeout: 15000 });
+  assert.match(await viewer.textContent('#scan-progress'), /^scan \d+ complete/);
+  assert.deepEqual(viewer.errors.filter((e) => !/ERR_CONNECTION_REFUSED|127\.0\.0\.1:1\/|Failed to load resource/.test(e)), []);
+  await viewer.context().close();
   await op.context().close();
 });
 
