@@ -8,9 +8,12 @@ CARGO ?= cargo
 run: release web
 	./target/release/nanopush serve
 
-## The web client's packages (three, uPlot) from npm, once.
+## The web client: its packages (three, uPlot, esbuild) from npm, again whenever
+## package-lock.json is newer than what npm installed (a checkout from before esbuild had
+## node_modules without it: `esbuild: not found`), and the minified page (web/dist/, by esbuild).
 web:
-	@test -d web/node_modules || (cd web && npm ci --no-audit --no-fund)
+	@test web/node_modules/.package-lock.json -nt web/package-lock.json || (cd web && npm ci --no-audit --no-fund)
+	cd web && npm run build
 
 release:
 	$(CARGO) build --release --workspace --bins
@@ -37,7 +40,7 @@ unit: build
 ## (web/e2e/: Debian's headless chromium, driven by playwright-core, against the real
 ## `nanopush serve` from target/debug or $CARGO_TARGET_DIR; screenshots in web/test-results/).
 web-test: build
-	cd web && npm ci --no-audit --no-fund && npm test && npm run e2e
+	cd web && npm ci --no-audit --no-fund && npm run build && npm test && npm run e2e
 
 ## The lab's monitoring: the shipped Prometheus config and its alert rules (deploy/prometheus/).
 prometheus-check:

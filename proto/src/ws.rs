@@ -235,6 +235,9 @@ pub struct PushPath {
     pub path: Vec<[f64; 2]>,
     /// The client that commanded it.
     pub by: u32,
+    /// Its run number (per server run), as its record's summary says: with the server's
+    /// `instance`, a client that lost sight of the push finds its record and no other.
+    pub run: u64,
 }
 
 /// The latest scan, for a client that joins after it (SI).
@@ -298,6 +301,11 @@ pub enum ServerMessage {
         scene: String,
         /// Control loop rate (Hz).
         tick_hz: f64,
+        /// This run of the server: a client that reconnects and finds another knows the
+        /// server restarted (a push it saw running ended unrecorded, or in a record).
+        instance: String,
+        /// When this run of the server started (ms since the Unix epoch).
+        started_unix_ms: u64,
     },
     /// Second message on a connection, right after `welcome`: the instrument as it is now, so
     /// a client that joins late (or reloads) shows what the others see.
@@ -544,11 +552,13 @@ mod tests {
             particle: 2,
             path: vec![[1e-6, 2e-6], [3e-6, 2e-6]],
             by: 5,
+            run: 3,
         };
         let s = serde_json::to_value(ServerMessage::PushStarted(path.clone())).unwrap();
         assert_eq!(s["type"], "push_started");
         assert_eq!(s["particle"], 2);
         assert_eq!(s["by"], 5);
+        assert_eq!(s["run"], 3);
         let s = serde_json::to_value(ServerMessage::State {
             particles: vec![ParticleNow {
                 id: 2,

@@ -36,6 +36,7 @@ fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
         let started = until(&mut op, 20.0, |m| is(m, "push_started")).await;
         assert_eq!(started["particle"], 1);
         assert_eq!(started["by"], me);
+        assert_eq!(started["run"], 1, "its run number, as its record will say: {started}");
         let path = started["path"].as_array().unwrap();
         assert_eq!(path.len(), 2, "{started}");
         assert!((path[1][0].as_f64().unwrap() - 41e-6).abs() < 50e-9, "{started}");
@@ -44,6 +45,7 @@ fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
         let s = until(&mut during, 5.0, |_| true).await;
         assert_eq!(s["type"], "state");
         assert_eq!(s["push"]["particle"], 1, "{s}");
+        assert_eq!(s["push"]["run"], 1, "{s}");
         assert_eq!(s["lease"], me);
         let run = until(&mut op, 30.0, |m| is(m, "run_done")).await;
         assert_eq!(run["outcome"], "ok", "{run}");
@@ -69,6 +71,27 @@ fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
         assert_eq!(s["scan"]["stale"], true, "a push ran since the scan: {s}");
         let (status, _) = http_get(&srv.addr, &format!("/api/records/{scan_record}"));
         assert_eq!(status, 200);
+        // The server's run (issue 26: a page tells a restart from a network blip by it) and the
+        // run history read from the records on disk.
+        let instance = w["instance"].as_str().expect("welcome names the instance");
+        assert!(!instance.is_empty(), "{w}");
+        let st = crate::util::status(&srv.addr);
+        assert_eq!(st["instance"], instance, "{st}");
+        assert_eq!(st["started_unix_ms"], w["started_unix_ms"], "{st}");
+        assert!(
+            w["started_unix_ms"].as_u64().is_some_and(|ms| ms > 1_700_000_000_000),
+            "{w}"
+        );
+        let (code, body) = http_get(&srv.addr, "/api/runs");
+        assert_eq!(code, 200);
+        let runs: serde_json::Value = serde_json::from_slice(&body).unwrap();
+        assert_eq!(runs[0]["outcome"], "ok", "{runs}");
+        assert_eq!(runs[0]["particle"], 1, "{runs}");
+        assert_eq!(runs[0]["estimate"], run["estimate"], "{runs}");
+        // Its record names the server run and run number push_started gave (review of issue 26:
+        // a page that lost sight of a push read an earlier push of the particle as its outcome).
+        assert_eq!(runs[0]["instance"], instance, "{runs}");
+        assert_eq!(runs[0]["run"], 1, "{runs}");
     });
 }
 
@@ -98,6 +121,9 @@ fn issue_11_a_push_stops_when_its_lease_holder_disconnects() {
         );
         let run = until(&mut watcher, 20.0, |m| is(m, "run_done")).await;
         assert_eq!(run["outcome"], "stopped", "{run}");
+        // A disconnect is not the operator's Stop (issue 26: the record said "stop requested by
+        // the operator").
+        assert_eq!(run["failure"], "stopped: the lease holder disconnected", "{run}");
         assert!(run["record"].is_string(), "the stopped push is recorded: {run}");
     });
 }

@@ -45,14 +45,15 @@ export function fastScene(dir) {
 /**
  * Starts `nanopush serve` (no real-time scheduling: the machine is shared) and resolves when it
  * prints its address. `extra` are more arguments; `webDir` another web client directory;
- * `haptic` the link (`none`, `sim`).
- * @returns {Promise<{url:string, addr:string, base:string, dir:string, log:()=>string, stop:()=>Promise<void>}>}
+ * `haptic` the link (`none`, `sim`); `port` and `dir`: a server started again where another
+ * ran (its records kept: `stop({ keep: true })` leaves the directory).
+ * @returns {Promise<{url:string, addr:string, base:string, dir:string, pid:number, log:()=>string, kill:(sig:string)=>Promise<void>, stop:(o?:{keep?:boolean})=>Promise<void>}>}
  */
-export async function startServer({ extra = [], webDir = WEB, haptic = 'none' } = {}) {
-  const dir = mkdtempSync(join(tmpdir(), 'nanopush-browser-'));
+export async function startServer({ extra = [], webDir = WEB, haptic = 'none', port = 0, dir = null } = {}) {
+  dir = dir ?? mkdtempSync(join(tmpdir(), 'nanopush-browser-'));
   const records = join(dir, 'records');
-  mkdirSync(records);
-  const args = ['serve', '--port', '0', '--haptic', haptic, '--no-realtime', '--operator-token', TOKEN,
+  mkdirSync(records, { recursive: true });
+  const args = ['serve', '--port', String(port), '--haptic', haptic, '--no-realtime', '--operator-token', TOKEN,
     '--scene', fastScene(dir), '--data-dir', records, '--web-dir', webDir, '--scan-line-hz', '400', ...extra];
   // A haptic link of its own (iceoryx2 services apart from any other server on this machine).
   const env = { ...process.env, NANOPUSH_HAPTIC_NAMESPACE: `browser${process.pid}` };
@@ -76,16 +77,24 @@ export async function startServer({ extra = [], webDir = WEB, haptic = 'none' } 
     base,
     url: `${base}/?token=${TOKEN}`,
     dir,
+    pid: child.pid,
     log: () => log,
-    async stop() {
-      if (child.exitCode === null) {
+    /** Sends `sig` to the server (this child only) and waits until it is gone. */
+    async kill(sig) {
+      if (child.exitCode !== null || child.signalCode !== null) return;
+      const gone = new Promise((res) => child.once('exit', res));
+      child.kill(sig);
+      await gone;
+    },
+    async stop({ keep = false } = {}) {
+      if (child.exitCode === null && child.signalCode === null) {
         const gone = new Promise((res) => child.once('exit', res));
         child.kill('SIGTERM');
         const t = setTimeout(() => child.kill('SIGKILL'), 10000);
         await gone;
         clearTimeout(t);
       }
-      rmSync(dir, { recursive: true, force: true });
+      if (!keep) rmSync(dir, { recursive: true, force: true });
     },
   };
 }
@@ -162,4 +171,18 @@ export async function timedStop(page) {
   const outside = Date.now() - t0;
   const t = await page.evaluate(() => window.stopTiming);
   return { inPage: t.shown - t.down, outside };
+}
+
+/** Waits until the text of `sel` matches `re`; returns the text. */
+export async function waitText(page, sel, re, timeout = 30000) {
+  await page.waitForFunction(([s, src]) => new RegExp(src).test(document.querySelector(s)?.textContent ?? ''), [sel, re.source], { timeout });
+  return page.textContent(sel);
+}
+
+/** Pushes the selected particle by a distance (µm) in a direction (°), through the form. */
+export async function pushBy(page, distanceUm, directionDeg) {
+  await page.check('input[name=mode][value=by]');
+  await page.fill('#distance', String(distanceUm));
+  await page.fill('#direction', String(directionDeg));
+  await page.click('#push-btn');
 }

@@ -8,7 +8,7 @@
 // owns no logic of its own: it builds the parts, routes the Session's events to them and holds
 // the one piece of state no part owns (the phase the status bar last showed).
 import { commands, STREAMS } from './wire.js';
-import { Session, describeRun, setPointForceN } from './session.js';
+import { Session, describeRun, runClass, setPointForceN, lostPushRun } from './session.js';
 import { Connection, wsUrl, apiUrl } from './connection.js';
 import { FrameScheduler, livePeriodMs } from './frame.js';
 import { formatTip } from './format.js';
@@ -19,7 +19,8 @@ import { HapticPanel } from './haptic.js';
 import { fetchStatus } from './devicefaults.js';
 import { StatusBar } from './status.js';
 import { Controls, Replies } from './controls.js';
-import { EventLog, LEASE_LOST_ON_CLOSE, welcomeText, stateText, pushStartedText, leaseNote, replyErrorText, closedText } from './eventlog.js';
+import { EventLog, LEASE_LOST_ON_CLOSE, welcomeText, stateText, pushStartedText, leaseNote, replyErrorText, closedText, restartText, lostPushText, hapticLinkNote, clockTime } from './eventlog.js';
+import { MapOverlay } from './mapoverlay.js';
 import { Records } from './records.js';
 import { Scans } from './scans.js';
 import { Toolbar } from './toolbar.js';
@@ -32,6 +33,7 @@ export class App {
   constructor(doc, loc) {
     const $ = (id) => doc.getElementById(id);
     this.$ = $;
+    this.doc = doc;
     this.loc = loc;
     const params = new URLSearchParams(loc.search);
     this.demo = params.has('demo');
@@ -48,19 +50,54 @@ export class App {
     this.statusFrame = frames.register('status', () => this.status.render(this.st));
     this.legendFrame = frames.register('legend', () => this.scans.renderLegend());
     this.liveFrame = frames.register('live', (parts) => this.drawLive(parts), { period: () => livePeriodMs(frames.frameInterval) });
+    // The tip's numbers: read by people, so 5 a second (at 60 a second the text's repaint cost a
+    // software renderer a third of its frames).
+    this.tipTextFrame = frames.register('tiptext', () => {
+      if (this.st.tip && this.st.connection === 'open') this.$('tipinfo').textContent = formatTip(this.st.tip);
+    }, { period: 200, aligned: true });
 
     this.view = new View3D($('view3d'), {
       onPickPoint: (x, y) => this.controls.pickTarget(x, y),
       onPickParticle: (id) => this.controls.selectParticle(id),
     }, frames);
-    this.image2d = new Image2D($('image2d'), { cursorEl: $('img-cursor'), profileEl: $('profile'), profileInfoEl: $('profile-info') }, frames);
+    this.image2d = new Image2D($('image2d'), { cursorEl: $('img-cursor'), profileEl: $('profile'), profileInfoEl: $('profile-info'), onDrawn: () => this.map?.invalidate(),
+      // The 3D view coloured as the image: one colour, one height, in both.
+      onLevelled: (values, range) => {
+        this.view.setColourSource(range ? { values, lo: range.lo, hi: range.hi } : null);
+        this.legendFrame?.mark();
+      } }, frames);
+    // The live map on the height image: particles, tip, path, trail; picking by mouse and keys.
+    this.map = new MapOverlay(this.image2d, {
+      state: () => this.st,
+      selected: () => this.controls.selected,
+      onPickParticle: (id) => this.controls.selectParticle(id),
+      onPickPoint: (x, y) => this.controls.pickTarget(x, y),
+      canTarget: () => this.session.hasLease,
+      // A software renderer (no GPU) pays for a whole frame whenever anything moves: the tip 20
+      // times a second there, every frame on a GPU.
+      livePeriod: () => (this.view.software ? 50 : 0),
+    }, frames);
     this.charts = new Charts($('chart-force'), $('chart-z'), $('chart-fd'), frames);
     this.haptic = new HapticPanel({
       panel: $('haptic-panel'),
       plot: $('chart-hap'),
       fields: { link: $('hap-link'), phase: $('hap-phase'), engaged: $('hap-engaged'), handle: $('hap-handle'), hand: $('hap-hand'), tip: $('hap-tip'), pc: $('hap-pc') },
       device: $('hap-device'),
-    }, frames, { doc, fetchStatus: this.demo ? undefined : () => fetchStatus(loc) });
+      downs: $('hap-downs'),
+      scales: $('hap-scales'),
+      nmInput: $('hap-nm'),
+      poInput: $('hap-po'),
+    }, frames, {
+      doc,
+      fetchStatus: this.demo ? undefined : () => fetchStatus(loc),
+      onLinkChange: (link, downs) => {
+        const n = hapticLinkNote(link, downs);
+        this.log.log(n.text, n.cls);
+        this.log.announce(n.text);
+        this.controls.render();
+      },
+      onScalesChange: (text) => this.log.log(`haptic scales now ${text}`),
+    });
 
     this.status = new StatusBar($, { demo: this.demo });
     this.log = new EventLog($('log'), $('announce'));
@@ -72,10 +109,12 @@ export class App {
         : new WebSocket(url)),
       onOpen: () => {
         this.log.log('connected', 'good');
+        doc.body.classList.remove('offline');
+        $('offline').hidden = true;
         this.render();
       },
       onMessage: (data) => this.onMessage(data),
-      onClose: (ev) => this.onClose(ev),
+      onClose: (ev, info) => this.onClose(ev, info),
       onCountdown: (text) => this.status.setConn('closed', text),
       onSend: (m) => this.replies.sent(m),
       onChange: () => this.render(),
@@ -83,6 +122,7 @@ export class App {
     this.controls = new Controls($, doc, {
       session: this.session,
       view: this.view,
+      map: () => this.map,
       replies: this.replies,
       send: (m) => this.conn.send(m),
       onScanRequested: () => this.scans.requested(),
@@ -92,6 +132,7 @@ export class App {
       session: this.session,
       view: this.view,
       image2d: this.image2d,
+      map: this.map,
       log: this.log,
       toolbar: this.toolbar,
       loc,
@@ -101,12 +142,41 @@ export class App {
     this.records = new Records($('records'), { loc, demo: this.demo, onOpen: (name) => this.scans.openRecord(name) });
 
     $('level').addEventListener('change', () => this.image2d.setLevelling($('level').value));
+    $('toggle-3d').addEventListener('click', () => this.show3d($('toggle-3d').getAttribute('aria-pressed') !== 'true'));
+    // Leaving mid-push stops it (the server stops what a departed lease holder commanded): ask.
+    loc && globalThis.addEventListener?.('beforeunload', (e) => {
+      if (this.session.hasLease && (this.st.push || this.st.phase === 'scanning')) {
+        e.preventDefault();
+        e.returnValue = '';
+      }
+    });
     $('csv').addEventListener('click', () => downloadCsv(this.st.trace));
     $('rec-refresh').addEventListener('click', () => this.records.refresh());
   }
 
+  /** Shows or hides the 3D companion view (remembered); hidden, it costs nothing per frame. */
+  show3d(on) {
+    const $ = this.$;
+    $('toggle-3d').setAttribute('aria-pressed', String(on));
+    $('viewport').hidden = !on;
+    $('layout').classList.toggle('with3d', on);
+    this.view.setShown(on);
+    try {
+      localStorage.setItem('nanopush.3d', on ? '1' : '0');
+    } catch {
+      // (storage refused: not remembered)
+    }
+  }
+
   /** Starts the page: the frame loop, the scene, the records and the connection. */
   start() {
+    let on = false;
+    try {
+      on = localStorage.getItem('nanopush.3d') === '1';
+    } catch {
+      // (storage refused)
+    }
+    this.show3d(on);
     this.frames.start();
     this.toolbar.setExaggeration(1);
     this.render();
@@ -125,15 +195,26 @@ export class App {
     const st = this.st;
     if (parts.has('tip')) {
       this.view.setTip(st.tip);
-      if (st.tip) this.$('tipinfo').textContent = formatTip(st.tip);
+      this.map.tipMoved();
+      this.tipTextFrame.mark();
       this.haptic.update(st.tip?.t, st.tip?.haptic);
     }
     if (parts.has('charts')) this.charts.update(st.trace);
   }
 
-  onClose(ev) {
-    // The shutdown message was logged when it came: do not say it twice.
-    if (this.st.shutdown === null) this.log.log(closedText(ev), 'bad');
+  onClose(ev, { wasOpen = true } = {}) {
+    // The shutdown message was logged when it came: do not say it twice. A refused attempt to
+    // reconnect is no news (the status bar counts the attempts): once every 2 s, it would push
+    // everything else out of the log while the server is down.
+    if (this.st.shutdown === null && wasOpen) this.log.log(closedText(ev), 'bad');
+    // What the server said no longer holds: grey the live views, mark them "unknown".
+    this.doc.body.classList.add('offline');
+    this.$('offline').hidden = false;
+    this.$('tipinfo').textContent = 'tip: unknown';
+    queueMicrotask(() => {
+      this.controls.renderPush();
+      this.map.invalidate();
+    });
     if (this.session.hasLease) {
       // The server frees the lease of a connection that closes, and stops its push or scan.
       this.log.log(LEASE_LOST_ON_CLOSE, 'bad');
@@ -150,6 +231,8 @@ export class App {
         this.conn.send(commands.subscribe(STREAMS));
         this.loadScene();
         log.log(welcomeText(st));
+        if (ev.restarted) this.onRestart();
+        if (!st.lastRun) this.showLastFromHistory();
         break;
       case 'state':
         this.onState(ev);
@@ -174,13 +257,15 @@ export class App {
       case 'push_started':
         log.log(pushStartedText(ev.push, st.client));
         this.charts.restartFd(st.tip?.t ?? -Infinity);
+        this.map.pushStarted();
         controls.renderPush();
         break;
       case 'run_done': {
         const r = ev.run;
         const text = describeRun(r);
-        log.log(text, r.outcome === 'ok' ? 'good' : 'bad');
+        log.log(text, runClass(r));
         controls.showLastRun(r, text);
+        this.map.invalidate();
         log.announce(text);
         this.records.noteRun(r);
         this.view.updateParticles(st.particles, controls.selected);
@@ -215,9 +300,62 @@ export class App {
     this.render();
   }
 
+  /**
+   * A page that has seen no push yet (just opened, reloaded) shows the newest recorded run, with
+   * its time: a lease holder who reloaded mid-push reads how that push ended.
+   */
+  async showLastFromHistory() {
+    if (this.demo) return;
+    const version = this.controls.lastRunVersion; // anything shown meanwhile wins
+    try {
+      const r = await fetch(apiUrl('/api/runs', this.loc));
+      if (!r.ok) return;
+      const [run] = await r.json();
+      if (!run || this.st.lastRun || this.st.push || this.controls.lastRunVersion !== version) return;
+      this.controls.showLastRunText(`last recorded run (${clockTime(run.modified * 1000)}): ${describeRun(run)}`, runClass(run));
+    } catch {
+      // (no history: nothing to show)
+    }
+  }
+
+  /** The server restarted while this page was away: say so; what it showed is gone. */
+  onRestart() {
+    const text = restartText(this.st.startedUnixMs);
+    this.log.log(text, 'warn');
+    this.log.announce(text);
+    this.controls.clearLastRun();
+    this.st.lastRun = null; // the previous server's: the history says what it recorded
+    this.charts.restartFd(-Infinity);
+  }
+
+  /**
+   * A push ran when the connection closed and its end was not seen: read its outcome from its
+   * record in the run history (that server run's, that run number), else say it is unknown.
+   */
+  async settleLostPush() {
+    const st = this.st;
+    const lost = st.lostPush;
+    st.lostPush = null;
+    if (!lost || st.push) return; // (still running: the state says so)
+    let run = null;
+    try {
+      const r = await fetch(apiUrl('/api/runs', this.loc));
+      if (r.ok) run = lostPushRun(await r.json(), lost);
+    } catch {
+      // (no history: unknown)
+    }
+    const text = lostPushText(lost, { restarted: st.restarted, run });
+    const cls = run ? runClass(run) : 'unknown';
+    this.log.log(text, cls === 'unknown' ? 'warn' : cls);
+    this.log.announce(text);
+    this.controls.showLastRunText(text, cls);
+    this.records.refresh();
+  }
+
   /** The server's `state`: particles, lease, phase, the push running and the latest scan. */
   onState(ev) {
     const st = this.st;
+    if (st.lostPush) this.settleLostPush();
     this.view.updateParticles(st.particles, this.controls.selected);
     this.controls.particlesMoved();
     if (st.tip) this.liveFrame.mark('tip');
@@ -247,6 +385,7 @@ export class App {
     this.charts.setSetPoint(setPointForceN(scene));
     this.$('scene-name').textContent = scene.name ? `· ${scene.name}` : '';
     this.view.setStage(this.st.stageRange * 1e6);
+    this.image2d.setStage(this.st.stageRange);
     this.controls.applyScene(scene);
   }
 }
@@ -255,7 +394,7 @@ export class App {
 export function start() {
   const app = new App(document, location);
   app.start();
-  const { session, view, image2d, charts, haptic, frames } = app;
-  window.nanopush = { session, view, image2d, charts, haptic, frames, app };
+  const { session, view, image2d, map, charts, haptic, frames } = app;
+  window.nanopush = { session, view, image2d, map, charts, haptic, frames, app };
   return app;
 }

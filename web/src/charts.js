@@ -6,8 +6,9 @@
 // `csvFileName` are pure (Node tests).
 import uPlot from 'uplot';
 
-/** Least time between two redraws of the plots (ms): at most ~8 a second. */
-export const CHART_PERIOD_MS = 120;
+/** Least time between two redraws of the plots (ms): at most 5 a second (each redraw of the three
+ * plots cost a software renderer a fifth of its frames at 8 a second). */
+export const CHART_PERIOD_MS = 200;
 
 const AXIS = { stroke: '#c4ccd6', grid: { stroke: '#3a4554' }, ticks: { stroke: '#3a4554' } };
 
@@ -101,7 +102,7 @@ export class Charts {
     this.setPointN = null; // the strategy's contact set point as a force (N), drawn dashed
     this.since = -Infinity; // the force-distance plot starts here (s, server time)
     this.trace = null; // the Session's trace, drawn in the next frame that may
-    this.frame = scheduler.register('charts', () => this.draw(), { period: CHART_PERIOD_MS });
+    this.frame = scheduler.register('charts', () => this.draw(), { period: CHART_PERIOD_MS, aligned: true });
     const els = [forceEl, zEl, fdEl];
     new ResizeObserver(() => {
       for (const [c, e] of [[this.force, els[0]], [this.z, els[1]], [this.fd, els[2]]]) c.setSize({ width: Math.max(200, e.clientWidth), height: 140 });

@@ -1,6 +1,6 @@
 // The connection to `nanopush serve`, no DOM: the URLs (the page's token passed on to `/ws` and
 // the JSON API), the reconnect backoff, and a Connection that owns the WebSocket: it opens it,
-// hands messages on, reconnects with backoff (0.5 s doubling to 15 s) and sends commands with
+// hands messages on, reconnects with backoff (0.25 s doubling to 2 s) and sends commands with
 // an id from the Session. Runs in browsers and in Node (tests, with a fake socket and timers).
 import { encodeCommand } from './wire.js';
 
@@ -21,8 +21,12 @@ export function apiUrl(path, loc) {
   return path + (path.includes('?') ? '&' : '?') + `token=${encodeURIComponent(token)}`;
 }
 
-/** Reconnect delay (ms) for the n-th attempt (1-based): 0.5 s doubling to 15 s at most. */
-export function backoffMs(attempt, baseMs = 500, maxMs = 15000) {
+/**
+ * Reconnect delay (ms) for the n-th attempt (1-based): 0.25 s doubling to 2 s at most. The
+ * server is one instrument on the lab's network, not a crowded service: a page that waits
+ * longer than 2 s after it came back (7 s, as it did with a 15 s cap) shows a stale instrument.
+ */
+export function backoffMs(attempt, baseMs = 250, maxMs = 2000) {
   const n = Math.max(1, attempt);
   return Math.min(maxMs, baseMs * 2 ** (n - 1));
 }
@@ -33,6 +37,14 @@ export function reconnectText(leftMs, attempt) {
 }
 
 const noop = () => {};
+
+/**
+ * Silence (ms) after which a socket is given up and another tried: the server streams telemetry
+ * all the time (tens of frames a second), so this long without a frame is a hung server or a
+ * network that drops packets without closing; a handshake that takes this long too. The
+ * server gives a client the same 5 s to take a frame.
+ */
+export const SILENCE_MS = 5000;
 
 /**
  * The page's WebSocket: one at a time, reopened after it closes (the n-th attempt after
@@ -47,14 +59,16 @@ export class Connection {
    * @param {(url: string) => WebSocket | Promise<WebSocket>} opts.open makes a socket (may throw)
    * @param {() => void} [opts.onOpen] the socket opened (after `session.opened()`)
    * @param {(data: string | ArrayBuffer) => void} [opts.onMessage] a message arrived
-   * @param {(ev: CloseEvent) => void} [opts.onClose] the socket closed (before `session.closed()`)
+   * @param {(ev: CloseEvent, info: {wasOpen: boolean}) => void} [opts.onClose] the socket closed
+   *   (before `session.closed()`); `wasOpen`: it had opened (else: an attempt the server refused)
    * @param {(text: string) => void} [opts.onCountdown] the time left until the next attempt, in words
    * @param {(msg: object) => void} [opts.onSend] a command got its id and is about to go
    * @param {() => void} [opts.onChange] the Session's connection state changed
    * @param {{setTimeout, clearTimeout, setInterval, clearInterval}} [opts.timers]
    * @param {() => number} [opts.now] wall clock (ms)
+   * @param {number} [opts.silenceMs] a socket silent this long is given up (0: never)
    */
-  constructor(session, { url, open, onOpen = noop, onMessage = noop, onClose = noop, onCountdown = noop, onSend = noop, onChange = noop, timers = globalThis, now = Date.now }) {
+  constructor(session, { url, open, onOpen = noop, onMessage = noop, onClose = noop, onCountdown = noop, onSend = noop, onChange = noop, timers = globalThis, now = Date.now, silenceMs = SILENCE_MS }) {
     this.session = session;
     this.url = url;
     this.open = open;
@@ -65,6 +79,8 @@ export class Connection {
     this.attempt = 0; // reconnect attempts since the last open
     this.reconnectTimer = null;
     this.countdownTimer = null;
+    this.silenceMs = silenceMs;
+    this.watchdog = null; // checks the socket's silence once a second
   }
 
   /** Opens a socket (now: the reconnect timer, if any, is cancelled). */
@@ -80,26 +96,52 @@ export class Connection {
       this.scheduleReconnect();
       return;
     }
-    if (sock && typeof sock.then === 'function') sock.then((s) => this.attach(s));
-    else this.attach(sock);
+    if (sock && typeof sock.then === 'function') {
+      sock.then((s) => this.attach(s), (e) => {
+        this.session.logError('client_socket', e?.message ?? String(e));
+        this.scheduleReconnect();
+      });
+    } else this.attach(sock);
   }
 
   attach(sock) {
     this.ws = sock;
     sock.binaryType = 'arraybuffer';
+    let wasOpen = false;
+    let heard = this.now();
     sock.onopen = () => {
+      wasOpen = true;
+      heard = this.now();
       this.attempt = 0;
       this.session.opened();
       this.on.onOpen();
     };
-    sock.onmessage = (ev) => this.on.onMessage(ev.data);
-    sock.onclose = (ev) => {
+    sock.onmessage = (ev) => {
+      heard = this.now();
+      this.on.onMessage(ev.data);
+    };
+    const gone = (ev) => {
       if (this.ws !== sock) return;
       this.ws = null;
-      this.on.onClose(ev);
+      this.timers.clearInterval(this.watchdog);
+      this.on.onClose(ev, { wasOpen });
       this.scheduleReconnect();
     };
+    sock.onclose = gone;
     sock.onerror = () => {};
+    this.timers.clearInterval(this.watchdog);
+    if (this.silenceMs > 0) {
+      this.watchdog = this.timers.setInterval(() => {
+        if (this.now() - heard <= this.silenceMs) return;
+        const reason = `no word from the server for ${this.silenceMs / 1000} s`;
+        gone({ code: null, reason });
+        try {
+          sock.close();
+        } catch {
+          // (closing a dead socket: nothing to do)
+        }
+      }, 1000);
+    }
   }
 
   scheduleReconnect() {

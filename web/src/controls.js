@@ -4,7 +4,7 @@
 // command id; the running push (everyone's view of it). What the forms mean (commands, the
 // preview, texts) is pure (Node tests); Controls binds them to the page.
 import { commands } from './wire.js';
-import { controlState } from './session.js';
+import { controlState, runClass } from './session.js';
 import { formatLength, formatStagePoint } from './format.js';
 import { pusher } from './eventlog.js';
 
@@ -19,7 +19,9 @@ export function readNumber(text) {
 
 /** A command's reply in its output: `#3 ok` or `#3 no_lease: push needs the lease`. */
 export function replyText(c) {
-  return c.status === 'ok' ? `#${c.id} ok` : `#${c.id} ${c.code}: ${c.message}`;
+  // A push's `ok` means it was accepted: how it ended comes with `run_done`.
+  if (c.status === 'ok') return c.type === 'push' ? `#${c.id} accepted` : `#${c.id} ok`;
+  return `#${c.id} ${c.code}: ${c.message}`;
 }
 
 /** A particle in the push form's list: `#1 gold-coated latex (r 500 nm)`. */
@@ -67,12 +69,24 @@ export function pushPreview(p, { running, hasLease, mode, distance, direction, t
   return { target: { x: toX, y: toY }, preview: { from, deg: (Math.atan2(dy, dx) * 180) / Math.PI, lengthUm: Math.hypot(dx, dy) } };
 }
 
-/** The scan form's start from the scene's own scan (a 14 nm particle is not imaged 10 µm wide). */
+/**
+ * The scan form's start from the scene's own scan, made small enough that the smallest particle
+ * spans at least 2 pixels (a 14 nm particle is not seen in a 50 µm, 256 px scan).
+ */
 export function scanFormDefaults(scene) {
   const out = {};
   if (!scene.scan) return out;
-  if (Number.isFinite(scene.scan.size_um)) out.size = String(scene.scan.size_um);
-  if (Number.isFinite(scene.scan.pixels)) out.pixels = String(Math.min(512, Math.max(8, scene.scan.pixels)));
+  const pixels = Number.isFinite(scene.scan.pixels) ? Math.min(512, Math.max(8, scene.scan.pixels)) : null;
+  if (pixels !== null) out.pixels = String(pixels);
+  if (Number.isFinite(scene.scan.size_um)) {
+    let size = scene.scan.size_um;
+    const radii = (scene.particles ?? []).map((p) => p.radius_nm).filter((r) => Number.isFinite(r) && r > 0);
+    if (radii.length && pixels !== null) {
+      const most = (2 * Math.min(...radii) * 1e-3 * pixels) / 2; // µm
+      if (most < size) size = Number(most.toPrecision(2));
+    }
+    out.size = String(size);
+  }
   return out;
 }
 
@@ -118,12 +132,13 @@ export class Controls {
    * @param {(msg: object) => object | null} deps.send sends a command (Connection.send)
    * @param {() => void} deps.onScanRequested the operator asked for a scan
    */
-  constructor($, doc, { session, view, replies, send, onScanRequested }) {
+  constructor($, doc, { session, view, map = () => null, replies, send, onScanRequested }) {
     this.$ = $;
     this.doc = doc;
     this.session = session;
     this.st = session.state;
     this.view = view;
+    this.map = map;
     this.replies = replies;
     this.send = send;
     this.onScanRequested = onScanRequested;
@@ -131,6 +146,7 @@ export class Controls {
     this.scanCentreTouched = false; // the operator typed a scan centre: keep it
     this.scanFormTouched = false; // the operator typed a scan size or pixels: keep them
     this.stopPressed = false; // Stop went on the pointer's press: ignore the click that follows
+    this.lastRunVersion = 0; // bumped by every change of the last run's line
     this.bind();
   }
 
@@ -160,20 +176,35 @@ export class Controls {
   render() {
     const $ = this.$;
     const c = controlState(this.st);
+    const focused = this.doc.activeElement;
     const set = (el, s) => {
       el.disabled = !s.enabled;
       el.title = s.why;
     };
+    // Viewers get no forms they cannot use: the reason says how to command instead.
+    const viewer = this.st.role === 'viewer';
+    $('push-form').hidden = viewer;
+    $('scan-form').hidden = viewer;
+    $('hap-fs').hidden = viewer;
     set($('take-lease'), c.takeLease);
     set($('release-lease'), c.releaseLease);
     set($('push-fs'), c.push);
     set($('scan-fs'), c.scan);
     set($('stop-btn'), c.stop);
     set($('hap-fs'), c.haptic);
+    set($('hap-engage'), c.hapticEngage);
     // Buttons inside a disabled fieldset: give them the reason as a tooltip too.
     $('push-btn').title = c.push.why;
     $('scan-btn').title = c.scan.why;
     $('why').textContent = c.push.enabled ? '' : c.push.why;
+    // A button that took the focus and is now disabled (Take lease, once taken) would drop it to
+    // the page: hand it to its counterpart.
+    if (focused && focused.disabled && focused !== this.doc.body) {
+      const next = { 'take-lease': 'release-lease', 'release-lease': 'take-lease', 'hap-engage': 'hap-release' }[focused.id];
+      const n = next && $(next);
+      if (n && !n.disabled) n.focus();
+      else $('stop-btn').disabled ? this.doc.querySelector('.map-svg')?.focus() : $('stop-btn').focus();
+    }
   }
 
   /** The push running (everyone's view of it) or, for the lease holder, the form's preview. */
@@ -181,6 +212,7 @@ export class Controls {
     const { st, view } = this;
     const p = st.push;
     const el = this.$('push-now');
+    this.map()?.invalidate();
     if (p) {
       view.setPushPath(p.path);
       view.setPreview(null);
@@ -203,6 +235,7 @@ export class Controls {
     });
     if (target) view.setTarget(target.x, target.y);
     else view.setTarget(null);
+    this.map()?.setTarget(target ? target.x : null, target ? target.y : null);
     if (preview) view.setPreview(preview.from, preview.deg, preview.lengthUm);
     else view.setPreview(null);
   }
@@ -244,12 +277,31 @@ export class Controls {
     this.renderPush();
   }
 
-  /** A finished push's outcome over the 3D view. */
+  /** A finished push's outcome under Stop, in its colour; the push's reply says it too. */
   showLastRun(run, text) {
+    this.showLastRunText(text, runClass(run));
+    const out = this.$('reply-push');
+    if (out.textContent) {
+      out.className = `reply ${runClass(run)}`;
+      out.textContent = `${out.textContent.replace(/ (accepted|ok)$/, '')} ${run.outcome}`;
+    }
+  }
+
+  /** The last run's line: `cls` good, neutral, warn, bad or unknown. */
+  showLastRunText(text, cls) {
+    this.lastRunVersion = (this.lastRunVersion ?? 0) + 1;
     const el = this.$('lastrun');
     el.textContent = text;
-    el.className = `lastrun ${run.outcome === 'ok' ? 'good' : 'bad'}`;
+    el.className = `lastrun ${cls}`;
     el.hidden = false;
+  }
+
+  /** The server restarted: the last run shown was the previous server's. */
+  clearLastRun() {
+    this.lastRunVersion = (this.lastRunVersion ?? 0) + 1;
+    const el = this.$('lastrun');
+    el.textContent = '';
+    el.hidden = true;
   }
 
   /** A point picked in the 3D view: the push target. */
@@ -312,6 +364,7 @@ export class Controls {
     for (const a of ['engage', 'release', 'recenter']) $(`hap-${a}`).addEventListener('click', () => this.guarded('reply-haptic', () => commands.haptic(a)));
     $('hap-scale').addEventListener('click', () => this.guarded('reply-haptic', () => commands.haptic('scale', { nmPerMm: this.num('hap-nm'), pullOffAtHandN: this.num('hap-po') })));
     for (const id of ['scan-x', 'scan-y']) $(id).addEventListener('input', () => { this.scanCentreTouched = true; });
+    for (const id of ['hap-nm', 'hap-po']) $(id).addEventListener('input', () => { delete $(id).dataset.fromServer; });
     for (const id of ['scan-size', 'scan-px']) $(id).addEventListener('input', () => { this.scanFormTouched = true; });
     doc.addEventListener('keydown', (e) => {
       if (e.key === 'Escape' && !$('stop-btn').disabled) {

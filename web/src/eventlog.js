@@ -57,7 +57,37 @@ export function replyErrorText(ev, e) {
 }
 
 export function closedText(ev) {
+  if (ev.code === null || ev.code === undefined) return `connection closed (${ev.reason || 'no reason'})`;
   return `connection closed (code ${ev.code}${ev.reason ? `, ${ev.reason}` : ''})`;
+}
+
+/** HH:MM:SS of a Unix time (ms), in the page's time zone. */
+export function clockTime(ms) {
+  return new Date(ms).toLocaleTimeString([], { hour: '2-digit', minute: '2-digit', second: '2-digit', hour12: false });
+}
+
+/** The server restarted while this page was away: when the new one started. */
+export function restartText(startedUnixMs) {
+  return `the server restarted (this run started at ${startedUnixMs ? clockTime(startedUnixMs) : 'an unknown time'}): what this page showed before is gone`;
+}
+
+/**
+ * The push that ran when the connection closed, and was never seen to end: `run` is its
+ * record's entry in /api/runs (the same server, a newer record of that particle), or null.
+ */
+export function lostPushText(push, { restarted, run }) {
+  if (run) return `push of #${push.particle} ended while this page was away: ${run.outcome}${run.failure ? ` (${String(run.failure).replace(/^stopped: /, '')})` : ''}, read from its record ${run.record}`;
+  return restarted
+    ? `push of #${push.particle}: outcome unknown: the server restarted while it ran (a killed server writes no record of it)`
+    : `push of #${push.particle}: outcome unknown: the connection closed while it ran and no record of it was found`;
+}
+
+/** A haptic link change, for the event log: {text, cls}. `downs`: losses the server counted. */
+export function hapticLinkNote(link, downs) {
+  const n = Number.isFinite(downs) ? ` (${downs} link loss${downs === 1 ? '' : 'es'} since the server started)` : '';
+  return link === 'up'
+    ? { text: `haptic link up${n}`, cls: 'good' }
+    : { text: `haptic link ${link}: z-control by hand is off until it is back; Engage is disabled${n}`, cls: 'bad' };
 }
 
 export class EventLog {
@@ -70,7 +100,7 @@ export class EventLog {
     this.live = live;
   }
 
-  /** Adds a line (`cls`: '', 'good' or 'bad'). */
+  /** Adds a line (`cls`: '', 'good', 'neutral', 'warn' or 'bad'). */
   log(text, cls = '') {
     const li = document.createElement('li');
     const time = document.createElement('time');

@@ -51,19 +51,23 @@ export class FrameScheduler {
    * the last one took.
    * @param {string} name
    * @param {(parts: Set<unknown>, now: number) => void} draw
-   * @param {{period?: number | (() => number), waitAfterSlow?: boolean}} [opts] `period`: at
-   *   least this long (ms) between draws; `waitAfterSlow`: after a draw slower than
-   *   SLOW_DRAW_MS, wait as long as it took.
+   * @param {{period?: number | (() => number), waitAfterSlow?: boolean, aligned?: boolean}} [opts]
+   *   `period`: at least this long (ms) between draws; `aligned`: instead, at most once per
+   *   slot of `period` ms of the clock (the first frame in it), so that views whose periods
+   *   divide one another draw in the same frames (a software renderer pays for a whole frame
+   *   whenever anything changes: the frames between stay clean); `waitAfterSlow`: after a draw
+   *   slower than SLOW_DRAW_MS, wait as long as it took.
    */
-  register(name, draw, { period = 0, waitAfterSlow = false } = {}) {
+  register(name, draw, { period = 0, waitAfterSlow = false, aligned = false } = {}) {
     const view = {
       name,
       draw,
       period: typeof period === 'function' ? period : () => period,
       waitAfterSlow,
+      aligned,
       dirty: false,
       parts: new Set(),
-      lastDraw: 0, // timestamp of the frame that drew it last
+      lastDraw: -Infinity, // timestamp of the frame that drew it last
       notBefore: 0, // after a slow draw: not before this time
       frames: 0,
       ms: 0,
@@ -89,7 +93,9 @@ export class FrameScheduler {
     this.last = now;
     this.frames++;
     for (const v of this.views) {
-      if (!v.dirty || now < v.notBefore || now - v.lastDraw < v.period()) continue;
+      if (!v.dirty || now < v.notBefore) continue;
+      const p = v.period();
+      if (v.aligned && p > 0 ? Math.floor(now / p) === Math.floor(v.lastDraw / p) : now - v.lastDraw < p) continue;
       const parts = v.parts;
       v.dirty = false;
       v.parts = new Set();

@@ -32,6 +32,12 @@ export function hapticFields(h) {
   };
 }
 
+/** The haptic scales in force (`/api/status`'s `haptic_scales`), in words; "–" when unknown. */
+export function scalesText(sc) {
+  if (!sc || !Number.isFinite(sc.nm_per_mm) || !Number.isFinite(sc.pull_off_at_hand_n)) return '–';
+  return `${Number(sc.nm_per_mm.toPrecision(4))} nm per mm · pull-off felt as ${Number(sc.pull_off_at_hand_n.toPrecision(4))} N`;
+}
+
 /** The force at the hand over the last `seconds` of server time (a restart starts it again). */
 export class HapticTrace {
   constructor(seconds = SECONDS) {
@@ -73,8 +79,13 @@ export class HapticPanel {
    * @param {Document} [opts.doc] the page's document: no fetches while it is hidden
    * @param {{setTimeout, clearTimeout}} [opts.timers]
    */
-  constructor(els, scheduler, { fetchStatus, doc, timers } = {}) {
+  constructor(els, scheduler, { fetchStatus, doc, timers, onLinkChange, onScalesChange } = {}) {
     this.els = els;
+    this.onLinkChange = onLinkChange;
+    this.onScalesChange = onScalesChange;
+    this.scales = null; // the scales in force, as last read (words)
+    this.link = null; // the link as last seen in telemetry
+    this.downs = null; // link losses the server counted (/api/status)
     this.trace = new HapticTrace(SECONDS);
     this.plot = null;
     this.frame = scheduler.register('haptic', () => this.draw(), { period: HAPTIC_PERIOD_MS });
@@ -84,7 +95,11 @@ export class HapticPanel {
         fetchStatus,
         periodMs: DEVICE_FAULTS_PERIOD_MS,
         timers,
-        onStatus: (s) => this.showDeviceFaults(s?.haptic ?? null),
+        onStatus: (s) => {
+          this.showDeviceFaults(s?.haptic ?? null);
+          this.showDowns(s?.haptic?.link_downs);
+          this.showScales(s?.haptic_scales);
+        },
         onError: () => this.showDeviceFaults(null),
       })
       : null;
@@ -98,6 +113,28 @@ export class HapticPanel {
     const { text, cls } = deviceFaultsLine(h);
     el.textContent = text;
     el.className = cls;
+  }
+
+  /** The scales in force: shown, the form's fields filled while untouched, a change reported. */
+  showScales(sc) {
+    const text = scalesText(sc);
+    if (text === '–') return;
+    if (this.els.scales) this.els.scales.textContent = text;
+    for (const [el, v] of [[this.els.nmInput, sc.nm_per_mm], [this.els.poInput, sc.pull_off_at_hand_n]]) {
+      if (el && (el.value === '' || el.dataset.fromServer === '1') && this.doc?.activeElement !== el) {
+        el.value = String(v);
+        el.dataset.fromServer = '1';
+      }
+    }
+    if (this.scales !== null && this.scales !== text) this.onScalesChange?.(text);
+    this.scales = text;
+  }
+
+  /** The link losses the server counted since it started. */
+  showDowns(n) {
+    if (!Number.isFinite(n)) return;
+    this.downs = n;
+    if (this.els.downs) this.els.downs.textContent = String(n);
   }
 
   /** Polls /api/status while the panel is shown and the page visible; stops otherwise. */
@@ -115,6 +152,12 @@ export class HapticPanel {
       panel.hidden = false;
       this.syncPolling();
     }
+    if (this.link !== null && h.link !== this.link) {
+      // A loss counted now even before the next status poll confirms it.
+      if (h.link !== 'up' && this.downs !== null) this.showDowns(this.downs + 1);
+      this.onLinkChange?.(h.link, this.downs ?? undefined);
+    }
+    this.link = h.link;
     for (const [k, v] of Object.entries(hapticFields(h))) {
       fields[k].textContent = v.text;
       if (v.cls !== undefined) fields[k].className = v.cls;

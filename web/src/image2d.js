@@ -1,7 +1,10 @@
 // The 2D height image, as an AFM user reads one (Gwyddion's views): the scan in false colour
 // with physical axes in a unit chosen for its size (nm or µm), a scale bar, a labelled colour
 // bar, plane levelling (mean plane / line by line / none), a cursor readout of x, y and height,
-// and a line profile (drag a line across the image, see the height along it in nm).
+// and a line profile (drag a line across the image, see the height along it in nm; or put its
+// ends at the keyboard cursor of the map layer, src/mapoverlay.js, which sits on top and takes
+// the pointer). Without a scan it shows the whole stage, axes and all, so the map layer has
+// somewhere to draw the particles and the tip.
 // The scan is the Session's scan object (heights in m, row 0 = lowest y); it grows line by line
 // and is drawn at most once per animation frame (by the page's frame scheduler, src/frame.js),
 // only when something changed.
@@ -135,6 +138,8 @@ export class Image2D {
     this.range = null;
     this.profile = null;
     this.line = null; // {i0, j0, i1, j1} in pixel coordinates (i along x, j along y, j = 0 lowest)
+    this.stage = { x_offset: 0, y_offset: 0, x_real: 100e-6, y_real: 100e-6 }; // shown without a scan
+    this.drag = null;
 
     container.classList.add('img2d');
     this.canvas = document.createElement('canvas');
@@ -143,8 +148,7 @@ export class Image2D {
     container.append(this.canvas, this.svg);
     this.off = document.createElement('canvas');
     this.empty = el('text', { class: 'empty', x: 20, y: 40 }, this.svg);
-    this.empty.textContent = 'No scan yet';
-    this.bindPointer();
+    this.empty.textContent = 'No scan yet: the whole stage';
     new ResizeObserver(() => this.invalidate()).observe(container);
   }
 
@@ -163,6 +167,17 @@ export class Image2D {
     this.updateProfile();
   }
 
+  /** The stage's range (m): the extent shown while there is no scan. */
+  setStage(rangeM) {
+    this.stage = { x_offset: 0, y_offset: 0, x_real: rangeM, y_real: rangeM };
+    this.invalidate();
+  }
+
+  /** What the image spans (m): the scan's area, else the whole stage. */
+  extent() {
+    return this.scan ?? this.stage;
+  }
+
   setLevelling(mode) {
     this.mode = mode;
     this.drawnVersion = -1;
@@ -172,10 +187,10 @@ export class Image2D {
 
   /** The image area (CSS px, relative to the container) and the physical unit. */
   geometry() {
-    const sc = this.scan;
+    const sc = this.extent();
     const W = this.container.clientWidth;
     const H = this.container.clientHeight;
-    if (!sc) return null;
+    if (W <= 0 || H <= 0) return null;
     const availW = Math.max(10, W - M.left - M.right);
     const availH = Math.max(10, H - M.top - M.bottom);
     // Physically square pixels: the image keeps x_real : y_real.
@@ -197,6 +212,7 @@ export class Image2D {
       }
     }
     this.range = lo <= hi ? { lo, hi: hi > lo ? hi : lo + 1e-12 } : null;
+    this.opts.onLevelled?.(this.levelled, this.range);
   }
 
   draw() {
@@ -214,8 +230,15 @@ export class Image2D {
     const ctx = this.canvas.getContext('2d');
     ctx.clearRect(0, 0, this.canvas.width, this.canvas.height);
     while (this.svg.lastChild) this.svg.lastChild.remove();
+    const g = this.geometry();
+    if (!g) return;
     if (!sc) {
+      this.drawAxes(g);
+      this.empty.setAttribute('x', g.x + 12);
+      this.empty.setAttribute('y', g.y + 24);
       this.svg.append(this.empty);
+      this.svg.setAttribute('aria-label', 'Height image: no scan yet; the map shows the whole stage');
+      this.opts.onDrawn?.();
       return;
     }
     if (this.drawnVersion !== sc.version || !this.levelled) {
@@ -223,7 +246,6 @@ export class Image2D {
       this.paintPixels();
       this.drawnVersion = sc.version;
     }
-    const g = this.geometry();
     ctx.imageSmoothingEnabled = false;
     ctx.fillStyle = '#0f141a';
     ctx.fillRect(g.x * dpr, g.y * dpr, g.w * dpr, g.h * dpr);
@@ -232,6 +254,7 @@ export class Image2D {
     this.drawScaleBar(g);
     this.drawColourBar(g);
     this.drawProfileLine(g);
+    this.opts.onDrawn?.();
     const u = g.unit;
     this.svg.setAttribute('aria-label', `Height image of scan ${sc.id}: ${(sc.x_real * u.scale).toPrecision(3)} × ${(sc.y_real * u.scale).toPrecision(3)} ${u.name}, ${sc.xres} × ${sc.yres} pixels, ${sc.lines} of ${sc.yres} lines`);
   }
@@ -267,7 +290,7 @@ export class Image2D {
   }
 
   drawAxes(g) {
-    const sc = this.scan;
+    const sc = this.extent();
     const u = g.unit;
     const axes = el('g', { class: 'axes' }, this.svg);
     el('rect', { x: g.x, y: g.y, width: g.w, height: g.h, class: 'frame' }, axes);
@@ -325,7 +348,7 @@ export class Image2D {
       const i = Math.round((k / 8) * 255);
       el('stop', { offset: k / 8, 'stop-color': `rgb(${LUT[3 * i]},${LUT[3 * i + 1]},${LUT[3 * i + 2]})` }, grad);
     }
-    el('rect', { x, y: g.y, width: w, height: g.h, fill: `url(#${id})`, class: 'frame' }, cb);
+    el('rect', { x, y: g.y, width: w, height: g.h, class: 'frame', style: `--cb: url(#${id})` }, cb);
     const span = (r.hi - r.lo) * 1e9;
     const step = niceStep(span, 4);
     const first = Math.ceil((r.lo * 1e9) / step) * step;
@@ -336,7 +359,8 @@ export class Image2D {
       t.textContent = `${Number(v.toPrecision(4))}`;
     }
     const tl = el('text', { x: x + w + 48, y: g.y + g.h / 2, class: 'axis-label', 'text-anchor': 'middle', transform: `rotate(90 ${x + w + 48} ${g.y + g.h / 2})` }, cb);
-    tl.textContent = 'height (nm)';
+    // The levelled heights (the 3D view is coloured by them too).
+    tl.textContent = this.mode === 'none' ? 'raw height (nm)' : 'levelled height (nm)';
   }
 
   drawProfileLine(g) {
@@ -365,59 +389,85 @@ export class Image2D {
     return { i: fx * sc.xres - 0.5, j: fy * sc.yres - 0.5, fx, fy };
   }
 
-  bindPointer() {
-    let drag = null;
-    const target = this.svg;
-    target.addEventListener('pointerdown', (e) => {
-      const p = this.pixelAt(e.clientX, e.clientY);
-      if (!p || e.button !== 0) return;
-      drag = p;
-      target.setPointerCapture?.(e.pointerId);
-      e.preventDefault();
-    });
-    target.addEventListener('pointermove', (e) => {
-      if (drag) {
-        const p = this.pixelAt(e.clientX, e.clientY, true);
-        this.line = { i0: drag.i, j0: drag.j, i1: p.i, j1: p.j };
-        this.invalidate();
-      }
-      this.readout(e.clientX, e.clientY);
-    });
-    const end = (e) => {
-      if (!drag) return;
+  // The pointer, handed on by the map layer on top (src/mapoverlay.js): a drag draws the line
+  // profile, the cursor's position is read out.
+  pointerDown(e) {
+    const p = this.pixelAt(e.clientX, e.clientY);
+    if (!p) return;
+    this.drag = p;
+    e.currentTarget?.setPointerCapture?.(e.pointerId);
+    e.preventDefault();
+  }
+
+  pointerMove(e) {
+    if (this.drag && this.scan) {
       const p = this.pixelAt(e.clientX, e.clientY, true);
-      if (Math.hypot(p.i - drag.i, p.j - drag.j) >= 1) {
-        this.line = { i0: drag.i, j0: drag.j, i1: p.i, j1: p.j };
-      }
-      drag = null;
+      this.line = { i0: this.drag.i, j0: this.drag.j, i1: p.i, j1: p.j };
       this.invalidate();
-      this.updateProfile();
-    };
-    target.addEventListener('pointerup', end);
-    target.addEventListener('pointercancel', end);
-    target.addEventListener('pointerleave', () => {
-      if (this.opts.cursorEl) this.opts.cursorEl.textContent = 'x –, y –, height –';
-    });
+    }
+    this.readout(e.clientX, e.clientY);
+  }
+
+  /** The press ended; `click`: it was a click (no drag), which leaves the profile as it was. */
+  pointerUp(e, click) {
+    const drag = this.drag;
+    this.drag = null;
+    if (!drag || !this.scan) return;
+    if (!click) {
+      const p = this.pixelAt(e.clientX, e.clientY, true);
+      if (Math.hypot(p.i - drag.i, p.j - drag.j) >= 1) this.line = { i0: drag.i, j0: drag.j, i1: p.i, j1: p.j };
+    }
+    this.invalidate();
+    this.updateProfile();
+  }
+
+  pointerLeave() {
+    if (this.opts.cursorEl) this.opts.cursorEl.textContent = 'x –, y –, height –';
+  }
+
+  /** The line profile's start or end at stage point (x, y) m (the keyboard's way to draw it). */
+  profileEnd(which, x, y) {
+    const sc = this.scan;
+    if (!sc) return;
+    const i = ((x - sc.x_offset) / sc.x_real) * sc.xres - 0.5;
+    const j = ((y - sc.y_offset) / sc.y_real) * sc.yres - 0.5;
+    const l = this.line ?? { i0: i, j0: j, i1: i, j1: j };
+    this.line = which === 'start' ? { ...l, i0: i, j0: j } : { ...l, i1: i, j1: j };
+    this.invalidate();
+    if (Math.hypot(this.line.i1 - this.line.i0, this.line.j1 - this.line.j0) >= 1) this.updateProfile();
   }
 
   readout(clientX, clientY) {
-    const out = this.opts.cursorEl;
-    const sc = this.scan;
-    if (!out || !sc) return;
-    const p = this.pixelAt(clientX, clientY);
-    if (!p) {
-      out.textContent = 'x –, y –, height –';
+    const g = this.geometry();
+    if (!g) return;
+    const rect = this.container.getBoundingClientRect();
+    const fx = (clientX - rect.left - g.x) / g.w;
+    const fy = (g.y + g.h - (clientY - rect.top)) / g.h;
+    if (fx < 0 || fx > 1 || fy < 0 || fy > 1) {
+      this.pointerLeave();
       return;
     }
+    const e = this.extent();
+    this.readoutAt(e.x_offset + fx * e.x_real, e.y_offset + fy * e.y_real);
+  }
+
+  /** The readout for stage point (x, y) m: position in the image, on the stage, and height. */
+  readoutAt(sx, sy) {
+    const out = this.opts.cursorEl;
+    if (!out) return;
+    const sc = this.extent();
+    const x = sx - sc.x_offset;
+    const y = sy - sc.y_offset;
     const u = lengthUnit(Math.max(sc.x_real, sc.y_real));
-    const i = Math.min(sc.xres - 1, Math.max(0, Math.round(p.i)));
-    const j = Math.min(sc.yres - 1, Math.max(0, Math.round(p.j)));
-    const x = p.fx * sc.x_real;
-    const y = p.fy * sc.y_real;
-    const v = this.levelled ? this.levelled[j * sc.xres + i] : NaN;
+    let v = NaN;
+    if (this.scan && this.levelled) {
+      const i = Math.min(sc.xres - 1, Math.max(0, Math.round((x / sc.x_real) * sc.xres - 0.5)));
+      const j = Math.min(sc.yres - 1, Math.max(0, Math.round((y / sc.y_real) * sc.yres - 0.5)));
+      v = this.levelled[j * sc.xres + i];
+    }
     const d = u.name === 'nm' ? 1 : 3;
     out.textContent = `x ${(x * u.scale).toFixed(d)} ${u.name}, y ${(y * u.scale).toFixed(d)} ${u.name}` +
-      ` (stage ${((sc.x_offset + x) * 1e6).toFixed(3)}, ${((sc.y_offset + y) * 1e6).toFixed(3)} µm), height ${Number.isFinite(v) ? `${(v * 1e9).toFixed(2)} nm` : '–'}`;
+      ` (stage ${(sx * 1e6).toFixed(3)}, ${(sy * 1e6).toFixed(3)} µm), height ${Number.isFinite(v) ? `${(v * 1e9).toFixed(2)} nm` : '–'}`;
   }
 
   /** Recomputes the profile along the drawn line and shows it. */

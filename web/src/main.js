@@ -1,14 +1,14 @@
-// Boot: the operator page (src/app.js, which needs three and uPlot from node_modules) or the
+// Boot: the operator page (src/app.js, with three and uPlot, bundled by `npm run build`) or the
 // monitoring view (`?view=monitor`, src/monitor.js, no packages); each exports `start()`. A
-// page whose modules cannot load (or start) says why (the packages are missing: `cd web && npm
-// ci`) instead of saying "starting" forever.
+// page whose modules cannot load (or start) says why (not built: `cd web && npm ci && npm run
+// build`) instead of saying "starting" forever.
 const view = new URLSearchParams(location.search).get('view');
 
 function bootError(e) {
   const el = document.getElementById('boot-error');
   const txt = document.querySelector('#st-conn .txt');
   const msg = `The page could not start: ${e && e.message ? e.message : e}. ` +
-    'If web/node_modules is missing, install the client\'s packages on the server: cd web && npm ci (or make web), then reload.';
+    'If web/dist is missing or old, build the client on the server: cd web && npm ci && npm run build (or make web), then reload.';
   if (el) {
     el.textContent = msg;
     el.hidden = false;

@@ -11,7 +11,9 @@ import { scanSize, scanDoneNote } from './eventlog.js';
 
 /** The legend's progress line for the live scan. */
 export function progressText(sc, stale) {
-  return (sc.done ? `scan ${sc.id} complete` : `scan ${sc.id}: line ${sc.lines}/${sc.yres}`) + (stale ? ' · stale (a push ran since)' : '');
+  const what = sc.done ? `scan ${sc.id} complete` : sc.interrupted ? `scan ${sc.id} interrupted at line ${sc.lines}/${sc.yres}` : `scan ${sc.id}: line ${sc.lines}/${sc.yres}`;
+  // A scan from before a restart is stale whatever ran since: the new server's sample is the scene's.
+  return what + (sc.previousRun ? ' · from before the server restarted' : stale ? ' · stale (a push ran since)' : '');
 }
 
 /** The height image's title: the record opened, else the live scan's id. */
@@ -32,7 +34,8 @@ export class Scans {
    * @param {() => number | null} deps.selected the selected particle
    * @param {() => void} deps.markLegend redraw the legend in the next frame
    */
-  constructor($, { session, view, image2d, log, toolbar, loc, selected, markLegend }) {
+  constructor($, { session, view, image2d, map = null, log, toolbar, loc, selected, markLegend }) {
+    this.map = map;
     this.$ = $;
     this.session = session;
     this.st = session.state;
@@ -57,6 +60,7 @@ export class Scans {
   started() {
     const st = this.st;
     this.openedRecord = null;
+    this.map?.setScanParticles([]);
     this.show();
     this.log.log(`scan ${st.scan.id} started: ${scanSize(st.scan)}`);
     this.frameOnce();
@@ -70,20 +74,56 @@ export class Scans {
     this.markLegend();
   }
 
-  /** `scan_done`. */
+  /**
+   * `scan_done`. A page that missed lines (it joined mid-scan, or lagged) fetches the whole scan
+   * from its record, so what it shows is the scan, not part of it.
+   */
   done(ev) {
     const n = scanDoneNote(ev);
     this.log.log(n.text, n.cls);
     this.toolbar.scanFilled();
     this.renderLegend();
+    const sc = this.st.scan;
+    if (sc && ev.record && !this.openedRecord) {
+      if (sc.lines < sc.yres) {
+        this.log.log(`scan ${sc.id}: ${sc.yres - sc.lines} of ${sc.yres} lines were not seen here; loading the whole scan from ${ev.record}`);
+        this.loadLatest(sc.id, ev.record);
+      }
+      this.loadFound(ev.record);
+    }
+  }
+
+  /** The particles a scan found (its record's JSON summary beside the GSF) onto the map. */
+  async loadFound(gsfName) {
+    if (!this.map) return;
+    try {
+      const r = await fetch(apiUrl(`/api/records/${encodeURIComponent(gsfName.replace(/\.gsf$/, '.json'))}`, this.loc));
+      if (!r.ok) throw new Error(`HTTP ${r.status}`);
+      const j = await r.json();
+      this.map.setScanParticles(j.particles ?? []);
+    } catch {
+      this.map.setScanParticles([]);
+    }
   }
 
   /** The server's `state`: a scan other than the one shown is the latest; fetch it if done. */
   stateChanged(ev) {
     const st = this.st;
+    if (ev.scanFinished && !this.openedRecord) {
+      // It ended while this page was away: the lines missed come from its record.
+      this.toolbar.scanFilled();
+      if (st.scan.record) {
+        if (st.scan.lines < st.scan.yres) this.loadLatest(st.scan.id, st.scan.record);
+        this.loadFound(st.scan.record);
+      }
+    }
     if (ev.scanChanged && !this.openedRecord) {
       this.show();
-      if (st.scan.done && st.scan.record) this.loadLatest(st.scan.id, st.scan.record);
+      this.map?.setScanParticles([]);
+      if (st.scan.done && st.scan.record) {
+        this.loadLatest(st.scan.id, st.scan.record);
+        this.loadFound(st.scan.record);
+      }
     }
   }
 
@@ -141,6 +181,7 @@ export class Scans {
       this.image2d.setScan(sc);
       $('img-title').textContent = scanTitle(name, sc);
       $('img-stale').hidden = true;
+      this.loadFound(name);
       view.frameScan();
       this.log.log(`opened ${name}: ${scanSize(g)}`);
     } catch (e) {
@@ -153,6 +194,7 @@ export class Scans {
     const st = this.st;
     const stale = st.scanStale && !this.openedRecord && !!st.scan;
     this.$('img-stale').hidden = !stale;
+    this.$('img-stale').textContent = st.scan?.previousRun ? 'stale: from before the server restarted' : 'stale: a push ran since this scan';
     this.$('scan-progress').classList.toggle('stale', stale);
     this.markLegend();
   }

@@ -5,7 +5,11 @@
 import { WS_VERSION, decodeScanLine } from './wire.js';
 import { formatPoint } from './format.js';
 
-/** What a finished push means, in words: `ok`, or the failure code, reason and record. */
+/**
+ * What a finished push means, in words: `ok`; `stopped` and who stopped it (a stop is not a
+ * failure: the server's `failure` already starts "stopped: "); `missed` (it ended outside the
+ * push's tolerance); else the failure code and reason; and the record.
+ */
 export function describeRun(r) {
   const rec = r.record ? `record ${r.record}` : r.record_error ? `no record: ${r.record_error}` : 'no record';
   if (r.outcome === 'ok') {
@@ -13,7 +17,31 @@ export function describeRun(r) {
     return `push of #${r.particle} ok${at} (${rec})`;
   }
   const never = Array.isArray(r.estimate) ? `, particle left at ${formatPoint(r.estimate)}` : ', it never started';
+  if (r.outcome === 'stopped' || r.outcome === 'missed') {
+    const why = String(r.failure ?? 'no reason given').replace(/^stopped: /, '');
+    return `push of #${r.particle} ${r.outcome}: ${why}${never} (${rec})`;
+  }
   return `push of #${r.particle} failed: ${r.outcome}: ${r.failure ?? 'no reason given'}${never} (${rec})`;
+}
+
+/**
+ * A run's colour class: `good` (ok), `neutral` (stopped: somebody's decision, not a fault),
+ * `warn` (missed: it ended outside the tolerance), `bad` (a failure).
+ */
+export function runClass(r) {
+  return r.outcome === 'ok' ? 'good' : r.outcome === 'stopped' ? 'neutral' : r.outcome === 'missed' ? 'warn' : 'bad';
+}
+
+/**
+ * The record of a push this page lost sight of (`lost`: the Session's `lostPush`, with the
+ * server run it ran on and its run number), among /api/runs entries: the one that server run
+ * wrote for that run, else null (a killed server writes none). Never matched by time or
+ * particle alone: an earlier push of the same particle, or the next server's run of the same
+ * number, is another push.
+ */
+export function lostPushRun(runs, lost) {
+  if (!Array.isArray(runs) || !lost || lost.instance == null || lost.run == null) return null;
+  return runs.find((x) => x.instance === lost.instance && x.run === lost.run && x.particle === lost.particle) ?? null;
 }
 
 /**
@@ -72,7 +100,7 @@ export function initialState({ traceSeconds = 10 } = {}) {
     leaseNote: null, // why the lease changed, when the server said
     stateReceived: false, // the server's `state` arrived on this connection
     lagged: { events: 0, skipped: 0 },
-    scan: null, // {id, xres, yres, x_offset, y_offset, x_real, y_real, heights, received, lines, min, max, done, record}
+    scan: null, // {id, xres, yres, x_offset, y_offset, x_real, y_real, heights, received, lines, min, max, done, record, previousRun, interrupted}
     strayLines: 0, // scan lines of no current scan
     runs: [], // run_done messages, newest last
     errors: [], // {at, id, code, message, command}
@@ -82,6 +110,10 @@ export function initialState({ traceSeconds = 10 } = {}) {
     particles: [], // from /api/scene, metres; moved by run_done estimates
     stageRange: 100e-6,
     shutdown: null,
+    instance: null, // the server's instance id (welcome): another one on a reconnect is a restart
+    startedUnixMs: null, // when that server started
+    restarted: false, // the last welcome came from another instance than the one before
+    lostPush: null, // the push that ran when the connection closed: its end was not seen
   };
 }
 
@@ -128,6 +160,7 @@ export class Session {
     s.role = null;
     s.lease = null;
     s.phase = null;
+    if (s.push) s.lostPush = { ...s.push, instance: s.instance };
     s.push = null;
     s.stateReceived = false;
     for (const c of s.commands.values()) {
@@ -199,7 +232,21 @@ export class Session {
         if (msg.version !== WS_VERSION) {
           this.logError('version', `the server speaks protocol ${msg.version}, this page ${WS_VERSION}`);
         }
-        return { kind: 'welcome' };
+        {
+          const previous = s.instance;
+          const instance = msg.instance ?? null;
+          s.restarted = previous !== null && instance !== null && instance !== previous;
+          s.instance = instance;
+          if (s.restarted && s.scan) {
+            // The previous run's scan: one it never finished never will be, and the restarted
+            // server's sample (the scene's) is not what it shows. Its scan ids start again.
+            s.scan.previousRun = true;
+            s.scan.interrupted = !s.scan.done;
+            s.scanStale = true;
+          }
+          s.startedUnixMs = msg.started_unix_ms ?? null;
+          return { kind: 'welcome', restarted: s.restarted, previous };
+        }
       case 'state': {
         s.stateReceived = true;
         s.lease = msg.lease ?? null;
@@ -216,20 +263,27 @@ export class Session {
           }
         }
         s.serverParticles = (msg.particles ?? []).map((q) => ({ ...q }));
-        s.push = msg.push ?? null;
+        s.push = msg.push ? { ...msg.push } : null;
         const sc = msg.scan ?? null;
         let scanChanged = false;
-        if (sc && (!s.scan || s.scan.id !== sc.scan)) {
+        let scanFinished = false;
+        if (sc && (!s.scan || s.scan.id !== sc.scan || s.scan.previousRun)) {
           this.startScan({ ...sc, type: 'scan_start' });
           s.scan.done = !!sc.done;
           s.scan.record = sc.record ?? null;
           scanChanged = true;
+        } else if (sc && sc.done && !s.scan.done) {
+          // The scan shown ended while this page was away: done, and its record has the lines
+          // this page missed.
+          s.scan.done = true;
+          s.scan.record = sc.record ?? null;
+          scanFinished = true;
         }
-        s.scanStale = !!sc?.stale;
-        return { kind: 'state', scan: sc, scanChanged };
+        s.scanStale = sc ? !!sc.stale : !!s.scan?.previousRun;
+        return { kind: 'state', scan: sc, scanChanged, scanFinished };
       }
       case 'push_started':
-        s.push = { particle: msg.particle, path: msg.path ?? [], by: msg.by ?? null };
+        s.push = { particle: msg.particle, path: msg.path ?? [], by: msg.by ?? null, run: msg.run ?? null };
         return { kind: 'push_started', push: s.push };
       case 'ok': {
         const c = msg.id != null ? s.commands.get(msg.id) : undefined;
@@ -350,6 +404,8 @@ export class Session {
           max: -Infinity,
           done: false,
           record: null,
+          previousRun: false, // shown from before a server restart
+          interrupted: false, // that server never finished it
           version: 0, // bumped by every change of the heights
         };
         return true;
@@ -427,7 +483,9 @@ export function controlState(state) {
   if (!open) base = 'Not connected to the server';
   else if (!operator) base = 'Viewer connection: open the page with the operator token (?token=…) to command';
   const needLease = base ? no(base) : mine ? yes : state.lease === null ? no('Take the lease first') : no(`Client ${state.lease} holds the lease`);
+  const link = state.tip?.haptic?.link ?? null;
   return {
+    hapticEngage: !needLease.enabled ? needLease : link === 'up' ? yes : no(`The haptic link is ${link ?? 'not reported'}: engage once it is up`),
     takeLease: base ? no(base) : mine ? no('You hold the lease') : state.lease !== null ? no(`Client ${state.lease} holds the lease`) : yes,
     releaseLease: base ? no(base) : mine ? yes : no('You do not hold the lease'),
     push: needLease,

@@ -15,17 +15,22 @@ export function statusFields(st, { demo = false } = {}) {
   else if (!st.reconnect) conn = { kind: 'closed', text: 'closed' };
   const mine = st.lease !== null && st.lease === st.client;
   const e = st.lastError;
+  const unknown = st.connection !== 'open' && (st.instance ?? st.version) !== null && (st.instance ?? st.version) !== undefined;
+  const err = {
+    text: e ? `${e.code}${e.id !== null ? ` (#${e.id}${e.command ? ` ${e.command}` : ''})` : ''}: ${e.message}` : 'none',
+    cls: e ? 'err' : '',
+  };
+  const lagged = st.lagged.events ? `${st.lagged.events}× (${st.lagged.skipped} msgs)` : '0';
+  // Disconnected after having been connected: what the server said no longer holds.
+  if (unknown) return { conn, role: 'unknown', client: 'unknown', lease: { text: 'unknown', cls: 'unknown' }, phase: 'unknown', lagged, error: err };
   return {
     conn,
     role: String(st.role ?? '–'),
     client: String(st.client ?? '–'),
     lease: { text: st.lease === null ? 'free' : st.lease === st.client ? `you (${st.lease})` : `client ${st.lease}`, cls: mine ? 'mine' : '' },
     phase: String(st.phase ?? '–'),
-    lagged: st.lagged.events ? `${st.lagged.events}× (${st.lagged.skipped} msgs)` : '0',
-    error: {
-      text: e ? `${e.code}${e.id !== null ? ` (#${e.id}${e.command ? ` ${e.command}` : ''})` : ''}: ${e.message}` : 'none',
-      cls: e ? 'err' : '',
-    },
+    lagged,
+    error: err,
   };
 }
 
@@ -55,6 +60,8 @@ export class StatusBar {
     el.lease.textContent = f.lease.text;
     el.lease.className = f.lease.cls;
     el.phase.textContent = f.phase;
+    el.phase.className = f.phase === 'unknown' ? 'unknown' : '';
+    el.role.className = f.role === 'unknown' ? 'unknown' : '';
     el.lagged.textContent = f.lagged;
     el.error.textContent = f.error.text;
     el.error.title = f.error.text;

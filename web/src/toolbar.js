@@ -18,7 +18,11 @@ export function exaggerationLabel(v) {
 export function autoExaggerationFor(sc) {
   if (!sc || !(sc.max > sc.min)) return null;
   const side = Math.min(sc.x_real, sc.y_real);
-  return (0.15 * side) / (sc.max - sc.min);
+  const auto = (0.15 * side) / (sc.max - sc.min);
+  // The tallest feature at most 8 pixel widths high: a sub-pixel particle is not a pillar.
+  if (!(sc.xres > 0 && sc.yres > 0)) return auto;
+  const px = Math.min(sc.x_real / sc.xres, sc.y_real / sc.yres);
+  return Math.min(auto, (8 * px) / (sc.max - sc.min));
 }
 
 export class Toolbar {

@@ -132,8 +132,18 @@ export class View3D {
     this.frameStage();
   }
 
+  /**
+   * Shown or hidden (the 3D view is the height image's optional companion): hidden, it is not
+   * rendered at all; shown again, it is sized and drawn in the next frame.
+   */
+  setShown(on) {
+    this.shown = on;
+    if (on) this.resize();
+  }
+
   /** Draws the scene (called by the frame scheduler when something changed). */
   render() {
+    if (this.shown === false) return;
     this.scaleTip();
     this.renderer.render(this.scene, this.camera);
     this.labels.render(this.scene, this.camera);
@@ -403,17 +413,33 @@ export class View3D {
     this.updateDrawRange(scan);
   }
 
+  /**
+   * Colours by the height image's levelled heights and its colour scale (`values` indexed as the
+   * scan's heights, `lo`, `hi` in m), so one colour means one height in both views; null: by
+   * the raw heights (the shape is always the raw heights).
+   */
+  setColourSource(src) {
+    this.colourSource = src;
+    const scan = this.scanState;
+    if (this.scanMesh && scan && (!src || src.values.length === scan.xres * scan.yres)) {
+      this.recolour(scan);
+      this.requestRender();
+    }
+  }
+
   /** Colours mesh row `b` (scan line b·step). */
   colourRow(scan, b) {
     const { xres } = scan;
     const { nx, ny, step } = this.scanMesh.userData;
     const col = this.scanMesh.geometry.getAttribute('color').array;
-    const { lo, hi } = this.colourRange;
+    const src = this.colourSource && this.colourSource.values.length === xres * scan.yres ? this.colourSource : null;
+    const { lo, hi } = src ?? this.colourRange;
+    const heights = src ? src.values : scan.heights;
     const inv = (LUT_N - 1) / Math.max(hi - lo, 1e-18);
     const row = ny - 1 - b;
     const line = b * step;
     for (let a = 0; a < nx; a++) {
-      const h = scan.heights[line * xres + Math.min(xres - 1, a * step)];
+      const h = heights[line * xres + Math.min(xres - 1, a * step)];
       let k = Math.round((h - lo) * inv);
       k = k > 0 ? (k < LUT_N ? k : LUT_N - 1) : 0;
       const o = 3 * (row * nx + a);
@@ -432,9 +458,11 @@ export class View3D {
     this.colourFull = true;
   }
 
-  /** The colour scale now in use (m), for the legend. */
+  /** The colour scale now in use (m), for the legend: the height image's when coloured by it. */
   colourScale() {
-    return this.colourRange;
+    const src = this.colourSource;
+    const scan = this.scanState;
+    return src && scan && src.values.length === scan.xres * scan.yres ? { lo: src.lo, hi: src.hi } : this.colourRange;
   }
 
   // ----- the tip -----
@@ -603,10 +631,19 @@ export class View3D {
 
   // ----- camera -----
 
+  /**
+   * Looks at the box from the south, 42° up, from far enough that the whole box fits the
+   * narrower of the two fields of view with a margin (a tall, narrow view cut the scan's edges
+   * off when only the vertical field was counted).
+   */
   frameBox(x0, y0, w, h) {
     const cx = x0 + w / 2;
     const cy = y0 + h / 2;
-    const d = Math.max(w, h) * 1.25;
+    const vHalf = ((this.camera.fov / 2) * Math.PI) / 180;
+    const hHalf = Math.atan(Math.tan(vHalf) * this.camera.aspect);
+    const radius = 0.5 * Math.hypot(w, h); // the box's corners, seen from any side
+    const dist = (radius * 1.08) / Math.sin(Math.min(vHalf, hHalf));
+    const d = dist / Math.hypot(0.95, 0.85);
     this.controls.target.set(cx, cy, 0);
     this.camera.position.set(cx, cy - d * 0.95, d * 0.85);
     this.camera.near = d / 1000;

@@ -201,3 +201,37 @@ test('a draw that throws is reported; the other views and the loop go on', () =>
   assert.ok(pending, 'the next frame was requested');
   assert.equal(bad.dirty, false);
 });
+
+test('aligned views draw on the same frames: each at the first frame of its period\'s slot of the clock', () => {
+  // A software renderer pays for a whole frame whenever anything on screen changes: the tip
+  // (every 50 ms), the map (100 ms) and the plots (200 ms) change in the same frames, and the
+  // frames between stay clean.
+  const f = fake();
+  const drawn = { tip: [], map: [], plots: [] };
+  const tip = f.s.register('tip', (p, now) => drawn.tip.push(now), { period: 50, aligned: true });
+  const map = f.s.register('map', (p, now) => drawn.map.push(now), { period: 100, aligned: true });
+  const plots = f.s.register('plots', (p, now) => drawn.plots.push(now), { period: 200, aligned: true });
+  f.s.start();
+  for (let t = 1000; t < 1400; t += 16) {
+    tip.mark();
+    map.mark();
+    plots.mark();
+    f.frame(t);
+  }
+  // 16 ms frames: 1000, 1016, … 1064 (the first in [1050, 1100)), 1112, …
+  assert.deepEqual(drawn.tip, [1000, 1064, 1112, 1160, 1208, 1256, 1304, 1352]);
+  assert.deepEqual(drawn.map, [1000, 1112, 1208, 1304]);
+  assert.deepEqual(drawn.plots, [1000, 1208]);
+  const every = new Set(drawn.tip);
+  assert.ok([...drawn.map, ...drawn.plots].every((t) => every.has(t)), 'the slower views draw only in frames the tip draws in');
+  // A zero period is every frame, aligned or not.
+  const g = fake();
+  const n = [];
+  const v = g.s.register('v', (p, now) => n.push(now), { period: () => 0, aligned: true });
+  g.s.start();
+  for (const t of [16, 32, 48]) {
+    v.mark();
+    g.frame(t);
+  }
+  assert.deepEqual(n, [16, 32, 48]);
+});

@@ -2,7 +2,7 @@
 // 10 s window (src/haptic.js; uPlot itself is not run).
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { hapticFields, HapticTrace } from '../src/haptic.js';
+import { hapticFields, HapticTrace, scalesText } from '../src/haptic.js';
 
 test('the fields of an engaged handle on a live link', () => {
   const f = hapticFields({ link: 'up', phase: 'engaged', handle_m: 0.01234, force_n: 0.5, tip_force_n: 2.5e-9, pc_active: true });
@@ -37,4 +37,11 @@ test('the plot keeps the last 10 s of the force at the hand; a server restart st
   assert.deepEqual([tr.t, tr.f], [[1], [7]]);
   const [ex, ey] = new HapticTrace().data();
   assert.deepEqual([ex.length, ey.length], [0, 0]);
+});
+
+test('the scales in force in words; unknown is "–"', () => {
+  assert.equal(scalesText({ nm_per_mm: 10, pull_off_at_hand_n: 1 }), '10 nm per mm · pull-off felt as 1 N');
+  assert.equal(scalesText({ nm_per_mm: 0.333333, pull_off_at_hand_n: 2.5 }), '0.3333 nm per mm · pull-off felt as 2.5 N');
+  assert.equal(scalesText(null), '–');
+  assert.equal(scalesText({ nm_per_mm: 10 }), '–');
 });

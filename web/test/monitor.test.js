@@ -2,7 +2,7 @@
 // (src/monitor.js; its DOM is not built).
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { statusTiles } from '../src/monitor.js';
+import { statusTiles, alertsOf, downText, runLine } from '../src/monitor.js';
 
 test('the tiles of a busy instrument with overruns and an engaged haptic link', () => {
   const tiles = statusTiles({
@@ -16,6 +16,7 @@ test('the tiles of a busy instrument with overruns and an engaged haptic link', 
   assert.deepEqual(tiles, [
     ['m-scene', '· gold-latex', ''],
     ['m-phase', 'pushing (busy)', ''],
+    ['m-alerts', '2 loop overruns', 'bad'],
     ['m-loop', '5000 ticks, 2 overruns, real-time', 'warn'],
     ['m-jitter', '≤ 42 µs', ''],
     ['m-haptic', 'up, engaged', ''],
@@ -37,4 +38,21 @@ test('an idle instrument with no haptic link, no p99 yet and a free lease', () =
   assert.deepEqual(statusTiles({ loop: {}, haptic: { link: 'down' } }).find((t) => t[0] === 'm-haptic'), ['m-haptic', 'down', 'bad']);
   const lost = { loop: {}, haptic: { link: 'down', rate_hz: 1000, device_faults: { bad_packets: 0, timeouts: 0, seq_gaps: 0, out_of_range: 0, watchdog_trips: 0, overruns: 0, losses: 2, reopens: 1 } } };
   assert.deepEqual(statusTiles(lost).find((t) => t[0] === 'm-hapdev'), ['m-hapdev', '1 kHz · faults: device 0 · bridge 0 · cable 2 lost, 1 reopened', 'bad']);
+});
+
+test('alerts: healthy is "none"; overruns, a lost haptic link (worse while engaged), faults, dropped frames', () => {
+  assert.deepEqual(alertsOf({ loop: { overruns: 0 }, haptic: { link: 'up' }, dropped_frames: 0 }), []);
+  assert.deepEqual(alertsOf({ loop: { overruns: 3 }, haptic: { link: 'down', engaged: true, fault: 'link_lost' }, dropped_frames: 7 }),
+    ['3 loop overruns', 'haptic link down while engaged', 'haptic fault: link_lost', '7 telemetry frames dropped']);
+  const t = new Map(statusTiles({ loop: { overruns: 0 }, haptic: { link: 'up', link_downs: 2 }, uptime_s: 600, started_unix_ms: Date.UTC(2026, 0, 1, 12, 0, 0) }).map(([id, text, cls]) => [id, [text, cls]]));
+  assert.deepEqual(t.get('m-alerts'), ['none', 'good']);
+  assert.equal(t.get('m-haptic')[0], 'up, 2 link losses');
+  assert.match(t.get('m-uptime')[0], /^\d\d:\d\d:\d\d \(10 min\)$/);
+  assert.deepEqual(statusTiles({ loop: { period_error_p99_bound_s: 0.1 } }).find((x) => x[0] === 'm-jitter'), ['m-jitter', '≤ 100 ms', 'warn']);
+});
+
+test('the down banner names the time, and a run of the history reads as the page\'s', () => {
+  assert.match(downText(Date.UTC(2026, 0, 1, 12, 0, 0), 'Failed to fetch'), /^server down since \d\d:\d\d:\d\d \(Failed to fetch\); what is shown below is from before$/);
+  const l = runLine({ record: 'push-1-r1-p1.json', modified: 1767268800, run: 1, particle: 1, outcome: 'stopped', failure: 'stopped: the lease holder disconnected', estimate: [1e-6, 2e-6] });
+  assert.match(l, /^\d\d:\d\d:\d\d push of #1 stopped: the lease holder disconnected, particle left at \(1\.00, 2\.00\) µm \(record push-1-r1-p1\.json\)$/);
 });

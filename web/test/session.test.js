@@ -1,7 +1,7 @@
 // node --test: the Session (src/session.js) over sequences of the server's messages.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { Session, controlState, sceneParticles, setPointForceN, describeRun } from '../src/session.js';
+import { Session, controlState, sceneParticles, setPointForceN, describeRun, runClass, lostPushRun } from '../src/session.js';
 import { WS_VERSION, encodeScanLine, commands } from '../src/wire.js';
 
 test('session: welcome, lease changes and who may command', () => {
@@ -252,8 +252,8 @@ test('session: a push that never started (estimate null) is a run like any other
   assert.equal(s.state.particles[0].x, 40e-6, 'not moved');
   assert.equal(describeRun(r), 'push of #1 failed: plan: particle 1: target out of reach, it never started (no record)');
   assert.equal(describeRun({ particle: 2, outcome: 'ok', estimate: [5e-5, 6e-5], record: 'push-1.csv' }), 'push of #2 ok, particle now at (50.00, 60.00) µm (record push-1.csv)');
-  assert.equal(describeRun({ particle: 2, outcome: 'stopped', failure: 'stopped by the operator', estimate: [5e-8, 6e-8], record: null, record_error: 'disk full' }),
-    'push of #2 failed: stopped: stopped by the operator, particle left at (50.0, 60.0) nm (no record: disk full)');
+  assert.equal(describeRun({ particle: 2, outcome: 'stopped', failure: 'stopped: stop requested by the operator', estimate: [5e-8, 6e-8], record: null, record_error: 'disk full' }),
+    'push of #2 stopped: stop requested by the operator, particle left at (50.0, 60.0) nm (no record: disk full)');
 });
 
 test('session: losing the lease is told apart from a lease changing elsewhere, with the server\'s reason', () => {
@@ -280,4 +280,110 @@ test('the set point as a force: the gold-latex scene\'s −1.5 V is 3.25 nm of d
   const f = setPointForceN({ strategy: { set_point_v: -1.5 }, sensor: { baseline_v: -0.2, gain_v_per_nm: -0.4 }, cantilever: { stiffness_n_per_m: 8 } });
   assert.ok(Math.abs(f - 26e-9) < 1e-15, `${f}`);
   assert.equal(setPointForceN({ strategy: {} }), null);
+});
+
+test('a stop is not a failure: "stopped" runs say who stopped them, once, in a neutral colour; a miss is amber', () => {
+  // Issue 26: the record said "failed: stopped: stopped: stop requested by the operator".
+  const stop = { particle: 1, outcome: 'stopped', failure: 'stopped: the lease holder disconnected', estimate: [1e-6, 2e-6], record: 'push-1.json' };
+  assert.equal(describeRun(stop), 'push of #1 stopped: the lease holder disconnected, particle left at (1.00, 2.00) µm (record push-1.json)');
+  assert.equal(runClass(stop), 'neutral');
+  assert.equal(runClass({ outcome: 'ok' }), 'good');
+  assert.equal(runClass({ outcome: 'plan' }), 'bad');
+  const missed = { particle: 3, outcome: 'missed', failure: 'ended 0.40 µm from the target', estimate: [1e-6, 2e-6], record: 'push-2.json' };
+  assert.equal(runClass(missed), 'warn');
+  assert.match(describeRun(missed), /^push of #3 missed: ended 0\.40 µm from the target/);
+});
+
+test('a push running when the connection closes is kept as lost; a restart is told from the instance id', () => {
+  const s = openSession(4);
+  s.apply({ type: 'welcome', version: WS_VERSION, client: 4, role: 'operator', lease: 4, scene: 'g', tick_hz: 1000, instance: 'a-1', started_unix_ms: 1000 });
+  assert.equal(s.state.instance, 'a-1');
+  assert.equal(s.state.restarted, false, 'the first server seen is no restart');
+  s.apply({ type: 'push_started', particle: 1, path: [[40e-6, 30e-6], [41e-6, 30e-6]], by: 4 });
+  s.closed(1, 250);
+  assert.equal(s.state.push, null, 'nothing runs that this page knows of');
+  assert.deepEqual(s.state.lostPush.particle, 1, 'but the push it saw running is remembered');
+  s.opened();
+  const ev = s.apply({ type: 'welcome', version: WS_VERSION, client: 9, role: 'operator', lease: null, scene: 'g', tick_hz: 1000, instance: 'b-2', started_unix_ms: 5000 });
+  assert.equal(ev.restarted, true);
+  assert.equal(ev.previous, 'a-1');
+  assert.equal(s.state.restarted, true);
+  assert.equal(s.state.startedUnixMs, 5000);
+  // The same server again (a network blip): no restart.
+  s.closed(1, 250);
+  s.opened();
+  assert.equal(s.apply({ type: 'welcome', version: WS_VERSION, client: 10, role: 'operator', lease: null, scene: 'g', tick_hz: 1000, instance: 'b-2', started_unix_ms: 5000 }).restarted, false);
+});
+
+test('the haptic handle may be engaged only while its link is up', () => {
+  const s = openSession(4);
+  s.apply({ type: 'lease', holder: 4 });
+  s.apply({ type: 'telemetry', t: 1, stage: [0, 0, 1e-6], volts: 0, phase: 'idle', estimate: null, haptic: { link: 'down', phase: 'off', tip_force_n: 0, pc_active: false } });
+  let c = controlState(s.state);
+  assert.equal(c.hapticEngage.enabled, false);
+  assert.match(c.hapticEngage.why, /link is down/);
+  assert.equal(c.haptic.enabled, true, 'release and the scales stay');
+  s.apply({ type: 'telemetry', t: 2, stage: [0, 0, 1e-6], volts: 0, phase: 'idle', estimate: null, haptic: { link: 'up', phase: 'off', tip_force_n: 0, pc_active: false } });
+  c = controlState(s.state);
+  assert.equal(c.hapticEngage.enabled, true);
+});
+
+// Found by the review of issue 26: the scan shown across a reconnect.
+const welcomeOf = (instance, client = 5) => ({ type: 'welcome', version: WS_VERSION, client, role: 'viewer', lease: null, scene: 'g', tick_hz: 1000, instance, started_unix_ms: 1000 });
+const scanOf = (id, extra = {}) => ({ scan: id, xres: 4, yres: 3, x_offset: 0, y_offset: 0, x_real: 1e-6, y_real: 1e-6, done: false, record: null, stale: false, ...extra });
+const stateWith = (scan) => ({ type: 'state', particles: [], stage: [0, 0, 1e-6], phase: 'idle', lease: null, push: null, scan });
+
+test('a scan that ended while the page was away (same server) is marked done and fetched whole, not left at its last line', () => {
+  const s = openSession(5);
+  s.apply(welcomeOf('a-1'));
+  s.apply(stateWith(scanOf(3)));
+  s.apply(encodeScanLine({ scan: 3, line: 0, xres: 4, yres: 3, y: 0 }, [1e-9, 2e-9, 3e-9, 4e-9]));
+  s.closed(1, 250);
+  s.opened();
+  s.apply(welcomeOf('a-1', 6));
+  const ev = s.apply(stateWith(scanOf(3, { done: true, record: 'scan-1-3.gsf' })));
+  assert.equal(s.state.scan.done, true, 'the server says scan 3 is done');
+  assert.equal(s.state.scan.record, 'scan-1-3.gsf');
+  assert.equal(ev.scanFinished, true, 'the page is told to fetch the lines it missed');
+  assert.equal(ev.scanChanged, false);
+});
+
+test('after a server restart the previous run\'s scan is never taken for the new one\'s: an unfinished one is interrupted, and the same id is another scan', () => {
+  const s = openSession(5);
+  s.apply(welcomeOf('a-1'));
+  s.apply(stateWith(scanOf(1)));
+  s.apply(encodeScanLine({ scan: 1, line: 0, xres: 4, yres: 3, y: 0 }, [1e-9, 2e-9, 3e-9, 4e-9]));
+  s.closed(1, 250);
+  s.opened();
+  s.apply(welcomeOf('b-2', 1));
+  s.apply(stateWith(null));
+  assert.equal(s.state.scan.interrupted, true, 'scan 1 of the killed server never ends');
+  assert.equal(s.state.scanStale, true, 'the restarted server\'s sample is not what it shows');
+  // The new server's scan 1 is another scan, though it has the same number.
+  const ev = s.apply(stateWith(scanOf(1, { done: true, record: 'scan-9-1.gsf' })));
+  assert.equal(ev.scanChanged, true);
+  assert.equal(s.state.scan.interrupted, false);
+  assert.equal(s.state.scan.record, 'scan-9-1.gsf');
+  assert.equal(s.state.scanStale, false);
+});
+
+test('a push lost from sight is matched to its own record (server run and run number), never to an earlier push of that particle (review of issue 26)', () => {
+  const s = openSession(4);
+  s.apply({ type: 'welcome', version: WS_VERSION, client: 4, role: 'operator', lease: 4, scene: 'g', tick_hz: 1000, instance: 'a-1', started_unix_ms: 1000 });
+  s.apply({ type: 'push_started', particle: 1, path: [[40e-6, 30e-6], [41e-6, 30e-6]], by: 4, run: 2 });
+  s.closed(1, 250);
+  const lost = s.state.lostPush;
+  assert.equal(lost.run, 2);
+  assert.equal(lost.instance, 'a-1');
+  const now = Date.now() / 1000;
+  // Run 1 of the same particle ended a second before run 2 began; run 2 was killed (no record);
+  // the restarted server ('b-2') already has a run 2 of that particle too.
+  const runs = [
+    { record: 'push-9-r2-p1.json', modified: Math.floor(now) + 5, instance: 'b-2', run: 2, particle: 1, outcome: 'ok' },
+    { record: 'push-8-r1-p1.json', modified: Math.floor(now) - 1, instance: 'a-1', run: 1, particle: 1, outcome: 'ok' },
+  ];
+  assert.equal(lostPushRun(runs, lost), null, 'killed: no record of it');
+  const own = { record: 'push-8-r2-p1.json', modified: Math.floor(now), instance: 'a-1', run: 2, particle: 1, outcome: 'stopped', failure: 'stopped: the lease holder disconnected' };
+  assert.equal(lostPushRun([runs[0], own, runs[1]], lost), own);
+  assert.equal(lostPushRun(null, lost), null);
 });

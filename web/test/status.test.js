@@ -62,3 +62,13 @@ test('StatusBar writes the fields into the page', () => {
   assert.equal(els['st-conn'].className, 'conn-closed');
   assert.equal(txt.textContent, 'reconnecting in 1.0 s (attempt 2)');
 });
+
+test('while disconnected, what the server said is "unknown", not the last value seen', () => {
+  const s = new Session();
+  s.opened();
+  s.apply({ type: 'welcome', version: 1, client: 4, role: 'operator', lease: 4, scene: 'g', tick_hz: 1000 });
+  s.apply({ type: 'telemetry', t: 1, stage: [0, 0, 1e-6], volts: 0, phase: 'approach', estimate: null });
+  s.closed(1, 250);
+  const f = statusFields(s.state);
+  assert.deepEqual([f.role, f.client, f.lease.text, f.lease.cls, f.phase], ['unknown', 'unknown', 'unknown', 'unknown', 'unknown']);
+});

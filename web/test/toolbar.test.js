@@ -9,6 +9,10 @@ test('"Auto" makes the height range 15 % of the scan\'s shorter side; the slider
   assert.equal(autoExaggerationFor({ x_real: 1e-6, y_real: 1e-6, min: 0, max: 0 }), null, 'flat');
   assert.equal(autoExaggerationFor({ x_real: 1e-6, y_real: 1e-6, min: Infinity, max: -Infinity }), null, 'no lines yet');
   assert.equal(autoExaggerationFor(null), null);
+  // Issue 26: a 14 nm particle in a 50 µm, 256 px scan became a 535× pillar; the tallest feature
+  // is kept within 8 pixel widths: 8 × 195 nm / 14 nm = 112×.
+  const gold = autoExaggerationFor({ x_real: 50e-6, y_real: 50e-6, xres: 256, yres: 256, min: 0, max: 14e-9 });
+  assert.ok(Math.abs(gold - (8 * 50e-6) / 256 / 14e-9) < 1e-6, `${gold}`);
   assert.equal(clampExaggeration(0.2), 1);
   assert.equal(clampExaggeration(30), 30);
   assert.equal(clampExaggeration(5000), 1000);

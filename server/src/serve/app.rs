@@ -19,15 +19,40 @@ use crate::serve::metrics::render;
 use crate::serve::records;
 use crate::serve::session::{HARD_CAP, session};
 
+/// What is wrong with the built web client in `web_dir`, in words, or None: not built (the page
+/// cannot start), or built before a change of its sources (`web/src/`, after a `git pull`: the
+/// page served is the old one). Both name the command that builds it.
+pub fn web_build_problem(web_dir: &std::path::Path) -> Option<String> {
+    let built = web_dir.join("dist").join("main.js");
+    let how = format!(
+        "build it with `cd {} && npm ci && npm run build` (or `make web`)",
+        web_dir.display()
+    );
+    let Ok(built_at) = std::fs::metadata(&built).and_then(|m| m.modified()) else {
+        return Some(format!(
+            "the web client is not built ({} is missing): the page cannot start; {how}",
+            built.display()
+        ));
+    };
+    let newer = std::fs::read_dir(web_dir.join("src"))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter(|e| e.metadata().and_then(|m| m.modified()).is_ok_and(|t| t > built_at))
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .min();
+    newer.map(|name| {
+        format!(
+            "the web client is older than its sources (src/{name} changed since {} was built): the page served is the old one; {how}",
+            built.display()
+        )
+    })
+}
+
 /// The router.
 pub fn router(state: Arc<AppState>) -> Router {
-    let packages = state.cfg.web_dir.join("node_modules");
-    if !packages.join("three").is_dir() || !packages.join("uplot").is_dir() {
-        tracing::warn!(
-            "the web client's packages are missing ({} has no three/ or uplot/): the page cannot start; install them with `cd {} && npm ci` (or `make web`)",
-            packages.display(),
-            state.cfg.web_dir.display()
-        );
+    if let Some(problem) = web_build_problem(&state.cfg.web_dir) {
+        tracing::warn!("{problem}");
     }
     let web = tower_http::services::ServeDir::new(&state.cfg.web_dir).append_index_html_on_directories(true);
     Router::new()
@@ -36,9 +61,10 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/scene", get(scene_json))
         .route("/api/records", get(records_list))
         .route("/api/records/{name}", get(record_get))
+        .route("/api/runs", get(runs))
         .route("/metrics", get(metrics))
-        // Static files gzip-compressed when the browser accepts it (three.js's 1.3 MB module is
-        // ~300 kB on the wire): a remote operator's page loads in seconds, not tens of seconds.
+        // Static files gzip-compressed when the browser accepts it (the minified page, three.js
+        // included, is ~0.7 MB, ~0.2 MB on the wire): a remote operator's page loads in seconds.
         .fallback_service(tower_http::compression::Compression::new(web))
         .layer(axum::middleware::from_fn_with_state(state.clone(), guard))
         .with_state(state)
@@ -92,6 +118,8 @@ async fn status(State(st): State<Arc<AppState>>) -> Response {
     let m = &st.shared.metrics;
     let body = serde_json::json!({
         "scene": st.scene.file.name,
+        "instance": st.instance.id,
+        "started_unix_ms": st.instance.started_unix_ms,
         "uptime_s": st.shared.start.elapsed().as_secs_f64(),
         "clients": st.net.clients.load(Relaxed),
         "lease": st.lease_holder(),
@@ -111,6 +139,7 @@ async fn status(State(st): State<Arc<AppState>>) -> Response {
         "telemetry_sent": st.net.sent.load(Relaxed),
         "dropped_frames": st.net.dropped_frames.load(Relaxed),
         "haptic": haptic_status(&m.haptic),
+        "haptic_scales": st.haptic_scales.lock().map(|s| *s).ok(),
         // Where the controller believes each particle is (m), as the `state` message says.
         "particles": match st.state_message() {
             ServerMessage::State { particles, .. } => serde_json::to_value(particles).unwrap_or_default(),
@@ -124,10 +153,34 @@ async fn scene_json(State(st): State<Arc<AppState>>) -> Response {
     axum::Json(&st.scene.file).into_response()
 }
 
+/// The records in the data directory, newest first. Read on a blocking thread: a directory of
+/// ten thousand records takes a tenth of a second to list, which an async worker (one of two
+/// on the lab's machine) would not spend on the clients' telemetry.
 async fn records_list(State(st): State<Arc<AppState>>) -> Response {
-    match records::list(&st.cfg.data_dir) {
-        Ok(l) => axum::Json(l).into_response(),
-        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("listing records: {e}")).into_response(),
+    let dir = st.cfg.data_dir.clone();
+    off_runtime("listing records", move || records::list(&dir)).await
+}
+
+/// The pushes recorded in the data directory, newest first (at most [`records::RUNS_MAX`]): the
+/// run history a page or a monitor shows, which survives restarts.
+async fn runs(State(st): State<Arc<AppState>>) -> Response {
+    let dir = st.cfg.data_dir.clone();
+    off_runtime("reading the run history", move || {
+        records::run_history(&dir, records::RUNS_MAX)
+    })
+    .await
+}
+
+/// `read` (file system work) on a blocking thread, its result as JSON, or a 500 that says
+/// `what` failed and why.
+async fn off_runtime<T: serde::Serialize + Send + 'static>(
+    what: &str,
+    read: impl FnOnce() -> std::io::Result<T> + Send + 'static,
+) -> Response {
+    match tokio::task::spawn_blocking(read).await {
+        Ok(Ok(v)) => axum::Json(v).into_response(),
+        Ok(Err(e)) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{what}: {e}")).into_response(),
+        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{what}: {e}")).into_response(),
     }
 }
 
@@ -247,4 +300,42 @@ async fn ws_upgrade(
             session(st, socket, role, peer).await;
             drop(held);
         })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::web_build_problem;
+
+    /// A web client not built, or built before its sources changed, is said at start with the
+    /// command that builds it (review of issue 26: after a `git pull`, the old page was served
+    /// without a word).
+    #[test]
+    fn a_web_client_missing_or_older_than_its_sources_is_named_with_the_build_command() {
+        let web = std::env::temp_dir().join(format!("nanopush-webbuild-{}", std::process::id()));
+        std::fs::create_dir_all(web.join("src")).unwrap();
+        std::fs::create_dir_all(web.join("dist")).unwrap();
+        std::fs::write(web.join("src/app.js"), "1").unwrap();
+        let p = web_build_problem(&web).expect("not built");
+        assert!(p.contains("is not built") && p.contains("npm run build"), "{p}");
+        std::fs::write(web.join("dist/main.js"), "1").unwrap();
+        let built = std::fs::metadata(web.join("dist/main.js")).unwrap().modified().unwrap();
+        let before = built - std::time::Duration::from_secs(60);
+        let after = built + std::time::Duration::from_secs(60);
+        std::fs::File::options()
+            .write(true)
+            .open(web.join("src/app.js"))
+            .unwrap()
+            .set_modified(before)
+            .unwrap();
+        assert_eq!(web_build_problem(&web), None, "built after its sources");
+        std::fs::File::options()
+            .write(true)
+            .open(web.join("src/app.js"))
+            .unwrap()
+            .set_modified(after)
+            .unwrap();
+        let p = web_build_problem(&web).expect("older than its sources");
+        assert!(p.contains("src/app.js changed") && p.contains("make web"), "{p}");
+        std::fs::remove_dir_all(&web).unwrap();
+    }
 }

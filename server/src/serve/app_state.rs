@@ -73,6 +73,44 @@ pub struct AppState {
     pub channels: Channels,
     /// What the instrument is doing beside the loop: scans, push preparation, shutdown.
     pub activity: Activity,
+    /// When this server started (Unix ms) and its instance id: a page that reconnects to a
+    /// different instance knows the server restarted (and what it last saw is gone).
+    pub instance: Instance,
+    /// The haptic scales in force, in the protocol's units: the scene's, then each accepted
+    /// `haptic scale` (`/api/status`'s `haptic_scales`).
+    pub haptic_scales: Mutex<HapticScales>,
+}
+
+/// The haptic scales in force, as the operator sets them.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct HapticScales {
+    /// Tip nanometres per handle millimetre.
+    pub nm_per_mm: f64,
+    /// The force the hand feels at the pull-off force (N).
+    pub pull_off_at_hand_n: f64,
+}
+
+/// One run of the server: its start (Unix ms) and an id no other run shares (the start and the
+/// process id, in hex).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Instance {
+    /// This server's id.
+    pub id: String,
+    /// When it started (ms since the Unix epoch).
+    pub started_unix_ms: u64,
+}
+
+impl Instance {
+    /// This process, now.
+    pub fn now() -> Instance {
+        let started_unix_ms = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as u64);
+        Instance {
+            id: format!("{started_unix_ms:x}-{:x}", std::process::id()),
+            started_unix_ms,
+        }
+    }
 }
 
 /// The connected clients.
@@ -211,6 +249,11 @@ impl AppState {
     /// The state of a server.
     pub fn new(cfg: ServeConfig, scene: Scene, shared: Arc<Shared>, params: StrategyParams) -> AppState {
         AppState {
+            instance: Instance::now(),
+            haptic_scales: Mutex::new(HapticScales {
+                nm_per_mm: scene.file.haptic.nm_per_mm,
+                pull_off_at_hand_n: scene.file.haptic.pull_off_at_hand_n,
+            }),
             cfg,
             params,
             shared,

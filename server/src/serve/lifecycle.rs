@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use crate::instrument::Afm;
 use crate::scene::Scene;
-use crate::serve::app_state::{AppState, ServeConfig};
+use crate::serve::app_state::{AppState, Instance, ServeConfig};
 use crate::serve::control_loop::{ControlLoop, LoopCommand, LoopConfig, Shared};
 use crate::serve::haptic::{HapticMode, Supervisor};
 use crate::serve::{app, guard, records, telemetry};
@@ -61,9 +61,12 @@ pub async fn run(
     let (ev_tx, ev_rx) = tokio::sync::mpsc::unbounded_channel();
     let rec_shared = shared.clone();
     let dir = cfg.data_dir.clone();
+    // This run of the server, named in its records' summaries and in `welcome`.
+    let instance = Instance::now();
+    let rec_instance = instance.id.clone();
     let recorder = match std::thread::Builder::new()
         .name("recorder".into())
-        .spawn(move || records::run_recorder(rec_shared, dir, ev_tx))
+        .spawn(move || records::run_recorder(rec_shared, dir, rec_instance, ev_tx))
     {
         Ok(r) => r,
         Err(source) => {
@@ -81,7 +84,9 @@ pub async fn run(
         HapticMode::External => Some(Supervisor::start(None, shared.clone())),
         HapticMode::None => None,
     };
-    let state = Arc::new(AppState::new(cfg, scene, shared, params));
+    let mut state = AppState::new(cfg, scene, shared, params);
+    state.instance = instance;
+    let state = Arc::new(state);
     *state.addr.lock().expect("addr lock") = Some(addr);
     let url = format!("http://{addr}/?token={}", state.cfg.operator_token);
     started(&Started { addr, url });

@@ -93,7 +93,12 @@ pub(crate) fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, gen
     let run = st.shared.runs.fetch_add(1, Relaxed) + 1;
     let mut path = vec![[located.x, located.y]];
     path.extend(legs.iter().map(|l| [l.to.0, l.to.1]));
-    let started = PushPath { particle, path, by };
+    let started = PushPath {
+        particle,
+        path,
+        by,
+        run,
+    };
     let job = PushJob {
         run,
         particle,

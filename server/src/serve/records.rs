@@ -78,11 +78,88 @@ pub fn list(dir: &Path) -> std::io::Result<Vec<RecordEntry>> {
     Ok(out)
 }
 
+/// How many runs `/api/runs` returns at most.
+pub const RUNS_MAX: usize = 50;
+
+/// A push summary is well under a kilobyte: a file of its name larger than this is not one, and
+/// is not read (the monitors ask for the history every 5 s).
+pub const SUMMARY_MAX_BYTES: u64 = 64 * 1024;
+
+/// One push of the run history (`/api/runs`), from its record's JSON summary.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunEntry {
+    /// The summary's file name (`push-….json`).
+    pub record: String,
+    /// When it was written (Unix seconds).
+    pub modified: u64,
+    /// The server run that wrote it (`welcome`'s `instance`; none in older records).
+    pub instance: Option<String>,
+    /// Run number (per server run: numbers start again after a restart).
+    pub run: u64,
+    /// Particle id.
+    pub particle: u32,
+    /// `ok` or the failure code.
+    pub outcome: String,
+    /// The failure in words.
+    pub failure: Option<String>,
+    /// Estimated final centre (m).
+    pub estimate: [f64; 2],
+}
+
+/// The pushes recorded in `dir`, newest first, at most `max`: read from their JSON summaries (a
+/// summary that cannot be read or parsed, or is larger than [`SUMMARY_MAX_BYTES`], is skipped),
+/// so the history survives restarts.
+pub fn run_history(dir: &Path, max: usize) -> std::io::Result<Vec<RunEntry>> {
+    let mut out = Vec::new();
+    for e in list(dir)? {
+        if out.len() >= max {
+            break;
+        }
+        if e.kind != "push" || !e.name.ends_with(".json") || e.bytes > SUMMARY_MAX_BYTES {
+            continue;
+        }
+        let Ok(bytes) = std::fs::read(dir.join(&e.name)) else {
+            continue;
+        };
+        let Ok(v) = serde_json::from_slice::<serde_json::Value>(&bytes) else {
+            continue;
+        };
+        let (Some(run), Some(particle), Some(outcome)) = (
+            v.get("run").and_then(serde_json::Value::as_u64),
+            v.get("particle")
+                .and_then(serde_json::Value::as_u64)
+                .and_then(|p| u32::try_from(p).ok()),
+            v.get("outcome").and_then(serde_json::Value::as_str),
+        ) else {
+            continue;
+        };
+        let est = v.get("estimate").and_then(serde_json::Value::as_array);
+        let at = |i: usize| est.and_then(|a| a.get(i)).and_then(serde_json::Value::as_f64);
+        out.push(RunEntry {
+            record: e.name,
+            modified: e.modified,
+            instance: v
+                .get("instance")
+                .and_then(serde_json::Value::as_str)
+                .map(str::to_string),
+            run,
+            particle,
+            outcome: outcome.to_string(),
+            failure: v.get("failure").and_then(serde_json::Value::as_str).map(str::to_string),
+            estimate: [at(0).unwrap_or(f64::NAN), at(1).unwrap_or(f64::NAN)],
+        });
+    }
+    Ok(out)
+}
+
 /// The JSON summary of a push record.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PushSummary {
     /// `"push-record"`.
     pub schema: &'static str,
+    /// The server run that wrote it (`welcome`'s `instance`): run numbers start again after a
+    /// restart, the pair names one push.
+    pub instance: String,
     /// Run number.
     pub run: u64,
     /// Particle id.
@@ -123,10 +200,15 @@ pub fn clean_partials(dir: &Path) -> usize {
         .count()
 }
 
-/// Drains the loop's trace rows and events, writes the records, and forwards each event with
-/// its record's name — or the reason it could not be written. Ends when the loop has finished
-/// and everything is written.
-pub fn run_recorder(shared: Arc<Shared>, dir: PathBuf, out: tokio::sync::mpsc::UnboundedSender<(LoopEvent, Recorded)>) {
+/// Drains the loop's trace rows and events, writes the records (each summary names `instance`,
+/// the server run), and forwards each event with its record's name — or the reason it could not
+/// be written. Ends when the loop has finished and everything is written.
+pub fn run_recorder(
+    shared: Arc<Shared>,
+    dir: PathBuf,
+    instance: String,
+    out: tokio::sync::mpsc::UnboundedSender<(LoopEvent, Recorded)>,
+) {
     if let Err(e) = std::fs::create_dir_all(&dir) {
         tracing::error!("records: cannot create {}: {e}", dir.display());
     }
@@ -167,6 +249,7 @@ pub fn run_recorder(shared: Arc<Shared>, dir: PathBuf, out: tokio::sync::mpsc::U
                 let stem = trace.trim_end_matches(".csv").to_string();
                 let summary = PushSummary {
                     schema: "push-record",
+                    instance: instance.clone(),
                     run,
                     particle,
                     outcome: outcome.into(),
@@ -308,6 +391,61 @@ mod tests {
         assert_eq!(l[0].name, "scan-1-1.json");
         assert_eq!(l[0].kind, "scan");
         assert_eq!(l[0].bytes, 2);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_run_history_reads_push_summaries_newest_first_and_skips_the_rest() {
+        let dir = std::env::temp_dir().join(format!("nanopush-runs-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let summary = |run: u64, outcome: &str, failure: Option<&str>| {
+            serde_json::to_vec(&PushSummary {
+                schema: "push-record",
+                instance: "18f-2a".into(),
+                run,
+                particle: 2,
+                outcome: outcome.into(),
+                failure: failure.map(str::to_string),
+                legs: 1,
+                estimate: [1e-6, 2e-6],
+                truth: [1e-6, 2e-6],
+                rows: 10,
+                trace: format!("push-1-r{run}-p2.csv"),
+            })
+            .unwrap()
+        };
+        std::fs::write(dir.join("push-1-r1-p2.json"), summary(1, "ok", None)).unwrap();
+        std::fs::write(
+            dir.join("push-2-r2-p2.json"),
+            summary(2, "stopped", Some("stopped: the lease holder disconnected")),
+        )
+        .unwrap();
+        std::fs::write(dir.join("push-3-r3-p2.json"), b"not json").unwrap();
+        // A file of a summary's name but megabytes long (copied there by hand) is not read: the
+        // monitors ask for the history every 5 s.
+        let mut big = br#"{"run":5,"particle":2,"outcome":"ok","pad":""#.to_vec();
+        big.extend(std::iter::repeat_n(b'x', SUMMARY_MAX_BYTES as usize));
+        big.extend(br#""}"#);
+        std::fs::write(dir.join("push-3-r5-p2.json"), big).unwrap();
+        // A particle id no particle has (beyond u32) is no run, not particle 4294967295.
+        std::fs::write(
+            dir.join("push-3-r4-p2.json"),
+            br#"{"run":4,"particle":99999999999,"outcome":"ok"}"#,
+        )
+        .unwrap();
+        std::fs::write(dir.join("push-1-r1-p2.csv"), b"t\n").unwrap();
+        std::fs::write(dir.join("scan-1-1.json"), b"{}").unwrap();
+        let h = run_history(&dir, 10).unwrap();
+        assert_eq!(h.len(), 2, "{h:?}");
+        // Same second: the newer name first.
+        assert_eq!(h[0].record, "push-2-r2-p2.json");
+        assert_eq!(h[0].outcome, "stopped");
+        assert_eq!(h[0].failure.as_deref(), Some("stopped: the lease holder disconnected"));
+        assert_eq!(h[1].run, 1);
+        assert_eq!(h[1].instance.as_deref(), Some("18f-2a"), "which server run wrote it");
+        assert_eq!(h[1].estimate, [1e-6, 2e-6]);
+        assert_eq!(run_history(&dir, 1).unwrap().len(), 1);
+        assert!(run_history(&dir.join("missing"), 10).unwrap().is_empty());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -22,12 +22,32 @@ pub struct PushJob {
 pub enum LoopCommand {
     /// Start a push.
     Push(Box<PushJob>),
-    /// Stop the running push: the tip retracts.
-    Stop,
+    /// Stop the running push, for this reason: the tip retracts.
+    Stop(StopReason),
     /// Finish: stop any push, retract, release the haptic force, end the thread.
     Shutdown,
     /// Haptic z-control.
     Haptic(HapticCommand),
+}
+
+/// Why a push was stopped: the words its `run_done` failure gives (a disconnect is not the
+/// operator's Stop).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopReason {
+    /// The lease holder pressed Stop (or sent `stop`).
+    Operator,
+    /// The lease holder's connection closed while its push ran.
+    HolderDisconnected,
+}
+
+impl StopReason {
+    /// The reason in words, as `run_done`'s `failure` says it after `stopped: `.
+    pub fn words(self) -> &'static str {
+        match self {
+            StopReason::Operator => "stop requested by the operator",
+            StopReason::HolderDisconnected => "the lease holder disconnected",
+        }
+    }
 }
 
 /// What the loop reports back.

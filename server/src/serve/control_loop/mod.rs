@@ -40,7 +40,7 @@ use crate::instrument::{Afm, Reading};
 use crate::serve::haptic::HapticCommand;
 use crate::serve::haptic::link::{LINK_DOWN, LINK_UP, ServerLink, believable, down_after_ns};
 use crate::serve::haptic::metrics::phase_index;
-pub use messages::{LoopCommand, LoopEvent, PushJob, RecordMsg};
+pub use messages::{LoopCommand, LoopEvent, PushJob, RecordMsg, StopReason};
 use no_halt::NoHalt;
 use realtime::make_realtime;
 pub use shared::{LoopConfig, QueueFull, Shared, Snapshot};
@@ -218,10 +218,10 @@ impl ControlLoop {
                     let start = job.legs.first().map_or((0.0, 0.0), |l| l.from);
                     self.next_leg(job, 0, start, 0.0, reading);
                 }
-                LoopCommand::Stop => {
+                LoopCommand::Stop(why) => {
                     if let Some(a) = &mut self.active {
                         a.stop = true;
-                        a.strategy.abort("stop requested by the operator", reading.t);
+                        a.strategy.abort(why.words(), reading.t);
                     }
                 }
                 LoopCommand::Shutdown => {

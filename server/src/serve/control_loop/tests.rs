@@ -76,7 +76,7 @@ fn a_shutdown_when_idle_ends_the_loop_at_that_tick_and_the_end_marks_it_stopped(
 fn a_stop_with_no_push_running_is_ignored() {
     let (mut lp, shared) = default_loop();
     let mut running = lp.start(&shared, &CFG);
-    shared.command(LoopCommand::Stop).unwrap();
+    shared.command(LoopCommand::Stop(StopReason::Operator)).unwrap();
     assert!(lp.tick(&shared, &mut running, Instant::now()));
     assert!(shared.events.pop().is_none(), "no run ended");
     assert!(shared.records.pop().is_none(), "nothing recorded");
@@ -88,8 +88,8 @@ fn a_full_command_queue_refuses_and_counts_the_drop() {
     let (_lp, shared) = default_loop();
     let capacity = shared.commands.capacity();
     for _ in 0..capacity {
-        shared.command(LoopCommand::Stop).unwrap();
+        shared.command(LoopCommand::Stop(StopReason::Operator)).unwrap();
     }
-    assert_eq!(shared.command(LoopCommand::Stop), Err(QueueFull));
+    assert_eq!(shared.command(LoopCommand::Stop(StopReason::Operator)), Err(QueueFull));
     assert_eq!(shared.metrics.dropped_commands.load(Relaxed), 1);
 }

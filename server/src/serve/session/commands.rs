@@ -5,7 +5,7 @@ use std::collections::HashSet;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 
-use nanopush_proto::ws::{ClientMessage, ErrorCode, Stream as WsStream};
+use nanopush_proto::ws::{ClientMessage, ErrorCode, HapticAction, Stream as WsStream};
 
 use super::lease::{self, require_lease};
 use super::{Client, MIN_SCAN_UM};
@@ -13,7 +13,7 @@ use crate::control::MoveTarget;
 use crate::scan::ScanParams;
 use crate::serve::app_state::AppState;
 use crate::serve::command_checks::{Refusal, number, push_target};
-use crate::serve::control_loop::LoopCommand;
+use crate::serve::control_loop::{LoopCommand, StopReason};
 use crate::serve::haptic::api::haptic_command;
 use crate::serve::push_job::{on_stage, prepare_push, run_done_failed};
 use crate::serve::scan_job::run_scan;
@@ -36,7 +36,13 @@ pub(super) fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> 
                 nm_per_mm,
                 pull_off_at_hand_n,
             )?;
-            to_loop(st, LoopCommand::Haptic(cmd))
+            to_loop(st, LoopCommand::Haptic(cmd))?;
+            // Checked by `haptic_command`: the scales in force, for `/api/status`.
+            if let (HapticAction::Scale, Ok(mut s)) = (action, st.haptic_scales.lock()) {
+                s.nm_per_mm = nm_per_mm.unwrap_or(s.nm_per_mm);
+                s.pull_off_at_hand_n = pull_off_at_hand_n.unwrap_or(s.pull_off_at_hand_n);
+            }
+            Ok(())
         }
         ClientMessage::Ping { .. } => Ok(()),
         ClientMessage::Subscribe { streams, .. } => {
@@ -49,7 +55,7 @@ pub(super) fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> 
             require_lease(st, c)?;
             st.activity.scan_cancel.store(true, Relaxed);
             st.activity.generation.fetch_add(1, Relaxed);
-            to_loop(st, LoopCommand::Stop)
+            to_loop(st, LoopCommand::Stop(StopReason::Operator))
         }
         ClientMessage::Push {
             particle,

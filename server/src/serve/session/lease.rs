@@ -9,7 +9,7 @@ use nanopush_proto::ws::{ErrorCode, Role, ServerMessage};
 use super::Client;
 use crate::serve::app_state::AppState;
 use crate::serve::command_checks::Refusal;
-use crate::serve::control_loop::LoopCommand;
+use crate::serve::control_loop::{LoopCommand, StopReason};
 
 /// A command that changes the instrument needs an operator holding the lease, and a server
 /// that is not shutting down.
@@ -92,7 +92,7 @@ pub(super) fn on_disconnect(st: &AppState, id: u32) {
         st.activity.generation.fetch_add(1, Relaxed);
         if pushing {
             // A full queue is counted by `command`; the push then ends on its own.
-            let _ = st.shared.command(LoopCommand::Stop);
+            let _ = st.shared.command(LoopCommand::Stop(StopReason::HolderDisconnected));
         }
     }
     let what = match (pushing, scanning) {
@@ -184,7 +184,10 @@ mod tests {
             "a push being prepared is dropped"
         );
         assert!(st.activity.scan_cancel.load(Relaxed));
-        assert!(matches!(st.shared.commands.pop(), Some(LoopCommand::Stop)));
+        assert!(matches!(
+            st.shared.commands.pop(),
+            Some(LoopCommand::Stop(StopReason::HolderDisconnected))
+        ));
         let e = next_event(&mut events);
         assert!(e["holder"].is_null());
         assert_eq!(

@@ -76,6 +76,8 @@ where
         lease: st.lease_holder(),
         scene: st.scene.file.name.clone(),
         tick_hz: 1.0 / st.params.tick,
+        instance: st.instance.id.clone(),
+        started_unix_ms: st.instance.started_unix_ms,
     };
     let _ = reply_tx.try_send(to_text(&welcome));
     let _ = reply_tx.try_send(to_text(&st.state_message()));

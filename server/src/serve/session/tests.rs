@@ -178,3 +178,40 @@ fn the_documented_server_limits_8_places_60_s_idle_5_s_send_30_s_replies_8_mib_f
     assert_eq!(HARD_CAP, 8 * 1024 * 1024);
     assert_eq!(crate::serve::control_loop::realtime::LOOP_PRIORITY, 50);
 }
+
+/// The haptic scales in force start at the scene's and follow each accepted `haptic scale` (a
+/// refused one changes nothing): `/api/status` shows them (issue 26).
+#[test]
+fn the_haptic_scales_in_force_follow_accepted_scale_commands() {
+    use nanopush_proto::ws::{ClientMessage, HapticAction};
+    let st = test_state();
+    let start = *st.haptic_scales.lock().unwrap();
+    assert_eq!(start.nm_per_mm, st.scene.file.haptic.nm_per_mm);
+    assert_eq!(start.pull_off_at_hand_n, st.scene.file.haptic.pull_off_at_hand_n);
+    let mut c = client(1, Role::Operator);
+    super::lease::take(&st, &c).unwrap();
+    let scale = |nm: Option<f64>, po: Option<f64>| ClientMessage::Haptic {
+        id: None,
+        action: HapticAction::Scale,
+        nm_per_mm: nm,
+        pull_off_at_hand_n: po,
+    };
+    super::commands::handle(&st, &mut c, scale(Some(20.0), None)).unwrap();
+    assert_eq!(st.haptic_scales.lock().unwrap().nm_per_mm, 20.0);
+    assert_eq!(
+        st.haptic_scales.lock().unwrap().pull_off_at_hand_n,
+        start.pull_off_at_hand_n
+    );
+    assert!(
+        super::commands::handle(&st, &mut c, scale(None, Some(50.0))).is_err(),
+        "out of range"
+    );
+    super::commands::handle(&st, &mut c, scale(None, Some(2.5))).unwrap();
+    assert_eq!(
+        *st.haptic_scales.lock().unwrap(),
+        crate::serve::app_state::HapticScales {
+            nm_per_mm: 20.0,
+            pull_off_at_hand_n: 2.5
+        }
+    );
+}

@@ -1,0 +1,49 @@
+// node --test: the map layer's geometry and picking (src/mapoverlay.js; its SVG is not built).
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { toPx, toStage, nearestParticle, stepCursor, TrailBuffer, foundParticles } from '../src/mapoverlay.js';
+
+const g = { x: 50, y: 10, w: 400, h: 200 };
+const e = { x_offset: 30e-6, y_offset: 20e-6, x_real: 20e-6, y_real: 10e-6 };
+
+test('stage metres to the image\'s pixels and back: y up, the scan\'s corner at the axes\' origin', () => {
+  assert.deepEqual(toPx(g, e, 30e-6, 20e-6), [50, 210], 'the lower left corner');
+  assert.deepEqual(toPx(g, e, 50e-6, 30e-6).map((v) => Math.round(v * 1e6) / 1e6), [450, 10], 'the upper right');
+  const [x, y] = toStage(g, e, 150, 110);
+  assert.ok(Math.abs(x - 35e-6) < 1e-15 && Math.abs(y - 25e-6) < 1e-15, `${x} ${y}`);
+});
+
+test('a pick selects the nearest particle whose ring holds the point, tiny ones by a minimum ring', () => {
+  const ps = [{ id: 1, x: 40e-6, y: 25e-6, radius: 0.5e-6 }, { id: 2, x: 41e-6, y: 25e-6, radius: 0.7e-6 }, { id: 3, x: 45e-6, y: 25e-6, radius: 7e-9 }];
+  assert.equal(nearestParticle(ps, 40.6e-6, 25e-6, 0.1e-6).id, 2, 'inside both rings: the nearer centre');
+  assert.equal(nearestParticle(ps, 40.2e-6, 25e-6, 0.1e-6).id, 1);
+  assert.equal(nearestParticle(ps, 45.2e-6, 25e-6, 0.1e-6), null, 'a 7 nm particle 0.2 µm away, 0.1 µm minimum ring');
+  assert.equal(nearestParticle(ps, 45.2e-6, 25e-6, 0.3e-6).id, 3, '… found within an 8 px ring');
+  assert.equal(nearestParticle(ps, 35e-6, 22e-6, 0.1e-6), null);
+});
+
+test('the keyboard cursor moves 1 % of the image a press, 10 % with Shift, and stays inside', () => {
+  const c = stepCursor([40e-6, 25e-6], 'ArrowRight', false, e);
+  assert.ok(Math.abs(c[0] - 40.2e-6) < 1e-15 && c[1] === 25e-6);
+  const u = stepCursor([40e-6, 25e-6], 'ArrowUp', true, e);
+  assert.ok(Math.abs(u[1] - 26e-6) < 1e-15, 'up is +y');
+  assert.deepEqual(stepCursor([30e-6, 20e-6], 'ArrowLeft', true, e), [30e-6, 20e-6], 'clamped at the edge');
+  assert.equal(stepCursor([30e-6, 20e-6], 'Enter', false, e), null);
+});
+
+test('the push trail keeps a point once the tip moved a pixel, and at most its length', () => {
+  const t = new TrailBuffer(3);
+  assert.equal(t.add(0, 0, 1e-7), true);
+  assert.equal(t.add(0.5e-7, 0, 1e-7), false, 'less than a pixel');
+  for (let k = 1; k <= 4; k++) t.add(k * 1e-6, 0, 1e-7);
+  assert.deepEqual(t.pts.map((p) => p[0]), [2e-6, 3e-6, 4e-6]);
+  t.clear();
+  assert.equal(t.pts.length, 0);
+});
+
+test('the particles a scan record says it found are kept only when they are numbers (a hand-edited or damaged summary drew NaN rings and console errors)', () => {
+  const good = { x: 1e-6, y: 2e-6, radius: 5e-7 };
+  assert.deepEqual(foundParticles([good, { x: 'a', y: 2e-6, radius: 5e-7 }, { x: 1e-6, y: null, radius: 1 }, { x: 1, y: 1, radius: -1 }, null, 7]), [good]);
+  assert.deepEqual(foundParticles('particles'), []);
+  assert.deepEqual(foundParticles(undefined), []);
+});
