@@ -113,10 +113,10 @@ pub fn run(scene: &Scene, reduced: bool, out: &Path) -> anyhow::Result<(String, 
 #[derive(clap::Args, Debug)]
 pub struct CampaignArgs {
     /// How many random scenes (seeds `--seed` … `--seed + N − 1`), in [1, 100000].
-    #[arg(long, value_name = "N", default_value_t = 100)]
+    #[arg(long, value_name = "N", default_value_t = 100, allow_negative_numbers = true)]
     random: u64,
     /// The first seed.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     seed: u64,
     /// The generator's ranges: `lab` (the instruments and samples of a nanomanipulation lab) or
     /// `validator` (every parameter across the scene validator's whole range).
@@ -126,7 +126,7 @@ pub struct CampaignArgs {
     #[arg(long, value_name = "I/N")]
     shard: Option<String>,
     /// The pushes' tolerance (nm), in [1, 100000].
-    #[arg(long, value_name = "NM", default_value_t = nanopush::control::strategy_plan::DEFAULT_TOLERANCE * 1e9)]
+    #[arg(long, value_name = "NM", default_value_t = nanopush::control::strategy_plan::DEFAULT_TOLERANCE * 1e9, allow_negative_numbers = true)]
     tolerance_nm: f64,
     /// Write `random.csv` (a row per scene) here.
     #[arg(long, default_value = "campaign-out")]
@@ -138,7 +138,12 @@ pub struct CampaignArgs {
 
 /// Parses `I/N` with `I < N`.
 fn parse_shard(s: &str) -> anyhow::Result<(u64, u64)> {
-    let bad = || anyhow::anyhow!("--shard {s:?}: expected I/N with 0 ≤ I < N ≤ 1000, e.g. 0/4");
+    let bad = || {
+        anyhow::anyhow!(
+            "--shard {}: expected I/N with 0 ≤ I < N ≤ 1000, e.g. 0/4",
+            crate::units::echo(s)
+        )
+    };
     let (i, n) = s.split_once('/').ok_or_else(bad)?;
     let (i, n): (u64, u64) = (
         i.trim().parse().map_err(|_| bad())?,
@@ -157,7 +162,10 @@ pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
     let ranges = match a.ranges.as_str() {
         "lab" => Ranges::Lab,
         "validator" => Ranges::Validator,
-        other => anyhow::bail!("--ranges {other:?}: unknown; allowed: lab, validator"),
+        other => anyhow::bail!(
+            "--ranges {}: unknown; allowed: lab, validator",
+            crate::units::echo(other)
+        ),
     };
     if !(1..=100_000).contains(&a.random) {
         anyhow::bail!("--random {} is out of range; allowed: [1, 100000] scenes", a.random);
@@ -234,8 +242,12 @@ pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
     writeln!(s, "  refused {} by reason: {}", t.refused, counts_text(&t.refusals))?;
     writeln!(
         s,
-        "  worst true error of an ok {:.2} nm; unsound {}; wall time per scene median {:.2} s, max {:.2} s",
-        t.worst_ok * 1e9,
+        "  worst true error of an ok {}; unsound {}; wall time per scene median {:.2} s, max {:.2} s",
+        if t.ok > 0 {
+            format!("{:.2} nm", t.worst_ok * 1e9)
+        } else {
+            "- (no ok)".into()
+        },
         t.unsound,
         t.median_wall,
         t.max_wall
@@ -261,6 +273,9 @@ pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
         )?;
     }
     writeln!(s, "Wrote {}/random.csv.", a.out.display())?;
+    if t.unsound > 0 {
+        anyhow::bail!("{s}the campaign found {} unsound scene(s) (UNSOUND above)", t.unsound);
+    }
     Ok(s)
 }
 

@@ -24,20 +24,20 @@ pub struct PushArgs {
     #[arg(long)]
     scene: Option<PathBuf>,
     /// Particle to push (its id); the scene's `push.particle_id` when absent.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     particle: Option<u32>,
     /// Distance to push (µm), in (0, 100]; with `--direction-deg`.
-    #[arg(long, value_name = "D")]
+    #[arg(long, value_name = "D", allow_negative_numbers = true)]
     distance_um: Option<f64>,
     /// Direction of the push in the plane (degrees from +x), in [-360, 360].
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     direction_deg: f64,
     /// The move is `ok` when the scan after it finds the particle within this of the target
     /// (nm), in [1, 100000]; otherwise a correction is pushed, and after the last `missed`.
-    #[arg(long, value_name = "NM", default_value_t = DEFAULT_TOLERANCE * 1e9)]
+    #[arg(long, value_name = "NM", default_value_t = DEFAULT_TOLERANCE * 1e9, allow_negative_numbers = true)]
     tolerance_nm: f64,
     /// Pushes at most, the first and the corrections, in [1, 10].
-    #[arg(long, default_value_t = DEFAULT_ATTEMPTS)]
+    #[arg(long, default_value_t = DEFAULT_ATTEMPTS, allow_negative_numbers = true)]
     attempts: u32,
     /// Derive every strategy setting from the model, ignoring the scene's hand-set
     /// `[strategy]`, contact angle and speed (to compare the two).
@@ -51,10 +51,10 @@ pub struct PushArgs {
     #[arg(long)]
     control: Option<String>,
     /// A brief stop during the (first) push at this travel (µm), as in Fig 15.
-    #[arg(long, value_name = "UM")]
+    #[arg(long, value_name = "UM", allow_negative_numbers = true)]
     pause_at_um: Option<f64>,
     /// Length of that stop (ms), in (0, 10000].
-    #[arg(long, default_value_t = 500.0)]
+    #[arg(long, default_value_t = 500.0, allow_negative_numbers = true)]
     pause_ms: f64,
     /// Write the traces and figures here: contact.csv/svg (Fig 9), push.csv/svg (Fig 15),
     /// scan-before/after.gsf/png and summary.json.
@@ -94,12 +94,15 @@ fn check(a: &PushArgs, scene: &Scene) -> anyhow::Result<Request> {
         (None, None) => bail!("give --distance-um D (with --direction-deg) or --to-um X_UM,Y_UM"),
         (Some(d), None) => {
             if !(d.is_finite() && d > 0.0 && d <= range) {
-                bail!("--distance-um {d} is out of range; allowed: (0, {range}] µm (the stage range)");
+                bail!(
+                    "--distance-um {} is out of range; allowed: (0, {range}] µm (the stage range)",
+                    crate::units::num(d)
+                );
             }
             if !(a.direction_deg.is_finite() && (-360.0..=360.0).contains(&a.direction_deg)) {
                 bail!(
                     "--direction-deg {} is out of range; allowed: [-360, 360] degrees",
-                    a.direction_deg
+                    crate::units::num(a.direction_deg)
                 );
             }
             let th = a.direction_deg.to_radians();
@@ -111,7 +114,11 @@ fn check(a: &PushArgs, scene: &Scene) -> anyhow::Result<Request> {
         (None, Some(s)) => {
             let (x, y) = crate::units::parse_point_um("--to-um", s, "60,45")?;
             if !((0.0..=range).contains(&x) && (0.0..=range).contains(&y)) {
-                bail!("--to-um {x},{y} is outside the stage; allowed: [0, {range}] µm in x and y");
+                bail!(
+                    "--to-um {},{} is outside the stage; allowed: [0, {range}] µm in x and y",
+                    crate::units::num(x),
+                    crate::units::num(y)
+                );
             }
             MoveTarget::Point((x * UM, y * UM))
         }
@@ -121,16 +128,22 @@ fn check(a: &PushArgs, scene: &Scene) -> anyhow::Result<Request> {
         Some("xy") => ControlFile::Xy,
         Some("z") => ControlFile::Z,
         Some("xyz") => ControlFile::Xyz,
-        Some(other) => bail!("--control {other}: unknown; allowed: xy, z, xyz"),
+        Some(other) => bail!("--control {}: unknown; allowed: xy, z, xyz", crate::units::echo(other)),
     };
     let pause = match a.pause_at_um {
         None => None,
         Some(at) => {
             if !(at.is_finite() && at > 0.0 && at <= range) {
-                bail!("--pause-at-um {at} is out of range; allowed: (0, {range}] µm");
+                bail!(
+                    "--pause-at-um {} is out of range; allowed: (0, {range}] µm",
+                    crate::units::num(at)
+                );
             }
             if !(a.pause_ms.is_finite() && a.pause_ms > 0.0 && a.pause_ms <= 10_000.0) {
-                bail!("--pause-ms {} is out of range; allowed: (0, 10000] ms", a.pause_ms);
+                bail!(
+                    "--pause-ms {} is out of range; allowed: (0, 10000] ms",
+                    crate::units::num(a.pause_ms)
+                );
             }
             Some((at * UM, a.pause_ms * 1e-3))
         }
@@ -475,4 +488,35 @@ fn write_outputs(
         (serde_json::to_string_pretty(report)? + "\n").as_bytes(),
     )?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(a: &[&str]) -> PushArgs {
+        match crate::parse(a) {
+            crate::Command::Push(p) => p,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// Issue 24.4: `--direction-deg -90` was taken for a flag (exit 2) while the help gives
+    /// [-360, 360].
+    #[test]
+    fn a_negative_direction_is_a_number() {
+        let a = args(&["push", "--distance-um", "1", "--direction-deg", "-90"]);
+        assert_eq!(a.direction_deg, -90.0);
+        let r = check(&a, &Scene::default_scene()).unwrap();
+        match r.target {
+            MoveTarget::Distance { direction, .. } => assert!((direction.1 + 1.0).abs() < 1e-12),
+            t => panic!("{t:?}"),
+        }
+        let e = check(&args(&["push", "--distance-um", "1e308"]), &Scene::default_scene())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.starts_with("--distance-um 1e308 is out of range"), "{e}");
+        assert_eq!(args(&["push", "--distance-um", "1"]).tolerance_nm, 25.0);
+    }
 }

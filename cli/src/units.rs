@@ -37,7 +37,30 @@ pub fn parse_point_um(flag: &str, s: &str, example: &str) -> anyhow::Result<(f64
         let (x, y) = (x.trim().parse::<f64>().ok()?, y.trim().parse::<f64>().ok()?);
         (x.is_finite() && y.is_finite()).then_some((x, y))
     });
-    parsed.with_context(|| format!("{flag} {s:?}: expected X_UM,Y_UM, two numbers in µm such as {example}"))
+    parsed.with_context(|| {
+        format!(
+            "{flag} {}: expected X_UM,Y_UM, two numbers in µm such as {example}",
+            echo(s)
+        )
+    })
+}
+
+/// A user's text as an error message quotes it: at most 40 characters, so a 400 KB argument is
+/// not echoed back whole.
+pub fn echo(s: &str) -> String {
+    if s.chars().count() <= 40 {
+        format!("{s:?}")
+    } else {
+        let head: String = s.chars().take(40).collect();
+        format!("{head:?}… ({} characters)", s.chars().count())
+    }
+}
+
+/// A number as an error message shows it: as typed when short, else in scientific notation (a
+/// 1e308 is not 309 digits).
+pub fn num(v: f64) -> String {
+    let plain = v.to_string();
+    if plain.len() <= 16 { plain } else { format!("{v:e}") }
 }
 
 /// `--method NAME` as an integration method, with the allowed names in the error.
@@ -56,6 +79,20 @@ pub fn write_file(path: &std::path::Path, bytes: impl AsRef<[u8]>) -> anyhow::Re
 #[cfg(test)]
 mod tests {
     use super::eng;
+
+    #[test]
+    fn long_inputs_and_huge_numbers_are_shortened_in_messages() {
+        assert_eq!(super::num(1e308), "1e308");
+        assert_eq!(super::num(-90.0), "-90");
+        assert_eq!(super::num(0.5), "0.5");
+        let long = "9".repeat(400_000);
+        let e = super::echo(&long);
+        assert!(e.len() < 80 && e.ends_with("(400000 characters)"), "{e}");
+        let e = super::parse_point_um("--to-um", &long, "60,45")
+            .unwrap_err()
+            .to_string();
+        assert!(e.len() < 200, "{} bytes", e.len());
+    }
 
     #[test]
     fn prefixes() {

@@ -493,15 +493,18 @@ mod tests {
 
     /// The reduced campaign (each validated range's ends, every friction zero, the Eq 16
     /// bound): every case a plausible outcome or a refusal with its reason, and sound;
-    /// docs/validation.md's outcome counts ("Whole pushes: the campaign"): 5 `ok`, 6 `no_contact`,
-    /// 1 `deflection_limit`, 1 `particle_lost`.
+    /// docs/validation.md's outcome counts ("Whole pushes: the campaign"): 7 `ok`, 5 refused by
+    /// the plan with their reasons (the 0.01 N/m lever's adhesion, the 500 N/m lever's stage, the
+    /// 75° tilt, the hand-set 1 mm/s, no friction), and the hand-set β = 89° `no_contact`.
     #[test]
-    fn the_reduced_campaign_is_sound_with_5_ok_6_no_contact_1_deflection_limit_1_particle_lost() {
+    fn the_reduced_campaign_is_sound_with_7_ok_5_refused_1_no_contact() {
         let scene = Scene::default_scene();
         let mut bad = Vec::new();
         let mut outcomes = std::collections::BTreeMap::new();
-        for case in cases(true) {
-            let r = run_case(&scene, &case);
+        use rayon::prelude::*;
+        let all = cases(true);
+        let results: Vec<PushCase> = all.par_iter().map(|case| run_case(&scene, case)).collect();
+        for (case, r) in all.into_iter().zip(results) {
             *outcomes.entry(r.outcome.clone()).or_insert(0) += 1;
             if case == [Edit::MuAsAtEq16(1.0)] {
                 // docs/validation.md, "Whole pushes: the campaign": at the Eq 16 bound (the bound
@@ -518,15 +521,7 @@ mod tests {
         }
         assert!(bad.is_empty(), "{}", bad.join("\n"));
         let counts: Vec<(&str, i32)> = outcomes.iter().map(|(o, n)| (o.as_str(), *n)).collect();
-        assert_eq!(
-            counts,
-            [
-                ("deflection_limit", 1),
-                ("no_contact", 6),
-                ("ok", 5),
-                ("particle_lost", 1)
-            ]
-        );
+        assert_eq!(counts, [("no_contact", 1), ("ok", 7), ("refused", 5)]);
     }
 
     proptest::proptest! {
@@ -650,67 +645,48 @@ mod tests {
     }
 
     /// docs/validation.md, "Whole pushes: the campaign": a 1 nm/s corner of the full campaign (5 µm
-    /// particle, 0.01 N/m, dry) cannot finish its contact search in the 120 s time-out and keeps
-    /// its trace, 25 MB.
+    /// particle, 0.01 N/m, dry) once timed out after keeping a 25 MB trace; the plan now refuses it
+    /// before any push: the tip's adhesion bends the soft lever past the readout's rail.
     #[test]
-    fn a_1_nm_per_s_corner_times_out_after_120_s_with_a_25_mb_trace() {
+    fn a_soft_1_nm_per_s_corner_is_refused_for_its_adhesion_before_any_push() {
         use Edit::*;
         let case = [RadiusNm(5000.0), StiffnessNPerM(0.01), Humidity(0.0), SpeedUmPerS(1e-3)];
         assert!(cases(false).contains(&case.to_vec()), "a case of the full campaign");
         let r = run_case(&Scene::default_scene(), &case);
-        assert_eq!(r.outcome, "timeout", "{}", r.reason);
-        assert!(r.reason.contains("120 s"), "{}", r.reason);
+        assert_eq!(r.outcome, "refused", "{}", r.reason);
+        assert!(r.reason.contains("change cantilever.stiffness_n_per_m"), "{}", r.reason);
         assert!(r.violations.is_empty(), "{:?}", r.violations);
-        assert!((r.trace_bytes as f64 - 25e6).abs() <= 0.5e6, "{} bytes", r.trace_bytes);
+        assert_eq!(r.trace_bytes, 0, "nothing pushed");
     }
 
-    /// docs/validation.md's refusals of the full campaign ("Whole pushes: the campaign"): a 7 nm
-    /// particle under the scene's 30 nm tip at β = 30° (the tip would park below the substrate:
-    /// `Rₐ − Rₜ + (Rₐ + Rₜ) sin β ≤ 0`), and the 1 mm/s corners of a 50 nm particle on a 0.01 N/m
-    /// lever, dry and humid, whose model prediction fails below the minimum step, naming the scene
-    /// sections that drive it.
+    /// A 7 nm particle under the scene's 30 nm tip cannot be met at the paper's 30° (the tip would
+    /// park below the substrate: `Rₐ − Rₜ + (Rₐ + Rₜ) sin β ≤ 0`); the plan goes to steeper angles,
+    /// where the dry run loses the particle, and refuses, naming the failure and the field.
     #[test]
-    fn a_7_nm_particle_under_a_30_nm_tip_at_30_deg_and_the_50_nm_soft_1_mm_per_s_corners_are_refused() {
+    fn a_7_nm_particle_under_a_30_nm_tip_is_refused_with_its_dry_run() {
         use Edit::*;
-        let scene = Scene::default_scene();
-        let full = cases(false);
         let small = [RadiusNm(7.0)];
-        assert!(full.contains(&small.to_vec()), "a case of the full campaign");
-        let r = run_case(&scene, &small);
+        assert!(cases(false).contains(&small.to_vec()), "a case of the full campaign");
+        let r = run_case(&Scene::default_scene(), &small);
         assert_eq!(r.outcome, "refused", "{}", r.reason);
         assert!(
-            r.reason.contains("push.contact_angle_deg = 30°")
-                && r.reason.contains("radius 30 nm")
-                && r.reason.contains("radius 7 nm"),
+            r.reason.contains("dry run") && r.reason.contains("; change "),
             "{}",
             r.reason
         );
-        for rh in [0.0, 0.99] {
-            let corner = [RadiusNm(50.0), StiffnessNPerM(0.01), Humidity(rh), SpeedUmPerS(1000.0)];
-            assert!(full.contains(&corner.to_vec()), "a corner of the full campaign");
-            let r = run_case(&scene, &corner);
-            assert_eq!(r.outcome, "refused", "{}: {}", r.case, r.reason);
-            assert!(
-                r.reason.contains("fell below the minimum")
-                    && r.reason
-                        .contains("[friction], [cantilever], [particles], [environment], [push] and [physics]"),
-                "{}: {}",
-                r.case,
-                r.reason
-            );
-            assert!(r.violations.is_empty(), "{:?}", r.violations);
-        }
+        assert!(r.violations.is_empty(), "{:?}", r.violations);
     }
 
-    /// docs/validation.md, "Whole pushes: the campaign": a contact search at 1 pm/s (a case of the
-    /// full campaign) cannot finish in the 120 s time-out.
+    /// A contact search at 1 pm/s set by hand (a case of the full campaign) cannot finish: the plan
+    /// warns, skips the dry run, and the push fails with a time-out after 600 s, the longest a
+    /// phase may take.
     #[test]
-    fn a_1_pm_per_s_search_times_out_after_120_s() {
+    fn a_1_pm_per_s_search_times_out_after_600_s() {
         let case = [Edit::SpeedUmPerS(1e-6)];
         assert!(cases(false).contains(&case.to_vec()), "a case of the full campaign");
         let r = run_case(&Scene::default_scene(), &case);
         assert_eq!(r.outcome, "timeout", "{}", r.reason);
-        assert!(r.reason.contains("contact_search took more than 120 s"), "{}", r.reason);
+        assert!(r.reason.contains("contact_search took more than 600 s"), "{}", r.reason);
         assert!(r.violations.is_empty(), "{:?}", r.violations);
     }
 }

@@ -313,4 +313,29 @@ mod tests {
         }
         assert_eq!(shard_seeds(100, 10, 1, 3), vec![101, 104, 107]);
     }
+
+    /// `make test`'s seeded sample of docs/validation.md's random-scene campaign: lab scenes 0
+    /// (adhesion), 11 (no separation), 13 (the model's push fails) are refused with their
+    /// reasons and the field to change; 166 is accepted and ends `ok`, truly within 25 nm of its
+    /// target; none is unsound.
+    #[test]
+    fn a_seeded_sample_is_refused_with_reasons_or_pushed_within_tolerance() {
+        let tolerance = 25e-9;
+        for (seed, expect) in [(0, "adhesion"), (11, "no_separation"), (13, "model"), (166, "ok")] {
+            let c = run_random(seed, Ranges::Lab, tolerance);
+            let j = &c.judged;
+            assert!(j.violations.is_empty(), "seed {seed}: {:?}", j.violations);
+            match j.refusal.as_deref() {
+                Some(code) => {
+                    assert_eq!(code, expect, "seed {seed}: {}", j.reason);
+                    assert!(j.reason.contains("; change "), "seed {seed}: {}", j.reason);
+                }
+                None => {
+                    assert_eq!(j.outcome, expect, "seed {seed}: {} [{}]", j.reason, c.summary);
+                    let e = j.true_error.expect("pushed");
+                    assert!(e <= tolerance, "seed {seed}: truly {:.1} nm off", e * 1e9);
+                }
+            }
+        }
+    }
 }

@@ -209,8 +209,16 @@ pub fn move_particle(
             Err(e) => return Err(e.into()),
         }
         if plan.legs.is_empty() && options.tolerance < DONE_WITHIN {
-            // Within the planner's 10 nm but outside a tighter tolerance: no leg to push.
-            attempts = attempts.max(options.attempts);
+            // Within the planner's 10 nm but outside a tighter tolerance: no leg can correct it.
+            let verdict = Verdict::judge((plan.located.x, plan.located.y), target, options.tolerance);
+            return Ok(MoveRun {
+                before,
+                target,
+                legs,
+                after: (plan.local, Some(plan.located)),
+                verdict,
+                attempts,
+            });
         }
     }
 }

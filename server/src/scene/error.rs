@@ -5,12 +5,12 @@
 #[non_exhaustive]
 pub enum SceneError {
     /// The file could not be read.
-    #[error("cannot read scene file {path}: {source}")]
+    #[error("cannot read scene file {path}: {error}")]
     Io {
         /// The path.
         path: String,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The I/O error (in the message, not a `source`: printed once).
+        error: std::io::Error,
     },
     /// Not valid TOML, a wrong type, an unknown key or a missing field (the message names it,
     /// with its line and column).

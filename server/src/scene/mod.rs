@@ -102,9 +102,9 @@ impl Scene {
 
     /// Reads, parses and validates a scene file.
     pub fn from_path(path: &std::path::Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        let text = std::fs::read_to_string(path).map_err(|error| SceneError::Io {
             path: path.display().to_string(),
-            source,
+            error,
         })?;
         Scene::parse(&path.display().to_string(), &text)
     }

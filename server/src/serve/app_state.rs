@@ -160,7 +160,13 @@ pub struct Activity {
     pub push_now: Mutex<Option<PushPath>>,
     /// The latest scan (running or finished), for clients that join after it.
     pub latest_scan: Mutex<Option<ScanNow>>,
+    /// Each particle's strategy plan (or why none can push it), derived once from the scene's
+    /// model on its first push: the scene does not change while the server runs.
+    pub plans: Mutex<std::collections::HashMap<u32, PlanOutcome>>,
 }
+
+/// A particle's strategy plan, or why none can push it.
+pub type PlanOutcome = Result<crate::control::strategy_plan::StrategyPlan, crate::control::strategy_plan::Refusal>;
 
 /// Connections counted for admission.
 #[derive(Debug, Default)]
@@ -277,6 +283,7 @@ impl AppState {
                 scanning: AtomicBool::new(false),
                 scan_cancel: AtomicBool::new(false),
                 next_scan: AtomicU32::new(1),
+                plans: Mutex::new(std::collections::HashMap::new()),
                 stopping: AtomicBool::new(false),
                 generation: AtomicU64::new(0),
                 estimates: Mutex::new(

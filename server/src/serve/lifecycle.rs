@@ -129,7 +129,7 @@ fn start_loop(scene: &Scene, loop_cfg: LoopConfig) -> Result<(Arc<Shared>, std::
     let afm = Afm::from_scene(scene, base.centre_x, base.centre_y, tick);
     let shared = Arc::new(Shared::new(&afm));
     let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel(1);
-    let control = ControlLoop::new(afm, scene.strategy_params(tick), scene.bilateral_params(tick)).with_ready(ready_tx);
+    let control = ControlLoop::new(afm, scene.bilateral_params(tick)).with_ready(ready_tx);
     let loop_shared = shared.clone();
     let loop_thread = std::thread::Builder::new()
         .name("control-loop".into())

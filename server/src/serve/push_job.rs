@@ -5,6 +5,7 @@ use std::sync::atomic::Ordering::Relaxed;
 
 use nanopush_proto::ws::{ErrorCode, PushPath, ServerMessage};
 
+use crate::control::strategy_plan::{self, DEFAULT_TOLERANCE, derive};
 use crate::control::{MoveTarget, Prepared, plan_move};
 use crate::serve::app_state::AppState;
 use crate::serve::command_checks::Refusal;
@@ -44,6 +45,31 @@ pub(crate) fn run_done_failed(st: &AppState, particle: u32, outcome: &str, failu
     });
 }
 
+/// The scene with particle `particle`'s strategy plan applied (hand-set values win), the plan
+/// derived on the particle's first push and kept; or why no strategy can push it.
+fn strategy_scene(st: &AppState, particle: u32) -> Result<crate::scene::Scene, strategy_plan::Refusal> {
+    let cached = st.activity.plans.lock().ok().and_then(|p| p.get(&particle).cloned());
+    let outcome = cached.unwrap_or_else(|| {
+        let outcome = derive(&st.scene, particle, DEFAULT_TOLERANCE);
+        match &outcome {
+            Ok(plan) => {
+                for w in &plan.warnings {
+                    tracing::warn!("strategy plan for particle {particle}: {w}");
+                }
+            }
+            Err(e) => tracing::warn!("{e}"),
+        }
+        if let Ok(mut p) = st.activity.plans.lock() {
+            p.insert(particle, outcome.clone());
+        }
+        outcome
+    });
+    let plan = outcome?;
+    let mut scene = st.scene.clone();
+    plan.apply(&mut scene);
+    Ok(scene)
+}
+
 /// Off the loop: locate the particle in a quick local scan, plan, predict; then hand the job
 /// to the loop.
 pub(crate) fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, generation: u64, by: u32) {
@@ -58,7 +84,13 @@ pub(crate) fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, gen
         .ok()
         .and_then(|e| e.get(&particle).copied())
         .unwrap_or((part.x_um * 1e-6, part.y_um * 1e-6));
-    let plan = match plan_move(&st.scene, &st.surface_now(), nominal, part.radius_nm * 1e-9, target) {
+    // The strategy for this particle: the plan's, where the scene sets none (derived once).
+    let scene = match strategy_scene(st, particle) {
+        Ok(s) => s,
+        Err(refusal) => return run_done_failed(st, particle, "refused", refusal.to_string()),
+    };
+    let params = scene.strategy_params(st.params.tick);
+    let plan = match plan_move(&scene, &st.surface_now(), nominal, part.radius_nm * 1e-9, target) {
         Ok(p) => p,
         Err(e) => return run_done_failed(st, particle, "plan", format!("particle {particle}: {e}")),
     };
@@ -83,7 +115,7 @@ pub(crate) fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, gen
         });
         return;
     }
-    let prepared = match Prepared::new(&st.scene, particle, located.radius, &st.params) {
+    let prepared = match Prepared::new(&scene, particle, located.radius, &params) {
         Ok(p) => p,
         Err(e) => return run_done_failed(st, particle, "error", e.to_string()),
     };
@@ -104,6 +136,7 @@ pub(crate) fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, gen
         particle,
         legs,
         prepared,
+        params,
     };
     // Said after the job is queued: a `stop` sent on hearing `push_started` reaches the loop
     // after the push, and stops it.

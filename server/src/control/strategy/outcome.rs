@@ -25,7 +25,7 @@ pub enum Failure {
     },
     /// The deflection went beyond the safety limit, or the reading saturated the readout on
     /// either side (`limit` is then the rail): emergency retract.
-    #[error("deflection {volts:.3} V beyond the limit {limit:.3} V in phase {phase}: emergency retract")]
+    #[error("deflection {volts:.3} V at or beyond the limit {limit:.3} V in phase {phase}: emergency retract")]
     DeflectionLimit {
         /// Reading (V).
         volts: f64,

@@ -9,7 +9,7 @@ use crate::scene::Scene;
 
 /// Runs `plan` on a copy of `scene` with other seeds for the readout's noise and the
 /// substrate's roughness (the plan knows their statistics, not their realization): one push of
-/// the longest leg the plan allows (within [0.3, 2] µm) up the substrate's slope, and one down it
+/// the longest leg the plan allows (within [0.3, 1] µm) up the substrate's slope, and one down it
 /// (the contact angle falls on the way up, rises on the way down), each from where a local scan
 /// finds the particle and judged with the plan's tolerance. `Err` says how one failed.
 pub fn dry_run(scene: &Scene, plan: &StrategyPlan) -> Result<(), String> {
@@ -26,7 +26,7 @@ pub fn dry_run(scene: &Scene, plan: &StrategyPlan) -> Result<(), String> {
         .ok_or_else(|| format!("no particle {}", plan.particle))?;
     let (x, y, r) = (part.x_um * 1e-6, part.y_um * 1e-6, part.radius_nm * 1e-9);
     let range = s.file.stage.range_um * 1e-6;
-    let distance = (s.file.strategy.max_push_um * 1e-6).clamp(0.3e-6, 2e-6);
+    let distance = (s.file.strategy.max_push_um * 1e-6).clamp(0.3e-6, 1e-6);
     let (tx, ty) = (s.file.substrate.tilt_x_mrad, s.file.substrate.tilt_y_mrad);
     let tilt = tx.hypot(ty);
     let up = if tilt > 0.0 { (tx / tilt, ty / tilt) } else { (1.0, 0.0) };

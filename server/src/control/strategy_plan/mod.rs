@@ -37,12 +37,13 @@
 //!   `|slope| · L ≤ 0.087 (Rₐ + Rₜ) cos β`, within [0.2, 20] µm; longer moves are split and
 //!   each leg re-parks.
 //! - **time-out**: three times the longest phase (the longest push at V, the approach from
-//!   twice the start height), at least 120 s.
+//!   twice the start height), within [120, 600] s.
 //!
 //! Each angle whose predicted push passes these checks gets its settings and a **dry run**: the
 //! whole strategy (local scan, park, search, push, retract, scan after, corrections) on the
-//! scene's model with another noise and roughness realization, a push of `2Rₐ` within
-//! [0.3, 1] µm toward the stage's centre, judged like a real one. The first angle whose dry run
+//! scene's model with another noise and roughness realization, a push of the longest leg the
+//! plan allows (within [0.3, 1] µm) up the substrate's slope and one down it, each judged like a
+//! real one. The first angle whose dry run
 //! ends `ok` is the plan; the checks say why a scene fails in the model's terms, the dry run
 //! catches what they do not (a true peak above twice the model's, a particle lost in the noise).
 //!
@@ -77,6 +78,12 @@ pub const STAGE_STIFFNESS_RATIO: f64 = 20.0;
 
 /// The stage's ringing must die within this (s): the paper's stage (250 Hz, Q = 20) takes 25 ms.
 pub const STAGE_SETTLE: f64 = 0.1;
+
+/// The longest a derived phase time-out may be (s): a slower push fails with a time-out.
+pub const MAX_TIMEOUT: f64 = 600.0;
+
+/// The longest simulated time a dry run may take (s): a slower plan is not dry-run (and says so).
+pub const MAX_DRY_RUN: f64 = 60.0;
 
 /// Highest start height the scene allows (m), `strategy.start_height_um`'s upper bound.
 const MAX_START: f64 = 50e-6;
@@ -306,25 +313,42 @@ impl<'a> Derivation<'a> {
         // Each angle that passes the checks is tried in a dry run of the whole strategy on the
         // model; the first that ends `ok` is the plan.
         let (base_choices, base_warnings) = (self.choices.clone(), self.warnings.clone());
-        let mut rejected: Vec<(f64, String)> = Vec::new();
+        let mut rejected: Vec<(f64, String, Vec<String>)> = Vec::new();
         loop {
             let skip: Vec<f64> = rejected.iter().map(|r| r.0).collect();
             let cand = match self.contact_angle(r_a, r_t, v0, approach_speed, &skip) {
                 Ok(c) => c,
                 Err(refusal) if rejected.is_empty() => return Err(refusal),
                 Err(_) => {
-                    let (beta, why) = &rejected[0];
+                    let (beta, why, warned) = &rejected[0];
                     let angles: Vec<f64> = rejected.iter().map(|r| r.0).collect();
+                    // A hand-set value the plan warned about is the likelier cause.
+                    let (hand, field) = match warned.iter().find(|w| w.contains("(hand-set)")) {
+                        Some(w) => (
+                            format!("; the plan warned: {w}"),
+                            w.split(" = ").next().unwrap_or("the hand-set value").to_string(),
+                        ),
+                        None => (String::new(), dry_run::field_for(why)),
+                    };
                     return Err(self.refuse(Fails {
                         code: "dry_run",
                         reason: format!(
-                            "the strategy passes the model's checks but its dry run on the model fails at every such angle ({angles:?}°); at β = {beta}°: {why}"
+                            "the strategy passes the model's checks but its dry run on the model fails at every such angle ({angles:?}°); at β = {beta}°: {why}{hand}"
                         ),
-                        field: dry_run::field_for(why),
+                        field,
                     }));
                 }
             };
             let mut plan = self.settings(cand, r_a, r_t, approach_speed)?;
+            // A dry run that would take longer than a real push may is not run: said instead.
+            let dry_run_time = 2.0 * (1e-6 + plan.strategy.search_range_um * 1e-6) / (plan.speed_um_per_s * 1e-6);
+            if dry_run_time > MAX_DRY_RUN {
+                plan.warnings.push(format!(
+                    "no dry run: at {} µm/s it would take {dry_run_time:.0} s of simulated time (at most {MAX_DRY_RUN:.0} s)",
+                    short(plan.speed_um_per_s)
+                ));
+                return Ok(plan);
+            }
             match dry_run::dry_run(self.scene, &plan) {
                 Ok(()) => return Ok(plan),
                 Err(why) if self.hand("push.contact_angle_deg") => {
@@ -333,7 +357,7 @@ impl<'a> Derivation<'a> {
                     return Ok(plan);
                 }
                 Err(why) => {
-                    rejected.push((cand.beta_deg, why));
+                    rejected.push((cand.beta_deg, why, plan.warnings.clone()));
                     self.choices = base_choices.clone();
                     self.warnings = base_warnings.clone();
                 }
@@ -622,12 +646,18 @@ impl<'a> Derivation<'a> {
         let longest = (f.strategy.max_push_um * 1e-6 / v)
             .max(2.0 * start / approach_speed)
             .max(search / v + search / step * f.strategy.dwell_ms * 1e-3);
-        let timeout = (3.0 * longest).max(120.0).ceil();
+        let timeout = (3.0 * longest).clamp(120.0, MAX_TIMEOUT).ceil();
+        if longest > MAX_TIMEOUT {
+            self.warnings.push(format!(
+                "the longest phase would take {longest:.0} s at {} µm/s, more than the {MAX_TIMEOUT:.0} s a phase may: such a push fails with a time-out",
+                short(v * 1e6)
+            ));
+        }
         self.choose(
             "strategy.phase_timeout_s",
             f.strategy.phase_timeout_s,
             timeout,
-            format!("three times the longest phase ({longest:.0} s), at least 120 s"),
+            format!("three times the longest phase ({longest:.0} s), within [120, {MAX_TIMEOUT:.0}] s"),
             (f.strategy.phase_timeout_s < longest).then(|| format!("shorter than the longest phase, {longest:.0} s")),
         );
         self.tolerance_warnings(&pred, pitch);
@@ -804,6 +834,16 @@ impl<'a> Derivation<'a> {
         let p = &c.prediction;
         let k = self.scene.file.cantilever.stiffness_n_per_m;
         let gain_nm = ro.gain * 1e-9;
+        if p.peak_deflection.abs() < 1e-13 && p.settled_deflection.abs() < 1e-13 {
+            return Err(Fails {
+                code: "no_resistance",
+                reason: format!(
+                    "at β = {}° the particle offers the tip no resistance: it moves without bending the lever (ζ_z stays below 0.1 pm), so no reading can find or follow it",
+                    c.beta_deg
+                ),
+                field: "friction.particle_substrate_static and friction.tip_particle_static (above 0)".into(),
+            });
+        }
         if p.peak_deflection <= 0.0 {
             return Err(Fails {
                 code: "unreadable",

@@ -1,7 +1,7 @@
 //! What crosses between the control loop and the rest of the server: commands in, events and
 //! trace rows out.
 
-use crate::control::{Leg, Prepared};
+use crate::control::{Leg, Prepared, StrategyParams};
 use crate::serve::haptic::HapticCommand;
 
 /// A push prepared off the loop (localization, model prediction, plan), ready to run.
@@ -15,6 +15,8 @@ pub struct PushJob {
     pub legs: Vec<Leg>,
     /// The model prediction and geometry.
     pub prepared: Prepared,
+    /// The strategy's settings for this particle (the plan's, where the scene sets none).
+    pub params: StrategyParams,
 }
 
 /// What the network side asks of the loop.

@@ -32,10 +32,10 @@ use std::time::{Duration, Instant};
 
 use nanopush_proto::haptic::{ForceFeedback, HapticState, STATE_DEVICE_LOST, monotonic_ns};
 
+use crate::control::Strategy;
 use crate::control::bilateral::{
     Bilateral, BilateralParams, Input as HapticInput, Output as HapticOutput, Phase as HapticPhase,
 };
-use crate::control::{Strategy, StrategyParams};
 use crate::instrument::{Afm, Reading};
 use crate::serve::haptic::HapticCommand;
 use crate::serve::haptic::link::{LINK_DOWN, LINK_UP, ServerLink, believable, down_after_ns};
@@ -87,7 +87,6 @@ struct HandleLink {
 /// Everything the loop owns.
 pub struct ControlLoop {
     afm: Afm,
-    params: StrategyParams,
     bilateral: Bilateral,
     target: [f64; 3],
     active: Option<Active>,
@@ -114,7 +113,7 @@ pub struct Running {
 
 impl ControlLoop {
     /// A loop over `afm` with the scene's strategy settings and the haptic z-control's.
-    pub fn new(afm: Afm, params: StrategyParams, haptic: BilateralParams) -> ControlLoop {
+    pub fn new(afm: Afm, haptic: BilateralParams) -> ControlLoop {
         let target = afm.stage();
         // Read for real by `start` (a reading draws the sensor's noise, so only once).
         let reading = Reading {
@@ -124,7 +123,6 @@ impl ControlLoop {
         };
         ControlLoop {
             afm,
-            params,
             bilateral: Bilateral::new(haptic),
             target,
             active: None,
@@ -160,8 +158,8 @@ impl ControlLoop {
     fn next_leg(&mut self, job: Box<PushJob>, leg: usize, estimate: (f64, f64), distance: f64, reading: &Reading) {
         match job.prepared.request(job.particle, estimate, job.legs[leg].to, None) {
             Some(request) => {
-                let task = job.prepared.task(&request, self.params.tick);
-                let strategy = Strategy::new(self.params, task, job.prepared.hxy(), reading);
+                let task = job.prepared.task(&request, job.params.tick);
+                let strategy = Strategy::new(job.params, task, job.prepared.hxy(), reading);
                 self.active = Some(Active {
                     job,
                     leg,

@@ -22,7 +22,7 @@ fn default_loop() -> (ControlLoop, Arc<Shared>) {
     let base = crate::scan::ScanParams::from_scene(&scene);
     let afm = Afm::from_scene(&scene, base.centre_x, base.centre_y, tick);
     let shared = Arc::new(Shared::new(&afm));
-    let lp = ControlLoop::new(afm, scene.strategy_params(tick), scene.bilateral_params(tick));
+    let lp = ControlLoop::new(afm, scene.bilateral_params(tick));
     (lp, shared)
 }
 
