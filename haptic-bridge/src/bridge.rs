@@ -85,6 +85,11 @@ pub struct CycleRow {
     pub pc_damping: f64,
     /// Observed port energy (J).
     pub port_energy: f64,
+    /// The raw port's energy since the force went live (J).
+    pub raw_port_energy: f64,
+    /// The hand holds the tip in contact (the simulated operator's hold; never for a real
+    /// device).
+    pub holding: bool,
     /// End-to-end latency measured this cycle (ns), 0 when none.
     pub latency_ns: u64,
 }
@@ -275,6 +280,8 @@ impl<D: Device> Bridge<D> {
         row.force = force;
         row.pc_damping = out.damping;
         row.port_energy = out.energy;
+        row.raw_port_energy = out.raw_energy;
+        row.holding = self.device.holding();
         row.latency_ns = self.latency_ns;
         row
     }
@@ -376,7 +383,7 @@ impl<D: Device> Bridge<D> {
     /// `s` under `live`.
     fn render(&mut self, live: Option<ForceFeedback>, s: &DeviceSample, dt: f64) -> PassivityOutput {
         let max = self.spec.max_force;
-        let env = self.environment(live, s.position);
+        let env = self.environment(live, s.position) - self.coupling_damper(live, s.velocity);
         let (dx, w_ref) = self.reference_work(s.position);
         self.x_prev = Some(s.position);
         self.ref_prev = live;
@@ -387,6 +394,7 @@ impl<D: Device> Bridge<D> {
                 force: 0.0,
                 damping: 0.0,
                 energy: 0.0,
+                raw_energy: 0.0,
             }
         }
     }
@@ -407,6 +415,18 @@ impl<D: Device> Bridge<D> {
                 clamp_force(capped.force_at(x), self.spec.max_force)
             }
             None => 0.0,
+        }
+    }
+
+    /// The virtual coupling's damper the server asks for (`ForceFeedback::damping`), `−B_c·v`
+    /// with the measured velocity, capped at what the device renders stably, while the model has
+    /// a stiffness (the coupling's spring is engaged); nothing otherwise.
+    fn coupling_damper(&self, live: Option<ForceFeedback>, v: f64) -> f64 {
+        match live {
+            Some(f) if f.stiffness < 0.0 && f.damping.is_finite() && v.is_finite() => {
+                f.damping.clamp(0.0, self.spec.max_damping) * v
+            }
+            _ => 0.0,
         }
     }
 
@@ -447,6 +467,11 @@ impl<D: Device> Bridge<D> {
             device: self.cfg.device_code,
             rate_hz: self.cfg.rate_hz,
             faults: self.faults(),
+            max_stiffness: self.spec.max_stiffness,
+            max_damping: self.spec.max_damping,
+            spec_rate_hz: self.spec.spec_rate_hz,
+            pc_cap: self.pc.alpha_max,
+            raw_port_energy: out.raw_energy,
         };
         self.sent[(self.seq % LATENCY_RING as u64) as usize] = (self.seq, now_ns);
         link.publish(&state);

@@ -23,6 +23,10 @@ pub struct DeviceSpec {
     /// Largest stiffness the device renders stably at its rate (N/m): a local linear model's
     /// stiffness is capped at it (Colgate: `b > K T / 2`).
     pub max_stiffness: f64,
+    /// The rate the limits above are declared for (Hz): with `max_stiffness` it fixes the
+    /// port damping the renderable region is computed from
+    /// (`nanopush_proto::haptic::region::port_damping`).
+    pub spec_rate_hz: f64,
 }
 
 /// One reading of the handle.
@@ -104,6 +108,11 @@ pub trait Device: Send {
     fn finished(&self) -> bool {
         false
     }
+    /// Whether the hand holds the tip in contact (the simulated operator's hold, for the
+    /// tip-force bound); real devices cannot tell.
+    fn holding(&self) -> bool {
+        false
+    }
     /// Zeroes the force and lets the device go. Called once, at the end; a backend also
     /// zeroes its force when dropped.
     fn close(&mut self) -> Result<(), DeviceError> {
@@ -135,6 +144,9 @@ impl Device for Box<dyn Device> {
     }
     fn observe(&mut self, link: &LinkView) {
         (**self).observe(link)
+    }
+    fn holding(&self) -> bool {
+        (**self).holding()
     }
     fn finished(&self) -> bool {
         (**self).finished()

@@ -213,7 +213,7 @@ fn read_trace(path: &Path) -> Vec<Row> {
     let mut lines = text.lines();
     assert_eq!(
         lines.next(),
-        Some("t_s,handle_m,handle_force_n,tip_z_m,tip_force_n,link,pc_damping,port_energy_j")
+        Some("t_s,handle_m,handle_force_n,tip_z_m,tip_force_n,link,pc_damping,port_energy_j,raw_port_energy_j,holding")
     );
     lines
         .map(|l| {

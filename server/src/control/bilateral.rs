@@ -380,6 +380,7 @@ impl Bilateral {
                 gain,
                 active: u32::from(gain > 0.0 && handle.is_some()),
                 flags,
+                damping: 0.0,
             },
         }
     }
