@@ -97,7 +97,10 @@ fn every_cell_of_the_grid_is_passive_calm_and_keeps_the_tip_steady() {
             for f in GRID_PULL_OFF_N {
                 let v: CellVerdict = judge(&run(g, f, op), 2.5);
                 println!("{op:>10} {g:>6} nm/mm {f:>4} N: {v}");
-                if !v.passes() {
+                // A press that reaches the surface (10 nm/mm and finer: at 1 nm/mm the
+                // surface is 100 mm of handle away, past the travel) is held in contact.
+                let held = op != "tap" && g >= 10.0;
+                if !v.passes() || (held && v.tip_windows < 10) {
                     failed.push(format!("{op} {g} nm/mm {f} N: {v}"));
                 }
             }

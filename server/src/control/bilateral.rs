@@ -8,18 +8,24 @@
 //!            z_ref ← clamp(z_des, z_lo, z_c + h_top), moved at most v_max·T per tick
 //! force:     F_tip = k_z ζ_z,  ζ_z = (V − V₀)/G                (Eqs 11-12: the measured deflection,
 //!                                                               with the sensor's noise)
-//!            F_hand = clamp(r · g_f · (F_tip + F_lim), ±F_dev)  (g_f: the scene's pull-off → 1 N)
+//!            F_hand = clamp(r · g_f · (F_tip·[|ζ_z| > ζ_c] + F_lim), ±F_dev)
+//!                                                  (g_f: the scene's pull-off → 1 N, limited to
+//!                                                   the device's renderable region: `coupling`)
 //! local model sent with it (rendered by the bridge at its rate between ticks):
-//!            dF_hand/dx = −r · g_f · k_z · g_p   while the tip touches (|ζ_z| > ζ_c), else 0
+//!            dF_hand/dx = −r · g_f · k_z · g_p   while the tip touches (|ζ_z| > ζ_c) or the
+//!                                                coupling spring acts, else 0; with it the
+//!                                                coupling's damper B_c
 //! ```
 //!
 //! `(x_a, z_a)` is the anchor, taken at the engagement and at every clutch release, so the tip
 //! never jumps when the hand is re-centred; `z_c` the height at which the surface was detected
 //! (the automatic approach below); `ζ_max` the deepest the lever may be pressed (80 % of the
 //! deflection at the strategy's safety limit): once `ζ_z ≥ ζ_max` the tip goes no lower (it backs
-//! off by the excess), and a hard floor `z_c − ζ_max − 20 nm` backs that up; `F_lim = k_z (z_lo −
-//! z_des)` is a virtual wall continuing the contact's stiffness where a limit holds the tip, so
-//! the hand feels the limit instead of a tip that stopped following; `r` the engagement ramp.
+//! off by the excess), and a hard floor `z_c − ζ_max − 20 nm` backs that up; `F_lim = k_z (z_ref
+//! − z_des)` is the coupling spring between the hand and the set-point: a virtual wall
+//! continuing the contact's stiffness where a limit holds the tip, so the hand feels the limit
+//! instead of a tip that stopped following, and the lag of a set-point moved at its speed limit;
+//! `r` the engagement ramp.
 //!
 //! Engagement, as CHAI3D and OpenHaptics do it: on `engage` the tip approaches the surface at the
 //! strategy's approach speed until the reading leaves the baseline (the substrate threshold),
@@ -29,12 +35,19 @@
 //! handle only feels the force; after it, the tip parks again. A lost link (no handle sample for
 //! 5 ms, decided by the caller) freezes z and retracts the tip to the parking height.
 //!
-//! The passivity of the port (energy the sampled loop generates) is watched and damped at the
-//! bridge, where the force actually rendered is known (`nanopush_haptic::passivity`).
+//! The force is rendered through a virtual coupling sized from the device's renderable region
+//! (the contact is never felt stiffer than the device renders passively; a lagging set-point is
+//! felt as a spring; the sensor's noise is not rendered): [`coupling`], with the passivity
+//! argument. The port's energy is also watched and damped at the bridge, where the force
+//! actually rendered is known (`nanopush_haptic::passivity`); a damper held at its cap lowers
+//! the force scale (energy bounding).
 
 use nanopush_proto::haptic::{FORCE_CLUTCHED, FORCE_ENGAGED, FORCE_PUSHING, ForceFeedback, HapticState};
 
 use crate::scene::Scene;
+
+pub mod coupling;
+pub use coupling::Coupling;
 
 pub use nanopush_proto::haptic::{BUTTON_CLUTCH, BUTTON_ENGAGE};
 /// Hand force below which the forces may engage (N).
@@ -46,6 +59,8 @@ pub const RAMP: f64 = 1.0;
 /// The hard floor below the detected surface beyond the deflection limit (m): a backstop for a
 /// reading that never reaches the limit.
 pub const FLOOR_MARGIN: f64 = 20e-9;
+/// Ticks the coupling spring's stiffness stays in the local model after it last acted.
+pub const COUPLED_HOLD: u32 = 50;
 /// Half-width of the handle range a local model is sent for (m).
 pub const MODEL_HALF_RANGE: f64 = 0.5e-3;
 
@@ -54,8 +69,11 @@ pub const MODEL_HALF_RANGE: f64 = 0.5e-3;
 pub struct BilateralParams {
     /// Tip metres per handle metre (`g_p`).
     pub position_gain: f64,
-    /// Hand newtons per tip newton (`g_f`).
+    /// Hand newtons per tip newton (`g_f`), as asked: the one in force may be lower
+    /// ([`Coupling::force_gain`]).
     pub force_gain: f64,
+    /// The tip-sample pull-off force (N), which `g_f` maps to the hand.
+    pub adhesion: f64,
     /// Height above the detected surface the tip parks at (m).
     pub park_gap: f64,
     /// Fastest the hand may move the tip's height (m/s).
@@ -96,6 +114,7 @@ impl Scene {
         BilateralParams {
             position_gain: h.nm_per_mm * 1e-9 / 1e-3,
             force_gain: h.pull_off_at_hand_n / ts.adhesion().max(1e-12),
+            adhesion: ts.adhesion().max(1e-12),
             park_gap: h.park_gap_nm * 1e-9,
             max_speed: h.max_speed_nm_per_s * 1e-9,
             approach_speed: st.approach_speed_um_per_s * 1e-6,
@@ -212,11 +231,17 @@ pub struct Bilateral {
     button_prev: bool,
     /// The height at which the lever reached its deflection limit, while the hand presses on.
     force_floor: Option<f64>,
+    /// Ticks since the coupling spring last acted (the local model's stiffness stays on for
+    /// [`COUPLED_HOLD`] ticks after it, so a set-point that lags on and off is felt as one
+    /// spring, not as a force switched on and off).
+    since_coupled: u32,
     /// The phase a running push interrupted (the hand gets the tip back after it only if it had
     /// it before).
     before_push: Phase,
     /// The force ramp during a push (0..1).
     push_gain: f64,
+    /// The renderable region, the coupling and energy bounding.
+    coupling: Coupling,
 }
 
 impl Bilateral {
@@ -233,8 +258,10 @@ impl Bilateral {
             fault: None,
             button_prev: false,
             force_floor: None,
+            since_coupled: u32::MAX,
             before_push: Phase::Off,
             push_gain: 0.0,
+            coupling: Coupling::new(params.tick),
         }
     }
 
@@ -246,6 +273,11 @@ impl Bilateral {
     /// Whether the hand owns (or will own) the tip: engaged in any way but off.
     pub fn engaged(&self) -> bool {
         self.phase != Phase::Off
+    }
+
+    /// The renderable region and the coupling in force.
+    pub fn coupling(&self) -> &Coupling {
+        &self.coupling
     }
 
     /// The last fault, if any.
@@ -268,6 +300,7 @@ impl Bilateral {
         self.approach_from = stage[2];
         self.fault = None;
         self.force_floor = None;
+        self.coupling.reset_bound();
         self.phase = Phase::Approach;
     }
 
@@ -296,6 +329,7 @@ impl Bilateral {
         if let Some(g) = force_gain {
             self.params.force_gain = g;
         }
+        self.coupling.reset_bound();
         if matches!(self.phase, Phase::Ramp { .. } | Phase::Engaged | Phase::Clutched) {
             if let Some(x) = handle.filter(|x| x.is_finite()) {
                 self.anchor = (x, self.z_ref);
@@ -357,11 +391,20 @@ impl Bilateral {
         let limit_force = self.step_phase(input, tip_force, zeta);
         let (gain, flags) = self.gain_and_flags(handle.is_some());
         let touching = zeta.abs() > p.contact_deflection;
-        let force = (gain * p.force_gain * (tip_force + limit_force)).clamp(-max_force, max_force);
+        let force_gain = self.coupling.update(&p, handle.as_ref(), gain > 0.0);
+        // The tip force beyond the sensor's noise, and the coupling spring (see `coupling`).
+        let rendered = if touching { tip_force } else { 0.0 } + limit_force;
+        let force = (gain * force_gain * rendered).clamp(-max_force, max_force);
         // A retraction that ends this tick still moves the tip there.
         let owns_z = !matches!(self.phase, Phase::Off | Phase::Pushing) || was == Phase::Retract;
-        let stiffness = if (touching || limit_force > 0.0) && self.phase != Phase::Pushing {
-            -gain * p.force_gain * p.k_z * p.position_gain
+        self.since_coupled = if limit_force != 0.0 {
+            0
+        } else {
+            self.since_coupled.saturating_add(1)
+        };
+        let coupled = self.since_coupled < COUPLED_HOLD;
+        let stiffness = if (touching || coupled) && self.phase != Phase::Pushing {
+            -gain * force_gain * p.k_z * p.position_gain
         } else {
             0.0
         };
@@ -380,7 +423,11 @@ impl Bilateral {
                 gain,
                 active: u32::from(gain > 0.0 && handle.is_some()),
                 flags,
-                damping: 0.0,
+                damping: if stiffness < 0.0 {
+                    gain * self.coupling.damping()
+                } else {
+                    0.0
+                },
             },
         }
     }
@@ -511,8 +558,8 @@ impl Bilateral {
         (gain, flags)
     }
 
-    /// The hand moves the tip (ramp, engaged, clutch); returns the virtual wall's force at the
-    /// range limit (N, tip side).
+    /// The hand moves the tip (ramp, engaged, clutch); returns the coupling spring's force
+    /// `k_z (z_ref − z_des)` (N, tip side): the wall at a limit, the lag at the speed limit.
     fn follow(&mut self, h: &HapticState, zeta: f64) -> f64 {
         let p = self.params;
         let clutch = h.buttons & BUTTON_CLUTCH != 0;
@@ -555,7 +602,9 @@ impl Bilateral {
         // When the force floor has risen above the top limit, the floor (up, away from the
         // surface) wins.
         self.slew(z_des.min(hi).max(lo), p.max_speed);
-        if z_des < lo { p.k_z * (lo - z_des) } else { 0.0 }
+        // The coupling spring: the set-point's lag behind the hand (a limit holding it is a
+        // virtual wall continuing the contact's stiffness).
+        p.k_z * (self.z_ref - z_des)
     }
 }
 
