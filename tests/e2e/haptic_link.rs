@@ -22,7 +22,7 @@ use crate::util::{
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 /// Holds the haptic tests' turn until dropped (taken over from a test that failed holding it).
-fn one_at_a_time() -> MutexGuard<'static, ()> {
+pub(crate) fn one_at_a_time() -> MutexGuard<'static, ()> {
     ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
 }
 
