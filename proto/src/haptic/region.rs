@@ -23,7 +23,10 @@
 //! period of round trip (the bridge locks its cycle to the server's tick, so that is the loop's
 //! round trip: docs/benchmarks.md, haptic latency), which fixes `b = K_s (T_s/2 + T_s)`. The
 //! simulated device declares 2 kN/m at 1 kHz; a serial device sends `K_s` and its rate in its
-//! info packet. The region at another rate or a longer measured delay follows from the formula.
+//! info packet. The region at another rate or a longer measured delay follows from the formula,
+//! but never beyond what the device declares ([`edge`]): at 4 kHz the formula allows the
+//! simulated device 2.67 kN/m, at which a loose grip (1 N·s/m) stays passive but rings (146
+//! chatter cycles in the grid's press at 10 nm/mm and 2.5 N, against none at 2 kN/m).
 //!
 //! The felt contact stiffness of a scaled teleoperator is `K_felt = g_f · k_z · g_p` (`g_f` hand
 //! newtons per tip newton, `k_z` the lever, `g_p` tip metres per handle metre). A setting with
@@ -49,6 +52,13 @@ pub fn max_stiffness(port_damping: f64, damping: f64, rate_hz: f64, delay_s: f64
     let t = 1.0 / rate_hz;
     let k = (port_damping - damping.abs()) / (0.5 * t + delay_s.max(0.0));
     if k.is_finite() { k.max(0.0) } else { 0.0 }
+}
+
+/// The region's edge the scales are limited to (N/m): [`max_stiffness`] with no damping, for a
+/// device declaring `declared` (N/m) at `spec_rate_hz`, run at `rate_hz` with a round trip of
+/// `delay_s`, and never above `declared`.
+pub fn edge(declared: f64, spec_rate_hz: f64, rate_hz: f64, delay_s: f64) -> f64 {
+    max_stiffness(port_damping(declared, spec_rate_hz), 0.0, rate_hz, delay_s).min(declared.max(0.0))
 }
 
 /// The virtual coupling's damper for a felt stiffness `stiffness` (N/m) at `rate_hz` with a
@@ -85,7 +95,7 @@ impl Limit {
         match self {
             Limit::None => "",
             Limit::Region => {
-                "the contact would be felt stiffer than the device renders passively at its rate and delay (its Z-width); the force scale was lowered to the region's edge"
+                "the contact would be felt stiffer than the device renders passively (its Z-width at its rate and the measured round trip, at most the stiffness it declares); the force scale was lowered to the region's edge"
             }
             Limit::EnergyBounding => {
                 "the passivity controller's damper stayed at its cap for more than 50 ms; the force scale was halved (energy bounding)"
@@ -116,9 +126,9 @@ impl Limit {
 /// scale `position_gain` (tip m per handle m), a lever of `k_lever` (N/m) and a region edge
 /// `k_max` (N/m): `min(g_f, K_max / (k_z g_p))`, and whether it was limited.
 pub fn limit_force_gain(force_gain: f64, position_gain: f64, k_lever: f64, k_max: f64) -> (f64, Limit) {
-    let edge = k_max / (k_lever * position_gain);
-    if edge.is_finite() && edge >= 0.0 && force_gain > edge {
-        (edge, Limit::Region)
+    let at_edge = k_max / (k_lever * position_gain);
+    if at_edge.is_finite() && at_edge >= 0.0 && force_gain > at_edge {
+        (at_edge, Limit::Region)
     } else {
         (force_gain, Limit::None)
     }
@@ -144,6 +154,10 @@ mod tests {
         assert_eq!(max_stiffness(f64::NAN, 0.0, 1000.0, 1e-3), 0.0);
         assert_eq!(port_damping(-1.0, 1000.0), 0.0);
         assert!((coupling_damping(-2000.0, 1000.0, 1e-3) - 6.0).abs() < 1e-12);
+        // The edge: the declared 2 kN/m at 4 kHz (not 2.67), 1.2 kN/m with 2 ms of delay.
+        assert_eq!(edge(2000.0, 1000.0, 4000.0, 1e-3), 2000.0);
+        assert!((edge(2000.0, 1000.0, 1000.0, 2e-3) - 1200.0).abs() < 1e-9);
+        assert_eq!(edge(f64::NAN, 1000.0, 1000.0, 1e-3), 0.0);
     }
 
     /// The paper scene's lever (8.0 N/m) at 10 nm/mm and 10 N of pull-off (18.15e7 hand N per

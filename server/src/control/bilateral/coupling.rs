@@ -20,9 +20,10 @@
 //! - the *gate* `[|ζ_z| > ζ_c]`: the tip force is rendered only beyond 5 σ of the sensor's noise.
 //!   The noise is an active source (a random force the hand moves with), scaled by `g_f`; in
 //!   free space it is all there is.
-//! - the *region*: the felt stiffness never exceeds `K_max = b / (T/2 + T_d)`, the device's
-//!   Z-width edge at its period `T` and the measured round trip `T_d`
-//!   ([`nanopush_proto::haptic::region`]); a force scale past it is lowered to the edge.
+//! - the *region*: the felt stiffness never exceeds `K_max = min(K_s, b / (T/2 + T_d))`, the
+//!   device's Z-width edge at its period `T` and the measured round trip `T_d`, and never what
+//!   the device declares ([`nanopush_proto::haptic::region`]); a force scale past it is lowered
+//!   to the edge.
 //! - the *coupling damper* `B_c`, rendered by the bridge with the device's measured velocity:
 //!   a spring held over a period `T` and a delay `T_d` gives back `K (T/2 + T_d) ẋ²` more power
 //!   than it took (the hold's leak, Colgate's `K T/2`, and the delay's); `B_c` dissipates twice
@@ -36,7 +37,7 @@
 //!   monitor logs it. A new `scale` or engagement starts at `β = 1` again.
 
 use nanopush_proto::haptic::HapticState;
-use nanopush_proto::haptic::region::{Limit, coupling_damping, limit_force_gain, max_stiffness, port_damping};
+use nanopush_proto::haptic::region::{Limit, coupling_damping, edge, limit_force_gain};
 
 use super::BilateralParams;
 
@@ -102,7 +103,7 @@ impl Coupling {
             }
             self.delay = self.delay.clamp(p.tick, MAX_DELAY);
             let rate = if h.rate_hz > 0.0 { h.rate_hz } else { 1.0 / p.tick };
-            self.k_max = max_stiffness(port_damping(h.max_stiffness, h.spec_rate_hz), 0.0, rate, self.delay);
+            self.k_max = edge(h.max_stiffness, h.spec_rate_hz, rate, self.delay);
             let pinned = engaged && h.pc_cap > 0.0 && h.pc_damping >= 0.999 * h.pc_cap;
             self.pinned = if pinned { self.pinned + 1 } else { 0 };
             if f64::from(self.pinned) * p.tick > PINNED_FOR && self.bound > MIN_BOUND {
