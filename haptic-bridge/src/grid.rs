@@ -75,6 +75,18 @@ impl std::fmt::Display for CellVerdict {
     }
 }
 
+/// [`judge`] of a device running `per_tick` cycles per 1 ms tick: the energy from every row
+/// (it is exact at any rate), the chatter, the force and the tip from every `per_tick`-th row
+/// (the measures are defined on 1 ms samples).
+pub fn judge_at(rows: &[CycleRow], per_tick: usize, force_limit: f64) -> CellVerdict {
+    let every: Vec<CycleRow> = rows.iter().step_by(per_tick.max(1)).copied().collect();
+    CellVerdict {
+        energy: judge(rows, force_limit).energy,
+        max_force: rows.iter().map(|r| r.force.abs()).fold(0.0, f64::max),
+        ..judge(&every, force_limit)
+    }
+}
+
 /// The measures of a cycle's rows (one per 1 kHz device cycle; rows without a handle sample are
 /// skipped) on a device whose force limit is `force_limit` (N).
 pub fn judge(rows: &[CycleRow], force_limit: f64) -> CellVerdict {

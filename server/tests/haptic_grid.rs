@@ -8,74 +8,26 @@
 //! 10 % of its mean over every 20 ms window. The same cells run with the real processes in
 //! `tests/e2e/haptic_grid.rs` (a subset) and in the `nanopush-haptic-grid` benchmark (all).
 
-use nanopush::control::bilateral::{Bilateral, Input, Phase};
-use nanopush::instrument::Afm;
-use nanopush::scene::Scene;
-use nanopush_haptic::bridge::{Bridge, BridgeConfig, CycleRow, Link};
+mod haptic_rig;
+
+use haptic_rig::closed_loop;
+use nanopush_haptic::bridge::CycleRow;
 use nanopush_haptic::grid::{CellVerdict, GRID_NM_PER_MM, GRID_OPERATORS, GRID_PULL_OFF_N, judge};
 use nanopush_haptic::operator::Script;
-use nanopush_haptic::sim::SimDevice;
-use nanopush_proto::haptic::{ForceFeedback, HapticState};
 
-/// The link: the newest sample each way.
-#[derive(Default)]
-struct Wire {
-    state: Option<HapticState>,
-    force: Option<ForceFeedback>,
-}
-
-impl Link for Wire {
-    fn publish(&mut self, s: &HapticState) {
-        self.state = Some(*s);
-    }
-    fn newest(&mut self) -> Option<ForceFeedback> {
-        self.force.take()
-    }
-}
-
-/// One cell: the operator `script` at `nm_per_mm` and `pull_off_n` (set as a `scale` request
-/// sets them), until the script ends or 30 s; the rows from the engagement on.
+/// One cell at a 1 kHz device: the rows from the engagement on (30 s at most).
 fn run(nm_per_mm: f64, pull_off_n: f64, script: &str) -> Vec<CycleRow> {
-    let dt = 1e-3;
-    let scene = Scene::default_scene();
-    let mut afm = Afm::from_scene(&scene, 20e-6, 20e-6, dt);
-    let mut law = Bilateral::new(scene.bilateral_params(dt));
-    law.rescale(
-        Some(nm_per_mm * 1e-6),
-        Some(pull_off_n / scene.tip_sample().adhesion()),
-        None,
+    let (rows, _) = closed_loop(
+        Script::parse(script).expect("a grid script"),
+        nm_per_mm,
+        pull_off_n,
+        1,
+        30_000,
     );
-    let device = SimDevice::new(Script::parse(script).expect("a grid script"), dt);
-    let mut bridge = Bridge::new(device, BridgeConfig::default(), 0);
-    let mut wire = Wire::default();
-    let mut reading = afm.read();
-    law.engage(reading.stage);
-    let mut rows = Vec::new();
-    let mut engaged = false;
-    for n in 0..30_000u64 {
-        let now = (n + 1) * 1_000_000;
-        let o = law.tick(&Input {
-            handle: wire.state,
-            stage: reading.stage,
-            volts: reading.volts,
-            pushing: false,
-        });
-        reading = afm.step(o.target.unwrap_or(reading.stage)).expect("the free tip steps");
-        wire.force = Some(ForceFeedback {
-            seq: n,
-            time_ns: now,
-            ..o.feedback
-        });
-        engaged |= law.phase() == Phase::Engaged;
-        let row = bridge.cycle(now + 30_000, &mut wire);
-        if engaged {
-            rows.push(row);
-        }
-        if bridge.device.operator.finished() {
-            break;
-        }
-    }
-    assert!(engaged, "{script} at {nm_per_mm} nm/mm, {pull_off_n} N never engaged");
+    assert!(
+        !rows.is_empty(),
+        "{script} at {nm_per_mm} nm/mm, {pull_off_n} N never engaged"
+    );
     rows
 }
 
