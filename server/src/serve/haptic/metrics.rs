@@ -226,7 +226,8 @@ impl HapticMetrics {
     /// `params` as asked, `c` the coupling of the law.
     pub fn note_scales(&self, p: &BilateralParams, c: &Coupling) {
         let s = &self.scales;
-        let g = c.force_gain();
+        // Before a device is known nothing is rendered; the scales shown are those asked.
+        let g = if c.k_max() > 0.0 { c.force_gain() } else { p.force_gain };
         let felt = g * p.k_z * p.position_gain;
         let pull_off = g * p.adhesion;
         let store = |a: &AtomicU64, v: f64| a.store(v.to_bits(), Relaxed);
