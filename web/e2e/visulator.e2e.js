@@ -298,6 +298,8 @@ test('with a haptic link, the haptic panel shows it and the lease holder can eng
     const dev = await waitText(p, '#hap-device', /faults: none|faults:/, 8000);
     assert.match(dev, /^(\d+(\.\d+)? k?Hz · )?faults: /, dev);
     assert.match(await p.getAttribute('#hap-device', 'class'), /^(|warn|bad)$/);
+    // The scales in force (issue 25): the scene's default, inside the device's region.
+    await waitText(p, '#hap-scales', /^10 nm\/mm, 1\.000 N pull-off, felt \d+ N\/m$/, 8000);
     // The monitor shows the same line.
     const m = await newPage(browser, { width: 1280, height: 800 });
     await m.goto(hs.base + '/?view=monitor');

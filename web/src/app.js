@@ -58,7 +58,7 @@ export class App {
     this.haptic = new HapticPanel({
       panel: $('haptic-panel'),
       plot: $('chart-hap'),
-      fields: { link: $('hap-link'), phase: $('hap-phase'), engaged: $('hap-engaged'), handle: $('hap-handle'), hand: $('hap-hand'), tip: $('hap-tip'), pc: $('hap-pc') },
+      fields: { link: $('hap-link'), phase: $('hap-phase'), engaged: $('hap-engaged'), handle: $('hap-handle'), hand: $('hap-hand'), tip: $('hap-tip'), pc: $('hap-pc'), scales: $('hap-scales') },
       device: $('hap-device'),
     }, frames, { doc, fetchStatus: this.demo ? undefined : () => fetchStatus(loc) });
 

@@ -1,6 +1,7 @@
 // The haptic panel, shown once telemetry carries a `haptic` object (the server runs a haptic
 // link: `--haptic sim|external`): link up/down, the z-control phase (engaged or not), the
-// handle's position and the force at the hand, the tip force, the passivity controller, and a
+// handle's position and the force at the hand, the tip force, the passivity controller, the
+// scales in force (lowered, and why, when the device cannot render those asked: issue 25), and a
 // scrolling plot of the force at the hand, and the device's fault counters (issue 28: the line
 // `deviceFaultsLine` of src/devicefaults.js makes, from /api/status every 2 s while the panel is
 // shown and the page is visible). The lease holder gets engage / release / re-centre
@@ -29,7 +30,26 @@ export function hapticFields(h) {
     hand: { text: h.force_n == null ? '–' : `${h.force_n.toFixed(3)} N` },
     tip: { text: `${(h.tip_force_n * 1e9).toFixed(2)} nN` },
     pc: { text: h.pc_active ? 'damping' : 'idle' },
+    scales: scalesField(h.scales),
   };
+}
+
+/** Why the scales in force differ from those asked (issue 25), as the panel says it. */
+const LIMITS = {
+  renderable_region: "lowered to the device's renderable region",
+  energy_bounding: 'halved: the passivity damper stayed at its cap (energy bounding)',
+};
+
+/**
+ * The scales in force (telemetry's `haptic.scales`): the position scale, the pull-off felt at
+ * the hand and the contact's stiffness there; when lowered, from what and why (`warn`).
+ */
+export function scalesField(s) {
+  if (!s) return { text: '–', cls: '' };
+  const text = `${s.nm_per_mm} nm/mm, ${s.pull_off_at_hand_n.toFixed(3)} N pull-off, felt ${s.felt_stiffness_n_per_m.toFixed(0)} N/m`;
+  const why = LIMITS[s.limit];
+  if (!why) return { text, cls: '' };
+  return { text: `${text} (asked ${s.asked_pull_off_at_hand_n} N: ${why})`, cls: 'warn' };
 }
 
 /** The force at the hand over the last `seconds` of server time (a restart starts it again). */
@@ -116,6 +136,7 @@ export class HapticPanel {
       this.syncPolling();
     }
     for (const [k, v] of Object.entries(hapticFields(h))) {
+      if (!fields[k]) continue; // a page without this field
       fields[k].textContent = v.text;
       if (v.cls !== undefined) fields[k].className = v.cls;
     }
