@@ -42,6 +42,8 @@ pub struct CellBench {
     pub dir: PathBuf,
     /// The link's namespace.
     pub namespace: String,
+    /// Keep the directory (a cell that failed, to read its trace and logs).
+    pub keep: bool,
 }
 
 impl CellBench {
@@ -58,6 +60,7 @@ impl CellBench {
         CellBench {
             dir,
             namespace: format!("grid{tag}{}", std::process::id()),
+            keep: false,
         }
     }
 }
@@ -73,7 +76,7 @@ impl Drop for CellBench {
                 }
             }
         }
-        if std::env::var_os("NANOPUSH_E2E_KEEP").is_none() && !std::thread::panicking() {
+        if !self.keep && std::env::var_os("NANOPUSH_E2E_KEEP").is_none() && !std::thread::panicking() {
             let _ = std::fs::remove_dir_all(&self.dir);
         }
     }
