@@ -341,7 +341,9 @@ impl Bilateral {
     }
 
     /// The link to the hand is lost (or a new bridge replaced it): as when no sample arrives.
+    /// A new bridge may hold another device: energy bounding starts over.
     pub fn link_lost(&mut self) {
+        self.coupling.reset_bound();
         if matches!(
             self.phase,
             Phase::Settle { .. } | Phase::Ramp { .. } | Phase::Engaged | Phase::Clutched
@@ -508,7 +510,18 @@ impl Bilateral {
                 }
             }
             Phase::Settle { small } => {
-                let hand = (p.force_gain * tip_force).abs();
+                // The force the hand would get: the force scale in force (the one asked before a
+                // device is known), nothing within the sensor's noise.
+                let g = if self.coupling.k_max() > 0.0 {
+                    self.coupling.force_gain()
+                } else {
+                    p.force_gain
+                };
+                let hand = if zeta.abs() > p.contact_deflection {
+                    (g * tip_force).abs()
+                } else {
+                    0.0
+                };
                 let small = if hand < ENGAGE_FORCE { small + 1 } else { 0 };
                 self.phase = Phase::Settle { small };
                 if small >= ENGAGE_TICKS
