@@ -55,12 +55,17 @@ impl Default for BridgeConfig {
 
 /// A gap between two force writes longer than this many periods, and at least
 /// [`RESUME_AFTER_MIN_NS`] (a stopped process, a long stall: by then a serial device's 10 ms
-/// watchdog may have zeroed its force), ends with the force ramped in from zero over
+/// watchdog has zeroed its force), ends with the force ramped in from zero over
 /// [`RESUME_RAMP_S`]: the device never gets the force from before the pause at once. One late
-/// answer (up to the 2 ms answer wait, rounded up to the next ms) is not a pause.
+/// answer (up to the 2 ms answer wait, rounded up to the next ms) is not a pause. A shorter
+/// stall is not one either: the device still holds the force it was given, and dropping it to
+/// zero to ramp it in again would be a dip the hand feels — and an active one, the force pushing
+/// back a handle the hand pressed in meanwhile (issue 25: a virtual machine's 5-6 ms pauses in
+/// contact handed the hand up to 2 mJ). A watchdog that tripped sooner says so, and ramps too.
 pub const RESUME_AFTER_PERIODS: u64 = 3;
-/// The least gap between two force writes that counts as a pause (ns).
-pub const RESUME_AFTER_MIN_NS: u64 = 5_000_000;
+/// The least gap between two force writes that counts as a pause (ns): the serial device's
+/// watchdog period.
+pub const RESUME_AFTER_MIN_NS: u64 = 10_000_000;
 /// How long the force takes to ramp in after a pause or a new device (s).
 pub const RESUME_RAMP_S: f64 = 0.02;
 /// Samples whose send times are kept for the latency measurement.
@@ -652,7 +657,7 @@ mod tests {
 
     /// Issue 28, "a stale force after a host pause": after the bridge was stopped for 50 ms, its
     /// first packet carried the force from before (505 mN) and the hand felt a kick. Now a pause
-    /// of more than 3 periods ramps the force in from zero over 20 ms.
+    /// of more than 3 periods and 10 ms ramps the force in from zero over 20 ms.
     #[test]
     fn after_a_pause_the_force_ramps_in_from_zero_not_at_the_old_force() {
         let mut b = Bridge::new(SimDevice::new(Script::Hold, 1e-3), BridgeConfig::default(), 0);
@@ -683,6 +688,14 @@ mod tests {
         t += 2 * ms;
         link.next = Some(live(0.5, t));
         assert_eq!(b.cycle(t, &mut link).force, 0.5);
+        // Issue 25: nor is a stall shorter than a serial device's 10 ms watchdog (the device still
+        // holds its force: dropping it would be an active dip); one of 10 ms and more is.
+        t += 9_900_000;
+        link.next = Some(live(0.5, t));
+        assert_eq!(b.cycle(t, &mut link).force, 0.5, "a 9.9 ms stall");
+        t += 10_100_000;
+        link.next = Some(live(0.5, t));
+        assert!(b.cycle(t, &mut link).force < 0.05, "a 10.1 ms stall");
     }
 
     /// Issue 28: a reopened device starts with the force ramped in, its limits taken anew, and
