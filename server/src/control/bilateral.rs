@@ -59,6 +59,9 @@ pub const RAMP: f64 = 1.0;
 /// The hard floor below the detected surface beyond the deflection limit (m): a backstop for a
 /// reading that never reaches the limit.
 pub const FLOOR_MARGIN: f64 = 20e-9;
+/// Ticks within the sensor's noise after which the tip force is no longer rendered (the noise
+/// gate closes): 20 ms.
+pub const GATE_TICKS: u32 = 20;
 /// Ticks the coupling spring's stiffness stays in the local model after it last acted.
 pub const COUPLED_HOLD: u32 = 50;
 /// Half-width of the handle range a local model is sent for (m).
@@ -235,6 +238,10 @@ pub struct Bilateral {
     /// [`COUPLED_HOLD`] ticks after it, so a set-point that lags on and off is felt as one
     /// spring, not as a force switched on and off).
     since_coupled: u32,
+    /// Consecutive ticks the deflection has stayed within the sensor's noise (`|ζ| ≤ ζ_c`): the
+    /// tip force is rendered until [`GATE_TICKS`] of them (a contact's force crosses zero in a
+    /// tick or two without a gap; free space is quiet from then on).
+    quiet: u32,
     /// The phase a running push interrupted (the hand gets the tip back after it only if it had
     /// it before).
     before_push: Phase,
@@ -259,6 +266,7 @@ impl Bilateral {
             button_prev: false,
             force_floor: None,
             since_coupled: u32::MAX,
+            quiet: u32::MAX,
             before_push: Phase::Off,
             push_gain: 0.0,
             coupling: Coupling::new(params.tick),
@@ -395,7 +403,8 @@ impl Bilateral {
         let touching = zeta.abs() > p.contact_deflection;
         let force_gain = self.coupling.update(&p, handle.as_ref(), gain > 0.0);
         // The tip force beyond the sensor's noise, and the coupling spring (see `coupling`).
-        let rendered = if touching { tip_force } else { 0.0 } + limit_force;
+        self.quiet = if touching { 0 } else { self.quiet.saturating_add(1) };
+        let rendered = if self.quiet < GATE_TICKS { tip_force } else { 0.0 } + limit_force;
         let force = (gain * force_gain * rendered).clamp(-max_force, max_force);
         // A retraction that ends this tick still moves the tip there.
         let owns_z = !matches!(self.phase, Phase::Off | Phase::Pushing) || was == Phase::Retract;
@@ -405,7 +414,7 @@ impl Bilateral {
             self.since_coupled.saturating_add(1)
         };
         let coupled = self.since_coupled < COUPLED_HOLD;
-        let stiffness = if (touching || coupled) && self.phase != Phase::Pushing {
+        let stiffness = if (self.quiet < GATE_TICKS || coupled) && self.phase != Phase::Pushing {
             -gain * force_gain * p.k_z * p.position_gain
         } else {
             0.0
