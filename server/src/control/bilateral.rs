@@ -8,13 +8,14 @@
 //!            z_ref ← clamp(z_des, z_lo, z_c + h_top), moved at most v_max·T per tick
 //! force:     F_tip = k_z ζ_z,  ζ_z = (V − V₀)/G                (Eqs 11-12: the measured deflection,
 //!                                                               with the sensor's noise)
-//!            F_hand = clamp(r · g_f · (F_tip·[|ζ_z| > ζ_c] + F_lim), ±F_dev)
+//!            F_hand = clamp(r · g_f · (F_tip·[gate open] + F_lim), ±F_dev)
 //!                                                  (g_f: the scene's pull-off → 1 N, limited to
 //!                                                   the device's renderable region: `coupling`)
 //! local model sent with it (rendered by the bridge at its rate between ticks):
-//!            dF_hand/dx = −r · g_f · k_z · g_p   while the tip touches (|ζ_z| > ζ_c) or the
-//!                                                coupling spring acts, else 0; with it the
-//!                                                coupling's damper B_c
+//!            dF_hand/dx = −r · g_f · k_z · g_p   while the gate is open (the tip touched,
+//!                                                |ζ_z| > ζ_c, within the last 20 ms) or the
+//!                                                coupling spring acted (50 ms), else 0; with it
+//!                                                the coupling's damper B_c
 //! ```
 //!
 //! `(x_a, z_a)` is the anchor, taken at the engagement and at every clutch release, so the tip

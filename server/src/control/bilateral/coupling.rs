@@ -4,7 +4,7 @@
 //! The law ([`super`]) renders at the hand, each tick, with `K = g_f k_z g_p` the felt stiffness:
 //!
 //! ```text
-//! F_hand = r g_f ( F_tip·[|ζ_z| > ζ_c]  +  k_z (z_ref − z_des) )         (server, 1 kHz)
+//! F_hand = r g_f ( F_tip·[gate open]  +  k_z (z_ref − z_des) )           (server, 1 kHz)
 //! F(x)   = F_hand − K (x − x_a) − B_c ẋ       while in contact or coupled (bridge, its rate)
 //! g_f    = min(g_f,asked · β, K_max / (k_z g_p))                            (the region)
 //! B_c    = 2 K (T/2 + T_d)
@@ -17,9 +17,11 @@
 //!   energy out of the spring that it did not store: the coupling is a spring in series with a
 //!   dissipative element. Without it a set-point that lags while the hand withdraws would keep
 //!   pushing the hand up with the force of a deeper tip: active.
-//! - the *gate* `[|ζ_z| > ζ_c]`: the tip force is rendered only beyond 5 σ of the sensor's noise.
-//!   The noise is an active source (a random force the hand moves with), scaled by `g_f`; in
-//!   free space it is all there is.
+//! - the *gate*: the tip force is rendered once the deflection leaves 5 σ of the sensor's noise
+//!   (`|ζ_z| > ζ_c`) and until it has stayed within it for 20 ms. The noise is an active source
+//!   (a random force the hand moves with), scaled by `g_f`; in free space it is all there is. The
+//!   hysteresis lets a contact's force cross zero (adhesion to repulsion) without a gap, and the
+//!   contact's stiffness stays in the local model while the gate is open.
 //! - the *region*: the felt stiffness never exceeds `K_max = min(K_s, b / (T/2 + T_d))`, the
 //!   device's Z-width edge at its period `T` and the measured round trip `T_d`, and never what
 //!   the device declares ([`nanopush_proto::haptic::region`]); a force scale past it is lowered
