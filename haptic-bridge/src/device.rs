@@ -113,6 +113,14 @@ pub trait Device: Send {
     fn holding(&self) -> bool {
         false
     }
+    /// Whether the device may have dropped its force while the bridge was paused (a watchdog
+    /// that zeroes it when the host falls silent): after such a pause the bridge ramps the force
+    /// in from zero. A device that holds its force through any pause says `false`, and the
+    /// bridge resumes at the force of the moment (a dip and a ramp would be active: the force
+    /// pushing back a handle the hand pressed in meanwhile).
+    fn may_drop_force_when_paused(&self) -> bool {
+        true
+    }
     /// Zeroes the force and lets the device go. Called once, at the end; a backend also
     /// zeroes its force when dropped.
     fn close(&mut self) -> Result<(), DeviceError> {
@@ -147,6 +155,9 @@ impl Device for Box<dyn Device> {
     }
     fn holding(&self) -> bool {
         (**self).holding()
+    }
+    fn may_drop_force_when_paused(&self) -> bool {
+        (**self).may_drop_force_when_paused()
     }
     fn finished(&self) -> bool {
         (**self).finished()

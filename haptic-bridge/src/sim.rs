@@ -153,6 +153,12 @@ impl Device for SimDevice {
     fn holding(&self) -> bool {
         self.operator.holding()
     }
+
+    /// The simulated motor holds its force through any pause of the bridge, and the handle,
+    /// integrated cycle by cycle, stands still meanwhile.
+    fn may_drop_force_when_paused(&self) -> bool {
+        false
+    }
 }
 
 #[cfg(test)]
