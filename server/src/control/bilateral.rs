@@ -347,9 +347,14 @@ impl Bilateral {
         } else {
             self.since_coupled.saturating_add(1)
         };
-        let coupled = self.since_coupled < COUPLED_HOLD;
-        let stiffness = if (self.quiet < GATE_TICKS || coupled) && self.phase != Phase::Pushing {
-            -gain * force_gain * p.k_z * p.position_gain
+        // The local model's stiffness (and the coupling damper with it) is whole while the tip
+        // touches or the coupling spring acts, and fades out over the gate's 20 ms and the
+        // coupling's 50 ms after: a contact crossing zero keeps it, free space loses it without a
+        // step (and without dragging a hand that flies off at the pull-off).
+        let fade = |since: u32, over: u32| 1.0 - f64::from(since.min(over)) / f64::from(over);
+        let share = fade(self.quiet, GATE_TICKS).max(fade(self.since_coupled, COUPLED_HOLD));
+        let stiffness = if self.phase != Phase::Pushing {
+            -gain * force_gain * p.k_z * p.position_gain * share
         } else {
             0.0
         };
@@ -369,7 +374,7 @@ impl Bilateral {
                 active: u32::from(gain > 0.0 && handle.is_some()),
                 flags,
                 damping: if stiffness < 0.0 {
-                    gain * self.coupling.damping()
+                    gain * self.coupling.damping() * share
                 } else {
                     0.0
                 },
