@@ -99,7 +99,9 @@ fn device_faults(h: &HapticMetrics) -> serde_json::Value {
 /// force, for a lever of `k_lever` (N/m) and a pull-off of `adhesion` (N): the force scale
 /// lowered to the device's renderable region's edge when past it (the region as the loop last
 /// computed it for the device on the link), and why. Before a device is known the asked scales
-/// are shown; the loop limits them once one is.
+/// are shown; the loop limits them once one is. A scale omitted is the one the previous accepted
+/// `scale` asked for (the loop may not have taken it yet: a burst), else the one in force; call
+/// it once per accepted `scale`, as it records what this one asks for.
 pub fn scales_in_force(
     h: &HapticMetrics,
     k_lever: f64,
@@ -108,8 +110,16 @@ pub fn scales_in_force(
     pull_off_at_hand_n: Option<f64>,
 ) -> HapticScales {
     let now = h.scales.snapshot();
-    let nm_per_mm = nm_per_mm.unwrap_or(now.nm_per_mm);
-    let asked = pull_off_at_hand_n.unwrap_or(now.asked_pull_off_at_hand_n);
+    let (nm_per_mm, asked) = {
+        let mut last = h.asked_scales.lock().unwrap_or_else(|e| e.into_inner());
+        let (nm_before, asked_before) = last.unwrap_or((now.nm_per_mm, now.asked_pull_off_at_hand_n));
+        let asked = (
+            nm_per_mm.unwrap_or(nm_before),
+            pull_off_at_hand_n.unwrap_or(asked_before),
+        );
+        *last = Some(asked);
+        asked
+    };
     let adhesion = adhesion.max(1e-12);
     let g_p = nm_per_mm * 1e-9 / 1e-3;
     let (g_f, limit) = match now.max_stiffness_n_per_m {
@@ -234,5 +244,33 @@ mod tests {
         );
         let one = scales_in_force(&h, k_z, adhesion, Some(10.0), Some(1.0));
         assert_eq!((one.limit.as_str(), one.reason), ("none", None));
+    }
+
+    /// A burst of `scale`s answered before the loop takes the first: each `ok` builds on the
+    /// scales the previous one asked for, not on those the loop still has in force (a scale of
+    /// 1000 nm/mm and 10 N, then 10 nm/mm, then 1 N is 10 nm/mm and 1 N, as asked, in force).
+    #[test]
+    fn a_burst_of_scales_builds_on_the_last_one_asked() {
+        let scene = Scene::default_scene();
+        let (k_z, adhesion) = (scene.tip_sample().k_c, scene.tip_sample().adhesion());
+        let h = HapticMetrics::default();
+        let p = scene.bilateral_params(1e-3);
+        let mut c = Coupling::new(1e-3);
+        let handle = HapticState {
+            max_force: 2.5,
+            max_stiffness: 2000.0,
+            spec_rate_hz: 1000.0,
+            rate_hz: 1000.0,
+            latency_ns: 1_000_000,
+            ..HapticState::default()
+        };
+        c.update(&p, Some(&handle), true);
+        h.note_scales(&p, &c);
+        scales_in_force(&h, k_z, adhesion, Some(1000.0), Some(10.0));
+        let nm = scales_in_force(&h, k_z, adhesion, Some(10.0), None);
+        assert_eq!((nm.nm_per_mm, nm.asked_pull_off_at_hand_n), (10.0, 10.0), "{nm:?}");
+        let one = scales_in_force(&h, k_z, adhesion, None, Some(1.0));
+        assert_eq!((one.nm_per_mm, one.asked_pull_off_at_hand_n), (10.0, 1.0), "{one:?}");
+        assert_eq!((one.limit.as_str(), one.reason.as_deref()), ("none", None), "{one:?}");
     }
 }

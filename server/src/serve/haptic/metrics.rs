@@ -77,6 +77,9 @@ pub struct HapticMetrics {
     pub scales: ScaleAtomics,
     /// Times energy bounding lowered the force scale.
     pub energy_bounds: AtomicU64,
+    /// The scales the last accepted `scale` asked for (nm/mm, pull-off at the hand in N), which
+    /// the loop may not have taken yet: the next `scale`'s `ok` builds on them.
+    pub asked_scales: std::sync::Mutex<Option<(f64, f64)>>,
 }
 
 /// The scales of haptic z-control in force, f64 bits, and why they differ from those asked.
