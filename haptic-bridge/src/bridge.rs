@@ -55,12 +55,17 @@ impl Default for BridgeConfig {
 
 /// A gap between two force writes longer than this many periods, and at least
 /// [`RESUME_AFTER_MIN_NS`] (a stopped process, a long stall: by then a serial device's 10 ms
-/// watchdog may have zeroed its force), ends with the force ramped in from zero over
+/// watchdog has zeroed its force), ends with the force ramped in from zero over
 /// [`RESUME_RAMP_S`]: the device never gets the force from before the pause at once. One late
-/// answer (up to the 2 ms answer wait, rounded up to the next ms) is not a pause.
+/// answer (up to the 2 ms answer wait, rounded up to the next ms) is not a pause. A shorter
+/// stall is not one either: the device still holds the force it was given, and dropping it to
+/// zero to ramp it in again would be a dip the hand feels — and an active one, the force pushing
+/// back a handle the hand pressed in meanwhile (issue 25: a virtual machine's 5-6 ms pauses in
+/// contact handed the hand up to 2 mJ). A watchdog that tripped sooner says so, and ramps too.
 pub const RESUME_AFTER_PERIODS: u64 = 3;
-/// The least gap between two force writes that counts as a pause (ns).
-pub const RESUME_AFTER_MIN_NS: u64 = 5_000_000;
+/// The least gap between two force writes that counts as a pause (ns): the serial device's
+/// watchdog period.
+pub const RESUME_AFTER_MIN_NS: u64 = 10_000_000;
 /// How long the force takes to ramp in after a pause or a new device (s).
 pub const RESUME_RAMP_S: f64 = 0.02;
 /// Samples whose send times are kept for the latency measurement.
@@ -85,6 +90,11 @@ pub struct CycleRow {
     pub pc_damping: f64,
     /// Observed port energy (J).
     pub port_energy: f64,
+    /// The raw port's energy since the force went live (J).
+    pub raw_port_energy: f64,
+    /// The hand holds the tip in contact (the simulated operator's hold; never for a real
+    /// device).
+    pub holding: bool,
     /// End-to-end latency measured this cycle (ns), 0 when none.
     pub latency_ns: u64,
 }
@@ -257,7 +267,7 @@ impl<D: Device> Bridge<D> {
         let out = self.render(live, &s, dt);
         // A pause between the clock above and the write (the process stopped there) is a pause
         // too: seen at the write, the force starts from zero.
-        if clock().saturating_sub(now_ns) > RESUME_AFTER_MIN_NS {
+        if clock().saturating_sub(now_ns) > RESUME_AFTER_MIN_NS && self.device.may_drop_force_when_paused() {
             self.resume_gain = 0.0;
         }
         let force = clamp_force(out.force * self.resume_gain, self.spec.max_force);
@@ -275,6 +285,8 @@ impl<D: Device> Bridge<D> {
         row.force = force;
         row.pc_damping = out.damping;
         row.port_energy = out.energy;
+        row.raw_port_energy = out.raw_energy;
+        row.holding = self.device.holding();
         row.latency_ns = self.latency_ns;
         row
     }
@@ -315,9 +327,11 @@ impl<D: Device> Bridge<D> {
     /// otherwise the ramp goes on (at the start there is no force from before to hold: gain 1).
     fn ramp_after_pause(&mut self, now_ns: u64, dt: f64) {
         let pause_ns = (RESUME_AFTER_PERIODS * (dt * 1e9) as u64).max(RESUME_AFTER_MIN_NS);
-        let paused = self
-            .last_write_ns
-            .is_some_and(|prev| now_ns.saturating_sub(prev) > pause_ns);
+        // A device that holds its force through a pause (the simulated one) resumes where it is.
+        let paused = self.device.may_drop_force_when_paused()
+            && self
+                .last_write_ns
+                .is_some_and(|prev| now_ns.saturating_sub(prev) > pause_ns);
         // The device's watchdog zeroed its force (it heard nothing valid for 10 ms): from zero.
         let trips = self.device.faults().watchdog_trips;
         let tripped = trips > self.trips_seen;
@@ -376,7 +390,7 @@ impl<D: Device> Bridge<D> {
     /// `s` under `live`.
     fn render(&mut self, live: Option<ForceFeedback>, s: &DeviceSample, dt: f64) -> PassivityOutput {
         let max = self.spec.max_force;
-        let env = self.environment(live, s.position);
+        let env = self.environment(live, s.position) - self.coupling_damper(live, s.velocity);
         let (dx, w_ref) = self.reference_work(s.position);
         self.x_prev = Some(s.position);
         self.ref_prev = live;
@@ -387,6 +401,7 @@ impl<D: Device> Bridge<D> {
                 force: 0.0,
                 damping: 0.0,
                 energy: 0.0,
+                raw_energy: 0.0,
             }
         }
     }
@@ -407,6 +422,18 @@ impl<D: Device> Bridge<D> {
                 clamp_force(capped.force_at(x), self.spec.max_force)
             }
             None => 0.0,
+        }
+    }
+
+    /// The virtual coupling's damper the server asks for (`ForceFeedback::damping`), `−B_c·v`
+    /// with the measured velocity, capped at what the device renders stably, while the model has
+    /// a stiffness (the coupling's spring is engaged); nothing otherwise.
+    fn coupling_damper(&self, live: Option<ForceFeedback>, v: f64) -> f64 {
+        match live {
+            Some(f) if f.stiffness < 0.0 && f.damping.is_finite() && v.is_finite() => {
+                f.damping.clamp(0.0, self.spec.max_damping) * v
+            }
+            _ => 0.0,
         }
     }
 
@@ -447,6 +474,11 @@ impl<D: Device> Bridge<D> {
             device: self.cfg.device_code,
             rate_hz: self.cfg.rate_hz,
             faults: self.faults(),
+            max_stiffness: self.spec.max_stiffness,
+            max_damping: self.spec.max_damping,
+            spec_rate_hz: self.spec.spec_rate_hz,
+            pc_cap: self.pc.alpha_max,
+            raw_port_energy: out.raw_energy,
         };
         self.sent[(self.seq % LATENCY_RING as u64) as usize] = (self.seq, now_ns);
         link.publish(&state);
@@ -496,344 +528,4 @@ impl<D: Device> Bridge<D> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::operator::Script;
-    use crate::sim::SimDevice;
-
-    /// A link in memory: what the bridge published, and a queue of force samples to hand it.
-    #[derive(Default)]
-    struct Loop {
-        published: Vec<HapticState>,
-        next: Option<ForceFeedback>,
-    }
-
-    impl Link for Loop {
-        fn publish(&mut self, s: &HapticState) {
-            self.published.push(*s);
-        }
-        fn newest(&mut self) -> Option<ForceFeedback> {
-            self.next.take()
-        }
-    }
-
-    fn live(force: f64, now_ns: u64) -> ForceFeedback {
-        ForceFeedback {
-            time_ns: now_ns,
-            force,
-            active: 1,
-            half_range: 1.0,
-            state_seq: u64::MAX,
-            ..Default::default()
-        }
-    }
-
-    /// docs/haptics.md, "Passivity": the damping is "capped at 80 % of the damping the device renders
-    /// (`m/T`)" and never applied "at `|v| < 0.1 mm/s`": the bridge's controller for the
-    /// simulated handle at 1, 2 and 4 kHz.
-    #[test]
-    fn the_bridges_passivity_cap_is_80_percent_of_m_over_t_and_its_speed_guard_0_1_mm_per_s() {
-        for rate in [1000.0, 2000.0, 4000.0] {
-            let period = 1.0 / rate;
-            let cfg = BridgeConfig {
-                rate_hz: rate,
-                ..BridgeConfig::default()
-            };
-            let b = Bridge::new(SimDevice::new(Script::Hold, period), cfg, 0);
-            let m_over_t = crate::sim::Handle::default().mass / period;
-            assert!((b.spec.max_damping - m_over_t).abs() <= 1e-12 * m_over_t);
-            assert!((b.pc.alpha_max - 0.8 * m_over_t).abs() <= 1e-12 * m_over_t);
-            assert_eq!(b.pc.v_min, 1e-4);
-            assert!(b.pc.enabled);
-        }
-    }
-
-    /// A device whose answers take as long as its test says, and whose watchdog trips on demand.
-    struct Slow {
-        sim: SimDevice,
-        trips: u64,
-    }
-
-    impl Device for Slow {
-        fn spec(&self) -> DeviceSpec {
-            self.sim.spec()
-        }
-        fn read(&mut self, dt: f64) -> Result<DeviceSample, DeviceError> {
-            self.sim.read(dt)
-        }
-        fn write_force(&mut self, force: f64) -> Result<(), DeviceError> {
-            self.sim.write_force(force)
-        }
-        fn faults(&self) -> DeviceFaults {
-            DeviceFaults {
-                watchdog_trips: self.trips,
-                ..DeviceFaults::default()
-            }
-        }
-    }
-
-    /// Review of issue 28: a read that waited 2 ms for a late answer made the server's newest
-    /// sample, published meanwhile, look stamped in the future: the force was zeroed and the
-    /// server blamed. The server is judged after the read now.
-    #[test]
-    fn a_late_answer_neither_zeroes_the_force_nor_blames_the_server() {
-        let sim = SimDevice::new(Script::Hold, 1e-3);
-        let mut b = Bridge::new(Slow { sim, trips: 0 }, BridgeConfig::default(), 0);
-        let mut link = Loop::default();
-        let ms = 1_000_000;
-        link.next = Some(live(0.5, ms));
-        assert_eq!(b.cycle(ms, &mut link).force, 0.5);
-        // The next cycle starts at 2 ms; its read returns at 4.2 ms; the server's sample of 4 ms
-        // arrived during the read.
-        link.next = Some(live(0.5, 4 * ms));
-        let row = b.cycle_timed(2 * ms, || 4 * ms + 200_000, &mut link);
-        assert!(row.link, "the server is heard");
-        assert_eq!(row.force, 0.5, "no zero, no ramp: a late answer is not a pause");
-        // At 2 kHz a late answer is a 3.2 ms gap between writes: still not a pause.
-        let mut b = Bridge::new(
-            SimDevice::new(Script::Hold, 5e-4),
-            BridgeConfig {
-                rate_hz: 2000.0,
-                ..BridgeConfig::default()
-            },
-            0,
-        );
-        link.next = Some(live(0.5, ms));
-        b.cycle(ms, &mut link);
-        link.next = Some(live(0.5, 4 * ms));
-        assert_eq!(b.cycle_timed(ms + 500_000, || 4 * ms + 200_000, &mut link).force, 0.5);
-    }
-
-    /// Review of issue 28: after the device's watchdog zeroed its force (it heard nothing valid
-    /// for 10 ms while the bridge ran on), the force came back as a step. It ramps in now.
-    #[test]
-    fn after_the_devices_watchdog_tripped_the_force_ramps_in() {
-        let sim = SimDevice::new(Script::Hold, 1e-3);
-        let mut b = Bridge::new(Slow { sim, trips: 0 }, BridgeConfig::default(), 0);
-        let mut link = Loop::default();
-        let ms = 1_000_000;
-        let mut t = ms;
-        link.next = Some(live(0.5, t));
-        assert_eq!(b.cycle(t, &mut link).force, 0.5);
-        b.device.trips = 1;
-        t += ms;
-        link.next = Some(live(0.5, t));
-        assert_eq!(b.cycle(t, &mut link).force, 0.0, "from zero after the trip");
-        t += ms;
-        link.next = Some(live(0.5, t));
-        let f = b.cycle(t, &mut link).force;
-        assert!(f > 0.0 && f < 0.05, "ramping: {f}");
-    }
-
-    /// Issue 28, "a stale force after a host pause": after the bridge was stopped for 50 ms, its
-    /// first packet carried the force from before (505 mN) and the hand felt a kick. Now a pause
-    /// of more than 3 periods ramps the force in from zero over 20 ms.
-    #[test]
-    fn after_a_pause_the_force_ramps_in_from_zero_not_at_the_old_force() {
-        let mut b = Bridge::new(SimDevice::new(Script::Hold, 1e-3), BridgeConfig::default(), 0);
-        let mut link = Loop::default();
-        let ms = 1_000_000;
-        let mut t = 0;
-        for _ in 0..5 {
-            t += ms;
-            link.next = Some(live(0.5, t));
-            assert_eq!(b.cycle(t, &mut link).force, 0.5, "steady before the pause");
-        }
-        // The bridge is stopped 50 ms; the server's newest force is fresh when it resumes.
-        t += 50 * ms;
-        let mut forces = Vec::new();
-        for _ in 0..25 {
-            link.next = Some(live(0.5, t));
-            forces.push(b.cycle(t, &mut link).force);
-            t += ms;
-        }
-        assert!(
-            forces[0] <= 0.5 * 0.05 + 1e-12,
-            "first force after the pause: {}",
-            forces[0]
-        );
-        assert!(forces.windows(2).all(|w| w[1] >= w[0]), "it only grows: {forces:?}");
-        assert_eq!(forces[20], 0.5, "ramped in over 20 ms: {forces:?}");
-        // A pause of 3 periods or less is a late cycle, not a pause: no ramp.
-        t += 2 * ms;
-        link.next = Some(live(0.5, t));
-        assert_eq!(b.cycle(t, &mut link).force, 0.5);
-    }
-
-    /// Issue 28: a reopened device starts with the force ramped in, its limits taken anew, and
-    /// the lost device's counters kept (one reopen counted).
-    #[test]
-    fn a_replaced_device_ramps_in_and_the_counters_carry_over() {
-        let mut b = Bridge::new(SimDevice::new(Script::Hold, 1e-3), BridgeConfig::default(), 0);
-        let mut link = Loop::default();
-        let ms = 1_000_000;
-        b.count_overrun();
-        b.faults.losses += 1;
-        b.replace_device(SimDevice::new(Script::Hold, 1e-3));
-        let f = b.faults();
-        assert_eq!((f.overruns, f.losses, f.reopens), (1, 1, 1));
-        assert!(b.lost().is_none());
-        link.next = Some(live(1.0, ms));
-        let first = b.cycle(ms, &mut link).force;
-        assert!(first > 0.0 && first <= 0.05 + 1e-12, "{first}");
-        assert_eq!(link.published.last().unwrap().faults, f, "published with every state");
-        assert_eq!(link.published.last().unwrap().rate_hz, 1000.0);
-    }
-
-    #[test]
-    fn the_bridge_clamps_whatever_the_server_sends_and_zeroes_a_silent_server() {
-        let mut b = Bridge::new(SimDevice::new(Script::Hold, 1e-3), BridgeConfig::default(), 0);
-        let mut link = Loop::default();
-        let ms = 1_000_000;
-        link.next = Some(live(100.0, ms));
-        let row = b.cycle(ms, &mut link);
-        assert_eq!(row.force, 2.5, "clamped to the device's limit");
-        assert!(row.link);
-        // The server falls silent: the same sample ages; zero force once it is 5 ms old.
-        let mut t = ms;
-        let mut silent_at = None;
-        for _ in 0..10 {
-            t += ms;
-            let row = b.cycle(t, &mut link);
-            if row.force == 0.0 && silent_at.is_none() {
-                silent_at = Some(t - ms);
-                assert!(!row.link);
-                assert_eq!(
-                    link.published.last().unwrap().flags & STATE_SERVER_SILENT,
-                    STATE_SERVER_SILENT
-                );
-            }
-        }
-        // Zero force within 5 ms of the last sample (cycles at 1 kHz).
-        assert!(silent_at.unwrap() <= 5 * ms, "{silent_at:?}");
-        // It comes back: the force is live again.
-        link.next = Some(live(0.5, t + ms));
-        let row = b.cycle(t + ms, &mut link);
-        assert!(row.link && (row.force - 0.5).abs() < 0.1, "{row:?}");
-        // Non-finite forces render nothing.
-        link.next = Some(live(f64::NAN, t + 2 * ms));
-        assert_eq!(b.cycle(t + 2 * ms, &mut link).force, 0.0);
-    }
-
-    /// A device that reports garbage every other cycle.
-    struct Glitchy(u32);
-
-    impl Device for Glitchy {
-        fn spec(&self) -> DeviceSpec {
-            SimDevice::new(Script::Hold, 1e-3).spec()
-        }
-        fn read(&mut self, _dt: f64) -> Result<DeviceSample, crate::device::DeviceError> {
-            self.0 += 1;
-            Ok(DeviceSample {
-                position: match self.0 % 3 {
-                    0 => f64::NAN,
-                    1 => 1.0, // a metre: outside the travel
-                    _ => 0.001,
-                },
-                velocity: 0.0,
-                buttons: 0,
-            })
-        }
-        fn write_force(&mut self, _f: f64) -> Result<(), crate::device::DeviceError> {
-            Ok(())
-        }
-    }
-
-    #[test]
-    fn samples_outside_the_travel_or_not_finite_are_dropped_and_counted() {
-        let mut b = Bridge::new(Glitchy(0), BridgeConfig::default(), 0);
-        let mut link = Loop::default();
-        for k in 0..30u64 {
-            b.cycle(k * 1_000_000, &mut link);
-        }
-        assert_eq!(b.dropped(), 20);
-        assert_eq!(link.published.len(), 10);
-        assert!(link.published.iter().all(|s| s.position == 0.001));
-        // The last published sample went out before the last cycle's drop.
-        assert_eq!(link.published.last().unwrap().dropped, 19);
-        // Sequence numbers count published samples, without gaps.
-        assert!(link.published.windows(2).all(|w| w[1].seq == w[0].seq + 1));
-    }
-
-    #[test]
-    fn latency_is_the_time_from_a_sample_to_the_force_computed_from_it() {
-        let mut b = Bridge::new(SimDevice::new(Script::Hold, 1e-3), BridgeConfig::default(), 0);
-        let mut link = Loop::default();
-        b.cycle(1_000_000, &mut link);
-        let seq = link.published[0].seq;
-        link.next = Some(ForceFeedback {
-            state_seq: seq,
-            ..live(0.0, 1_500_000)
-        });
-        let row = b.cycle(2_000_000, &mut link);
-        assert_eq!(row.latency_ns, 1_000_000);
-    }
-
-    /// A stiff wall at `x_w` computed by a "server" from the newest published sample (one cycle
-    /// late, as the real loop is), sent with its stiffness; the bridge renders it as a held force.
-    /// Returns the peak-to-peak handle motion over the last second and the lowest observed energy.
-    fn wall(k: f64, passivity: bool, local_model: bool) -> (f64, f64) {
-        let dt = 1e-3;
-        let script = Script::from_csv("press", "0,0\n2,-0.004\n4,-0.004\n").unwrap();
-        let cfg = BridgeConfig {
-            passivity,
-            local_model,
-            ..BridgeConfig::default()
-        };
-        let mut b = Bridge::new(SimDevice::new(script, dt), cfg, 0);
-        b.device.operator.damping = 1.0; // a light grip
-        let mut link = Loop::default();
-        let x_w = -0.002;
-        let (mut lo, mut hi, mut e_min) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY);
-        for n in 1..4000u64 {
-            let now = n * 1_000_000;
-            if let Some(st) = link.published.last() {
-                let pen = x_w - st.position;
-                link.next = Some(ForceFeedback {
-                    seq: n,
-                    time_ns: now,
-                    state_seq: st.seq,
-                    force: if pen > 0.0 { k * pen } else { 0.0 },
-                    stiffness: if pen > 0.0 { -k } else { 0.0 },
-                    anchor: st.position,
-                    half_range: 0.01,
-                    gain: 1.0,
-                    active: 1,
-                    flags: FORCE_ENGAGED,
-                    ..Default::default()
-                });
-            }
-            let row = b.cycle(now, &mut link);
-            if n > 3000 {
-                lo = lo.min(row.handle);
-                hi = hi.max(row.handle);
-            }
-            if n > 10 {
-                e_min = e_min.min(row.port_energy);
-            }
-        }
-        (hi - lo, e_min)
-    }
-
-    /// The sampled loop makes a stiff wall rendered as a held force buzz: the hand, pressing
-    /// slowly, comes to rest against it only with the passivity controller, which keeps the
-    /// observed energy above −1 µJ; without it the handle bounces (a limit cycle bounded by the
-    /// motor's saturation) and the energy runs away negative.
-    #[test]
-    fn a_stiff_held_wall_buzzes_without_the_passivity_controller_and_settles_with_it() {
-        // 20 kN/m against a light grip (1 N·s/m): ten times the sampled loop's limit
-        // `K < 2b/T` ≈ 2 kN/m; the controller holds it up to ~40 kN/m (its damping cap, 40
-        // N·s/m, is then reached).
-        let k = 20_000.0;
-        let (p2p_off, e_off) = wall(k, false, false);
-        let (p2p_on, e_on) = wall(k, true, false);
-        eprintln!("held wall {k} N/m: without PC p2p {p2p_off:e} m, E_min {e_off:e} J; with {p2p_on:e} m, {e_on:e} J");
-        assert!(p2p_off > 2e-4, "without the controller the wall should buzz: {p2p_off}");
-        assert!(
-            p2p_on < 2e-5,
-            "with the controller the hand should rest on the wall: {p2p_on}"
-        );
-        assert!(e_on > -1e-6, "{e_on}");
-        assert!(e_off < -1e-4, "{e_off}");
-    }
-}
+mod tests;

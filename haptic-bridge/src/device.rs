@@ -23,6 +23,10 @@ pub struct DeviceSpec {
     /// Largest stiffness the device renders stably at its rate (N/m): a local linear model's
     /// stiffness is capped at it (Colgate: `b > K T / 2`).
     pub max_stiffness: f64,
+    /// The rate the limits above are declared for (Hz): with `max_stiffness` it fixes the
+    /// port damping the renderable region is computed from
+    /// (`nanopush_proto::haptic::region::port_damping`).
+    pub spec_rate_hz: f64,
 }
 
 /// One reading of the handle.
@@ -104,6 +108,19 @@ pub trait Device: Send {
     fn finished(&self) -> bool {
         false
     }
+    /// Whether the hand holds the tip in contact (the simulated operator's hold, for the
+    /// tip-force bound); real devices cannot tell.
+    fn holding(&self) -> bool {
+        false
+    }
+    /// Whether the device may have dropped its force while the bridge was paused (a watchdog
+    /// that zeroes it when the host falls silent): after such a pause the bridge ramps the force
+    /// in from zero. A device that holds its force through any pause says `false`, and the
+    /// bridge resumes at the force of the moment (a dip and a ramp would be active: the force
+    /// pushing back a handle the hand pressed in meanwhile).
+    fn may_drop_force_when_paused(&self) -> bool {
+        true
+    }
     /// Zeroes the force and lets the device go. Called once, at the end; a backend also
     /// zeroes its force when dropped.
     fn close(&mut self) -> Result<(), DeviceError> {
@@ -135,6 +152,12 @@ impl Device for Box<dyn Device> {
     }
     fn observe(&mut self, link: &LinkView) {
         (**self).observe(link)
+    }
+    fn holding(&self) -> bool {
+        (**self).holding()
+    }
+    fn may_drop_force_when_paused(&self) -> bool {
+        (**self).may_drop_force_when_paused()
     }
     fn finished(&self) -> bool {
         (**self).finished()

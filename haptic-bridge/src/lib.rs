@@ -8,11 +8,14 @@
 //! - [`bridge`]: one device cycle (read, local model, passivity, clamp, write, publish), and
 //!   [`link`], its iceoryx2 ports;
 //! - [`latency`]: an allocation-free latency histogram;
+//! - [`grid`]: the measures of a closed haptic cycle (raw port energy, chatter, tip-force swing)
+//!   and the grid of settings they are checked over;
 //! - [`scaling`]: the bilateral scaling between the nano world and the hand.
 #![deny(missing_docs)]
 
 pub mod bridge;
 pub mod device;
+pub mod grid;
 pub mod latency;
 pub mod link;
 pub mod operator;

@@ -6,7 +6,10 @@
 //! ```
 //!
 //! with a firm grip (`k_h` = 500 N/m, `b_h` = 8 N·s/m: the stiffness and damping of a human
-//! wrist and fingers holding a stylus lie around 200-1000 N/m and 2-10 N·s/m).
+//! wrist and fingers holding a stylus lie around 200-1000 N/m and 2-10 N·s/m). The grips that
+//! probe the loop's stability ([`Grip`]): a stiff one (1000 N/m, 20 N·s/m: a clenched hand, which
+//! hides little), a loose one (50 N/m, 1 N·s/m: fingertips, which add almost no damping), and a
+//! hand that lets go of the handle in contact (nothing but the device's own friction is left).
 //!
 //! Scripts (`--operator`), in handle coordinates (m, positive up):
 //! - `hold`: keep the handle where it started;
@@ -15,10 +18,17 @@
 //! - `press`: once haptic z-control is engaged, move down at 3 mm/s until the hand feels the
 //!   surface push back with 0.8 N (or 30 mm at most), hold 1 s, move back up at 3 mm/s to 3 mm
 //!   above where it started (through the adhesive pull-off), rest 0.5 s, end;
+//! - `stiff-grip`, `loose-grip`: `press` with the stiff or the loose grip;
+//! - `let-go`: `press` with the firm grip, but 0.3 s into the hold the hand lets go of the handle
+//!   for 1 s (no hand force at all: the handle must come to rest on its own), then takes it again
+//!   where its set point was and finishes the press (the closed cycle);
+//! - `tap`: once engaged, move down at 3 mm/s until the hand feels 0.3 N (or 30 mm at most), then
+//!   tap the surface 4 times at 2 Hz (the set point rises 4 mm above that depth and comes back,
+//!   `x = d + A (1 − cos 2π f t)/2`), then up to 3 mm above the start, rest 0.5 s, end;
 //! - `file:PATH`: once engaged, follow the set points of a CSV `t_s,handle_m` (a header line is
 //!   allowed; times increasing from 0), linearly between rows; ends after the last row.
 //!
-//! `press` and `file:` wait for the engagement, as a person would: until the link says the tip
+//! `press`, its grips, `tap` and `file:` wait for the engagement, as a person would: until the link says the tip
 //! is under haptic control and the force ramp has ended.
 
 use std::path::Path;
@@ -28,7 +38,9 @@ use std::path::Path;
 #[non_exhaustive]
 pub enum ScriptError {
     /// Not a known script.
-    #[error("--operator {0:?}: unknown script; allowed: hold, sine, press, file:PATH")]
+    #[error(
+        "--operator {0:?}: unknown script; allowed: hold, sine, press, stiff-grip, loose-grip, let-go, tap, file:PATH"
+    )]
     Unknown(String),
     /// The script file could not be read.
     #[error("--operator file:{path}: {source}")]
@@ -60,6 +72,18 @@ pub const PRESS_SPEED: f64 = 3e-3;
 pub const PRESS_FORCE: f64 = 0.8;
 /// Deepest `press` goes below its start (m).
 pub const PRESS_DEPTH: f64 = 0.03;
+/// Force at which `tap` has found the surface (N).
+pub const TAP_FORCE: f64 = 0.3;
+/// `tap`'s rate (Hz).
+pub const TAP_HZ: f64 = 2.0;
+/// How far `tap`'s set point rises above the depth where it found the surface (m).
+pub const TAP_LIFT: f64 = 4e-3;
+/// Taps `tap` makes.
+pub const TAPS: u32 = 4;
+/// How long into the hold `let-go` lets go (s).
+pub const LET_GO_AFTER: f64 = 0.3;
+/// How long `let-go` leaves the handle alone (s).
+pub const LET_GO_FOR: f64 = 1.0;
 /// Set points of a script file, at most.
 pub const MAX_FILE_ROWS: usize = 1_000_000;
 /// Travel a script file may ask for (m): ±0.1 m.
@@ -77,8 +101,10 @@ pub enum Script {
         /// Frequency (Hz).
         hz: f64,
     },
-    /// Press into the surface and pull off (see the module doc).
-    Press,
+    /// Press into the surface and pull off with a grip (see the module doc).
+    Press(Grip),
+    /// Find the surface and tap it at 2 Hz (see the module doc).
+    Tap,
     /// Set points `(t_s, handle_m)` from a file.
     File(Vec<(f64, f64)>),
 }
@@ -92,7 +118,11 @@ impl Script {
                 amplitude: 3e-3,
                 hz: 0.5,
             }),
-            "press" => Ok(Script::Press),
+            "press" => Ok(Script::Press(Grip::Firm)),
+            "stiff-grip" => Ok(Script::Press(Grip::Stiff)),
+            "loose-grip" => Ok(Script::Press(Grip::Loose)),
+            "let-go" => Ok(Script::Press(Grip::LetGo)),
+            "tap" => Ok(Script::Tap),
             _ => match s.strip_prefix("file:") {
                 Some(path) => Script::from_file(Path::new(path)),
                 None => Err(ScriptError::Unknown(s.to_string())),
@@ -157,7 +187,31 @@ impl Script {
 
     /// Whether the script waits for the engagement before it starts.
     pub fn waits_for_engagement(&self) -> bool {
-        matches!(self, Script::Press | Script::File(_))
+        matches!(self, Script::Press(_) | Script::Tap | Script::File(_))
+    }
+}
+
+/// How the hand holds the handle during `press`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Grip {
+    /// [`HAND_STIFFNESS`], [`HAND_DAMPING`].
+    Firm,
+    /// 1000 N/m, 20 N·s/m.
+    Stiff,
+    /// 50 N/m, 1 N·s/m.
+    Loose,
+    /// Firm, but lets go of the handle for [`LET_GO_FOR`] in the hold.
+    LetGo,
+}
+
+impl Grip {
+    /// The grip's stiffness (N/m) and damping (N·s/m).
+    pub fn impedance(self) -> (f64, f64) {
+        match self {
+            Grip::Firm | Grip::LetGo => (HAND_STIFFNESS, HAND_DAMPING),
+            Grip::Stiff => (1000.0, 20.0),
+            Grip::Loose => (50.0, 1.0),
+        }
     }
 }
 
@@ -167,6 +221,7 @@ enum PressPhase {
     Settle { until: f64 },
     Down,
     Hold { until: f64 },
+    Tap { from: f64 },
     Up,
     Rest { until: f64 },
     Done,
@@ -188,6 +243,11 @@ pub struct Operator {
     deepest: f64,
     /// Time of the last update (s).
     last_t: f64,
+    /// The hand has let go of the handle (`let-go`): it exerts no force.
+    released: bool,
+    /// The hand has let go once: after it takes the handle again, the hold is not the steady
+    /// one the tip-force bound is for.
+    let_go_once: bool,
     /// Hand stiffness (N/m) and damping (N·s/m).
     pub stiffness: f64,
     /// Hand damping (N·s/m).
@@ -197,6 +257,10 @@ pub struct Operator {
 impl Operator {
     /// A hand holding the handle at `origin` (m) that will play `script`.
     pub fn new(script: Script, origin: f64) -> Operator {
+        let (stiffness, damping) = match script {
+            Script::Press(grip) => grip.impedance(),
+            _ => (HAND_STIFFNESS, HAND_DAMPING),
+        };
         Operator {
             script,
             origin,
@@ -206,8 +270,10 @@ impl Operator {
             press: PressPhase::Settle { until: 0.3 },
             deepest: origin,
             last_t: 0.0,
-            stiffness: HAND_STIFFNESS,
-            damping: HAND_DAMPING,
+            released: false,
+            let_go_once: false,
+            stiffness,
+            damping,
         }
     }
 
@@ -230,19 +296,54 @@ impl Operator {
                 (self.origin + amplitude * (w * s).sin(), amplitude * w * (w * s).cos())
             }
             Script::File(rows) => interpolate(rows, s),
-            Script::Press => self.press_step(s, dt, felt),
+            Script::Press(grip) => {
+                let grip = *grip;
+                self.press_step(s, dt, felt, grip)
+            }
+            Script::Tap => self.press_step(s, dt, felt, Grip::Firm),
         };
         self.set = set;
         self.rate = rate;
     }
 
-    fn press_step(&mut self, s: f64, dt: f64, felt: f64) -> (f64, f64) {
+    /// `press` (with `grip`) and `tap`: down until the surface is felt, then hold (or tap), up,
+    /// rest.
+    fn press_step(&mut self, s: f64, dt: f64, felt: f64, grip: Grip) -> (f64, f64) {
         let (mut set, mut rate) = (self.set, 0.0);
+        let tap = self.script == Script::Tap;
+        let enough = if tap { TAP_FORCE } else { PRESS_FORCE };
         self.press = match self.press {
             PressPhase::Settle { until } if s >= until => PressPhase::Down,
-            PressPhase::Down if felt >= PRESS_FORCE || self.origin - set >= PRESS_DEPTH => {
+            PressPhase::Down if felt >= enough || self.origin - set >= PRESS_DEPTH => {
                 self.deepest = set;
-                PressPhase::Hold { until: s + 1.0 }
+                if tap {
+                    PressPhase::Tap { from: s }
+                } else {
+                    PressPhase::Hold {
+                        until: s + 1.0 + if grip == Grip::LetGo { LET_GO_FOR } else { 0.0 },
+                    }
+                }
+            }
+            PressPhase::Tap { from } if s - from >= f64::from(TAPS) / TAP_HZ => {
+                set = self.deepest;
+                PressPhase::Up
+            }
+            PressPhase::Tap { from } => {
+                let w = 2.0 * std::f64::consts::PI * TAP_HZ;
+                let u = s - from;
+                set = self.deepest + 0.5 * TAP_LIFT * (1.0 - (w * u).cos());
+                rate = 0.5 * TAP_LIFT * w * (w * u).sin();
+                PressPhase::Tap { from }
+            }
+            PressPhase::Hold { until } if grip == Grip::LetGo => {
+                let held_for = s - (until - 1.0 - LET_GO_FOR);
+                self.released = (LET_GO_AFTER..LET_GO_AFTER + LET_GO_FOR).contains(&held_for);
+                self.let_go_once |= self.released;
+                if s >= until {
+                    PressPhase::Up
+                } else {
+                    PressPhase::Hold { until }
+                }
             }
             PressPhase::Down => {
                 set -= PRESS_SPEED * dt;
@@ -262,9 +363,24 @@ impl Operator {
         (set, rate)
     }
 
-    /// The hand's force on the handle at position `x`, velocity `v` (N).
+    /// The hand's force on the handle at position `x`, velocity `v` (N): none while it has let
+    /// go.
     pub fn force(&self, x: f64, v: f64) -> f64 {
+        if self.released {
+            return 0.0;
+        }
         self.stiffness * (self.set - x) + self.damping * (self.rate - v)
+    }
+
+    /// Whether the hand holds the tip in contact now: `press` (any grip) in its hold, with the
+    /// handle in its hand.
+    pub fn holding(&self) -> bool {
+        matches!(self.press, PressPhase::Hold { .. }) && !self.let_go_once && matches!(self.script, Script::Press(_))
+    }
+
+    /// Whether the hand has let go of the handle (`let-go`).
+    pub fn released(&self) -> bool {
+        self.released
     }
 
     /// The lowest set point `press` went down to (m).
@@ -281,7 +397,7 @@ impl Operator {
     pub fn finished(&self) -> bool {
         match &self.script {
             Script::Hold | Script::Sine { .. } => false,
-            Script::Press => self.press == PressPhase::Done,
+            Script::Press(_) | Script::Tap => self.press == PressPhase::Done,
             Script::File(rows) => match (self.start, rows.last()) {
                 (Some(_), Some(&(t_last, _))) => self.elapsed() > t_last,
                 _ => false,
@@ -316,11 +432,16 @@ mod tests {
     #[test]
     fn scripts_parse_and_bad_ones_name_what_is_wrong() {
         assert_eq!(Script::parse("hold").unwrap(), Script::Hold);
-        assert_eq!(Script::parse("press").unwrap(), Script::Press);
+        assert_eq!(Script::parse("press").unwrap(), Script::Press(Grip::Firm));
+        assert_eq!(Script::parse("stiff-grip").unwrap(), Script::Press(Grip::Stiff));
+        assert_eq!(Script::parse("loose-grip").unwrap(), Script::Press(Grip::Loose));
+        assert_eq!(Script::parse("let-go").unwrap(), Script::Press(Grip::LetGo));
+        assert_eq!(Script::parse("tap").unwrap(), Script::Tap);
         assert!(matches!(Script::parse("sine").unwrap(), Script::Sine { .. }));
         let e = Script::parse("wiggle").unwrap_err().to_string();
         assert!(
-            e.contains("wiggle") && e.contains("allowed: hold, sine, press, file:PATH"),
+            e.contains("wiggle")
+                && e.contains("allowed: hold, sine, press, stiff-grip, loose-grip, let-go, tap, file:PATH"),
             "{e}"
         );
         let e = Script::parse("file:/nonexistent/x.csv").unwrap_err().to_string();
@@ -361,7 +482,7 @@ mod tests {
     #[test]
     fn press_follows_its_phases_on_what_the_hand_feels() {
         let dt = 1e-3;
-        let mut op = Operator::new(Script::Press, 0.002);
+        let mut op = Operator::new(Script::Press(Grip::Firm), 0.002);
         let mut t = 0.0;
         let mut step = |op: &mut Operator, engaged: bool, felt: f64| {
             t += dt;

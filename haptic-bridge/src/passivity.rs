@@ -43,6 +43,8 @@
 pub struct Passivity {
     /// Observed energy `E[n]` (J), before this cycle's dissipation.
     energy: f64,
+    /// The raw port's energy `−Σ f[n−1]·Δx[n]` (J), no model subtracted.
+    raw: f64,
     /// The force rendered in the previous cycle, held over the displacement now measured (N).
     f_prev: f64,
     /// Largest damping (N·s/m).
@@ -65,6 +67,8 @@ pub struct PassivityOutput {
     pub damping: f64,
     /// Observed energy after this cycle's dissipation (J).
     pub energy: f64,
+    /// The raw port's energy since the last reset (J): `−Σ f[n−1]·Δx[n]`.
+    pub raw_energy: f64,
 }
 
 impl Passivity {
@@ -73,6 +77,7 @@ impl Passivity {
     pub fn new(alpha_max: f64, v_min: f64) -> Passivity {
         Passivity {
             energy: 0.0,
+            raw: 0.0,
             f_prev: 0.0,
             alpha_max,
             v_min,
@@ -83,6 +88,7 @@ impl Passivity {
     /// Forgets the energy (a new server or an engagement starts a new port history).
     pub fn reset(&mut self) {
         self.energy = 0.0;
+        self.raw = 0.0;
         self.f_prev = 0.0;
     }
 
@@ -99,9 +105,11 @@ impl Passivity {
                 force: 0.0,
                 damping: 0.0,
                 energy: self.energy,
+                raw_energy: self.raw,
             };
         }
         self.energy += -self.f_prev * dx + w_ref;
+        self.raw -= self.f_prev * dx;
         let alpha = if self.enabled && self.energy < -DEFICIT_FLOOR && v.abs() >= self.v_min {
             (-self.energy / (dt * v * v)).min(self.alpha_max)
         } else {
@@ -113,6 +121,7 @@ impl Passivity {
             force: out,
             damping: alpha,
             energy: self.energy,
+            raw_energy: self.raw,
         }
     }
 }

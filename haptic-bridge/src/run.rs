@@ -26,7 +26,7 @@ pub struct RunArgs {
     /// serial port), or `none` (publishes nothing).
     #[arg(long, default_value = "sim")]
     device: String,
-    /// The simulated operator's script (`--device sim`): hold, sine, press, file:PATH.
+    /// The simulated operator's script (`--device sim`): hold, sine, press, stiff-grip, loose-grip, let-go, tap, file:PATH.
     #[arg(long, default_value = "hold")]
     operator: String,
     /// Stop after this many seconds (default: when the script ends, or never).
@@ -101,11 +101,12 @@ fn make_realtime(cpu: usize) {
 }
 
 /// The trace's header.
-const TRACE_HEADER: &str = "t_s,handle_m,handle_force_n,tip_z_m,tip_force_n,link,pc_damping,port_energy_j\n";
+const TRACE_HEADER: &str =
+    "t_s,handle_m,handle_force_n,tip_z_m,tip_force_n,link,pc_damping,port_energy_j,raw_port_energy_j,holding\n";
 
 fn trace_line(r: &CycleRow) -> String {
     format!(
-        "{:.6},{:.9e},{:.6},{:.6e},{:.6e},{},{:.6},{:.6e}\n",
+        "{:.6},{:.9e},{:.6},{:.6e},{:.6e},{},{:.6},{:.6e},{:.6e},{}\n",
         r.t,
         r.handle,
         r.force,
@@ -113,7 +114,9 @@ fn trace_line(r: &CycleRow) -> String {
         r.tip_force,
         if r.link { "up" } else { "down" },
         r.pc_damping,
-        r.port_energy
+        r.port_energy,
+        r.raw_port_energy,
+        u8::from(r.holding)
     )
 }
 

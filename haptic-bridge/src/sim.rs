@@ -122,6 +122,7 @@ impl Device for SimDevice {
             // handle alone, by Colgate's `b > KT/2` with its own 0.05 N·s/m, only ~100 N/m;
             // the hand's damping and the passivity controller carry the rest).
             max_stiffness: 2000.0,
+            spec_rate_hz: 1000.0,
         }
     }
 
@@ -147,6 +148,16 @@ impl Device for SimDevice {
 
     fn finished(&self) -> bool {
         self.operator.finished()
+    }
+
+    fn holding(&self) -> bool {
+        self.operator.holding()
+    }
+
+    /// The simulated motor holds its force through any pause of the bridge, and the handle,
+    /// integrated cycle by cycle, stands still meanwhile.
+    fn may_drop_force_when_paused(&self) -> bool {
+        false
     }
 }
 

@@ -8,6 +8,8 @@
 
 use iceoryx2::prelude::ZeroCopySend;
 
+pub mod region;
+
 /// Service the bridge publishes the handle's state on.
 pub const HAPTIC_STATE_SERVICE: &str = "nanopush/haptic/state";
 /// Service the server publishes the force to render on.
@@ -134,7 +136,7 @@ impl std::ops::Add for DeviceFaults {
 
 /// The handle's state, bridge → server, every device cycle.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("nanopush::HapticState3")]
+#[type_name("nanopush::HapticState4")]
 #[repr(C)]
 pub struct HapticState {
     /// Sequence number (increments by one per device cycle).
@@ -171,6 +173,18 @@ pub struct HapticState {
     pub rate_hz: f64,
     /// The device's faults so far.
     pub faults: DeviceFaults,
+    /// The largest stiffness the device declares it renders stably (N/m), at `spec_rate_hz`.
+    pub max_stiffness: f64,
+    /// The largest damping the device renders stably (N·s/m).
+    pub max_damping: f64,
+    /// The rate the device's limits are declared for (Hz).
+    pub spec_rate_hz: f64,
+    /// The damping cap of the passivity controller (N·s/m): a damper at it is *pinned*.
+    pub pc_cap: f64,
+    /// Energy the operator has put in through the raw port since the force went live (J): the
+    /// force rendered times the handle's displacement, `−Σ f[n−1]·Δx[n]`, with no model
+    /// subtracted (Hannaford & Ryu's observer of the port itself).
+    pub raw_port_energy: f64,
 }
 
 /// The force to render, server → bridge, every control tick: a local linear model of the
@@ -181,7 +195,7 @@ pub struct HapticState {
 /// F(x) = force + stiffness · clamp(x − anchor, −half_range, +half_range)
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("nanopush::ForceFeedback2")]
+#[type_name("nanopush::ForceFeedback3")]
 #[repr(C)]
 pub struct ForceFeedback {
     /// Sequence number (the server's tick count).
@@ -209,6 +223,9 @@ pub struct ForceFeedback {
     pub active: u32,
     /// `FORCE_*` bits.
     pub flags: u32,
+    /// The virtual coupling's damper (N·s/m, ≥ 0), rendered by the bridge as `−damping · v`
+    /// with the device's measured velocity while the model has a stiffness.
+    pub damping: f64,
 }
 
 impl ForceFeedback {
@@ -374,10 +391,12 @@ mod tests {
 
     #[test]
     fn payloads_are_plain_data_of_a_stable_size() {
-        // Ten 8-byte fields and four 4-byte ones, then the rate and the eight fault counters.
+        // Ten 8-byte fields and four 4-byte ones, then the rate, the eight fault counters and
+        // the five of the device's limits and the raw port.
         assert_eq!(std::mem::size_of::<DeviceFaults>(), 8 * 8);
-        assert_eq!(std::mem::size_of::<HapticState>(), 10 * 8 + 4 * 4 + 8 + 8 * 8);
-        assert_eq!(std::mem::size_of::<ForceFeedback>(), 10 * 8 + 2 * 4);
+        assert_eq!(std::mem::size_of::<HapticState>(), 10 * 8 + 4 * 4 + 8 + 8 * 8 + 5 * 8);
+        // Ten 8-byte fields, two 4-byte ones, the coupling's damper.
+        assert_eq!(std::mem::size_of::<ForceFeedback>(), 10 * 8 + 2 * 4 + 8);
     }
 
     #[test]

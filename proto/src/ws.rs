@@ -281,6 +281,31 @@ pub struct HapticTelemetry {
     pub tip_force_n: f64,
     /// Whether the passivity controller acted within the last 100 ms.
     pub pc_active: bool,
+    /// The scales in force.
+    pub scales: HapticScales,
+}
+
+/// The scales of haptic z-control in force, and why they differ from those asked: in the `ok`
+/// of a `haptic` `scale`, in telemetry's `haptic` and in `/api/status`'s `haptic`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HapticScales {
+    /// Tip nanometres per handle millimetre.
+    pub nm_per_mm: f64,
+    /// The tip-sample pull-off as felt at the hand, in force (N).
+    pub pull_off_at_hand_n: f64,
+    /// The pull-off at the hand asked for (N).
+    pub asked_pull_off_at_hand_n: f64,
+    /// The contact's stiffness felt at the hand in force, `g_f k_z g_p` (N/m).
+    pub felt_stiffness_n_per_m: f64,
+    /// The device's renderable region's edge at its rate and the measured delay (N/m); null
+    /// before a device is known.
+    pub max_stiffness_n_per_m: Option<f64>,
+    /// The round-trip delay the region is computed for (s).
+    pub delay_s: f64,
+    /// `none`, `renderable_region`, `energy_bounding`.
+    pub limit: String,
+    /// Why, in a sentence; null when `limit` is `none`.
+    pub reason: Option<String>,
 }
 
 /// A server → client text message.
@@ -330,6 +355,10 @@ pub enum ServerMessage {
     Ok {
         /// Its id.
         id: Option<u32>,
+        /// For a `haptic` `scale`: the scales that will be in force (the asked ones, or lower
+        /// where the device cannot render them passively), and why.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        scales: Option<HapticScales>,
     },
     /// A message was refused.
     Error {

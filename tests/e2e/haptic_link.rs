@@ -22,7 +22,7 @@ use crate::util::{
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 /// Holds the haptic tests' turn until dropped (taken over from a test that failed holding it).
-fn one_at_a_time() -> MutexGuard<'static, ()> {
+pub(crate) fn one_at_a_time() -> MutexGuard<'static, ()> {
     ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
 }
 
@@ -213,7 +213,7 @@ fn read_trace(path: &Path) -> Vec<Row> {
     let mut lines = text.lines();
     assert_eq!(
         lines.next(),
-        Some("t_s,handle_m,handle_force_n,tip_z_m,tip_force_n,link,pc_damping,port_energy_j")
+        Some("t_s,handle_m,handle_force_n,tip_z_m,tip_force_n,link,pc_damping,port_energy_j,raw_port_energy_j,holding")
     );
     lines
         .map(|l| {

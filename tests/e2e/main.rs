@@ -3,6 +3,7 @@
 //! API and WebSocket) is in [`util`].
 
 mod haptic;
+mod haptic_grid;
 mod haptic_link;
 mod model;
 mod prometheus;

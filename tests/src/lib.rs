@@ -1,11 +1,13 @@
 //! Helpers for the end-to-end tests and the benchmarks (`nanopush-load`, `nanopush-soak`,
 //! `nanopush-haptic-latency`): find the workspace's real binaries (building them if they are
 //! missing) and run them; start and stop their processes ([`process`]); talk to a running
-//! `nanopush serve` ([`client`]); read its Prometheus exposition ([`metrics`]) and the kernel's
+//! `nanopush serve` ([`client`]); run one cell of the haptic grid with the real processes
+//! ([`haptic_grid`]); read its Prometheus exposition ([`metrics`]) and the kernel's
 //! accounts of it ([`procfs`]).
 #![deny(missing_docs)]
 
 pub mod client;
+pub mod haptic_grid;
 pub mod metrics;
 pub mod process;
 pub mod procfs;

@@ -400,6 +400,8 @@ test('with a haptic link, the haptic panel shows it and the lease holder can eng
     const dev = await waitText(p, '#hap-device', /faults: none|faults:/, 8000);
     assert.match(dev, /^(\d+(\.\d+)? k?Hz · )?faults: /, dev);
     assert.match(await p.getAttribute('#hap-device', 'class'), /^(|warn|bad)$/);
+    // The scales in force (issue 25): the scene's default, inside the device's region.
+    await waitText(p, '#hap-scales', /^10 nm\/mm, 1\.000 N pull-off, felt \d+ N\/m$/, 8000);
     // The monitor shows the same line.
     const m = await newPage(browser, { width: 1280, height: 800 });
     await m.goto(hs.base + '/?view=monitor');
@@ -413,12 +415,12 @@ test('with a haptic link, the haptic panel shows it and the lease holder can eng
     await p.waitForFunction(() => !document.querySelector('#hap-fs').disabled);
     assert.equal(await p.evaluate(() => document.activeElement?.id), 'release-lease');
     // The scales in force (the scene's), then as set: shown and in the Events log.
-    await waitText(p, '#hap-scales', /^10 nm per mm · pull-off felt as 1 N$/, 8000);
+    await waitText(p, '#hap-scales', /^10 nm\/mm, 1\.000 N pull-off/, 8000);
     await p.fill('#hap-nm', '20');
     await p.click('#hap-scale');
     await waitText(p, '#reply-haptic', /ok/, 10000);
-    await waitText(p, '#hap-scales', /^20 nm per mm/, 8000);
-    await waitText(p, '#log', /haptic scales now 20 nm per mm/, 5000);
+    await waitText(p, '#hap-scales', /^20 nm\/mm/, 8000);
+    await waitText(p, '#log', /haptic scales now 20 nm\/mm/, 5000);
     await p.click('#hap-engage');
     await waitText(p, '#reply-haptic', /ok/, 10000);
     await waitText(p, '#hap-phase', /approach|park|settle|ramp|engaged/, 20000);

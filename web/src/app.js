@@ -81,7 +81,7 @@ export class App {
     this.haptic = new HapticPanel({
       panel: $('haptic-panel'),
       plot: $('chart-hap'),
-      fields: { link: $('hap-link'), phase: $('hap-phase'), engaged: $('hap-engaged'), handle: $('hap-handle'), hand: $('hap-hand'), tip: $('hap-tip'), pc: $('hap-pc') },
+      fields: { link: $('hap-link'), phase: $('hap-phase'), engaged: $('hap-engaged'), handle: $('hap-handle'), hand: $('hap-hand'), tip: $('hap-tip'), pc: $('hap-pc'), scales: $('hap-scales') },
       device: $('hap-device'),
       downs: $('hap-downs'),
       scales: $('hap-scales'),

@@ -1,6 +1,7 @@
 // The haptic panel, shown once telemetry carries a `haptic` object (the server runs a haptic
 // link: `--haptic sim|external`): link up/down, the z-control phase (engaged or not), the
-// handle's position and the force at the hand, the tip force, the passivity controller, and a
+// handle's position and the force at the hand, the tip force, the passivity controller, the
+// scales in force (lowered, and why, when the device cannot render those asked: issue 25), and a
 // scrolling plot of the force at the hand, and the device's fault counters (issue 28: the line
 // `deviceFaultsLine` of src/devicefaults.js makes, from /api/status every 2 s while the panel is
 // shown and the page is visible). The lease holder gets engage / release / re-centre
@@ -29,6 +30,7 @@ export function hapticFields(h) {
     hand: { text: h.force_n == null ? '–' : `${h.force_n.toFixed(3)} N` },
     tip: { text: `${(h.tip_force_n * 1e9).toFixed(2)} nN` },
     pc: { text: h.pc_active ? 'damping' : 'idle' },
+    scales: scalesField(h.scales),
   };
 }
 
@@ -36,6 +38,24 @@ export function hapticFields(h) {
 export function scalesText(sc) {
   if (!sc || !Number.isFinite(sc.nm_per_mm) || !Number.isFinite(sc.pull_off_at_hand_n)) return '–';
   return `${Number(sc.nm_per_mm.toPrecision(4))} nm per mm · pull-off felt as ${Number(sc.pull_off_at_hand_n.toPrecision(4))} N`;
+}
+
+/** Why the scales in force differ from those asked (issue 25), as the panel says it. */
+const LIMITS = {
+  renderable_region: "lowered to the device's renderable region",
+  energy_bounding: 'halved: the passivity damper stayed at its cap (energy bounding)',
+};
+
+/**
+ * The scales in force (telemetry's `haptic.scales`): the position scale, the pull-off felt at
+ * the hand and the contact's stiffness there; when lowered, from what and why (`warn`).
+ */
+export function scalesField(s) {
+  if (!s) return { text: '–', cls: '' };
+  const text = `${s.nm_per_mm} nm/mm, ${s.pull_off_at_hand_n.toFixed(3)} N pull-off, felt ${s.felt_stiffness_n_per_m.toFixed(0)} N/m`;
+  const why = LIMITS[s.limit];
+  if (!why) return { text, cls: '' };
+  return { text: `${text} (asked ${s.asked_pull_off_at_hand_n} N: ${why})`, cls: 'warn' };
 }
 
 /** The force at the hand over the last `seconds` of server time (a restart starts it again). */
@@ -115,17 +135,24 @@ export class HapticPanel {
     el.className = cls;
   }
 
-  /** The scales in force: shown, the form's fields filled while untouched, a change reported. */
+  /**
+   * The scales as asked (`/api/status`'s `haptic_scales`): the form's fields filled while
+   * untouched. The scales in force are telemetry's (`haptic.scales`, shown by `update`).
+   */
   showScales(sc) {
-    const text = scalesText(sc);
-    if (text === '–') return;
-    if (this.els.scales) this.els.scales.textContent = text;
+    if (scalesText(sc) === '–') return;
     for (const [el, v] of [[this.els.nmInput, sc.nm_per_mm], [this.els.poInput, sc.pull_off_at_hand_n]]) {
       if (el && (el.value === '' || el.dataset.fromServer === '1') && this.doc?.activeElement !== el) {
         el.value = String(v);
         el.dataset.fromServer = '1';
       }
     }
+  }
+
+  /** The scales in force, from telemetry: a change reported (the field itself is `hapticFields`'). */
+  noteScales(s) {
+    const { text } = scalesField(s);
+    if (text === '–') return;
     if (this.scales !== null && this.scales !== text) this.onScalesChange?.(text);
     this.scales = text;
   }
@@ -158,7 +185,9 @@ export class HapticPanel {
       this.onLinkChange?.(h.link, this.downs ?? undefined);
     }
     this.link = h.link;
+    this.noteScales(h.scales);
     for (const [k, v] of Object.entries(hapticFields(h))) {
+      if (!fields[k]) continue; // a page without this field
       fields[k].textContent = v.text;
       if (v.cls !== undefined) fields[k].className = v.cls;
     }

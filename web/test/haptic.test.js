@@ -2,7 +2,7 @@
 // 10 s window (src/haptic.js; uPlot itself is not run).
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { hapticFields, HapticTrace, scalesText } from '../src/haptic.js';
+import { hapticFields, HapticTrace, scalesField, scalesText } from '../src/haptic.js';
 
 test('the fields of an engaged handle on a live link', () => {
   const f = hapticFields({ link: 'up', phase: 'engaged', handle_m: 0.01234, force_n: 0.5, tip_force_n: 2.5e-9, pc_active: true });
@@ -14,7 +14,20 @@ test('the fields of an engaged handle on a live link', () => {
     hand: { text: '0.500 N' },
     tip: { text: '2.50 nN' },
     pc: { text: 'damping' },
+    scales: { text: '–', cls: '' },
   });
+});
+
+test('the scales in force: as asked, lowered to the renderable region, halved by energy bounding', () => {
+  const s = { nm_per_mm: 10, pull_off_at_hand_n: 1, asked_pull_off_at_hand_n: 1, felt_stiffness_n_per_m: 1452.4, limit: 'none' };
+  assert.deepEqual(scalesField(s), { text: '10 nm/mm, 1.000 N pull-off, felt 1452 N/m', cls: '' });
+  const region = { ...s, pull_off_at_hand_n: 1.3772, asked_pull_off_at_hand_n: 10, felt_stiffness_n_per_m: 2000, limit: 'renderable_region' };
+  assert.deepEqual(scalesField(region), {
+    text: "10 nm/mm, 1.377 N pull-off, felt 2000 N/m (asked 10 N: lowered to the device's renderable region)",
+    cls: 'warn',
+  });
+  assert.match(scalesField({ ...s, limit: 'energy_bounding' }).text, /energy bounding/);
+  assert.equal(hapticFields({ link: 'up', phase: 'engaged', tip_force_n: 0, scales: region }).scales.cls, 'warn');
 });
 
 test('a link down, not engaged, no handle reading', () => {

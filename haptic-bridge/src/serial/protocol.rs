@@ -369,6 +369,7 @@ impl InfoPacket {
             travel: [lo_m, hi_m],
             max_damping: damping,
             max_stiffness: stiffness,
+            spec_rate_hz: f64::from(self.rate_hz),
         })
     }
 }

@@ -8,18 +8,25 @@
 //!            z_ref ← clamp(z_des, z_lo, z_c + h_top), moved at most v_max·T per tick
 //! force:     F_tip = k_z ζ_z,  ζ_z = (V − V₀)/G                (Eqs 11-12: the measured deflection,
 //!                                                               with the sensor's noise)
-//!            F_hand = clamp(r · g_f · (F_tip + F_lim), ±F_dev)  (g_f: the scene's pull-off → 1 N)
+//!            F_hand = clamp(r · g_f · (F_tip·[gate open] + F_lim), ±F_dev)
+//!                                                  (g_f: the scene's pull-off → 1 N, limited to
+//!                                                   the device's renderable region: `coupling`)
 //! local model sent with it (rendered by the bridge at its rate between ticks):
-//!            dF_hand/dx = −r · g_f · k_z · g_p   while the tip touches (|ζ_z| > ζ_c), else 0
+//!            dF_hand/dx = −r · g_f · k_z · g_p   while the gate is open (the tip touched,
+//!                                                |ζ_z| > ζ_c, within the last 20 ms) or the
+//!                                                coupling spring acted (50 ms), else 0; with it
+//!                                                the coupling's damper B_c
 //! ```
 //!
 //! `(x_a, z_a)` is the anchor, taken at the engagement and at every clutch release, so the tip
 //! never jumps when the hand is re-centred; `z_c` the height at which the surface was detected
 //! (the automatic approach below); `ζ_max` the deepest the lever may be pressed (80 % of the
 //! deflection at the strategy's safety limit): once `ζ_z ≥ ζ_max` the tip goes no lower (it backs
-//! off by the excess), and a hard floor `z_c − ζ_max − 20 nm` backs that up; `F_lim = k_z (z_lo −
-//! z_des)` is a virtual wall continuing the contact's stiffness where a limit holds the tip, so
-//! the hand feels the limit instead of a tip that stopped following; `r` the engagement ramp.
+//! off by the excess), and a hard floor `z_c − ζ_max − 20 nm` backs that up; `F_lim = k_z (z_ref
+//! − z_des)` is the coupling spring between the hand and the set-point: a virtual wall
+//! continuing the contact's stiffness where a limit holds the tip, so the hand feels the limit
+//! instead of a tip that stopped following, and the lag of a set-point moved at its speed limit;
+//! `r` the engagement ramp.
 //!
 //! Engagement, as CHAI3D and OpenHaptics do it: on `engage` the tip approaches the surface at the
 //! strategy's approach speed until the reading leaves the baseline (the substrate threshold),
@@ -29,12 +36,19 @@
 //! handle only feels the force; after it, the tip parks again. A lost link (no handle sample for
 //! 5 ms, decided by the caller) freezes z and retracts the tip to the parking height.
 //!
-//! The passivity of the port (energy the sampled loop generates) is watched and damped at the
-//! bridge, where the force actually rendered is known (`nanopush_haptic::passivity`).
+//! The force is rendered through a virtual coupling sized from the device's renderable region
+//! (the contact is never felt stiffer than the device renders passively; a lagging set-point is
+//! felt as a spring; the sensor's noise is not rendered): [`coupling`], with the passivity
+//! argument. The port's energy is also watched and damped at the bridge, where the force
+//! actually rendered is known (`nanopush_haptic::passivity`); a damper held at its cap lowers
+//! the force scale (energy bounding).
 
 use nanopush_proto::haptic::{FORCE_CLUTCHED, FORCE_ENGAGED, FORCE_PUSHING, ForceFeedback, HapticState};
 
-use crate::scene::Scene;
+pub mod coupling;
+mod params;
+pub use coupling::Coupling;
+pub use params::BilateralParams;
 
 pub use nanopush_proto::haptic::{BUTTON_CLUTCH, BUTTON_ENGAGE};
 /// Hand force below which the forces may engage (N).
@@ -46,71 +60,13 @@ pub const RAMP: f64 = 1.0;
 /// The hard floor below the detected surface beyond the deflection limit (m): a backstop for a
 /// reading that never reaches the limit.
 pub const FLOOR_MARGIN: f64 = 20e-9;
+/// Ticks within the sensor's noise after which the tip force is no longer rendered (the noise
+/// gate closes): 20 ms.
+pub const GATE_TICKS: u32 = 20;
+/// Ticks the coupling spring's stiffness stays in the local model after it last acted.
+pub const COUPLED_HOLD: u32 = 50;
 /// Half-width of the handle range a local model is sent for (m).
 pub const MODEL_HALF_RANGE: f64 = 0.5e-3;
-
-/// The settings of the law, SI.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct BilateralParams {
-    /// Tip metres per handle metre (`g_p`).
-    pub position_gain: f64,
-    /// Hand newtons per tip newton (`g_f`).
-    pub force_gain: f64,
-    /// Height above the detected surface the tip parks at (m).
-    pub park_gap: f64,
-    /// Fastest the hand may move the tip's height (m/s).
-    pub max_speed: f64,
-    /// Speed of the automatic approach and retraction (m/s).
-    pub approach_speed: f64,
-    /// Deepest the lever may be pressed, as a deflection `ζ_max` (m).
-    pub max_indent: f64,
-    /// Highest the hand may take the tip above the detected surface (m).
-    pub max_height: f64,
-    /// Reading change that means the tip met the surface (V).
-    pub substrate_threshold: f64,
-    /// Reading at zero deflection (V).
-    pub baseline: f64,
-    /// Sensor gain (V/m).
-    pub sensor_gain: f64,
-    /// Deflection beyond which the tip is taken to touch the surface (m).
-    pub contact_deflection: f64,
-    /// Lever stiffness `k_z` (N/m).
-    pub k_z: f64,
-    /// Control tick (s).
-    pub tick: f64,
-    /// Longest the approach may search below its start (m).
-    pub search_depth: f64,
-}
-
-impl Scene {
-    /// The haptic z-control's settings from `[haptic]`, `[strategy]`, `[sensor]` and the lever,
-    /// for a control tick of `tick` seconds. The force scaling maps the tip's adhesion (the
-    /// pull-off scale, [`crate::physics::force_curve::TipSample::adhesion`]) to
-    /// `haptic.pull_off_at_hand_n`.
-    pub fn bilateral_params(&self, tick: f64) -> BilateralParams {
-        let f = &self.file;
-        let (h, st) = (&f.haptic, &f.strategy);
-        let sensor = self.sensor();
-        let ts = self.tip_sample();
-        let safety_deflection = ((st.safety_limit_v - sensor.baseline) / sensor.gain).abs();
-        BilateralParams {
-            position_gain: h.nm_per_mm * 1e-9 / 1e-3,
-            force_gain: h.pull_off_at_hand_n / ts.adhesion().max(1e-12),
-            park_gap: h.park_gap_nm * 1e-9,
-            max_speed: h.max_speed_nm_per_s * 1e-9,
-            approach_speed: st.approach_speed_um_per_s * 1e-6,
-            max_indent: 0.8 * safety_deflection,
-            max_height: h.max_height_nm * 1e-9,
-            substrate_threshold: st.substrate_threshold_mv * 1e-3,
-            baseline: sensor.baseline,
-            sensor_gain: sensor.gain,
-            contact_deflection: (5.0 * sensor.noise_rms / sensor.gain.abs()).max(0.2e-9),
-            k_z: ts.k_c,
-            tick,
-            search_depth: st.search_range_um * 1e-6 + st.start_height_um * 1e-6,
-        }
-    }
-}
 
 /// Where the haptic z-control is.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -212,11 +168,21 @@ pub struct Bilateral {
     button_prev: bool,
     /// The height at which the lever reached its deflection limit, while the hand presses on.
     force_floor: Option<f64>,
+    /// Ticks since the coupling spring last acted (the local model's stiffness stays on for
+    /// [`COUPLED_HOLD`] ticks after it, so a set-point that lags on and off is felt as one
+    /// spring, not as a force switched on and off).
+    since_coupled: u32,
+    /// Consecutive ticks the deflection has stayed within the sensor's noise (`|ζ| ≤ ζ_c`): the
+    /// tip force is rendered until [`GATE_TICKS`] of them (a contact's force crosses zero in a
+    /// tick or two without a gap; free space is quiet from then on).
+    quiet: u32,
     /// The phase a running push interrupted (the hand gets the tip back after it only if it had
     /// it before).
     before_push: Phase,
     /// The force ramp during a push (0..1).
     push_gain: f64,
+    /// The renderable region, the coupling and energy bounding.
+    coupling: Coupling,
 }
 
 impl Bilateral {
@@ -233,8 +199,11 @@ impl Bilateral {
             fault: None,
             button_prev: false,
             force_floor: None,
+            since_coupled: u32::MAX,
+            quiet: u32::MAX,
             before_push: Phase::Off,
             push_gain: 0.0,
+            coupling: Coupling::new(params.tick),
         }
     }
 
@@ -246,6 +215,11 @@ impl Bilateral {
     /// Whether the hand owns (or will own) the tip: engaged in any way but off.
     pub fn engaged(&self) -> bool {
         self.phase != Phase::Off
+    }
+
+    /// The renderable region and the coupling in force.
+    pub fn coupling(&self) -> &Coupling {
+        &self.coupling
     }
 
     /// The last fault, if any.
@@ -268,6 +242,7 @@ impl Bilateral {
         self.approach_from = stage[2];
         self.fault = None;
         self.force_floor = None;
+        self.coupling.reset_bound();
         self.phase = Phase::Approach;
     }
 
@@ -296,6 +271,7 @@ impl Bilateral {
         if let Some(g) = force_gain {
             self.params.force_gain = g;
         }
+        self.coupling.reset_bound();
         if matches!(self.phase, Phase::Ramp { .. } | Phase::Engaged | Phase::Clutched) {
             if let Some(x) = handle.filter(|x| x.is_finite()) {
                 self.anchor = (x, self.z_ref);
@@ -307,7 +283,9 @@ impl Bilateral {
     }
 
     /// The link to the hand is lost (or a new bridge replaced it): as when no sample arrives.
+    /// A new bridge may hold another device: energy bounding starts over.
     pub fn link_lost(&mut self) {
+        self.coupling.reset_bound();
         if matches!(
             self.phase,
             Phase::Settle { .. } | Phase::Ramp { .. } | Phase::Engaged | Phase::Clutched
@@ -357,11 +335,26 @@ impl Bilateral {
         let limit_force = self.step_phase(input, tip_force, zeta);
         let (gain, flags) = self.gain_and_flags(handle.is_some());
         let touching = zeta.abs() > p.contact_deflection;
-        let force = (gain * p.force_gain * (tip_force + limit_force)).clamp(-max_force, max_force);
+        let force_gain = self.coupling.update(&p, handle.as_ref(), gain > 0.0);
+        // The tip force beyond the sensor's noise, and the coupling spring (see `coupling`).
+        self.quiet = if touching { 0 } else { self.quiet.saturating_add(1) };
+        let rendered = if self.quiet < GATE_TICKS { tip_force } else { 0.0 } + limit_force;
+        let force = (gain * force_gain * rendered).clamp(-max_force, max_force);
         // A retraction that ends this tick still moves the tip there.
         let owns_z = !matches!(self.phase, Phase::Off | Phase::Pushing) || was == Phase::Retract;
-        let stiffness = if (touching || limit_force > 0.0) && self.phase != Phase::Pushing {
-            -gain * p.force_gain * p.k_z * p.position_gain
+        self.since_coupled = if limit_force != 0.0 {
+            0
+        } else {
+            self.since_coupled.saturating_add(1)
+        };
+        // The local model's stiffness (and the coupling damper with it) is whole while the tip
+        // touches or the coupling spring acts, and fades out over the gate's 20 ms and the
+        // coupling's 50 ms after: a contact crossing zero keeps it, free space loses it without a
+        // step (and without dragging a hand that flies off at the pull-off).
+        let fade = |since: u32, over: u32| 1.0 - f64::from(since.min(over)) / f64::from(over);
+        let share = fade(self.quiet, GATE_TICKS).max(fade(self.since_coupled, COUPLED_HOLD));
+        let stiffness = if self.phase != Phase::Pushing {
+            -gain * force_gain * p.k_z * p.position_gain * share
         } else {
             0.0
         };
@@ -380,6 +373,11 @@ impl Bilateral {
                 gain,
                 active: u32::from(gain > 0.0 && handle.is_some()),
                 flags,
+                damping: if stiffness < 0.0 {
+                    gain * self.coupling.damping() * share
+                } else {
+                    0.0
+                },
             },
         }
     }
@@ -460,7 +458,18 @@ impl Bilateral {
                 }
             }
             Phase::Settle { small } => {
-                let hand = (p.force_gain * tip_force).abs();
+                // The force the hand would get: the force scale in force (the one asked before a
+                // device is known), nothing within the sensor's noise.
+                let g = if self.coupling.k_max() > 0.0 {
+                    self.coupling.force_gain()
+                } else {
+                    p.force_gain
+                };
+                let hand = if zeta.abs() > p.contact_deflection {
+                    (g * tip_force).abs()
+                } else {
+                    0.0
+                };
                 let small = if hand < ENGAGE_FORCE { small + 1 } else { 0 };
                 self.phase = Phase::Settle { small };
                 if small >= ENGAGE_TICKS
@@ -510,8 +519,8 @@ impl Bilateral {
         (gain, flags)
     }
 
-    /// The hand moves the tip (ramp, engaged, clutch); returns the virtual wall's force at the
-    /// range limit (N, tip side).
+    /// The hand moves the tip (ramp, engaged, clutch); returns the coupling spring's force
+    /// `k_z (z_ref − z_des)` (N, tip side): the wall at a limit, the lag at the speed limit.
     fn follow(&mut self, h: &HapticState, zeta: f64) -> f64 {
         let p = self.params;
         let clutch = h.buttons & BUTTON_CLUTCH != 0;
@@ -554,7 +563,9 @@ impl Bilateral {
         // When the force floor has risen above the top limit, the floor (up, away from the
         // surface) wins.
         self.slew(z_des.min(hi).max(lo), p.max_speed);
-        if z_des < lo { p.k_z * (lo - z_des) } else { 0.0 }
+        // The coupling spring: the set-point's lag behind the hand (a limit holding it is a
+        // virtual wall continuing the contact's stiffness).
+        p.k_z * (self.z_ref - z_des)
     }
 }
 

@@ -179,7 +179,7 @@ fn loop_scalars(l: &LoopMetrics, free: f64, total: f64) -> [Scalar; 9] {
 }
 
 /// The haptic link's gauges and counters; the link's age is −1 before any sample.
-fn haptic_scalars(h: &HapticMetrics, now_ns: u64) -> [Scalar; 13] {
+fn haptic_scalars(h: &HapticMetrics, now_ns: u64) -> [Scalar; 19] {
     let last = h.last_ns.load(Relaxed);
     let age = if last == 0 {
         -1.0
@@ -234,6 +234,42 @@ fn haptic_scalars(h: &HapticMetrics, now_ns: u64) -> [Scalar; 13] {
             "Damping the passivity controller adds now (N s/m).",
             "gauge",
             h.pc_damping(),
+        ),
+        (
+            "nanopush_haptic_raw_port_energy_joules",
+            "Energy the hand has put in through the raw port since the force went live (force rendered times handle displacement); below minus the stored-energy bound the loop was active.",
+            "gauge",
+            h.raw_port_energy(),
+        ),
+        (
+            "nanopush_haptic_stored_energy_bound_joules",
+            "The most the tip-sample environment can give back at the hand (half the pull-off squared over the felt stiffness).",
+            "gauge",
+            h.stored_energy_bound(),
+        ),
+        (
+            "nanopush_haptic_felt_stiffness_n_per_m",
+            "The contact's stiffness felt at the hand with the scales in force.",
+            "gauge",
+            f64::from_bits(h.scales.felt_stiffness.load(Relaxed)),
+        ),
+        (
+            "nanopush_haptic_max_stiffness_n_per_m",
+            "The device's renderable region's edge at its rate and the measured delay (0 before a device is known).",
+            "gauge",
+            f64::from_bits(h.scales.max_stiffness.load(Relaxed)),
+        ),
+        (
+            "nanopush_haptic_scale_limited",
+            "Why the force scale in force is below the one asked: 0 not, 1 the renderable region, 2 energy bounding.",
+            "gauge",
+            h.scales.limit.load(Relaxed) as f64,
+        ),
+        (
+            "nanopush_haptic_energy_bounds_total",
+            "Times the force scale was halved because the passivity damper stayed at its cap for more than 50 ms.",
+            "counter",
+            h.energy_bounds.load(Relaxed) as f64,
         ),
         (
             "nanopush_haptic_pc_active_samples_total",

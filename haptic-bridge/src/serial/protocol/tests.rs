@@ -395,3 +395,21 @@ proptest! {
         prop_assert_eq!(InfoPacket::decode(&i.encode()), Ok(i));
     }
 }
+
+/// Issue 25: a serial device gets its renderable region from its info packet as the simulated
+/// device does from its spec. The fixture's board declares 400 N/m at 1 kHz (a port damping of
+/// 0.6 N·s/m): with the loop's 1 ms round trip its edge is 400 N/m at 1 kHz and 4 kHz, 240 N/m
+/// with 2 ms; the same board declaring its limit at 500 Hz keeps it at 500 Hz.
+#[test]
+fn the_info_packet_gives_the_renderable_region() {
+    use nanopush_proto::haptic::region::{edge, port_damping};
+    let spec = info().spec().unwrap();
+    assert_eq!((spec.max_stiffness, spec.spec_rate_hz), (400.0, 1000.0));
+    assert!((port_damping(spec.max_stiffness, spec.spec_rate_hz) - 0.6).abs() < 1e-12);
+    assert!((edge(spec.max_stiffness, spec.spec_rate_hz, 1000.0, 1e-3) - 400.0).abs() < 1e-9);
+    assert_eq!(edge(spec.max_stiffness, spec.spec_rate_hz, 4000.0, 1e-3), 400.0);
+    assert!((edge(spec.max_stiffness, spec.spec_rate_hz, 1000.0, 2e-3) - 240.0).abs() < 1e-9);
+    let slow = InfoPacket { rate_hz: 500, ..info() }.spec().unwrap();
+    assert_eq!(slow.spec_rate_hz, 500.0);
+    assert!((edge(slow.max_stiffness, slow.spec_rate_hz, 500.0, 2e-3) - 400.0).abs() < 1e-9);
+}

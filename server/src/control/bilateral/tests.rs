@@ -30,6 +30,9 @@ impl Rig {
             volts: r.volts,
             handle: HapticState {
                 max_force: 2.5,
+                max_stiffness: 2000.0,
+                spec_rate_hz: 1000.0,
+                rate_hz: 1000.0,
                 ..Default::default()
             },
             link: true,
@@ -444,7 +447,8 @@ fn every_phase_has_its_protocol_name() {
 
 /// The force ramps in linearly, a tick's worth of `RAMP` each tick, flagged as engaged from its
 /// first tick; the tip force is the lever's stiffness times the deflection read from the
-/// voltage, `k_z (V − V₀)/G` (Eqs 11-12), and the hand gets it times the ramp and `g_f`.
+/// voltage, `k_z (V − V₀)/G` (Eqs 11-12), and the hand gets it times the ramp and `g_f` once it
+/// is beyond the sensor's noise (`|ζ| > ζ_c`; within it, nothing: the noise is not rendered).
 #[test]
 fn the_ramp_adds_a_tick_over_1_s_each_tick_and_the_hand_feels_g_f_times_k_z_zeta() {
     let mut rig = Rig::new();
@@ -462,7 +466,8 @@ fn the_ramp_adds_a_tick_over_1_s_each_tick_and_the_hand_feels_g_f_times_k_z_zeta
         assert_eq!((f.flags, f.active), (FORCE_ENGAGED, 1), "tick {k}");
         let tip = p.k_z * (v - p.baseline) / p.sensor_gain;
         assert!((f.tip_force - tip).abs() <= 1e-12 * tip.abs(), "{} {tip}", f.tip_force);
-        let hand = f.gain * p.force_gain * tip;
+        let touching = ((v - p.baseline) / p.sensor_gain).abs() > p.contact_deflection;
+        let hand = if touching { f.gain * p.force_gain * tip } else { 0.0 };
         assert!((f.force - hand).abs() <= 1e-12 * hand.abs(), "{} {hand}", f.force);
     }
     assert_eq!(k, 1000);
@@ -516,6 +521,9 @@ impl Ideal {
             stiff,
             handle: HapticState {
                 max_force: 1e3,
+                max_stiffness: 2000.0,
+                spec_rate_hz: 1000.0,
+                rate_hz: 1000.0,
                 ..Default::default()
             },
             pushing: false,
@@ -566,10 +574,10 @@ impl Ideal {
     }
 }
 
-/// Up, the hand takes the tip at most 300 nm above the surface and feels nothing there; down
-/// onto a surface the lever does not feel, the tip stops 20 nm past the deflection limit below
-/// it and the hand meets a wall `g_f k_z (z_lo − z_des)` with the wall's stiffness in the local
-/// model.
+/// Up, the hand takes the tip at most 300 nm above the surface and meets a wall there (the
+/// coupling spring `g_f k_z (z_hi − z_des)`, pulling it down); down onto a surface the lever
+/// does not feel, the tip stops 20 nm past the deflection limit below it and the hand meets a
+/// wall `g_f k_z (z_lo − z_des)` with the wall's stiffness in the local model.
 #[test]
 fn the_tip_stays_between_300_nm_above_and_the_limit_plus_20_nm_below_and_the_hand_meets_a_wall() {
     let mut s = Ideal::engaged(0.0);
@@ -584,7 +592,10 @@ fn the_tip_stays_between_300_nm_above_and_the_limit_plus_20_nm_below_and_the_han
         s.tick();
     }
     assert!((s.z - (zc + 300e-9)).abs() < 1e-14, "{} nm above", (s.z - zc) * 1e9);
-    assert_eq!(s.tick().feedback.force, 0.0);
+    let f = s.tick().feedback;
+    let top = p.force_gain * p.k_z * (zc + 300e-9 - s.z_des());
+    assert!(top < 0.0 && f.force == top.max(-1e3), "{} {top}", f.force);
+    assert_eq!(f.stiffness, -p.force_gain * p.k_z * p.position_gain);
     s.handle.position = -0.05;
     for _ in 0..1000 {
         s.tick();

@@ -513,6 +513,7 @@ impl ControlLoop {
         }
         hm.tip_force_n.store(hand.feedback.tip_force.to_bits(), Relaxed);
         hm.tip_z_m.store(hand.feedback.tip_z.to_bits(), Relaxed);
+        hm.note_scales(&self.bilateral.params, self.bilateral.coupling());
         if link.is_some() {
             hm.fault.store(u64::from(self.bilateral.fault().is_some()), Relaxed);
         }

@@ -21,6 +21,11 @@ pub fn down_after_ns(timeout: std::time::Duration, tick: f64) -> u64 {
 pub const MAX_HANDLE_M: f64 = 0.5;
 /// Largest device force limit a bridge may report (N).
 pub const MAX_DEVICE_FORCE_N: f64 = 50.0;
+/// Largest stiffness a bridge may say its device renders (N/m): the renderable region is
+/// computed from it (a serial device's info packet has the same bound).
+pub const MAX_DEVICE_STIFFNESS: f64 = 100_000.0;
+/// Largest rate a device's limits may be declared for (Hz).
+pub const MAX_SPEC_RATE_HZ: f64 = 20_000.0;
 
 /// Link state codes in [`super::HapticMetrics::link`].
 pub const LINK_OFF: u64 = 0;
@@ -30,9 +35,15 @@ pub const LINK_DOWN: u64 = 1;
 pub const LINK_UP: u64 = 2;
 
 /// Whether a sample from a bridge can be believed: finite, the handle within ±0.5 m, a device
-/// force limit in (0, 50] N.
+/// force limit in (0, 50] N, a declared stiffness in (0, 100] kN/m at a rate in (0, 20] kHz,
+/// a finite passivity damper and cap.
 pub fn believable(s: &HapticState) -> bool {
-    s.position.is_finite()
+    let within = |v: f64, hi: f64| v.is_finite() && v > 0.0 && v <= hi;
+    within(s.max_stiffness, MAX_DEVICE_STIFFNESS)
+        && within(s.spec_rate_hz, MAX_SPEC_RATE_HZ)
+        && s.pc_damping.is_finite()
+        && s.pc_cap.is_finite()
+        && s.position.is_finite()
         && s.velocity.is_finite()
         && s.position.abs() <= MAX_HANDLE_M
         && s.max_force.is_finite()
@@ -109,6 +120,8 @@ mod tests {
         let good = HapticState {
             position: 0.01,
             max_force: 2.5,
+            max_stiffness: 2000.0,
+            spec_rate_hz: 1000.0,
             ..Default::default()
         };
         assert!(believable(&good));
@@ -124,6 +137,22 @@ mod tests {
             HapticState { position: 1.0, ..good },
             HapticState { max_force: 0.0, ..good },
             HapticState { max_force: 1e6, ..good },
+            HapticState {
+                max_stiffness: 0.0,
+                ..good
+            },
+            HapticState {
+                max_stiffness: 1e9,
+                ..good
+            },
+            HapticState {
+                spec_rate_hz: f64::NAN,
+                ..good
+            },
+            HapticState {
+                pc_cap: f64::INFINITY,
+                ..good
+            },
             HapticState {
                 force: f64::NAN,
                 ..good

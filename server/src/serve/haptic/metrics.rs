@@ -3,7 +3,11 @@
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::Relaxed};
 
+use nanopush_proto::haptic::region::Limit;
 use nanopush_proto::haptic::{HapticState, monotonic_ns};
+use nanopush_proto::ws::HapticScales;
+
+use crate::control::bilateral::{BilateralParams, Coupling};
 
 use super::link::LINK_UP;
 use crate::serve::histogram::Histogram;
@@ -64,6 +68,55 @@ pub struct HapticMetrics {
     pub device_faults: [AtomicU64; 8],
     /// A bridge has told its device's counters (a sample, or a lost device's state).
     pub device_noted: AtomicBool,
+    /// The raw port's energy since the force went live (J), f64 bits.
+    pub raw_port_energy: AtomicU64,
+    /// The most the environment can give back at the hand (J), f64 bits: `½ F² / K` with `F`
+    /// the pull-off at the hand in force and `K` the felt stiffness.
+    pub stored_energy_bound: AtomicU64,
+    /// The scales in force (written by the loop every tick).
+    pub scales: ScaleAtomics,
+    /// Times energy bounding lowered the force scale.
+    pub energy_bounds: AtomicU64,
+    /// The scales the last accepted `scale` asked for (nm/mm, pull-off at the hand in N), which
+    /// the loop may not have taken yet: the next `scale`'s `ok` builds on them.
+    pub asked_scales: std::sync::Mutex<Option<(f64, f64)>>,
+}
+
+/// The scales of haptic z-control in force, f64 bits, and why they differ from those asked.
+#[derive(Debug, Default)]
+pub struct ScaleAtomics {
+    /// Tip nm per handle mm.
+    pub nm_per_mm: AtomicU64,
+    /// Pull-off felt at the hand in force (N).
+    pub pull_off_at_hand_n: AtomicU64,
+    /// Pull-off asked (N).
+    pub asked_pull_off_at_hand_n: AtomicU64,
+    /// Felt contact stiffness in force (N/m).
+    pub felt_stiffness: AtomicU64,
+    /// The renderable region's edge (N/m); 0 before a device is known.
+    pub max_stiffness: AtomicU64,
+    /// The round-trip delay the region is computed for (s).
+    pub delay_s: AtomicU64,
+    /// [`nanopush_proto::haptic::region::Limit::code`].
+    pub limit: AtomicU64,
+}
+
+impl ScaleAtomics {
+    /// The scales as the `ok` of a `scale`, `/api/status` and telemetry show them.
+    pub fn snapshot(&self) -> HapticScales {
+        let limit = Limit::from_code(self.limit.load(Relaxed) as u32);
+        let k_max = f(&self.max_stiffness);
+        HapticScales {
+            nm_per_mm: f(&self.nm_per_mm),
+            pull_off_at_hand_n: f(&self.pull_off_at_hand_n),
+            asked_pull_off_at_hand_n: f(&self.asked_pull_off_at_hand_n),
+            felt_stiffness_n_per_m: f(&self.felt_stiffness),
+            max_stiffness_n_per_m: (k_max > 0.0).then_some(k_max),
+            delay_s: f(&self.delay_s),
+            limit: limit.name().into(),
+            reason: (limit != Limit::None).then(|| limit.reason().into()),
+        }
+    }
 }
 
 /// Names of the bilateral phases, in [`crate::control::bilateral::Phase`] order.
@@ -162,6 +215,41 @@ impl HapticMetrics {
         self.device_noted.store(true, Relaxed);
     }
 
+    /// The raw port's energy (J).
+    pub fn raw_port_energy(&self) -> f64 {
+        f(&self.raw_port_energy)
+    }
+
+    /// The environment's stored-energy bound at the hand (J).
+    pub fn stored_energy_bound(&self) -> f64 {
+        f(&self.stored_energy_bound)
+    }
+
+    /// The scales in force, the region and energy bounding (called by the loop every tick):
+    /// `params` as asked, `c` the coupling of the law.
+    pub fn note_scales(&self, p: &BilateralParams, c: &Coupling) {
+        let s = &self.scales;
+        // Before a device is known nothing is rendered; the scales shown are those asked.
+        let g = if c.k_max() > 0.0 { c.force_gain() } else { p.force_gain };
+        let felt = g * p.k_z * p.position_gain;
+        let pull_off = g * p.adhesion;
+        let store = |a: &AtomicU64, v: f64| a.store(v.to_bits(), Relaxed);
+        store(&s.nm_per_mm, p.position_gain * 1e-3 / 1e-9);
+        store(&s.pull_off_at_hand_n, pull_off);
+        store(&s.asked_pull_off_at_hand_n, p.force_gain * p.adhesion);
+        store(&s.felt_stiffness, felt);
+        store(&s.max_stiffness, c.k_max());
+        store(&s.delay_s, c.delay());
+        s.limit.store(u64::from(c.limit().code()), Relaxed);
+        let bound = if felt > 0.0 {
+            0.5 * pull_off * pull_off / felt
+        } else {
+            0.0
+        };
+        store(&self.stored_energy_bound, bound);
+        self.energy_bounds.store(c.bounds(), Relaxed);
+    }
+
     /// Records a sample from the bridge (called by the loop).
     pub fn sample(&self, s: &HapticState, now_ns: u64) {
         self.samples.fetch_add(1, Relaxed);
@@ -170,6 +258,7 @@ impl HapticMetrics {
         self.force_n.store(s.force.to_bits(), Relaxed);
         self.pc_damping.store(s.pc_damping.to_bits(), Relaxed);
         self.port_energy.store(s.port_energy.to_bits(), Relaxed);
+        self.raw_port_energy.store(s.raw_port_energy.to_bits(), Relaxed);
         self.dropped_samples.store(s.dropped, Relaxed);
         self.note_device(s);
         if s.pc_damping > 0.0 {

@@ -81,10 +81,38 @@ pub fn next_backoff(backoff: Duration) -> Duration {
     (backoff * 2).min(BACKOFF_MAX)
 }
 
+/// Logs an energy bounding (the passivity damper pinned at its cap: the force scale halved) and
+/// a change of the reason the scales in force differ from those asked.
+fn note_scales(h: &HapticMetrics, bounds: &mut u64, limit: &mut u64) {
+    let (b, l) = (h.energy_bounds.load(Relaxed), h.scales.limit.load(Relaxed));
+    if b == *bounds && l == *limit {
+        return;
+    }
+    let s = h.scales.snapshot();
+    if b > *bounds {
+        tracing::warn!(
+            "haptic energy bounding: the passivity damper stayed at its cap for more than 50 ms; the pull-off at the hand is now {:.3} N (asked {:.3} N)",
+            s.pull_off_at_hand_n,
+            s.asked_pull_off_at_hand_n
+        );
+    } else if l != *limit {
+        tracing::info!(
+            "haptic scales in force: {} nm/mm, {:.3} N of pull-off (asked {:.3} N), felt as {:.0} N/m: {}",
+            s.nm_per_mm,
+            s.pull_off_at_hand_n,
+            s.asked_pull_off_at_hand_n,
+            s.felt_stiffness_n_per_m,
+            s.reason.as_deref().unwrap_or("as asked")
+        );
+    }
+    (*bounds, *limit) = (b, l);
+}
+
 fn monitor(bin: Option<&std::path::Path>, stop: &AtomicBool, slot: &Mutex<Option<Child>>, h: &HapticMetrics) {
     let cleaner = ipc_node("nanopush-serve-monitor").ok();
     let mut last_clean = Instant::now();
     let (mut downs, mut ups) = (0u64, 0u64);
+    let (mut bounds, mut limit) = (0u64, 0u64);
     let mut backoff = BACKOFF_FIRST;
     let mut started = Instant::now();
     let mut respawn_at: Option<Instant> = bin.map(|_| Instant::now());
@@ -107,6 +135,7 @@ fn monitor(bin: Option<&std::path::Path>, stop: &AtomicBool, slot: &Mutex<Option
             );
         }
         (downs, ups) = (d, u);
+        note_scales(h, &mut bounds, &mut limit);
         // The simulated bridge: reap it when it exits, start it again after the back-off.
         if let Some(bin) = bin {
             if let Ok(mut s) = slot.lock()

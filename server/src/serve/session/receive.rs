@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use axum::extract::ws::{Message, Utf8Bytes};
 use futures_util::{Stream, StreamExt};
-use nanopush_proto::ws::{ErrorCode, ServerMessage, Stream as WsStream};
+use nanopush_proto::ws::{ClientMessage, ErrorCode, HapticAction, ServerMessage, Stream as WsStream};
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 
@@ -15,6 +15,7 @@ use super::commands::handle;
 use super::{Client, REPLY_PATIENCE};
 use crate::serve::app_state::{AppState, ServeConfig, to_text};
 use crate::serve::command_checks::parse_command;
+use crate::serve::haptic::api::scales_in_force;
 
 /// Why the receive loop ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -135,9 +136,22 @@ async fn answer(st: &Arc<AppState>, client: &mut Client, inbox: &Inbox<'_>, text
         Err((id, why)) => return reply(st, inbox.replies, id, ErrorCode::Malformed, why).await,
     };
     let cid = parsed.id();
+    let scale = match &parsed {
+        ClientMessage::Haptic {
+            action: HapticAction::Scale,
+            nm_per_mm,
+            pull_off_at_hand_n,
+            ..
+        } => Some((*nm_per_mm, *pull_off_at_hand_n)),
+        _ => None,
+    };
     match handle(st, client, parsed) {
         Ok(()) => {
-            if !deliver(inbox.replies, to_text(&ServerMessage::Ok { id: cid })).await {
+            let scales = scale.map(|(g, f)| {
+                let ts = st.scene.tip_sample();
+                scales_in_force(&st.shared.metrics.haptic, ts.k_c, ts.adhesion(), g, f)
+            });
+            if !deliver(inbox.replies, to_text(&ServerMessage::Ok { id: cid, scales })).await {
                 return false;
             }
             // Only a changed subscription wakes the sender (it resubscribes, dropping queued
