@@ -38,9 +38,15 @@ impl Bench {
         // The paper's scene with the tip starting 2.2 µm above bare substrate at (20, 20) µm, away
         // from its particle at (50, 50) µm (the server starts the tip at the [scan] centre).
         let text = std::fs::read_to_string(workspace().join("scenes/paper-default.toml")).unwrap();
-        let extra =
-            "[strategy]\nstart_height_um = 2.2\n\n[scan]\ncentre_x_um = 20.0\ncentre_y_um = 20.0\nsize_um = 10.0\n";
-        std::fs::write(dir.join("scene.toml"), format!("{text}\n{extra}")).unwrap();
+        let extra = "[scan]\ncentre_x_um = 20.0\ncentre_y_um = 20.0\nsize_um = 10.0\n";
+        std::fs::write(
+            dir.join("scene.toml"),
+            format!(
+                "{}\n{extra}",
+                nanopush_e2e::with_strategy(&text, &[("start_height_um", "2.2")])
+            ),
+        )
+        .unwrap();
         Bench {
             dir,
             namespace: format!("e2e{tag}{}", std::process::id()),

@@ -87,9 +87,17 @@ fn fast_scene_with(dir: &Path, edits: &[(&str, &str)]) -> PathBuf {
         "roughness_rms_nm = 0.0",
         1,
     );
-    let text = format!(
-        "{text}\n[strategy]\nstart_height_um = 1.2\napproach_speed_um_per_s = 5.0\ntravel_speed_um_per_s = 40.0\napproach_distance_um = 0.3\ndwell_ms = 2.0\n\n[scan]\ncentre_x_um = 40.0\ncentre_y_um = 32.0\nsize_um = 16.0\npixels = 32\n"
+    let text = nanopush_e2e::with_strategy(
+        &text,
+        &[
+            ("start_height_um", "1.2"),
+            ("approach_speed_um_per_s", "5.0"),
+            ("travel_speed_um_per_s", "40.0"),
+            ("approach_distance_um", "0.3"),
+            ("dwell_ms", "2.0"),
+        ],
     );
+    let text = format!("{text}\n[scan]\ncentre_x_um = 40.0\ncentre_y_um = 32.0\nsize_um = 16.0\npixels = 32\n");
     let mut text = text;
     for (from, to) in edits {
         assert!(text.contains(from), "the scene has {from:?}");

@@ -54,9 +54,15 @@ impl CellBench {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).expect("a temporary directory");
         let text = std::fs::read_to_string(workspace().join("scenes/paper-default.toml")).expect("the paper scene");
-        let extra =
-            "[strategy]\nstart_height_um = 2.2\n\n[scan]\ncentre_x_um = 20.0\ncentre_y_um = 20.0\nsize_um = 10.0\n";
-        std::fs::write(dir.join("scene.toml"), format!("{text}\n{extra}")).expect("writing the scene");
+        let extra = "[scan]\ncentre_x_um = 20.0\ncentre_y_um = 20.0\nsize_um = 10.0\n";
+        std::fs::write(
+            dir.join("scene.toml"),
+            format!(
+                "{}\n{extra}",
+                crate::with_strategy(&text, &[("start_height_um", "2.2")])
+            ),
+        )
+        .expect("writing the scene");
         CellBench {
             dir,
             namespace: format!("grid{tag}{}", std::process::id()),

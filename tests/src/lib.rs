@@ -87,3 +87,43 @@ pub fn text(o: &Output) -> (String, String) {
 pub fn pm_qos_setting(cpu: usize) -> String {
     format!("/sys/devices/system/cpu/cpu{cpu}/power/pm_qos_resume_latency_us")
 }
+
+/// A scene's text with `values` (`key`, `value` in TOML) set in its `[strategy]` section: each
+/// key's line replaced where the section has it, else added at the section's top; a scene without
+/// the section gets one at its end. (The shipped paper scenes write their strategy out.)
+pub fn with_strategy(text: &str, values: &[(&str, &str)]) -> String {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let Some(start) = lines.iter().position(|l| l.trim() == "[strategy]") else {
+        let mut out = format!("{text}\n[strategy]\n");
+        for (k, v) in values {
+            out.push_str(&format!("{k} = {v}\n"));
+        }
+        return out;
+    };
+    let end = lines[start + 1..]
+        .iter()
+        .position(|l| l.trim_start().starts_with('['))
+        .map_or(lines.len(), |i| start + 1 + i);
+    for (k, v) in values {
+        let at = (start + 1..end).find(|&i| lines[i].split('=').next().is_some_and(|key| key.trim() == *k));
+        match at {
+            Some(i) => lines[i] = format!("{k} = {v}"),
+            None => lines.insert(start + 1, format!("{k} = {v}")),
+        }
+    }
+    lines.join("\n") + "\n"
+}
+
+#[cfg(test)]
+mod with_strategy_tests {
+    #[test]
+    fn keys_are_replaced_in_the_section_or_added() {
+        let t = "[push]\nparticle_id = 1\n[strategy]\nstart_height_um = 3.0\nstep_um = 0.1\n\n[physics]\ncapillary = true\n";
+        let out = super::with_strategy(t, &[("start_height_um", "2.2"), ("dwell_ms", "2.0")]);
+        assert!(out.contains("start_height_um = 2.2\n") && !out.contains("3.0"), "{out}");
+        assert!(out.contains("[strategy]\ndwell_ms = 2.0\n"), "{out}");
+        assert_eq!(out.matches("[strategy]").count(), 1);
+        let none = super::with_strategy("[push]\n", &[("step_um", "0.2")]);
+        assert!(none.ends_with("[strategy]\nstep_um = 0.2\n"), "{none}");
+    }
+}

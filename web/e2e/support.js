@@ -36,7 +36,14 @@ export function chromiumPath() {
 export function fastScene(dir) {
   let text = readFileSync(join(ROOT, 'scenes/gold-latex-500nm.toml'), 'utf8');
   text = text.replace('tilt_x_mrad = 6.0', 'tilt_x_mrad = 0.0').replace('roughness_rms_nm = 0.5', 'roughness_rms_nm = 0.0');
-  text += '\n[strategy]\nstart_height_um = 1.2\napproach_speed_um_per_s = 5.0\ntravel_speed_um_per_s = 40.0\napproach_distance_um = 0.3\ndwell_ms = 2.0\n\n[scan]\ncentre_x_um = 40.0\ncentre_y_um = 32.0\nsize_um = 16.0\npixels = 32\n';
+  // The scene writes its [strategy] out (the paper's search): these values replace its own.
+  const quick = { start_height_um: '1.2', approach_speed_um_per_s: '5.0', travel_speed_um_per_s: '40.0', approach_distance_um: '0.3', dwell_ms: '2.0' };
+  for (const [k, v] of Object.entries(quick)) {
+    const re = new RegExp(`^${k} = .*$`, 'm');
+    if (!re.test(text)) throw new Error(`the gold-latex scene has no ${k} in its [strategy]`);
+    text = text.replace(re, `${k} = ${v}`);
+  }
+  text += '\n[scan]\ncentre_x_um = 40.0\ncentre_y_um = 32.0\nsize_um = 16.0\npixels = 32\n';
   const path = join(dir, 'fast.toml');
   writeFileSync(path, text);
   return path;

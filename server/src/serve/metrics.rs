@@ -248,13 +248,13 @@ fn haptic_scalars(h: &HapticMetrics, now_ns: u64) -> [Scalar; 19] {
             h.stored_energy_bound(),
         ),
         (
-            "nanopush_haptic_felt_stiffness_n_per_m",
+            "nanopush_haptic_felt_stiffness_newtons_per_meter",
             "The contact's stiffness felt at the hand with the scales in force.",
             "gauge",
             f64::from_bits(h.scales.felt_stiffness.load(Relaxed)),
         ),
         (
-            "nanopush_haptic_max_stiffness_n_per_m",
+            "nanopush_haptic_max_stiffness_newtons_per_meter",
             "The device's renderable region's edge at its rate and the measured delay (0 before a device is known).",
             "gauge",
             f64::from_bits(h.scales.max_stiffness.load(Relaxed)),
