@@ -33,6 +33,13 @@
 //!   is passive whatever the environment behind the coupling does, as long as that environment
 //!   is passive (Adams & Hannaford): the tip-sample force is (the snap-in and the adhesion give
 //!   back only what the approach stored; the hysteresis of a closed cycle dissipates).
+//!
+//!   **Known gap (issue 25 open):** `B_c` is itself rendered by a sampled loop, and by the
+//!   region's own condition `b > K (T/2 + T_d) + |B|` a sampled damper counts against passivity:
+//!   the spring at the edge with `B_c` on top is proven passive only for `3 K (T/2 + T_d) < b`
+//!   (about 667 N/m for the simulated device, below the default's 1452 N/m). The grid measured
+//!   every accepted setting passive; the proof still has to count the hand's damping (and say
+//!   what a hand that lets go leaves) or the edge has to come down to the bound.
 //! - *energy bounding* `β`: if the bridge's passivity controller (which watches the port and
 //!   damps what still leaks) holds its damper at its cap for more than 50 ms, the region was
 //!   wrong for this device or this hand: `β` halves (down to 1/64), the status says why, and the
