@@ -392,7 +392,6 @@ fn judge_inner(scene: &Scene, distance: f64, direction: (f64, f64), tolerance: f
         .copied()
         .expect("the particle exists");
     let true_error = (truth.x - moved.target.0).hypot(truth.y - moved.target.1);
-    let before = (moved.before.1.x, moved.before.1.y);
     let mut j = Judged {
         outcome: moved.verdict.code().into(),
         refusal: None,
@@ -417,7 +416,6 @@ fn judge_inner(scene: &Scene, distance: f64, direction: (f64, f64), tolerance: f
         simulated: afm.time(),
         wall_time: 0.0,
     };
-    let _ = before;
     j.reason = match &moved.verdict {
         Verdict::Ok { .. } => String::new(),
         Verdict::Missed { error } => format!(

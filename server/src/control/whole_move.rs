@@ -6,7 +6,7 @@
 //! Used by `nanopush push`, the campaigns and the tests; the server runs its legs one tick at a
 //! time and judges the same way ([`Verdict::judge`]).
 
-use crate::control::locate_and_plan::{DONE_WITHIN, MoveError, MoveTarget, locate_near, plan_move};
+use crate::control::locate_and_plan::{MoveError, MoveTarget, locate_near, plan_move};
 use crate::control::strategy_run::{Prepared, RunError, StrategyRun};
 use crate::instrument::Afm;
 use crate::scan::{HeightImage, Located, ScanParams, Tip};
@@ -126,7 +126,8 @@ pub fn move_particle(
         let measured = (plan.located.x, plan.located.y);
         if attempts > 0 {
             let verdict = Verdict::judge(measured, target, options.tolerance);
-            if matches!(verdict, Verdict::Ok { .. }) || attempts >= options.attempts {
+            // No legs: within the planner's 10 nm, where no leg can correct a tighter tolerance.
+            if matches!(verdict, Verdict::Ok { .. }) || attempts >= options.attempts || plan.legs.is_empty() {
                 return Ok(MoveRun {
                     before,
                     target,
@@ -207,18 +208,6 @@ pub fn move_particle(
                 });
             }
             Err(e) => return Err(e.into()),
-        }
-        if plan.legs.is_empty() && options.tolerance < DONE_WITHIN {
-            // Within the planner's 10 nm but outside a tighter tolerance: no leg can correct it.
-            let verdict = Verdict::judge((plan.located.x, plan.located.y), target, options.tolerance);
-            return Ok(MoveRun {
-                before,
-                target,
-                legs,
-                after: (plan.local, Some(plan.located)),
-                verdict,
-                attempts,
-            });
         }
     }
 }
