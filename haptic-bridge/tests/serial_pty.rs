@@ -13,7 +13,9 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use nanopush_haptic::device::{BUTTON_CLUTCH, BUTTON_ENGAGE, Device, DeviceError, DeviceSample};
-use nanopush_haptic::serial::{HOLD_CYCLES, SerialDevice, SerialOptions, conformance, crc16, negotiate_rate};
+use nanopush_haptic::serial::{
+    HOLD_CYCLES, SerialDevice, SerialOptions, conformance, crc16, exchange_wire_time, negotiate_rate,
+};
 
 /// How long any condition may take before the test fails.
 const PATIENCE: Duration = Duration::from_secs(20);
@@ -95,6 +97,8 @@ struct World {
     watchdog: bool,
     /// Skip this many of its own sequence numbers before the next state packet.
     skip_seq: u16,
+    /// Hold each answer this long after reading its request (a slow firmware).
+    answer_delay: Duration,
 }
 
 impl Default for World {
@@ -118,6 +122,7 @@ impl Default for World {
             rate_hz: RATE_HZ,
             watchdog: true,
             skip_seq: 0,
+            answer_delay: Duration::ZERO,
         }
     }
 }
@@ -294,6 +299,7 @@ impl Fake {
                         let bits = (12 + answer.len()) as f64 * 10.0;
                         std::thread::sleep(Duration::from_secs_f64(bits / f64::from(baud)));
                     }
+                    std::thread::sleep(world.answer_delay);
                     if !world.mute {
                         write_all(&master, &answer);
                     }
@@ -649,8 +655,16 @@ fn opening_what_does_not_answer_fails_with_a_typed_error() {
     ));
 }
 
+/// The answer deadline the conformance runs on a fake device use (see the next test).
+const LOOSE: conformance::Deadline = conformance::Deadline {
+    answer: Duration::from_millis(100),
+};
+
 /// The conformance test a maker runs against their board passes on a fake that follows the
-/// specification, paced like a UART at 1 Mbaud.
+/// specification, paced like a UART at 1 Mbaud. The answers are timed on the host, and this fake
+/// shares a loaded test machine with the other tests, so its deadline here is 100 ms instead of
+/// the specification's 2 (a CI run once saw one answer in 3.3 ms); the rule itself is held to by
+/// a device that is late by construction, below.
 #[test]
 fn the_conformance_test_passes_on_a_device_that_follows_the_specification() {
     let (master, _slave, path) = open_pty();
@@ -661,10 +675,39 @@ fn the_conformance_test_passes_on_a_device_that_follows_the_specification() {
             ..World::default()
         },
     );
-    let checks = conformance::run(&path).expect("the board is there");
+    let checks = conformance::run_with(&path, LOOSE).expect("the board is there");
     let failed: Vec<String> = checks.iter().filter(|c| !c.pass).map(|c| c.to_string()).collect();
     assert!(failed.is_empty(), "{failed:#?}");
     assert_eq!(checks.len(), 12, "{checks:#?}");
+}
+
+/// A firmware that answers each force packet 5 ms after reading it fails the specification's
+/// 2 ms deadline on every one of the 200 exchanges, whatever the host's load (load only makes it
+/// later), and the checks of framing and sequence still pass.
+#[test]
+fn the_conformance_test_names_a_device_that_answers_late() {
+    let (master, _slave, path) = open_pty();
+    let _fake = Fake::start(
+        master,
+        World {
+            answer_delay: Duration::from_millis(5),
+            ..World::default()
+        },
+    );
+    let checks = conformance::run(&path).expect("the board is there");
+    let timing = checks
+        .iter()
+        .find(|c| c.name.contains("answered in time"))
+        .expect("a timing check");
+    assert!(!timing.pass, "{timing}");
+    assert!(
+        timing.detail.starts_with("200 exchanges: 200 not answered within 2 ms"),
+        "{timing}"
+    );
+    for name in ["sequence number", "framed and checksummed"] {
+        let c = checks.iter().find(|c| c.name.contains(name)).expect(name);
+        assert!(c.pass, "{c}");
+    }
 }
 
 /// A board without a watchdog fails the conformance test, on that rule and no other.
@@ -678,7 +721,7 @@ fn the_conformance_test_names_a_device_without_a_watchdog() {
             ..World::default()
         },
     );
-    let checks = conformance::run(&path).expect("the board is there");
+    let checks = conformance::run_with(&path, LOOSE).expect("the board is there");
     let failed: Vec<&conformance::Check> = checks.iter().filter(|c| !c.pass).collect();
     assert_eq!(failed.len(), 1, "{checks:#?}");
     assert!(failed[0].name.contains("watchdog"), "{}", failed[0]);
@@ -727,11 +770,16 @@ fn the_rate_fits_the_device_and_its_baud_or_is_refused_with_the_numbers() {
     );
 }
 
-/// At 1 Mbaud, paced like a UART, 200 cycles at 1 kHz take their answers in time; at 115 200
-/// (3.1 ms an exchange) the same cycles are late, which is why the bridge refuses that baud.
+/// At 115 200 baud (3.1 ms an exchange on the wire) the answers to 200 cycles at 1 kHz are late
+/// (load only makes them later), which is why the bridge refuses that baud; at 1 Mbaud the wire
+/// takes 0.3 ms of the cycle ([`exchange_wire_time`]). That 1 Mbaud keeps up in real time is a
+/// timing claim about this machine, so it is not asserted here: only that every answer comes.
 #[test]
 fn a_uart_at_1_mbaud_answers_every_cycle_and_one_at_115200_cannot() {
-    for (baud, late_expected) in [(1_000_000, false), (115_200, true)] {
+    assert!(exchange_wire_time(1_000_000) < Duration::from_micros(400));
+    assert!(exchange_wire_time(115_200) > Duration::from_millis(3));
+    // (baud, how long a read waits): the slow link within the 1 ms cycle, the fast one patiently.
+    for (baud, wait_s) in [(1_000_000, 50e-3), (115_200, 1e-3)] {
         let world = World {
             baud: Some(baud),
             ..World::default()
@@ -741,16 +789,16 @@ fn a_uart_at_1_mbaud_answers_every_cycle_and_one_at_115200_cannot() {
         for _ in 0..200 {
             let start = Instant::now();
             dev.write_force(0.0).unwrap();
-            let _ = dev.read(1e-3);
+            let _ = dev.read(wait_s);
             if let Some(rest) = Duration::from_millis(1).checked_sub(start.elapsed()) {
                 std::thread::sleep(rest);
             }
         }
         let late = dev.timeouts() - before;
-        if late_expected {
+        if baud == 115_200 {
             assert!(late >= 150, "{baud} baud: only {late} of 200 late");
         } else {
-            assert!(late <= 5, "{baud} baud: {late} of 200 late");
+            assert_eq!(late, 0, "{baud} baud: {late} of 200 unanswered in 50 ms");
         }
     }
 }

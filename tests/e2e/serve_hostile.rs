@@ -14,8 +14,10 @@ use tokio_tungstenite::tungstenite::Message;
 use crate::util::{TOKEN, Ws, http_get, is, ok, reply, runtime, send, start, start_with, status, until, welcomed};
 
 /// Issue 12.1: a client that sends commands does not delay its own telemetry (the sockets have
-/// TCP_NODELAY): with a ping every 100 ms, the gaps between telemetry frames stay within 5 ms of
-/// the stream's period at the 99th percentile (before: 25-45 ms late after each message).
+/// TCP_NODELAY). Before the fix each message held the next frames back 25-45 ms (Nagle against a
+/// delayed ACK). With a ping every 100 ms, the frame gap that spans each ping is judged: their
+/// median stays within 12 ms of the stream's period. A median over 40 pings, not a percentile of
+/// every gap, so that a loaded test machine's stray late frames do not decide it.
 #[test]
 fn commands_do_not_delay_telemetry() {
     let srv = start("nodelay", &[]);
@@ -24,11 +26,13 @@ fn commands_do_not_delay_telemetry() {
         send(&mut ws, json!({"type": "subscribe", "id": 1, "streams": ["tip"]})).await;
         reply(&mut ws, 1).await;
         let mut arrivals = Vec::new();
+        let mut pings = Vec::new();
         let mut next_ping = Instant::now();
         let end = Instant::now() + Duration::from_secs(4);
         let mut id = 10;
         while Instant::now() < end {
             if Instant::now() >= next_ping {
+                pings.push(Instant::now());
                 send(&mut ws, json!({"type": "ping", "id": id})).await;
                 id += 1;
                 next_ping += Duration::from_millis(100);
@@ -40,15 +44,23 @@ fn commands_do_not_delay_telemetry() {
                 arrivals.push(Instant::now());
             }
         }
-        let mut gaps: Vec<f64> = arrivals.windows(2).map(|w| (w[1] - w[0]).as_secs_f64()).collect();
-        gaps.sort_by(f64::total_cmp);
-        let p99 = gaps[(gaps.len() * 99) / 100];
+        assert!(arrivals.len() > 150, "{} frames", arrivals.len());
+        // For each ping, the gap between the last frame before it and the first after it.
+        let mut spans: Vec<f64> = pings
+            .iter()
+            .filter_map(|&p| {
+                let after = arrivals.iter().position(|&a| a > p)?;
+                (after > 0).then(|| (arrivals[after] - arrivals[after - 1]).as_secs_f64())
+            })
+            .collect();
+        assert!(spans.len() >= 30, "{} pings spanned", spans.len());
+        spans.sort_by(f64::total_cmp);
+        let median = spans[spans.len() / 2];
         let period = 1.0 / 60.0;
-        assert!(gaps.len() > 150, "{} frames", gaps.len());
         assert!(
-            p99 < period + 5e-3,
-            "p99 gap {:.1} ms against a {:.1} ms period",
-            p99 * 1e3,
+            median < period + 12e-3,
+            "median gap across a ping {:.1} ms against a {:.1} ms period",
+            median * 1e3,
             period * 1e3
         );
     });
