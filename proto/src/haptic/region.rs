@@ -23,7 +23,10 @@
 //! period of round trip (the bridge locks its cycle to the server's tick, so that is the loop's
 //! round trip: docs/benchmarks.md, haptic latency), which fixes `b = K_s (T_s/2 + T_s)`. The
 //! simulated device declares 2 kN/m at 1 kHz; a serial device sends `K_s` and its rate in its
-//! info packet. The region at another rate or a longer measured delay follows from the formula,
+//! info packet. That `b` is the port's damping *with the hand the maker rated the device with*:
+//! a bare handle has far less (the simulated one 0.05 N·s/m, a wall of ~33 N/m), so what the
+//! region promises, and what the coupling adds for a lighter grip, is argued in
+//! `nanopush::control::bilateral::coupling`. The region at another rate or a longer measured delay follows from the formula,
 //! but never beyond what the device declares ([`edge`]): at 4 kHz the formula allows the
 //! simulated device 2.67 kN/m, at which a loose grip (1 N·s/m) stays passive but rings (146
 //! chatter cycles in the grid's press at 10 nm/mm and 2.5 N, against none at 2 kN/m).

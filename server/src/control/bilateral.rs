@@ -46,6 +46,7 @@
 use nanopush_proto::haptic::{FORCE_CLUTCHED, FORCE_ENGAGED, FORCE_PUSHING, ForceFeedback, HapticState};
 
 pub mod coupling;
+pub mod linear_loop;
 mod params;
 pub use coupling::Coupling;
 pub use params::BilateralParams;

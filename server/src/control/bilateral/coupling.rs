@@ -26,20 +26,37 @@
 //!   device's Z-width edge at its period `T` and the measured round trip `T_d`, and never what
 //!   the device declares ([`nanopush_proto::haptic::region`]); a force scale past it is lowered
 //!   to the edge.
-//! - the *coupling damper* `B_c`, rendered by the bridge with the device's measured velocity:
-//!   a spring held over a period `T` and a delay `T_d` gives back `K (T/2 + T_d) ẋ²` more power
-//!   than it took (the hold's leak, Colgate's `K T/2`, and the delay's); `B_c` dissipates twice
-//!   that. With the spring inside the region and its leak dissipated, the port seen by the hand
-//!   is passive whatever the environment behind the coupling does, as long as that environment
-//!   is passive (Adams & Hannaford): the tip-sample force is (the snap-in and the adhesion give
-//!   back only what the approach stored; the hysteresis of a closed cycle dissipates).
-//!
-//!   **Known gap (issue 25 open):** `B_c` is itself rendered by a sampled loop, and by the
-//!   region's own condition `b > K (T/2 + T_d) + |B|` a sampled damper counts against passivity:
-//!   the spring at the edge with `B_c` on top is proven passive only for `3 K (T/2 + T_d) < b`
-//!   (about 667 N/m for the simulated device, below the default's 1452 N/m). The grid measured
-//!   every accepted setting passive; the proof still has to count the hand's damping (and say
-//!   what a hand that lets go leaves) or the edge has to come down to the bound.
+//! - the *coupling damper* `B_c`, rendered by the bridge with the device's velocity of the same
+//!   cycle: a spring held over a period `T` and a delay `T_d` gives back `K (T/2 + T_d) ẋ²` more
+//!   power than it took (the hold's leak, Colgate's `K T/2`, and the delay's); `B_c` is twice
+//!   that. What it does, and what it does not:
+//!   - *Passivity against every environment* (Colgate & Schenkel): a damper rendered by a
+//!     sampled loop counts *against* the port, so the condition is
+//!     `b > K (T/2 + T_d) + B_c = 3 K (T/2 + T_d)`, where `b` is the handle's damping and the
+//!     grip's. A grip that brings that much makes the port passive whatever a passive
+//!     environment behind the coupling does (Adams & Hannaford), and the contact is one (the
+//!     snap-in and the adhesion give back only what the approach stored; the hysteresis of a
+//!     closed cycle dissipates): the stiff grip (20 N·s/m) at every stiffness to the 2 kN/m edge
+//!     (9 N·s/m needed), the firm grip (8 N·s/m) to 1788 N/m, the default's 1452 included
+//!     ([`super::linear_loop`]'s tests).
+//!   - *A lighter grip, or none*, leaves the handle's own 0.05 N·s/m, and with that no sampled
+//!     stiffness above ~33 N/m is passive against every environment, with a damper or without.
+//!     For those hands what is proven is stability with the environment the loop has, the
+//!     contact: linearised about it (the handle, the hand, the held spring a round trip late or
+//!     not, the damper), the loop's spectral radius is below 1 at every stiffness to the edge,
+//!     for the loose grip and the let-go hand, at 1 and 4 kHz, for round trips of 1, 2 and 5 ms
+//!     (worst ρ = 0.99973, the let-go hand on a 50 N/m spring at 4 kHz). That is what `B_c` is
+//!     for: without it, or with a damper inside Colgate's budget (half of what the spring leaves
+//!     of `b`, 0.41 N·s/m at the default), the loose grip and the let-go hand are unstable at the
+//!     default (ρ = 1.011 and 1.021, 1.007 and 1.017), and so was the grid (with the budgeted
+//!     damper and the edge 10 % lower, 3 loose-grip cells active: −16 mJ and 660 chatter cycles
+//!     at 10 nm/mm and 2.5 N).
+//!     (For the simulated handle, 50 g; a serial device declares no mass, and for a light grip
+//!     on it the statement rests on its maker's declared stiffness and on energy bounding.)
+//!   - What the linearisation leaves out (the snap-in, the adhesion, the gate, the limits, a
+//!     stalled process) is measured: every cell of the grid, both processes paused at random
+//!     included; and a loop that still leaks pins the passivity controller's damper, which
+//!     energy bounding answers below.
 //! - *energy bounding* `β`: if the bridge's passivity controller (which watches the port and
 //!   damps what still leaks) holds its damper at its cap for more than 50 ms, the region was
 //!   wrong for this device or this hand: `β` halves (down to 1/64), the status says why, and the
