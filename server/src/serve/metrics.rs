@@ -219,15 +219,15 @@ fn haptic_scalars(h: &HapticMetrics, now_ns: u64) -> [Scalar; 19] {
         ),
         (
             "nanopush_haptic_handle_meters",
-            "Handle position.",
+            "Handle position (NaN while the link is down: unknown).",
             "gauge",
-            h.handle_m(),
+            h.live_handle_m(),
         ),
         (
             "nanopush_haptic_force_newtons",
-            "Force rendered at the hand.",
+            "Force rendered at the hand (NaN while the link is down: unknown).",
             "gauge",
-            h.force_n(),
+            h.live_force_n(),
         ),
         (
             "nanopush_haptic_pc_damping",

@@ -35,12 +35,11 @@ pub fn haptic_telemetry(h: &HapticMetrics) -> Option<nanopush_proto::ws::HapticT
     if !h.enabled.load(Relaxed) {
         return None;
     }
-    let sampled = h.samples.load(Relaxed) > 0;
     Some(nanopush_proto::ws::HapticTelemetry {
         link: h.link_name().into(),
         phase: h.phase_name().into(),
-        handle_m: sampled.then(|| h.handle_m()),
-        force_n: sampled.then(|| h.force_n()),
+        handle_m: h.live().then(|| h.handle_m()),
+        force_n: h.live().then(|| h.force_n()),
         tip_force_n: h.tip_force_n(),
         pc_active: h.pc_active(),
         scales: h.scales.snapshot(),
@@ -61,8 +60,8 @@ pub fn haptic_status(h: &HapticMetrics) -> serde_json::Value {
         "pid": sampled.then(|| h.pid.load(Relaxed)),
         "engaged": h.phase_name() != "off",
         "phase": h.phase_name(),
-        "handle_m": num(h.handle_m()),
-        "force_n": num(h.force_n()),
+        "handle_m": num(h.live_handle_m()),
+        "force_n": num(h.live_force_n()),
         "restarts": h.restarts.load(Relaxed),
         "dropped_samples": h.dropped_samples.load(Relaxed),
         "rejected_samples": h.rejected_samples.load(Relaxed),
@@ -205,6 +204,31 @@ mod tests {
     use crate::control::bilateral::Coupling;
     use crate::scene::Scene;
     use nanopush_proto::haptic::HapticState;
+
+    /// Once the link is down the handle and the hand's force are unknown (the bridge may be
+    /// dead, the device may hold what it last had): `null` in `/api/status` and telemetry, NaN in
+    /// `/metrics`, not the last sample's values as if they were live.
+    #[test]
+    fn a_link_that_is_down_reports_the_hand_as_unknown() {
+        let h = HapticMetrics::default();
+        h.enabled.store(true, Relaxed);
+        let state = HapticState {
+            position: 0.01,
+            force: 0.7,
+            ..HapticState::default()
+        };
+        h.sample(&state, 1);
+        h.link.store(super::super::link::LINK_UP, Relaxed);
+        let s = haptic_status(&h);
+        assert_eq!(s["force_n"], 0.7);
+        assert_eq!(s["handle_m"], 0.01);
+        h.link.store(super::super::link::LINK_DOWN, Relaxed);
+        let s = haptic_status(&h);
+        assert!(s["force_n"].is_null() && s["handle_m"].is_null(), "{s}");
+        let t = haptic_telemetry(&h).unwrap();
+        assert_eq!((t.force_n, t.handle_m), (None, None));
+        assert!(h.live_force_n().is_nan() && h.live_handle_m().is_nan());
+    }
 
     /// The `ok` of a `scale`: before a device is known the asked scales; with the simulated
     /// device (2 kN/m) the default 10 nm/mm and 1 N as asked, 10 N lowered to the edge with the

@@ -187,6 +187,22 @@ impl HapticMetrics {
         f(&self.force_n)
     }
 
+    /// Whether the handle's values are live: a sample has come and the link is up. Once it is
+    /// down they are unknown (the bridge may be dead and the device hold what it last had).
+    pub fn live(&self) -> bool {
+        self.samples.load(Relaxed) > 0 && self.link_name() == "up"
+    }
+
+    /// Force at the hand (N) while [`HapticMetrics::live`], NaN (unknown) otherwise.
+    pub fn live_force_n(&self) -> f64 {
+        if self.live() { self.force_n() } else { f64::NAN }
+    }
+
+    /// Handle position (m) while [`HapticMetrics::live`], NaN (unknown) otherwise.
+    pub fn live_handle_m(&self) -> f64 {
+        if self.live() { self.handle_m() } else { f64::NAN }
+    }
+
     /// Passivity damping (N·s/m).
     pub fn pc_damping(&self) -> f64 {
         f(&self.pc_damping)
