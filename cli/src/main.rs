@@ -79,8 +79,31 @@ fn print_stdout(text: &str) -> ExitCode {
     }
 }
 
+/// A refusal as the JSON a `--json` caller reads on stdout (the error still goes to stderr and
+/// the exit status is 2): `{"schema", "outcome": "refused", "particle", "code", "reason",
+/// "field"}`.
+fn refusal_json(schema: &str, e: &anyhow::Error) -> Option<String> {
+    let r = e.downcast_ref::<nanopush::control::strategy_plan::Refusal>()?;
+    let v = serde_json::json!({
+        "schema": schema,
+        "version": nanopush_proto::VERSION,
+        "outcome": "refused",
+        "particle": r.particle,
+        "code": r.code,
+        "reason": r.reason,
+        "field": r.field,
+    });
+    serde_json::to_string_pretty(&v).ok().map(|t| t + "\n")
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // Which command's refusal is printed as JSON (`plan`/`push` with `--json`).
+    let json_refusal = match &cli.command {
+        Command::Plan(a) if a.json => Some("plan"),
+        Command::Push(a) if a.json => Some("push"),
+        _ => None,
+    };
     let result = match cli.command {
         Command::Model(args) => model_cmd::run(&args),
         Command::Simulate(args) => simulate_cmd::run(&args),
@@ -108,6 +131,9 @@ fn main() -> ExitCode {
     match result {
         Ok(text) => print_stdout(&text),
         Err(e) => {
+            if let Some(text) = json_refusal.and_then(|schema| refusal_json(schema, &e)) {
+                let _ = print_stdout(&text);
+            }
             eprintln!("error: {e:#}");
             ExitCode::from(2)
         }

@@ -25,7 +25,7 @@ pub struct PlanArgs {
     derive_all: bool,
     /// Print one JSON object instead of the lines.
     #[arg(long)]
-    json: bool,
+    pub json: bool,
 }
 
 /// Runs the command: the plan, or the refusal as an error (exit 2).

@@ -62,7 +62,7 @@ pub struct PushArgs {
     out: Option<PathBuf>,
     /// Print one JSON object (SI units) instead of a summary.
     #[arg(long)]
-    json: bool,
+    pub json: bool,
 }
 
 const UM: f64 = 1e-6;

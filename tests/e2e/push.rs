@@ -164,3 +164,34 @@ fn bad_arguments_are_refused_with_the_allowed_range() {
         assert!(err.contains(expect), "{args:?}: {err}");
     }
 }
+
+/// `--json` callers get the refusal as JSON on stdout (they got nothing), with the exit status 2
+/// and the error on stderr; `plan` refuses what `push` refuses.
+#[test]
+fn a_refusal_is_json_on_stdout_for_json_callers_and_plan_refuses_what_push_refuses() {
+    let dir = tmp("refusal");
+    let scenes = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/");
+    let scene = std::fs::read_to_string(format!("{scenes}gold-latex-500nm.toml")).unwrap();
+    let from = scene.lines().find(|l| l.starts_with("start_height_um")).unwrap();
+    let low = dir.join("low.toml");
+    std::fs::write(&low, scene.replacen(from, "start_height_um = 0.05", 1)).unwrap();
+    let low = low.to_str().unwrap();
+    for args in [
+        vec!["plan", "--scene", low, "--json"],
+        vec!["push", "--scene", low, "--distance-um", "1", "--json"],
+    ] {
+        let out = run("nanopush", &args, None);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let (stdout, stderr) = text(&out);
+        let v: serde_json::Value = serde_json::from_str(&stdout).unwrap_or_else(|e| panic!("{args:?}: {e}: {stdout}"));
+        assert_eq!(v["schema"], args[0]);
+        assert_eq!(v["outcome"], "refused");
+        assert_eq!(v["code"], "geometry");
+        assert_eq!(v["field"], "strategy.start_height_um");
+        assert!(stderr.contains("no strategy can push particle"), "{stderr}");
+    }
+    let dynamic = format!("{scenes}paper-full-dynamics.toml");
+    let out = run("nanopush", &["plan", "--scene", &dynamic, "--json"], None);
+    let v: serde_json::Value = serde_json::from_str(&text(&out).0).unwrap();
+    assert_eq!((v["code"].as_str(), out.status.code()), (Some("model"), Some(2)));
+}

@@ -129,7 +129,7 @@ impl Scene {
     /// particle (the tip would run into it), and the parking height that gives the contact
     /// angle β, `h = Rₐ − Rₜ + (Rₐ + Rₜ) sin β`, must put the tip's apex above the substrate.
     pub fn pushable(&self) -> Result<(), RunError> {
-        use crate::scene::file::DofFile;
+        self.model_pushable()?;
         let s = &self.file;
         let tallest = s.particles.iter().map(|p| 2.0 * p.radius_nm * 1e-3).fold(0.0, f64::max);
         if s.strategy.start_height_um <= tallest {
@@ -149,6 +149,12 @@ impl Scene {
                 )));
             }
         }
+        Ok(())
+    }
+
+    /// The model part of [`Scene::pushable`]: no dynamic particle or cantilever.
+    pub fn model_pushable(&self) -> Result<(), RunError> {
+        use crate::scene::file::DofFile;
         let ph = &self.file.physics;
         for (field, dof) in [
             ("particle_y", ph.particle_y),

@@ -231,6 +231,21 @@ impl<'a> Derivation<'a> {
     }
 
     fn run(mut self) -> Result<StrategyPlan, Refusal> {
+        // A model no push can run (dynamic degrees of freedom) is refused before anything is
+        // derived or dry-run.
+        if let Err(e) = self.scene.model_pushable() {
+            let text = e.to_string();
+            let field = text
+                .split("physics.")
+                .nth(1)
+                .and_then(|r| r.split(" = ").next())
+                .map_or("physics".to_string(), |k| format!("physics.{k} = \"quasi_static\""));
+            return Err(self.refuse(Fails {
+                code: "model",
+                reason: text,
+                field,
+            }));
+        }
         let f = &self.scene.file;
         let (r_a, r_t) = (self.part.radius_nm * 1e-9, f.tip.radius_nm * 1e-9);
         let ro = self.readout;
@@ -340,6 +355,23 @@ impl<'a> Derivation<'a> {
                 }
             };
             let mut plan = self.settings(cand, r_a, r_t, approach_speed)?;
+            // The geometry a push checks before it moves (hand-set values may break it): what
+            // the plan accepts, a push must not refuse.
+            let mut applied = self.scene.clone();
+            plan.apply(&mut applied);
+            if let Err(e) = applied.pushable() {
+                let text = e.to_string();
+                let field = text
+                    .split(" = ")
+                    .next()
+                    .filter(|k| k.contains('.'))
+                    .unwrap_or("strategy");
+                return Err(self.refuse(Fails {
+                    code: "geometry",
+                    reason: text.clone(),
+                    field: field.to_string(),
+                }));
+            }
             // A dry run that would take longer than a real push may is not run: said instead.
             let dry_run_time = 2.0 * (1e-6 + plan.strategy.search_range_um * 1e-6) / (plan.speed_um_per_s * 1e-6);
             if dry_run_time > MAX_DRY_RUN {

@@ -163,3 +163,37 @@ fn a_hand_set_1_mm_per_s_is_warned_about() {
     };
     assert!(warned, "{plan:?}");
 }
+
+/// What the plan accepts a push must not refuse (review of issue 24): a hand-set start height
+/// below the particle, with the contact angle hand-set too (so the dry run's failure was only a
+/// warning), was planned with exit 0 and then refused by `push`. It is refused by the plan now,
+/// naming the field.
+#[test]
+fn a_hand_set_start_height_below_the_particle_is_refused_by_the_plan_as_by_the_push() {
+    let text = scene_text("gold-latex-500nm");
+    let from = text
+        .lines()
+        .find(|l| l.starts_with("start_height_um"))
+        .expect("a start height");
+    let s = Scene::parse("low", &text.replacen(from, "start_height_um = 0.05", 1)).expect("valid");
+    assert!(s.hand_set.contains("push.contact_angle_deg") && s.hand_set.contains("strategy.start_height_um"));
+    let r = derive(&s, s.file.push.particle_id, DEFAULT_TOLERANCE).expect_err("the push would refuse it");
+    assert_eq!(r.code, "geometry");
+    assert_eq!(r.field, "strategy.start_height_um");
+    assert!(r.reason.contains("does not clear the tallest particle"), "{}", r.reason);
+}
+
+/// A model no push can run is refused at once, naming the field and its value: it took 24 s of
+/// dry runs at every contact angle, and the field read as a fragment of the dry run's text.
+#[test]
+fn a_dynamic_model_is_refused_before_any_dry_run_with_the_field_to_change() {
+    let s = Scene::parse("dyn", &scene_text("paper-full-dynamics")).expect("valid");
+    let r = derive(&s, s.file.push.particle_id, DEFAULT_TOLERANCE).expect_err("dynamic");
+    assert_eq!(r.code, "model");
+    assert!(
+        r.field.starts_with("physics.") && r.field.ends_with("= \"quasi_static\""),
+        "{}",
+        r.field
+    );
+    assert!(r.reason.contains("cannot be pushed"), "{}", r.reason);
+}
