@@ -11,8 +11,9 @@ use crate::scene::Scene;
 /// substrate's roughness (the plan knows their statistics, not their realization): one push of
 /// the longest leg the plan allows (within [0.3, 1] µm) up the substrate's slope, and one down it
 /// (the contact angle falls on the way up, rises on the way down), each from where a local scan
-/// finds the particle and judged with the plan's tolerance. `Err` says how one failed.
-pub fn dry_run(scene: &Scene, plan: &StrategyPlan) -> Result<(), String> {
+/// finds the particle and judged with the plan's tolerance; a leg that would leave the stage is
+/// not run. The legs run, or `Err` saying how one failed.
+pub fn dry_run(scene: &Scene, plan: &StrategyPlan) -> Result<usize, String> {
     let mut s = scene.clone();
     plan.apply(&mut s);
     s.file.sensor.noise_seed = s.file.sensor.noise_seed.wrapping_add(0x9e37_79b9_7f4a_7c15);
@@ -35,11 +36,13 @@ pub fn dry_run(scene: &Scene, plan: &StrategyPlan) -> Result<(), String> {
     let start = ((x - up.0 * back).clamp(0.0, range), (y - up.1 * back).clamp(0.0, range));
     let mut afm = Afm::from_scene(&s, start.0, start.1, 1e-3);
     let mut at = (x, y);
+    let mut legs = 0;
     for direction in [up, (-up.0, -up.1)] {
         let end = (at.0 + direction.0 * distance, at.1 + direction.1 * distance);
         if !(r..=range - r).contains(&end.0) || !(r..=range - r).contains(&end.1) {
             continue;
         }
+        legs += 1;
         let options = MoveOptions {
             tolerance: plan.tolerance,
             attempts: DEFAULT_ATTEMPTS,
@@ -52,7 +55,7 @@ pub fn dry_run(scene: &Scene, plan: &StrategyPlan) -> Result<(), String> {
             at = (found.x, found.y);
         }
     }
-    Ok(())
+    Ok(legs)
 }
 
 fn judge(moved: &crate::control::whole_move::MoveRun, plan: &StrategyPlan) -> Result<(), String> {

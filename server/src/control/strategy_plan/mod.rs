@@ -382,7 +382,14 @@ impl<'a> Derivation<'a> {
                 return Ok(plan);
             }
             match dry_run::dry_run(self.scene, &plan) {
-                Ok(()) => return Ok(plan),
+                Ok(0) => {
+                    plan.warnings.push(
+                        "no dry run: neither leg of it (up and down the slope, 0.3-1 µm) stays on the stage from this particle"
+                            .into(),
+                    );
+                    return Ok(plan);
+                }
+                Ok(_) => return Ok(plan),
                 Err(why) if self.hand("push.contact_angle_deg") => {
                     plan.warnings
                         .push(format!("the plan's dry run on the model fails: {why}"));
@@ -647,22 +654,24 @@ impl<'a> Derivation<'a> {
         // most 5° a leg, `Δz = 0.087 (Rₐ + Rₜ) cos β`; a longer move re-parks for each leg.
         let slope = (f.substrate.tilt_x_mrad.hypot(f.substrate.tilt_y_mrad)) * 1e-3;
         let dz = 5f64.to_radians() * (r_a + r_t) * beta.cos();
+        let range = f.stage.range_um * 1e-6;
         let max_push = if slope > 0.0 {
             (dz / slope).clamp(0.2e-6, 20e-6)
         } else {
             20e-6
-        };
-        self.choose(
+        }
+        .min(range);
+        let max_push = self.choose(
             "strategy.max_push_um",
             f.strategy.max_push_um,
             (max_push * 1e8).floor() / 100.0,
             format!(
-                "a longer move is planned as several pushes, each re-parked: the substrate's slope {:.1} mrad may change the contact angle by at most 5° a push ({:.1} nm of height), at most 20 µm",
+                "a longer move is planned as several pushes, each re-parked: the substrate's slope {:.1} mrad may change the contact angle by at most 5° a push ({:.1} nm of height), at most 20 µm and the stage's range",
                 slope * 1e3,
                 dz * 1e9
             ),
             None,
-        );
+        ) * 1e-6;
         fixed(
             self,
             "strategy.clearance_um",
@@ -675,7 +684,7 @@ impl<'a> Derivation<'a> {
             f.strategy.z_gain_nm_per_v,
             "the z force loop's gain (z and xyz control only)",
         );
-        let longest = (f.strategy.max_push_um * 1e-6 / v)
+        let longest = (max_push / v)
             .max(2.0 * start / approach_speed)
             .max(search / v + search / step * f.strategy.dwell_ms * 1e-3);
         let timeout = (3.0 * longest).clamp(120.0, MAX_TIMEOUT).ceil();

@@ -197,3 +197,29 @@ fn a_dynamic_model_is_refused_before_any_dry_run_with_the_field_to_change() {
     );
     assert!(r.reason.contains("cannot be pushed"), "{}", r.reason);
 }
+
+/// A dry run with no leg that stays on the stage ran nothing and still passed silently (review
+/// of issue 24): the plan says so.
+#[test]
+fn a_dry_run_with_no_room_for_a_leg_is_said_not_passed() {
+    let mut text = scene_text("minimal");
+    for (from, to) in [
+        ("range_um = 100.0", "range_um = 2.6"),
+        ("x_um = 50.0", "x_um = 1.3"),
+        ("y_um = 50.0", "y_um = 1.3"),
+    ] {
+        assert!(text.contains(from), "{from}");
+        text = text.replacen(from, to, 1);
+    }
+    text += "\n[scan]\nsize_um = 2.6\ncentre_x_um = 1.3\ncentre_y_um = 1.3\n";
+    let mut s = Scene::parse("small", &text).expect("valid");
+    s.hand_set = HandSet::none();
+    let plan = derive(&s, s.file.push.particle_id, DEFAULT_TOLERANCE).expect("a plan");
+    assert!(
+        plan.warnings.iter().any(|w| w.starts_with("no dry run: neither leg")),
+        "{:?}",
+        plan.warnings
+    );
+    // And no push longer than the stage (it was 20 µm on this 2.6 µm stage).
+    assert!(value(&plan, "strategy.max_push_um") <= 2.6);
+}
