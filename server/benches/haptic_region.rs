@@ -49,7 +49,8 @@ fn main() {
     let (k_z, adhesion) = (scene.tip_sample().k_c, scene.tip_sample().adhesion());
     for per_tick in [1u32, 4] {
         let rate = 1000.0 * f64::from(per_tick);
-        let k_max = edge(K_SPEC, 1000.0, rate, DELAY);
+        // The simulated handle renders dampers up to m/T (50 g).
+        let k_max = edge(K_SPEC, 1000.0, rate, DELAY, 0.05 * rate);
         println!(
             "\n## Transparency at {} kHz: felt ÷ asked contact stiffness (the felt stiffness, N/m); region edge {k_max:.0} N/m\n",
             per_tick

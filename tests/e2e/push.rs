@@ -7,11 +7,11 @@ use crate::util::{nanopush_json as json, tmp};
 
 /// docs/manipulation.md's push table ("Measured pushes"), row 1, and its Figs 9 and 15: `nanopush push --scene
 /// scenes/gold-latex-500nm.toml --distance-um 12 --pause-at-um 6 --out DIR` touches at step 43,
-/// ends 15.8 nm short after 15.6 s of simulated time, and its trace shows the 500 ms stop at
+/// ends 14.3 nm short after 15.6 s of simulated time, and its trace shows the 500 ms stop at
 /// 6 µm and, at the restart, a static-friction peak of −1.78 V against a rolling level of about
 /// −1.1 V.
 #[test]
-fn a_12_um_push_with_a_stop_ends_minus_15_8_nm_and_writes_figs_9_and_15_with_a_minus_1_78_v_peak() {
+fn a_12_um_push_with_a_stop_ends_minus_14_3_nm_and_writes_figs_9_and_15_with_a_minus_1_78_v_peak() {
     let dir = tmp("push-fig15");
     let d = dir.to_str().unwrap();
     let r = json(&[
@@ -36,8 +36,8 @@ fn a_12_um_push_with_a_stop_ends_minus_15_8_nm_and_writes_figs_9_and_15_with_a_m
     // docs/manipulation.md's figures, to their last digit: the error along the push, the simulated time.
     let along = leg["true_distance"].as_f64().unwrap() - 12e-6;
     assert!(
-        (along / 1e-9 + 15.8).abs() <= 0.05,
-        "distance error {along:e} m (docs/manipulation.md: −15.8 nm)"
+        (along / 1e-9 + 14.3).abs() <= 0.05,
+        "distance error {along:e} m (docs/manipulation.md: −14.3 nm)"
     );
     let simulated = r["simulated_time"].as_f64().unwrap();
     assert!(
@@ -100,9 +100,9 @@ fn a_12_um_push_with_a_stop_ends_minus_15_8_nm_and_writes_figs_9_and_15_with_a_m
 /// docs/manipulation.md's push table ("Measured pushes"), row 4: `nanopush push --scene scenes/gold-latex-500nm.toml --to-um
 /// 40,55`, 25 µm in legs of at most 20 µm (the scene's `strategy.max_push_um`): two pushes of
 /// 12.5 µm, each from where a local scan finds the particle, touching at step 43, ending 0.4 nm and
-/// 0.7 nm short, 1.6 nm from the target.
+/// 0.7 nm short, 0.7 nm from the target.
 #[test]
-fn a_far_target_is_two_pushes_ending_minus_0_4_and_minus_0_7_nm_and_1_6_nm_from_it() {
+fn a_far_target_is_two_pushes_ending_minus_0_4_and_minus_0_7_nm_and_0_7_nm_from_it() {
     let r = json(&[
         "push",
         "--scene",
@@ -128,8 +128,8 @@ fn a_far_target_is_two_pushes_ending_minus_0_4_and_minus_0_7_nm_and_1_6_nm_from_
     }
     let err = r["final_error"].as_f64().unwrap();
     assert!(
-        (err / 1e-9 - 1.6).abs() <= 0.05,
-        "final error {err:e} m (docs/manipulation.md: 1.6 nm)"
+        (err / 1e-9 - 0.7).abs() <= 0.05,
+        "final error {err:e} m (docs/manipulation.md: 0.7 nm)"
     );
 }
 

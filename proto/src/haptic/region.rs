@@ -59,9 +59,19 @@ pub fn max_stiffness(port_damping: f64, damping: f64, rate_hz: f64, delay_s: f64
 
 /// The region's edge the scales are limited to (N/m): [`max_stiffness`] with no damping, for a
 /// device declaring `declared` (N/m) at `spec_rate_hz`, run at `rate_hz` with a round trip of
-/// `delay_s`, and never above `declared`.
-pub fn edge(declared: f64, spec_rate_hz: f64, rate_hz: f64, delay_s: f64) -> f64 {
-    max_stiffness(port_damping(declared, spec_rate_hz), 0.0, rate_hz, delay_s).min(declared.max(0.0))
+/// `delay_s`; never above `declared`; and never so stiff that the coupling's damper
+/// ([`coupling_damping`], `2 K (T/2 + T_d)`) would exceed the damping the device renders,
+/// `max_damping` (N·s/m): the bridge clamps the damper there, and a spring without its damper
+/// is what the damper is there to prevent. A `max_damping` that is not a positive finite number
+/// does not limit.
+pub fn edge(declared: f64, spec_rate_hz: f64, rate_hz: f64, delay_s: f64, max_damping: f64) -> f64 {
+    let z_width = max_stiffness(port_damping(declared, spec_rate_hz), 0.0, rate_hz, delay_s).min(declared.max(0.0));
+    let damper = max_damping / (2.0 * (0.5 / rate_hz + delay_s.max(0.0)));
+    if damper.is_finite() && damper > 0.0 {
+        z_width.min(damper)
+    } else {
+        z_width
+    }
 }
 
 /// The virtual coupling's damper for a felt stiffness `stiffness` (N/m) at `rate_hz` with a
@@ -158,9 +168,14 @@ mod tests {
         assert_eq!(port_damping(-1.0, 1000.0), 0.0);
         assert!((coupling_damping(-2000.0, 1000.0, 1e-3) - 6.0).abs() < 1e-12);
         // The edge: the declared 2 kN/m at 4 kHz (not 2.67), 1.2 kN/m with 2 ms of delay.
-        assert_eq!(edge(2000.0, 1000.0, 4000.0, 1e-3), 2000.0);
-        assert!((edge(2000.0, 1000.0, 1000.0, 2e-3) - 1200.0).abs() < 1e-9);
-        assert_eq!(edge(f64::NAN, 1000.0, 1000.0, 1e-3), 0.0);
+        assert_eq!(edge(2000.0, 1000.0, 4000.0, 1e-3, 50.0), 2000.0);
+        assert!((edge(2000.0, 1000.0, 1000.0, 2e-3, 50.0) - 1200.0).abs() < 1e-9);
+        assert_eq!(edge(f64::NAN, 1000.0, 1000.0, 1e-3, 50.0), 0.0);
+        // A device that renders at most 1.5 N·s/m: the damper 2K (T/2 + T_d) fits up to 500 N/m
+        // at 1 kHz with 1 ms of delay; an unknown damping limit does not limit.
+        assert!((edge(2000.0, 1000.0, 1000.0, 1e-3, 1.5) - 500.0).abs() < 1e-9);
+        assert!((coupling_damping(500.0, 1000.0, 1e-3) - 1.5).abs() < 1e-12);
+        assert_eq!(edge(2000.0, 1000.0, 1000.0, 1e-3, 0.0), 2000.0);
     }
 
     /// The paper scene's lever (8.0 N/m) at 10 nm/mm and 10 N of pull-off (18.15e7 hand N per

@@ -476,7 +476,11 @@ fn scan_section_is_optional_and_validated() {
 fn a_sphere_on_a_steep_substrate_is_located_where_it_is() {
     let t = tip();
     let mut worst = 0.0f64;
-    for (ra, size, pixels) in [(500.0 * NM, 6.0 * UM, 128), (500.0 * NM, 6.0 * UM, 64), (1000.0 * NM, 10.0 * UM, 128)] {
+    for (ra, size, pixels) in [
+        (500.0 * NM, 6.0 * UM, 128),
+        (500.0 * NM, 6.0 * UM, 64),
+        (1000.0 * NM, 10.0 * UM, 128),
+    ] {
         for (tx, ty) in [(0.1, 0.0), (0.0, -0.1), (0.0707, 0.0707)] {
             let sp = Sphere {
                 x: 5.03 * UM,

@@ -10,6 +10,7 @@ use nanopush::control::bilateral::{Bilateral, Input, Phase};
 use nanopush::instrument::Afm;
 use nanopush::scene::Scene;
 use nanopush_haptic::bridge::{Bridge, BridgeConfig, CycleRow, Link};
+use nanopush_haptic::device::{Device, DeviceError, DeviceSample, DeviceSpec, LinkView};
 use nanopush_haptic::operator::Script;
 use nanopush_haptic::sim::SimDevice;
 use nanopush_proto::haptic::{ForceFeedback, HapticState};
@@ -65,10 +66,69 @@ pub fn closed_loop(
     closed_loop_with(script, nm_per_mm, pull_off_n, per_tick, max_ticks, Stalls::NONE)
 }
 
+/// The simulated handle with other limits in its specification, as a serial device's info
+/// packet may declare them (`None`: the simulated device's own).
+#[allow(dead_code)] // used by the grid test, not by the benchmark
+pub struct Declared {
+    /// The simulated handle and hand.
+    pub sim: SimDevice,
+    /// The largest stiffness it declares (N/m).
+    pub max_stiffness: Option<f64>,
+    /// The largest damping it declares (N·s/m).
+    pub max_damping: Option<f64>,
+}
+
+impl Device for Declared {
+    fn spec(&self) -> DeviceSpec {
+        let own = self.sim.spec();
+        DeviceSpec {
+            max_stiffness: self.max_stiffness.unwrap_or(own.max_stiffness),
+            max_damping: self.max_damping.unwrap_or(own.max_damping),
+            ..own
+        }
+    }
+    fn read(&mut self, dt: f64) -> Result<DeviceSample, DeviceError> {
+        self.sim.read(dt)
+    }
+    fn write_force(&mut self, force: f64) -> Result<(), DeviceError> {
+        self.sim.write_force(force)
+    }
+    fn observe(&mut self, link: &LinkView) {
+        self.sim.observe(link)
+    }
+    fn finished(&self) -> bool {
+        self.sim.finished()
+    }
+    fn holding(&self) -> bool {
+        self.sim.holding()
+    }
+    fn may_drop_force_when_paused(&self) -> bool {
+        self.sim.may_drop_force_when_paused()
+    }
+}
+
 /// [`closed_loop`] with the pauses `stalls` (the bridge's server time-out at 100 ms, as the
 /// end-to-end tests run it, so that a server's pause is not a lost link).
 pub fn closed_loop_with(
     script: Script,
+    nm_per_mm: f64,
+    pull_off_n: f64,
+    per_tick: u32,
+    max_ticks: u64,
+    stalls: Stalls,
+) -> (Vec<CycleRow>, Bilateral) {
+    let ddt = 1e-3 / f64::from(per_tick);
+    let device = Declared {
+        sim: SimDevice::new(script, ddt),
+        max_stiffness: None,
+        max_damping: None,
+    };
+    closed_loop_on(device, nm_per_mm, pull_off_n, per_tick, max_ticks, stalls)
+}
+
+/// [`closed_loop_with`] on `device` (serviced every `1 ms / per_tick`).
+pub fn closed_loop_on(
+    device: Declared,
     nm_per_mm: f64,
     pull_off_n: f64,
     per_tick: u32,
@@ -101,7 +161,7 @@ pub fn closed_loop_with(
         },
         ..BridgeConfig::default()
     };
-    let mut bridge = Bridge::new(SimDevice::new(script, ddt), cfg, 0);
+    let mut bridge = Bridge::new(device, cfg, 0);
     let mut wire = Wire::default();
     let mut reading = afm.read();
     law.engage(reading.stage);
@@ -146,7 +206,7 @@ pub fn closed_loop_with(
                 rows.push(row);
             }
         }
-        if bridge.device.operator.finished() {
+        if bridge.device.sim.operator.finished() {
             break;
         }
     }

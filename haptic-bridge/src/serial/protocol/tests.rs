@@ -399,17 +399,24 @@ proptest! {
 /// Issue 25: a serial device gets its renderable region from its info packet as the simulated
 /// device does from its spec. The fixture's board declares 400 N/m at 1 kHz (a port damping of
 /// 0.6 N·s/m): with the loop's 1 ms round trip its edge is 400 N/m at 1 kHz and 4 kHz, 240 N/m
-/// with 2 ms; the same board declaring its limit at 500 Hz keeps it at 500 Hz.
+/// with 2 ms (its 1.5 N·s/m carry the coupling's damper there); the same board declaring its limit
+/// at 500 Hz keeps it at 500 Hz, where with 2 ms its damping limits the edge to 250 N/m.
 #[test]
 fn the_info_packet_gives_the_renderable_region() {
     use nanopush_proto::haptic::region::{edge, port_damping};
     let spec = info().spec().unwrap();
     assert_eq!((spec.max_stiffness, spec.spec_rate_hz), (400.0, 1000.0));
     assert!((port_damping(spec.max_stiffness, spec.spec_rate_hz) - 0.6).abs() < 1e-12);
-    assert!((edge(spec.max_stiffness, spec.spec_rate_hz, 1000.0, 1e-3) - 400.0).abs() < 1e-9);
-    assert_eq!(edge(spec.max_stiffness, spec.spec_rate_hz, 4000.0, 1e-3), 400.0);
-    assert!((edge(spec.max_stiffness, spec.spec_rate_hz, 1000.0, 2e-3) - 240.0).abs() < 1e-9);
+    assert!((edge(spec.max_stiffness, spec.spec_rate_hz, 1000.0, 1e-3, spec.max_damping) - 400.0).abs() < 1e-9);
+    assert_eq!(
+        edge(spec.max_stiffness, spec.spec_rate_hz, 4000.0, 1e-3, spec.max_damping),
+        400.0
+    );
+    assert!((edge(spec.max_stiffness, spec.spec_rate_hz, 1000.0, 2e-3, spec.max_damping) - 240.0).abs() < 1e-9);
     let slow = InfoPacket { rate_hz: 500, ..info() }.spec().unwrap();
     assert_eq!(slow.spec_rate_hz, 500.0);
-    assert!((edge(slow.max_stiffness, slow.spec_rate_hz, 500.0, 2e-3) - 400.0).abs() < 1e-9);
+    // At 500 Hz with 2 ms the Z-width keeps 400 N/m, but its coupling damper, 2K (T/2 + T_d) =
+    // 2.4 N·s/m, is more than the board's 1.5: the edge is where the damper fits, 250 N/m.
+    assert!((edge(slow.max_stiffness, slow.spec_rate_hz, 500.0, 2e-3, 0.0) - 400.0).abs() < 1e-9);
+    assert!((edge(slow.max_stiffness, slow.spec_rate_hz, 500.0, 2e-3, slow.max_damping) - 250.0).abs() < 1e-9);
 }

@@ -22,10 +22,13 @@
 //!   (a random force the hand moves with), scaled by `g_f`; in free space it is all there is. The
 //!   hysteresis lets a contact's force cross zero (adhesion to repulsion) without a gap, and the
 //!   contact's stiffness stays in the local model while the gate is open.
-//! - the *region*: the felt stiffness never exceeds `K_max = min(K_s, b / (T/2 + T_d))`, the
-//!   device's Z-width edge at its period `T` and the measured round trip `T_d`, and never what
-//!   the device declares ([`nanopush_proto::haptic::region`]); a force scale past it is lowered
-//!   to the edge.
+//! - the *region*: the felt stiffness never exceeds `K_max = min(K_s, b / (T/2 + T_d),
+//!   B_max / (2 (T/2 + T_d)))`, the device's Z-width edge at its period `T` and the measured
+//!   round trip `T_d`, never what the device declares, and never so stiff that the coupling's
+//!   damper would pass the damping `B_max` the device renders (the bridge clamps it there, and
+//!   the spring without its damper is the loop the damper prevents: a device declaring
+//!   1.5 N·s/m had the let-go press at the default hand the hand −1.36 mJ in 113 chatter
+//!   cycles) ([`nanopush_proto::haptic::region`]); a force scale past it is lowered to the edge.
 //! - the *coupling damper* `B_c`, rendered by the bridge with the device's velocity of the same
 //!   cycle: a spring held over a period `T` and a delay `T_d` gives back `K (T/2 + T_d) ẋ²` more
 //!   power than it took (the hold's leak, Colgate's `K T/2`, and the delay's); `B_c` is twice
@@ -33,26 +36,33 @@
 //!   - *Passivity against every environment* (Colgate & Schenkel): a damper rendered by a
 //!     sampled loop counts *against* the port, so the condition is
 //!     `b > K (T/2 + T_d) + B_c = 3 K (T/2 + T_d)`, where `b` is the handle's damping and the
-//!     grip's. A grip that brings that much makes the port passive whatever a passive
-//!     environment behind the coupling does (Adams & Hannaford), and the contact is one (the
-//!     snap-in and the adhesion give back only what the approach stored; the hysteresis of a
-//!     closed cycle dissipates): the stiff grip (20 N·s/m) at every stiffness to the 2 kN/m edge
-//!     (9 N·s/m needed), the firm grip (8 N·s/m) to 1788 N/m, the default's 1452 included
-//!     ([`super::linear_loop`]'s tests).
+//!     grip's (so this is passivity toward the hand's intended motion, not the bare port's). A
+//!     grip that brings that much makes the port passive whatever a passive environment behind
+//!     the coupling does (Adams & Hannaford), and the contact is one (the snap-in and the
+//!     adhesion give back only what the approach stored; the hysteresis of a closed cycle
+//!     dissipates). At 1 kHz with a 1 ms round trip: the stiff grip (20 N·s/m) at every
+//!     stiffness to the 2 kN/m edge (9 N·s/m needed), the firm grip (8 N·s/m) to 1788 N/m, the
+//!     default's 1452 included ([`super::linear_loop`]'s tests); with a 2 ms round trip the firm
+//!     grip only to 1073 N/m of the 1200 N/m edge. (The condition is sufficient: it is exact for
+//!     a damper on a backward-differenced velocity, and the bridge's uses the device's sample.)
 //!   - *A lighter grip, or none*, leaves the handle's own 0.05 N·s/m, and with that no sampled
 //!     stiffness above ~33 N/m is passive against every environment, with a damper or without.
 //!     For those hands what is proven is stability with the environment the loop has, the
-//!     contact: linearised about it (the handle, the hand, the held spring a round trip late or
-//!     not, the damper), the loop's spectral radius is below 1 at every stiffness to the edge,
-//!     for the loose grip and the let-go hand, at 1 and 4 kHz, for round trips of 1, 2 and 5 ms
-//!     (worst ρ = 0.99973, the let-go hand on a 50 N/m spring at 4 kHz). That is what `B_c` is
+//!     contact, for the simulated handle (50 g): linearised about it, the loop's spectral radius
+//!     is below 1 at every stiffness to the edge, for the loose grip and the let-go hand, at 1
+//!     and 4 kHz, for round trips of 1, 2 and 5 ms. Three loops are checked: the held spring
+//!     on the current position, the same a round trip late, and the loop as the two processes
+//!     render it (the bridge's local spring on the position it has just read, its anchor and
+//!     force a round trip late, [`super::linear_loop::LinearLoop::rendered`]); worst ρ =
+//!     0.99973 in each (the let-go hand on a 50 N/m spring at 4 kHz). That is what `B_c` is
 //!     for: without it, or with a damper inside Colgate's budget (half of what the spring leaves
 //!     of `b`, 0.41 N·s/m at the default), the loose grip and the let-go hand are unstable at the
-//!     default (ρ = 1.011 and 1.021, 1.007 and 1.017), and so was the grid (with the budgeted
-//!     damper and the edge 10 % lower, 3 loose-grip cells active: −16 mJ and 660 chatter cycles
-//!     at 10 nm/mm and 2.5 N).
-//!     (For the simulated handle, 50 g; a serial device declares no mass, and for a light grip
-//!     on it the statement rests on its maker's declared stiffness and on energy bounding.)
+//!     default (as rendered ρ = 1.010 and 1.020 without, 1.006 and 1.016 with the budgeted
+//!     damper; a round trip late 1.011 and 1.021, 1.007 and 1.017), and so was the grid (with the
+//!     budgeted damper and the edge 10 % lower, 3 loose-grip cells active: −16 mJ and 660
+//!     chatter cycles at 10 nm/mm and 2.5 N). A serial device declares no mass: for a light
+//!     grip on it the statement rests on the stiffness and damping its maker declares (the
+//!     region keeps `B_c` within the declared damping) and on energy bounding.
 //!   - What the linearisation leaves out (the snap-in, the adhesion, the gate, the limits, a
 //!     stalled process) is measured: every cell of the grid, both processes paused at random
 //!     included; and a loop that still leaks pins the passivity controller's damper, which
@@ -129,7 +139,7 @@ impl Coupling {
             }
             self.delay = self.delay.clamp(p.tick, MAX_DELAY);
             let rate = if h.rate_hz > 0.0 { h.rate_hz } else { 1.0 / p.tick };
-            self.k_max = edge(h.max_stiffness, h.spec_rate_hz, rate, self.delay);
+            self.k_max = edge(h.max_stiffness, h.spec_rate_hz, rate, self.delay, h.max_damping);
             let pinned = engaged && h.pc_cap > 0.0 && h.pc_damping >= 0.999 * h.pc_cap;
             self.pinned = if pinned { self.pinned + 1 } else { 0 };
             if f64::from(self.pinned) * p.tick > PINNED_FOR && self.bound > MIN_BOUND {
