@@ -269,13 +269,13 @@ fn assert_digits(what: &str, value: f64, readme: f64, half_unit: f64) {
 /// control", and its reading-drift paragraph: `nanopush push --scene scenes/gold-latex-500nm.toml
 /// --distance-um 6 --control C` (the same pushes, by [`push_as_the_cli_does`]). The scene's
 /// substrate rises 6 nm per µm: with the height fixed the reading drifts toward the baseline as the
-/// particle climbs (Fig 15, +0.129 V); the z loop holds it, −0.024 V under xyz control and −0.015 V
-/// under z control, and raises the tip 47 nm and 46 nm for it. xy and
-/// xyz end 14.3 nm short; z-only control stops on stage travel, so it does not push the
-/// predicted retraction drag (−0.544 µm, the estimator's `retract_shift`) back and ends 552 nm
-/// short. The stick-phase peak the model predicts for these particles is 5.64 nm of `ζ_z`.
+/// particle climbs (Fig 15, +0.129 V); the z loop holds it, −0.024 V under xyz and under z
+/// control, and raises the tip 47 nm for it. xy and xyz end 14.3 nm short; z-only control stops
+/// on stage travel planned with the predicted retraction drag (−0.544 µm, the estimator's
+/// `retract_shift`) and ends 8.3 nm short (552 nm when its travel did not count the drag: a
+/// correction could never make that up). The stick-phase peak the model predicts for these particles is 5.64 nm of `ζ_z`.
 #[test]
-fn gold_latex_6_um_ends_minus_14_3_nm_xy_minus_552_nm_z_drifts_0_129_v_xy_minus_0_024_v_xyz_minus_0_015_v_z() {
+fn gold_latex_6_um_ends_minus_14_3_nm_xy_minus_8_3_nm_z_drifts_0_129_v_xy_minus_0_024_v_xyz_and_z() {
     use crate::scene::file::ControlFile;
     let base = scene(&[]);
     let run_with = |control: ControlFile| {
@@ -295,12 +295,12 @@ fn gold_latex_6_um_ends_minus_14_3_nm_xy_minus_552_nm_z_drifts_0_129_v_xy_minus_
     }
     assert_eq!(z.summary.failure, None);
     assert_eq!(z.summary.contact_step, Some(43));
-    assert_digits("z distance error (nm)", error_nm(&z), -552.0, 0.5);
+    assert_digits("z distance error (nm)", error_nm(&z), -8.3, 0.05);
     // The drift of the reading, toward the baseline with the height fixed, held by the z loop.
     let (d_xy, d_xyz, d_z) = (reading_drift(&xy), reading_drift(&xyz), reading_drift(&z));
     assert_digits("xy reading drift (V)", d_xy, 0.129, 0.0005);
     assert_digits("xyz reading drift (V)", d_xyz, -0.024, 0.0005);
-    assert_digits("z reading drift (V)", d_z, -0.015, 0.0005);
+    assert_digits("z reading drift (V)", d_z, -0.024, 0.0005);
     // How far the z loop raised the tip over the push.
     let rise = |run: &StrategyRun| {
         let z: Vec<f64> = run
@@ -313,12 +313,12 @@ fn gold_latex_6_um_ends_minus_14_3_nm_xy_minus_552_nm_z_drifts_0_129_v_xy_minus_
     };
     assert_eq!(rise(&xy), 0.0, "the height is fixed under xy control");
     assert_digits("xyz rise of the tip (nm)", rise(&xyz) / 1e-9, 47.0, 0.5);
-    assert_digits("z rise of the tip (nm)", rise(&z) / 1e-9, 46.0, 0.5);
-    // z control ends short by the predicted drag, which xy control pushes back.
+    assert_digits("z rise of the tip (nm)", rise(&z) / 1e-9, 47.0, 0.5);
+    // Both loops push the predicted drag back: z control within the settling lag of xy's.
     let drag = z.prediction.retract_shift;
     assert_digits("predicted retraction drag (µm)", drag / UM, -0.544, 0.0005);
     assert!(
-        (error_nm(&z) * 1e-9 - drag).abs() < 30e-9,
+        error_nm(&z).abs() < 25.0,
         "z control ends {:.1} nm off, the drag is {:.1} nm",
         error_nm(&z),
         drag * 1e9
