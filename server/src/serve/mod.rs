@@ -12,6 +12,7 @@ pub mod histogram;
 mod lifecycle;
 pub mod metrics;
 pub mod push_job;
+pub mod record_routes;
 pub mod records;
 pub mod scan_job;
 pub mod session;
