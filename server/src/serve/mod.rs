@@ -5,6 +5,7 @@ pub mod app;
 pub mod app_state;
 pub mod command_checks;
 pub mod control_loop;
+pub mod data_dir;
 pub mod frames;
 pub mod guard;
 pub mod haptic;
