@@ -112,6 +112,7 @@ fn record_downloads_are_streamed_not_read_whole() {
         assert!(String::from_utf8_lossy(&head).starts_with("HTTP/1.1 200"));
     }
     let grown_mb = rss_kb(pid).saturating_sub(before) / 1024;
+    eprintln!("12 unread 32 MB downloads: the server grew by {grown_mb} MB");
     assert!(
         grown_mb < 100,
         "12 unread 32 MB downloads grew the server by {grown_mb} MB"
@@ -255,6 +256,10 @@ fn a_slow_reader_is_told_it_lagged_and_is_not_closed() {
             }
         }
         let (fast_newest, _fast) = fast_task.await.unwrap();
+        eprintln!(
+            "slow reader: {received} frames read, {skipped_total} skipped in {announced_gaps} gaps, newest {} frames behind",
+            fast_newest.saturating_sub(last_seq)
+        );
         assert!(
             skipped_total > 0 && announced_gaps > 0,
             "never told it lagged ({received} frames)"
