@@ -16,8 +16,8 @@ use nanopush_proto::ws::{Role, ServerMessage};
 use crate::serve::app_state::{AppState, Place};
 use crate::serve::haptic::api::haptic_status;
 use crate::serve::metrics::render;
+use crate::serve::record_routes;
 use crate::serve::session::{HARD_CAP, session};
-use crate::serve::{record_routes, records};
 
 /// What is wrong with the built web client in `web_dir`, in words, or None: not built (the page
 /// cannot start), or built before a change of its sources (`web/src/`, after a `git pull`: the
@@ -158,14 +158,11 @@ async fn records_list(State(st): State<Arc<AppState>>, Query(page): Query<record
     record_routes::list_page(st.cfg.data_dir.clone(), page).await
 }
 
-/// The pushes recorded in the data directory, newest first (at most [`records::RUNS_MAX`]): the
+/// The pushes recorded in the data directory, newest first (at most [`crate::serve::records::RUNS_MAX`]): the
 /// run history a page or a monitor shows, which survives restarts.
 async fn runs(State(st): State<Arc<AppState>>) -> Response {
     let dir = st.cfg.data_dir.clone();
-    off_runtime("reading the run history", move || {
-        records::run_history(&dir, records::RUNS_MAX)
-    })
-    .await
+    off_runtime("reading the run history", move || record_routes::run_history(&dir)).await
 }
 
 /// `read` (file system work) on a blocking thread, its result as JSON, or a 500 that says

@@ -147,6 +147,12 @@ fn listing(dir: &Path) -> std::io::Result<Arc<Vec<records::RecordEntry>>> {
     Ok(entries)
 }
 
+/// The pushes recorded in `dir`, newest first, at most [`records::RUNS_MAX`]
+/// ([`records::run_history`]), from the listing `/api/records` reuses: the monitors ask every 5 s.
+pub fn run_history(dir: &Path) -> std::io::Result<Vec<records::RunEntry>> {
+    Ok(records::runs_in(dir, &listing(dir)?, records::RUNS_MAX))
+}
+
 /// The record `name` of `dir`, streamed: a plain file only (opened without following a
 /// symlink, so none is served, to anywhere), read a chunk at a time as the client takes it.
 pub async fn download(dir: PathBuf, name: String) -> Response {

@@ -110,8 +110,13 @@ pub struct RunEntry {
 /// summary that cannot be read or parsed, or is larger than [`SUMMARY_MAX_BYTES`], is skipped),
 /// so the history survives restarts.
 pub fn run_history(dir: &Path, max: usize) -> std::io::Result<Vec<RunEntry>> {
+    Ok(runs_in(dir, &list(dir)?, max))
+}
+
+/// [`run_history`] from a listing of `dir` already made ([`list`]).
+pub fn runs_in(dir: &Path, listed: &[RecordEntry], max: usize) -> Vec<RunEntry> {
     let mut out = Vec::new();
-    for e in list(dir)? {
+    for e in listed {
         if out.len() >= max {
             break;
         }
@@ -136,7 +141,7 @@ pub fn run_history(dir: &Path, max: usize) -> std::io::Result<Vec<RunEntry>> {
         let est = v.get("estimate").and_then(serde_json::Value::as_array);
         let at = |i: usize| est.and_then(|a| a.get(i)).and_then(serde_json::Value::as_f64);
         out.push(RunEntry {
-            record: e.name,
+            record: e.name.clone(),
             modified: e.modified,
             instance: v
                 .get("instance")
@@ -149,7 +154,7 @@ pub fn run_history(dir: &Path, max: usize) -> std::io::Result<Vec<RunEntry>> {
             estimate: [at(0).unwrap_or(f64::NAN), at(1).unwrap_or(f64::NAN)],
         });
     }
-    Ok(out)
+    out
 }
 
 /// The JSON summary of a push record.
