@@ -114,13 +114,14 @@ where
     for s in &client.streams {
         commands::counter(&st, *s).fetch_sub(1, Relaxed);
     }
-    // On shutdown the send task says `shutdown` and closes before the reply queue goes (else it
-    // could see the queue closed first and end silently); on a disconnect the closed queue is
-    // what ends it. (A finished JoinHandle must not be polled again.)
+    // A message too big: the send task ends with a 1009 close once the queue goes.
     if ended == Ended::TooBig {
         tracing::info!("client {id}: a message over {HARD_CAP} bytes; closing (1009)");
         let _ = closing.set((1009, "message over 8 MiB"));
     }
+    // On shutdown the send task says `shutdown` and closes before the reply queue goes (else it
+    // could see the queue closed first and end silently); on a disconnect the closed queue is
+    // what ends it. (A finished JoinHandle must not be polled again.)
     let mut send_done = ended == Ended::SenderDone;
     if ended == Ended::ShuttingDown {
         if tokio::time::timeout(Duration::from_secs(2), &mut send).await.is_err() {
