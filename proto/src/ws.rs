@@ -12,13 +12,36 @@ use serde::{Deserialize, Serialize};
 pub const WS_VERSION: u32 = 1;
 
 /// The streams a client can subscribe to. Nothing is produced for a stream no client wants.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+/// Read from its name only (a derived reader also took `{"tip": null}`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Stream {
     /// `telemetry` at about 60 Hz: tip position, reading, phase.
     Tip,
     /// `scan_start`, binary scan lines as they complete, `scan_done`.
     Scan,
+}
+
+impl<'de> Deserialize<'de> for Stream {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Name;
+        impl serde::de::Visitor<'_> for Name {
+            type Value = Stream;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("a stream's name, \"tip\" or \"scan\"")
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Stream, E> {
+                match v {
+                    "tip" => Ok(Stream::Tip),
+                    "scan" => Ok(Stream::Scan),
+                    other => Err(E::custom(format_args!(
+                        "unknown stream \"{other}\"; the streams are \"tip\" and \"scan\""
+                    ))),
+                }
+            }
+        }
+        d.deserialize_str(Name)
+    }
 }
 
 /// A client → server message.
@@ -547,6 +570,17 @@ mod tests {
         );
         assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"push","particle":1,"bogus":1}"#).is_err());
         assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"fly"}"#).is_err());
+    }
+
+    /// Issue 27.8: a stream is its name; `{"tip": null}` (which a derived reader took) and
+    /// unknown names are refused, naming the streams there are.
+    #[test]
+    fn a_stream_is_a_name_only() {
+        for bad in [r#"[{"tip":null}]"#, r#"["wind"]"#, "[1]"] {
+            let e = serde_json::from_str::<Vec<Stream>>(bad).unwrap_err().to_string();
+            assert!(e.contains("\"tip\"") && e.contains("\"scan\""), "{bad}: {e}");
+        }
+        assert_eq!(serde_json::to_string(&Stream::Scan).unwrap(), "\"scan\"");
     }
 
     #[test]

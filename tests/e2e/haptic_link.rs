@@ -11,6 +11,7 @@ use std::process::{Command, Stdio};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
+use futures_util::StreamExt;
 use nanopush_e2e::{Proc, bin, workspace};
 use serde_json::{Value, json};
 
@@ -149,16 +150,54 @@ fn wait_line_after(lines: &Mutex<Vec<String>>, skip: usize, secs: f64, text: &st
     }
 }
 
-/// As the lease holder: take the lease and send `haptic {action}`; the reply.
+/// As the lease holder: take the lease and send `haptic {action}`; the reply. When it is `ok`
+/// the holder stays connected, on a thread of its own that reads what the server sends, until
+/// the server closes: haptic z-control ends when the lease is freed (issue 27.6).
 fn haptic(addr: &str, action: &str) -> Value {
-    runtime().block_on(async {
-        let (mut ws, _) = welcomed(addr, Some(TOKEN)).await;
-        send(&mut ws, json!({"type": "take_lease", "id": 1})).await;
-        assert_eq!(reply(&mut ws, 1).await["type"], "ok");
-        send(&mut ws, json!({"type": "haptic", "id": 2, "action": action})).await;
-        // An `ok` means the command is already in the loop's queue: the socket may close now.
-        reply(&mut ws, 2).await
-    })
+    let (tx, rx) = std::sync::mpsc::channel();
+    let (addr, action) = (addr.to_string(), action.to_string());
+    std::thread::spawn(move || {
+        runtime().block_on(async move {
+            let (mut ws, _) = welcomed(&addr, Some(TOKEN)).await;
+            send(&mut ws, json!({"type": "take_lease", "id": 1})).await;
+            assert_eq!(reply(&mut ws, 1).await["type"], "ok");
+            send(&mut ws, json!({"type": "haptic", "id": 2, "action": action})).await;
+            let r = reply(&mut ws, 2).await;
+            let holds = r["type"] == "ok";
+            let _ = tx.send(r);
+            while holds && matches!(ws.next().await, Some(Ok(_))) {}
+        })
+    });
+    rx.recv_timeout(Duration::from_secs(30))
+        .expect("the lease holder's reply")
+}
+
+/// Issue 27.6: haptic z-control ends with the lease. The holder engages, then its connection
+/// drops (or it gives the lease back): z-control goes off (before: it stayed `engaged`, with no
+/// holder).
+#[test]
+fn haptic_engagement_ends_when_the_lease_is_freed() {
+    let _one = one_at_a_time();
+    let b = Bench::new("lease-ends");
+    let (_srv, addr) = serve(&b, "sim", "server.log");
+    wait_status(&addr, 10.0, "link up", |s| s["haptic"]["link"] == "up");
+    for gives_back in [false, true] {
+        runtime().block_on(async {
+            let (mut ws, _) = welcomed(&addr, Some(TOKEN)).await;
+            send(&mut ws, json!({"type": "take_lease", "id": 1})).await;
+            assert_eq!(reply(&mut ws, 1).await["type"], "ok");
+            send(&mut ws, json!({"type": "haptic", "id": 2, "action": "engage"})).await;
+            assert_eq!(reply(&mut ws, 2).await["type"], "ok");
+            wait_status(&addr, 20.0, "engaged", |s| s["haptic"]["phase"] == "engaged");
+            if gives_back {
+                send(&mut ws, json!({"type": "release_lease", "id": 3})).await;
+                assert_eq!(reply(&mut ws, 3).await["type"], "ok");
+            }
+        });
+        wait_status(&addr, 20.0, "z-control off with the lease free", |s| {
+            s["lease"].is_null() && s["haptic"]["phase"] == "off"
+        });
+    }
 }
 
 /// A server with `--haptic external` (its own watchdog at 100 ms) and a bridge whose scripted

@@ -11,6 +11,7 @@ mod push;
 mod scan;
 mod serve;
 mod serve_behaviour;
+mod serve_campus;
 mod serve_hostile;
 mod serve_scenes;
 mod serve_state;

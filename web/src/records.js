@@ -18,7 +18,7 @@ export const RECORDS_SHOWN = 200;
 
 /** The note under the table when `total` records are more than it shows, else null. */
 export function olderText(total) {
-  return total > RECORDS_SHOWN ? `and ${total - RECORDS_SHOWN} older records in the data directory (GET /api/records lists them all)` : null;
+  return total > RECORDS_SHOWN ? `and ${total - RECORDS_SHOWN} older records in the data directory (GET /api/records?offset=${RECORDS_SHOWN} lists them, a page at a time)` : null;
 }
 
 /**
@@ -77,15 +77,17 @@ export class Records {
       return;
     }
     try {
-      const r = await fetch(apiUrl('/api/records', this.loc));
+      // One page, the newest: the server says how many there are in all.
+      const r = await fetch(apiUrl(`/api/records?limit=${RECORDS_SHOWN}`, this.loc));
       if (!r.ok) throw new Error(`HTTP ${r.status}`);
       const list = await r.json();
+      const total = Number(r.headers.get('X-Total-Count') ?? list.length);
       if (!list.length) {
         body.replaceChildren(note('no records yet'));
         return;
       }
       const rows = recordRows(list, this.outcomes).map((rec) => this.row(rec));
-      const older = olderText(list.length);
+      const older = olderText(Math.max(total, list.length));
       body.replaceChildren(...rows, ...(older ? [note(older)] : []));
     } catch (e) {
       body.replaceChildren(note(`could not list records: ${e.message}`));

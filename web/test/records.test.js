@@ -38,6 +38,6 @@ test('a data directory of thousands of records lists the newest few hundred, and
   assert.equal(rows.length, RECORDS_SHOWN);
   assert.ok(RECORDS_SHOWN <= 300);
   assert.equal(rows[0].name, 'push-1700009999-r9999-p1.csv', 'newest first');
-  assert.equal(olderText(list.length), `and ${10000 - RECORDS_SHOWN} older records in the data directory (GET /api/records lists them all)`);
+  assert.equal(olderText(list.length), `and ${10000 - RECORDS_SHOWN} older records in the data directory (GET /api/records?offset=${RECORDS_SHOWN} lists them, a page at a time)`);
   assert.equal(olderText(RECORDS_SHOWN), null);
 });

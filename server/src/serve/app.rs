@@ -16,7 +16,7 @@ use nanopush_proto::ws::{Role, ServerMessage};
 use crate::serve::app_state::{AppState, Place};
 use crate::serve::haptic::api::haptic_status;
 use crate::serve::metrics::render;
-use crate::serve::records;
+use crate::serve::record_routes;
 use crate::serve::session::{HARD_CAP, session};
 
 /// What is wrong with the built web client in `web_dir`, in words, or None: not built (the page
@@ -153,22 +153,16 @@ async fn scene_json(State(st): State<Arc<AppState>>) -> Response {
     axum::Json(&st.scene.file).into_response()
 }
 
-/// The records in the data directory, newest first. Read on a blocking thread: a directory of
-/// ten thousand records takes a tenth of a second to list, which an async worker (one of two
-/// on the lab's machine) would not spend on the clients' telemetry.
-async fn records_list(State(st): State<Arc<AppState>>) -> Response {
-    let dir = st.cfg.data_dir.clone();
-    off_runtime("listing records", move || records::list(&dir)).await
+/// A page of the records in the data directory, newest first (`record_routes.rs`).
+async fn records_list(State(st): State<Arc<AppState>>, Query(page): Query<record_routes::Page>) -> Response {
+    record_routes::list_page(st.cfg.data_dir.clone(), page).await
 }
 
-/// The pushes recorded in the data directory, newest first (at most [`records::RUNS_MAX`]): the
+/// The pushes recorded in the data directory, newest first (at most [`crate::serve::records::RUNS_MAX`]): the
 /// run history a page or a monitor shows, which survives restarts.
 async fn runs(State(st): State<Arc<AppState>>) -> Response {
     let dir = st.cfg.data_dir.clone();
-    off_runtime("reading the run history", move || {
-        records::run_history(&dir, records::RUNS_MAX)
-    })
-    .await
+    off_runtime("reading the run history", move || record_routes::run_history(&dir)).await
 }
 
 /// `read` (file system work) on a blocking thread, its result as JSON, or a 500 that says
@@ -184,40 +178,9 @@ async fn off_runtime<T: serde::Serialize + Send + 'static>(
     }
 }
 
+/// One record, streamed (`record_routes.rs`).
 async fn record_get(State(st): State<Arc<AppState>>, UrlPath(name): UrlPath<String>) -> Response {
-    if !records::valid_name(&name) {
-        return (
-            StatusCode::BAD_REQUEST,
-            "a record name is letters, digits, '-', '_' and '.', with no path",
-        )
-            .into_response();
-    }
-    // A plain file in the data directory, never a symlink (to anywhere).
-    let path = st.cfg.data_dir.join(&name);
-    if !tokio::fs::symlink_metadata(&path)
-        .await
-        .is_ok_and(|m| m.file_type().is_file())
-    {
-        return (StatusCode::NOT_FOUND, format!("no record named {name}")).into_response();
-    }
-    match tokio::fs::read(&path).await {
-        Ok(bytes) => {
-            let ctype = match name.rsplit('.').next() {
-                Some("json") => "application/json",
-                Some("csv") => "text/csv",
-                _ => "application/octet-stream",
-            };
-            (
-                [
-                    (header::CONTENT_TYPE, ctype.to_string()),
-                    (header::CONTENT_DISPOSITION, format!("attachment; filename=\"{name}\"")),
-                ],
-                bytes,
-            )
-                .into_response()
-        }
-        Err(_) => (StatusCode::NOT_FOUND, format!("no record named {name}")).into_response(),
-    }
+    record_routes::download(st.cfg.data_dir.clone(), name).await
 }
 
 async fn metrics(State(st): State<Arc<AppState>>) -> Response {

@@ -346,10 +346,12 @@ impl AppState {
             .lock()
             .map(|s| (s.stage, s.phase))
             .unwrap_or(([0.0; 3], "idle"));
-        let phase = if self.activity.scanning.load(Relaxed) && phase == "idle" {
-            "scanning"
-        } else {
-            phase
+        // The loop is idle while a push is prepared off it (a local scan, the plan: seconds on a
+        // crowded sample) and while a scan runs on its own thread: said as such.
+        let phase = match phase {
+            "idle" if self.activity.scanning.load(Relaxed) => "scanning",
+            "idle" if self.shared.busy.load(Relaxed) => "preparing",
+            other => other,
         };
         ServerMessage::State {
             particles,

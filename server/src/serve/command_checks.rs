@@ -1,8 +1,7 @@
 //! Checks of client commands: finite numbers, ranges, known particles. Each refusal is a typed
 //! error naming the field, the value and the allowed range.
 
-use nanopush_proto::ws::ClientMessage;
-use nanopush_proto::ws::ErrorCode;
+use nanopush_proto::ws::{ClientMessage, ErrorCode, HapticAction};
 
 use crate::control::MoveTarget;
 
@@ -60,7 +59,101 @@ pub fn parse_command(text: &str) -> Result<ClientMessage, (Option<u32>, String)>
         .get("id")
         .and_then(serde_json::Value::as_u64)
         .and_then(|v| u32::try_from(v).ok());
+    // serde_json keeps the last of a key given twice: `{"type":"ping","type":"stop"}` would be a
+    // stop. A key given twice is refused instead, naming the key.
+    if let Err(e) = serde_json::from_str::<UniqueKeys>(text) {
+        return Err((id, format!("not a valid command: {e}")));
+    }
     serde_json::from_value(value).map_err(|e| (id, format!("not a valid command: {e}")))
+}
+
+/// A JSON value in which no object has a key twice (at any depth); deserializing one fails with
+/// the key's name otherwise.
+struct UniqueKeys;
+
+impl<'de> serde::Deserialize<'de> for UniqueKeys {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_any(UniqueKeys)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for UniqueKeys {
+    type Value = UniqueKeys;
+
+    fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("a JSON value")
+    }
+
+    fn visit_bool<E>(self, _: bool) -> Result<UniqueKeys, E> {
+        Ok(UniqueKeys)
+    }
+
+    fn visit_i64<E>(self, _: i64) -> Result<UniqueKeys, E> {
+        Ok(UniqueKeys)
+    }
+
+    fn visit_u64<E>(self, _: u64) -> Result<UniqueKeys, E> {
+        Ok(UniqueKeys)
+    }
+
+    fn visit_f64<E>(self, _: f64) -> Result<UniqueKeys, E> {
+        Ok(UniqueKeys)
+    }
+
+    fn visit_str<E>(self, _: &str) -> Result<UniqueKeys, E> {
+        Ok(UniqueKeys)
+    }
+
+    fn visit_unit<E>(self) -> Result<UniqueKeys, E> {
+        Ok(UniqueKeys)
+    }
+
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<UniqueKeys, A::Error> {
+        while seq.next_element::<UniqueKeys>()?.is_some() {}
+        Ok(UniqueKeys)
+    }
+
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<UniqueKeys, A::Error> {
+        let mut seen = std::collections::HashSet::new();
+        while let Some(key) = map.next_key::<String>()? {
+            map.next_value::<UniqueKeys>()?;
+            if !seen.insert(key.clone()) {
+                return Err(serde::de::Error::custom(format_args!(
+                    "the key \"{key}\" is given more than once; each key may appear once"
+                )));
+            }
+        }
+        Ok(UniqueKeys)
+    }
+}
+
+/// Refuses a field the command carries but its kind does not use (else it would be dropped
+/// without a word): `haptic`'s `nm_per_mm` and `pull_off_at_hand_n` belong to `scale` only.
+pub fn fields_apply(msg: &ClientMessage) -> Result<(), Refusal> {
+    if let ClientMessage::Haptic {
+        action,
+        nm_per_mm,
+        pull_off_at_hand_n,
+        ..
+    } = msg
+        && *action != HapticAction::Scale
+    {
+        let given = [
+            ("nm_per_mm", nm_per_mm.is_some()),
+            ("pull_off_at_hand_n", pull_off_at_hand_n.is_some()),
+        ];
+        if let Some((field, _)) = given.iter().find(|(_, g)| *g) {
+            let name = serde_json::to_value(action)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_string))
+                .unwrap_or_default();
+            return Err(Refusal::new(
+                ErrorCode::Invalid,
+                format!("{field} goes with action \"scale\" only; action \"{name}\" takes no other field"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Checks a push's numbers; `range_um` is the stage range.
@@ -132,6 +225,41 @@ mod tests {
         let (id, why) = parse_command(r#"{"type":"push","id":9,"particle":"x"}"#).unwrap_err();
         assert_eq!(id, Some(9));
         assert!(why.contains("not a valid command"), "{why}");
+    }
+
+    /// Issue 27.7: a key given twice is refused naming the key, at any depth (before, the last
+    /// one won: `{"type":"ping","type":"stop"}` was a stop).
+    #[test]
+    fn a_key_given_twice_is_refused_naming_it() {
+        for (text, key) in [
+            (r#"{"type":"ping","type":"stop","id":2}"#, "type"),
+            (r#"{"type":"subscribe","streams":[{"a":1,"a":2}]}"#, "a"),
+        ] {
+            let (_, why) = parse_command(text).unwrap_err();
+            assert!(why.contains(&format!("\"{key}\" is given more than once")), "{why}");
+        }
+        assert_eq!(
+            parse_command(r#"{"type":"ping","type":"stop","id":2}"#).unwrap_err().0,
+            Some(2)
+        );
+        assert!(parse_command(r#"{"type":"subscribe","streams":["tip","scan"],"id":1}"#).is_ok());
+    }
+
+    /// Issue 27.8: `haptic`'s scales go with `scale` only.
+    #[test]
+    fn a_field_of_another_action_is_refused_naming_it() {
+        let m = parse_command(r#"{"type":"haptic","action":"recenter","nm_per_mm":-5}"#).unwrap();
+        let e = fields_apply(&m).unwrap_err();
+        assert_eq!(e.code, ErrorCode::Invalid);
+        assert!(
+            e.message.contains("nm_per_mm") && e.message.contains("\"recenter\""),
+            "{}",
+            e.message
+        );
+        let m = parse_command(r#"{"type":"haptic","action":"engage","pull_off_at_hand_n":1e300}"#).unwrap();
+        assert!(fields_apply(&m).unwrap_err().message.contains("pull_off_at_hand_n"));
+        let m = parse_command(r#"{"type":"haptic","action":"scale","nm_per_mm":5}"#).unwrap();
+        assert_eq!(fields_apply(&m), Ok(()));
     }
 
     #[test]

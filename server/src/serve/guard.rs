@@ -6,7 +6,10 @@
 //! The guard sits between the listener and hyper ([`GuardedListener`], an axum `Listener`), so
 //! it sees the bytes as they arrive: it follows the end of each header block (`\r\n\r\n`) and
 //! whether that block asked for `Upgrade: websocket`. The API has no request bodies, so bytes
-//! after a header block begin the next request.
+//! after a header block begin the next request. Asking is not enough: the guard lets go only
+//! when the server's answer is `101 Switching Protocols`. A refused upgrade (401, 403, 429, 503)
+//! or an upgrade header on a plain route leaves the connection guarded (before, the header alone
+//! switched the time-outs off for good: a slowloris bypass).
 
 use std::io;
 use std::net::SocketAddr;
@@ -60,6 +63,9 @@ enum State {
     Headers,
     /// Between requests, or answering one (the idle deadline runs, reset by any traffic).
     Idle,
+    /// A request asked for `Upgrade: websocket` and is being answered (the idle deadline runs):
+    /// upgraded when the answer is `101`, else idle.
+    Asked,
     /// A WebSocket: no deadline here.
     Upgraded,
 }
@@ -96,7 +102,7 @@ impl Guarded {
         for &b in bytes {
             match self.state {
                 State::Upgraded => return,
-                State::Idle => {
+                State::Idle | State::Asked => {
                     // A new request begins.
                     self.state = State::Headers;
                     self.header.clear();
@@ -114,7 +120,7 @@ impl Guarded {
                             l.split_once(':')
                                 .is_some_and(|(k, v)| k.trim() == "upgrade" && v.trim().contains("websocket"))
                         });
-                        self.state = if upgrade { State::Upgraded } else { State::Idle };
+                        self.state = if upgrade { State::Asked } else { State::Idle };
                         let idle = self.idle_timeout;
                         self.deadline.as_mut().reset(Instant::now() + idle);
                     }
@@ -134,7 +140,7 @@ impl AsyncRead for Guarded {
         match Pin::new(&mut self.io).poll_read(cx, buf) {
             Poll::Ready(Ok(())) => {
                 let new = &buf.filled()[before..];
-                if !new.is_empty() && self.state == State::Idle {
+                if !new.is_empty() && matches!(self.state, State::Idle | State::Asked) {
                     let idle = self.idle_timeout;
                     self.deadline.as_mut().reset(Instant::now() + idle);
                 }
@@ -156,9 +162,19 @@ impl AsyncRead for Guarded {
 impl AsyncWrite for Guarded {
     fn poll_write(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
         let r = Pin::new(&mut self.io).poll_write(cx, buf);
-        if matches!(r, Poll::Ready(Ok(n)) if n > 0) && self.state == State::Idle {
-            let idle = self.idle_timeout;
-            self.deadline.as_mut().reset(Instant::now() + idle);
+        if matches!(r, Poll::Ready(Ok(n)) if n > 0) {
+            if self.state == State::Asked {
+                // The answer to the upgrade request: only a 101 hands the connection over.
+                self.state = if buf.starts_with(b"HTTP/1.1 101") {
+                    State::Upgraded
+                } else {
+                    State::Idle
+                };
+            }
+            if self.state == State::Idle {
+                let idle = self.idle_timeout;
+                self.deadline.as_mut().reset(Instant::now() + idle);
+            }
         }
         r
     }
@@ -207,6 +223,8 @@ mod tests {
         while got < 60 {
             got += g.read(&mut buf).await.unwrap();
         }
+        assert_eq!(g.state, State::Asked);
+        g.write_all(b"HTTP/1.1 101 Switching Protocols\r\n\r\n").await.unwrap();
         assert_eq!(g.state, State::Upgraded);
         // Quiet for longer than both time-outs: still open.
         let quiet = tokio::time::timeout(Duration::from_millis(500), g.read(&mut buf)).await;
@@ -219,6 +237,29 @@ mod tests {
             got += g.read(&mut buf).await.unwrap();
         }
         assert_eq!(g.state, State::Idle);
+        let e = g.read(&mut buf).await.unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::TimedOut);
+    }
+
+    /// Issue 27.1: an upgrade asked for and refused (here 401) leaves the connection guarded:
+    /// the next request's headers are timed again.
+    #[tokio::test]
+    async fn an_upgrade_refused_leaves_the_guard_on() {
+        let (mut g, mut c) = pair(Duration::from_millis(100), Duration::from_secs(60)).await;
+        c.write_all(b"GET /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\r\n")
+            .await
+            .unwrap();
+        let mut buf = [0u8; 256];
+        let mut got = 0;
+        while got < 60 {
+            got += g.read(&mut buf).await.unwrap();
+        }
+        g.write_all(b"HTTP/1.1 401 Unauthorized\r\ncontent-length: 0\r\n\r\n")
+            .await
+            .unwrap();
+        assert_eq!(g.state, State::Idle);
+        c.write_all(b"GET / HTTP/1.1\r\nX-Slow: ").await.unwrap();
+        let _ = g.read(&mut buf).await.unwrap();
         let e = g.read(&mut buf).await.unwrap_err();
         assert_eq!(e.kind(), io::ErrorKind::TimedOut);
     }

@@ -30,6 +30,9 @@ pub enum ServeError {
     /// The haptic link could not be opened.
     #[error("{0}")]
     Haptic(String),
+    /// The data directory is held by another server, or cannot be written.
+    #[error(transparent)]
+    DataDir(#[from] crate::serve::data_dir::DataDirError),
 }
 
 /// A running server's address and the operator's URL.
@@ -55,6 +58,16 @@ pub async fn run(
 ) -> Result<(), ServeError> {
     // Bound first: a port in use must stop the start before the loop takes its core.
     let (listener, addr) = bind_to(bind).await?;
+    // Held for the whole run (`data_dir.rs`): no second server writes here, and records can be.
+    let _held = crate::serve::data_dir::hold(&cfg.data_dir)?;
+    // Its holder's to clean, before anything is recorded: a dead server's unfinished records.
+    let cleaned = records::clean_partials(&cfg.data_dir);
+    if cleaned > 0 {
+        tracing::warn!(
+            "records: removed {cleaned} unfinished .partial file(s) left in {} by an earlier run",
+            cfg.data_dir.display()
+        );
+    }
     let tick = 1.0 / loop_cfg.rate_hz;
     let params = scene.strategy_params(tick);
     let (shared, loop_thread) = start_loop(&scene, loop_cfg)?;

@@ -51,7 +51,9 @@ pub struct NetMetrics {
     pub sent: AtomicU64,
 }
 
-/// Free and total bytes of the file system holding `dir` (statvfs), for the disk alert.
+/// Free and total bytes of the file system holding `dir` (statvfs), for the disk alert. Free
+/// space records cannot be written to (a read-only mount, no permission) is none: 0, so that
+/// the disk alert fires rather than a gauge that looks healthy until the first record fails.
 pub fn disk_space(dir: &std::path::Path) -> Option<(f64, f64)> {
     use std::os::unix::ffi::OsStrExt;
     let path = std::ffi::CString::new(dir.as_os_str().as_bytes()).ok()?;
@@ -61,7 +63,12 @@ pub fn disk_space(dir: &std::path::Path) -> Option<(f64, f64)> {
         return None;
     }
     let frag = st.f_frsize as f64;
-    Some((st.f_bavail as f64 * frag, st.f_blocks as f64 * frag))
+    let free = if crate::serve::data_dir::writable(dir) {
+        st.f_bavail as f64 * frag
+    } else {
+        0.0
+    };
+    Some((free, st.f_blocks as f64 * frag))
 }
 
 /// Renders both sets as a Prometheus exposition; `now_ns` is `CLOCK_MONOTONIC` now; `disk` the
@@ -129,7 +136,7 @@ fn loop_scalars(l: &LoopMetrics, free: f64, total: f64) -> [Scalar; 9] {
         ),
         (
             "nanopush_data_dir_free_bytes",
-            "Free bytes (for unprivileged users) on the file system of the data directory.",
+            "Free bytes (for unprivileged users) on the file system of the data directory; 0 when records cannot be written there (read-only mount, no permission).",
             "gauge",
             free,
         ),

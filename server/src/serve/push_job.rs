@@ -14,20 +14,26 @@ use crate::serve::control_loop::{LoopCommand, PushJob};
 /// Whether a particle of radius `r` (m) can be pushed to `p` (m): its centre at least a radius
 /// inside the stage's `[0, range]` square, so the particle stays on the stage and the tip, which
 /// stays inside it, can reach behind it.
+///
+/// Checked in the protocol's units, against the bounds the refusal states: µm, the bounds
+/// rounded inward to the nanometre (the three decimals printed), the values to the picometre. In
+/// metres, a target exactly on the stated edge was refused (500 nm × 1e-9 is a hair above
+/// 0.5 µm × 1e-6).
 pub(crate) fn on_stage(p: (f64, f64), r: f64, range: f64) -> Result<(), Refusal> {
-    let inside = |v: f64| v >= r && v <= range - r;
+    let um = |v: f64| (v * 1e12).round() / 1e6;
+    let lo = (um(r) * 1e3).ceil() / 1e3;
+    let hi = ((um(range) - um(r)) * 1e3).floor() / 1e3;
+    let inside = |v: f64| um(v) >= lo && um(v) <= hi;
     if inside(p.0) && inside(p.1) {
         return Ok(());
     }
     Err(Refusal::new(
         ErrorCode::OutOfRange,
         format!(
-            "target ({:.3}, {:.3}) µm is out of range for a particle {:.3} µm in radius; allowed: [{:.3}, {:.3}] µm in x and y",
+            "target ({:.3}, {:.3}) µm is out of range for a particle {:.3} µm in radius; allowed: [{lo:.3}, {hi:.3}] µm in x and y",
             p.0 * 1e6,
             p.1 * 1e6,
             r * 1e6,
-            r * 1e6,
-            (range - r) * 1e6
         ),
     ))
 }
@@ -149,4 +155,27 @@ pub(crate) fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, gen
         return;
     }
     st.broadcast_event(&ServerMessage::PushStarted(started));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::on_stage;
+
+    /// Issue 27.9: the edges the refusal states are accepted, in µm as sent; a nanometre past
+    /// them is not.
+    #[test]
+    fn a_target_on_the_stated_edge_is_on_the_stage() {
+        let (r, range) = (500.0 * 1e-9, 100.0 * 1e-6);
+        for edge in [0.5, 99.5] {
+            assert_eq!(on_stage((edge * 1e-6, 30.0 * 1e-6), r, range), Ok(()), "{edge}");
+        }
+        for past in [0.499, 99.501] {
+            let e = on_stage((past * 1e-6, 30.0 * 1e-6), r, range).unwrap_err();
+            assert!(e.message.contains("allowed: [0.500, 99.500] µm"), "{}", e.message);
+        }
+        // A radius between nanometres: the bounds are rounded inward, and the stated one holds.
+        let e = on_stage((0.0, 0.0), 251.37e-9, range).unwrap_err();
+        assert!(e.message.contains("allowed: [0.252, 99.748] µm"), "{}", e.message);
+        assert_eq!(on_stage((0.252e-6, 99.748e-6), 251.37e-9, range), Ok(()));
+    }
 }

@@ -110,8 +110,13 @@ pub struct RunEntry {
 /// summary that cannot be read or parsed, or is larger than [`SUMMARY_MAX_BYTES`], is skipped),
 /// so the history survives restarts.
 pub fn run_history(dir: &Path, max: usize) -> std::io::Result<Vec<RunEntry>> {
+    Ok(runs_in(dir, &list(dir)?, max))
+}
+
+/// [`run_history`] from a listing of `dir` already made ([`list`]).
+pub fn runs_in(dir: &Path, listed: &[RecordEntry], max: usize) -> Vec<RunEntry> {
     let mut out = Vec::new();
-    for e in list(dir)? {
+    for e in listed {
         if out.len() >= max {
             break;
         }
@@ -136,7 +141,7 @@ pub fn run_history(dir: &Path, max: usize) -> std::io::Result<Vec<RunEntry>> {
         let est = v.get("estimate").and_then(serde_json::Value::as_array);
         let at = |i: usize| est.and_then(|a| a.get(i)).and_then(serde_json::Value::as_f64);
         out.push(RunEntry {
-            record: e.name,
+            record: e.name.clone(),
             modified: e.modified,
             instance: v
                 .get("instance")
@@ -149,7 +154,7 @@ pub fn run_history(dir: &Path, max: usize) -> std::io::Result<Vec<RunEntry>> {
             estimate: [at(0).unwrap_or(f64::NAN), at(1).unwrap_or(f64::NAN)],
         });
     }
-    Ok(out)
+    out
 }
 
 /// The JSON summary of a push record.
@@ -191,7 +196,8 @@ struct Open {
 /// A record's name, or why it could not be written.
 pub type Recorded = Result<String, String>;
 
-/// Removes the `.partial` files a crash (or a kill) left in `dir`; how many.
+/// Removes the `.partial` files a crash (or a kill) left in `dir`; how many. Called by the
+/// directory's holder only (`data_dir.rs`): another live server's are never there.
 pub fn clean_partials(dir: &Path) -> usize {
     let Ok(rd) = std::fs::read_dir(dir) else { return 0 };
     rd.flatten()
@@ -212,13 +218,6 @@ pub fn run_recorder(
     if let Err(e) = std::fs::create_dir_all(&dir) {
         tracing::error!("records: cannot create {}: {e}", dir.display());
     }
-    let cleaned = clean_partials(&dir);
-    if cleaned > 0 {
-        tracing::warn!(
-            "records: removed {cleaned} unfinished .partial file(s) left in {} by an earlier run",
-            dir.display()
-        );
-    }
     let mut open: Option<Open> = None;
     let mut done: Vec<(u64, String, u64)> = Vec::new();
     let mut failed: Vec<(u64, String)> = Vec::new();
@@ -229,7 +228,7 @@ pub fn run_recorder(
             events.push(e);
         }
         while let Some(msg) = shared.records.pop() {
-            handle(&dir, msg, &mut open, &mut done, &mut failed);
+            handle(&dir, &instance, msg, &mut open, &mut done, &mut failed);
         }
         for e in events {
             let LoopEvent::RunDone {
@@ -296,6 +295,7 @@ pub fn run_recorder(
 
 fn handle(
     dir: &Path,
+    instance: &str,
     msg: RecordMsg,
     open: &mut Option<Open>,
     done: &mut Vec<(u64, String, u64)>,
@@ -306,7 +306,8 @@ fn handle(
             if let Some(o) = open.take() {
                 finish(dir, o, done, failed);
             }
-            let name = format!("push-{}-r{run}-p{particle}.csv", unix_now());
+            // The server run in the name: runs one after the other never reuse a name.
+            let name = format!("push-{}-{instance}-r{run}-p{particle}.csv", unix_now());
             match std::fs::File::create(partial(&dir.join(&name))) {
                 Ok(f) => {
                     let mut file = std::io::BufWriter::new(f);

@@ -103,11 +103,12 @@ pub(crate) fn run_scan(st: &AppState, params: ScanParams) {
     });
 }
 
-/// Writes scan `scan_id`'s record (`scan-T-N.gsf` and its `.json` summary with the particles
+/// Writes scan `scan_id`'s record (`scan-T-INSTANCE-N.gsf` and its `.json` summary with the particles
 /// found); returns the GSF's name, or the reason it is missing.
 fn write_record(st: &AppState, scan_id: u32, img: &HeightImage, tip: &Tip) -> (Option<String>, Option<String>) {
     let (mut record, mut record_error) = (None, None);
-    let stem = format!("scan-{}-{scan_id}", records::unix_now());
+    // The server run in the name: two runs' scans of the same second never share one.
+    let stem = format!("scan-{}-{}-{scan_id}", records::unix_now(), st.instance.id);
     let mut gsf = Vec::new();
     let prepared = write_gsf(&mut gsf, img, &stem)
         .map_err(|e| e.to_string())

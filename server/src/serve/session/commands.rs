@@ -12,7 +12,7 @@ use super::{Client, MIN_SCAN_UM};
 use crate::control::MoveTarget;
 use crate::scan::ScanParams;
 use crate::serve::app_state::AppState;
-use crate::serve::command_checks::{Refusal, number, push_target};
+use crate::serve::command_checks::{Refusal, fields_apply, number, push_target};
 use crate::serve::control_loop::{LoopCommand, StopReason};
 use crate::serve::haptic::api::haptic_command;
 use crate::serve::push_job::{on_stage, prepare_push, run_done_failed};
@@ -20,6 +20,7 @@ use crate::serve::scan_job::run_scan;
 
 /// Handles one valid-JSON command.
 pub(super) fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<(), Refusal> {
+    fields_apply(&msg)?;
     match msg {
         ClientMessage::Haptic {
             action,

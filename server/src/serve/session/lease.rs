@@ -1,6 +1,7 @@
 //! The control lease: one operator at a time commands the instrument. Taken with `take_lease`,
 //! given back with `release_lease`, or lost with the connection (which also stops what the
-//! holder commanded). Every change is broadcast as a `lease` event.
+//! holder commanded). Haptic z-control ends whenever the lease is freed. Every change is
+//! broadcast as a `lease` event.
 
 use std::sync::atomic::Ordering::Relaxed;
 
@@ -10,6 +11,7 @@ use super::Client;
 use crate::serve::app_state::AppState;
 use crate::serve::command_checks::Refusal;
 use crate::serve::control_loop::{LoopCommand, StopReason};
+use crate::serve::haptic::HapticCommand;
 
 /// A command that changes the instrument needs an operator holding the lease, and a server
 /// that is not shutting down.
@@ -68,11 +70,27 @@ pub(super) fn release(st: &AppState, c: &Client) -> Result<(), Refusal> {
     }
     *lease = None;
     drop(lease);
+    release_haptic(st);
     st.broadcast_event(&ServerMessage::Lease {
         holder: None,
         reason: None,
     });
     Ok(())
+}
+
+/// The lease is free: haptic z-control, which only the holder commands, ends with it (the tip
+/// parks, the handle is let go), so z-control is never `engaged` with no holder. Sent whatever
+/// the phase (an `engage` still queued is undone too); releasing when off changes nothing.
+/// `true` when z-control was on.
+fn release_haptic(st: &AppState) -> bool {
+    let h = &st.shared.metrics.haptic;
+    if !h.enabled.load(Relaxed) {
+        return false;
+    }
+    let on = h.phase_name() != "off";
+    // A full queue is counted by `command`.
+    let _ = st.shared.command(LoopCommand::Haptic(HapticCommand::Release));
+    on
 }
 
 /// Client `id` disconnected: the lease goes with it, and so does what it commanded. Nobody
@@ -95,11 +113,17 @@ pub(super) fn on_disconnect(st: &AppState, id: u32) {
             let _ = st.shared.command(LoopCommand::Stop(StopReason::HolderDisconnected));
         }
     }
+    let haptic = if release_haptic(st) {
+        "; its haptic z-control was released"
+    } else {
+        ""
+    };
     let what = match (pushing, scanning) {
         (true, _) => "; its push was stopped",
         (_, true) => "; its scan was stopped",
         _ => "",
     };
+    let what = format!("{what}{haptic}");
     tracing::info!("client {id} held the lease and disconnected{what}");
     st.broadcast_event(&ServerMessage::Lease {
         holder: None,

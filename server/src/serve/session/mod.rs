@@ -5,6 +5,7 @@
 //! channels in the tests.
 
 mod commands;
+mod keepalive;
 mod lease;
 mod receive;
 mod send;
@@ -13,8 +14,8 @@ pub(crate) mod tests;
 
 use std::collections::HashSet;
 use std::net::SocketAddr;
+use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use axum::extract::ws::{Message, Utf8Bytes, WebSocket};
@@ -64,6 +65,7 @@ pub(crate) async fn run<S, R, E>(st: Arc<AppState>, sink: S, stream: R, role: Ro
 where
     S: Sink<Message> + Unpin + Send + 'static,
     R: Stream<Item = Result<Message, E>> + Unpin,
+    E: std::error::Error + 'static,
 {
     let id = st.clients.next_client.fetch_add(1, Relaxed);
     tracing::info!("client {id} ({role:?}) connected from {peer}");
@@ -82,15 +84,17 @@ where
     let _ = reply_tx.try_send(to_text(&welcome));
     let _ = reply_tx.try_send(to_text(&st.state_message()));
 
-    // When the peer last sent anything (a command, a pong): the sender's keep-alive closes a
-    // connection whose peer stayed silent past the dead-peer time-out.
-    let heard = Arc::new(Mutex::new(Instant::now()));
+    // The newest ping the peer answered (`keepalive.rs`): the sender closes a peer that left a
+    // ping unanswered past the dead-peer time-out, and skips telemetry for one that lags.
+    let answered = keepalive::Answered::default();
+    let closing = send::Closing::default();
     let outbox = Outbox {
         id,
         role,
         replies,
         streams,
-        heard: heard.clone(),
+        answered: answered.clone(),
+        closing: closing.clone(),
     };
     let mut send = tokio::spawn(send::send_loop(st.clone(), sink, outbox));
     let mut client = Client {
@@ -103,12 +107,17 @@ where
     let inbox = Inbox {
         replies: &reply_tx,
         streams: &streams_tx,
-        heard: &heard,
+        answered: &answered,
     };
     let ended = receive::receive_loop(&st, stream, &mut client, inbox, &mut send).await;
     lease::on_disconnect(&st, id);
     for s in &client.streams {
         commands::counter(&st, *s).fetch_sub(1, Relaxed);
+    }
+    // A message too big: the send task ends with a 1009 close once the queue goes.
+    if ended == Ended::TooBig {
+        tracing::info!("client {id}: a message over {HARD_CAP} bytes; closing (1009)");
+        let _ = closing.set((1009, "message over 8 MiB"));
     }
     // On shutdown the send task says `shutdown` and closes before the reply queue goes (else it
     // could see the queue closed first and end silently); on a disconnect the closed queue is

@@ -2,7 +2,7 @@
 //! limit), parsed as one command, handled, and answered in order (`ok` or a typed error).
 
 use std::collections::HashSet;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Instant;
 
 use axum::extract::ws::{Message, Utf8Bytes};
@@ -26,6 +26,21 @@ pub(super) enum Ended {
     ShuttingDown,
     /// The send loop ended first.
     SenderDone,
+    /// The peer sent a message over [`super::HARD_CAP`]: the connection is closed with 1009.
+    TooBig,
+}
+
+/// Whether `e`, a read error, is a message or frame over the size cap (tungstenite's
+/// `Capacity` error, under axum's).
+fn too_big(e: &(dyn std::error::Error + 'static)) -> bool {
+    let mut cause = Some(e);
+    while let Some(c) = cause {
+        if let Some(tungstenite::Error::Capacity(_)) = c.downcast_ref::<tungstenite::Error>() {
+            return true;
+        }
+        cause = c.source();
+    }
+    false
 }
 
 /// What becomes of one frame read.
@@ -83,8 +98,8 @@ pub(super) struct Inbox<'a> {
     pub replies: &'a mpsc::Sender<Utf8Bytes>,
     /// The client's subscriptions, for the send loop.
     pub streams: &'a watch::Sender<HashSet<WsStream>>,
-    /// When the peer last sent anything.
-    pub heard: &'a Mutex<Instant>,
+    /// The newest ping the peer answered.
+    pub answered: &'a super::keepalive::Answered,
 }
 
 /// Reads and handles commands until the peer goes, the server shuts down, or the send loop
@@ -98,6 +113,7 @@ pub(super) async fn receive_loop<R, E>(
 ) -> Ended
 where
     R: Stream<Item = Result<Message, E>> + Unpin,
+    E: std::error::Error + 'static,
 {
     let mut shutdown = st.channels.shutdown.subscribe();
     loop {
@@ -106,11 +122,13 @@ where
             _ = shutdown.changed() => return Ended::ShuttingDown,
             _ = &mut *send => return Ended::SenderDone,
         };
-        let Some(Ok(msg)) = next else {
-            return Ended::Disconnected;
+        let msg = match next {
+            Some(Ok(msg)) => msg,
+            Some(Err(e)) if too_big(&e) => return Ended::TooBig,
+            _ => return Ended::Disconnected,
         };
-        if let Ok(mut t) = inbox.heard.lock() {
-            *t = Instant::now();
+        if let Message::Pong(payload) = &msg {
+            super::keepalive::pong(inbox.answered, payload);
         }
         let text = match admit(&st.cfg, client, msg, Instant::now()) {
             Admit::Command(t) => t,

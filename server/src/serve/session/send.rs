@@ -1,19 +1,21 @@
 //! The send loop of one session: replies (with back-pressure), events, telemetry and scan lines
-//! merged onto the socket, keep-alive pings, the dead-peer time-out and the per-frame send
-//! budget. A slow client skips telemetry and is told how many frames (`lagged`).
+//! merged onto the socket, numbered pings judged by their pongs (`keepalive.rs`: the dead-peer
+//! time-out, and telemetry skipped for a client that has not read what was sent half a second
+//! ago), and the per-frame send budget. A slow client skips telemetry and is told how many frames
+//! (`lagged`) before the next one it gets.
 
 use std::collections::HashSet;
+use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
-use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
-use axum::body::Bytes;
 use axum::extract::ws::{CloseFrame, Message, Utf8Bytes};
 use futures_util::{Sink, SinkExt};
 use nanopush_proto::ws::{Role, ServerMessage, Stream as WsStream};
 use tokio::sync::{broadcast, mpsc, watch};
 
 use super::SEND_BUDGET;
+use super::keepalive::{Answered, KeepAlive, PROBE};
 use crate::serve::app_state::{AppState, to_text};
 use crate::serve::frames::{Frames, Next};
 
@@ -27,18 +29,27 @@ pub(super) struct Outbox {
     pub replies: mpsc::Receiver<Utf8Bytes>,
     /// The streams it subscribed to.
     pub streams: watch::Receiver<HashSet<WsStream>>,
-    /// When the peer last sent anything (a command, a pong).
-    pub heard: Arc<Mutex<Instant>>,
+    /// The newest ping the peer answered.
+    pub answered: Answered,
+    /// The close frame to end with once the replies are sent, when the receive side ended the
+    /// session for a reason the peer must be told (a message too big: 1009).
+    pub closing: Closing,
 }
 
-/// Sends until the replies close, the server shuts down (after saying so), the peer stays silent
-/// past the dead-peer time-out, or a frame waits past [`SEND_BUDGET`].
+/// A close code and reason, set once.
+pub(super) type Closing = Arc<std::sync::OnceLock<(u16, &'static str)>>;
+
+/// Sends until the replies close, the server shuts down (after saying so), the peer leaves a ping
+/// unanswered past the dead-peer time-out, or a frame waits past [`SEND_BUDGET`].
 pub(super) async fn send_loop<S>(st: Arc<AppState>, mut sink: S, mut out: Outbox)
 where
     S: Sink<Message> + Unpin,
 {
     let id = out.id;
-    let mut ping = tokio::time::interval(st.cfg.ws_ping);
+    let mut ping = tokio::time::interval(st.cfg.ws_ping.min(PROBE));
+    let mut keepalive = KeepAlive::new(out.answered.clone(), Instant::now());
+    // Telemetry frames skipped since the last one sent (the client lagging).
+    let mut skipped = 0u64;
     ping.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     ping.tick().await;
     let mut events = st.channels.events.subscribe();
@@ -57,7 +68,12 @@ where
         let msg = tokio::select! {
             r = out.replies.recv() => match r {
                 Some(m) => Message::Text(m),
-                None => break,
+                None => {
+                    if let Some(&(code, reason)) = out.closing.get() {
+                        let _ = send_within_budget(&mut sink, close(code, reason), id).await;
+                    }
+                    break;
+                }
             },
             r = events.recv() => match r {
                 Ok(m) => Message::Text(m),
@@ -66,6 +82,19 @@ where
             },
             r = telemetry.next(), if wants.contains(&WsStream::Tip) => match r {
                 Next::Frame(_, m) => {
+                    if keepalive.behind(Instant::now()) {
+                        // Not queued to be read seconds late: skipped, and told before the next.
+                        skipped += 1;
+                        st.net.dropped_frames.fetch_add(1, Relaxed);
+                        continue;
+                    }
+                    if skipped > 0 {
+                        let told = Message::Text(to_text(&ServerMessage::Lagged { skipped }));
+                        skipped = 0;
+                        if !send_within_budget(&mut sink, told, id).await {
+                            break;
+                        }
+                    }
                     st.net.sent.fetch_add(1, Relaxed);
                     Message::Text(m)
                 }
@@ -84,17 +113,22 @@ where
                 wants = out.streams.borrow_and_update().clone();
                 // Drop what queued before the subscription.
                 telemetry.renew();
+                skipped = 0;
                 scans = scans.resubscribe();
                 continue;
             }
             _ = ping.tick() => {
-                let silent = out.heard.lock().map_or(Duration::ZERO, |t| t.elapsed());
+                let now = Instant::now();
+                let silent = keepalive.unanswered_for(now);
                 if silent > st.cfg.ws_timeout {
-                    tracing::info!("client {id}: nothing heard for {:.0} s; closing (a dead peer)", silent.as_secs_f64());
+                    tracing::info!("client {id}: a ping unanswered for {:.1} s; closing (a dead peer)", silent.as_secs_f64());
                     let _ = sink.send(close(1001, "no answer to pings")).await;
                     break;
                 }
-                Message::Ping(Bytes::from_static(b"nanopush"))
+                match keepalive.due(now, wants.contains(&WsStream::Tip), st.cfg.ws_ping) {
+                    Some(payload) => Message::Ping(payload),
+                    None => continue,
+                }
             }
             _ = shutdown.changed() => {
                 let bye = to_text(&ServerMessage::Shutdown { reason: "server shutting down".into() });
