@@ -6,7 +6,10 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nanopush::serve::app_state::ServeConfig;
+use nanopush::serve::app_state::{AccessConfig, ServeConfig};
+use nanopush::serve::auth::TokenFile;
+use nanopush::serve::auth::tokens::TokenTable;
+use nanopush::serve::client_addr::Cidr;
 use nanopush::serve::control_loop::LoopConfig;
 use nanopush::serve::haptic::HapticMode;
 
@@ -31,6 +34,15 @@ pub struct ServeArgs {
     /// Viewer token; when absent viewers need none.
     #[arg(long)]
     viewer_token: Option<String>,
+    /// Named operators and viewers, one hashed token each (`nanopush token add NAME --role R`);
+    /// then every connection needs a token of the file (the generated one is not accepted), and
+    /// the file is re-read when it changes (a revoked token's sessions are closed at once).
+    #[arg(long, conflicts_with_all = ["operator_token", "viewer_token"])]
+    token_file: Option<PathBuf>,
+    /// A reverse proxy whose X-Forwarded-For names the real client (repeatable; an address or a
+    /// CIDR block, e.g. 127.0.0.1 or 10.0.0.0/8). From any other peer the header is ignored.
+    #[arg(long)]
+    trusted_proxy: Vec<String>,
     /// Another browser origin allowed to connect (repeatable), e.g. http://lab-display:3000.
     #[arg(long)]
     allow_origin: Vec<String>,
@@ -188,6 +200,38 @@ fn check(a: &ServeArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `--token-file` (read now: a broken file stops the start, naming its line) and
+/// `--trusted-proxy`.
+fn access(a: &ServeArgs) -> anyhow::Result<AccessConfig> {
+    let token_file = match &a.token_file {
+        Some(path) => {
+            let table = TokenTable::read(path, false).context("--token-file")?;
+            if table.entries.is_empty() {
+                bail!(
+                    "--token-file {}: no tokens in it; add one with `nanopush token add NAME --role operator --token-file {}`",
+                    path.display(),
+                    path.display()
+                );
+            }
+            Some(TokenFile {
+                path: path.clone(),
+                table,
+            })
+        }
+        None => None,
+    };
+    let trusted_proxies = a
+        .trusted_proxy
+        .iter()
+        .map(|s| s.parse::<Cidr>().map_err(|e| anyhow::anyhow!("--trusted-proxy {e}")))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok(AccessConfig {
+        token_file,
+        trusted_proxies,
+        tls: false,
+    })
+}
+
 /// Runs the server until SIGINT or SIGTERM.
 pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
     check(a)?;
@@ -225,6 +269,7 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         scan_line_hz: a.scan_line_hz,
         telemetry_hz: a.telemetry_hz,
         haptic: haptic_mode(a)?,
+        access: access(a)?,
     };
     let loop_cfg = LoopConfig {
         rate_hz: a.rate_hz,

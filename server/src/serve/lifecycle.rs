@@ -11,7 +11,7 @@ use crate::scene::Scene;
 use crate::serve::app_state::{AppState, Instance, ServeConfig};
 use crate::serve::control_loop::{ControlLoop, LoopCommand, LoopConfig, Shared};
 use crate::serve::haptic::{HapticMode, Supervisor};
-use crate::serve::{app, guard, records, telemetry};
+use crate::serve::{app, audit, auth, guard, records, telemetry};
 
 /// A plain HTTP connection idle this long is closed (WebSockets keep themselves alive with pings).
 pub const IDLE_HTTP: Duration = Duration::from_secs(60);
@@ -64,9 +64,12 @@ pub async fn run(
     // This run of the server, named in its records' summaries and in `welcome`.
     let instance = Instance::now();
     let rec_instance = instance.id.clone();
+    // Who ran each push: the audit log's and the records'.
+    let people = audit::RunPeople::default();
+    let rec_people = people.clone();
     let recorder = match std::thread::Builder::new()
         .name("recorder".into())
-        .spawn(move || records::run_recorder(rec_shared, dir, rec_instance, ev_tx))
+        .spawn(move || records::run_recorder(rec_shared, dir, rec_instance, rec_people, ev_tx))
     {
         Ok(r) => r,
         Err(source) => {
@@ -86,11 +89,18 @@ pub async fn run(
     };
     let mut state = AppState::new(cfg, scene, shared, params);
     state.instance = instance;
+    state.audit = audit::Audit::open(&state.cfg.data_dir, people);
     let state = Arc::new(state);
     *state.addr.lock().expect("addr lock") = Some(addr);
-    let url = format!("http://{addr}/?token={}", state.cfg.operator_token);
+    // With a token file each person opens the page with their own token.
+    let url = if state.auth.is_named() {
+        format!("http://{addr}/ (each person adds ?token=THEIR_TOKEN)")
+    } else {
+        format!("http://{addr}/?token={}", state.cfg.operator_token)
+    };
     started(&Started { addr, url });
     let telemetry = tokio::spawn(telemetry::telemetry_task(state.clone(), ev_rx));
+    tokio::spawn(auth::watch_token_file(state.clone()));
     let threads = Threads {
         recorder,
         control_loop: loop_thread,

@@ -3,6 +3,9 @@
 
 pub mod app;
 pub mod app_state;
+pub mod audit;
+pub mod auth;
+pub mod client_addr;
 pub mod command_checks;
 pub mod control_loop;
 pub mod frames;

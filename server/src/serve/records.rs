@@ -162,6 +162,8 @@ pub struct PushSummary {
     pub instance: String,
     /// Run number.
     pub run: u64,
+    /// Who ran it (their token's name; `operator` without a token file).
+    pub person: Option<String>,
     /// Particle id.
     pub particle: u32,
     /// `ok` or the failure code.
@@ -202,11 +204,13 @@ pub fn clean_partials(dir: &Path) -> usize {
 
 /// Drains the loop's trace rows and events, writes the records (each summary names `instance`,
 /// the server run), and forwards each event with its record's name — or the reason it could not
-/// be written. Ends when the loop has finished and everything is written.
+/// be written. `people` names who ran each push. Ends when the loop has finished and everything
+/// is written.
 pub fn run_recorder(
     shared: Arc<Shared>,
     dir: PathBuf,
     instance: String,
+    people: crate::serve::audit::RunPeople,
     out: tokio::sync::mpsc::UnboundedSender<(LoopEvent, Recorded)>,
 ) {
     if let Err(e) = std::fs::create_dir_all(&dir) {
@@ -251,6 +255,7 @@ pub fn run_recorder(
                     schema: "push-record",
                     instance: instance.clone(),
                     run,
+                    person: people.lock().ok().and_then(|p| p.get(&run).cloned()),
                     particle,
                     outcome: outcome.into(),
                     failure: failure.clone(),
@@ -403,6 +408,7 @@ mod tests {
                 schema: "push-record",
                 instance: "18f-2a".into(),
                 run,
+                person: Some("alice".into()),
                 particle: 2,
                 outcome: outcome.into(),
                 failure: failure.map(str::to_string),

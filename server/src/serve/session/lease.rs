@@ -53,6 +53,7 @@ pub(super) fn take(st: &AppState, c: &Client) -> Result<(), Refusal> {
             drop(lease);
             st.broadcast_event(&ServerMessage::Lease {
                 holder: Some(c.id),
+                holder_name: Some(c.person.name.clone()),
                 reason: None,
             });
             Ok(())
@@ -70,6 +71,7 @@ pub(super) fn release(st: &AppState, c: &Client) -> Result<(), Refusal> {
     drop(lease);
     st.broadcast_event(&ServerMessage::Lease {
         holder: None,
+        holder_name: None,
         reason: None,
     });
     Ok(())
@@ -103,6 +105,7 @@ pub(super) fn on_disconnect(st: &AppState, id: u32) {
     tracing::info!("client {id} held the lease and disconnected{what}");
     st.broadcast_event(&ServerMessage::Lease {
         holder: None,
+        holder_name: None,
         reason: Some(format!("client {id}, which held the lease, disconnected{what}")),
     });
 }

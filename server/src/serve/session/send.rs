@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 use axum::body::Bytes;
 use axum::extract::ws::{CloseFrame, Message, Utf8Bytes};
 use futures_util::{Sink, SinkExt};
-use nanopush_proto::ws::{Role, ServerMessage, Stream as WsStream};
+use nanopush_proto::ws::{ErrorCode, Role, ServerMessage, Stream as WsStream};
 use tokio::sync::{broadcast, mpsc, watch};
 
 use super::SEND_BUDGET;
@@ -29,6 +29,8 @@ pub(super) struct Outbox {
     pub streams: watch::Receiver<HashSet<WsStream>>,
     /// When the peer last sent anything (a command, a pong).
     pub heard: Arc<Mutex<Instant>>,
+    /// Changes to the reason when the person's token is revoked: the session is closed.
+    pub kicked: watch::Receiver<Option<String>>,
 }
 
 /// Sends until the replies close, the server shuts down (after saying so), the peer stays silent
@@ -48,6 +50,7 @@ where
     let mut scans = st.channels.scans.subscribe();
     let mut shutdown = st.channels.shutdown.subscribe();
     let mut wants = HashSet::new();
+    let mut kick_open = true;
     loop {
         // Only an operator can hold the lease: a viewer's session never looks (500 of them
         // would each take the lease's lock for every message).
@@ -95,6 +98,17 @@ where
                     break;
                 }
                 Message::Ping(Bytes::from_static(b"nanopush"))
+            }
+            r = out.kicked.changed(), if kick_open => {
+                let Ok(()) = r else {
+                    kick_open = false;
+                    continue;
+                };
+                let why = out.kicked.borrow().clone().unwrap_or_default();
+                let refused = to_text(&ServerMessage::Error { id: None, code: ErrorCode::Forbidden, message: why });
+                let _ = sink.send(Message::Text(refused)).await;
+                let _ = sink.send(close(1008, "access revoked")).await;
+                break;
             }
             _ = shutdown.changed() => {
                 let bye = to_text(&ServerMessage::Shutdown { reason: "server shutting down".into() });
