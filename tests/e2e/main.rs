@@ -10,6 +10,8 @@ mod prometheus;
 mod push;
 mod scan;
 mod serve;
+mod serve_access;
+mod serve_audit;
 mod serve_behaviour;
 mod serve_hostile;
 mod serve_scenes;
