@@ -22,6 +22,37 @@ export function apiUrl(path, loc) {
 }
 
 /**
+ * Exchanges the page's `?token=` for the server's session cookie (HttpOnly and SameSite=Strict:
+ * no script reads it, no other site sends it) and removes the token from the address bar and
+ * the history entry (`history.replaceState`), so it stays in no browser history, bookmark,
+ * proxy log or `Referer`. Resolves to the server's `{name, role}`, or null: no token in the URL,
+ * or the server refused it or has no `/api/session` (the token is then left where it is, and the
+ * page's connection carries it and says why it fails).
+ * @param {Location} loc the page's location
+ * @param {{fetchFn?: typeof fetch, history?: History}} [deps]
+ */
+export async function exchangeToken(loc, { fetchFn = globalThis.fetch, history = globalThis.history } = {}) {
+  const params = new URLSearchParams(loc.search || '');
+  const token = params.get('token');
+  if (!token) return null;
+  let r;
+  try {
+    r = await fetchFn('/api/session', { method: 'POST', headers: { Authorization: `Bearer ${token}` }, credentials: 'same-origin' });
+  } catch {
+    return null;
+  }
+  if (!r.ok) return null;
+  params.delete('token');
+  const q = params.toString();
+  history.replaceState(history.state, '', `${loc.pathname}${q ? `?${q}` : ''}${loc.hash || ''}`);
+  try {
+    return await r.json();
+  } catch {
+    return null;
+  }
+}
+
+/**
  * Reconnect delay (ms) for the n-th attempt (1-based): 0.25 s doubling to 2 s at most. The
  * server is one instrument on the lab's network, not a crowded service: a page that waits
  * longer than 2 s after it came back (7 s, as it did with a 15 s cap) shows a stale instrument.

@@ -17,4 +17,10 @@ function bootError(e) {
   console.warn(msg);
 }
 
-(view === 'monitor' ? import('./monitor.js') : import('./app.js')).then((page) => page.start()).catch(bootError);
+// The token of the URL is exchanged for a session cookie first and removed from the address bar
+// (src/connection.js, `exchangeToken`); the page then connects with the cookie.
+import('./connection.js')
+  .then((c) => c.exchangeToken(location))
+  .then(() => (view === 'monitor' ? import('./monitor.js') : import('./app.js')))
+  .then((page) => page.start())
+  .catch(bootError);

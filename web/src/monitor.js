@@ -108,7 +108,7 @@ export function statusTiles(s) {
     ['m-jitter', Number.isFinite(p99) ? (p99 < 1e-3 ? `≤ ${(p99 * 1e6).toFixed(0)} µs` : `≤ ${(p99 * 1e3).toPrecision(3)} ms`) : '–', p99 > 1e-3 ? 'warn' : ''],
     ['m-haptic', (hp.link === 'off' || !hp.link ? 'off' : `${hp.link}${hp.engaged ? ', engaged' : ''}`) + downs, hp.link === 'down' ? 'bad' : ''],
     ['m-clients', String(s.clients), ''],
-    ['m-lease', s.lease === null ? 'free' : `client ${s.lease}`, ''],
+    ['m-lease', s.lease === null ? 'free' : s.lease_name ? `${s.lease_name} (client ${s.lease})` : `client ${s.lease}`, ''],
     ['m-uptime', since, ''],
     ['m-hapdev', dev.text, dev.cls],
   ];

@@ -2,7 +2,7 @@
 // reconnects and sends over a fake socket and fake timers.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { wsUrl, apiUrl, backoffMs, reconnectText, Connection } from '../src/connection.js';
+import { wsUrl, apiUrl, backoffMs, reconnectText, Connection, exchangeToken } from '../src/connection.js';
 import { Session } from '../src/session.js';
 import { commands } from '../src/wire.js';
 
@@ -272,4 +272,28 @@ test('a socket promised and refused (the demo\'s module did not load) is logged 
   timers.run(250);
   assert.equal(tries, 2);
   await new Promise((r) => setImmediate(r));
+});
+
+test('the URL token is exchanged for the session cookie and removed from the address bar, other parameters kept (issue 27)', async () => {
+  const calls = [];
+  const replaced = [];
+  const fetchFn = async (url, init) => {
+    calls.push({ url, init });
+    return { ok: true, json: async () => ({ name: 'alice', role: 'operator' }) };
+  };
+  const history = { state: null, replaceState: (s, t, url) => replaced.push(url) };
+  const loc = { search: '?view=monitor&token=npt_ab_cd', pathname: '/', hash: '' };
+  const me = await exchangeToken(loc, { fetchFn, history });
+  assert.deepEqual(me, { name: 'alice', role: 'operator' });
+  assert.equal(calls.length, 1);
+  assert.equal(calls[0].url, '/api/session');
+  assert.equal(calls[0].init.method, 'POST');
+  assert.equal(calls[0].init.headers.Authorization, 'Bearer npt_ab_cd');
+  assert.deepEqual(replaced, ['/?view=monitor']);
+  // Refused: the token stays (the connection carries it and says why); no token: nothing asked.
+  const refused = async () => ({ ok: false, json: async () => ({}) });
+  assert.equal(await exchangeToken(loc, { fetchFn: refused, history }), null);
+  assert.equal(replaced.length, 1);
+  assert.equal(await exchangeToken({ search: '', pathname: '/', hash: '' }, { fetchFn, history }), null);
+  assert.equal(calls.length, 1);
 });
