@@ -12,6 +12,7 @@ use nanopush::serve::auth::tokens::TokenTable;
 use nanopush::serve::client_addr::Cidr;
 use nanopush::serve::control_loop::LoopConfig;
 use nanopush::serve::haptic::HapticMode;
+use nanopush::serve::tls::{self, TlsSource};
 
 /// Arguments of `nanopush serve`.
 #[derive(Args, Debug)]
@@ -43,6 +44,17 @@ pub struct ServeArgs {
     /// CIDR block, e.g. 127.0.0.1 or 10.0.0.0/8). From any other peer the header is ignored.
     #[arg(long)]
     trusted_proxy: Vec<String>,
+    /// HTTPS with this certificate chain (PEM, leaf first), with --tls-key.
+    #[arg(long, requires = "tls_key")]
+    tls_cert: Option<PathBuf>,
+    /// The private key (PEM) of --tls-cert.
+    #[arg(long, requires = "tls_cert")]
+    tls_key: Option<PathBuf>,
+    /// HTTPS with a self-signed certificate for a lab without a CA: made on the first start
+    /// (kept in tls/ of --data-dir), its SHA-256 fingerprint printed at each start for people to
+    /// compare with what their browser shows.
+    #[arg(long, conflicts_with_all = ["tls_cert", "tls_key"])]
+    tls_self_signed: bool,
     /// Another browser origin allowed to connect (repeatable), e.g. http://lab-display:3000.
     #[arg(long)]
     allow_origin: Vec<String>,
@@ -225,10 +237,34 @@ fn access(a: &ServeArgs) -> anyhow::Result<AccessConfig> {
         .iter()
         .map(|s| s.parse::<Cidr>().map_err(|e| anyhow::anyhow!("--trusted-proxy {e}")))
         .collect::<anyhow::Result<Vec<_>>>()?;
+    let source = match (&a.tls_cert, &a.tls_key, a.tls_self_signed) {
+        (Some(cert), Some(key), _) => Some(TlsSource::Files {
+            cert: cert.clone(),
+            key: key.clone(),
+        }),
+        (_, _, true) => {
+            // The names a browser on the lab's network may use: this host's, loopback, and the
+            // bound address.
+            let mut names = vec!["localhost".to_string(), "127.0.0.1".into(), "::1".into()];
+            if let Ok(h) = std::fs::read_to_string("/proc/sys/kernel/hostname") {
+                names.push(h.trim().to_string());
+            }
+            if !a.bind.is_unspecified() {
+                names.push(a.bind.to_string());
+            }
+            names.dedup();
+            Some(TlsSource::SelfSigned {
+                dir: a.data_dir.join("tls"),
+                names,
+            })
+        }
+        _ => None,
+    };
+    let tls = source.map(|s| tls::load(&s)).transpose().context("TLS")?;
     Ok(AccessConfig {
         token_file,
         trusted_proxies,
-        tls: false,
+        tls,
     })
 }
 
@@ -253,6 +289,14 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
             PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../web"))
         }
     });
+    let access = access(a)?;
+    let tls_note = access.tls.as_ref().map(|t| {
+        format!(
+            "TLS certificate {} SHA-256 fingerprint {}",
+            t.cert_path.display(),
+            t.fingerprint
+        )
+    });
     let cfg = ServeConfig {
         operator_token,
         viewer_token: a.viewer_token.clone(),
@@ -269,7 +313,7 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         scan_line_hz: a.scan_line_hz,
         telemetry_hz: a.telemetry_hz,
         haptic: haptic_mode(a)?,
-        access: access(a)?,
+        access,
     };
     let loop_cfg = LoopConfig {
         rate_hz: a.rate_hz,
@@ -328,6 +372,9 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
                 let mut out = std::io::stdout().lock();
                 let _ = writeln!(out, "nanopush serve: listening on {}", s.addr);
                 let _ = writeln!(out, "open {}", s.url);
+                if let Some(note) = &tls_note {
+                    let _ = writeln!(out, "{note}");
+                }
                 let _ = out.flush();
             },
             shutdown,

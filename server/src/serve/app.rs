@@ -250,7 +250,7 @@ fn origin_allowed(st: &AppState, origin: &str) -> bool {
         return false;
     };
     let port = addr.port();
-    let scheme = if st.cfg.access.tls { "https" } else { "http" };
+    let scheme = if st.cfg.access.tls.is_some() { "https" } else { "http" };
     [
         format!("{scheme}://127.0.0.1:{port}"),
         format!("{scheme}://localhost:{port}"),

@@ -62,8 +62,9 @@ pub struct AccessConfig {
     pub token_file: Option<crate::serve::auth::TokenFile>,
     /// Reverse proxies whose `X-Forwarded-For` is believed (`--trusted-proxy`).
     pub trusted_proxies: Vec<crate::serve::client_addr::Cidr>,
-    /// The server speaks HTTPS (session cookies are `Secure`).
-    pub tls: bool,
+    /// The server's own HTTPS (`--tls-cert`/`--tls-key`, `--tls-self-signed`); session cookies
+    /// are then `Secure`.
+    pub tls: Option<crate::serve::tls::Tls>,
 }
 
 /// Everything the handlers share, grouped by job.

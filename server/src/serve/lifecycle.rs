@@ -37,7 +37,7 @@ pub enum ServeError {
 pub struct Started {
     /// Bound address.
     pub addr: SocketAddr,
-    /// `http://ADDR/?token=TOKEN`.
+    /// `http://ADDR/?token=TOKEN` (`https` with TLS).
     pub url: String,
 }
 
@@ -93,10 +93,15 @@ pub async fn run(
     let state = Arc::new(state);
     *state.addr.lock().expect("addr lock") = Some(addr);
     // With a token file each person opens the page with their own token.
-    let url = if state.auth.is_named() {
-        format!("http://{addr}/ (each person adds ?token=THEIR_TOKEN)")
+    let scheme = if state.cfg.access.tls.is_some() {
+        "https"
     } else {
-        format!("http://{addr}/?token={}", state.cfg.operator_token)
+        "http"
+    };
+    let url = if state.auth.is_named() {
+        format!("{scheme}://{addr}/ (each person adds ?token=THEIR_TOKEN)")
+    } else {
+        format!("{scheme}://{addr}/?token={}", state.cfg.operator_token)
     };
     started(&Started { addr, url });
     let telemetry = tokio::spawn(telemetry::telemetry_task(state.clone(), ev_rx));
@@ -221,6 +226,14 @@ async fn serve_http(
     // ACK of the reply before the next telemetry frames went out (docs/server.md).
     // Slowloris: each request's headers within the header time-out, a plain HTTP connection
     // idle for a minute closed (WebSockets keep themselves alive with pings).
+    if let Some(tls) = &state.cfg.access.tls {
+        // HTTPS: the handshakes on tasks of their own, the guard over the decrypted bytes.
+        let listener = crate::serve::tls::TlsListener::new(listener, tls, state.cfg.header_timeout, IDLE_HTTP)?;
+        // (`tap_io`, with nothing to do: axum gives `ConnectInfo<SocketAddr>` to a tapped
+        // listener; TCP_NODELAY is set before the handshake.)
+        let listener = axum::serve::ListenerExt::tap_io(listener, |_: &mut crate::serve::tls::TlsIo| {});
+        return axum::serve(listener, app).with_graceful_shutdown(graceful).await;
+    }
     let guarded = guard::GuardedListener::new(listener, state.cfg.header_timeout, IDLE_HTTP);
     let listener = axum::serve::ListenerExt::tap_io(guarded, |io: &mut guard::Guarded| {
         if let Err(e) = io.tcp().set_nodelay(true) {

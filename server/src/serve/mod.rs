@@ -19,5 +19,6 @@ pub mod records;
 pub mod scan_job;
 pub mod session;
 pub mod telemetry;
+pub mod tls;
 
 pub use lifecycle::{IDLE_HTTP, ServeError, Started, run};

@@ -119,7 +119,7 @@ pub async fn login(
                 .into_response();
         }
     };
-    let secure = st.cfg.access.tls || forwarded_https(peer.ip(), &headers, &st.cfg.access.trusted_proxies);
+    let secure = st.cfg.access.tls.is_some() || forwarded_https(peer.ip(), &headers, &st.cfg.access.trusted_proxies);
     let set = format!(
         "{COOKIE}={value}; Path=/; HttpOnly; SameSite=Strict{}",
         if secure { "; Secure" } else { "" }
