@@ -52,7 +52,8 @@ enum Command {
     /// within the tolerance, refusals by reason, cost); `--shard I/N` splits the seeds.
     Campaign(campaign_cmd::CampaignArgs),
     /// The teleoperation server: the 1 kHz control loop, the WebSocket protocol, the web client.
-    Serve(serve_cmd::ServeArgs),
+    // Boxed: its arguments are the most numerous (clippy's large_enum_variant).
+    Serve(Box<serve_cmd::ServeArgs>),
     /// Named operators and viewers: `token add NAME --role R` (prints the token once),
     /// `token list`, `token revoke NAME` (its sessions on a running server are closed).
     Token(token_cmd::TokenArgs),

@@ -395,7 +395,7 @@ mod tests {
         let Command::Serve(a) = crate::parse(&argv) else {
             unreachable!("`serve` parses as Serve")
         };
-        a
+        *a
     }
 
     /// docs/server.md, "The teleoperation server": the synopsis's defaults, `--bind 127.0.0.1
@@ -437,5 +437,52 @@ mod tests {
             check(&parse(&["--haptic", link, "--rate-hz", "500"])).unwrap();
         }
         check(&parse(&["--rate-hz", "100"])).unwrap();
+    }
+
+    /// docs/deployment.md: a token file excludes the generated tokens, a certificate needs its
+    /// key, a self-signed certificate excludes given files, and a bad `--trusted-proxy` or a
+    /// missing or empty token file stops the start with what was wrong.
+    #[test]
+    fn access_flags_are_checked_before_the_start() {
+        let refused = |args: &[&str]| {
+            let argv = std::iter::once("nanopush")
+                .chain(std::iter::once("serve"))
+                .chain(args.iter().copied());
+            <crate::Cli as clap::Parser>::try_parse_from(argv).is_err()
+        };
+        assert!(refused(&["--token-file", "t", "--operator-token", "abcdefgh"]));
+        assert!(refused(&["--token-file", "t", "--viewer-token", "abcdefgh"]));
+        assert!(refused(&["--tls-cert", "c.pem"]));
+        assert!(refused(&["--tls-key", "k.pem"]));
+        assert!(refused(&[
+            "--tls-self-signed",
+            "--tls-cert",
+            "c.pem",
+            "--tls-key",
+            "k.pem"
+        ]));
+        let e = access(&parse(&["--trusted-proxy", "10.0.0.0/40"])).unwrap_err();
+        assert!(
+            e.to_string().contains("--trusted-proxy") && e.to_string().contains("[0, 32]"),
+            "{e}"
+        );
+        let dir = std::env::temp_dir().join(format!("nanopush-access-flags-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("tokens");
+        let e = access(&parse(&["--token-file", file.to_str().unwrap()])).unwrap_err();
+        assert!(format!("{e:#}").contains("No such file"), "{e:#}");
+        std::fs::write(&file, "# nobody yet\n").unwrap();
+        let e = access(&parse(&["--token-file", file.to_str().unwrap()])).unwrap_err();
+        assert!(e.to_string().contains("no tokens in it"), "{e}");
+        let a = access(&parse(&[
+            "--trusted-proxy",
+            "127.0.0.1",
+            "--trusted-proxy",
+            "10.0.0.0/8",
+        ]))
+        .unwrap();
+        assert_eq!(a.trusted_proxies.len(), 2);
+        assert!(a.token_file.is_none() && a.tls.is_none());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -215,8 +215,11 @@ fn issue_27_a_token_is_exchanged_for_an_http_only_same_site_strict_cookie() {
     assert!(!set.contains("secure"), "plain HTTP: not Secure ({set})");
     let value = set.split(';').next().unwrap().trim().to_string();
     let cookie = format!("Cookie: {value}");
-    assert_eq!(http(&srv.addr, "GET", "/api/status", &[cookie.clone()]).0, 200);
-    let (code, _, who) = http(&srv.addr, "GET", "/api/session", &[cookie.clone()]);
+    assert_eq!(
+        http(&srv.addr, "GET", "/api/status", std::slice::from_ref(&cookie)).0,
+        200
+    );
+    let (code, _, who) = http(&srv.addr, "GET", "/api/session", std::slice::from_ref(&cookie));
     assert_eq!((code, who.contains("carol")), (200, true), "{who}");
     let raw_cookie = value.clone();
     runtime().block_on(async {
@@ -249,7 +252,7 @@ fn issue_27_a_token_is_exchanged_for_an_http_only_same_site_strict_cookie() {
         .success()
     );
     let deadline = Instant::now() + Duration::from_secs(20);
-    while http(&srv.addr, "GET", "/api/status", &[cookie.clone()]).0 == 200 {
+    while http(&srv.addr, "GET", "/api/status", std::slice::from_ref(&cookie)).0 == 200 {
         assert!(
             Instant::now() < deadline,
             "a revoked token's cookie still opens the API"

@@ -42,6 +42,25 @@ pub struct Audit {
     pub written: Arc<AtomicU64>,
 }
 
+/// What the server did on an operator's behalf, for [`Audit::event`].
+#[derive(Debug)]
+pub struct Happened<'a> {
+    /// Whose behalf.
+    pub person: &'a str,
+    /// From where, when a connection is concerned.
+    pub address: Option<IpAddr>,
+    /// Their session.
+    pub client: Option<u32>,
+    /// `lease_lost`, `run_done`.
+    pub command: &'a str,
+    /// Details (the run, the particle, the record).
+    pub args: serde_json::Map<String, serde_json::Value>,
+    /// What became of it.
+    pub outcome: &'a str,
+    /// In words.
+    pub message: Option<&'a str>,
+}
+
 /// One line of the log.
 #[derive(Debug, Serialize)]
 struct Entry<'a> {
@@ -184,31 +203,22 @@ impl Audit {
         });
     }
 
-    /// Something the server did on a person's behalf (`lease_lost` when their connection
+    /// Something the server did on an operator's behalf (`lease_lost` when their connection
     /// closed, `run_done` when their push ended), with its `outcome`.
-    pub fn event(
-        &self,
-        person: &str,
-        address: Option<IpAddr>,
-        client: Option<u32>,
-        command: &str,
-        args: serde_json::Map<String, serde_json::Value>,
-        outcome: &str,
-        message: Option<&str>,
-    ) {
+    pub fn event(&self, e: Happened<'_>) {
         let unix_ms = now_ms();
         self.append(&Entry {
             time: rfc3339(unix_ms),
             unix_ms,
-            person,
+            person: e.person,
             role: role_name(Role::Operator),
-            address: address.map_or_else(|| "-".into(), |a| a.to_string()),
-            client,
-            command,
-            args,
-            outcome,
+            address: e.address.map_or_else(|| "-".into(), |a| a.to_string()),
+            client: e.client,
+            command: e.command,
+            args: e.args,
+            outcome: e.outcome,
             code: None,
-            message,
+            message: e.message,
         });
     }
 

@@ -29,15 +29,15 @@ fn audit_run_done(st: &AppState, run: u64, particle: u32, outcome: &str, failure
     if let Some(r) = record {
         args.insert("record".into(), r.into());
     }
-    st.audit.event(
-        person.as_deref().unwrap_or("unknown"),
-        None,
-        None,
-        "run_done",
+    st.audit.event(crate::serve::audit::Happened {
+        person: person.as_deref().unwrap_or("unknown"),
+        address: None,
+        client: None,
+        command: "run_done",
         args,
         outcome,
-        failure,
-    );
+        message: failure,
+    });
 }
 
 /// Telemetry at `telemetry_hz`, produced only while someone subscribes to `tip`, to the lease

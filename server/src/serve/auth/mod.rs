@@ -108,13 +108,16 @@ struct Named {
     verified: Mutex<HashMap<[u8; 32], Arc<Person>>>,
 }
 
+/// Session cookies by the SHA-256 of their value: the order they were made in, and whose.
+type Cookies = HashMap<[u8; 32], (u64, Arc<Person>)>;
+
 /// Everything about access the handlers share.
 pub struct Auth {
     /// Without a token file: the generated operator token and the viewer token.
     generated: (String, Option<String>),
     named: Option<Named>,
     /// Session cookies, by SHA-256 of their value, with when they were made (for eviction).
-    cookies: Mutex<HashMap<[u8; 32], (u64, Arc<Person>)>>,
+    cookies: Mutex<Cookies>,
     next_cookie: AtomicU64,
     live: Mutex<HashMap<u32, Live>>,
     failures: Mutex<FailureLimiter>,

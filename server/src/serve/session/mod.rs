@@ -23,6 +23,7 @@ use nanopush_proto::ws::{Role, ServerMessage, Stream as WsStream, WS_VERSION};
 use tokio::sync::{mpsc, watch};
 
 use crate::serve::app_state::{AppState, to_text};
+use crate::serve::audit::Happened;
 use crate::serve::auth::Person;
 use receive::{Ended, Inbox};
 use send::Outbox;
@@ -120,15 +121,15 @@ where
     };
     let ended = receive::receive_loop(&st, stream, &mut client, inbox, &mut send).await;
     if st.lease_holder() == Some(id) {
-        st.audit.event(
-            &person.name,
-            Some(peer.ip()),
-            Some(id),
-            "lease_lost",
-            serde_json::Map::new(),
-            "ok",
-            Some("the lease holder's connection closed"),
-        );
+        st.audit.event(Happened {
+            person: &person.name,
+            address: Some(peer.ip()),
+            client: Some(id),
+            command: "lease_lost",
+            args: serde_json::Map::new(),
+            outcome: "ok",
+            message: Some("the lease holder's connection closed"),
+        });
     }
     lease::on_disconnect(&st, id);
     st.auth.leave(id);
