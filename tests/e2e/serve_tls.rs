@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::Arc;
 
-use futures_util::{SinkExt, StreamExt};
+use futures_util::SinkExt;
 use nanopush_e2e::{Proc, bin, workspace};
 use rustls::pki_types::pem::PemObject as _;
 use rustls::pki_types::{CertificateDer, ServerName};
@@ -18,7 +18,7 @@ use tokio_rustls::TlsConnector;
 use tokio_tungstenite::tungstenite::Message;
 
 use crate::serve_access::http;
-use crate::util::{TOKEN, runtime, start, tmp};
+use crate::util::{TOKEN, runtime, start, tmp, until};
 
 /// A test CA, and a leaf for 127.0.0.1 and localhost signed by it, in `dir`: the CA's PEM, the
 /// leaf's and its key's.
@@ -90,26 +90,6 @@ async fn https(
     (status, head, String::from_utf8_lossy(&body).into_owned())
 }
 
-/// The next JSON text message satisfying `pred` (within 10 s).
-async fn next_json<S>(ws: &mut tokio_tungstenite::WebSocketStream<S>, pred: impl Fn(&Value) -> bool) -> Value
-where
-    S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin,
-{
-    loop {
-        let m = tokio::time::timeout(std::time::Duration::from_secs(10), ws.next())
-            .await
-            .expect("a message within 10 s")
-            .expect("open")
-            .expect("a frame");
-        if let Message::Text(t) = m {
-            let v: Value = serde_json::from_str(&t).unwrap();
-            if pred(&v) {
-                return v;
-            }
-        }
-    }
-}
-
 /// A server with a test CA's certificate: a client that trusts the CA gets the API and a `wss:`
 /// WebSocket (the operator's token, the lease taken over TLS); a client that trusts another CA
 /// is refused in the handshake; the session cookie is `Secure`; plain HTTP to the port is
@@ -137,12 +117,12 @@ fn issue_27_https_with_a_test_ca_serves_the_api_and_the_websocket_and_plain_http
         let stream = tls(&srv.addr, &trusted).await.unwrap();
         let url = format!("wss://{}/ws?token={TOKEN}", srv.addr);
         let (mut ws, _) = tokio_tungstenite::client_async(url, stream).await.expect("wss upgrade");
-        let w = next_json(&mut ws, |m| m["type"] == "welcome").await;
+        let w = until(&mut ws, 10.0, |m| m["type"] == "welcome").await;
         assert_eq!(w["role"], "operator");
         ws.send(Message::Text(json!({"type": "take_lease", "id": 1}).to_string().into()))
             .await
             .unwrap();
-        let ok = next_json(&mut ws, |m| m["id"] == 1).await;
+        let ok = until(&mut ws, 10.0, |m| m["id"] == 1).await;
         assert_eq!(ok["type"], "ok", "{ok}");
 
         let bearer = format!("Authorization: Bearer {TOKEN}");

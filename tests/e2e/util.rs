@@ -239,8 +239,16 @@ pub(crate) async fn send(ws: &mut Ws, v: Value) {
     ws.send(Message::Text(v.to_string().into())).await.unwrap();
 }
 
-/// The next JSON message that satisfies `pred`, within `secs`.
-pub(crate) async fn until(ws: &mut Ws, secs: f64, pred: impl Fn(&Value) -> bool) -> Value {
+/// The next JSON message that satisfies `pred`, within `secs` (on a WebSocket over TCP, or over
+/// TLS: `serve_tls.rs`).
+pub(crate) async fn until<S>(
+    ws: &mut tokio_tungstenite::WebSocketStream<S>,
+    secs: f64,
+    pred: impl Fn(&Value) -> bool,
+) -> Value
+where
+    S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin,
+{
     let deadline = Instant::now() + Duration::from_secs_f64(secs);
     loop {
         let left = deadline.saturating_duration_since(Instant::now());

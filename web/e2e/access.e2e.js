@@ -76,3 +76,20 @@ test('over HTTPS with a test CA, the URL token becomes an HttpOnly SameSite=Stri
   assert.equal(alice.url(), 'about:blank');
   assert.deepEqual(bob.errors, [], bob.errors.join('\n'));
 });
+
+test('a page signed in before the server restarts is signed in after it, by its cookie (the signing key is kept in the data directory)', async () => {
+  const alice = await newPage(browser, { width: 1280, height: 720 });
+  await alice.goto(`${srv.base}/?token=${tokens.alice}`);
+  await ready(alice);
+  const before = await alice.evaluate(() => window.nanopush.session.state.instance);
+  const port = Number(srv.addr.split(':').pop());
+  const { dir } = srv;
+  await srv.stop({ keep: true });
+  srv = await startServer({ tokenFile: join(scratch, 'tokens'), tls: { cert: join(scratch, 'cert.pem'), key: join(scratch, 'key.pem') }, port, dir });
+  await alice.waitForFunction((old) => {
+    const s = window.nanopush.session.state;
+    return s.connection === 'open' && s.instance !== null && s.instance !== old;
+  }, before, { timeout: 30000 });
+  assert.deepEqual(await alice.evaluate(() => ({ name: window.nanopush.session.state.name, role: window.nanopush.session.state.role })), { name: 'alice', role: 'operator' });
+  assert.ok(!alice.url().includes('token'), alice.url());
+});

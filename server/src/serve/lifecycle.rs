@@ -90,6 +90,13 @@ pub async fn run(
     let mut state = AppState::new(cfg, scene, shared, params);
     state.instance = instance;
     state.audit = audit::Audit::open(&state.cfg.data_dir, people);
+    let auth_dir = state.cfg.data_dir.join("auth");
+    if let Err(e) = state.auth.keep_cookies_in(&auth_dir) {
+        tracing::error!(
+            "cannot keep the session cookies' key in {}: {e}; pages sign in again after a restart",
+            auth_dir.display()
+        );
+    }
     let state = Arc::new(state);
     *state.addr.lock().expect("addr lock") = Some(addr);
     // With a token file each person opens the page with their own token.

@@ -109,15 +109,12 @@ pub async fn login(
         Ok(p) => p,
         Err((code, why)) => return (code, why).into_response(),
     };
-    let value = match st.auth.login(person.clone()) {
-        Ok(v) => v,
-        Err(e) => {
-            return (
-                StatusCode::INTERNAL_SERVER_ERROR,
-                format!("making a session cookie: {e}"),
-            )
-                .into_response();
-        }
+    let Some(value) = st.auth.login(&person) else {
+        return (
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "no key to sign session cookies (the kernel gave no random bytes); use ?token=",
+        )
+            .into_response();
     };
     let secure = st.cfg.access.tls.is_some() || forwarded_https(peer.ip(), &headers, &st.cfg.access.trusted_proxies);
     let set = format!(

@@ -8,6 +8,7 @@
 //! needs a token of the file ([`tokens`]): one per person, with a role; the file is re-read when
 //! it changes, and the sessions of a token no longer in it (or whose role changed) are closed.
 
+pub mod cookie;
 pub mod http;
 pub mod limiter;
 pub mod tokens;
@@ -25,6 +26,7 @@ use sha2::{Digest, Sha256};
 use subtle::ConstantTimeEq;
 use tokio::sync::watch;
 
+use self::cookie::{Claims, CookieKey};
 use self::limiter::FailureLimiter;
 use self::tokens::TokenTable;
 
@@ -42,9 +44,6 @@ pub struct Person {
 
 /// How often the token file is looked at for a change.
 pub const FILE_POLL: Duration = Duration::from_millis(250);
-
-/// Most cookie sessions kept (the oldest goes first beyond it).
-pub const COOKIES_MAX: usize = 10_000;
 
 /// The session cookie's name.
 pub const COOKIE: &str = "nanopush_session";
@@ -108,17 +107,15 @@ struct Named {
     verified: Mutex<HashMap<[u8; 32], Arc<Person>>>,
 }
 
-/// Session cookies by the SHA-256 of their value: the order they were made in, and whose.
-type Cookies = HashMap<[u8; 32], (u64, Arc<Person>)>;
-
 /// Everything about access the handlers share.
 pub struct Auth {
     /// Without a token file: the generated operator token and the viewer token.
     generated: (String, Option<String>),
     named: Option<Named>,
-    /// Session cookies, by SHA-256 of their value, with when they were made (for eviction).
-    cookies: Mutex<Cookies>,
-    next_cookie: AtomicU64,
+    /// Signs the session cookies (`cookie.rs`): a key of this process until the server keeps
+    /// one in its data directory ([`Auth::keep_cookies_in`]); None if the kernel gave no random
+    /// bytes for one (then no cookie is issued or believed).
+    cookie_key: Option<CookieKey>,
     live: Mutex<HashMap<u32, Live>>,
     failures: Mutex<FailureLimiter>,
     /// Counters for `/metrics`.
@@ -150,11 +147,44 @@ impl Auth {
                 table: Mutex::new(Arc::new(f.table)),
                 verified: Mutex::new(HashMap::new()),
             }),
-            cookies: Mutex::new(HashMap::new()),
-            next_cookie: AtomicU64::new(0),
+            cookie_key: CookieKey::ephemeral().ok(),
             live: Mutex::new(HashMap::new()),
             failures: Mutex::new(FailureLimiter::default()),
             counters: AuthCounters::default(),
+        }
+    }
+
+    /// Signs cookies with the key kept in `dir` (made there on the first start), so that a
+    /// page signed in before a restart stays signed in.
+    pub fn keep_cookies_in(&mut self, dir: &std::path::Path) -> std::io::Result<()> {
+        self.cookie_key = Some(CookieKey::load_or_make(dir)?);
+        Ok(())
+    }
+
+    /// The credential key of the generated token of `role`: changes with the token, so a
+    /// cookie issued for another token is not believed.
+    fn generated_key(&self, role: Role) -> Option<String> {
+        let token = match role {
+            Role::Operator => Some(&self.generated.0),
+            Role::Viewer => self.generated.1.as_ref(),
+        }?;
+        Some(format!(
+            "generated:{}:{}",
+            tokens::role_name(role),
+            tokens::hex(&digest(token)[..8])
+        ))
+    }
+
+    /// Whether the person a credential named is still believed: their token in the file with
+    /// the same role and name, or the generated token they came with still in force.
+    fn still_valid(&self, p: &Person) -> bool {
+        match &self.named {
+            Some(named) => named.table.lock().is_ok_and(|t| {
+                t.entries
+                    .iter()
+                    .any(|e| e.id == p.key && e.role == p.role && e.name == p.name)
+            }),
+            None => self.generated_key(p.role).is_some_and(|k| k == p.key),
         }
     }
 
@@ -175,19 +205,16 @@ impl Auth {
             // Both compared, whatever the first says.
             let is_op = ct_eq(token, op);
             let is_viewer = viewer.as_deref().is_some_and(|v| ct_eq(token, v));
-            return match (is_op, is_viewer) {
-                (true, _) => Some(Arc::new(Person {
-                    name: "operator".into(),
-                    role: Role::Operator,
-                    key: "generated:operator".into(),
-                })),
-                (_, true) => Some(Arc::new(Person {
-                    name: "viewer".into(),
-                    role: Role::Viewer,
-                    key: "generated:viewer".into(),
-                })),
-                _ => None,
+            let role = match (is_op, is_viewer) {
+                (true, _) => Role::Operator,
+                (_, true) => Role::Viewer,
+                _ => return None,
             };
+            return Some(Arc::new(Person {
+                name: tokens::role_name(role).into(),
+                role,
+                key: self.generated_key(role)?,
+            }));
         };
         let key = digest(token);
         if let Some(p) = named.verified.lock().ok()?.get(&key) {
@@ -216,9 +243,19 @@ impl Auth {
         }
     }
 
-    /// The person a session cookie names, or None (unknown or revoked cookies are as none).
+    /// The person a session cookie names, or None: not signed by this server, too old, or its
+    /// credential revoked (such cookies are as none).
     pub fn person_for_cookie(&self, cookie: &str) -> Option<Arc<Person>> {
-        self.cookies.lock().ok()?.get(&digest(cookie)).map(|(_, p)| p.clone())
+        let c = self
+            .cookie_key
+            .as_ref()?
+            .open(cookie, crate::serve::records::unix_now())?;
+        let p = Person {
+            name: c.name,
+            role: c.role,
+            key: c.key,
+        };
+        self.still_valid(&p).then(|| Arc::new(p))
     }
 
     /// Who a request is: its token (checked, failures rate-limited per `ip`), else its cookie,
@@ -267,20 +304,18 @@ impl Auth {
         }))
     }
 
-    /// A new session cookie's value for `person` (256 random bits; only its SHA-256 is kept).
-    pub fn login(&self, person: Arc<Person>) -> std::io::Result<String> {
-        let value = tokens::hex(&tokens::random_bytes::<32>()?);
-        let n = self.next_cookie.fetch_add(1, Relaxed);
-        if let Ok(mut c) = self.cookies.lock() {
-            if c.len() >= COOKIES_MAX
-                && let Some(oldest) = c.iter().min_by_key(|(_, (n, _))| *n).map(|(k, _)| *k)
-            {
-                c.remove(&oldest);
-            }
-            c.insert(digest(&value), (n, person));
-        }
+    /// A new session cookie's value for `person`, signed (`cookie.rs`); None without a key.
+    pub fn login(&self, person: &Person) -> Option<String> {
+        let value = self.cookie_key.as_ref()?.issue(
+            &Claims {
+                name: person.name.clone(),
+                role: person.role,
+                key: person.key.clone(),
+            },
+            crate::serve::records::unix_now(),
+        );
         self.counters.logins.fetch_add(1, Relaxed);
-        Ok(value)
+        Some(value)
     }
 
     /// Session `client` of `person` begins: it is closed (the receiver changes to the reason)
@@ -305,8 +340,8 @@ impl Auth {
         self.live.lock().ok()?.get(&client).map(|l| l.person.name.clone())
     }
 
-    /// Re-reads the token file if it changed; closes the sessions and forgets the cookies of
-    /// tokens no longer in it (or whose role changed). A file that cannot be read or parsed
+    /// Re-reads the token file if it changed; closes the sessions of tokens no longer in it (or
+    /// whose role changed); their cookies are refused from then on. A file that cannot be read or parsed
     /// (mid-edit by hand) leaves the table as it was, said in the log. Returns whether it
     /// re-read it.
     pub fn reload_if_changed(&self) -> bool {
@@ -333,9 +368,6 @@ impl Auth {
         }
         if let Ok(mut v) = named.verified.lock() {
             v.clear();
-        }
-        if let Ok(mut c) = self.cookies.lock() {
-            c.retain(|_, (_, p)| valid(p));
         }
         if let Ok(l) = self.live.lock() {
             for (id, live) in l.iter().filter(|(_, l)| !valid(&l.person)) {

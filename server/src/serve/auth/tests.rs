@@ -85,7 +85,7 @@ async fn a_revoked_token_closes_its_sessions_forgets_its_cookies_and_is_refused(
     let a = auth.authenticate(ip("10.0.0.1"), Some(&alice), None).await.unwrap();
     assert_eq!((a.name.as_str(), a.role), ("alice", Role::Operator));
     let b = auth.authenticate(ip("10.0.0.2"), Some(&bob), None).await.unwrap();
-    let cookie = auth.login(a.clone()).unwrap();
+    let cookie = auth.login(&a).unwrap();
     assert_eq!(auth.person_for_cookie(&cookie).unwrap().name, "alice");
     let mut alice_session = auth.join(1, a);
     let bob_session = auth.join(2, b);

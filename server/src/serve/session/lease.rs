@@ -46,7 +46,10 @@ pub(super) fn take(st: &AppState, c: &Client) -> Result<(), Refusal> {
         Some(h) if h == c.id => Ok(()),
         Some(h) => Err(Refusal::new(
             ErrorCode::LeaseHeld,
-            format!("client {h} holds the lease"),
+            match st.auth.name_of(h) {
+                Some(name) => format!("{name} (client {h}) holds the lease"),
+                None => format!("client {h} holds the lease"),
+            },
         )),
         None => {
             *lease = Some(c.id);
