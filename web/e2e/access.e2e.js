@@ -66,6 +66,12 @@ test('over HTTPS with a test CA, the URL token becomes an HttpOnly SameSite=Stri
   assert.ok(!mon.url().includes('token'), mon.url());
   await shot(mon, 'monitor-named-lease');
 
+  // Someone without a token (nor a cookie) is told how to sign in.
+  const stranger = await newPage(browser, { width: 1280, height: 720 });
+  await stranger.goto(`${srv.base}/`);
+  await waitText(stranger, '#boot-error', /needs your token/, 15000);
+  assert.equal(await stranger.isVisible('#boot-error'), true);
+
   // A reload has no token in its URL any more: the cookie signs Alice in again.
   await alice.reload();
   await ready(alice);

@@ -2,7 +2,7 @@
 // reconnects and sends over a fake socket and fake timers.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { wsUrl, apiUrl, backoffMs, reconnectText, Connection, exchangeToken } from '../src/connection.js';
+import { wsUrl, apiUrl, backoffMs, reconnectText, Connection, exchangeToken, signInNote } from '../src/connection.js';
 import { Session } from '../src/session.js';
 import { commands } from '../src/wire.js';
 
@@ -296,4 +296,12 @@ test('the URL token is exchanged for the session cookie and removed from the add
   assert.equal(replaced.length, 1);
   assert.equal(await exchangeToken({ search: '', pathname: '/', hash: '' }, { fetchFn, history }), null);
   assert.equal(calls.length, 1);
+});
+
+test('a server that does not know this person says how to sign in; one that does, or cannot be asked, says nothing (issue 27)', async () => {
+  const answer = (status, text = '') => async () => ({ status, ok: status < 300, text: async () => text });
+  assert.match(await signInNote({ fetchFn: answer(401) }), /needs your token.*\?token=/);
+  assert.match(await signInNote({ fetchFn: answer(429, 'too many failed attempts from 10.0.0.9; try again in 5 s') }), /too many failed attempts from 10\.0\.0\.9/);
+  assert.equal(await signInNote({ fetchFn: answer(200) }), null);
+  assert.equal(await signInNote({ fetchFn: async () => { throw new Error('offline'); } }), null);
 });
