@@ -119,9 +119,9 @@ export function downText(sinceMs, why) {
   return `server down since ${clockTime(sinceMs)} (${why}); what is shown below is from before`;
 }
 
-/** One line of the run history (an /api/runs entry): its time and what it was. */
+/** One line of the run history (an /api/runs entry): its time, what it was, and who ran it. */
 export function runLine(r) {
-  return `${clockTime(r.modified * 1000)} ${describeRun({ ...r, record: r.record })}`;
+  return `${clockTime(r.modified * 1000)} ${describeRun({ ...r, record: r.record })}${r.person ? ` — ${r.person}` : ''}`;
 }
 
 const LUT = viridisTable(256);

@@ -96,6 +96,8 @@ pub struct RunEntry {
     pub instance: Option<String>,
     /// Run number (per server run: numbers start again after a restart).
     pub run: u64,
+    /// Who ran it (none in records older than the audit trail).
+    pub person: Option<String>,
     /// Particle id.
     pub particle: u32,
     /// `ok` or the failure code.
@@ -143,6 +145,7 @@ pub fn run_history(dir: &Path, max: usize) -> std::io::Result<Vec<RunEntry>> {
                 .and_then(serde_json::Value::as_str)
                 .map(str::to_string),
             run,
+            person: v.get("person").and_then(serde_json::Value::as_str).map(str::to_string),
             particle,
             outcome: outcome.to_string(),
             failure: v.get("failure").and_then(serde_json::Value::as_str).map(str::to_string),
@@ -449,6 +452,7 @@ mod tests {
         assert_eq!(h[0].failure.as_deref(), Some("stopped: the lease holder disconnected"));
         assert_eq!(h[1].run, 1);
         assert_eq!(h[1].instance.as_deref(), Some("18f-2a"), "which server run wrote it");
+        assert_eq!(h[1].person.as_deref(), Some("alice"), "who ran it");
         assert_eq!(h[1].estimate, [1e-6, 2e-6]);
         assert_eq!(run_history(&dir, 1).unwrap().len(), 1);
         assert!(run_history(&dir.join("missing"), 10).unwrap().is_empty());
