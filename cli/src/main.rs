@@ -1,5 +1,6 @@
 //! `nanopush`: the command line — the model and its studies (`model`, `simulate`, `sweep`,
-//! `accuracy`), the instrument (`scan`, `push`) and the teleoperation server (`serve`).
+//! `accuracy`), the instrument (`scan`, `push`), the teleoperation server (`serve`) and its
+//! people (`token`).
 
 mod accuracy_cmd;
 mod campaign_cmd;
@@ -11,6 +12,7 @@ mod scan_cmd;
 mod serve_cmd;
 mod simulate_cmd;
 mod sweep_cmd;
+mod token_cmd;
 mod units;
 
 use std::path::PathBuf;
@@ -50,7 +52,11 @@ enum Command {
     /// within the tolerance, refusals by reason, cost); `--shard I/N` splits the seeds.
     Campaign(campaign_cmd::CampaignArgs),
     /// The teleoperation server: the 1 kHz control loop, the WebSocket protocol, the web client.
-    Serve(serve_cmd::ServeArgs),
+    // Boxed: its arguments are the most numerous (clippy's large_enum_variant).
+    Serve(Box<serve_cmd::ServeArgs>),
+    /// Named operators and viewers: `token add NAME --role R` (prints the token once),
+    /// `token list`, `token revoke NAME` (its sessions on a running server are closed).
+    Token(token_cmd::TokenArgs),
 }
 
 /// Loads `--scene FILE`, or the embedded default scene; prints its warnings to stderr.
@@ -127,6 +133,7 @@ fn main() -> ExitCode {
             Err(e) => Err(e),
         },
         Command::Serve(args) => serve_cmd::run(&args),
+        Command::Token(args) => token_cmd::run(&args),
     };
     match result {
         Ok(text) => print_stdout(&text),

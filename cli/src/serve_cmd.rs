@@ -6,9 +6,13 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nanopush::serve::app_state::ServeConfig;
+use nanopush::serve::app_state::{AccessConfig, ServeConfig};
+use nanopush::serve::auth::TokenFile;
+use nanopush::serve::auth::tokens::TokenTable;
+use nanopush::serve::client_addr::Cidr;
 use nanopush::serve::control_loop::LoopConfig;
 use nanopush::serve::haptic::HapticMode;
+use nanopush::serve::tls::{self, TlsSource};
 
 /// Arguments of `nanopush serve`.
 #[derive(Args, Debug)]
@@ -31,6 +35,26 @@ pub struct ServeArgs {
     /// Viewer token; when absent viewers need none.
     #[arg(long)]
     viewer_token: Option<String>,
+    /// Named operators and viewers, one hashed token each (`nanopush token add NAME --role R`);
+    /// then every connection needs a token of the file (the generated one is not accepted), and
+    /// the file is re-read when it changes (a revoked token's sessions are closed at once).
+    #[arg(long, conflicts_with_all = ["operator_token", "viewer_token"])]
+    token_file: Option<PathBuf>,
+    /// A reverse proxy whose X-Forwarded-For names the real client (repeatable; an address or a
+    /// CIDR block, e.g. 127.0.0.1 or 10.0.0.0/8). From any other peer the header is ignored.
+    #[arg(long)]
+    trusted_proxy: Vec<String>,
+    /// HTTPS with this certificate chain (PEM, leaf first), with --tls-key.
+    #[arg(long, requires = "tls_key")]
+    tls_cert: Option<PathBuf>,
+    /// The private key (PEM) of --tls-cert.
+    #[arg(long, requires = "tls_cert")]
+    tls_key: Option<PathBuf>,
+    /// HTTPS with a self-signed certificate for a lab without a CA: made on the first start
+    /// (kept in tls/ of --data-dir), its SHA-256 fingerprint printed at each start for people to
+    /// compare with what their browser shows.
+    #[arg(long, conflicts_with_all = ["tls_cert", "tls_key"])]
+    tls_self_signed: bool,
     /// Another browser origin allowed to connect (repeatable), e.g. http://lab-display:3000.
     #[arg(long)]
     allow_origin: Vec<String>,
@@ -188,6 +212,62 @@ fn check(a: &ServeArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `--token-file` (read now: a broken file stops the start, naming its line) and
+/// `--trusted-proxy`.
+fn access(a: &ServeArgs) -> anyhow::Result<AccessConfig> {
+    let token_file = match &a.token_file {
+        Some(path) => {
+            let table = TokenTable::read(path, false).context("--token-file")?;
+            if table.entries.is_empty() {
+                bail!(
+                    "--token-file {}: no tokens in it; add one with `nanopush token add NAME --role operator --token-file {}`",
+                    path.display(),
+                    path.display()
+                );
+            }
+            Some(TokenFile {
+                path: path.clone(),
+                table,
+            })
+        }
+        None => None,
+    };
+    let trusted_proxies = a
+        .trusted_proxy
+        .iter()
+        .map(|s| s.parse::<Cidr>().map_err(|e| anyhow::anyhow!("--trusted-proxy {e}")))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let source = match (&a.tls_cert, &a.tls_key, a.tls_self_signed) {
+        (Some(cert), Some(key), _) => Some(TlsSource::Files {
+            cert: cert.clone(),
+            key: key.clone(),
+        }),
+        (_, _, true) => {
+            // The names a browser on the lab's network may use: this host's, loopback, and the
+            // bound address.
+            let mut names = vec!["localhost".to_string(), "127.0.0.1".into(), "::1".into()];
+            if let Ok(h) = std::fs::read_to_string("/proc/sys/kernel/hostname") {
+                names.push(h.trim().to_string());
+            }
+            if !a.bind.is_unspecified() {
+                names.push(a.bind.to_string());
+            }
+            names.dedup();
+            Some(TlsSource::SelfSigned {
+                dir: a.data_dir.join("tls"),
+                names,
+            })
+        }
+        _ => None,
+    };
+    let tls = source.map(|s| tls::load(&s)).transpose().context("TLS")?;
+    Ok(AccessConfig {
+        token_file,
+        trusted_proxies,
+        tls,
+    })
+}
+
 /// Runs the server until SIGINT or SIGTERM.
 pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
     check(a)?;
@@ -209,6 +289,14 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
             PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../web"))
         }
     });
+    let access = access(a)?;
+    let tls_note = access.tls.as_ref().map(|t| {
+        format!(
+            "TLS certificate {} SHA-256 fingerprint {}",
+            t.cert_path.display(),
+            t.fingerprint
+        )
+    });
     let cfg = ServeConfig {
         operator_token,
         viewer_token: a.viewer_token.clone(),
@@ -225,6 +313,7 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         scan_line_hz: a.scan_line_hz,
         telemetry_hz: a.telemetry_hz,
         haptic: haptic_mode(a)?,
+        access,
     };
     let loop_cfg = LoopConfig {
         rate_hz: a.rate_hz,
@@ -283,6 +372,9 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
                 let mut out = std::io::stdout().lock();
                 let _ = writeln!(out, "nanopush serve: listening on {}", s.addr);
                 let _ = writeln!(out, "open {}", s.url);
+                if let Some(note) = &tls_note {
+                    let _ = writeln!(out, "{note}");
+                }
                 let _ = out.flush();
             },
             shutdown,
@@ -303,7 +395,7 @@ mod tests {
         let Command::Serve(a) = crate::parse(&argv) else {
             unreachable!("`serve` parses as Serve")
         };
-        a
+        *a
     }
 
     /// docs/server.md, "The teleoperation server": the synopsis's defaults, `--bind 127.0.0.1
@@ -345,5 +437,52 @@ mod tests {
             check(&parse(&["--haptic", link, "--rate-hz", "500"])).unwrap();
         }
         check(&parse(&["--rate-hz", "100"])).unwrap();
+    }
+
+    /// docs/deployment.md: a token file excludes the generated tokens, a certificate needs its
+    /// key, a self-signed certificate excludes given files, and a bad `--trusted-proxy` or a
+    /// missing or empty token file stops the start with what was wrong.
+    #[test]
+    fn access_flags_are_checked_before_the_start() {
+        let refused = |args: &[&str]| {
+            let argv = std::iter::once("nanopush")
+                .chain(std::iter::once("serve"))
+                .chain(args.iter().copied());
+            <crate::Cli as clap::Parser>::try_parse_from(argv).is_err()
+        };
+        assert!(refused(&["--token-file", "t", "--operator-token", "abcdefgh"]));
+        assert!(refused(&["--token-file", "t", "--viewer-token", "abcdefgh"]));
+        assert!(refused(&["--tls-cert", "c.pem"]));
+        assert!(refused(&["--tls-key", "k.pem"]));
+        assert!(refused(&[
+            "--tls-self-signed",
+            "--tls-cert",
+            "c.pem",
+            "--tls-key",
+            "k.pem"
+        ]));
+        let e = access(&parse(&["--trusted-proxy", "10.0.0.0/40"])).unwrap_err();
+        assert!(
+            e.to_string().contains("--trusted-proxy") && e.to_string().contains("[0, 32]"),
+            "{e}"
+        );
+        let dir = std::env::temp_dir().join(format!("nanopush-access-flags-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("tokens");
+        let e = access(&parse(&["--token-file", file.to_str().unwrap()])).unwrap_err();
+        assert!(format!("{e:#}").contains("No such file"), "{e:#}");
+        std::fs::write(&file, "# nobody yet\n").unwrap();
+        let e = access(&parse(&["--token-file", file.to_str().unwrap()])).unwrap_err();
+        assert!(e.to_string().contains("no tokens in it"), "{e}");
+        let a = access(&parse(&[
+            "--trusted-proxy",
+            "127.0.0.1",
+            "--trusted-proxy",
+            "10.0.0.0/8",
+        ]))
+        .unwrap();
+        assert_eq!(a.trusted_proxies.len(), 2);
+        assert!(a.token_file.is_none() && a.tls.is_none());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -345,6 +345,14 @@ pub enum ServerMessage {
         role: Role,
         /// Who holds the lease now.
         lease: Option<u32>,
+        /// The name of the person holding the lease (their token's name; `operator` without a
+        /// token file).
+        #[serde(default)]
+        lease_name: Option<String>,
+        /// The name of the person this connection's credential names (`anonymous` for a
+        /// viewer without one).
+        #[serde(default)]
+        name: String,
         /// Scene name.
         scene: String,
         /// Control loop rate (Hz).
@@ -367,6 +375,9 @@ pub enum ServerMessage {
         phase: String,
         /// Lease holder.
         lease: Option<u32>,
+        /// The lease holder's name.
+        #[serde(default)]
+        lease_name: Option<String>,
         /// The push running now, if any.
         push: Option<PushPath>,
         /// The latest scan (running or finished), if any.
@@ -403,6 +414,9 @@ pub enum ServerMessage {
     Lease {
         /// Holder now.
         holder: Option<u32>,
+        /// The holder's name (absent when the lease is free).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        holder_name: Option<String>,
         /// Why it changed, when not by the holder's own command (its connection closed).
         #[serde(default, skip_serializing_if = "Option::is_none")]
         reason: Option<String>,
@@ -632,21 +646,32 @@ mod tests {
             stage: [0.0; 3],
             phase: "idle".into(),
             lease: Some(5),
+            lease_name: Some("alice".into()),
             push: Some(path),
             scan: None,
         })
         .unwrap();
         assert_eq!(s["type"], "state");
+        assert_eq!(s["lease_name"], "alice");
         assert_eq!(s["particles"][0]["radius"], 5e-7);
         assert_eq!(s["push"]["path"][1][0], 3e-6);
         assert!(s["scan"].is_null());
         // A lease change by command has no reason key; one by a disconnect says why.
         let l = serde_json::to_string(&ServerMessage::Lease {
             holder: None,
+            holder_name: None,
             reason: None,
         })
         .unwrap();
         assert_eq!(l, r#"{"type":"lease","holder":null}"#);
+        // A held lease names its holder.
+        let l = serde_json::to_string(&ServerMessage::Lease {
+            holder: Some(3),
+            holder_name: Some("alice".into()),
+            reason: None,
+        })
+        .unwrap();
+        assert_eq!(l, r#"{"type":"lease","holder":3,"holder_name":"alice"}"#);
     }
 
     #[test]

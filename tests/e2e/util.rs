@@ -125,17 +125,37 @@ pub(crate) fn start_scene(tag: &str, edits: &[(&str, &str)]) -> Server {
 }
 
 fn start_edited(tag: &str, edits: &[(&str, &str)], prepare: impl FnOnce(&Path), extra: &[&str]) -> Server {
+    launch(tag, edits, prepare, |_| {
+        let mut a: Vec<String> = vec!["--operator-token".into(), TOKEN.into()];
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    })
+}
+
+/// [`start`] without the operator token [`TOKEN`], with the arguments `args` makes from the
+/// server's directory (e.g. `--token-file DIR/tokens`, written there first).
+pub(crate) fn start_args(tag: &str, args: impl FnOnce(&Path) -> Vec<String>) -> Server {
+    launch(tag, &[], |_| {}, args)
+}
+
+fn launch(
+    tag: &str,
+    edits: &[(&str, &str)],
+    prepare: impl FnOnce(&Path),
+    args: impl FnOnce(&Path) -> Vec<String>,
+) -> Server {
     let dir = tmp(&format!("serve-{tag}"));
     let scene = fast_scene_with(&dir, edits);
     let records = dir.join("records");
     std::fs::create_dir_all(&records).unwrap();
     prepare(&records);
+    let extra = args(&dir);
     let (child, addr) = spawn_serve(&dir.join("server.log"), |c| {
-        c.args(["--haptic", "none", "--operator-token", TOKEN, "--scene"])
+        c.args(["--haptic", "none", "--scene"])
             .arg(&scene)
             .arg("--data-dir")
             .arg(&records)
-            .args(extra);
+            .args(&extra);
     });
     Server { child, addr, dir }
 }
@@ -219,8 +239,16 @@ pub(crate) async fn send(ws: &mut Ws, v: Value) {
     ws.send(Message::Text(v.to_string().into())).await.unwrap();
 }
 
-/// The next JSON message that satisfies `pred`, within `secs`.
-pub(crate) async fn until(ws: &mut Ws, secs: f64, pred: impl Fn(&Value) -> bool) -> Value {
+/// The next JSON message that satisfies `pred`, within `secs` (on a WebSocket over TCP, or over
+/// TLS: `serve_tls.rs`).
+pub(crate) async fn until<S>(
+    ws: &mut tokio_tungstenite::WebSocketStream<S>,
+    secs: f64,
+    pred: impl Fn(&Value) -> bool,
+) -> Value
+where
+    S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin,
+{
     let deadline = Instant::now() + Duration::from_secs_f64(secs);
     loop {
         let left = deadline.saturating_duration_since(Instant::now());

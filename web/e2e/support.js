@@ -1,6 +1,6 @@
 // Helpers for the browser end-to-end tests: start the real `nanopush serve` on a free port with
 // a quick scene, and a headless Chromium (Debian's, driven by playwright-core) with SwiftShader.
-import { spawn } from 'node:child_process';
+import { spawn, spawnSync } from 'node:child_process';
 import { mkdtempSync, readFileSync, writeFileSync, mkdirSync, existsSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join, dirname, resolve } from 'node:path';
@@ -53,14 +53,18 @@ export function fastScene(dir) {
  * Starts `nanopush serve` (no real-time scheduling: the machine is shared) and resolves when it
  * prints its address. `extra` are more arguments; `webDir` another web client directory;
  * `haptic` the link (`none`, `sim`); `port` and `dir`: a server started again where another
- * ran (its records kept: `stop({ keep: true })` leaves the directory).
+ * ran (its records kept: `stop({ keep: true })` leaves the directory). `tokenFile`: named people
+ * (`--token-file`, instead of the operator token); `tls`: the server's `--tls-cert`/`--tls-key`
+ * ({cert, key}): then `base` is `https://…`.
  * @returns {Promise<{url:string, addr:string, base:string, dir:string, pid:number, log:()=>string, kill:(sig:string)=>Promise<void>, stop:(o?:{keep?:boolean})=>Promise<void>}>}
  */
-export async function startServer({ extra = [], webDir = WEB, haptic = 'none', port = 0, dir = null } = {}) {
+export async function startServer({ extra = [], webDir = WEB, haptic = 'none', port = 0, dir = null, tokenFile = null, tls = null } = {}) {
   dir = dir ?? mkdtempSync(join(tmpdir(), 'nanopush-browser-'));
   const records = join(dir, 'records');
   mkdirSync(records, { recursive: true });
-  const args = ['serve', '--port', String(port), '--haptic', haptic, '--no-realtime', '--operator-token', TOKEN,
+  const who = tokenFile ? ['--token-file', tokenFile] : ['--operator-token', TOKEN];
+  const https = tls ? ['--tls-cert', tls.cert, '--tls-key', tls.key] : [];
+  const args = ['serve', '--port', String(port), '--haptic', haptic, '--no-realtime', ...who, ...https,
     '--scene', fastScene(dir), '--data-dir', records, '--web-dir', webDir, '--scan-line-hz', '400', ...extra];
   // A haptic link of its own (iceoryx2 services apart from any other server on this machine).
   const env = { ...process.env, NANOPUSH_HAPTIC_NAMESPACE: `browser${process.pid}` };
@@ -78,7 +82,7 @@ export async function startServer({ extra = [], webDir = WEB, haptic = 'none', p
       else rej(new Error(`unexpected first line ${JSON.stringify(l)}`));
     });
   });
-  const base = `http://${addr}`;
+  const base = `${tls ? 'https' : 'http'}://${addr}`;
   return {
     addr,
     base,
@@ -106,12 +110,60 @@ export async function startServer({ extra = [], webDir = WEB, haptic = 'none', p
   };
 }
 
-/** Headless Chromium with WebGL2 on SwiftShader. */
-export function launchBrowser() {
+/**
+ * Headless Chromium with WebGL2 on SwiftShader. `home`: the HOME it runs with (whose
+ * `.pki/nssdb` holds the CAs it trusts beyond the system's: `trustingCa`).
+ */
+export function launchBrowser({ home = null } = {}) {
   return chromium.launch({
     executablePath: chromiumPath(),
     args: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--no-sandbox', '--disable-dev-shm-usage'],
+    ...(home ? { env: { ...process.env, HOME: home } } : {}),
   });
+}
+
+/** Runs a command; throws with its output unless it succeeds. */
+export function sh(cmd, args, opts = {}) {
+  const r = spawnSync(cmd, args, { encoding: 'utf8', ...opts });
+  if (r.error) throw new Error(`${cmd}: ${r.error.message}`);
+  if (r.status !== 0) throw new Error(`${cmd} ${args.join(' ')} failed (${r.status}): ${r.stderr}${r.stdout}`);
+  return r.stdout;
+}
+
+/**
+ * A test CA and a certificate for 127.0.0.1 and localhost signed by it (openssl), in `dir`:
+ * {ca, cert, key} (PEM files).
+ */
+export function testCa(dir) {
+  const p = (f) => join(dir, f);
+  const ec = ['-newkey', 'ec', '-pkeyopt', 'ec_paramgen_curve:P-256', '-nodes'];
+  sh('openssl', ['req', '-x509', ...ec, '-keyout', p('ca.key'), '-out', p('ca.pem'), '-days', '2', '-subj', '/CN=nanopush browser test CA',
+    '-addext', 'basicConstraints=critical,CA:TRUE', '-addext', 'keyUsage=critical,keyCertSign,cRLSign']);
+  sh('openssl', ['req', ...ec, '-keyout', p('key.pem'), '-out', p('leaf.csr'), '-subj', '/CN=127.0.0.1']);
+  writeFileSync(p('leaf.ext'), 'basicConstraints=CA:FALSE\nsubjectAltName=IP:127.0.0.1,DNS:localhost\nextendedKeyUsage=serverAuth\nkeyUsage=critical,digitalSignature\n');
+  sh('openssl', ['x509', '-req', '-in', p('leaf.csr'), '-CA', p('ca.pem'), '-CAkey', p('ca.key'), '-CAcreateserial', '-out', p('cert.pem'), '-days', '2', '-extfile', p('leaf.ext')]);
+  return { ca: p('ca.pem'), cert: p('cert.pem'), key: p('key.pem') };
+}
+
+/**
+ * A HOME whose NSS database (`.pki/nssdb`, where Chromium on Linux keeps the CAs a user added)
+ * trusts the CA `caPem` for web sites, as a lab's admin would install its CA: made with
+ * certutil (Debian's libnss3-tools).
+ */
+export function trustingCa(home, caPem) {
+  const db = join(home, '.pki', 'nssdb');
+  mkdirSync(db, { recursive: true });
+  sh('certutil', ['-d', `sql:${db}`, '-N', '--empty-password']);
+  sh('certutil', ['-d', `sql:${db}`, '-A', '-t', 'C,,', '-n', 'nanopush-test-ca', '-i', caPem]);
+  return home;
+}
+
+/** `nanopush token add NAME --role ROLE --token-file FILE`: the token it prints once. */
+export function addToken(file, name, role) {
+  const out = sh(serverBin(), ['token', 'add', name, '--role', role, '--token-file', file]);
+  const token = out.trim().split('\n').pop().trim();
+  if (!token.startsWith('npt_')) throw new Error(`no token in: ${out}`);
+  return token;
 }
 
 /** A page that collects console errors and page errors (uncaught exceptions). */

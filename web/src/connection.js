@@ -22,6 +22,56 @@ export function apiUrl(path, loc) {
 }
 
 /**
+ * Exchanges the page's `?token=` for the server's session cookie (HttpOnly and SameSite=Strict:
+ * no script reads it, no other site sends it) and removes the token from the address bar and
+ * the history entry (`history.replaceState`), so it stays in no browser history, bookmark,
+ * proxy log or `Referer`. Resolves to the server's `{name, role}`, or null: no token in the URL,
+ * or the server refused it or has no `/api/session` (the token is then left where it is, and the
+ * page's connection carries it and says why it fails).
+ * @param {Location} loc the page's location
+ * @param {{fetchFn?: typeof fetch, history?: History}} [deps]
+ */
+export async function exchangeToken(loc, { fetchFn = globalThis.fetch, history = globalThis.history } = {}) {
+  const params = new URLSearchParams(loc.search || '');
+  const token = params.get('token');
+  if (!token) return null;
+  let r;
+  try {
+    r = await fetchFn('/api/session', { method: 'POST', headers: { Authorization: `Bearer ${token}` }, credentials: 'same-origin' });
+  } catch {
+    return null;
+  }
+  if (!r.ok) return null;
+  params.delete('token');
+  const q = params.toString();
+  history.replaceState(history.state, '', `${loc.pathname}${q ? `?${q}` : ''}${loc.hash || ''}`);
+  try {
+    return await r.json();
+  } catch {
+    return null;
+  }
+}
+
+/**
+ * What to tell a person the server does not know (a server with a token file or a viewer
+ * token, and no token in the URL nor a cookie it believes: a first visit without the link, a
+ * revoked token, a cookie over a week old), or null: `GET /api/session` answers 401 (429:
+ * too many failed attempts from here). Null too when the server cannot be asked (the demo).
+ * @param {{fetchFn?: typeof fetch}} [deps]
+ */
+export async function signInNote({ fetchFn = globalThis.fetch } = {}) {
+  let r;
+  try {
+    r = await fetchFn('/api/session', { credentials: 'same-origin' });
+  } catch {
+    return null;
+  }
+  if (r.status === 401) return 'This instrument needs your token: open the address you were given (it ends in ?token=…), or ask for a token (nanopush token add NAME --role operator|viewer).';
+  if (r.status === 429) return `The server refuses this address for now: ${await r.text().catch(() => 'too many failed attempts')}`;
+  return null;
+}
+
+/**
  * Reconnect delay (ms) for the n-th attempt (1-based): 0.25 s doubling to 2 s at most. The
  * server is one instrument on the lab's network, not a crowded service: a page that waits
  * longer than 2 s after it came back (7 s, as it did with a 15 s cap) shows a stale instrument.

@@ -2,6 +2,7 @@
 // announcements (only what matters: runs, the lease, shutdown). The texts of the server's
 // events are pure functions of the event and the Session's state (Node tests).
 import { formatLength, formatStagePoint } from './format.js';
+import { holderText } from './session.js';
 
 /** Lines the log keeps. */
 export const LOG_LINES = 60;
@@ -10,12 +11,12 @@ export const LOG_LINES = 60;
 export const LEASE_LOST_ON_CLOSE = 'you lost the lease: the connection closed (the server stops a push or scan whose lease holder is gone); take it again once reconnected';
 
 export function welcomeText(st) {
-  return `welcome: client ${st.client}, ${st.role}, scene ${st.scene}, ${st.tickHz} Hz`;
+  return `welcome: client ${st.client}${st.name ? ` (${st.name})` : ''}, ${st.role}, scene ${st.scene}, ${st.tickHz} Hz`;
 }
 
 /** The server's `state` after a (re)connect, in one line. */
 export function stateText(st) {
-  return `state: phase ${st.phase ?? '–'}, ${st.lease === null ? 'lease free' : `lease held by client ${st.lease}`}${st.push ? `, pushing #${st.push.particle}` : ''}${st.scan ? `, latest scan ${st.scan.record ?? st.scan.id}${st.scanStale ? ' (stale)' : ''}` : ''}`;
+  return `state: phase ${st.phase ?? '–'}, ${st.lease === null ? 'lease free' : `lease held by ${holderText(st)}`}${st.push ? `, pushing #${st.push.particle}` : ''}${st.scan ? `, latest scan ${st.scan.record ?? st.scan.id}${st.scanStale ? ' (stale)' : ''}` : ''}`;
 }
 
 /** A scan (the Session's, or a parsed record) by its size: `…: 32×32 px, 10.0 µm square`. */
@@ -43,7 +44,7 @@ export function pushStartedText(push, client) {
 
 /** A `lease` event: {text, cls, announce} (`announce`: what to tell a screen reader, or null). */
 export function leaseNote(ev, st) {
-  const now = st.lease === null ? 'the lease is free' : st.lease === st.client ? 'you hold the lease' : `client ${st.lease} holds the lease`;
+  const now = st.lease === null ? 'the lease is free' : st.lease === st.client ? 'you hold the lease' : `${holderText(st)} holds the lease`;
   if (ev.lost) {
     const t = `you lost the lease: ${ev.reason ?? now}`;
     return { text: t, cls: 'bad', announce: t };

@@ -17,4 +17,22 @@ function bootError(e) {
   console.warn(msg);
 }
 
-(view === 'monitor' ? import('./monitor.js') : import('./app.js')).then((page) => page.start()).catch(bootError);
+// The token of the URL is exchanged for a session cookie first and removed from the address bar
+// (src/connection.js, `exchangeToken`); the page then connects with the cookie.
+// A server that does not know this person says so on the page (the page still starts, and
+// connects once it does).
+function signInNote(text) {
+  const el = document.getElementById('boot-error');
+  if (!text || !el) return;
+  el.textContent = text;
+  el.hidden = false;
+}
+
+import('./connection.js')
+  .then(async (c) => {
+    await c.exchangeToken(location);
+    if (!new URLSearchParams(location.search).has('demo')) signInNote(await c.signInNote());
+  })
+  .then(() => (view === 'monitor' ? import('./monitor.js') : import('./app.js')))
+  .then((page) => page.start())
+  .catch(bootError);

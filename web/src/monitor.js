@@ -108,7 +108,7 @@ export function statusTiles(s) {
     ['m-jitter', Number.isFinite(p99) ? (p99 < 1e-3 ? `≤ ${(p99 * 1e6).toFixed(0)} µs` : `≤ ${(p99 * 1e3).toPrecision(3)} ms`) : '–', p99 > 1e-3 ? 'warn' : ''],
     ['m-haptic', (hp.link === 'off' || !hp.link ? 'off' : `${hp.link}${hp.engaged ? ', engaged' : ''}`) + downs, hp.link === 'down' ? 'bad' : ''],
     ['m-clients', String(s.clients), ''],
-    ['m-lease', s.lease === null ? 'free' : `client ${s.lease}`, ''],
+    ['m-lease', s.lease === null ? 'free' : s.lease_name ? `${s.lease_name} (client ${s.lease})` : `client ${s.lease}`, ''],
     ['m-uptime', since, ''],
     ['m-hapdev', dev.text, dev.cls],
   ];
@@ -119,9 +119,9 @@ export function downText(sinceMs, why) {
   return `server down since ${clockTime(sinceMs)} (${why}); what is shown below is from before`;
 }
 
-/** One line of the run history (an /api/runs entry): its time and what it was. */
+/** One line of the run history (an /api/runs entry): its time, what it was, and who ran it. */
 export function runLine(r) {
-  return `${clockTime(r.modified * 1000)} ${describeRun({ ...r, record: r.record })}`;
+  return `${clockTime(r.modified * 1000)} ${describeRun({ ...r, record: r.record })}${r.person ? ` — ${r.person}` : ''}`;
 }
 
 const LUT = viridisTable(256);

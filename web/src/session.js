@@ -89,6 +89,8 @@ export function initialState({ traceSeconds = 10 } = {}) {
     scene: null,
     tickHz: null,
     lease: null, // holder's client id
+    leaseName: null, // the holder's name (their token's), when the server said
+    name: null, // this connection's person, as the server named them
     phase: null,
     tip: null, // last telemetry {t, stage:[x,y,z] m, volts, phase, estimate}
     telemetryCount: 0,
@@ -225,7 +227,9 @@ export class Session {
         s.version = msg.version;
         s.client = msg.client;
         s.role = msg.role;
+        s.name = msg.name ?? null;
         s.lease = msg.lease ?? null;
+        s.leaseName = msg.lease_name ?? null;
         s.scene = msg.scene;
         s.tickHz = msg.tick_hz;
         s.stateReceived = false;
@@ -250,6 +254,7 @@ export class Session {
       case 'state': {
         s.stateReceived = true;
         s.lease = msg.lease ?? null;
+        s.leaseName = msg.lease_name ?? null;
         s.phase = msg.phase ?? null;
         if (Array.isArray(msg.stage)) s.tip = { t: null, stage: msg.stage, volts: 0, phase: msg.phase, estimate: null, force: 0 };
         for (const q of msg.particles ?? []) {
@@ -339,6 +344,7 @@ export class Session {
         const before = s.lease;
         const hadIt = before !== null && before === s.client;
         s.lease = msg.holder ?? null;
+        s.leaseName = msg.holder_name ?? null;
         s.leaseNote = msg.reason ?? null;
         const lost = hadIt && s.lease !== s.client;
         return { kind: 'lease', before, lost, reason: msg.reason ?? null };
@@ -469,6 +475,11 @@ export class Session {
   }
 }
 
+/** The lease holder by name and client (`alice (client 3)`), or `client 3` when unnamed. */
+export function holderText(state) {
+  return state.leaseName ? `${state.leaseName} (client ${state.lease})` : `client ${state.lease}`;
+}
+
 /**
  * What each operator control may do now, and why not: {enabled, why} per control. Viewers,
  * a closed connection, and commands that need the lease are explained in words (tooltips).
@@ -478,15 +489,17 @@ export function controlState(state) {
   const operator = state.role === 'operator';
   const mine = open && state.lease !== null && state.lease === state.client;
   const no = (why) => ({ enabled: false, why });
+  // A tooltip's sentence begins with its capital: `Client 9`, or the holder's name as written.
+  const holder = state.leaseName ? holderText(state) : `Client ${state.lease}`;
   const yes = { enabled: true, why: '' };
   let base = null;
   if (!open) base = 'Not connected to the server';
   else if (!operator) base = 'Viewer connection: open the page with the operator token (?token=…) to command';
-  const needLease = base ? no(base) : mine ? yes : state.lease === null ? no('Take the lease first') : no(`Client ${state.lease} holds the lease`);
+  const needLease = base ? no(base) : mine ? yes : state.lease === null ? no('Take the lease first') : no(`${holder} holds the lease`);
   const link = state.tip?.haptic?.link ?? null;
   return {
     hapticEngage: !needLease.enabled ? needLease : link === 'up' ? yes : no(`The haptic link is ${link ?? 'not reported'}: engage once it is up`),
-    takeLease: base ? no(base) : mine ? no('You hold the lease') : state.lease !== null ? no(`Client ${state.lease} holds the lease`) : yes,
+    takeLease: base ? no(base) : mine ? no('You hold the lease') : state.lease !== null ? no(`${holder} holds the lease`) : yes,
     releaseLease: base ? no(base) : mine ? yes : no('You do not hold the lease'),
     push: needLease,
     scan: needLease,

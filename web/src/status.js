@@ -1,6 +1,7 @@
 // The status bar at the top of the page: link, role, client, lease, phase, lagged messages and
 // the last error, from the Session's state. `statusFields` is pure (Node tests); StatusBar
 // writes it into the page.
+import { holderText } from './session.js';
 
 /**
  * What the status bar says for a Session state. `conn` is null while waiting to reconnect (the
@@ -27,7 +28,7 @@ export function statusFields(st, { demo = false } = {}) {
     conn,
     role: String(st.role ?? '–'),
     client: String(st.client ?? '–'),
-    lease: { text: st.lease === null ? 'free' : st.lease === st.client ? `you (${st.lease})` : `client ${st.lease}`, cls: mine ? 'mine' : '' },
+    lease: { text: st.lease === null ? 'free' : st.lease === st.client ? `you (${st.name ? `${st.name}, ` : ''}${st.lease})` : holderText(st), cls: mine ? 'mine' : '' },
     phase: String(st.phase ?? '–'),
     lagged,
     error: err,

@@ -2,7 +2,7 @@
 // reconnects and sends over a fake socket and fake timers.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { wsUrl, apiUrl, backoffMs, reconnectText, Connection } from '../src/connection.js';
+import { wsUrl, apiUrl, backoffMs, reconnectText, Connection, exchangeToken, signInNote } from '../src/connection.js';
 import { Session } from '../src/session.js';
 import { commands } from '../src/wire.js';
 
@@ -272,4 +272,36 @@ test('a socket promised and refused (the demo\'s module did not load) is logged 
   timers.run(250);
   assert.equal(tries, 2);
   await new Promise((r) => setImmediate(r));
+});
+
+test('the URL token is exchanged for the session cookie and removed from the address bar, other parameters kept (issue 27)', async () => {
+  const calls = [];
+  const replaced = [];
+  const fetchFn = async (url, init) => {
+    calls.push({ url, init });
+    return { ok: true, json: async () => ({ name: 'alice', role: 'operator' }) };
+  };
+  const history = { state: null, replaceState: (s, t, url) => replaced.push(url) };
+  const loc = { search: '?view=monitor&token=npt_ab_cd', pathname: '/', hash: '' };
+  const me = await exchangeToken(loc, { fetchFn, history });
+  assert.deepEqual(me, { name: 'alice', role: 'operator' });
+  assert.equal(calls.length, 1);
+  assert.equal(calls[0].url, '/api/session');
+  assert.equal(calls[0].init.method, 'POST');
+  assert.equal(calls[0].init.headers.Authorization, 'Bearer npt_ab_cd');
+  assert.deepEqual(replaced, ['/?view=monitor']);
+  // Refused: the token stays (the connection carries it and says why); no token: nothing asked.
+  const refused = async () => ({ ok: false, json: async () => ({}) });
+  assert.equal(await exchangeToken(loc, { fetchFn: refused, history }), null);
+  assert.equal(replaced.length, 1);
+  assert.equal(await exchangeToken({ search: '', pathname: '/', hash: '' }, { fetchFn, history }), null);
+  assert.equal(calls.length, 1);
+});
+
+test('a server that does not know this person says how to sign in; one that does, or cannot be asked, says nothing (issue 27)', async () => {
+  const answer = (status, text = '') => async () => ({ status, ok: status < 300, text: async () => text });
+  assert.match(await signInNote({ fetchFn: answer(401) }), /needs your token.*\?token=/);
+  assert.match(await signInNote({ fetchFn: answer(429, 'too many failed attempts from 10.0.0.9; try again in 5 s') }), /too many failed attempts from 10\.0\.0\.9/);
+  assert.equal(await signInNote({ fetchFn: answer(200) }), null);
+  assert.equal(await signInNote({ fetchFn: async () => { throw new Error('offline'); } }), null);
 });

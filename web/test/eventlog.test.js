@@ -59,3 +59,13 @@ test('errors and a closed connection', () => {
   assert.equal(closedText({ code: 1001, reason: 'going away' }), 'connection closed (code 1001, going away)');
   assert.match(LEASE_LOST_ON_CLOSE, /^you lost the lease: the connection closed/);
 });
+
+test('the lease holder is named where the server names them (issue 27)', () => {
+  const s = new Session();
+  s.apply({ type: 'welcome', version: 1, client: 2, role: 'viewer', name: 'bob', lease: 5, lease_name: 'alice', scene: 'x', tick_hz: 1000 });
+  assert.equal(welcomeText(s.state), 'welcome: client 2 (bob), viewer, scene x, 1000 Hz');
+  s.apply({ type: 'lease', holder: 7, holder_name: 'carol' });
+  assert.deepEqual(leaseNote({ lost: false, reason: null }, s.state), { text: 'carol (client 7) holds the lease', cls: '', announce: null });
+  s.apply({ type: 'lease', holder: null });
+  assert.equal(s.state.leaseName, null);
+});

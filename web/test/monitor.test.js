@@ -55,4 +55,6 @@ test('the down banner names the time, and a run of the history reads as the page
   assert.match(downText(Date.UTC(2026, 0, 1, 12, 0, 0), 'Failed to fetch'), /^server down since \d\d:\d\d:\d\d \(Failed to fetch\); what is shown below is from before$/);
   const l = runLine({ record: 'push-1-r1-p1.json', modified: 1767268800, run: 1, particle: 1, outcome: 'stopped', failure: 'stopped: the lease holder disconnected', estimate: [1e-6, 2e-6] });
   assert.match(l, /^\d\d:\d\d:\d\d push of #1 stopped: the lease holder disconnected, particle left at \(1\.00, 2\.00\) µm \(record push-1-r1-p1\.json\)$/);
+  // Who ran it, where the record says (issue 27).
+  assert.match(runLine({ record: 'push-1-r2-p1.json', modified: 1767268800, run: 2, particle: 1, outcome: 'ok', failure: null, estimate: [1e-6, 2e-6], person: 'alice' }), / — alice$/);
 });

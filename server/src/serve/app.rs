@@ -11,7 +11,7 @@ use axum::extract::{ConnectInfo, Path as UrlPath, Query, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
-use nanopush_proto::ws::{Role, ServerMessage};
+use nanopush_proto::ws::ServerMessage;
 
 use crate::serve::app_state::{AppState, Place};
 use crate::serve::haptic::api::haptic_status;
@@ -62,6 +62,10 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/records", get(records_list))
         .route("/api/records/{name}", get(record_get))
         .route("/api/runs", get(runs))
+        .route(
+            "/api/session",
+            get(crate::serve::auth::http::current).post(crate::serve::auth::http::login),
+        )
         .route("/metrics", get(metrics))
         // Static files gzip-compressed when the browser accepts it (the minified page, three.js
         // included, is ~0.7 MB, ~0.2 MB on the wire): a remote operator's page loads in seconds.
@@ -71,8 +75,9 @@ pub fn router(state: Arc<AppState>) -> Router {
 }
 
 /// Every request: when the server listens on loopback, the `Host` must name loopback (a page on
-/// another site that rebinds its DNS name to 127.0.0.1 is refused); with `--viewer-token`, the
-/// JSON API needs `?token=` (the viewer's or the operator's). `/metrics` stays open for a local
+/// another site that rebinds its DNS name to 127.0.0.1 is refused); with `--viewer-token` or a
+/// token file, the JSON API needs a credential (`?token=`, a bearer token or the session
+/// cookie; `auth::http`). `/metrics` stays open for a local
 /// Prometheus, as is usual.
 async fn guard(State(st): State<Arc<AppState>>, req: axum::extract::Request, next: axum::middleware::Next) -> Response {
     let addr = *st.addr.lock().expect("addr lock");
@@ -95,17 +100,15 @@ async fn guard(State(st): State<Arc<AppState>>, req: axum::extract::Request, nex
             return (StatusCode::MISDIRECTED_REQUEST, "Host must name this loopback server").into_response();
         }
     }
-    if let Some(viewer) = st.cfg.viewer_token.as_deref()
-        && req.uri().path().starts_with("/api/")
+    let gate = if req.uri().path().starts_with("/api/") {
+        crate::serve::auth::http::api_gate(&st, &req)
+    } else {
+        None
+    };
+    if let Some(gate) = gate
+        && let Err(refused) = gate.await
     {
-        // Decoded once, as the WebSocket route's query is (`%2B` is '+', '+' a space).
-        let token = Query::<WsQuery>::try_from_uri(req.uri())
-            .ok()
-            .and_then(|q| q.0.token)
-            .unwrap_or_default();
-        if token != viewer && token != st.cfg.operator_token {
-            return (StatusCode::UNAUTHORIZED, "this API needs ?token= (viewer or operator)").into_response();
-        }
+        return refused;
     }
     next.run(req).await
 }
@@ -123,6 +126,7 @@ async fn status(State(st): State<Arc<AppState>>) -> Response {
         "uptime_s": st.shared.start.elapsed().as_secs_f64(),
         "clients": st.net.clients.load(Relaxed),
         "lease": st.lease_holder(),
+        "lease_name": st.lease_name(),
         "phase": s.phase,
         "stage": s.stage,
         "volts": s.volts,
@@ -184,16 +188,15 @@ async fn record_get(State(st): State<Arc<AppState>>, UrlPath(name): UrlPath<Stri
 }
 
 async fn metrics(State(st): State<Arc<AppState>>) -> Response {
-    (
-        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
-        render(
-            &st.shared.metrics,
-            &st.net,
-            nanopush_proto::haptic::monotonic_ns(),
-            crate::serve::metrics::disk_space(&st.cfg.data_dir),
-        ),
-    )
-        .into_response()
+    let mut text = render(
+        &st.shared.metrics,
+        &st.net,
+        nanopush_proto::haptic::monotonic_ns(),
+        crate::serve::metrics::disk_space(&st.cfg.data_dir),
+    );
+    text.push_str(&st.auth.render_metrics());
+    text.push_str(&st.audit.render_metrics());
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text).into_response()
 }
 
 #[derive(Debug, serde::Deserialize)]
@@ -210,10 +213,11 @@ fn origin_allowed(st: &AppState, origin: &str) -> bool {
         return false;
     };
     let port = addr.port();
+    let scheme = if st.cfg.access.tls.is_some() { "https" } else { "http" };
     [
-        format!("http://127.0.0.1:{port}"),
-        format!("http://localhost:{port}"),
-        format!("http://{addr}"),
+        format!("{scheme}://127.0.0.1:{port}"),
+        format!("{scheme}://localhost:{port}"),
+        format!("{scheme}://{addr}"),
     ]
     .iter()
     .any(|o| o == origin)
@@ -235,15 +239,19 @@ async fn ws_upgrade(
             return (StatusCode::FORBIDDEN, "origin not allowed; see --allow-origin").into_response();
         }
     }
-    let role = match q.token.as_deref() {
-        Some(t) if t == st.cfg.operator_token => Role::Operator,
-        Some(t) if st.cfg.viewer_token.as_deref() == Some(t) => Role::Viewer,
-        None if st.cfg.viewer_token.is_none() => Role::Viewer,
-        _ => return (StatusCode::UNAUTHORIZED, "invalid or missing token").into_response(),
+    // The client behind a trusted proxy; its token (checked in constant time, failures
+    // rate-limited per address) or its session cookie.
+    let ip = crate::serve::auth::http::client_of(&st, peer.ip(), &headers);
+    let cookie = crate::serve::auth::http::cookie(&headers);
+    let person = match st.auth.authenticate(ip, q.token.as_deref(), cookie.as_deref()).await {
+        Ok(p) => p,
+        Err((code, why)) => return (code, why).into_response(),
     };
+    let role = person.role;
+    let peer = SocketAddr::new(ip, peer.port());
     // Counted here, under one lock, so simultaneous upgrades cannot pass the cap together; the
     // session (or a failed upgrade) gives the place back when it drops it.
-    let place = match Place::take(&st, role, peer.ip()) {
+    let place = match Place::take(&st, role, ip) {
         Ok(p) => std::sync::Arc::new(Mutex::new(Some(p))),
         Err((code, why)) => return (code, why).into_response(),
     };
@@ -260,7 +268,7 @@ async fn ws_upgrade(
         })
         .on_upgrade(move |socket| async move {
             let held = place.lock().ok().and_then(|mut p| p.take());
-            session(st, socket, role, peer).await;
+            session(st, socket, person, peer).await;
             drop(held);
         })
 }

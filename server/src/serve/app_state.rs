@@ -51,6 +51,20 @@ pub struct ServeConfig {
     pub scan_line_hz: f64,
     /// Telemetry rate to browsers (Hz).
     pub telemetry_hz: f64,
+    /// Who may connect: the token file, the trusted proxies, TLS.
+    pub access: AccessConfig,
+}
+
+/// Access settings beyond the generated tokens.
+#[derive(Debug, Clone, Default)]
+pub struct AccessConfig {
+    /// Named people with roles (`--token-file`); None: the generated operator token.
+    pub token_file: Option<crate::serve::auth::TokenFile>,
+    /// Reverse proxies whose `X-Forwarded-For` is believed (`--trusted-proxy`).
+    pub trusted_proxies: Vec<crate::serve::client_addr::Cidr>,
+    /// The server's own HTTPS (`--tls-cert`/`--tls-key`, `--tls-self-signed`); session cookies
+    /// are then `Secure`.
+    pub tls: Option<crate::serve::tls::Tls>,
 }
 
 /// Everything the handlers share, grouped by job.
@@ -79,6 +93,10 @@ pub struct AppState {
     /// The haptic scales in force, in the protocol's units: the scene's, then each accepted
     /// `haptic scale` (`/api/status`'s `haptic_scales`).
     pub haptic_scales: Mutex<HapticScales>,
+    /// Who is connecting: credentials, cookies, live sessions, failed attempts.
+    pub auth: crate::serve::auth::Auth,
+    /// The audit log (off until the server opens it in its data directory).
+    pub audit: crate::serve::audit::Audit,
 }
 
 /// The haptic scales in force, as the operator sets them.
@@ -255,6 +273,12 @@ impl AppState {
     /// The state of a server.
     pub fn new(cfg: ServeConfig, scene: Scene, shared: Arc<Shared>, params: StrategyParams) -> AppState {
         AppState {
+            auth: crate::serve::auth::Auth::new(
+                cfg.operator_token.clone(),
+                cfg.viewer_token.clone(),
+                cfg.access.token_file.clone(),
+            ),
+            audit: crate::serve::audit::Audit::off(),
             instance: Instance::now(),
             haptic_scales: Mutex::new(HapticScales {
                 nm_per_mm: scene.file.haptic.nm_per_mm,
@@ -320,6 +344,11 @@ impl AppState {
         *self.clients.lease.lock().expect("lease lock")
     }
 
+    /// The lease holder's name (their token's).
+    pub(crate) fn lease_name(&self) -> Option<String> {
+        self.lease_holder().and_then(|id| self.auth.name_of(id))
+    }
+
     /// The instrument as it is now, for a client that has just connected: the particles where
     /// the controller believes they are, the tip, the phase, the lease, the push running and
     /// the latest scan.
@@ -358,6 +387,7 @@ impl AppState {
             stage,
             phase: phase.into(),
             lease: self.lease_holder(),
+            lease_name: self.lease_name(),
             push: self.activity.push_now.lock().ok().and_then(|p| p.clone()),
             scan: self.activity.latest_scan.lock().ok().and_then(|s| s.clone()),
         }

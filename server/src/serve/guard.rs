@@ -70,9 +70,9 @@ enum State {
     Upgraded,
 }
 
-/// A guarded connection.
-pub struct Guarded {
-    io: TcpStream,
+/// A guarded connection: over TCP, or over TLS (`tls.rs`: the guard reads the decrypted bytes).
+pub struct Guarded<S = TcpStream> {
+    io: S,
     state: State,
     deadline: Pin<Box<Sleep>>,
     header_timeout: Duration,
@@ -81,7 +81,15 @@ pub struct Guarded {
 }
 
 impl Guarded {
-    fn new(io: TcpStream, header_timeout: Duration, idle_timeout: Duration) -> Guarded {
+    /// The TCP stream (for socket options).
+    pub fn tcp(&self) -> &TcpStream {
+        &self.io
+    }
+}
+
+impl<S> Guarded<S> {
+    /// Guards `io` with these time-outs.
+    pub(crate) fn new(io: S, header_timeout: Duration, idle_timeout: Duration) -> Guarded<S> {
         Guarded {
             io,
             state: State::Headers,
@@ -90,11 +98,6 @@ impl Guarded {
             idle_timeout,
             header: Vec::new(),
         }
-    }
-
-    /// The TCP stream (for socket options).
-    pub fn tcp(&self) -> &TcpStream {
-        &self.io
     }
 
     /// Follows the header blocks in `bytes`, just read.
@@ -134,7 +137,7 @@ impl Guarded {
     }
 }
 
-impl AsyncRead for Guarded {
+impl<S: AsyncRead + Unpin> AsyncRead for Guarded<S> {
     fn poll_read(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>> {
         let before = buf.filled().len();
         match Pin::new(&mut self.io).poll_read(cx, buf) {
@@ -159,7 +162,7 @@ impl AsyncRead for Guarded {
     }
 }
 
-impl AsyncWrite for Guarded {
+impl<S: AsyncWrite + Unpin> AsyncWrite for Guarded<S> {
     fn poll_write(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
         let r = Pin::new(&mut self.io).poll_write(cx, buf);
         if matches!(r, Poll::Ready(Ok(n)) if n > 0) {

@@ -11,7 +11,7 @@ use crate::scene::Scene;
 use crate::serve::app_state::{AppState, Instance, ServeConfig};
 use crate::serve::control_loop::{ControlLoop, LoopCommand, LoopConfig, Shared};
 use crate::serve::haptic::{HapticMode, Supervisor};
-use crate::serve::{app, guard, records, telemetry};
+use crate::serve::{app, audit, auth, guard, records, telemetry};
 
 /// A plain HTTP connection idle this long is closed (WebSockets keep themselves alive with pings).
 pub const IDLE_HTTP: Duration = Duration::from_secs(60);
@@ -40,7 +40,7 @@ pub enum ServeError {
 pub struct Started {
     /// Bound address.
     pub addr: SocketAddr,
-    /// `http://ADDR/?token=TOKEN`.
+    /// `http://ADDR/?token=TOKEN` (`https` with TLS).
     pub url: String,
 }
 
@@ -77,9 +77,12 @@ pub async fn run(
     // This run of the server, named in its records' summaries and in `welcome`.
     let instance = Instance::now();
     let rec_instance = instance.id.clone();
+    // Who ran each push: the audit log's and the records'.
+    let people = audit::RunPeople::default();
+    let rec_people = people.clone();
     let recorder = match std::thread::Builder::new()
         .name("recorder".into())
-        .spawn(move || records::run_recorder(rec_shared, dir, rec_instance, ev_tx))
+        .spawn(move || records::run_recorder(rec_shared, dir, rec_instance, rec_people, ev_tx))
     {
         Ok(r) => r,
         Err(source) => {
@@ -99,11 +102,30 @@ pub async fn run(
     };
     let mut state = AppState::new(cfg, scene, shared, params);
     state.instance = instance;
+    state.audit = audit::Audit::open(&state.cfg.data_dir, people);
+    let auth_dir = state.cfg.data_dir.join("auth");
+    if let Err(e) = state.auth.keep_cookies_in(&auth_dir) {
+        tracing::error!(
+            "cannot keep the session cookies' key in {}: {e}; pages sign in again after a restart",
+            auth_dir.display()
+        );
+    }
     let state = Arc::new(state);
     *state.addr.lock().expect("addr lock") = Some(addr);
-    let url = format!("http://{addr}/?token={}", state.cfg.operator_token);
+    // With a token file each person opens the page with their own token.
+    let scheme = if state.cfg.access.tls.is_some() {
+        "https"
+    } else {
+        "http"
+    };
+    let url = if state.auth.is_named() {
+        format!("{scheme}://{addr}/ (each person adds ?token=THEIR_TOKEN)")
+    } else {
+        format!("{scheme}://{addr}/?token={}", state.cfg.operator_token)
+    };
     started(&Started { addr, url });
     let telemetry = tokio::spawn(telemetry::telemetry_task(state.clone(), ev_rx));
+    tokio::spawn(auth::watch_token_file(state.clone()));
     let threads = Threads {
         recorder,
         control_loop: loop_thread,
@@ -224,6 +246,14 @@ async fn serve_http(
     // ACK of the reply before the next telemetry frames went out (docs/server.md).
     // Slowloris: each request's headers within the header time-out, a plain HTTP connection
     // idle for a minute closed (WebSockets keep themselves alive with pings).
+    if let Some(tls) = &state.cfg.access.tls {
+        // HTTPS: the handshakes on tasks of their own, the guard over the decrypted bytes.
+        let listener = crate::serve::tls::TlsListener::new(listener, tls, state.cfg.header_timeout, IDLE_HTTP)?;
+        // (`tap_io`, with nothing to do: axum gives `ConnectInfo<SocketAddr>` to a tapped
+        // listener; TCP_NODELAY is set before the handshake.)
+        let listener = axum::serve::ListenerExt::tap_io(listener, |_: &mut crate::serve::tls::TlsIo| {});
+        return axum::serve(listener, app).with_graceful_shutdown(graceful).await;
+    }
     let guarded = guard::GuardedListener::new(listener, state.cfg.header_timeout, IDLE_HTTP);
     let listener = axum::serve::ListenerExt::tap_io(guarded, |io: &mut guard::Guarded| {
         if let Err(e) = io.tcp().set_nodelay(true) {

@@ -3,6 +3,9 @@
 
 pub mod app;
 pub mod app_state;
+pub mod audit;
+pub mod auth;
+pub mod client_addr;
 pub mod command_checks;
 pub mod control_loop;
 pub mod data_dir;
@@ -18,5 +21,6 @@ pub mod records;
 pub mod scan_job;
 pub mod session;
 pub mod telemetry;
+pub mod tls;
 
 pub use lifecycle::{IDLE_HTTP, ServeError, Started, run};

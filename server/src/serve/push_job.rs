@@ -129,6 +129,11 @@ pub(crate) fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, gen
         return run_done_failed(st, particle, "stopped", "stopped before the push began".into());
     }
     let run = st.shared.runs.fetch_add(1, Relaxed) + 1;
+    // Who ran it, for its record and the audit log's `run_done` (the session may be gone by
+    // now: then its client number).
+    if let Ok(mut people) = st.audit.runs.lock() {
+        people.insert(run, st.auth.name_of(by).unwrap_or_else(|| format!("client {by}")));
+    }
     let mut path = vec![[located.x, located.y]];
     path.extend(legs.iter().map(|l| [l.to.0, l.to.1]));
     let started = PushPath {

@@ -96,6 +96,8 @@ pub struct RunEntry {
     pub instance: Option<String>,
     /// Run number (per server run: numbers start again after a restart).
     pub run: u64,
+    /// Who ran it (none in records older than the audit trail).
+    pub person: Option<String>,
     /// Particle id.
     pub particle: u32,
     /// `ok` or the failure code.
@@ -148,6 +150,7 @@ pub fn runs_in(dir: &Path, listed: &[RecordEntry], max: usize) -> Vec<RunEntry> 
                 .and_then(serde_json::Value::as_str)
                 .map(str::to_string),
             run,
+            person: v.get("person").and_then(serde_json::Value::as_str).map(str::to_string),
             particle,
             outcome: outcome.to_string(),
             failure: v.get("failure").and_then(serde_json::Value::as_str).map(str::to_string),
@@ -167,6 +170,8 @@ pub struct PushSummary {
     pub instance: String,
     /// Run number.
     pub run: u64,
+    /// Who ran it (their token's name; `operator` without a token file).
+    pub person: Option<String>,
     /// Particle id.
     pub particle: u32,
     /// `ok` or the failure code.
@@ -208,11 +213,13 @@ pub fn clean_partials(dir: &Path) -> usize {
 
 /// Drains the loop's trace rows and events, writes the records (each summary names `instance`,
 /// the server run), and forwards each event with its record's name — or the reason it could not
-/// be written. Ends when the loop has finished and everything is written.
+/// be written. `people` names who ran each push. Ends when the loop has finished and everything
+/// is written.
 pub fn run_recorder(
     shared: Arc<Shared>,
     dir: PathBuf,
     instance: String,
+    people: crate::serve::audit::RunPeople,
     out: tokio::sync::mpsc::UnboundedSender<(LoopEvent, Recorded)>,
 ) {
     if let Err(e) = std::fs::create_dir_all(&dir) {
@@ -250,6 +257,7 @@ pub fn run_recorder(
                     schema: "push-record",
                     instance: instance.clone(),
                     run,
+                    person: people.lock().ok().and_then(|p| p.get(&run).cloned()),
                     particle,
                     outcome: outcome.into(),
                     failure: failure.clone(),
@@ -404,6 +412,7 @@ mod tests {
                 schema: "push-record",
                 instance: "18f-2a".into(),
                 run,
+                person: Some("alice".into()),
                 particle: 2,
                 outcome: outcome.into(),
                 failure: failure.map(str::to_string),
@@ -444,6 +453,7 @@ mod tests {
         assert_eq!(h[0].failure.as_deref(), Some("stopped: the lease holder disconnected"));
         assert_eq!(h[1].run, 1);
         assert_eq!(h[1].instance.as_deref(), Some("18f-2a"), "which server run wrote it");
+        assert_eq!(h[1].person.as_deref(), Some("alice"), "who ran it");
         assert_eq!(h[1].estimate, [1e-6, 2e-6]);
         assert_eq!(run_history(&dir, 1).unwrap().len(), 1);
         assert!(run_history(&dir.join("missing"), 10).unwrap().is_empty());

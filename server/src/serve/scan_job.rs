@@ -12,8 +12,9 @@ use crate::serve::app_state::{AppState, to_text};
 use crate::serve::records::{self, write_atomic};
 
 /// A scan on its own thread: lines at the scan line rate to the `scan` stream, then the GSF
-/// record. Tapping never moves particles: it images a snapshot of the sample.
-pub(crate) fn run_scan(st: &AppState, params: ScanParams) {
+/// record (naming `person`, who ran it). Tapping never moves particles: it images a snapshot of
+/// the sample.
+pub(crate) fn run_scan(st: &AppState, params: ScanParams, person: &str) {
     let scan_id = st.activity.next_scan.fetch_add(1, Relaxed);
     let surface = st.surface_now();
     let tip = Tip::from_scene(&st.scene);
@@ -79,7 +80,7 @@ pub(crate) fn run_scan(st: &AppState, params: ScanParams) {
     let (record, record_error) = if cancelled {
         (None, None)
     } else {
-        write_record(st, scan_id, &img, &tip)
+        write_record(st, scan_id, &img, &tip, person)
     };
     if let Ok(mut s) = st.activity.latest_scan.lock() {
         // A cancelled scan is not the latest picture of the sample: the one before stays.
@@ -104,8 +105,14 @@ pub(crate) fn run_scan(st: &AppState, params: ScanParams) {
 }
 
 /// Writes scan `scan_id`'s record (`scan-T-INSTANCE-N.gsf` and its `.json` summary with the particles
-/// found); returns the GSF's name, or the reason it is missing.
-fn write_record(st: &AppState, scan_id: u32, img: &HeightImage, tip: &Tip) -> (Option<String>, Option<String>) {
+/// found, and `person`, who ran it); returns the GSF's name, or the reason it is missing.
+fn write_record(
+    st: &AppState,
+    scan_id: u32,
+    img: &HeightImage,
+    tip: &Tip,
+    person: &str,
+) -> (Option<String>, Option<String>) {
     let (mut record, mut record_error) = (None, None);
     // The server run in the name: two runs' scans of the same second never share one.
     let stem = format!("scan-{}-{}-{scan_id}", records::unix_now(), st.instance.id);
@@ -124,6 +131,7 @@ fn write_record(st: &AppState, scan_id: u32, img: &HeightImage, tip: &Tip) -> (O
         let summary = serde_json::json!({
             "schema": "scan-record",
             "scan": scan_id,
+            "person": person,
             "gsf": gsf_name,
             "xres": img.xres, "yres": img.yres,
             "x_offset": img.x_offset, "y_offset": img.y_offset,

@@ -20,6 +20,26 @@ fn split(r: records::Recorded) -> (Option<String>, Option<String>) {
     }
 }
 
+/// A push's end in the audit log, under the person who ran it.
+fn audit_run_done(st: &AppState, run: u64, particle: u32, outcome: &str, failure: Option<&str>, record: Option<&str>) {
+    let person = st.audit.runs.lock().ok().and_then(|mut p| p.remove(&run));
+    let mut args = serde_json::Map::new();
+    args.insert("run".into(), run.into());
+    args.insert("particle".into(), particle.into());
+    if let Some(r) = record {
+        args.insert("record".into(), r.into());
+    }
+    st.audit.event(crate::serve::audit::Happened {
+        person: person.as_deref().unwrap_or("unknown"),
+        address: None,
+        client: None,
+        command: "run_done",
+        args,
+        outcome,
+        message: failure,
+    });
+}
+
 /// Telemetry at `telemetry_hz`, produced only while someone subscribes to `tip`, to the lease
 /// holder first, then to everyone else; and loop events forwarded to everyone.
 pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiver<(LoopEvent, records::Recorded)>) {
@@ -51,16 +71,18 @@ pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiv
                 let _ = st.channels.telemetry.send(frame);
             }
             e = events.recv() => {
-                let Some((LoopEvent::RunDone { particle, outcome, failure, estimate, .. }, record)) = e else { break };
+                let Some((LoopEvent::RunDone { run, particle, outcome, failure, estimate, .. }, record)) = e else { break };
                 st.remember(particle, estimate);
                 st.push_ended(true);
                 let (record, record_error) = split(record);
+                audit_run_done(&st, run, particle, outcome, failure.as_deref(), record.as_deref());
                 st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record, record_error });
             }
             _ = shutdown.changed() => {
                 // Forward what the recorder still finishes (the aborted run's record).
-                while let Some((LoopEvent::RunDone { particle, outcome, failure, estimate, .. }, record)) = events.recv().await {
+                while let Some((LoopEvent::RunDone { run, particle, outcome, failure, estimate, .. }, record)) = events.recv().await {
                     let (record, record_error) = split(record);
+                    audit_run_done(&st, run, particle, outcome, failure.as_deref(), record.as_deref());
                     st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record, record_error });
                 }
                 break;

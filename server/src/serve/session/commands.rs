@@ -233,8 +233,9 @@ fn scan(
         ..base
     };
     let st2 = st.clone();
+    let by = c.person.name.clone();
     std::thread::spawn(move || {
-        if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_scan(&st2, params))).is_err() {
+        if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_scan(&st2, params, &by))).is_err() {
             tracing::error!("scan failed (internal error)");
             st2.activity.scanning.store(false, Relaxed);
         }

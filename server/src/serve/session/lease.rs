@@ -48,13 +48,17 @@ pub(super) fn take(st: &AppState, c: &Client) -> Result<(), Refusal> {
         Some(h) if h == c.id => Ok(()),
         Some(h) => Err(Refusal::new(
             ErrorCode::LeaseHeld,
-            format!("client {h} holds the lease"),
+            match st.auth.name_of(h) {
+                Some(name) => format!("{name} (client {h}) holds the lease"),
+                None => format!("client {h} holds the lease"),
+            },
         )),
         None => {
             *lease = Some(c.id);
             drop(lease);
             st.broadcast_event(&ServerMessage::Lease {
                 holder: Some(c.id),
+                holder_name: Some(c.person.name.clone()),
                 reason: None,
             });
             Ok(())
@@ -73,6 +77,7 @@ pub(super) fn release(st: &AppState, c: &Client) -> Result<(), Refusal> {
     release_haptic(st);
     st.broadcast_event(&ServerMessage::Lease {
         holder: None,
+        holder_name: None,
         reason: None,
     });
     Ok(())
@@ -127,6 +132,7 @@ pub(super) fn on_disconnect(st: &AppState, id: u32) {
     tracing::info!("client {id} held the lease and disconnected{what}");
     st.broadcast_event(&ServerMessage::Lease {
         holder: None,
+        holder_name: None,
         reason: Some(format!("client {id}, which held the lease, disconnected{what}")),
     });
 }

@@ -24,6 +24,8 @@ use nanopush_proto::ws::{Role, ServerMessage, Stream as WsStream, WS_VERSION};
 use tokio::sync::{mpsc, watch};
 
 use crate::serve::app_state::{AppState, to_text};
+use crate::serve::audit::Happened;
+use crate::serve::auth::Person;
 use receive::{Ended, Inbox};
 use send::Outbox;
 
@@ -45,6 +47,10 @@ pub const REPLY_PATIENCE: Duration = Duration::from_secs(30);
 pub(crate) struct Client {
     id: u32,
     role: Role,
+    /// Who (the audit log's `person`) and from where (behind a trusted proxy, the client's
+    /// address it forwarded).
+    person: Arc<Person>,
+    addr: std::net::IpAddr,
     streams: HashSet<WsStream>,
     /// The rate limit's token bucket.
     tokens: f64,
@@ -52,23 +58,26 @@ pub(crate) struct Client {
     last: Instant,
 }
 
-/// One WebSocket connection from `peer`, with `role`.
-pub(crate) async fn session(st: Arc<AppState>, socket: WebSocket, role: Role, peer: SocketAddr) {
+/// One WebSocket connection of `person` from `peer`.
+pub(crate) async fn session(st: Arc<AppState>, socket: WebSocket, person: Arc<Person>, peer: SocketAddr) {
     let (sink, stream) = socket.split();
-    run(st, sink, stream, role, peer).await;
+    run(st, sink, stream, person, peer).await;
 }
 
 /// A session over any sink and stream of WebSocket messages: the welcome and the state first,
 /// then the receive loop here and the send loop on a task of its own; when either ends, the
 /// lease and the subscriptions are given back and the send loop is given 2 s to finish.
-pub(crate) async fn run<S, R, E>(st: Arc<AppState>, sink: S, stream: R, role: Role, peer: SocketAddr)
+pub(crate) async fn run<S, R, E>(st: Arc<AppState>, sink: S, stream: R, person: Arc<Person>, peer: SocketAddr)
 where
     S: Sink<Message> + Unpin + Send + 'static,
     R: Stream<Item = Result<Message, E>> + Unpin,
     E: std::error::Error + 'static,
 {
     let id = st.clients.next_client.fetch_add(1, Relaxed);
-    tracing::info!("client {id} ({role:?}) connected from {peer}");
+    let role = person.role;
+    tracing::info!("client {id} ({}, {role:?}) connected from {peer}", person.name);
+    // Closed at once if the person's token is revoked.
+    let kicked = st.auth.join(id, person.clone());
     let (reply_tx, replies) = mpsc::channel::<Utf8Bytes>(64);
     let (streams_tx, streams) = watch::channel(HashSet::<WsStream>::new());
     let welcome = ServerMessage::Welcome {
@@ -76,6 +85,8 @@ where
         client: id,
         role,
         lease: st.lease_holder(),
+        lease_name: st.lease_name(),
+        name: person.name.clone(),
         scene: st.scene.file.name.clone(),
         tick_hz: 1.0 / st.params.tick,
         instance: st.instance.id.clone(),
@@ -95,11 +106,14 @@ where
         streams,
         answered: answered.clone(),
         closing: closing.clone(),
+        kicked,
     };
     let mut send = tokio::spawn(send::send_loop(st.clone(), sink, outbox));
     let mut client = Client {
         id,
         role,
+        person: person.clone(),
+        addr: peer.ip(),
         streams: HashSet::new(),
         tokens: st.cfg.max_rate,
         last: Instant::now(),
@@ -110,7 +124,19 @@ where
         answered: &answered,
     };
     let ended = receive::receive_loop(&st, stream, &mut client, inbox, &mut send).await;
+    if st.lease_holder() == Some(id) {
+        st.audit.event(Happened {
+            person: &person.name,
+            address: Some(peer.ip()),
+            client: Some(id),
+            command: "lease_lost",
+            args: serde_json::Map::new(),
+            outcome: "ok",
+            message: Some("the lease holder's connection closed"),
+        });
+    }
     lease::on_disconnect(&st, id);
+    st.auth.leave(id);
     for s in &client.streams {
         commands::counter(&st, *s).fetch_sub(1, Relaxed);
     }

@@ -163,7 +163,13 @@ async fn answer(st: &Arc<AppState>, client: &mut Client, inbox: &Inbox<'_>, text
         } => Some((*nm_per_mm, *pull_off_at_hand_n)),
         _ => None,
     };
-    match handle(st, client, parsed) {
+    let audited = crate::serve::audit::describe(&parsed);
+    let handled = handle(st, client, parsed);
+    if let Some(cmd) = audited {
+        let refused = handled.as_ref().err().map(|r| (r.code, r.message.as_str()));
+        st.audit.command(&client.person, client.addr, client.id, cmd, refused);
+    }
+    match handled {
         Ok(()) => {
             let scales = scale.map(|(g, f)| {
                 let ts = st.scene.tip_sample();

@@ -11,7 +11,7 @@ use std::time::Instant;
 
 use axum::extract::ws::{CloseFrame, Message, Utf8Bytes};
 use futures_util::{Sink, SinkExt};
-use nanopush_proto::ws::{Role, ServerMessage, Stream as WsStream};
+use nanopush_proto::ws::{ErrorCode, Role, ServerMessage, Stream as WsStream};
 use tokio::sync::{broadcast, mpsc, watch};
 
 use super::SEND_BUDGET;
@@ -34,6 +34,8 @@ pub(super) struct Outbox {
     /// The close frame to end with once the replies are sent, when the receive side ended the
     /// session for a reason the peer must be told (a message too big: 1009).
     pub closing: Closing,
+    /// Changes to the reason when the person's token is revoked: the session is closed.
+    pub kicked: watch::Receiver<Option<String>>,
 }
 
 /// A close code and reason, set once.
@@ -59,6 +61,7 @@ where
     let mut scans = st.channels.scans.subscribe();
     let mut shutdown = st.channels.shutdown.subscribe();
     let mut wants = HashSet::new();
+    let mut kick_open = true;
     loop {
         // Only an operator can hold the lease: a viewer's session never looks (500 of them
         // would each take the lease's lock for every message).
@@ -129,6 +132,17 @@ where
                     Some(payload) => Message::Ping(payload),
                     None => continue,
                 }
+            }
+            r = out.kicked.changed(), if kick_open => {
+                let Ok(()) = r else {
+                    kick_open = false;
+                    continue;
+                };
+                let why = out.kicked.borrow().clone().unwrap_or_default();
+                let refused = to_text(&ServerMessage::Error { id: None, code: ErrorCode::Forbidden, message: why });
+                let _ = sink.send(Message::Text(refused)).await;
+                let _ = sink.send(close(1008, "access revoked")).await;
+                break;
             }
             _ = shutdown.changed() => {
                 let bye = to_text(&ServerMessage::Shutdown { reason: "server shutting down".into() });

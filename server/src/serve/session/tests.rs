@@ -37,6 +37,7 @@ pub(crate) fn test_state() -> Arc<AppState> {
         haptic: crate::serve::haptic::HapticMode::None,
         scan_line_hz: 100.0,
         telemetry_hz: 60.0,
+        access: Default::default(),
     };
     let params = scene.strategy_params(tick);
     Arc::new(AppState::new(cfg, scene, shared, params))
@@ -47,10 +48,21 @@ pub(crate) fn client(id: u32, role: Role) -> Client {
     Client {
         id,
         role,
+        person: person(role),
+        addr: std::net::IpAddr::from([127, 0, 0, 1]),
         streams: HashSet::new(),
         tokens: 50.0,
         last: Instant::now(),
     }
+}
+
+/// A person of `role` (named after it).
+pub(crate) fn person(role: Role) -> Arc<crate::serve::auth::Person> {
+    Arc::new(crate::serve::auth::Person {
+        name: format!("{role:?}").to_lowercase(),
+        role,
+        key: "test".into(),
+    })
 }
 
 /// Runs a session over channels; returns the client's outgoing side and incoming side.
@@ -65,7 +77,7 @@ fn connect(
     let (to_server, from_client) = futures_channel::mpsc::unbounded();
     let (to_client, from_server) = futures_channel::mpsc::unbounded::<Message>();
     let peer = "127.0.0.1:9".parse().unwrap();
-    let task = tokio::spawn(run(st.clone(), to_client, from_client, role, peer));
+    let task = tokio::spawn(run(st.clone(), to_client, from_client, person(role), peer));
     (to_server, from_server, task)
 }
 

@@ -1,0 +1,319 @@
+//! The token file: one line per person, `NAME ROLE ID HASH`, where the person's token is
+//! `npt_ID_SECRET` and HASH is the argon2id hash (PHC string) of SECRET. Only the hash is kept:
+//! a copy of the file gives nobody access. `nanopush token add|list|revoke` edits it; the server
+//! re-reads it when it changes.
+//!
+//! A token is checked by its ID (not secret: it only finds the line) and then by argon2's
+//! verification of SECRET against the line's hash, which compares the digests in constant time.
+
+use std::io::{Read as _, Write as _};
+use std::path::{Path, PathBuf};
+
+use argon2::Argon2;
+use argon2::password_hash::{PasswordHash, PasswordHasher, PasswordVerifier, SaltString};
+use nanopush_proto::ws::Role;
+
+/// The token's prefix: a token pasted into a chat or a log is recognisable.
+pub const TOKEN_PREFIX: &str = "npt_";
+
+/// Longest name (characters).
+pub const NAME_MAX: usize = 64;
+
+/// Why the token file could not be read, written or changed.
+#[derive(Debug, thiserror::Error)]
+pub enum TokenFileError {
+    /// Reading or writing the file failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A line is not `NAME ROLE ID HASH`.
+    #[error("{path}, line {line}: {why}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// Line number (from 1).
+        line: usize,
+        /// What is wrong.
+        why: String,
+    },
+    /// A name that is not allowed.
+    #[error("name {0:?} is not allowed: 1 to {NAME_MAX} letters, digits, '.', '_', '-' or '@', not starting with '-'")]
+    BadName(String),
+    /// `add` of a name the file has.
+    #[error("{0} has a token already (revoke it first to issue a new one)")]
+    Exists(String),
+    /// `revoke` of a name the file lacks.
+    #[error("no token for {0}")]
+    Missing(String),
+    /// Hashing failed (never with the default parameters).
+    #[error("hashing the token: {0}")]
+    Hash(String),
+}
+
+/// One person's line.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TokenEntry {
+    /// The person's name, as the audit log and the records say it.
+    pub name: String,
+    /// Operator or viewer.
+    pub role: Role,
+    /// The token's id (8 hex digits): finds the line; not secret.
+    pub id: String,
+    /// argon2id PHC string of the token's secret.
+    pub hash: String,
+}
+
+/// The parsed token file.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct TokenTable {
+    /// The people, in file order.
+    pub entries: Vec<TokenEntry>,
+}
+
+/// Whether `name` may name a person.
+pub fn valid_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.chars().count() <= NAME_MAX
+        && !name.starts_with('-')
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-' | '@'))
+}
+
+/// `operator` or `viewer`.
+pub fn parse_role(s: &str) -> Option<Role> {
+    match s {
+        "operator" => Some(Role::Operator),
+        "viewer" => Some(Role::Viewer),
+        _ => None,
+    }
+}
+
+/// The role's name in the file and the CLI.
+pub fn role_name(r: Role) -> &'static str {
+    match r {
+        Role::Operator => "operator",
+        Role::Viewer => "viewer",
+    }
+}
+
+/// `N` random bytes from the kernel.
+pub fn random_bytes<const N: usize>() -> std::io::Result<[u8; N]> {
+    let mut b = [0u8; N];
+    std::fs::File::open("/dev/urandom")?.read_exact(&mut b)?;
+    Ok(b)
+}
+
+/// Lower-case hex.
+pub fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// A token's id and secret, or None when it is not `npt_ID_SECRET`.
+fn split_token(token: &str) -> Option<(&str, &str)> {
+    let rest = token.strip_prefix(TOKEN_PREFIX)?;
+    let (id, secret) = rest.split_once('_')?;
+    (id.len() == 8 && !secret.is_empty()).then_some((id, secret))
+}
+
+fn hash_secret(secret: &str) -> Result<String, TokenFileError> {
+    let salt_bytes = random_bytes::<16>().map_err(|e| TokenFileError::Hash(e.to_string()))?;
+    let salt = SaltString::encode_b64(&salt_bytes).map_err(|e| TokenFileError::Hash(e.to_string()))?;
+    Argon2::default()
+        .hash_password(secret.as_bytes(), &salt)
+        .map(|h| h.to_string())
+        .map_err(|e| TokenFileError::Hash(e.to_string()))
+}
+
+impl TokenTable {
+    /// Parses the file's text (`path` names it in errors).
+    pub fn parse(text: &str, path: &Path) -> Result<TokenTable, TokenFileError> {
+        let mut entries: Vec<TokenEntry> = Vec::new();
+        for (i, line) in text.lines().enumerate() {
+            let line = line.trim();
+            if line.is_empty() || line.starts_with('#') {
+                continue;
+            }
+            let bad = |why: String| TokenFileError::Parse {
+                path: path.to_path_buf(),
+                line: i + 1,
+                why,
+            };
+            let f: Vec<&str> = line.split_whitespace().collect();
+            let [name, role, id, hash] = f[..] else {
+                return Err(bad(format!("expected 4 fields `NAME ROLE ID HASH`, found {}", f.len())));
+            };
+            if !valid_name(name) {
+                return Err(bad(format!("name {name:?} is not allowed")));
+            }
+            let role = parse_role(role).ok_or_else(|| bad(format!("role {role:?}; allowed: operator, viewer")))?;
+            if id.len() != 8 || !id.chars().all(|c| c.is_ascii_hexdigit()) {
+                return Err(bad(format!("id {id:?} is not 8 hex digits")));
+            }
+            PasswordHash::new(hash).map_err(|e| bad(format!("hash is not an argon2 PHC string: {e}")))?;
+            if entries.iter().any(|e| e.name == name || e.id == id) {
+                return Err(bad(format!("{name} (or id {id}) appears twice")));
+            }
+            entries.push(TokenEntry {
+                name: name.into(),
+                role,
+                id: id.into(),
+                hash: hash.into(),
+            });
+        }
+        Ok(TokenTable { entries })
+    }
+
+    /// Reads `path`; a missing file is an empty table when `missing_ok`.
+    pub fn read(path: &Path, missing_ok: bool) -> Result<TokenTable, TokenFileError> {
+        match std::fs::read_to_string(path) {
+            Ok(text) => TokenTable::parse(&text, path),
+            Err(e) if missing_ok && e.kind() == std::io::ErrorKind::NotFound => Ok(TokenTable::default()),
+            Err(source) => Err(TokenFileError::Io {
+                path: path.to_path_buf(),
+                source,
+            }),
+        }
+    }
+
+    /// The file's text.
+    pub fn render(&self) -> String {
+        let mut s = String::from(
+            "# nanopush tokens: NAME ROLE ID ARGON2-HASH, one person a line.\n# Edit with `nanopush token add|list|revoke`; a running server re-reads this file.\n",
+        );
+        for e in &self.entries {
+            s.push_str(&format!("{} {} {} {}\n", e.name, role_name(e.role), e.id, e.hash));
+        }
+        s
+    }
+
+    /// Writes the file whole: a temporary file (mode 0600) fsynced, then renamed over it, so a
+    /// server re-reading it never sees half a file.
+    pub fn write(&self, path: &Path) -> Result<(), TokenFileError> {
+        use std::os::unix::fs::OpenOptionsExt as _;
+        let io = |source| TokenFileError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let tmp = path.with_extension(format!("tmp-{}", std::process::id()));
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .mode(0o600)
+            .open(&tmp)
+            .map_err(io)?;
+        f.write_all(self.render().as_bytes())
+            .and_then(|()| f.sync_all())
+            .and_then(|()| std::fs::rename(&tmp, path))
+            .map_err(|e| {
+                let _ = std::fs::remove_file(&tmp);
+                io(e)
+            })
+    }
+
+    /// Adds `name` with `role`; returns the new token (shown once: only its hash is kept).
+    pub fn add(&mut self, name: &str, role: Role) -> Result<String, TokenFileError> {
+        if !valid_name(name) {
+            return Err(TokenFileError::BadName(name.into()));
+        }
+        if self.entries.iter().any(|e| e.name == name) {
+            return Err(TokenFileError::Exists(name.into()));
+        }
+        let rand = |e: std::io::Error| TokenFileError::Hash(format!("reading /dev/urandom: {e}"));
+        let id = loop {
+            let id = hex(&random_bytes::<4>().map_err(rand)?);
+            if !self.entries.iter().any(|e| e.id == id) {
+                break id;
+            }
+        };
+        let secret = hex(&random_bytes::<16>().map_err(rand)?);
+        let hash = hash_secret(&secret)?;
+        self.entries.push(TokenEntry {
+            name: name.into(),
+            role,
+            id: id.clone(),
+            hash,
+        });
+        Ok(format!("{TOKEN_PREFIX}{id}_{secret}"))
+    }
+
+    /// Removes `name`'s token.
+    pub fn revoke(&mut self, name: &str) -> Result<TokenEntry, TokenFileError> {
+        let i = self
+            .entries
+            .iter()
+            .position(|e| e.name == name)
+            .ok_or_else(|| TokenFileError::Missing(name.into()))?;
+        Ok(self.entries.remove(i))
+    }
+
+    /// The line `token` belongs to, checked with argon2 (slow on purpose: call it off the async
+    /// workers), or None.
+    pub fn verify(&self, token: &str) -> Option<&TokenEntry> {
+        let (id, secret) = split_token(token)?;
+        let e = self.entries.iter().find(|e| e.id == id)?;
+        let hash = PasswordHash::new(&e.hash).ok()?;
+        Argon2::default()
+            .verify_password(secret.as_bytes(), &hash)
+            .is_ok()
+            .then_some(e)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_token_added_verifies_only_itself_and_the_file_keeps_only_its_hash() {
+        let mut t = TokenTable::default();
+        let alice = t.add("alice", Role::Operator).unwrap();
+        let bob = t.add("bob", Role::Viewer).unwrap();
+        assert!(
+            alice.starts_with(TOKEN_PREFIX) && alice.len() == 4 + 8 + 1 + 32,
+            "{alice}"
+        );
+        assert_eq!(t.verify(&alice).map(|e| e.name.as_str()), Some("alice"));
+        assert_eq!(t.verify(&bob).map(|e| e.role), Some(Role::Viewer));
+        // Alice's id with a wrong secret, or with Bob's secret: refused.
+        let (aid, _) = split_token(&alice).unwrap();
+        let (_, bsecret) = split_token(&bob).unwrap();
+        assert!(t.verify(&format!("{TOKEN_PREFIX}{aid}_{bsecret}")).is_none());
+        assert!(t.verify(&format!("{TOKEN_PREFIX}{aid}_00")).is_none());
+        assert!(t.verify("alice").is_none() && t.verify("").is_none());
+        let text = t.render();
+        assert!(
+            !text.contains(split_token(&alice).unwrap().1),
+            "the secret is never stored"
+        );
+        let back = TokenTable::parse(&text, Path::new("t")).unwrap();
+        assert_eq!(back, t);
+        assert_eq!(back.verify(&alice).map(|e| e.name.as_str()), Some("alice"));
+        assert!(matches!(t.add("alice", Role::Viewer), Err(TokenFileError::Exists(_))));
+        assert!(matches!(t.add("a b", Role::Viewer), Err(TokenFileError::BadName(_))));
+        t.revoke("alice").unwrap();
+        assert!(t.verify(&alice).is_none(), "a revoked token is refused");
+        assert!(matches!(t.revoke("alice"), Err(TokenFileError::Missing(_))));
+    }
+
+    #[test]
+    fn a_broken_line_is_named_with_its_number_and_what_is_wrong() {
+        let e = TokenTable::parse("# c\n\nalice operator 0011aabb\n", Path::new("tok")).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "tok, line 3: expected 4 fields `NAME ROLE ID HASH`, found 3"
+        );
+        let e = TokenTable::parse("alice admin 0011aabb $argon2id$x\n", Path::new("tok")).unwrap_err();
+        assert!(
+            e.to_string().contains("role \"admin\"; allowed: operator, viewer"),
+            "{e}"
+        );
+        let e = TokenTable::parse("alice viewer 0011aabb nothash\n", Path::new("tok")).unwrap_err();
+        assert!(e.to_string().contains("not an argon2 PHC string"), "{e}");
+    }
+}

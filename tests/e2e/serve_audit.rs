@@ -1,0 +1,113 @@
+//! Issue 27, item 4: the audit trail. Every command that changes the instrument, with who sent
+//! it, from where, and what became of it, is in `audit/audit.jsonl` of the data directory, and
+//! still there, whole, after the server is killed with SIGKILL; each record names who made it.
+
+use std::time::{Duration, Instant};
+
+use serde_json::{Value, json};
+
+use crate::serve_access::{named_server, try_ws};
+use crate::util::{is, ok, reply, runtime, send, until};
+
+/// The audit log's lines (each must be whole JSON).
+fn audit_lines(records: &std::path::Path) -> Vec<Value> {
+    let text = std::fs::read_to_string(records.join("audit/audit.jsonl")).unwrap_or_default();
+    assert!(text.is_empty() || text.ends_with('\n'), "a partial last line: {text:?}");
+    text.lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not a whole JSON line ({e}): {l}")))
+        .collect()
+}
+
+/// Alice (operator) takes the lease, scans, pushes, stops, asks for haptic engagement (refused:
+/// no haptic link) and gives the lease back; Bob (viewer) tries to take it. The log has each of
+/// these in order with the person, the address, the arguments and the outcome (refusals with
+/// their code), and the push's end under Alice's name; the push and scan records name Alice.
+/// Then the server is killed with SIGKILL: every line is still there, whole.
+#[test]
+fn issue_27_every_command_is_in_the_audit_log_with_its_person_and_survives_kill_9() {
+    let (mut srv, tokens) = named_server(
+        "audit",
+        &[("alice", "operator"), ("bob", "viewer")],
+        &["--scan-line-hz", "400", "--allow-cpu-halt"],
+    );
+    let records = srv.dir.join("records");
+    runtime().block_on(async {
+        let (mut a, _) = try_ws(&srv.addr, Some(&tokens[0]), &[]).await.unwrap();
+        let (mut b, _) = try_ws(&srv.addr, Some(&tokens[1]), &[]).await.unwrap();
+        send(&mut a, json!({"type": "subscribe", "id": 1, "streams": ["scan"]})).await;
+        ok(&mut a, json!({"type": "take_lease", "id": 2})).await;
+        ok(&mut a, json!({"type": "scan", "id": 3, "pixels": 16})).await;
+        let scan = until(&mut a, 30.0, |m| is(m, "scan_done")).await;
+        let gsf = scan["record"].as_str().expect("a scan record").to_string();
+        ok(
+            &mut a,
+            json!({"type": "push", "id": 4, "particle": 1, "distance_um": 1.0, "direction_deg": 0.0}),
+        )
+        .await;
+        let done = until(&mut a, 60.0, |m| is(m, "run_done")).await;
+        let push = done["record"].as_str().expect("a push record").to_string();
+        ok(&mut a, json!({"type": "stop", "id": 5})).await;
+        send(&mut a, json!({"type": "haptic", "id": 6, "action": "engage"})).await;
+        let engage = reply(&mut a, 6).await;
+        assert_eq!(engage["type"], "error", "no haptic link: {engage}");
+        ok(&mut a, json!({"type": "release_lease", "id": 7})).await;
+        send(&mut b, json!({"type": "take_lease", "id": 8})).await;
+        assert_eq!(reply(&mut b, 8).await["code"], "forbidden");
+
+        let summary: Value = serde_json::from_slice(&std::fs::read(records.join(&push)).unwrap()).unwrap();
+        assert_eq!(
+            summary["person"], "alice",
+            "the push record names its person: {summary}"
+        );
+        let scan_json = records.join(gsf.replace(".gsf", ".json"));
+        let summary: Value = serde_json::from_slice(&std::fs::read(scan_json).unwrap()).unwrap();
+        assert_eq!(
+            summary["person"], "alice",
+            "the scan record names its person: {summary}"
+        );
+        let expected = engage["code"].clone();
+
+        // The writer appends in the background: wait for the 8 lines (not timed: a bound).
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while audit_lines(&records).len() < 8 {
+            assert!(Instant::now() < deadline, "the audit log: {:?}", audit_lines(&records));
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        srv.child.kill().unwrap();
+        srv.child.wait().unwrap();
+        let lines = audit_lines(&records);
+        let row = |l: &Value| {
+            (
+                l["person"].as_str().unwrap_or("").to_string(),
+                l["command"].as_str().unwrap_or("").to_string(),
+                l["outcome"].as_str().unwrap_or("").to_string(),
+            )
+        };
+        let rows: Vec<(String, String, String)> = lines.iter().map(row).collect();
+        let want = [
+            ("alice", "take_lease", "ok"),
+            ("alice", "scan", "ok"),
+            ("alice", "push", "ok"),
+            ("alice", "run_done", "ok"),
+            ("alice", "stop", "ok"),
+            ("alice", "haptic", "refused"),
+            ("alice", "release_lease", "ok"),
+            ("bob", "take_lease", "refused"),
+        ];
+        let got: Vec<(&str, &str, &str)> = rows
+            .iter()
+            .map(|(p, c, o)| (p.as_str(), c.as_str(), o.as_str()))
+            .collect();
+        assert_eq!(&got[..want.len()], &want[..], "{lines:#?}");
+        let push_line = &lines[2];
+        assert_eq!(push_line["address"], "127.0.0.1");
+        assert_eq!(push_line["role"], "operator");
+        assert_eq!(push_line["args"]["particle"], 1, "{push_line}");
+        assert_eq!(push_line["args"]["distance_um"], 1.0, "{push_line}");
+        assert!(push_line["time"].as_str().unwrap().ends_with('Z'), "{push_line}");
+        assert_eq!(lines[3]["args"]["record"], push, "{}", lines[3]);
+        assert_eq!(lines[5]["code"], expected, "{}", lines[5]);
+        assert_eq!(lines[7]["code"], "forbidden");
+        assert_eq!(lines[7]["role"], "viewer");
+    });
+}
