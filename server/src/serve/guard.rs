@@ -215,9 +215,8 @@ mod tests {
         assert_eq!(e.kind(), io::ErrorKind::TimedOut);
     }
 
-    #[tokio::test]
-    async fn a_websocket_upgrade_is_left_alone_and_plain_idle_connections_close() {
-        let (mut g, mut c) = pair(Duration::from_millis(100), Duration::from_millis(200)).await;
+    /// The client asks for a WebSocket upgrade; the guard reads the whole request.
+    async fn ask_upgrade(g: &mut Guarded, c: &mut TcpStream) {
         c.write_all(b"GET /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\r\n")
             .await
             .unwrap();
@@ -226,6 +225,13 @@ mod tests {
         while got < 60 {
             got += g.read(&mut buf).await.unwrap();
         }
+    }
+
+    #[tokio::test]
+    async fn a_websocket_upgrade_is_left_alone_and_plain_idle_connections_close() {
+        let (mut g, mut c) = pair(Duration::from_millis(100), Duration::from_millis(200)).await;
+        let mut buf = [0u8; 256];
+        ask_upgrade(&mut g, &mut c).await;
         assert_eq!(g.state, State::Asked);
         g.write_all(b"HTTP/1.1 101 Switching Protocols\r\n\r\n").await.unwrap();
         assert_eq!(g.state, State::Upgraded);
@@ -249,14 +255,8 @@ mod tests {
     #[tokio::test]
     async fn an_upgrade_refused_leaves_the_guard_on() {
         let (mut g, mut c) = pair(Duration::from_millis(100), Duration::from_secs(60)).await;
-        c.write_all(b"GET /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\r\n")
-            .await
-            .unwrap();
         let mut buf = [0u8; 256];
-        let mut got = 0;
-        while got < 60 {
-            got += g.read(&mut buf).await.unwrap();
-        }
+        ask_upgrade(&mut g, &mut c).await;
         g.write_all(b"HTTP/1.1 401 Unauthorized\r\ncontent-length: 0\r\n\r\n")
             .await
             .unwrap();
