@@ -735,8 +735,9 @@ impl<'a> Derivation<'a> {
             return Err(self.refuse(Fails {
                 code: "stage",
                 reason: format!(
-                    "the stage, m (2π f_y)² = {} N/m, yields under the push like a spring of the lever's stiffness ({} N/m): the tip's position is not the stage's",
+                    "the stage's stiffness m (2π f_y)² = {} N/m is less than {} times the lever's stiffer direction (max(k_y, k_z) = {} N/m, the lateral k_y from the lever's shape): under the push it yields as much as the lever does, so the tip's position is not the stage's",
                     short(k_stage),
+                    STAGE_STIFFNESS_RATIO,
                     short(k_lever)
                 ),
                 field: format!("stage.resonance_hz: f_y ≥ {} Hz for this moving mass", short(need)),
