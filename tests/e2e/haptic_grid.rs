@@ -27,6 +27,13 @@ fn cell(tag: &str, operator: &str, nm_per_mm: f64, pull_off_n: f64) -> nanopush_
         run.verdict, run.rows
     );
     assert!(run.rows > 3000, "{} rows", run.rows);
+    // Every cell reaches the surface (a cell that never touched would pass its bounds vacuously:
+    // a lease holder that had left ended z-control, and these cells passed with no force).
+    assert!(
+        run.verdict.max_force > 0.05,
+        "{operator}: no force at the hand: {}",
+        run.verdict
+    );
     assert!(
         run.verdict.passes(),
         "{operator} at {nm_per_mm} nm/mm, {pull_off_n} N: {}",

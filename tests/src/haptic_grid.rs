@@ -127,11 +127,15 @@ pub fn run_cell(b: &CellBench, operator: &str, nm_per_mm: f64, pull_off_n: f64) 
             .map_err(|e| format!("starting nanopush-haptic: {e}"))?,
     );
     wait_status(&addr, 10.0, |s| s["haptic"]["link"] == "up")?;
-    let rt = tokio::runtime::Builder::new_current_thread()
+    // The lease holder stays connected, reading (so that it answers the server's pings), until
+    // the cell ends: z-control ends when the lease is freed.
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
         .enable_all()
         .build()
         .map_err(|e| e.to_string())?;
-    let scales = rt.block_on(scale_and_engage(&addr, nm_per_mm, pull_off_n))?;
+    let (mut holder, scales) = rt.block_on(scale_and_engage(&addr, nm_per_mm, pull_off_n))?;
+    rt.spawn(async move { while let Some(Ok(_)) = holder.next().await {} });
     // The script ends by itself (the bridge exits 0 when it does).
     let deadline = Instant::now() + Duration::from_secs(60);
     let status = loop {
@@ -144,6 +148,7 @@ pub fn run_cell(b: &CellBench, operator: &str, nm_per_mm: f64, pull_off_n: f64) 
     };
     let _ = status;
     let status = get_status(&addr)?["haptic"].clone();
+    drop(rt);
     drop(srv);
     let rows = read_trace(&trace)?;
     Ok(CellRun {
@@ -154,8 +159,12 @@ pub fn run_cell(b: &CellBench, operator: &str, nm_per_mm: f64, pull_off_n: f64) 
     })
 }
 
-/// As the lease holder: the scales, then `engage`; the `scales` of the scale's `ok`.
-async fn scale_and_engage(addr: &str, nm_per_mm: f64, pull_off_n: f64) -> Result<Value, String> {
+/// The lease holder's socket.
+type Socket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+/// As the lease holder: the scales, then `engage`; its socket (to keep open) and the `scales` of
+/// the scale's `ok`.
+async fn scale_and_engage(addr: &str, nm_per_mm: f64, pull_off_n: f64) -> Result<(Socket, Value), String> {
     let url = client::ws_url(addr, Some(TOKEN));
     let (mut ws, _) = tokio_tungstenite::connect_async(url.into_client_request().map_err(|e| e.to_string())?)
         .await
@@ -191,7 +200,7 @@ async fn scale_and_engage(addr: &str, nm_per_mm: f64, pull_off_n: f64) -> Result
     )
     .await?;
     ask(json!({"type": "haptic", "id": 3, "action": "engage"})).await?;
-    Ok(ok["scales"].clone())
+    Ok((ws, ok["scales"].clone()))
 }
 
 fn get_status(addr: &str) -> Result<Value, String> {

@@ -38,7 +38,10 @@ pub(crate) fn on_stage(p: (f64, f64), r: f64, range: f64) -> Result<(), Refusal>
     ))
 }
 
-pub(crate) fn run_done_failed(st: &AppState, particle: u32, outcome: &str, failure: String) {
+/// A push that ended before the loop ran it (refused by the plan, stopped, already there, the
+/// queue full): its `run_done` to everyone, and to the audit log under the person who asked.
+pub(crate) fn run_done_failed(st: &AppState, by: u32, particle: u32, outcome: &str, failure: String) {
+    audit_early_end(st, by, particle, outcome, Some(&failure));
     st.push_ended(false);
     st.shared.busy.store(false, Relaxed);
     st.broadcast_event(&ServerMessage::RunDone {
@@ -48,6 +51,21 @@ pub(crate) fn run_done_failed(st: &AppState, particle: u32, outcome: &str, failu
         estimate: None,
         record: None,
         record_error: None,
+    });
+}
+
+fn audit_early_end(st: &AppState, by: u32, particle: u32, outcome: &str, failure: Option<&str>) {
+    let person = st.auth.name_of(by).unwrap_or_else(|| format!("client {by}"));
+    let mut args = serde_json::Map::new();
+    args.insert("particle".into(), particle.into());
+    st.audit.event(crate::serve::audit::Happened {
+        person: &person,
+        address: None,
+        client: Some(by),
+        command: "run_done",
+        args,
+        outcome,
+        message: failure,
     });
 }
 
@@ -93,21 +111,25 @@ pub(crate) fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, gen
     // The strategy for this particle: the plan's, where the scene sets none (derived once).
     let scene = match strategy_scene(st, particle) {
         Ok(s) => s,
-        Err(refusal) => return run_done_failed(st, particle, "refused", refusal.to_string()),
+        Err(refusal) => return run_done_failed(st, by, particle, "refused", refusal.to_string()),
     };
     let params = scene.strategy_params(st.params.tick);
     let plan = match plan_move(&scene, &st.surface_now(), nominal, part.radius_nm * 1e-9, target) {
         Ok(p) => p,
-        Err(e) => return run_done_failed(st, particle, "plan", format!("particle {particle}: {e}")),
+        Err(e) => return run_done_failed(st, by, particle, "plan", format!("particle {particle}: {e}")),
     };
     // A target the particle cannot reach whole, with the tip behind it, fails now, not after a
     // push that runs into the stage's edge until its time-out.
-    if let Err(r) = on_stage(plan.target, plan.located.radius, f.stage.range_um * 1e-6) {
-        return run_done_failed(st, particle, "plan", format!("particle {particle}: {}", r.message));
+    // Against the scene's radius, as the command's check stated the range (the located one
+    // differs by a fraction of a nanometre: a target on the stated edge was accepted, then
+    // refused here with other bounds).
+    if let Err(r) = on_stage(plan.target, part.radius_nm * 1e-9, f.stage.range_um * 1e-6) {
+        return run_done_failed(st, by, particle, "plan", format!("particle {particle}: {}", r.message));
     }
     let (located, legs) = (plan.located, plan.legs);
     if legs.is_empty() {
         // Already there (within 10 nm): nothing to push.
+        audit_early_end(st, by, particle, "ok", Some("already within 10 nm of the target"));
         st.remember(particle, [located.x, located.y]);
         st.push_ended(false);
         st.shared.busy.store(false, Relaxed);
@@ -123,10 +145,10 @@ pub(crate) fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, gen
     }
     let prepared = match Prepared::new(&scene, particle, located.radius, &params) {
         Ok(p) => p,
-        Err(e) => return run_done_failed(st, particle, "error", e.to_string()),
+        Err(e) => return run_done_failed(st, by, particle, "error", e.to_string()),
     };
     if st.activity.generation.load(Relaxed) != generation || st.activity.stopping.load(Relaxed) {
-        return run_done_failed(st, particle, "stopped", "stopped before the push began".into());
+        return run_done_failed(st, by, particle, "stopped", "stopped before the push began".into());
     }
     let run = st.shared.runs.fetch_add(1, Relaxed) + 1;
     // Who ran it, for its record and the audit log's `run_done` (the session may be gone by
@@ -156,7 +178,13 @@ pub(crate) fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, gen
     }
     if st.shared.commands.push(LoopCommand::Push(Box::new(job))).is_err() {
         st.shared.metrics.dropped_commands.fetch_add(1, Relaxed);
-        run_done_failed(st, particle, "error", "the control loop's command queue is full".into());
+        run_done_failed(
+            st,
+            by,
+            particle,
+            "error",
+            "the control loop's command queue is full".into(),
+        );
         return;
     }
     st.broadcast_event(&ServerMessage::PushStarted(started));

@@ -13,8 +13,7 @@
 //! 3. the control loop's mean compute time per tick (the three phases, from `/metrics`) without
 //!    a haptic link and with one engaged, for the loop's tick budget.
 
-use std::io::{Read, Write};
-use std::net::TcpStream;
+use std::io::Read;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -87,22 +86,29 @@ fn mean_between(a: &Compute, b: &Compute) -> [f64; 3] {
     std::array::from_fn(|i| (b.sums[i] - a.sums[i]) / (b.counts[i] - a.counts[i]).max(1.0) * 1e6)
 }
 
-/// As the lease holder, engages haptic z-control (and leaves the socket open 200 ms).
+/// As the lease holder, engages haptic z-control, and stays connected (reading, so that it
+/// answers the server's pings) until the server closes the socket: z-control ends when the lease
+/// is freed.
 fn engage(addr: &str) {
-    // A bare WebSocket handshake and two text frames: take the lease, engage.
-    let mut s = TcpStream::connect(addr).unwrap();
-    let upgrade = nanopush_e2e::client::upgrade_request(addr, &format!("/ws?token={TOKEN}"));
-    s.write_all(upgrade.as_bytes()).unwrap();
-    let mut head = [0u8; 512];
-    let _ = s.read(&mut head);
-    for msg in [
-        r#"{"type":"take_lease","id":1}"#,
-        r#"{"type":"haptic","id":2,"action":"engage"}"#,
-    ] {
-        s.write_all(&nanopush_e2e::client::text_frame(msg.as_bytes(), [1, 2, 3, 4]))
-            .unwrap();
-    }
-    std::thread::sleep(Duration::from_millis(200));
+    use futures_util::{SinkExt, StreamExt};
+    use tokio_tungstenite::tungstenite::Message;
+    let url = nanopush_e2e::client::ws_url(addr, Some(TOKEN));
+    std::thread::spawn(move || {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .expect("a runtime");
+        rt.block_on(async move {
+            let (mut ws, _) = tokio_tungstenite::connect_async(url).await.expect("the WebSocket");
+            for msg in [
+                r#"{"type":"take_lease","id":1}"#,
+                r#"{"type":"haptic","id":2,"action":"engage"}"#,
+            ] {
+                ws.send(Message::Text(msg.into())).await.expect("a command sent");
+            }
+            while let Some(Ok(_)) = ws.next().await {}
+        });
+    });
 }
 
 fn main() {

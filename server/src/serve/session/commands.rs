@@ -153,6 +153,7 @@ fn push(st: &Arc<AppState>, c: &Client, particle: u32, target: Result<MoveTarget
         if prepared.is_err() {
             run_done_failed(
                 &st2,
+                by,
                 particle,
                 "error",
                 "preparing the push failed (internal error)".into(),

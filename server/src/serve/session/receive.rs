@@ -147,6 +147,9 @@ where
     }
 }
 
+/// How long an accepted command's `ok` waits for its audit line to be on disk.
+const AUDIT_PATIENCE: std::time::Duration = std::time::Duration::from_secs(2);
+
 /// Parses and handles one command and queues its answer; `false` when the client is gone.
 async fn answer(st: &Arc<AppState>, client: &mut Client, inbox: &Inbox<'_>, text: Utf8Bytes) -> bool {
     let parsed = match parse_command(text.as_str()) {
@@ -165,9 +168,15 @@ async fn answer(st: &Arc<AppState>, client: &mut Client, inbox: &Inbox<'_>, text
     };
     let audited = crate::serve::audit::describe(&parsed);
     let handled = handle(st, client, parsed);
-    if let Some(cmd) = audited {
+    let durable = audited.and_then(|cmd| {
         let refused = handled.as_ref().err().map(|r| (r.code, r.message.as_str()));
-        st.audit.command(&client.person, client.addr, client.id, cmd, refused);
+        st.audit.command(&client.person, client.addr, client.id, cmd, refused)
+    });
+    // An accepted command's `ok` is sent once its audit line is on disk (the command itself has
+    // run: a stop does not wait for the disk); a log that cannot be written within
+    // AUDIT_PATIENCE does not hold the reply (the failure is counted and alerted on).
+    if let Some(d) = durable {
+        let _ = tokio::time::timeout(AUDIT_PATIENCE, d).await;
     }
     match handled {
         Ok(()) => {
