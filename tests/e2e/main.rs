@@ -21,4 +21,5 @@ mod serve_state;
 mod serve_tls;
 mod simulate;
 mod sweep;
+mod review_27b;
 mod util;

@@ -1,0 +1,72 @@
+//! Issue 27 review (27b): defects found by probing the merged work as a careless or hostile lab
+//! client would. Each test fails on the code it was written against.
+
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::time::{Duration, Instant};
+
+use crate::serve_access::{http, metric, named_server};
+use crate::util::start;
+
+/// The failure limit is checked before the token is verified (argon2, on a blocking thread) and
+/// the failure counted after: wrong tokens sent at once from one address all pass the check.
+/// 60 wrong tokens at once from 127.0.0.1 must still cost at most the burst of 10 checks; the
+/// rest are refused with 429 unchecked.
+#[test]
+fn review_27_wrong_tokens_sent_at_once_from_one_address_are_held_to_the_burst() {
+    let (srv, tokens) = named_server("rv27-burst", &[("alice", "operator")], &[]);
+    // Alice's id (not secret) with a wrong secret: argon2 runs for each.
+    let id = tokens[0].split('_').nth(1).unwrap().to_string();
+    let threads: Vec<_> = (0..60)
+        .map(|i| {
+            let (addr, id) = (srv.addr.clone(), id.clone());
+            std::thread::spawn(move || {
+                let bearer = format!("Authorization: Bearer npt_{id}_{i:032x}");
+                http(&addr, "GET", "/api/status", &[bearer]).0
+            })
+        })
+        .collect();
+    let codes: Vec<u16> = threads.into_iter().map(|t| t.join().unwrap()).collect();
+    let checked = codes.iter().filter(|&&c| c == 401).count();
+    let throttled = codes.iter().filter(|&&c| c == 429).count();
+    assert_eq!(checked + throttled, 60, "{codes:?}");
+    assert!(
+        checked <= 10,
+        "{checked} wrong tokens from one address were checked (argon2 each), the limit is 10; \
+         failures_total {}",
+        metric(&srv.addr, "nanopush_auth_failures_total")
+    );
+}
+
+/// hyper accepts a request whose lines end in a bare LF, and upgrades it; the slowloris guard
+/// only recognises the end of a header block as CRLF CRLF, so the upgraded WebSocket stays
+/// under the header time-out and is cut after it, although the client is alive.
+#[test]
+fn review_27_a_websocket_upgraded_from_bare_lf_header_lines_outlives_the_header_timeout() {
+    let srv = start("rv27-lf", &["--header-timeout-s", "1"]);
+    let mut s = TcpStream::connect(&srv.addr).unwrap();
+    let req = format!(
+        "GET /ws HTTP/1.1\nHost: {}\nUpgrade: websocket\nConnection: Upgrade\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\nSec-WebSocket-Version: 13\n\n",
+        srv.addr
+    );
+    s.write_all(req.as_bytes()).unwrap();
+    s.set_read_timeout(Some(Duration::from_millis(200))).unwrap();
+    let mut buf = [0u8; 4096];
+    let n = s.read(&mut buf).unwrap();
+    let head = String::from_utf8_lossy(&buf[..n]).to_string();
+    assert!(head.starts_with("HTTP/1.1 101"), "{head}");
+    // Alive for 3 header time-outs: a masked ping every 0.2 s, reading what comes.
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_secs(3) {
+        s.write_all(&[0x89, 0x80, 0, 0, 0, 0]).unwrap();
+        match s.read(&mut buf) {
+            Ok(0) => panic!(
+                "the server closed an upgraded WebSocket after {:.1} s (header time-out 1 s)",
+                t0.elapsed().as_secs_f64()
+            ),
+            Ok(_) => {}
+            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {}
+            Err(e) => panic!("after {:.1} s: {e}", t0.elapsed().as_secs_f64()),
+        }
+    }
+}
