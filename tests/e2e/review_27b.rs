@@ -126,3 +126,36 @@ fn review_27_an_operator_command_answered_ok_is_in_the_audit_log_despite_a_viewe
          ({lines} lines, 12,000 viewer refusals were queued first)"
     );
 }
+
+/// `nanopush token add|revoke` read the file, change it and write it back with no lock: run at
+/// once (a script adding a class, `xargs -P`), each says it added its person and the file keeps
+/// one of them; a `revoke` while an `add` hashes is undone by the add's write (seen: "revoked
+/// alice's token", and alice still in the file).
+#[test]
+fn review_27_token_adds_run_at_once_all_reach_the_file() {
+    let dir = crate::util::tmp("rv27-tokens");
+    let file = dir.join("tokens");
+    let names: Vec<String> = (0..6).map(|i| format!("student{i}")).collect();
+    let threads: Vec<_> = names
+        .iter()
+        .map(|n| {
+            let (n, f) = (n.clone(), file.clone());
+            std::thread::spawn(move || crate::serve_access::add_token(&f, &n, "viewer"))
+        })
+        .collect();
+    for t in threads {
+        t.join().unwrap();
+    }
+    let o = nanopush_e2e::run(
+        "nanopush",
+        &["token", "list", "--token-file", file.to_str().unwrap()],
+        None,
+    );
+    let (out, _) = nanopush_e2e::text(&o);
+    let missing: Vec<&String> = names.iter().filter(|n| !out.contains(n.as_str())).collect();
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(
+        missing.is_empty(),
+        "each add said it added its person; the file lacks {missing:?}:\n{out}"
+    );
+}
