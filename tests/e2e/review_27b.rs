@@ -159,3 +159,40 @@ fn review_27_token_adds_run_at_once_all_reach_the_file() {
         "each add said it added its person; the file lacks {missing:?}:\n{out}"
     );
 }
+
+/// A push accepted (`ok`, logged) and stopped while it is still being located and planned ends
+/// in a `run_done` to everyone ("stopped before the push began"), but the audit log gets no
+/// `run_done` line: the log says the push was accepted and never how it ended. (So do the
+/// other ends before the loop runs it: a plan refused, already there, a full queue:
+/// `push_job.rs` `run_done_failed` and the already-there branch broadcast without auditing.)
+#[test]
+fn review_27_a_push_stopped_before_it_began_has_its_end_in_the_audit_log() {
+    use crate::util::{TOKEN, is, ok, runtime, until, welcomed};
+    use serde_json::json;
+    let srv = start("rv27-prepstop", &[]);
+    let addr = srv.addr.clone();
+    let done = runtime().block_on(async move {
+        let (mut op, _) = welcomed(&addr, Some(TOKEN)).await;
+        ok(&mut op, json!({"type": "take_lease", "id": 1})).await;
+        ok(
+            &mut op,
+            json!({"type": "push", "id": 2, "particle": 1, "distance_um": 1.0, "direction_deg": 0.0}),
+        )
+        .await;
+        ok(&mut op, json!({"type": "stop", "id": 3})).await;
+        until(&mut op, 30.0, |m| is(m, "run_done")).await
+    });
+    let path = srv.dir.join("records/audit/audit.jsonl");
+    let deadline = Instant::now() + Duration::from_secs(5);
+    loop {
+        let log = std::fs::read_to_string(&path).unwrap_or_default();
+        if log.lines().any(|l| l.contains("\"command\":\"run_done\"")) {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the push ended ({done}) and the audit log has no run_done:\n{log}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
