@@ -196,3 +196,47 @@ fn review_27_a_push_stopped_before_it_began_has_its_end_in_the_audit_log() {
         std::thread::sleep(Duration::from_millis(100));
     }
 }
+
+/// Item 9 half fixed: a target exactly on the edge the refusal states is answered `ok`, and
+/// then refused when the push is planned, with other bounds (the located radius's: on the
+/// paper scene `to_x_um: 1` → ok, then run_done `plan` "target (1.000, 50.000) µm is out of
+/// range for a particle 1.000 µm in radius; allowed: [1.001, 98.999]"). The serve_campus test
+/// accepts either end; a person on the stated edge still gets a refusal.
+#[test]
+fn review_27_a_push_target_on_the_stated_edge_is_not_refused_when_planned() {
+    use crate::util::{is, operator, reply, runtime, send, until};
+    use serde_json::json;
+    let srv = start("rv27-edge", &[]);
+    runtime().block_on(async {
+        let mut op = operator(&srv.addr, "tip").await;
+        send(
+            &mut op,
+            json!({"type": "push", "id": 3, "particle": 1, "to_x_um": 0.4, "to_y_um": 30.0}),
+        )
+        .await;
+        let why = reply(&mut op, 3).await["message"].as_str().unwrap().to_string();
+        let edges = why.split("allowed: [").nth(1).expect("the stated bounds").to_string();
+        let (lo, hi) = edges.split_once(']').unwrap().0.split_once(", ").unwrap();
+        let mut refused = Vec::new();
+        for (id, x) in [(4, lo.parse::<f64>().unwrap()), (6, hi.parse::<f64>().unwrap())] {
+            send(
+                &mut op,
+                json!({"type": "push", "id": id, "particle": 1, "to_x_um": x, "to_y_um": 30.0}),
+            )
+            .await;
+            let r = reply(&mut op, id).await;
+            assert_eq!(r["type"], "ok", "to_x_um {x}: {r}");
+            let m = until(&mut op, 60.0, |m| is(m, "push_started") || is(m, "run_done")).await;
+            if is(&m, "push_started") {
+                send(&mut op, json!({"type": "stop", "id": id + 1})).await;
+                until(&mut op, 60.0, |m| is(m, "run_done")).await;
+            } else if m["outcome"] == "plan" {
+                refused.push(format!("to_x_um {x}: {}", m["failure"]));
+            }
+        }
+        assert!(
+            refused.is_empty(),
+            "stated: [{lo}, {hi}]; refused when planned: {refused:?}"
+        );
+    });
+}
