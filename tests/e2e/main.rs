@@ -8,6 +8,7 @@ mod haptic_link;
 mod model;
 mod prometheus;
 mod push;
+mod review_27b;
 mod scan;
 mod serve;
 mod serve_access;
