@@ -117,7 +117,9 @@ impl<S> Guarded<S> {
                     if self.header.len() < MAX_HEADER {
                         self.header.push(b);
                     }
-                    if self.header.ends_with(b"\r\n\r\n") {
+                    // The end of the block: an empty line, CRLF or a bare LF (hyper accepts
+                    // both, and upgrades either).
+                    if self.header.ends_with(b"\n\r\n") || self.header.ends_with(b"\n\n") {
                         let text = String::from_utf8_lossy(&self.header).to_ascii_lowercase();
                         let upgrade = text.lines().any(|l| {
                             l.split_once(':')

@@ -258,7 +258,13 @@ async fn plain_http_answer(mut tcp: TcpStream, port: u16) {
             Ok(n) => head.extend_from_slice(&buf[..n]),
         }
     }
-    let text = String::from_utf8_lossy(&head);
+    let answer = plain_http_reply(&String::from_utf8_lossy(&head), port);
+    let _ = tcp.write_all(answer.as_bytes()).await;
+    let _ = tcp.shutdown().await;
+}
+
+/// The reply to a plain-HTTP request `text` (its head) on the HTTPS port `port`.
+fn plain_http_reply(text: &str, port: u16) -> String {
     let path = text
         .lines()
         .next()
@@ -271,8 +277,12 @@ async fn plain_http_answer(mut tcp: TcpStream, port: u16) {
         .map(|(_, v)| v.trim().to_string())
         .filter(|h| !h.is_empty() && h.chars().all(|c| c.is_ascii_alphanumeric() || ".-:[]".contains(c)))
         .unwrap_or_else(|| format!("localhost:{port}"));
-    let carries_token = path.contains("token=") || text.to_ascii_lowercase().contains("\nauthorization:");
-    let answer = if carries_token {
+    // A query that holds a token in any spelling (`%74oken=` too) is never repeated: it gets the
+    // 400 below.
+    let (path, query) = path.split_once('?').unwrap_or((path, ""));
+    let decoded = percent_decoded(query).to_ascii_lowercase();
+    let carries_token = decoded.contains("token") || text.to_ascii_lowercase().contains("\nauthorization:");
+    if carries_token {
         let body = format!(
             "This nanopush server speaks HTTPS only: open https://{host}/ . Your request carried a token over plain HTTP, where anyone on the network can read it: have it replaced (nanopush token revoke NAME, then add).\n"
         );
@@ -281,15 +291,18 @@ async fn plain_http_answer(mut tcp: TcpStream, port: u16) {
             body.len()
         )
     } else {
-        let to = format!("https://{host}{path}");
+        // No token in it (checked decoded above): the query is kept.
+        let to = if query.is_empty() {
+            format!("https://{host}{path}")
+        } else {
+            format!("https://{host}{path}?{query}")
+        };
         let body = format!("This nanopush server speaks HTTPS only: {to}\n");
         format!(
             "HTTP/1.1 301 Moved Permanently\r\nLocation: {to}\r\nContent-Type: text/plain; charset=utf-8\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
             body.len()
         )
-    };
-    let _ = tcp.write_all(answer.as_bytes()).await;
-    let _ = tcp.shutdown().await;
+    }
 }
 
 impl axum::serve::Listener for TlsListener {
@@ -313,6 +326,24 @@ impl axum::serve::Listener for TlsListener {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Review of issue 27: a token percent-encoded in the query (`%74ok%65n=`) was echoed in
+    /// the redirect's `Location` and body. A token in any spelling gets the 400 that says it
+    /// crossed the network in clear, and is not repeated; another query is kept.
+    #[test]
+    fn plain_http_never_echoes_the_query_and_a_token_in_any_spelling_is_refused() {
+        assert_eq!(percent_decoded("%74ok%65n=abc+d%2"), "token=abc d%2");
+        for q in ["token=npt_x_y", "%74ok%65n=npt_x_y", "a=1&TOKEN=npt_x_y"] {
+            let r = plain_http_reply(&format!("GET /?{q} HTTP/1.1\r\nHost: lab:8443\r\n\r\n"), 8443);
+            assert!(r.starts_with("HTTP/1.1 400"), "{q}: {r}");
+            assert!(!r.contains("npt_x_y"), "{q}: {r}");
+        }
+        let r = plain_http_reply("GET /monitor?view=monitor HTTP/1.1\r\nHost: lab:8443\r\n\r\n", 8443);
+        assert!(
+            r.starts_with("HTTP/1.1 301") && r.contains("Location: https://lab:8443/monitor?view=monitor\r\n"),
+            "{r}"
+        );
+    }
 
     #[test]
     fn a_self_signed_certificate_is_made_once_and_kept_with_its_fingerprint() {
@@ -339,4 +370,25 @@ mod tests {
         assert!(load(&bad).unwrap_err().to_string().contains("no certificate"));
         std::fs::remove_dir_all(&dir).unwrap();
     }
+}
+
+/// `%XX` escapes decoded (and `+` as a space), byte by byte; invalid escapes are kept as they are.
+fn percent_decoded(s: &str) -> String {
+    let b = s.as_bytes();
+    let hex = |c: u8| (c as char).to_digit(16);
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%'
+            && i + 2 < b.len()
+            && let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2]))
+        {
+            out.push((h * 16 + l) as u8);
+            i += 3;
+            continue;
+        }
+        out.push(if b[i] == b'+' { b' ' } else { b[i] });
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
 }
