@@ -544,3 +544,20 @@ fn a_late_joiner_is_told_a_push_is_being_prepared() {
         until(&mut op, 60.0, |m| is(m, "run_done")).await;
     });
 }
+
+/// Issue 27's review: the slowloris guard bounds how long a socket that sends no headers lives,
+/// not how many there are; at the soft limit of 1024 open files, one client holding ~1100
+/// half-open TLS handshakes made `/api/status` time out for everyone. The server raises its
+/// soft limit of open files to the hard limit at start.
+#[test]
+fn the_server_raises_its_open_files_limit_to_the_hard_limit() {
+    let srv = start("nofile", &[]);
+    let limits = std::fs::read_to_string(format!("/proc/{}/limits", srv.child.id())).unwrap();
+    let line = limits
+        .lines()
+        .find(|l| l.starts_with("Max open files"))
+        .expect("a Max open files line");
+    let v: Vec<&str> = line.split_whitespace().collect();
+    // "Max open files SOFT HARD files"
+    assert_eq!(v[3], v[4], "{line}");
+}

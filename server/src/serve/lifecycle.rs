@@ -58,6 +58,7 @@ pub async fn run(
 ) -> Result<(), ServeError> {
     // Bound first: a port in use must stop the start before the loop takes its core.
     let (listener, addr) = bind_to(bind).await?;
+    raise_open_files();
     // Held for the whole run (`data_dir.rs`): no second server writes here, and records can be.
     let _held = crate::serve::data_dir::hold(&cfg.data_dir)?;
     // Its holder's to clean, before anything is recorded: a dead server's unfinished records.
@@ -141,6 +142,27 @@ pub async fn run(
 }
 
 /// Binds the listening socket; returns it with the address it got.
+/// Raises the soft limit of open files to the hard one (as nginx's `worker_rlimit_nofile`): the
+/// slowloris guard bounds how long a connection that sends no headers lives, not how many there
+/// are, and at Debian's default soft limit of 1024 one client holding ~1100 half-open sockets (TLS
+/// handshakes never finished) made `/api/status` time out for everyone (issue 27's review).
+fn raise_open_files() {
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: getrlimit/setrlimit with a valid rlimit struct.
+    unsafe {
+        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) == 0 && lim.rlim_cur < lim.rlim_max {
+            let from = lim.rlim_cur;
+            lim.rlim_cur = lim.rlim_max;
+            if libc::setrlimit(libc::RLIMIT_NOFILE, &lim) == 0 {
+                tracing::info!("open files: soft limit raised from {from} to {}", lim.rlim_max);
+            }
+        }
+    }
+}
+
 async fn bind_to(bind: SocketAddr) -> Result<(tokio::net::TcpListener, SocketAddr), ServeError> {
     let listener = tokio::net::TcpListener::bind(bind)
         .await
