@@ -547,17 +547,36 @@ fn a_late_joiner_is_told_a_push_is_being_prepared() {
 
 /// Issue 27's review: the slowloris guard bounds how long a socket that sends no headers lives,
 /// not how many there are; at the soft limit of 1024 open files, one client holding ~1100
-/// half-open TLS handshakes made `/api/status` time out for everyone. The server raises its
-/// soft limit of open files to the hard limit at start.
+/// half-open TLS handshakes made `/api/status` time out for everyone. Started with a soft limit
+/// of 1024, the server raises it to the hard limit.
 #[test]
 fn the_server_raises_its_open_files_limit_to_the_hard_limit() {
-    let srv = start("nofile", &[]);
-    let limits = std::fs::read_to_string(format!("/proc/{}/limits", srv.child.id())).unwrap();
+    use std::os::unix::process::CommandExt as _;
+    let dir = crate::util::tmp("nofile");
+    let (mut child, _addr) = crate::util::spawn_serve(&dir.join("server.log"), |c| {
+        c.args(["--haptic", "none", "--operator-token", "nofile-token", "--data-dir"])
+            .arg(dir.join("records"));
+        // SAFETY: only setrlimit, async-signal-safe, between fork and exec.
+        unsafe {
+            c.pre_exec(|| {
+                let mut lim = libc::rlimit {
+                    rlim_cur: 0,
+                    rlim_max: 0,
+                };
+                libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim);
+                lim.rlim_cur = lim.rlim_max.min(1024);
+                libc::setrlimit(libc::RLIMIT_NOFILE, &lim);
+                Ok(())
+            });
+        }
+    });
+    let limits = std::fs::read_to_string(format!("/proc/{}/limits", child.id())).unwrap();
+    nanopush_e2e::stop(&mut child);
     let line = limits
         .lines()
         .find(|l| l.starts_with("Max open files"))
         .expect("a Max open files line");
+    // "Max open files SOFT HARD files": the hard limit here is above 1024 (else nothing to raise).
     let v: Vec<&str> = line.split_whitespace().collect();
-    // "Max open files SOFT HARD files"
     assert_eq!(v[3], v[4], "{line}");
 }
