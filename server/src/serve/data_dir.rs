@@ -15,6 +15,7 @@
 
 use std::io::{Read, Seek, Write};
 use std::os::fd::AsRawFd;
+use std::os::unix::fs::OpenOptionsExt as _;
 use std::path::{Path, PathBuf};
 
 /// The lock file's name in the data directory (hidden: never listed or served as a record).
@@ -74,8 +75,11 @@ pub fn hold(dir: &Path) -> Result<HeldDataDir, DataDirError> {
         .write(true)
         .create(true)
         .truncate(false)
+        // Never through a symlink: the lock file is truncated and rewritten below, and a link
+        // planted there would have its target overwritten (issue 27's review).
+        .custom_flags(libc::O_NOFOLLOW)
         .open(dir.join(LOCK_FILE))
-        .map_err(not_writable("opening its lock file"))?;
+        .map_err(not_writable("opening its lock file (not a symbolic link)"))?;
     // SAFETY: flock(2) on a descriptor this function owns.
     if unsafe { libc::flock(lock.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
         let e = std::io::Error::last_os_error();
@@ -147,6 +151,22 @@ mod tests {
         assert_eq!(names, vec![LOCK_FILE.to_string()]);
         assert!(crate::serve::records::list(&dir).unwrap().is_empty());
         drop(again);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Issue 27's review: a symbolic link planted as the lock file is refused, not followed (its
+    /// target was truncated and overwritten with the server's pid).
+    #[test]
+    fn a_lock_file_that_is_a_symbolic_link_is_refused_and_its_target_left_alone() {
+        let dir = std::env::temp_dir().join(format!("nanopush-held-link-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let target = dir.join("precious.txt");
+        std::fs::write(&target, "keep me").unwrap();
+        std::os::unix::fs::symlink(&target, dir.join(LOCK_FILE)).unwrap();
+        let e = hold(&dir).unwrap_err().to_string();
+        assert!(e.contains("not a symbolic link"), "{e}");
+        assert_eq!(std::fs::read_to_string(&target).unwrap(), "keep me");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
