@@ -1,6 +1,7 @@
 //! `nanopush token add|list|revoke`: the token file of named operators and viewers. `add`
 //! prints the new token once (the file keeps only its argon2 hash); `revoke` removes it, and a
-//! running server closes that person's sessions within a fraction of a second.
+//! running server closes that person's sessions within about 1.5 s. Both change the file under
+//! an exclusive lock (`FILE.lock`), so runs at once lose nobody's change.
 
 use std::path::PathBuf;
 
@@ -31,7 +32,7 @@ enum TokenAction {
     },
     /// The people with a token, and their roles (never the tokens).
     List,
-    /// Remove NAME's token: a server using the file closes their sessions at once.
+    /// Remove NAME's token: a server using the file closes their sessions within about 1.5 s.
     Revoke {
         /// The person's name.
         name: String,
@@ -44,9 +45,7 @@ pub fn run(a: &TokenArgs) -> anyhow::Result<String> {
     match &a.action {
         TokenAction::Add { name, role } => {
             let role = parse_role(role).context("--role: allowed: operator, viewer")?;
-            let mut table = TokenTable::read(path, true)?;
-            let token = table.add(name, role)?;
-            table.write(path)?;
+            let token = TokenTable::update(path, true, |t| t.add(name, role))?;
             Ok(format!(
                 "added {name} ({}) to {}\ntoken (shown once; give it to {name}, who opens the page with ?token=…):\n{token}\n",
                 role_name(role),
@@ -62,9 +61,7 @@ pub fn run(a: &TokenArgs) -> anyhow::Result<String> {
             Ok(s)
         }
         TokenAction::Revoke { name } => {
-            let mut table = TokenTable::read(path, false)?;
-            let gone = table.revoke(name)?;
-            table.write(path)?;
+            let gone = TokenTable::update(path, false, |t| t.revoke(name))?;
             Ok(format!(
                 "revoked {name}'s token ({}, id {}) in {}\n",
                 role_name(gone.role),

@@ -1,6 +1,9 @@
-//! Failed attempts per address: a token bucket of [`BURST`] failures refilled one every
-//! [`REFILL`]. An address whose bucket is empty is refused without its credential being checked,
-//! so guessing tokens runs at 10 a minute at most (a token has 128 random bits).
+//! Failed attempts per address: a token bucket of [`BURST`] attempts refilled one every
+//! [`REFILL`]. An attempt with a token takes one from its address's bucket *before* the token is
+//! checked, and gives it back when the token was right: so attempts sent at once cannot all pass
+//! an almost empty bucket while their checks run. An address whose bucket is empty is refused
+//! without its credential being checked, so guessing tokens runs at 10 a minute at most (a token
+//! has 128 random bits), however many are sent at once.
 
 use std::collections::HashMap;
 use std::net::IpAddr;
@@ -22,22 +25,15 @@ pub struct FailureLimiter {
 }
 
 impl FailureLimiter {
+    /// The bucket's level at `now`: `min(BURST, level + (now − at) / REFILL)`.
     fn level(&self, ip: IpAddr, now: Instant) -> f64 {
         self.buckets.get(&ip).map_or(BURST, |&(level, at)| {
-            (level + now.duration_since(at).as_secs_f64() / REFILL.as_secs_f64()).min(BURST)
+            (level + now.saturating_duration_since(at).as_secs_f64() / REFILL.as_secs_f64()).min(BURST)
         })
     }
 
-    /// How long `ip` must wait before its next attempt, or None when it may try now.
-    pub fn blocked_at(&mut self, ip: IpAddr, now: Instant) -> Option<Duration> {
-        let level = self.level(ip, now);
-        (level < 1.0).then(|| REFILL.mul_f64(1.0 - level))
-    }
-
-    /// A failure from `ip` at `now`.
-    pub fn failed_at(&mut self, ip: IpAddr, now: Instant) {
-        let level = (self.level(ip, now) - 1.0).max(0.0);
-        if self.buckets.len() >= ADDRESSES_MAX {
+    fn set(&mut self, ip: IpAddr, level: f64, now: Instant) {
+        if self.buckets.len() >= ADDRESSES_MAX && !self.buckets.contains_key(&ip) {
             let full: Vec<IpAddr> = self
                 .buckets
                 .keys()
@@ -51,14 +47,33 @@ impl FailureLimiter {
         self.buckets.insert(ip, (level, now));
     }
 
-    /// [`Self::blocked_at`] now.
-    pub fn blocked(&mut self, ip: IpAddr) -> Option<Duration> {
-        self.blocked_at(ip, Instant::now())
+    /// An attempt from `ip` at `now`: taken from its bucket (counted as failed until
+    /// [`Self::refund_at`] says it was not), or refused with how long to wait when the bucket
+    /// holds less than one attempt.
+    pub fn reserve_at(&mut self, ip: IpAddr, now: Instant) -> Result<(), Duration> {
+        let level = self.level(ip, now);
+        if level < 1.0 {
+            return Err(REFILL.mul_f64(1.0 - level));
+        }
+        self.set(ip, level - 1.0, now);
+        Ok(())
     }
 
-    /// [`Self::failed_at`] now.
-    pub fn failed(&mut self, ip: IpAddr) {
-        self.failed_at(ip, Instant::now())
+    /// The attempt reserved for `ip` did not fail (the token was right, or it was never
+    /// checked): it goes back into the bucket.
+    pub fn refund_at(&mut self, ip: IpAddr, now: Instant) {
+        let level = (self.level(ip, now) + 1.0).min(BURST);
+        self.set(ip, level, now);
+    }
+
+    /// [`Self::reserve_at`] now.
+    pub fn reserve(&mut self, ip: IpAddr) -> Result<(), Duration> {
+        self.reserve_at(ip, Instant::now())
+    }
+
+    /// [`Self::refund_at`] now.
+    pub fn refund(&mut self, ip: IpAddr) {
+        self.refund_at(ip, Instant::now())
     }
 }
 
@@ -72,16 +87,43 @@ mod tests {
         let (a, b): (IpAddr, IpAddr) = ("10.0.0.1".parse().unwrap(), "10.0.0.2".parse().unwrap());
         let t0 = Instant::now();
         for _ in 0..10 {
-            assert_eq!(l.blocked_at(a, t0), None);
-            l.failed_at(a, t0);
+            assert_eq!(l.reserve_at(a, t0), Ok(()));
         }
-        let wait = l.blocked_at(a, t0).expect("blocked after 10 failures");
+        let wait = l.reserve_at(a, t0).expect_err("blocked after 10 failures");
         assert!(wait <= REFILL && wait > Duration::ZERO, "{wait:?}");
-        assert_eq!(l.blocked_at(b, t0), None, "another address is not blocked");
+        assert_eq!(l.reserve_at(b, t0), Ok(()), "another address is not blocked");
         // One refill later, one more attempt.
         let t1 = t0 + REFILL;
-        assert_eq!(l.blocked_at(a, t1), None);
-        l.failed_at(a, t1);
-        assert!(l.blocked_at(a, t1).is_some());
+        assert_eq!(l.reserve_at(a, t1), Ok(()));
+        assert!(l.reserve_at(a, t1).is_err());
+    }
+
+    #[test]
+    fn attempts_in_flight_hold_their_place_and_a_right_token_gives_it_back() {
+        let mut l = FailureLimiter::default();
+        let a: IpAddr = "10.0.0.1".parse().unwrap();
+        let t0 = Instant::now();
+        // Ten attempts at once, none answered yet: the eleventh is refused before any check.
+        for _ in 0..10 {
+            l.reserve_at(a, t0).unwrap();
+        }
+        assert!(l.reserve_at(a, t0).is_err());
+        // Nine were right: nine places back, one failure stays counted.
+        for _ in 0..9 {
+            l.refund_at(a, t0);
+        }
+        for _ in 0..9 {
+            l.reserve_at(a, t0).unwrap();
+        }
+        assert!(l.reserve_at(a, t0).is_err());
+        // Refunds never fill the bucket beyond its burst.
+        let b: IpAddr = "10.0.0.2".parse().unwrap();
+        for _ in 0..5 {
+            l.refund_at(b, t0);
+        }
+        for _ in 0..10 {
+            l.reserve_at(b, t0).unwrap();
+        }
+        assert!(l.reserve_at(b, t0).is_err());
     }
 }

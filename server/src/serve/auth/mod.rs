@@ -6,11 +6,15 @@
 //! viewer token, compared in constant time, as before; the people are named `operator`, `viewer`
 //! and `anonymous` (a viewer when no viewer token is set). With `--token-file`, every connection
 //! needs a token of the file ([`tokens`]): one per person, with a role; the file is re-read when
-//! it changes, and the sessions of a token no longer in it (or whose role changed) are closed.
+//! it changes ([`reload`]), and the sessions of a token no longer in it (or whose role changed)
+//! are closed. Tokens are checked with argon2 a few at a time server-wide ([`checks`]), each
+//! attempt counted against its address before it is checked ([`limiter`]).
 
+pub mod checks;
 pub mod cookie;
 pub mod http;
 pub mod limiter;
+pub mod reload;
 pub mod tokens;
 
 use std::collections::HashMap;
@@ -18,7 +22,6 @@ use std::net::IpAddr;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, SystemTime};
 
 use axum::http::StatusCode;
 use nanopush_proto::ws::Role;
@@ -26,9 +29,13 @@ use sha2::{Digest, Sha256};
 use subtle::ConstantTimeEq;
 use tokio::sync::watch;
 
+use self::checks::Checks;
 use self::cookie::{Claims, CookieKey};
 use self::limiter::FailureLimiter;
+use self::reload::{FileWatch, Stamp};
 use self::tokens::TokenTable;
+
+pub use self::reload::{FILE_POLL, SETTLE, watch_token_file};
 
 /// A person, as a credential names them.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -41,9 +48,6 @@ pub struct Person {
     /// what a revocation looks for.
     pub key: String,
 }
-
-/// How often the token file is looked at for a change.
-pub const FILE_POLL: Duration = Duration::from_millis(250);
 
 /// The session cookie's name.
 pub const COOKIE: &str = "nanopush_session";
@@ -65,12 +69,17 @@ pub struct AuthCounters {
     pub failures: AtomicU64,
     /// Attempts refused by the per-address limit without being checked.
     pub throttled: AtomicU64,
+    /// Attempts refused unchecked because too many checks were running and waiting.
+    pub busy: AtomicU64,
     /// Tokens exchanged for a session cookie.
     pub logins: AtomicU64,
     /// Sessions closed because their token was revoked (or its role changed).
     pub revoked_sessions: AtomicU64,
     /// Times the token file was re-read after a change.
     pub reloads: AtomicU64,
+    /// Times the token file could not be used (missing, unreadable, not parsing): each new
+    /// problem once.
+    pub file_errors: AtomicU64,
 }
 
 /// A live WebSocket session: who, and how to close it.
@@ -79,29 +88,11 @@ struct Live {
     kick: watch::Sender<Option<String>>,
 }
 
-/// The identity of a file's content: re-read when it changes.
-#[derive(Debug, Clone, PartialEq, Eq)]
-struct Stamp {
-    modified: Option<SystemTime>,
-    len: u64,
-    inode: u64,
-}
-
-fn stamp(path: &std::path::Path) -> Option<Stamp> {
-    use std::os::unix::fs::MetadataExt as _;
-    let m = std::fs::metadata(path).ok()?;
-    Some(Stamp {
-        modified: m.modified().ok(),
-        len: m.len(),
-        inode: m.ino(),
-    })
-}
-
 /// The token file as the server holds it.
 struct Named {
     path: PathBuf,
     table: Mutex<Arc<TokenTable>>,
-    stamp: Mutex<Option<Stamp>>,
+    watch: Mutex<FileWatch>,
     /// Tokens verified against the current table, by SHA-256 (argon2 once per token, not once
     /// per connection); emptied when the file changes.
     verified: Mutex<HashMap<[u8; 32], Arc<Person>>>,
@@ -118,6 +109,7 @@ pub struct Auth {
     cookie_key: Option<CookieKey>,
     live: Mutex<HashMap<u32, Live>>,
     failures: Mutex<FailureLimiter>,
+    checks: Checks,
     /// Counters for `/metrics`.
     pub counters: AuthCounters,
 }
@@ -135,6 +127,15 @@ pub fn ct_eq(a: &str, b: &str) -> bool {
 /// A refusal: the HTTP status and why.
 pub type Refused = (StatusCode, String);
 
+/// Why a token names nobody.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Unchecked {
+    /// Wrong, revoked, or not a token.
+    Wrong,
+    /// Not checked: too many checks running and waiting ([`checks`]).
+    Busy,
+}
+
 impl Auth {
     /// Access with the generated `operator` token and `viewer` token, and the token file when
     /// there is one.
@@ -142,7 +143,7 @@ impl Auth {
         Auth {
             generated: (operator, viewer),
             named: file.map(|f| Named {
-                stamp: Mutex::new(stamp(&f.path)),
+                watch: Mutex::new(FileWatch::new(Stamp::at(&f.path))),
                 path: f.path,
                 table: Mutex::new(Arc::new(f.table)),
                 verified: Mutex::new(HashMap::new()),
@@ -150,6 +151,7 @@ impl Auth {
             cookie_key: CookieKey::ephemeral().ok(),
             live: Mutex::new(HashMap::new()),
             failures: Mutex::new(FailureLimiter::default()),
+            checks: Checks::default(),
             counters: AuthCounters::default(),
         }
     }
@@ -198,8 +200,9 @@ impl Auth {
         self.named.is_some() || self.generated.1.is_some()
     }
 
-    /// The person `token` names, checked (argon2 runs on a blocking thread), or None.
-    async fn person_for_token(&self, token: &str) -> Option<Arc<Person>> {
+    /// The person `token` names, checked (argon2 on a blocking thread, a few at a time
+    /// server-wide: [`checks`]).
+    async fn person_for_token(&self, token: &str) -> Result<Arc<Person>, Unchecked> {
         let Some(named) = &self.named else {
             let (op, viewer) = &self.generated;
             // Both compared, whatever the first says.
@@ -208,38 +211,43 @@ impl Auth {
             let role = match (is_op, is_viewer) {
                 (true, _) => Role::Operator,
                 (_, true) => Role::Viewer,
-                _ => return None,
+                _ => return Err(Unchecked::Wrong),
             };
-            return Some(Arc::new(Person {
+            return Ok(Arc::new(Person {
                 name: tokens::role_name(role).into(),
                 role,
-                key: self.generated_key(role)?,
+                key: self.generated_key(role).ok_or(Unchecked::Wrong)?,
             }));
         };
         let key = digest(token);
-        if let Some(p) = named.verified.lock().ok()?.get(&key) {
-            return Some(p.clone());
+        if let Some(p) = named.verified.lock().ok().and_then(|v| v.get(&key).cloned()) {
+            return Ok(p);
         }
-        let table = named.table.lock().ok()?.clone();
+        let table = named.table.lock().map_err(|_| Unchecked::Wrong)?.clone();
         let token = token.to_string();
-        let found = tokio::task::spawn_blocking(move || {
-            table.verify(&token).map(|e| {
-                Arc::new(Person {
-                    name: e.name.clone(),
-                    role: e.role,
-                    key: e.id.clone(),
+        let found = self
+            .checks
+            .run(move || {
+                table.verify(&token).map(|e| {
+                    Arc::new(Person {
+                        name: e.name.clone(),
+                        role: e.role,
+                        key: e.id.clone(),
+                    })
                 })
             })
-        })
-        .await
-        .ok()??;
+            .await
+            .ok_or(Unchecked::Busy)?
+            .ok_or(Unchecked::Wrong)?;
         // Cached only if the table it was checked against is still the one in force.
-        let still = named.table.lock().ok()?;
+        let still = named.table.lock().map_err(|_| Unchecked::Wrong)?;
         if still.entries.iter().any(|e| e.id == found.key && e.role == found.role) {
-            named.verified.lock().ok()?.insert(key, found.clone());
-            Some(found)
+            if let Ok(mut v) = named.verified.lock() {
+                v.insert(key, found.clone());
+            }
+            Ok(found)
         } else {
-            None
+            Err(Unchecked::Wrong)
         }
     }
 
@@ -267,7 +275,11 @@ impl Auth {
         cookie: Option<&str>,
     ) -> Result<Arc<Person>, Refused> {
         if let Some(token) = token {
-            if let Some(wait) = self.failures.lock().map_or(None, |mut f| f.blocked(ip)) {
+            // The attempt is counted against its address before it is checked, and given back
+            // if the token is right: attempts sent at once cannot all pass an almost empty
+            // bucket while their checks run.
+            let reserved = self.failures.lock().map_or(Ok(()), |mut f| f.reserve(ip));
+            if let Err(wait) = reserved {
                 self.counters.throttled.fetch_add(1, Relaxed);
                 return Err((
                     StatusCode::TOO_MANY_REQUESTS,
@@ -277,14 +289,28 @@ impl Auth {
                     ),
                 ));
             }
-            return match self.person_for_token(token).await {
-                Some(p) => Ok(p),
-                None => {
+            let checked = self.person_for_token(token).await;
+            if !matches!(checked, Err(Unchecked::Wrong)) {
+                if let Ok(mut f) = self.failures.lock() {
+                    f.refund(ip);
+                }
+            }
+            return match checked {
+                Ok(p) => Ok(p),
+                Err(Unchecked::Wrong) => {
                     self.counters.failures.fetch_add(1, Relaxed);
-                    if let Ok(mut f) = self.failures.lock() {
-                        f.failed(ip);
-                    }
                     Err((StatusCode::UNAUTHORIZED, "invalid or revoked token".into()))
+                }
+                Err(Unchecked::Busy) => {
+                    self.counters.busy.fetch_add(1, Relaxed);
+                    Err((
+                        StatusCode::SERVICE_UNAVAILABLE,
+                        format!(
+                            "the server is busy checking other sign-ins ({} at once, {} waiting); try again in a few seconds",
+                            checks::AT_ONCE,
+                            checks::WAITING
+                        ),
+                    ))
                 }
             };
         }
@@ -340,49 +366,6 @@ impl Auth {
         self.live.lock().ok()?.get(&client).map(|l| l.person.name.clone())
     }
 
-    /// Re-reads the token file if it changed; closes the sessions of tokens no longer in it (or
-    /// whose role changed); their cookies are refused from then on. A file that cannot be read or parsed
-    /// (mid-edit by hand) leaves the table as it was, said in the log. Returns whether it
-    /// re-read it.
-    pub fn reload_if_changed(&self) -> bool {
-        let Some(named) = &self.named else { return false };
-        let now = stamp(&named.path);
-        {
-            let Ok(mut s) = named.stamp.lock() else { return false };
-            if *s == now {
-                return false;
-            }
-            *s = now;
-        }
-        let table = match TokenTable::read(&named.path, true) {
-            Ok(t) => t,
-            Err(e) => {
-                tracing::error!("token file: {e}; the tokens read before stay in force");
-                return false;
-            }
-        };
-        self.counters.reloads.fetch_add(1, Relaxed);
-        let valid = |p: &Person| table.entries.iter().any(|e| e.id == p.key && e.role == p.role);
-        if let Ok(mut t) = named.table.lock() {
-            *t = Arc::new(table.clone());
-        }
-        if let Ok(mut v) = named.verified.lock() {
-            v.clear();
-        }
-        if let Ok(l) = self.live.lock() {
-            for (id, live) in l.iter().filter(|(_, l)| !valid(&l.person)) {
-                tracing::info!("client {id} ({}): token revoked; closing its session", live.person.name);
-                self.counters.revoked_sessions.fetch_add(1, Relaxed);
-                let _ = live.kick.send(Some(format!(
-                    "the token of {} was revoked (or its role changed); this session is closed",
-                    live.person.name
-                )));
-            }
-        }
-        tracing::info!("token file re-read: {} token(s)", table.entries.len());
-        true
-    }
-
     /// The counters as Prometheus text.
     pub fn render_metrics(&self) -> String {
         let c = &self.counters;
@@ -399,6 +382,11 @@ impl Auth {
                 &c.throttled,
             ),
             (
+                "nanopush_auth_busy_total",
+                "Attempts refused unchecked (503): too many token checks running and waiting.",
+                &c.busy,
+            ),
+            (
                 "nanopush_auth_logins_total",
                 "Tokens exchanged for a session cookie.",
                 &c.logins,
@@ -413,32 +401,25 @@ impl Auth {
                 "Times the token file was re-read after a change.",
                 &c.reloads,
             ),
+            (
+                "nanopush_auth_token_file_errors_total",
+                "Times the token file could not be used (missing, unreadable, not parsing); each new problem once.",
+                &c.file_errors,
+            ),
         ] {
             s.push_str(&format!(
                 "# HELP {name} {help}\n# TYPE {name} counter\n{name} {}\n",
                 v.load(Relaxed)
             ));
         }
-        s
-    }
-}
-
-/// Re-reads the token file every [`FILE_POLL`] while the server runs.
-pub async fn watch_token_file(st: Arc<crate::serve::app_state::AppState>) {
-    if !st.auth.is_named() {
-        return;
-    }
-    let mut shutdown = st.channels.shutdown.subscribe();
-    let mut tick = tokio::time::interval(FILE_POLL);
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-    loop {
-        tokio::select! {
-            _ = tick.tick() => {
-                let st2 = st.clone();
-                let _ = tokio::task::spawn_blocking(move || st2.auth.reload_if_changed()).await;
-            }
-            _ = shutdown.changed() => break,
+        if let Some(named) = &self.named {
+            let ok = named.watch.lock().is_ok_and(|w| w.ok());
+            s.push_str(&format!(
+                "# HELP nanopush_auth_token_file_ok 1 while the token file can be read and parsed; 0: the tokens read before stay in force and revocations wait.\n# TYPE nanopush_auth_token_file_ok gauge\nnanopush_auth_token_file_ok {}\n",
+                u8::from(ok)
+            ));
         }
+        s
     }
 }
 

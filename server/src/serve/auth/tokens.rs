@@ -1,7 +1,8 @@
 //! The token file: one line per person, `NAME ROLE ID HASH`, where the person's token is
 //! `npt_ID_SECRET` and HASH is the argon2id hash (PHC string) of SECRET. Only the hash is kept:
 //! a copy of the file gives nobody access. `nanopush token add|list|revoke` edits it; the server
-//! re-reads it when it changes.
+//! re-reads it when it changes. Changes are made under an exclusive lock (`FILE.lock`, next to
+//! it: [`TokenTable::update`]), so `nanopush token` run at once loses nobody's change.
 //!
 //! A token is checked by its ID (not secret: it only finds the line) and then by argon2's
 //! verification of SECRET against the line's hash, which compares the digests in constant time.
@@ -52,7 +53,28 @@ pub enum TokenFileError {
     /// Hashing failed (never with the default parameters).
     #[error("hashing the token: {0}")]
     Hash(String),
+    /// The file's owner could not be kept: the file rewritten by this user would not be
+    /// readable by the server running as its owner.
+    #[error(
+        "{path} belongs to uid {uid} gid {gid} (the server's user, presumably), and this user cannot give the rewritten file back to them ({source}); run `nanopush token` as that user (`sudo -u USER nanopush token …`)"
+    )]
+    Owner {
+        /// The file.
+        path: PathBuf,
+        /// Its owner.
+        uid: u32,
+        /// Its group.
+        gid: u32,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// Another `nanopush token` holds the lock for longer than we wait.
+    #[error("{0}: another `nanopush token` is changing the file (its lock is held); try again")]
+    Locked(PathBuf),
 }
+
+/// Longest wait for the lock of the token file.
+const LOCK_WAIT: std::time::Duration = std::time::Duration::from_secs(30);
 
 /// One person's line.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -191,10 +213,12 @@ impl TokenTable {
         s
     }
 
-    /// Writes the file whole: a temporary file (mode 0600) fsynced, then renamed over it, so a
-    /// server re-reading it never sees half a file.
+    /// Writes the file whole: a temporary file (mode 0600, the old file's owner and group kept,
+    /// so a `sudo nanopush token …` leaves a file the server's user still reads) fsynced, then
+    /// renamed over it, so a server re-reading it never sees half a file. Changes read the file
+    /// first: use [`Self::update`], which holds the lock.
     pub fn write(&self, path: &Path) -> Result<(), TokenFileError> {
-        use std::os::unix::fs::OpenOptionsExt as _;
+        use std::os::unix::fs::{MetadataExt as _, OpenOptionsExt as _};
         let io = |source| TokenFileError::Io {
             path: path.to_path_buf(),
             source,
@@ -207,13 +231,42 @@ impl TokenTable {
             .mode(0o600)
             .open(&tmp)
             .map_err(io)?;
+        let gone = |e| {
+            let _ = std::fs::remove_file(&tmp);
+            e
+        };
+        if let (Ok(old), Ok(new)) = (std::fs::metadata(path), f.metadata()) {
+            if (old.uid(), old.gid()) != (new.uid(), new.gid()) {
+                std::os::unix::fs::fchown(&f, Some(old.uid()), Some(old.gid())).map_err(|source| {
+                    gone(TokenFileError::Owner {
+                        path: path.to_path_buf(),
+                        uid: old.uid(),
+                        gid: old.gid(),
+                        source,
+                    })
+                })?;
+            }
+        }
         f.write_all(self.render().as_bytes())
             .and_then(|()| f.sync_all())
             .and_then(|()| std::fs::rename(&tmp, path))
-            .map_err(|e| {
-                let _ = std::fs::remove_file(&tmp);
-                io(e)
-            })
+            .map_err(|e| gone(io(e)))
+    }
+
+    /// Reads the file, lets `change` change the table, and writes it back, all under an
+    /// exclusive lock on `FILE.lock` (waiting up to 30 s for another `nanopush token` to finish):
+    /// changes made at once are made one after the other, none lost. A missing file is an empty
+    /// table when `missing_ok`.
+    pub fn update<T>(
+        path: &Path,
+        missing_ok: bool,
+        change: impl FnOnce(&mut TokenTable) -> Result<T, TokenFileError>,
+    ) -> Result<T, TokenFileError> {
+        let _lock = lock(path)?;
+        let mut table = TokenTable::read(path, missing_ok)?;
+        let out = change(&mut table)?;
+        table.write(path)?;
+        Ok(out)
     }
 
     /// Adds `name` with `role`; returns the new token (shown once: only its hash is kept).
@@ -262,6 +315,54 @@ impl TokenTable {
             .verify_password(secret.as_bytes(), &hash)
             .is_ok()
             .then_some(e)
+    }
+}
+
+/// The lock file of the token file at `path`: `FILE.lock` next to it.
+pub fn lock_path(path: &Path) -> PathBuf {
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(".lock");
+    path.with_file_name(name)
+}
+
+/// An exclusive `flock` on the token file's lock file, held until dropped (closing the file
+/// releases it, also when the process dies).
+fn lock(path: &Path) -> Result<std::fs::File, TokenFileError> {
+    use std::os::fd::AsRawFd as _;
+    use std::os::unix::fs::OpenOptionsExt as _;
+    let at = lock_path(path);
+    let io = |source| TokenFileError::Io {
+        path: at.clone(),
+        source,
+    };
+    // Readable by all (it holds nothing): whoever made it, any user may lock it after.
+    let f = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .mode(0o644)
+        .open(&at)
+        .or_else(|e| match e.kind() {
+            std::io::ErrorKind::PermissionDenied => std::fs::File::open(&at),
+            _ => Err(e),
+        })
+        .map_err(io)?;
+    let t0 = std::time::Instant::now();
+    loop {
+        // SAFETY: flock on a file descriptor this function owns.
+        if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+            return Ok(f);
+        }
+        let e = std::io::Error::last_os_error();
+        match e.raw_os_error() {
+            Some(libc::EWOULDBLOCK) if t0.elapsed() < LOCK_WAIT => {
+                std::thread::sleep(std::time::Duration::from_millis(20))
+            }
+            Some(libc::EWOULDBLOCK) => return Err(TokenFileError::Locked(path.to_path_buf())),
+            Some(libc::EINTR) => {}
+            _ => return Err(io(e)),
+        }
     }
 }
 
@@ -315,5 +416,62 @@ mod tests {
         );
         let e = TokenTable::parse("alice viewer 0011aabb nothash\n", Path::new("tok")).unwrap_err();
         assert!(e.to_string().contains("not an argon2 PHC string"), "{e}");
+    }
+
+    #[test]
+    fn changes_made_at_once_are_all_kept() {
+        let dir = std::env::temp_dir().join(format!("nanopush-tokens-lock-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("tokens");
+        TokenTable::update(&path, true, |t| t.add("alice", Role::Operator)).unwrap();
+        let threads: Vec<_> = (0..6)
+            .map(|i| {
+                let path = path.clone();
+                std::thread::spawn(move || {
+                    if i == 0 {
+                        TokenTable::update(&path, false, |t| t.revoke("alice")).map(|_| ())
+                    } else {
+                        TokenTable::update(&path, true, |t| t.add(&format!("student{i}"), Role::Viewer)).map(|_| ())
+                    }
+                })
+            })
+            .collect();
+        for t in threads {
+            t.join().unwrap().unwrap();
+        }
+        let names: Vec<String> = TokenTable::read(&path, false)
+            .unwrap()
+            .entries
+            .into_iter()
+            .map(|e| e.name)
+            .collect();
+        assert_eq!(names.len(), 5, "{names:?}");
+        assert!(
+            !names.contains(&"alice".to_string()),
+            "the revoke is not undone: {names:?}"
+        );
+        assert!(lock_path(&path).ends_with("tokens.lock"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Review of issue 27, item 2: `sudo nanopush token revoke` left a root:root 0600 file the
+    /// server's user could not read. The rewritten file keeps the old one's owner and group.
+    #[test]
+    fn a_rewritten_file_keeps_its_owner_and_group() {
+        use std::os::unix::fs::MetadataExt as _;
+        // SAFETY: geteuid has no preconditions.
+        if unsafe { libc::geteuid() } != 0 {
+            eprintln!("skipped: only root can give a file to another user");
+            return;
+        }
+        let dir = std::env::temp_dir().join(format!("nanopush-tokens-owner-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("tokens");
+        TokenTable::update(&path, true, |t| t.add("alice", Role::Operator)).unwrap();
+        std::os::unix::fs::chown(&path, Some(65534), Some(65534)).unwrap();
+        TokenTable::update(&path, false, |t| t.revoke("alice")).unwrap();
+        let m = std::fs::metadata(&path).unwrap();
+        assert_eq!((m.uid(), m.gid(), m.mode() & 0o777), (65534, 65534, 0o600));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
