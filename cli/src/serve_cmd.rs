@@ -37,7 +37,8 @@ pub struct ServeArgs {
     viewer_token: Option<String>,
     /// Named operators and viewers, one hashed token each (`nanopush token add NAME --role R`);
     /// then every connection needs a token of the file (the generated one is not accepted), and
-    /// the file is re-read when it changes (a change is applied once the file has been stable for 1 s: a revoked token's sessions are closed within about 1.5 s).
+    /// the file is re-read when it changes (a change is applied once the file has been stable
+    /// for 1 s: a revoked token's sessions are closed within about 1.5 s).
     #[arg(long, conflicts_with_all = ["operator_token", "viewer_token"])]
     token_file: Option<PathBuf>,
     /// A reverse proxy whose X-Forwarded-For names the real client (repeatable; an address or a
