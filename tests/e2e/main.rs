@@ -8,7 +8,6 @@ mod haptic_link;
 mod model;
 mod prometheus;
 mod push;
-mod review_27b;
 mod scan;
 mod serve;
 mod serve_access;
