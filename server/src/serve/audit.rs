@@ -5,15 +5,17 @@
 //! `outcome` (`ok`, or `refused` with the error's `code` and `message`).
 //!
 //! A thread of its own writes the lines queued since its last write with one `write` and one
-//! `fdatasync` (a group commit), and only then tells the sessions waiting for them: an accepted
-//! command's `ok` is sent once its line is on disk, so a command a client saw accepted is in the
-//! log whatever happens to the server afterwards (kill -9, power loss). A write that fails part
-//! way (a full disk) is cut back to the last whole line, so the log holds whole lines only.
-//! Refused commands are logged without waiting, at most [`REFUSED_IN_FLIGHT`] queued at once: a
-//! flood of refused commands (a viewer's script) cannot queue ahead of the operator's lines or
-//! grow without bound; what it sheds is counted in a line of its own (`refusals_not_logged`) and
-//! in `/metrics`. The log is in a directory of its own, so `/api/records` neither lists nor serves
-//! it.
+//! `fdatasync` (a group commit): a line the log holds is whole and on disk, whatever happens to
+//! the server afterwards (kill -9, power loss), and a line is queued before its command's answer
+//! is sent and on disk within one commit (milliseconds). The answer does not wait for the disk:
+//! a command's events (a lease change, a `run_done`) must not overtake its `ok`, and a stop
+//! waits for nothing; a kill -9 in those milliseconds can lose the line of a command whose `ok`
+//! was sent. A write that fails part way (a full disk) is cut back to the last whole line.
+//! Refused commands are logged at most [`REFUSED_IN_FLIGHT`] queued at once: a flood of refused
+//! commands (a viewer's script) cannot queue ahead of the operator's lines or grow without
+//! bound (12,000 queued refusals once kept an operator's `ok`ed commands off the disk for ~40 s);
+//! what it sheds is counted in a line of its own (`refusals_not_logged`) and in `/metrics`. The
+//! log is in a directory of its own, so `/api/records` neither lists nor serves it.
 
 use std::collections::HashMap;
 use std::io::Write as _;

@@ -147,9 +147,6 @@ where
     }
 }
 
-/// How long an accepted command's `ok` waits for its audit line to be on disk.
-const AUDIT_PATIENCE: std::time::Duration = std::time::Duration::from_secs(2);
-
 /// Parses and handles one command and queues its answer; `false` when the client is gone.
 async fn answer(st: &Arc<AppState>, client: &mut Client, inbox: &Inbox<'_>, text: Utf8Bytes) -> bool {
     let parsed = match parse_command(text.as_str()) {
@@ -168,15 +165,12 @@ async fn answer(st: &Arc<AppState>, client: &mut Client, inbox: &Inbox<'_>, text
     };
     let audited = crate::serve::audit::describe(&parsed);
     let handled = handle(st, client, parsed);
-    let durable = audited.and_then(|cmd| {
+    // Queued before the answer is sent, written within one group commit (`audit.rs`). The `ok`
+    // does not wait for the disk: the command's events (a lease change, a run_done) must not
+    // overtake its answer, and a stop must not wait for anything.
+    if let Some(cmd) = audited {
         let refused = handled.as_ref().err().map(|r| (r.code, r.message.as_str()));
-        st.audit.command(&client.person, client.addr, client.id, cmd, refused)
-    });
-    // An accepted command's `ok` is sent once its audit line is on disk (the command itself has
-    // run: a stop does not wait for the disk); a log that cannot be written within
-    // AUDIT_PATIENCE does not hold the reply (the failure is counted and alerted on).
-    if let Some(d) = durable {
-        let _ = tokio::time::timeout(AUDIT_PATIENCE, d).await;
+        let _ = st.audit.command(&client.person, client.addr, client.id, cmd, refused);
     }
     match handled {
         Ok(()) => {
