@@ -87,13 +87,8 @@ impl LinearLoop {
         period: f64,
     ) -> LinearLoop {
         LinearLoop {
-            mass,
-            handle_damping,
-            hand_stiffness: hand.0,
-            hand_damping: hand.1,
             taps: vec![(0, k), (lag, -k), (lag + tick, k)],
-            damping,
-            period,
+            ..LinearLoop::spring(mass, handle_damping, hand, k, 0, damping, period)
         }
     }
 

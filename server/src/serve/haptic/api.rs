@@ -245,14 +245,7 @@ mod tests {
         );
         let p = scene.bilateral_params(1e-3);
         let mut c = Coupling::new(1e-3);
-        let handle = HapticState {
-            max_force: 2.5,
-            max_stiffness: 2000.0,
-            spec_rate_hz: 1000.0,
-            rate_hz: 1000.0,
-            latency_ns: 1_000_000,
-            ..HapticState::default()
-        };
+        let handle = sim_handle();
         c.update(&p, Some(&handle), true);
         h.note_scales(&p, &c);
         let now = h.scales.snapshot();
@@ -270,6 +263,18 @@ mod tests {
         assert_eq!((one.limit.as_str(), one.reason), ("none", None));
     }
 
+    /// A sample of the simulated device (2 kN/m at 1 kHz) with one tick of round trip.
+    fn sim_handle() -> HapticState {
+        HapticState {
+            max_force: 2.5,
+            max_stiffness: 2000.0,
+            spec_rate_hz: 1000.0,
+            rate_hz: 1000.0,
+            latency_ns: 1_000_000,
+            ..HapticState::default()
+        }
+    }
+
     /// A burst of `scale`s answered before the loop takes the first: each `ok` builds on the
     /// scales the previous one asked for, not on those the loop still has in force (a scale of
     /// 1000 nm/mm and 10 N, then 10 nm/mm, then 1 N is 10 nm/mm and 1 N, as asked, in force).
@@ -280,14 +285,7 @@ mod tests {
         let h = HapticMetrics::default();
         let p = scene.bilateral_params(1e-3);
         let mut c = Coupling::new(1e-3);
-        let handle = HapticState {
-            max_force: 2.5,
-            max_stiffness: 2000.0,
-            spec_rate_hz: 1000.0,
-            rate_hz: 1000.0,
-            latency_ns: 1_000_000,
-            ..HapticState::default()
-        };
+        let handle = sim_handle();
         c.update(&p, Some(&handle), true);
         h.note_scales(&p, &c);
         scales_in_force(&h, k_z, adhesion, Some(1000.0), Some(10.0));
