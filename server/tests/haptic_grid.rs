@@ -109,7 +109,6 @@ fn a_device_that_renders_little_damping_keeps_the_coupling_whole() {
             for pull_off in [1.0, 2.5] {
                 let device = Declared {
                     sim: SimDevice::new(Script::parse(script).unwrap(), 1e-3),
-                    max_stiffness: None,
                     max_damping: Some(max_damping),
                 };
                 let (rows, law) = closed_loop_on(device, 10.0, pull_off, 1, 30_000, Stalls::NONE);

@@ -66,14 +66,12 @@ pub fn closed_loop(
     closed_loop_with(script, nm_per_mm, pull_off_n, per_tick, max_ticks, Stalls::NONE)
 }
 
-/// The simulated handle with other limits in its specification, as a serial device's info
-/// packet may declare them (`None`: the simulated device's own).
+/// The simulated handle declaring another damping limit in its specification, as a serial device's info
+/// packet may declare it (`None`: the simulated device's own).
 #[allow(dead_code)] // used by the grid test, not by the benchmark
 pub struct Declared {
     /// The simulated handle and hand.
     pub sim: SimDevice,
-    /// The largest stiffness it declares (N/m).
-    pub max_stiffness: Option<f64>,
     /// The largest damping it declares (N·s/m).
     pub max_damping: Option<f64>,
 }
@@ -82,7 +80,6 @@ impl Device for Declared {
     fn spec(&self) -> DeviceSpec {
         let own = self.sim.spec();
         DeviceSpec {
-            max_stiffness: self.max_stiffness.unwrap_or(own.max_stiffness),
             max_damping: self.max_damping.unwrap_or(own.max_damping),
             ..own
         }
@@ -120,7 +117,6 @@ pub fn closed_loop_with(
     let ddt = 1e-3 / f64::from(per_tick);
     let device = Declared {
         sim: SimDevice::new(script, ddt),
-        max_stiffness: None,
         max_damping: None,
     };
     closed_loop_on(device, nm_per_mm, pull_off_n, per_tick, max_ticks, stalls)
