@@ -88,6 +88,10 @@ pub enum ClientMessage {
         /// Target y (µm).
         #[serde(default)]
         to_y_um: Option<f64>,
+        /// The push is `ok` when the scan after it finds the particle within this of the target
+        /// (nm); [`PUSH_TOLERANCE_NM`] (25 nm) when left out; allowed: [1, 100000] nm.
+        #[serde(default)]
+        tolerance_nm: Option<f64>,
     },
     /// A tapping-mode scan of a square region (the scene's `[scan]` where left out). Needs the
     /// lease.
@@ -261,6 +265,35 @@ pub struct PushPath {
     /// Its run number (per server run), as its record's summary says: with the server's
     /// `instance`, a client that lost sight of the push finds its record and no other.
     pub run: u64,
+    /// Which push of the move this is: 1, then 2.. for each correction from where the scan
+    /// after the previous push found the particle (older servers leave it out: 1).
+    #[serde(default = "first_attempt")]
+    pub attempt: u32,
+}
+
+fn first_attempt() -> u32 {
+    1
+}
+
+/// A push's tolerance when the command gives none (nm).
+pub const PUSH_TOLERANCE_NM: f64 = 25.0;
+
+/// The allowed range of a push's `tolerance_nm`.
+pub const PUSH_TOLERANCE_RANGE_NM: (f64, f64) = (1.0, 100_000.0);
+
+/// A move judged by the scan after its last push (SI).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Judged {
+    /// Where the scan after the last push found the particle (m).
+    pub measured: [f64; 2],
+    /// Where it was sent (m).
+    pub target: [f64; 2],
+    /// The measured distance from the target (m).
+    pub error_m: f64,
+    /// The move's tolerance (m): `ok` within it, `missed` beyond it.
+    pub tolerance_m: f64,
+    /// Pushes made: the first and the corrections.
+    pub attempts: u32,
 }
 
 /// The latest scan, for a client that joins after it (SI).
@@ -436,6 +469,10 @@ pub enum ServerMessage {
         /// Why no record was written (disk full, read-only, gone), when one was not.
         #[serde(default)]
         record_error: Option<String>,
+        /// What the scan after the last push measured, when one was made: `ok` and `missed`
+        /// are decided by it, never by the estimate.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        judged: Option<Judged>,
     },
     /// A scan starts (stream `scan`); binary line frames follow.
     ScanStart {
@@ -630,8 +667,10 @@ mod tests {
             path: vec![[1e-6, 2e-6], [3e-6, 2e-6]],
             by: 5,
             run: 3,
+            attempt: 2,
         };
         let s = serde_json::to_value(ServerMessage::PushStarted(path.clone())).unwrap();
+        assert_eq!(s["attempt"], 2);
         assert_eq!(s["type"], "push_started");
         assert_eq!(s["particle"], 2);
         assert_eq!(s["by"], 5);

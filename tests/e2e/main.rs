@@ -15,6 +15,7 @@ mod serve_audit;
 mod serve_behaviour;
 mod serve_campus;
 mod serve_hostile;
+mod serve_judge;
 mod serve_proxy;
 mod serve_scenes;
 mod serve_state;

@@ -39,7 +39,11 @@ export function pusher(push, client) {
 
 export function pushStartedText(push, client) {
   const end = push.path[push.path.length - 1];
-  return `push started: #${push.particle} by ${pusher(push, client)}, to ${formatStagePoint(end)} in ${push.path.length - 1} leg${push.path.length > 2 ? 's' : ''}`;
+  const legs = `${push.path.length - 1} leg${push.path.length > 2 ? 's' : ''}`;
+  if (push.attempt > 1) {
+    return `correction ${push.attempt - 1} of #${push.particle}: the scan after the push found it outside the tolerance; pushing it from ${formatStagePoint(push.path[0])} to ${formatStagePoint(end)} in ${legs}`;
+  }
+  return `push started: #${push.particle} by ${pusher(push, client)}, to ${formatStagePoint(end)} in ${legs}`;
 }
 
 /** A `lease` event: {text, cls, announce} (`announce`: what to tell a screen reader, or null). */

@@ -14,7 +14,7 @@ export function describeRun(r) {
   const rec = r.record ? `record ${r.record}` : r.record_error ? `no record: ${r.record_error}` : 'no record';
   if (r.outcome === 'ok') {
     const at = Array.isArray(r.estimate) ? `, particle now at ${formatPoint(r.estimate)}` : '';
-    return `push of #${r.particle} ok${at} (${rec})`;
+    return `push of #${r.particle} ok${judgedText(r.judged)}${at} (${rec})`;
   }
   const never = Array.isArray(r.estimate) ? `, particle left at ${formatPoint(r.estimate)}` : ', it never started';
   if (r.outcome === 'stopped' || r.outcome === 'missed') {
@@ -22,6 +22,17 @@ export function describeRun(r) {
     return `push of #${r.particle} ${r.outcome}: ${why}${never} (${rec})`;
   }
   return `push of #${r.particle} failed: ${r.outcome}: ${r.failure ?? 'no reason given'}${never} (${rec})`;
+}
+
+/**
+ * What the scan after the push measured (`run_done`'s `judged`), in words: the distance from
+ * the target against the tolerance, and the corrections; '' for a run nobody judged.
+ */
+export function judgedText(j) {
+  if (!j || !Number.isFinite(j.error_m) || !Number.isFinite(j.tolerance_m)) return '';
+  const nm = (m) => `${(m * 1e9).toFixed(1)} nm`;
+  const fixes = j.attempts > 1 ? `, after ${j.attempts - 1} correction${j.attempts > 2 ? 's' : ''}` : '';
+  return `: measured ${nm(j.error_m)} from the target (tolerance ${nm(j.tolerance_m)})${fixes}`;
 }
 
 /**

@@ -34,6 +34,8 @@ test('a push started, by this client or another, in one leg or more', () => {
   assert.equal(pusher(p, 4), 'you');
   assert.equal(pushStartedText(p, 4), 'push started: #2 by you, to (45.000, 30.000) µm in 1 leg');
   assert.equal(pushStartedText({ ...p, path: [...p.path, [45e-6, 31e-6]] }, 5), 'push started: #2 by client 4, to (45.000, 31.000) µm in 2 legs');
+  assert.equal(pushStartedText({ ...p, attempt: 2 }, 4),
+    'correction 1 of #2: the scan after the push found it outside the tolerance; pushing it from (40.000, 30.000) µm to (45.000, 30.000) µm in 1 leg');
 });
 
 test('the lease: taken, lost (said aloud), changed elsewhere with or without a reason', () => {

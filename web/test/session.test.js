@@ -1,7 +1,7 @@
 // node --test: the Session (src/session.js) over sequences of the server's messages.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { Session, controlState, sceneParticles, setPointForceN, describeRun, runClass, lostPushRun } from '../src/session.js';
+import { Session, controlState, sceneParticles, setPointForceN, describeRun, judgedText, runClass, lostPushRun } from '../src/session.js';
 import { WS_VERSION, encodeScanLine, commands } from '../src/wire.js';
 
 test('session: welcome, lease changes and who may command', () => {
@@ -252,6 +252,11 @@ test('session: a push that never started (estimate null) is a run like any other
   assert.equal(s.state.particles[0].x, 40e-6, 'not moved');
   assert.equal(describeRun(r), 'push of #1 failed: plan: particle 1: target out of reach, it never started (no record)');
   assert.equal(describeRun({ particle: 2, outcome: 'ok', estimate: [5e-5, 6e-5], record: 'push-1.csv' }), 'push of #2 ok, particle now at (50.00, 60.00) µm (record push-1.csv)');
+  const judged = { measured: [5e-5, 6e-5], target: [5e-5, 6.0000002e-5], error_m: 2.49e-9, tolerance_m: 25e-9, attempts: 2 };
+  assert.equal(describeRun({ particle: 2, outcome: 'ok', estimate: [5e-5, 6e-5], record: 'push-2.json', judged }),
+    'push of #2 ok: measured 2.5 nm from the target (tolerance 25.0 nm), after 1 correction, particle now at (50.00, 60.00) µm (record push-2.json)');
+  assert.equal(judgedText({ ...judged, attempts: 3 }), ': measured 2.5 nm from the target (tolerance 25.0 nm), after 2 corrections');
+  assert.equal(judgedText(null), '');
   assert.equal(describeRun({ particle: 2, outcome: 'stopped', failure: 'stopped: stop requested by the operator', estimate: [5e-8, 6e-8], record: null, record_error: 'disk full' }),
     'push of #2 stopped: stop requested by the operator, particle left at (50.0, 60.0) nm (no record: disk full)');
 });

@@ -178,9 +178,13 @@ pub struct Activity {
     pub push_now: Mutex<Option<PushPath>>,
     /// The latest scan (running or finished), for clients that join after it.
     pub latest_scan: Mutex<Option<ScanNow>>,
-    /// Each particle's strategy plan (or why none can push it), derived once from the scene's
-    /// model on its first push: the scene does not change while the server runs.
-    pub plans: Mutex<std::collections::HashMap<u32, PlanOutcome>>,
+    /// Each particle's strategy plan (or why none can push it) for a tolerance (its bits),
+    /// derived once from the scene's model on the first push that asks for it: the scene does
+    /// not change while the server runs.
+    pub plans: Mutex<std::collections::HashMap<(u32, u64), PlanOutcome>>,
+    /// The pushes the loop runs whose move is judged by the scan after them, by run number
+    /// (`push_job::Pending`).
+    pub judging: Mutex<std::collections::HashMap<u64, crate::serve::push_job::Pending>>,
 }
 
 /// A particle's strategy plan, or why none can push it.
@@ -308,6 +312,7 @@ impl AppState {
                 scan_cancel: AtomicBool::new(false),
                 next_scan: AtomicU32::new(1),
                 plans: Mutex::new(std::collections::HashMap::new()),
+                judging: Mutex::new(std::collections::HashMap::new()),
                 stopping: AtomicBool::new(false),
                 generation: AtomicU64::new(0),
                 estimates: Mutex::new(

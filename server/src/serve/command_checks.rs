@@ -1,7 +1,7 @@
 //! Checks of client commands: finite numbers, ranges, known particles. Each refusal is a typed
 //! error naming the field, the value and the allowed range.
 
-use nanopush_proto::ws::{ClientMessage, ErrorCode, HapticAction};
+use nanopush_proto::ws::{ClientMessage, ErrorCode, HapticAction, PUSH_TOLERANCE_NM, PUSH_TOLERANCE_RANGE_NM};
 
 use crate::control::MoveTarget;
 
@@ -156,6 +156,21 @@ pub fn fields_apply(msg: &ClientMessage) -> Result<(), Refusal> {
     Ok(())
 }
 
+/// A push's tolerance (m) from its `tolerance_nm` ([`PUSH_TOLERANCE_NM`] when left out),
+/// checked against [`PUSH_TOLERANCE_RANGE_NM`].
+pub fn push_tolerance(tolerance_nm: Option<f64>) -> Result<f64, Refusal> {
+    let (lo, hi) = PUSH_TOLERANCE_RANGE_NM;
+    let t = number(
+        "tolerance_nm",
+        tolerance_nm.unwrap_or(PUSH_TOLERANCE_NM),
+        lo,
+        hi,
+        false,
+        "nm",
+    )?;
+    Ok(t * 1e-9)
+}
+
 /// Checks a push's numbers; `range_um` is the stage range.
 pub fn push_target(
     distance_um: Option<f64>,
@@ -260,6 +275,24 @@ mod tests {
         assert!(fields_apply(&m).unwrap_err().message.contains("pull_off_at_hand_n"));
         let m = parse_command(r#"{"type":"haptic","action":"scale","nm_per_mm":5}"#).unwrap();
         assert_eq!(fields_apply(&m), Ok(()));
+    }
+
+    #[test]
+    fn a_push_tolerance_defaults_to_25_nm_and_is_checked() {
+        assert_eq!(push_tolerance(None), Ok(25.0 * 1e-9));
+        assert_eq!(push_tolerance(Some(1.0)), Ok(1.0 * 1e-9));
+        let e = push_tolerance(Some(0.5)).unwrap_err();
+        assert_eq!(e.code, ErrorCode::OutOfRange);
+        assert!(
+            e.message
+                .contains("tolerance_nm = 0.5 is out of range; allowed: [1, 100000] nm"),
+            "{}",
+            e.message
+        );
+        assert_eq!(
+            push_tolerance(Some(f64::INFINITY)).unwrap_err().code,
+            ErrorCode::NotFinite
+        );
     }
 
     #[test]

@@ -13,6 +13,7 @@ pub mod frames;
 pub mod guard;
 pub mod haptic;
 pub mod histogram;
+pub mod judge;
 mod lifecycle;
 pub mod metrics;
 pub mod push_job;

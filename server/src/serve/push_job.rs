@@ -1,15 +1,17 @@
 //! A push prepared off the loop and off the async workers: a quick local scan locates the
-//! particle, the move is planned and the model predicts it; then the job goes to the loop.
+//! particle, the move is planned and the model predicts it; then the job goes to the loop, and
+//! the scan after it judges the move (`judge.rs`).
 
 use std::sync::atomic::Ordering::Relaxed;
 
 use nanopush_proto::ws::{ErrorCode, PushPath, ServerMessage};
 
-use crate::control::strategy_plan::{self, DEFAULT_TOLERANCE, derive};
-use crate::control::{MoveTarget, Prepared, plan_move};
+use crate::control::strategy_plan::{self, derive};
+use crate::control::{MovePlan, MoveTarget, Prepared, plan_move};
 use crate::serve::app_state::AppState;
 use crate::serve::command_checks::Refusal;
 use crate::serve::control_loop::{LoopCommand, PushJob};
+use crate::serve::judge;
 
 /// Whether a particle of radius `r` (m) can be pushed to `p` (m): its centre at least a radius
 /// inside the stage's `[0, range]` square, so the particle stays on the stage and the tip, which
@@ -38,8 +40,34 @@ pub(crate) fn on_stage(p: (f64, f64), r: f64, range: f64) -> Result<(), Refusal>
     ))
 }
 
-/// A push that ended before the loop ran it (refused by the plan, stopped, already there, the
-/// queue full): its `run_done` to everyone, and to the audit log under the person who asked.
+/// A move as the operator asked for it: the particle, the tolerance it must end within, the
+/// `stop` generation it began in, and who asked.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Move {
+    /// Particle id.
+    pub particle: u32,
+    /// `ok` within this of the target, as the scan after the push measures it (m).
+    pub tolerance: f64,
+    /// [`crate::serve::app_state::Activity::generation`] when it was asked: a `stop` changes it.
+    pub generation: u64,
+    /// The client that asked.
+    pub by: u32,
+}
+
+/// A push the loop runs, whose move the scan after it judges (`judge.rs`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pending {
+    pub(crate) mv: Move,
+    /// The target (m).
+    pub(crate) target: (f64, f64),
+    /// The particle's radius as the local scan before the push measured it (m).
+    pub(crate) radius: f64,
+    /// Which push of the move this is (1, then the corrections).
+    pub(crate) attempt: u32,
+}
+
+/// A push that ended before the loop ran it (refused by the plan, stopped, the queue full): its
+/// `run_done` to everyone, and to the audit log under the person who asked.
 pub(crate) fn run_done_failed(st: &AppState, by: u32, particle: u32, outcome: &str, failure: String) {
     audit_early_end(st, by, particle, outcome, Some(&failure));
     st.push_ended(false);
@@ -51,6 +79,7 @@ pub(crate) fn run_done_failed(st: &AppState, by: u32, particle: u32, outcome: &s
         estimate: None,
         record: None,
         record_error: None,
+        judged: None,
     });
 }
 
@@ -69,12 +98,18 @@ fn audit_early_end(st: &AppState, by: u32, particle: u32, outcome: &str, failure
     });
 }
 
-/// The scene with particle `particle`'s strategy plan applied (hand-set values win), the plan
-/// derived on the particle's first push and kept; or why no strategy can push it.
-fn strategy_scene(st: &AppState, particle: u32) -> Result<crate::scene::Scene, strategy_plan::Refusal> {
-    let cached = st.activity.plans.lock().ok().and_then(|p| p.get(&particle).cloned());
+/// The scene with particle `particle`'s strategy plan for `tolerance` applied (hand-set values
+/// win), the plan derived on the first push that asks for it and kept; or why no strategy can
+/// push it.
+pub(crate) fn strategy_scene(
+    st: &AppState,
+    particle: u32,
+    tolerance: f64,
+) -> Result<crate::scene::Scene, strategy_plan::Refusal> {
+    let key = (particle, tolerance.to_bits());
+    let cached = st.activity.plans.lock().ok().and_then(|p| p.get(&key).cloned());
     let outcome = cached.unwrap_or_else(|| {
-        let outcome = derive(&st.scene, particle, DEFAULT_TOLERANCE);
+        let outcome = derive(&st.scene, particle, tolerance);
         match &outcome {
             Ok(plan) => {
                 for w in &plan.warnings {
@@ -84,7 +119,7 @@ fn strategy_scene(st: &AppState, particle: u32) -> Result<crate::scene::Scene, s
             Err(e) => tracing::warn!("{e}"),
         }
         if let Ok(mut p) = st.activity.plans.lock() {
-            p.insert(particle, outcome.clone());
+            p.insert(key, outcome.clone());
         }
         outcome
     });
@@ -94,10 +129,12 @@ fn strategy_scene(st: &AppState, particle: u32) -> Result<crate::scene::Scene, s
     Ok(scene)
 }
 
-/// Off the loop: locate the particle in a quick local scan, plan, predict; then hand the job
-/// to the loop.
-pub(crate) fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, generation: u64, by: u32) {
+/// Off the loop: locate the particle in a quick local scan, plan, predict; then hand the first
+/// push to the loop ([`launch`]). A particle already within the planner's 10 nm of the target is
+/// judged where the scan found it.
+pub(crate) fn prepare_push(st: &AppState, mv: Move, target: MoveTarget) {
     let f = &st.scene.file;
+    let particle = mv.particle;
     let Some(part) = f.particles.iter().find(|p| p.id == particle) else {
         return;
     };
@@ -109,14 +146,13 @@ pub(crate) fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, gen
         .and_then(|e| e.get(&particle).copied())
         .unwrap_or((part.x_um * 1e-6, part.y_um * 1e-6));
     // The strategy for this particle: the plan's, where the scene sets none (derived once).
-    let scene = match strategy_scene(st, particle) {
+    let scene = match strategy_scene(st, particle, mv.tolerance) {
         Ok(s) => s,
-        Err(refusal) => return run_done_failed(st, by, particle, "refused", refusal.to_string()),
+        Err(refusal) => return run_done_failed(st, mv.by, particle, "refused", refusal.to_string()),
     };
-    let params = scene.strategy_params(st.params.tick);
     let plan = match plan_move(&scene, &st.surface_now(), nominal, part.radius_nm * 1e-9, target) {
         Ok(p) => p,
-        Err(e) => return run_done_failed(st, by, particle, "plan", format!("particle {particle}: {e}")),
+        Err(e) => return run_done_failed(st, mv.by, particle, "plan", format!("particle {particle}: {e}")),
     };
     // A target the particle cannot reach whole, with the tip behind it, fails now, not after a
     // push that runs into the stage's edge until its time-out.
@@ -124,53 +160,75 @@ pub(crate) fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, gen
     // differs by a fraction of a nanometre: a target on the stated edge was accepted, then
     // refused here with other bounds).
     if let Err(r) = on_stage(plan.target, part.radius_nm * 1e-9, f.stage.range_um * 1e-6) {
-        return run_done_failed(st, by, particle, "plan", format!("particle {particle}: {}", r.message));
-    }
-    let (located, legs) = (plan.located, plan.legs);
-    if legs.is_empty() {
-        // Already there (within 10 nm): nothing to push.
-        audit_early_end(st, by, particle, "ok", Some("already within 10 nm of the target"));
-        st.remember(particle, [located.x, located.y]);
-        st.push_ended(false);
-        st.shared.busy.store(false, Relaxed);
-        st.broadcast_event(&ServerMessage::RunDone {
+        return run_done_failed(
+            st,
+            mv.by,
             particle,
-            outcome: "ok".into(),
-            failure: None,
-            estimate: Some([located.x, located.y]),
-            record: None,
-            record_error: None,
-        });
-        return;
+            "plan",
+            format!("particle {particle}: {}", r.message),
+        );
     }
-    let prepared = match Prepared::new(&scene, particle, located.radius, &params) {
+    if plan.legs.is_empty() {
+        // Already there (within the planner's 10 nm): judged where the scan found it, no push.
+        return judge::already_there(st, mv, &plan);
+    }
+    launch(st, mv, &scene, plan, 1);
+}
+
+/// Hands push `attempt` of move `mv` (the legs of `plan`, from where its local scan found the
+/// particle) to the loop, and says so (`push_started`); its end is judged by `judge.rs`.
+pub(crate) fn launch(st: &AppState, mv: Move, scene: &crate::scene::Scene, plan: MovePlan, attempt: u32) {
+    let particle = mv.particle;
+    let params = scene.strategy_params(st.params.tick);
+    let prepared = match Prepared::new(scene, particle, plan.located.radius, &params) {
         Ok(p) => p,
-        Err(e) => return run_done_failed(st, by, particle, "error", e.to_string()),
+        Err(e) => return run_done_failed(st, mv.by, particle, "error", e.to_string()),
     };
-    if st.activity.generation.load(Relaxed) != generation || st.activity.stopping.load(Relaxed) {
-        return run_done_failed(st, by, particle, "stopped", "stopped before the push began".into());
+    if st.activity.generation.load(Relaxed) != mv.generation || st.activity.stopping.load(Relaxed) {
+        let when = if attempt == 1 {
+            "stopped before the push began".to_string()
+        } else {
+            format!("stopped before correction {} began", attempt - 1)
+        };
+        return run_done_failed(st, mv.by, particle, "stopped", when);
     }
     let run = st.shared.runs.fetch_add(1, Relaxed) + 1;
     // Who ran it, for its record and the audit log's `run_done` (the session may be gone by
     // now: then its client number).
     if let Ok(mut people) = st.audit.runs.lock() {
-        people.insert(run, st.auth.name_of(by).unwrap_or_else(|| format!("client {by}")));
+        people.insert(
+            run,
+            st.auth.name_of(mv.by).unwrap_or_else(|| format!("client {}", mv.by)),
+        );
     }
+    let located = plan.located;
     let mut path = vec![[located.x, located.y]];
-    path.extend(legs.iter().map(|l| [l.to.0, l.to.1]));
+    path.extend(plan.legs.iter().map(|l| [l.to.0, l.to.1]));
     let started = PushPath {
         particle,
         path,
-        by,
+        by: mv.by,
         run,
+        attempt,
     };
     let job = PushJob {
         run,
         particle,
-        legs,
+        legs: plan.legs,
         prepared,
         params,
     };
+    if let Ok(mut j) = st.activity.judging.lock() {
+        j.insert(
+            run,
+            Pending {
+                mv,
+                target: plan.target,
+                radius: located.radius,
+                attempt,
+            },
+        );
+    }
     // Said after the job is queued: a `stop` sent on hearing `push_started` reaches the loop
     // after the push, and stops it.
     if let Ok(mut p) = st.activity.push_now.lock() {
@@ -178,9 +236,12 @@ pub(crate) fn prepare_push(st: &AppState, particle: u32, target: MoveTarget, gen
     }
     if st.shared.commands.push(LoopCommand::Push(Box::new(job))).is_err() {
         st.shared.metrics.dropped_commands.fetch_add(1, Relaxed);
+        if let Ok(mut j) = st.activity.judging.lock() {
+            j.remove(&run);
+        }
         run_done_failed(
             st,
-            by,
+            mv.by,
             particle,
             "error",
             "the control loop's command queue is full".into(),

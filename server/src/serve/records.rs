@@ -104,7 +104,8 @@ pub struct RunEntry {
     pub outcome: String,
     /// The failure in words.
     pub failure: Option<String>,
-    /// Estimated final centre (m).
+    /// Final centre (m): where the scan after the push found it (`judged.measured`), else the
+    /// controller's estimate.
     pub estimate: [f64; 2],
 }
 
@@ -140,7 +141,12 @@ pub fn runs_in(dir: &Path, listed: &[RecordEntry], max: usize) -> Vec<RunEntry> 
         ) else {
             continue;
         };
-        let est = v.get("estimate").and_then(serde_json::Value::as_array);
+        // Where the scan after the push found the particle, else where the controller believed it.
+        let est = v
+            .get("judged")
+            .and_then(|j| j.get("measured"))
+            .or_else(|| v.get("estimate"))
+            .and_then(serde_json::Value::as_array);
         let at = |i: usize| est.and_then(|a| a.get(i)).and_then(serde_json::Value::as_f64);
         out.push(RunEntry {
             record: e.name.clone(),
@@ -363,6 +369,34 @@ fn handle(
     }
 }
 
+/// Writes the move's verdict into the JSON summary `name` in `dir` (atomically): its `outcome`
+/// and `failure` become the verdict's, and `judged` says what the scan after the push measured
+/// (when it found the particle).
+/// The loop wrote the summary when the push's legs ended (`pushed`): the verdict comes from the
+/// scan after it.
+pub fn amend(
+    dir: &Path,
+    name: &str,
+    outcome: &str,
+    failure: Option<&str>,
+    judged: Option<&nanopush_proto::ws::Judged>,
+) -> Result<(), String> {
+    let path = dir.join(name);
+    let bytes = std::fs::read(&path).map_err(|e| format!("reading {name} to add the verdict: {e}"))?;
+    let mut v: serde_json::Value =
+        serde_json::from_slice(&bytes).map_err(|e| format!("{name} is not a push summary: {e}"))?;
+    let Some(o) = v.as_object_mut() else {
+        return Err(format!("{name} is not a push summary: not a JSON object"));
+    };
+    o.insert("outcome".into(), outcome.into());
+    o.insert("failure".into(), failure.into());
+    if let Some(j) = judged {
+        o.insert("judged".into(), serde_json::to_value(j).map_err(|e| e.to_string())?);
+    }
+    let bytes = serde_json::to_vec_pretty(&v).map_err(|e| e.to_string())?;
+    write_atomic(&path, &bytes).map_err(|e| format!("writing the verdict into {name} in {}: {e}", dir.display()))
+}
+
 fn finish(dir: &Path, mut o: Open, done: &mut Vec<(u64, String, u64)>, failed: &mut Vec<(u64, String)>) {
     let path = dir.join(&o.name);
     let ok = o.file.flush().and_then(|()| o.file.get_ref().sync_all());
@@ -379,6 +413,61 @@ fn finish(dir: &Path, mut o: Open, done: &mut Vec<(u64, String, u64)>, failed: &
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_verdict_is_written_into_the_summary_and_the_history_reads_it() {
+        let dir = std::env::temp_dir().join(format!("nanopush-amend-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let summary = PushSummary {
+            schema: "push-record",
+            instance: "18f-2a".into(),
+            run: 4,
+            person: None,
+            particle: 1,
+            outcome: "pushed".into(),
+            failure: None,
+            legs: 1,
+            estimate: [41e-6, 40e-6],
+            truth: [41.03e-6, 40e-6],
+            rows: 10,
+            trace: "push-9-r4-p1.csv".into(),
+        };
+        let name = "push-9-r4-p1.json";
+        write_atomic(&dir.join(name), &serde_json::to_vec(&summary).unwrap()).unwrap();
+        let judged = nanopush_proto::ws::Judged {
+            measured: [41.03e-6, 40e-6],
+            target: [41e-6, 40e-6],
+            error_m: 30e-9,
+            tolerance_m: 25e-9,
+            attempts: 3,
+        };
+        let why = "the scan after found it 30.0 nm from the target";
+        amend(&dir, name, "missed", Some(why), Some(&judged)).unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join(name)).unwrap()).unwrap();
+        assert_eq!(v["outcome"], "missed");
+        assert_eq!(v["failure"], why);
+        assert_eq!(v["judged"]["attempts"], 3);
+        assert_eq!(v["truth"][0], 41.03e-6, "the rest is kept");
+        let runs = run_history(&dir, 10).unwrap();
+        assert_eq!(
+            (runs[0].outcome.as_str(), runs[0].failure.as_deref()),
+            ("missed", Some(why))
+        );
+        assert_eq!(runs[0].estimate, judged.measured, "where the scan found it");
+        // A summary that is gone or not one is an error in words, not a panic.
+        assert!(
+            amend(&dir, "push-gone.json", "ok", None, Some(&judged))
+                .unwrap_err()
+                .contains("push-gone.json")
+        );
+        std::fs::write(dir.join("push-bad.json"), b"[1]").unwrap();
+        assert!(
+            amend(&dir, "push-bad.json", "ok", None, None)
+                .unwrap_err()
+                .contains("not a JSON object")
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn record_names_are_plain_file_names() {

@@ -8,8 +8,9 @@ use nanopush_proto::ws::{ServerMessage, Telemetry};
 use tokio::sync::mpsc;
 
 use crate::serve::app_state::{AppState, to_text};
-use crate::serve::control_loop::LoopEvent;
+use crate::serve::control_loop::{LoopEvent, PUSHED};
 use crate::serve::haptic::api::haptic_telemetry;
+use crate::serve::judge;
 use crate::serve::records;
 
 /// A record's name, or the reason it is missing, as the two fields of a message.
@@ -21,7 +22,14 @@ fn split(r: records::Recorded) -> (Option<String>, Option<String>) {
 }
 
 /// A push's end in the audit log, under the person who ran it.
-fn audit_run_done(st: &AppState, run: u64, particle: u32, outcome: &str, failure: Option<&str>, record: Option<&str>) {
+pub(crate) fn audit_run_done(
+    st: &AppState,
+    run: u64,
+    particle: u32,
+    outcome: &str,
+    failure: Option<&str>,
+    record: Option<&str>,
+) {
     let person = st.audit.runs.lock().ok().and_then(|mut p| p.remove(&run));
     let mut args = serde_json::Map::new();
     args.insert("run".into(), run.into());
@@ -72,18 +80,29 @@ pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiv
             }
             e = events.recv() => {
                 let Some((LoopEvent::RunDone { run, particle, outcome, failure, estimate, .. }, record)) = e else { break };
+                if outcome == PUSHED {
+                    // The legs ran: the scan after the push decides (`judge.rs`).
+                    judge::on_pushed(&st, run, particle, estimate, record);
+                    continue;
+                }
+                if let Ok(mut j) = st.activity.judging.lock() {
+                    j.remove(&run);
+                }
                 st.remember(particle, estimate);
                 st.push_ended(true);
                 let (record, record_error) = split(record);
                 audit_run_done(&st, run, particle, outcome, failure.as_deref(), record.as_deref());
-                st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record, record_error });
+                st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record, record_error, judged: None });
             }
             _ = shutdown.changed() => {
                 // Forward what the recorder still finishes (the aborted run's record).
-                while let Some((LoopEvent::RunDone { run, particle, outcome, failure, estimate, .. }, record)) = events.recv().await {
+                while let Some((LoopEvent::RunDone { run, particle, outcome, mut failure, estimate, .. }, record)) = events.recv().await {
+                    if outcome == PUSHED {
+                        failure = Some("the server shut down before the scan after the push could judge it".into());
+                    }
                     let (record, record_error) = split(record);
                     audit_run_done(&st, run, particle, outcome, failure.as_deref(), record.as_deref());
-                    st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record, record_error });
+                    st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record, record_error, judged: None });
                 }
                 break;
             }

@@ -52,6 +52,10 @@ impl StopReason {
     }
 }
 
+/// The loop's outcome for a push whose legs all ran: not yet a verdict. The scan after the push
+/// judges the move (`serve/judge.rs`), which keeps the instrument busy until then.
+pub const PUSHED: &str = "pushed";
+
 /// What the loop reports back.
 #[derive(Debug, Clone, PartialEq)]
 pub enum LoopEvent {
@@ -61,7 +65,7 @@ pub enum LoopEvent {
         run: u64,
         /// Particle.
         particle: u32,
-        /// `ok` or a failure code.
+        /// [`PUSHED`] or a failure code.
         outcome: &'static str,
         /// The failure in words.
         failure: Option<String>,

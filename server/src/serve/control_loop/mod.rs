@@ -40,7 +40,7 @@ use crate::instrument::{Afm, Reading};
 use crate::serve::haptic::HapticCommand;
 use crate::serve::haptic::link::{LINK_DOWN, LINK_UP, ServerLink, believable, down_after_ns};
 use crate::serve::haptic::metrics::phase_index;
-pub use messages::{LoopCommand, LoopEvent, PushJob, RecordMsg, StopReason};
+pub use messages::{LoopCommand, LoopEvent, PUSHED, PushJob, RecordMsg, StopReason};
 use no_halt::NoHalt;
 use realtime::make_realtime;
 pub use shared::{LoopConfig, QueueFull, Shared, Snapshot};
@@ -173,7 +173,7 @@ impl ControlLoop {
                     leg,
                     estimate,
                     distance,
-                    outcome: "ok",
+                    outcome: PUSHED,
                     failure: None,
                 })
             }
@@ -197,7 +197,10 @@ impl ControlLoop {
             truth,
             legs: e.leg + 1,
         });
-        shared.busy.store(false, Relaxed);
+        // A push whose legs ran stays busy until the scan after it has judged the move.
+        if e.outcome != PUSHED {
+            shared.busy.store(false, Relaxed);
+        }
     }
 
     /// The control phase of one tick: commands, then the strategy. Returns the stage target.
@@ -263,7 +266,7 @@ impl ControlLoop {
                 let (outcome, failure) = match failure {
                     Some(f) => (f.code(), Some(f.to_string())),
                     None if a.stop => ("stopped", Some("stopped between legs".into())),
-                    None if last => ("ok", None),
+                    None if last => (PUSHED, None),
                     None => return self.next_then(a, estimate, distance, reading),
                 };
                 self.ending = Some(Ending {

@@ -12,10 +12,10 @@ use super::{Client, MIN_SCAN_UM};
 use crate::control::MoveTarget;
 use crate::scan::ScanParams;
 use crate::serve::app_state::AppState;
-use crate::serve::command_checks::{Refusal, fields_apply, number, push_target};
+use crate::serve::command_checks::{Refusal, fields_apply, number, push_target, push_tolerance};
 use crate::serve::control_loop::{LoopCommand, StopReason};
 use crate::serve::haptic::api::haptic_command;
-use crate::serve::push_job::{on_stage, prepare_push, run_done_failed};
+use crate::serve::push_job::{Move, on_stage, prepare_push, run_done_failed};
 use crate::serve::scan_job::run_scan;
 
 /// Handles one valid-JSON command.
@@ -64,6 +64,7 @@ pub(super) fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> 
             direction_deg,
             to_x_um,
             to_y_um,
+            tolerance_nm,
             ..
         } => push(
             st,
@@ -76,6 +77,7 @@ pub(super) fn handle(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> 
                 to_y_um,
                 st.scene.file.stage.range_um,
             ),
+            tolerance_nm,
         ),
         ClientMessage::Scan {
             centre_x_um,
@@ -126,11 +128,18 @@ fn to_loop(st: &AppState, cmd: LoopCommand) -> Result<(), Refusal> {
 /// `push`: checked here (lease first, then the target, the particle, the stage, a free
 /// instrument), prepared off the async workers (local scan, model prediction, plan), then run
 /// by the control loop.
-fn push(st: &Arc<AppState>, c: &Client, particle: u32, target: Result<MoveTarget, Refusal>) -> Result<(), Refusal> {
+fn push(
+    st: &Arc<AppState>,
+    c: &Client,
+    particle: u32,
+    target: Result<MoveTarget, Refusal>,
+    tolerance_nm: Option<f64>,
+) -> Result<(), Refusal> {
     require_lease(st, c)?;
     let f = &st.scene.file;
     let range = f.stage.range_um;
     let target = target?;
+    let tolerance = push_tolerance(tolerance_nm)?;
     let Some(part) = f.particles.iter().find(|p| p.id == particle) else {
         let ids: Vec<String> = f.particles.iter().map(|p| p.id.to_string()).collect();
         return Err(Refusal::new(
@@ -144,12 +153,15 @@ fn push(st: &Arc<AppState>, c: &Client, particle: u32, target: Result<MoveTarget
     busy(st)?;
     st.shared.busy.store(true, Relaxed);
     let st2 = st.clone();
-    let generation = st.activity.generation.load(Relaxed);
     let by = c.id;
+    let mv = Move {
+        particle,
+        tolerance,
+        generation: st.activity.generation.load(Relaxed),
+        by,
+    };
     tokio::task::spawn_blocking(move || {
-        let prepared = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            prepare_push(&st2, particle, target, generation, by)
-        }));
+        let prepared = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| prepare_push(&st2, mv, target)));
         if prepared.is_err() {
             run_done_failed(
                 &st2,
