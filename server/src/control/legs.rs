@@ -57,9 +57,99 @@ pub enum PlanError {
         /// The blocking particle's centre (m).
         blocker: (f64, f64),
     },
-    /// The target lies outside the stage range.
-    #[error("target ({:.2}, {:.2}) µm is outside the stage range [0, {:.1}] µm", .0.0 * 1e6, .0.1 * 1e6, .1 * 1e6)]
-    OutOfRange((f64, f64), f64),
+    /// The target lies outside the stage range, less the particle's radius at each end: the
+    /// particle must lie on the stage whole, and the tip (which stays on it) must reach behind
+    /// it (as the server's `push` check states it).
+    #[error(
+        "target ({:.3}, {:.3}) µm is out of range for a particle {:.3} µm in radius; allowed: [{:.3}, {:.3}] µm in x and y",
+        .to.0 * 1e6, .to.1 * 1e6, .radius * 1e6, centre_bounds_um(*.radius, *.range).0, centre_bounds_um(*.radius, *.range).1
+    )]
+    OutOfRange {
+        /// The target (m).
+        to: (f64, f64),
+        /// The particle's radius (m).
+        radius: f64,
+        /// The stage's travel (m).
+        range: f64,
+    },
+    /// On the way, a push would need the tip off the stage.
+    #[error(
+        "{what} ({:.3}, {:.3}) µm, off the stage: allowed [{:.3}, {:.3}] µm in x and y{why}",
+        .at.0 * 1e6, .at.1 * 1e6, .lo * 1e6, .hi * 1e6
+    )]
+    OffStage {
+        /// What would go there.
+        what: String,
+        /// Where (m).
+        at: (f64, f64),
+        /// The allowed range in x and y (m).
+        lo: f64,
+        /// Its upper end (m).
+        hi: f64,
+        /// Why it goes there, in words (starting with `: `), or empty.
+        why: String,
+    },
+}
+
+/// Checks the whole way of `legs`, not only their ends: at the start of each push the tip must
+/// reach the particle's back, `behind` (`Rₐ + Rₜ`) behind its centre, inside the stage's
+/// `[0, range]` (the contact search's run-up further back may be clamped to the stage: the
+/// search then starts closer). The push's overshoot past a leg's end (the retraction's drag made
+/// up for) is kept on the stage by the push itself ([`crate::control::PushTask::max_travel`]).
+pub fn check_reach(legs: &[Leg], behind: f64, range: f64) -> Result<(), PlanError> {
+    let on = |p: (f64, f64)| [p.0, p.1].iter().all(|v| (0.0..=range).contains(v));
+    for (k, leg) in legs.iter().enumerate() {
+        let d = leg.direction();
+        let back = (leg.from.0 - d.0 * behind, leg.from.1 - d.1 * behind);
+        if !on(back) {
+            return Err(PlanError::OffStage {
+                what: format!("push {} would need the tip at", k + 1),
+                at: back,
+                lo: 0.0,
+                hi: range,
+                why: format!(": behind the particle, {:.3} µm from its centre", behind * 1e6),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Where the centre of a particle of radius `r` (m) may lie on a stage of travel `range` (m):
+/// `[r, range − r]`, in µm rounded inward to the nanometre, as messages print them (three
+/// decimals), so that a value on a printed bound is inside.
+pub fn centre_bounds_um(r: f64, range: f64) -> (f64, f64) {
+    let (r, range) = (um(r), um(range));
+    ((r * 1e3).ceil() / 1e3, ((range - r) * 1e3).floor() / 1e3)
+}
+
+/// A length in µm, rounded to the picometre.
+fn um(v: f64) -> f64 {
+    (v * 1e12).round() / 1e6
+}
+
+/// Whether a particle of radius `r` centred at `p` lies on the stage whole (m), checked in µm
+/// against [`centre_bounds_um`] (in metres, a target exactly on a printed bound was refused:
+/// 500 nm × 1e-9 is a hair above 0.5 µm × 1e-6).
+pub fn on_stage(p: (f64, f64), r: f64, range: f64) -> bool {
+    let (lo, hi) = centre_bounds_um(r, range);
+    [p.0, p.1].iter().all(|&v| um(v) >= lo && um(v) <= hi)
+}
+
+/// How far a particle at `from` (m) may be pushed along the unit direction `d` and still lie on
+/// a stage of travel `range` whole, its centre in `[r, range − r]` (m): where the ray leaves
+/// that square (`+∞` along an axis it does not move on; 0 when it starts outside).
+pub fn travel_on_stage(from: (f64, f64), d: (f64, f64), r: f64, range: f64) -> f64 {
+    let (lo, hi) = (r, range - r);
+    let axis = |p: f64, v: f64| {
+        if v > 0.0 {
+            (hi - p) / v
+        } else if v < 0.0 {
+            (lo - p) / v
+        } else {
+            f64::INFINITY
+        }
+    };
+    axis(from.0, d.0).min(axis(from.1, d.1)).max(0.0)
 }
 
 /// The planner's settings (m).
@@ -110,9 +200,13 @@ impl Planner {
     /// The legs that take a particle from `from` to `to` avoiding `obstacles` (the other
     /// particles).
     pub fn plan(&self, from: (f64, f64), to: (f64, f64), obstacles: &[Obstacle]) -> Result<Vec<Leg>, PlanError> {
-        let inside = |p: (f64, f64)| (0.0..=self.range).contains(&p.0) && (0.0..=self.range).contains(&p.1);
+        let inside = |p: (f64, f64)| on_stage(p, self.radius, self.range);
         if !inside(to) {
-            return Err(PlanError::OutOfRange(to, self.range));
+            return Err(PlanError::OutOfRange {
+                to,
+                radius: self.radius,
+                range: self.range,
+            });
         }
         let mut legs = Vec::new();
         let Some(b) = self.blocker(from, to, obstacles) else {
@@ -201,13 +295,52 @@ mod tests {
         assert_eq!(legs.last().unwrap().to, to);
     }
 
+    /// Issue 24.4: a push to 99.9 µm of a 1 µm particle took its centre to 100.88 µm (the
+    /// push goes 0.977 µm further for the retraction's drag). The target must keep the particle
+    /// on the stage whole; the push's overshoot is cut where it would leave it; a push the tip
+    /// cannot get behind is refused.
+    #[test]
+    fn the_whole_way_stays_on_the_stage_target_overshoot_and_the_tips_reach() {
+        let p = Planner {
+            radius: 1.0 * UM,
+            ..planner()
+        };
+        let e = p.plan((59.9 * UM, 50.0 * UM), (99.9 * UM, 50.0 * UM), &[]).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "target (99.900, 50.000) µm is out of range for a particle 1.000 µm in radius; allowed: [1.000, 99.000] µm in x and y"
+        );
+        assert!(p.plan((59.0 * UM, 50.0 * UM), (99.0 * UM, 50.0 * UM), &[]).is_ok());
+        // The push's overshoot stops where the particle would leave the stage: 0.5 µm left of
+        // the 0.977 µm, along x; along y nothing; diagonally, the nearer edge.
+        let r = 1.0 * UM;
+        assert!((travel_on_stage((98.5 * UM, 50.0 * UM), (1.0, 0.0), r, 100.0 * UM) - 0.5 * UM).abs() < 1e-12);
+        assert!((travel_on_stage((98.5 * UM, 50.0 * UM), (-1.0, 0.0), r, 100.0 * UM) - 97.5 * UM).abs() < 1e-12);
+        let diag = (0.6, 0.8);
+        assert!((travel_on_stage((90.0 * UM, 95.0 * UM), diag, r, 100.0 * UM) - 5.0 * UM).abs() < 1e-12);
+        assert_eq!(travel_on_stage((99.5 * UM, 50.0 * UM), (1.0, 0.0), r, 100.0 * UM), 0.0);
+        // Pushed toward −x from 99.5 µm: the tip would have to be at 100.53 µm.
+        let leg = |from: f64, to: f64| Leg {
+            from: (from * UM, 50.0 * UM),
+            to: (to * UM, 50.0 * UM),
+        };
+        let e = check_reach(&[leg(40.0, 41.0), leg(99.5, 90.0)], 1.03 * UM, 100.0 * UM).unwrap_err();
+        assert!(
+            e.to_string().starts_with(
+                "push 2 would need the tip at (100.530, 50.000) µm, off the stage: allowed [0.000, 100.000] µm"
+            ),
+            "{e}"
+        );
+        assert_eq!(check_reach(&[leg(98.97, 90.0)], 1.03 * UM, 100.0 * UM), Ok(()));
+    }
+
     #[test]
     fn targets_outside_the_stage_and_walled_in_paths_are_refused() {
         let p = planner();
         let e = p
             .plan((40.0 * UM, 30.0 * UM), (140.0 * UM, 30.0 * UM), &[])
             .unwrap_err();
-        assert!(e.to_string().contains("outside the stage range"), "{e}");
+        assert!(e.to_string().contains("allowed: [0.500, 99.500] µm in x and y"), "{e}");
         // A wall of particles across the whole path, 3 µm apart.
         let wall: Vec<Obstacle> = (0..=33)
             .map(|k| Obstacle {

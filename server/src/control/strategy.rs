@@ -437,11 +437,9 @@ impl Strategy {
         // z-only control has no lateral feedback: it stops on stage travel, planned with the
         // model's retraction drag as the xy loop's stop is (without it a z push ended short by
         // the whole drag, 0.544 µm on gold-latex, and no correction could make that up).
-        let finished = if xy_loop {
-            est >= self.hxy.stop_at(self.task.distance)
-        } else {
-            travel >= self.hxy.stop_at(self.task.distance)
-        };
+        // Past the leg's end by the retraction's drag, but never off the stage.
+        let stop = self.hxy.stop_at(self.task.distance).min(self.task.max_travel);
+        let finished = if xy_loop { est >= stop } else { travel >= stop };
         let overshoot = self.task.distance + self.hxy.prediction.settle_offset + 2e-6;
         if !self.hxy.separated() && travel > overshoot {
             self.fail(

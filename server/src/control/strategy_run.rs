@@ -2,7 +2,7 @@
 //! `nanopush push` does, and what the server's loop will do one tick at a time.
 
 use crate::control::estimator::{Hxy, PushPrediction, RetractPlan, predict};
-use crate::control::legs::Leg;
+use crate::control::legs::{Leg, travel_on_stage};
 use crate::control::locate_and_plan::DONE_WITHIN;
 use crate::control::strategy::{BACK_OFF, Control, HOLD, PushTask, Strategy, StrategyParams, Summary};
 use crate::instrument::{Afm, AfmError};
@@ -245,6 +245,8 @@ pub struct Prepared {
     pub gain: f64,
     /// How far above the substrate auto-parking will detect it (m): [`detection_offset`].
     pub detect_offset: f64,
+    /// The stage's travel in x and y (m).
+    pub range: f64,
 }
 
 /// How far above the true substrate auto-parking detects it (m): the tip's piezo distance when
@@ -310,7 +312,28 @@ impl Prepared {
             radius,
             approach_distance: f.strategy.approach_distance_um * 1e-6,
             gain: sensor.gain,
+            range: f.stage.range_um * 1e-6,
         })
+    }
+
+    /// [`crate::control::legs::check_reach`] for `legs`: the tip reaches the particle's back,
+    /// on the stage.
+    pub fn check_reach(&self, legs: &[Leg]) -> Result<(), crate::control::PlanError> {
+        crate::control::legs::check_reach(legs, self.radius + self.tip_radius, self.range)
+    }
+
+    /// How much of the retraction's drag the pushes of `legs` cannot make up for (m), because
+    /// pushing that much further would carry the particle off the stage
+    /// ([`PushTask::max_travel`]): the most any leg falls short by; `None` when none does
+    /// by more than [`DONE_WITHIN`]. A target within the drag of the stage's edge ends short by
+    /// it, and pushing again ends short again.
+    pub fn short_of_drag(&self, legs: &[Leg]) -> Option<f64> {
+        let drag = (-self.prediction.retract_shift).max(0.0);
+        let short = legs
+            .iter()
+            .map(|l| l.length() + drag - travel_on_stage(l.from, l.direction(), self.radius, self.range))
+            .fold(0.0, f64::max);
+        (short > DONE_WITHIN).then_some(short)
     }
 
     /// A fresh estimator for one push.
@@ -342,6 +365,7 @@ impl Prepared {
     /// The task of one push.
     pub fn task(&self, request: &PushRequest, tick: f64) -> PushTask {
         PushTask {
+            max_travel: travel_on_stage(request.particle, request.direction, self.radius, self.range),
             particle: request.particle,
             radius: self.radius,
             direction: request.direction,

@@ -119,6 +119,7 @@ pub fn move_particle(
     let target = first.target;
     let before = (first.local.clone(), first.located);
     let prepared = Prepared::new(scene, id, first.located.radius, &params)?;
+    prepared.check_reach(&first.legs).map_err(MoveError::Plan)?;
     let mut legs: Vec<PushedLeg> = Vec::new();
     let mut plan = first;
     let mut attempts = 0;
@@ -126,8 +127,15 @@ pub fn move_particle(
         let measured = (plan.located.x, plan.located.y);
         if attempts > 0 {
             let verdict = Verdict::judge(measured, target, options.tolerance);
-            // No legs: within the planner's 10 nm, where no leg can correct a tighter tolerance.
-            if matches!(verdict, Verdict::Ok { .. }) || attempts >= options.attempts || plan.legs.is_empty() {
+            // No legs: within the planner's 10 nm, where no leg can correct a tighter tolerance;
+            // nor a correction the tip cannot get behind, or that the stage's edge cuts short
+            // as it cut this push.
+            if matches!(verdict, Verdict::Ok { .. })
+                || attempts >= options.attempts
+                || plan.legs.is_empty()
+                || prepared.check_reach(&plan.legs).is_err()
+                || prepared.short_of_drag(&plan.legs).is_some()
+            {
                 return Ok(MoveRun {
                     before,
                     target,

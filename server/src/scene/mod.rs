@@ -12,7 +12,10 @@ mod ranges;
 
 pub use error::{SceneError, SceneWarning};
 pub use file::SceneFile;
-pub use ranges::{MAX_SCAN_PIXELS, MIN_SCAN_PIXELS, Range};
+pub use ranges::{MAX_PARTICLES, MAX_SCAN_PIXELS, MIN_SCAN_PIXELS, Range};
+
+/// The largest scene file read (bytes): 4 MiB.
+pub const MAX_SCENE_BYTES: u64 = 4 << 20;
 
 use crate::physics::cantilever::Cantilever;
 use crate::physics::contact::jkr::{Jkr, contact_modulus};
@@ -100,12 +103,24 @@ impl Scene {
         Ok(scene)
     }
 
-    /// Reads, parses and validates a scene file.
+    /// Reads, parses and validates a scene file (at most [`MAX_SCENE_BYTES`]).
     pub fn from_path(path: &std::path::Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|error| SceneError::Io {
+        let io = |error| SceneError::Io {
             path: path.display().to_string(),
             error,
-        })?;
+        };
+        let file = std::fs::File::open(path).map_err(io)?;
+        let mut text = String::new();
+        std::io::Read::read_to_string(&mut std::io::Read::take(file, MAX_SCENE_BYTES + 1), &mut text).map_err(io)?;
+        if text.len() as u64 > MAX_SCENE_BYTES {
+            return Err(SceneError::Inconsistent {
+                origin: path.display().to_string(),
+                field: "the file".into(),
+                message: format!(
+                    "larger than {MAX_SCENE_BYTES} bytes; allowed: at most {MAX_SCENE_BYTES} bytes ({MAX_PARTICLES} particles with comments take under 1 MiB)"
+                ),
+            });
+        }
         Scene::parse(&path.display().to_string(), &text)
     }
 

@@ -429,3 +429,80 @@ fn gold_latex_rises_6_mrad_and_its_reading_is_perturbed_20_mv_at_3_hz() {
     assert_eq!((f.substrate.tilt_x_mrad, f.substrate.tilt_y_mrad), (6.0, 0.0));
     assert_eq!((f.sensor.perturbation_mv, f.sensor.perturbation_hz), (20.0, 3.0));
 }
+
+fn particle_toml(id: u32, x_um: f64, y_um: f64, radius_nm: f64) -> String {
+    format!(
+        "\n[[particles]]\nid = {id}\nmaterial = \"x\"\nradius_nm = {radius_nm}\nx_um = {x_um}\ny_um = {y_um}\nyoungs_modulus_gpa = 3.0\npoisson_ratio = 0.3\ndensity_kg_per_m3 = 1000.0\nhamaker_zj = 60.0\n"
+    )
+}
+
+/// Issue 24.4: a 10 MB scene of 60 000 particles took 70-86 s and 173 MB for one push (every
+/// scan images every particle, and the clash check compared every pair). A scene holds at most
+/// 2000 particles (a push of 2000 takes 5 s: docs/manipulation.md), and its file at most 4 MiB.
+#[test]
+fn a_scene_holds_at_most_2000_particles_and_its_file_at_most_4_mib() {
+    assert_eq!((MAX_PARTICLES, MAX_SCENE_BYTES), (2000, 4 << 20));
+    let grid = |n: u32| -> String {
+        let mut text = DEFAULT_SCENE.to_string();
+        for k in 0..n {
+            text += &particle_toml(
+                k + 2,
+                1.0 + f64::from(k % 45) * 2.0,
+                1.0 + f64::from(k / 45) * 2.0,
+                50.0,
+            );
+        }
+        text
+    };
+    // On odd micrometres: clear of the default particle at (50, 50).
+    let ok = Scene::parse("max.toml", &grid(1999)).unwrap();
+    assert_eq!(ok.file.particles.len(), 2000);
+    let e = Scene::parse("over.toml", &grid(2000)).unwrap_err().to_string();
+    assert_eq!(
+        e,
+        "scene over.toml: particles: 2001 particles; allowed: at most 2000 (every scan images each particle at every pixel: 60 000 took over a minute a push)"
+    );
+    let dir = std::env::temp_dir().join(format!("nanopush-big-scene-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("big.toml");
+    std::fs::write(&path, DEFAULT_SCENE.to_string() + &"# padding\n".repeat(500_000)).unwrap();
+    let e = Scene::from_path(&path).unwrap_err().to_string();
+    assert!(
+        e.contains("the file: larger than 4194304 bytes; allowed: at most 4194304 bytes"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+proptest::proptest! {
+    /// The sweep finds the clash every pair would: the same pair, in file order, the id checked
+    /// before the overlap.
+    #[test]
+    fn the_clash_check_agrees_with_every_pair(
+        ps in proptest::collection::vec((0u32..6, 0.0f64..3.0, 0.0f64..3.0, 2.0f64..400.0), 1..25)
+    ) {
+        let parts: Vec<file::ParticleFile> = ps
+            .iter()
+            .map(|&(id, x, y, r)| {
+                let mut p = Scene::default_scene().file.particles[0].clone();
+                (p.id, p.x_um, p.y_um, p.radius_nm) = (id, x, y, r);
+                p
+            })
+            .collect();
+        let mut every_pair = None;
+        'outer: for (i, p) in parts.iter().enumerate() {
+            for (j, q) in parts.iter().enumerate().take(i) {
+                if q.id == p.id {
+                    every_pair = Some((i, j, true));
+                    break 'outer;
+                }
+                let d_nm = ((p.x_um - q.x_um).powi(2) + (p.y_um - q.y_um).powi(2)).sqrt() * 1e3;
+                if d_nm < p.radius_nm + q.radius_nm {
+                    every_pair = Some((i, j, false));
+                    break 'outer;
+                }
+            }
+        }
+        proptest::prop_assert_eq!(ranges::first_clash(&parts), every_pair);
+    }
+}

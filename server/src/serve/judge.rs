@@ -105,6 +105,16 @@ fn judge_with(st: &AppState, scene: &Scene, run: u64, p: &Pending, estimate: [f6
             let why = missed_words(id, error, p.mv.tolerance, p.attempt, plan.legs.is_empty());
             end(st, run, id, "missed", Some(why), Some(measured), record, Some(judged));
         }
+        Verdict::Missed { error } if let Some(short) = p.prepared.short_of_drag(&plan.legs) => {
+            // The stage's edge cut this push short of the retraction's drag, and would cut a
+            // correction the same way.
+            let why = format!(
+                "{}: the push cannot go the {} further that the retraction's drag needs without carrying the particle off the stage",
+                missed_words(id, error, p.mv.tolerance, p.attempt, false),
+                nm(short)
+            );
+            end(st, run, id, "missed", Some(why), Some(measured), record, Some(judged));
+        }
         Verdict::Missed { error } => {
             let why = format!(
                 "the scan after found particle {id} {} from the target, beyond the {} tolerance: corrected by push {}",
@@ -260,9 +270,19 @@ mod tests {
     /// A test server whose particle 1 the loop left `off` (m, along x) from the target, which
     /// is 1 µm along +x from where the scene puts it; the move as `launch` registers it.
     fn left_off(off: f64, attempt: u32, tolerance: f64) -> (Arc<AppState>, Pending, [f64; 2]) {
+        left_off_at(None, off, attempt, tolerance)
+    }
+
+    /// [`left_off`] with the target at `at` (m) instead.
+    fn left_off_at(
+        at: Option<(f64, f64)>,
+        off: f64,
+        attempt: u32,
+        tolerance: f64,
+    ) -> (Arc<AppState>, Pending, [f64; 2]) {
         let st = test_state();
         let part = st.scene.file.particles.iter().find(|p| p.id == 1).unwrap().clone();
-        let target = (part.x_um * 1e-6 + 1e-6, part.y_um * 1e-6);
+        let target = at.unwrap_or((part.x_um * 1e-6 + 1e-6, part.y_um * 1e-6));
         {
             let mut snap = st.shared.snapshot.lock().unwrap();
             let p = snap.particles.iter_mut().find(|p| p.0 == 1).unwrap();
@@ -275,11 +295,15 @@ mod tests {
             generation: st.activity.generation.load(Relaxed),
             by: 1,
         };
+        let scene = st.scene.clone();
+        let params = scene.strategy_params(st.params.tick);
+        let prepared = crate::control::Prepared::new(&scene, 1, part.radius_nm * 1e-9, &params).unwrap();
         let p = Pending {
             mv,
             target,
             radius: part.radius_nm * 1e-9,
             attempt,
+            prepared,
         };
         // The controller believes the particle is on the target.
         (st, p, [target.0, target.1])
@@ -369,6 +393,26 @@ mod tests {
         let believed = st.activity.estimates.lock().unwrap()[&1];
         assert_eq!(believed.0, measured, "the next push starts from the measured position");
         assert!(!st.shared.busy.load(Relaxed));
+    }
+
+    /// A target within the retraction's drag of the stage's edge: the push was cut short there
+    /// (the drag then pulled the particle back 976 nm), and a correction would be cut the
+    /// same way: `missed` at once, saying why.
+    #[test]
+    fn a_push_the_stages_edge_cut_short_is_missed_without_a_useless_correction() {
+        let (st, p, estimate) = left_off_at(Some((98.999e-6, 50e-6)), -976e-9, 1, 25e-9);
+        let mut rx = st.channels.events.subscribe();
+        judge_with(&st, &st.scene.clone(), 1, &p, estimate, Err("no trace".into()));
+        assert!(st.shared.commands.pop().is_none(), "no correction");
+        let done = run_done(&mut rx);
+        assert_eq!(done["outcome"], "missed", "{done}");
+        let why = done["failure"].as_str().unwrap();
+        assert!(
+            why.contains("after 1 push the scan found particle 1 976.0 nm from the target")
+                && why.contains("the push cannot go the")
+                && why.contains("without carrying the particle off the stage"),
+            "{why}"
+        );
     }
 
     /// A `stop` while the scan ran ends the move `stopped`; a particle the scan does not find is

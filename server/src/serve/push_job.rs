@@ -15,20 +15,14 @@ use crate::serve::judge;
 
 /// Whether a particle of radius `r` (m) can be pushed to `p` (m): its centre at least a radius
 /// inside the stage's `[0, range]` square, so the particle stays on the stage and the tip, which
-/// stays inside it, can reach behind it.
-///
-/// Checked in the protocol's units, against the bounds the refusal states: µm, the bounds
-/// rounded inward to the nanometre (the three decimals printed), the values to the picometre. In
-/// metres, a target exactly on the stated edge was refused (500 nm × 1e-9 is a hair above
-/// 0.5 µm × 1e-6).
+/// stays inside it, can reach behind it. Checked as the planner checks it
+/// ([`crate::control::legs::on_stage`]: in µm, the bounds rounded inward to the nanometre, as
+/// the refusal prints them).
 pub(crate) fn on_stage(p: (f64, f64), r: f64, range: f64) -> Result<(), Refusal> {
-    let um = |v: f64| (v * 1e12).round() / 1e6;
-    let lo = (um(r) * 1e3).ceil() / 1e3;
-    let hi = ((um(range) - um(r)) * 1e3).floor() / 1e3;
-    let inside = |v: f64| um(v) >= lo && um(v) <= hi;
-    if inside(p.0) && inside(p.1) {
+    if crate::control::legs::on_stage(p, r, range) {
         return Ok(());
     }
+    let (lo, hi) = crate::control::legs::centre_bounds_um(r, range);
     Err(Refusal::new(
         ErrorCode::OutOfRange,
         format!(
@@ -64,6 +58,8 @@ pub struct Pending {
     pub(crate) radius: f64,
     /// Which push of the move this is (1, then the corrections).
     pub(crate) attempt: u32,
+    /// Its model prediction and geometry.
+    pub(crate) prepared: Prepared,
 }
 
 /// A push that ended before the loop ran it (refused by the plan, stopped, the queue full): its
@@ -184,6 +180,14 @@ pub(crate) fn launch(st: &AppState, mv: Move, scene: &crate::scene::Scene, plan:
         Ok(p) => p,
         Err(e) => return run_done_failed(st, mv.by, particle, "error", e.to_string()),
     };
+    if let Err(e) = prepared.check_reach(&plan.legs) {
+        let push = if attempt == 1 {
+            String::new()
+        } else {
+            format!(" (correction {})", attempt - 1)
+        };
+        return run_done_failed(st, mv.by, particle, "plan", format!("particle {particle}{push}: {e}"));
+    }
     if st.activity.generation.load(Relaxed) != mv.generation || st.activity.stopping.load(Relaxed) {
         let when = if attempt == 1 {
             "stopped before the push began".to_string()
@@ -211,13 +215,6 @@ pub(crate) fn launch(st: &AppState, mv: Move, scene: &crate::scene::Scene, plan:
         run,
         attempt,
     };
-    let job = PushJob {
-        run,
-        particle,
-        legs: plan.legs,
-        prepared,
-        params,
-    };
     if let Ok(mut j) = st.activity.judging.lock() {
         j.insert(
             run,
@@ -226,9 +223,17 @@ pub(crate) fn launch(st: &AppState, mv: Move, scene: &crate::scene::Scene, plan:
                 target: plan.target,
                 radius: located.radius,
                 attempt,
+                prepared: prepared.clone(),
             },
         );
     }
+    let job = PushJob {
+        run,
+        particle,
+        legs: plan.legs,
+        prepared,
+        params,
+    };
     // Said after the job is queued: a `stop` sent on hearing `push_started` reaches the loop
     // after the push, and stops it.
     if let Ok(mut p) = st.activity.push_now.lock() {

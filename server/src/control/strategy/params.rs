@@ -86,6 +86,11 @@ pub struct PushTask {
     /// the reading takes to pass the threshold) stops the approach early, by up to a few nm
     /// ([`crate::control::strategy_run::detection_offset`]). The parking height makes up for it.
     pub detect_offset: f64,
+    /// The farthest the particle may be pushed (m, along `direction`) and still lie on the
+    /// stage whole ([`crate::control::legs::travel_on_stage`]): the push stops there even when
+    /// the retraction's drag asks for more, and the particle then ends short (the move is judged
+    /// by the scan after it).
+    pub max_travel: f64,
 }
 
 impl PushTask {
