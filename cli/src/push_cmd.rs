@@ -265,6 +265,7 @@ pub fn run(a: &PushArgs) -> anyhow::Result<(String, bool)> {
         tolerance: req.tolerance,
         measured_error: after.map(|l| (l.x - target.0).hypot(l.y - target.1)),
         attempts: moved.attempts,
+        cut_short: moved.cut_short,
         warnings: plan.warnings.clone(),
         final_position: [truth.x, truth.y],
         final_error: (truth.x - target.0).hypot(truth.y - target.1),
@@ -344,10 +345,14 @@ fn text(r: &PushReport, runs: &[StrategyRun], plan: &StrategyPlan) -> String {
             r.tolerance * 1e9
         ),
         ("missed", Some(e)) => format!(
-            "missed: the scan after finds it {:.1} nm from the target, beyond the {:.0} nm tolerance, after {} push(es)",
+            "missed: the scan after finds it {:.1} nm from the target, beyond the {:.0} nm tolerance, after {} push(es){}",
             e * 1e9,
             r.tolerance * 1e9,
-            r.attempts
+            r.attempts,
+            r.cut_short.map_or(String::new(), |c| format!(
+                ": the stage's edge cut the push {:.0} nm short of the retraction's drag, and would cut a correction the same way",
+                c * 1e9
+            ))
         ),
         ("not_found", _) => "not_found: the scan after the push does not find the particle".into(),
         (code, _) => format!("{code}: a push failed (its leg says why)"),

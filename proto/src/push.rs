@@ -92,6 +92,10 @@ pub struct PushReport {
     /// Pushes made: the first and the corrections.
     #[serde(default)]
     pub attempts: u32,
+    /// A `missed` move that was not corrected because the stage's edge cut the last push short
+    /// of the retraction's drag (and would cut a correction the same way): by how much (m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cut_short: Option<f64>,
     /// What the strategy plan warned of (hand-set values that cannot work, risks).
     #[serde(default)]
     pub warnings: Vec<String>,

@@ -157,6 +157,11 @@ pub fn travel_on_stage(from: (f64, f64), d: (f64, f64), r: f64, range: f64) -> f
 pub struct Planner {
     /// Radius of the pushed particle.
     pub radius: f64,
+    /// Its radius as the move's target was checked against (the scene's, which the server's
+    /// `push` check states): the target and the waypoints keep the particle on the stage by it.
+    /// The located radius differs by a fraction of a nanometre, and a target on the stated edge
+    /// must not be refused when planned.
+    pub edge_radius: f64,
     /// Longest single push.
     pub max_push: f64,
     /// Clearance to keep from other particles.
@@ -200,11 +205,11 @@ impl Planner {
     /// The legs that take a particle from `from` to `to` avoiding `obstacles` (the other
     /// particles).
     pub fn plan(&self, from: (f64, f64), to: (f64, f64), obstacles: &[Obstacle]) -> Result<Vec<Leg>, PlanError> {
-        let inside = |p: (f64, f64)| on_stage(p, self.radius, self.range);
+        let inside = |p: (f64, f64)| on_stage(p, self.edge_radius, self.range);
         if !inside(to) {
             return Err(PlanError::OutOfRange {
                 to,
-                radius: self.radius,
+                radius: self.edge_radius,
                 range: self.range,
             });
         }
@@ -245,6 +250,7 @@ mod tests {
     fn planner() -> Planner {
         Planner {
             radius: 0.5 * UM,
+            edge_radius: 0.5 * UM,
             max_push: 12.0 * UM,
             clearance: 0.5 * UM,
             run_up: 5.0 * UM,
@@ -303,6 +309,7 @@ mod tests {
     fn the_whole_way_stays_on_the_stage_target_overshoot_and_the_tips_reach() {
         let p = Planner {
             radius: 1.0 * UM,
+            edge_radius: 1.0 * UM,
             ..planner()
         };
         let e = p.plan((59.9 * UM, 50.0 * UM), (99.9 * UM, 50.0 * UM), &[]).unwrap_err();

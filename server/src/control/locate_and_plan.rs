@@ -106,7 +106,8 @@ pub fn locate_near(
 
 /// Locates the particle believed at `near` (radius about `radius_hint`) and plans its move to
 /// `target` around the other particles of the scene's overview scan (`[scan]`), with the
-/// strategy's longest push and clearance.
+/// strategy's longest push and clearance. The target keeps a particle of `radius_hint` on the
+/// stage ([`Planner::edge_radius`]).
 pub fn plan_move(
     scene: &Scene,
     surface: &Surface,
@@ -144,6 +145,7 @@ pub fn plan_move(
     let st = &scene.file.strategy;
     let planner = Planner {
         radius: located.radius,
+        edge_radius: radius_hint,
         max_push: st.max_push_um * 1e-6,
         clearance: st.clearance_um * 1e-6,
         run_up: st.approach_distance_um * 1e-6 + 2.0 * located.radius,

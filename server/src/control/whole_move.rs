@@ -98,6 +98,9 @@ pub struct MoveRun {
     pub verdict: Verdict,
     /// Pushes made (attempts begun).
     pub attempts: u32,
+    /// When a `missed` move was not corrected because the stage's edge cut the last push short
+    /// of the retraction's drag (and would cut a correction the same way): by how much (m).
+    pub cut_short: Option<f64>,
 }
 
 /// Moves particle `id` of `scene`, believed at `near` with radius about `radius_hint`, to
@@ -136,6 +139,10 @@ pub fn move_particle(
                 || prepared.check_reach(&plan.legs).is_err()
                 || prepared.short_of_drag(&plan.legs).is_some()
             {
+                let cut_short = match verdict {
+                    Verdict::Missed { .. } if attempts < options.attempts => prepared.short_of_drag(&plan.legs),
+                    _ => None,
+                };
                 return Ok(MoveRun {
                     before,
                     target,
@@ -143,6 +150,7 @@ pub fn move_particle(
                     after: (plan.local, Some(plan.located)),
                     verdict,
                     attempts,
+                    cut_short,
                 });
             }
         }
@@ -162,6 +170,7 @@ pub fn move_particle(
                             after: (img, None),
                             verdict: Verdict::NotFound,
                             attempts,
+                            cut_short: None,
                         });
                     }
                 }
@@ -192,17 +201,13 @@ pub fn move_particle(
                     after: (img, located.ok()),
                     verdict: Verdict::Failed { code },
                     attempts,
+                    cut_short: None,
                 });
             }
         }
         // The scan after: where the particle is now, and the legs from there.
-        match plan_move(
-            scene,
-            &afm.surface(),
-            estimate,
-            prepared.radius,
-            MoveTarget::Point(target),
-        ) {
+        // With the radius the target was checked against (the located one differs by a hair).
+        match plan_move(scene, &afm.surface(), estimate, radius_hint, MoveTarget::Point(target)) {
             Ok(p) => plan = p,
             Err(MoveError::NotFound { .. }) => {
                 let (img, _) = scan_after(scene, afm, estimate, prepared.radius);
@@ -213,6 +218,7 @@ pub fn move_particle(
                     after: (img, None),
                     verdict: Verdict::NotFound,
                     attempts,
+                    cut_short: None,
                 });
             }
             Err(e) => return Err(e.into()),

@@ -54,7 +54,8 @@ pub struct Pending {
     pub(crate) mv: Move,
     /// The target (m).
     pub(crate) target: (f64, f64),
-    /// The particle's radius as the local scan before the push measured it (m).
+    /// The particle's radius in the scene (m): what the command's target was checked against,
+    /// and the local scans' hint.
     pub(crate) radius: f64,
     /// Which push of the move this is (1, then the corrections).
     pub(crate) attempt: u32,
@@ -206,6 +207,13 @@ pub(crate) fn launch(st: &AppState, mv: Move, scene: &crate::scene::Scene, plan:
         );
     }
     let located = plan.located;
+    let scene_radius = st
+        .scene
+        .file
+        .particles
+        .iter()
+        .find(|p| p.id == particle)
+        .map_or(located.radius, |p| p.radius_nm * 1e-9);
     let mut path = vec![[located.x, located.y]];
     path.extend(plan.legs.iter().map(|l| [l.to.0, l.to.1]));
     let started = PushPath {
@@ -221,7 +229,7 @@ pub(crate) fn launch(st: &AppState, mv: Move, scene: &crate::scene::Scene, plan:
             Pending {
                 mv,
                 target: plan.target,
-                radius: located.radius,
+                radius: scene_radius,
                 attempt,
                 prepared: prepared.clone(),
             },
