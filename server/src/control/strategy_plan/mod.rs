@@ -27,8 +27,9 @@
 //!   plus four local-scan pixels (where the scan may have put it) and two steps; **search
 //!   range**: twice that plus the model's travel to the set point and four steps.
 //! - **start height** (the retraction's): above the tallest particle by a quarter of its height
-//!   (at least 0.5 µm), and above the parking height plus 1.25 × the lift the model needs to
-//!   let go, plus 0.2 µm; at most 50 µm.
+//!   (at least 0.5 µm) plus the substrate's rise over the stage's diagonal (the tip travels at
+//!   a fixed height: `|tilt| · √2 · range`) and four RMS of roughness, and above the parking
+//!   height plus 1.25 × the lift the model needs to let go, plus 0.2 µm; at most 50 µm.
 //! - **adhesion**: the pull-off from the substrate after auto-parking bends the lever the
 //!   other way by the tip's adhesion over `k_c`; that reading must stay within 90 % of the rail.
 //! - **stage**: stiff against the push, `m (2π f_y)² ≥ 20 max(k_y, k_z)` (the paper's: 86 times), and settled within
@@ -591,9 +592,15 @@ impl<'a> Derivation<'a> {
             (f.strategy.search_range_um * 1e-6 < approach + to_set).then(|| "shorter than the approach distance and the travel to the set point".into()),
         );
 
-        // The retraction: high enough to let go, and to clear every particle.
+        // The retraction: high enough to let go, and to clear every particle wherever the tip
+        // travels at it: the tip moves at a fixed height, and a tilted substrate rises (or falls,
+        // and auto-parking descends at most twice the start height) by the tilt times the
+        // distance, at most the stage's diagonal; plus four RMS of roughness.
         let tallest = f.particles.iter().map(|p| 2.0 * p.radius_nm * 1e-9).fold(0.0, f64::max);
-        let clear = tallest + (0.25 * tallest).max(0.5e-6);
+        let sub = &f.substrate;
+        let slope = sub.tilt_x_mrad.hypot(sub.tilt_y_mrad) * 1e-3;
+        let rise = slope * f.stage.range_um * 1e-6 * std::f64::consts::SQRT_2 + 4.0 * sub.roughness_rms_nm * 1e-9;
+        let clear = tallest + (0.25 * tallest).max(0.5e-6) + rise;
         let release = pred.release_lift.unwrap_or(0.0);
         let lift_need = cand.parking + BACK_OFF * beta.sin() + 1.25 * release + 0.2e-6;
         let start = clear.max(lift_need);
@@ -621,8 +628,9 @@ impl<'a> Derivation<'a> {
             f.strategy.start_height_um,
             (start * 1e7).ceil() / 10.0,
             format!(
-                "above the tallest particle ({:.2} µm) by a quarter of it, at least 0.5 µm, and above the parking height plus 1.25 × the {:.3} µm the model lifts before the tip lets go",
+                "above the tallest particle ({:.2} µm) by a quarter of it, at least 0.5 µm, plus the substrate's rise over the stage's diagonal and its roughness ({:.3} µm), and above the parking height plus 1.25 × the {:.3} µm the model lifts before the tip lets go",
                 tallest * 1e6,
+                rise * 1e6,
                 release * 1e6
             ),
             start_check,

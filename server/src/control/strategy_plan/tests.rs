@@ -223,3 +223,29 @@ fn a_dry_run_with_no_room_for_a_leg_is_said_not_passed() {
     // And no push longer than the stage (it was 20 µm on this 2.6 µm stage).
     assert!(value(&plan, "strategy.max_push_um") <= 2.6);
 }
+
+/// The tip travels at the start height, and a tilted substrate rises under it (the review of
+/// issue 24: the derived start height ignored the slope). gold-latex-500nm rises 6 mrad along x:
+/// over the stage's 141 µm diagonal, 0.85 µm, which the start height adds to its clearance of
+/// the particles; level, it does not.
+#[test]
+fn the_start_height_clears_the_particles_wherever_the_tilted_substrate_rises() {
+    let tilted = untuned("gold-latex-500nm", &[]);
+    assert_eq!(tilted.file.substrate.tilt_x_mrad, 6.0);
+    let level = untuned("gold-latex-500nm", &[("tilt_x_mrad = 6.0", "tilt_x_mrad = 0.0")]);
+    let start = |s: &Scene| value(&derive(s, 1, DEFAULT_TOLERANCE).unwrap(), "strategy.start_height_um");
+    let (t, l) = (start(&tilted), start(&level));
+    let rise_um = 6e-3 * 100.0 * std::f64::consts::SQRT_2 + 4.0 * tilted.file.substrate.roughness_rms_nm * 1e-3;
+    assert!(
+        (t - l - rise_um).abs() < 0.11,
+        "tilted {t} µm, level {l} µm, rise {rise_um} µm"
+    );
+    let plan = derive(&tilted, 1, DEFAULT_TOLERANCE).unwrap();
+    let why = &plan
+        .choices
+        .iter()
+        .find(|c| c.key == "strategy.start_height_um")
+        .unwrap()
+        .why;
+    assert!(why.contains("the substrate's rise over the stage's diagonal"), "{why}");
+}
