@@ -43,13 +43,15 @@ export function clampTarget(xUm, yUm, rangeUm) {
  * The push form's command (throws a RangeError naming a field out of range).
  * @param {'by' | 'to'} mode
  * @param {number} particle
- * @param {{distance?: number, direction?: number, toX?: number, toY?: number}} v the fields (µm, °)
+ * @param {{distance?: number, direction?: number, toX?: number, toY?: number, tolerance?: number}} v
+ *   the fields (µm, °; the tolerance in nm, the server's 25 nm when left empty)
  * @param {number} rangeUm the stage's range
  */
 export function pushCommand(mode, particle, v, rangeUm) {
-  return mode === 'by'
+  const m = mode === 'by'
     ? commands.pushBy(particle, v.distance, v.direction)
     : commands.pushTo(particle, v.toX, v.toY, undefined, rangeUm);
+  return commands.withTolerance(m, v.tolerance);
 }
 
 /**
@@ -343,7 +345,7 @@ export class Controls {
       e.preventDefault();
       const particle = Number($('particle').value);
       this.guarded('reply-push', () => pushCommand(this.mode(), particle,
-        { distance: this.num('distance'), direction: this.num('direction'), toX: this.num('to-x'), toY: this.num('to-y') },
+        { distance: this.num('distance'), direction: this.num('direction'), toX: this.num('to-x'), toY: this.num('to-y'), tolerance: this.num('tolerance') },
         this.st.stageRange * 1e6));
     });
     $('scan-form').addEventListener('submit', (e) => {

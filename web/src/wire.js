@@ -127,6 +127,17 @@ export const commands = {
     if (!(yUm >= 0 && yUm <= rangeUm)) throw new RangeError(`to_y_um must be in [0, ${rangeUm}] µm, got ${yUm}`);
     return withId({ type: 'push', particle: particleId(particle), to_x_um: xUm, to_y_um: yUm }, id);
   },
+  /**
+   * A push command `m` (from pushBy or pushTo) judged with `toleranceNm` [1, 100000] nm: `ok`
+   * only when the scan after it finds the particle that close to the target. Left out
+   * (undefined), the server's 25 nm.
+   */
+  withTolerance(m, toleranceNm) {
+    if (toleranceNm === undefined || toleranceNm === null) return m;
+    finite('tolerance_nm', toleranceNm);
+    if (!(toleranceNm >= 1 && toleranceNm <= 100000)) throw new RangeError(`tolerance_nm must be in [1, 100000] nm, got ${toleranceNm}`);
+    return { ...m, tolerance_nm: toleranceNm };
+  },
   /** A scan; any of centreXUm, centreYUm, sizeUm (0, 100], pixels [8, 512] may be left out. */
   scan({ centreXUm, centreYUm, sizeUm, pixels } = {}, id) {
     const m = { type: 'scan' };

@@ -20,6 +20,12 @@ test('the push form: by distance or to a target inside the stage', () => {
   assert.deepEqual(pushCommand('to', 2, { distance: 5, direction: 90, toX: 30, toY: 40.5 }, 100),
     { type: 'push', particle: 2, to_x_um: 30, to_y_um: 40.5 });
   assert.throws(() => pushCommand('to', 2, { toX: 60, toY: 10 }, 50), /to_x_um must be in \[0, 50\]/, 'the stage of the scene, not 100 µm');
+  // The tolerance: sent when given, the server's default when the field is empty.
+  assert.deepEqual(pushCommand('by', 2, { distance: 5, direction: 0, tolerance: 10 }, 100),
+    { type: 'push', particle: 2, distance_um: 5, direction_deg: 0, tolerance_nm: 10 });
+  assert.equal(pushCommand('by', 2, { distance: 5, direction: 0, tolerance: undefined }, 100).tolerance_nm, undefined);
+  assert.throws(() => pushCommand('by', 2, { distance: 5, direction: 0, tolerance: 0.5 }, 100), /tolerance_nm must be in \[1, 100000\] nm, got 0.5/);
+  assert.throws(() => pushCommand('by', 2, { distance: 5, direction: 0, tolerance: NaN }, 100), /tolerance_nm must be a finite number/);
 });
 
 test('a target picked in the 3D view stays on the stage', () => {
