@@ -113,10 +113,10 @@ pub fn run(scene: &Scene, reduced: bool, out: &Path) -> anyhow::Result<(String, 
 #[derive(clap::Args, Debug)]
 pub struct CampaignArgs {
     /// How many random scenes (seeds `--seed` … `--seed + N − 1`), in [1, 100000].
-    #[arg(long, value_name = "N", default_value_t = 100, allow_negative_numbers = true)]
+    #[arg(long, value_name = "N", default_value_t = 100, allow_hyphen_values = true)]
     random: u64,
     /// The first seed.
-    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
     seed: u64,
     /// The generator's ranges: `lab` (the instruments and samples of a nanomanipulation lab) or
     /// `validator` (every parameter across the scene validator's whole range).
@@ -126,7 +126,7 @@ pub struct CampaignArgs {
     #[arg(long, value_name = "I/N")]
     shard: Option<String>,
     /// The pushes' tolerance (nm), in [1, 100000].
-    #[arg(long, value_name = "NM", default_value_t = nanopush::control::strategy_plan::DEFAULT_TOLERANCE * 1e9, allow_negative_numbers = true)]
+    #[arg(long, value_name = "NM", default_value_t = nanopush::control::strategy_plan::DEFAULT_TOLERANCE * 1e9, allow_hyphen_values = true)]
     tolerance_nm: f64,
     /// Write `random.csv` (a row per scene) here.
     #[arg(long, default_value = "campaign-out")]
@@ -173,7 +173,16 @@ pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
     if !(a.tolerance_nm.is_finite() && (1.0..=100_000.0).contains(&a.tolerance_nm)) {
         anyhow::bail!(
             "--tolerance-nm {} is out of range; allowed: [1, 100000] nm",
-            a.tolerance_nm
+            crate::units::num(a.tolerance_nm)
+        );
+    }
+    // The seeds run from --seed to --seed + N − 1: past the largest u64 they wrapped to 0.
+    if a.seed.checked_add(a.random - 1).is_none() {
+        anyhow::bail!(
+            "--seed {} is out of range for --random {}; allowed: [0, {}] (the seeds run to --seed + N − 1)",
+            a.seed,
+            a.random,
+            u64::MAX - (a.random - 1)
         );
     }
     let (i, n) = a.shard.as_deref().map(parse_shard).transpose()?.unwrap_or((0, 1));
@@ -221,10 +230,10 @@ pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
     let pct = |k: usize, of: usize| if of == 0 { 0.0 } else { 100.0 * k as f64 / of as f64 };
     writeln!(
         s,
-        "Random valid scenes ({} ranges), seeds {}..{} (shard {i}/{n}: {} scenes), tolerance {} nm, {:.0} s on {} threads",
+        "Random valid scenes ({} ranges), seeds {}-{} (shard {i}/{n}: {} scenes), tolerance {} nm, {:.0} s on {} threads",
         ranges.name(),
         a.seed,
-        a.seed + a.random,
+        a.seed + (a.random - 1),
         seeds.len(),
         a.tolerance_nm,
         total,
@@ -330,5 +339,23 @@ impl RandomTable {
             median_wall: walls.get(walls.len() / 2).copied().unwrap_or(0.0),
             max_wall: walls.last().copied().unwrap_or(0.0),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// The review of issue 24: `--seed 18446744073709551615 --random 2` wrapped to seed 0.
+    #[test]
+    fn seeds_past_the_largest_are_refused_not_wrapped() {
+        let crate::Command::Campaign(a) =
+            crate::parse(&["campaign", "--random", "2", "--seed", "18446744073709551615"])
+        else {
+            panic!("a campaign")
+        };
+        let e = super::run_random(&a).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "--seed 18446744073709551615 is out of range for --random 2; allowed: [0, 18446744073709551614] (the seeds run to --seed + N − 1)"
+        );
     }
 }

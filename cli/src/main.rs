@@ -18,7 +18,6 @@ mod units;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::Context;
 use clap::{Parser, Subcommand};
 use nanopush::scene::Scene;
 
@@ -62,7 +61,8 @@ enum Command {
 /// Loads `--scene FILE`, or the embedded default scene; prints its warnings to stderr.
 pub fn load_scene(path: Option<&PathBuf>) -> anyhow::Result<Scene> {
     let scene = match path {
-        Some(p) => Scene::from_path(p).with_context(|| format!("loading scene {}", p.display()))?,
+        // The error names the file already ("scene FILE: …", "cannot read scene file FILE: …").
+        Some(p) => Scene::from_path(p)?,
         None => Scene::default_scene(),
     };
     for w in &scene.warnings {

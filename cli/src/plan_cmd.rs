@@ -15,10 +15,10 @@ pub struct PlanArgs {
     #[arg(long)]
     scene: Option<PathBuf>,
     /// Particle to plan for (its id); the scene's `push.particle_id` when absent.
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, allow_hyphen_values = true)]
     particle: Option<u32>,
     /// The push's tolerance (nm), in [1, 100000].
-    #[arg(long, value_name = "NM", default_value_t = DEFAULT_TOLERANCE * 1e9, allow_negative_numbers = true)]
+    #[arg(long, value_name = "NM", default_value_t = DEFAULT_TOLERANCE * 1e9, allow_hyphen_values = true)]
     tolerance_nm: f64,
     /// Ignore the scene's hand-set values: derive every setting.
     #[arg(long)]

@@ -24,20 +24,20 @@ pub struct PushArgs {
     #[arg(long)]
     scene: Option<PathBuf>,
     /// Particle to push (its id); the scene's `push.particle_id` when absent.
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, allow_hyphen_values = true)]
     particle: Option<u32>,
     /// Distance to push (µm), in (0, 100]; with `--direction-deg`.
-    #[arg(long, value_name = "D", allow_negative_numbers = true)]
+    #[arg(long, value_name = "D", allow_hyphen_values = true)]
     distance_um: Option<f64>,
     /// Direction of the push in the plane (degrees from +x), in [-360, 360].
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     direction_deg: f64,
     /// The move is `ok` when the scan after it finds the particle within this of the target
     /// (nm), in [1, 100000]; otherwise a correction is pushed, and after the last `missed`.
-    #[arg(long, value_name = "NM", default_value_t = DEFAULT_TOLERANCE * 1e9, allow_negative_numbers = true)]
+    #[arg(long, value_name = "NM", default_value_t = DEFAULT_TOLERANCE * 1e9, allow_hyphen_values = true)]
     tolerance_nm: f64,
     /// Pushes at most, the first and the corrections, in [1, 10].
-    #[arg(long, default_value_t = DEFAULT_ATTEMPTS, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = DEFAULT_ATTEMPTS, allow_hyphen_values = true)]
     attempts: u32,
     /// Derive every strategy setting from the model, ignoring the scene's hand-set
     /// `[strategy]`, contact angle and speed (to compare the two).
@@ -45,16 +45,16 @@ pub struct PushArgs {
     derive_all: bool,
     /// Target position instead of a distance (µm), e.g. `--to-um 60,45`: planned as several
     /// pushes when one cannot reach it.
-    #[arg(long, value_name = "X_UM,Y_UM")]
+    #[arg(long, value_name = "X_UM,Y_UM", allow_hyphen_values = true)]
     to_um: Option<String>,
     /// Loop closure: xy, z or xyz; the scene's `strategy.control` when absent.
     #[arg(long)]
     control: Option<String>,
     /// A brief stop during the (first) push at this travel (µm), as in Fig 15.
-    #[arg(long, value_name = "UM", allow_negative_numbers = true)]
+    #[arg(long, value_name = "UM", allow_hyphen_values = true)]
     pause_at_um: Option<f64>,
     /// Length of that stop (ms), in (0, 10000].
-    #[arg(long, default_value_t = 500.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 500.0, allow_hyphen_values = true)]
     pause_ms: f64,
     /// Write the traces and figures here: contact.csv/svg (Fig 9), push.csv/svg (Fig 15),
     /// scan-before/after.gsf/png and summary.json.
@@ -151,7 +151,7 @@ fn check(a: &PushArgs, scene: &Scene) -> anyhow::Result<Request> {
     if !(a.tolerance_nm.is_finite() && (1.0..=100_000.0).contains(&a.tolerance_nm)) {
         bail!(
             "--tolerance-nm {} is out of range; allowed: [1, 100000] nm",
-            a.tolerance_nm
+            crate::units::num(a.tolerance_nm)
         );
     }
     if !(1..=10).contains(&a.attempts) {
@@ -523,5 +523,14 @@ mod tests {
             .to_string();
         assert!(e.starts_with("--distance-um 1e308 is out of range"), "{e}");
         assert_eq!(args(&["push", "--distance-um", "1"]).tolerance_nm, 25.0);
+        // The review of issue 24: a negative point and a negative number in exponent form were
+        // taken for flags too.
+        let a = args(&["push", "--to-um", "-1,50", "--direction-deg", "-1e-320"]);
+        assert_eq!((a.to_um.as_deref(), a.direction_deg), (Some("-1,50"), -1e-320));
+        let e = check(&args(&["push", "--to-um", "-1,50"]), &Scene::default_scene())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("-1"), "{e}");
     }
 }

@@ -28,7 +28,7 @@ pub struct ScanArgs {
     #[arg(long, value_name = "FILE.gsf")]
     out: PathBuf,
     /// Locate the particle nearest this point (µm), e.g. `--locate 50,50`.
-    #[arg(long, value_name = "X_UM,Y_UM")]
+    #[arg(long, value_name = "X_UM,Y_UM", allow_hyphen_values = true)]
     locate: Option<String>,
     /// How far from the point to look for a particle (µm), in (0, scan size].
     #[arg(long, default_value_t = 2.0, value_name = "UM")]

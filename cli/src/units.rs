@@ -59,8 +59,7 @@ pub fn echo(s: &str) -> String {
 /// A number as an error message shows it: as typed when short, else in scientific notation (a
 /// 1e308 is not 309 digits).
 pub fn num(v: f64) -> String {
-    let plain = v.to_string();
-    if plain.len() <= 16 { plain } else { format!("{v:e}") }
+    nanopush::shown(v)
 }
 
 /// `--method NAME` as an integration method, with the allowed names in the error.

@@ -269,6 +269,10 @@ pub struct PushPath {
     /// after the previous push found the particle (older servers leave it out: 1).
     #[serde(default = "first_attempt")]
     pub attempt: u32,
+    /// What the strategy plan for this particle warns of (a hand-set value that cannot work, a
+    /// dry run that fails, a tolerance no push can reach), on the first push of a move.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 fn first_attempt() -> u32 {
@@ -668,9 +672,14 @@ mod tests {
             by: 5,
             run: 3,
             attempt: 2,
+            warnings: vec!["strategy.speed_um_per_s = 10 (hand-set): faster than the set point allows".into()],
         };
         let s = serde_json::to_value(ServerMessage::PushStarted(path.clone())).unwrap();
         assert_eq!(s["attempt"], 2);
+        assert_eq!(
+            s["warnings"][0],
+            "strategy.speed_um_per_s = 10 (hand-set): faster than the set point allows"
+        );
         assert_eq!(s["type"], "push_started");
         assert_eq!(s["particle"], 2);
         assert_eq!(s["by"], 5);

@@ -35,6 +35,13 @@ pub mod scan;
 pub mod scene;
 pub mod serve;
 
+/// A number as an error message shows it: as written when short, else in scientific notation (a
+/// 1e308 is not 309 digits, a 1e-320 not 330).
+pub fn shown(v: f64) -> String {
+    let plain = v.to_string();
+    if plain.len() <= 16 { plain } else { format!("{v:e}") }
+}
+
 /// The message of a caught panic's payload (`&str` or `String`), for reports that turn a
 /// panic in one case, run or push into a row with its reason.
 pub fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {

@@ -105,10 +105,10 @@ fn bad_scene_gets_one_clear_error_and_no_panic() {
         assert!(err.contains(expected), "expected {expected:?} in: {err}");
         assert!(!err.contains("panicked"), "{err}");
         if i == 1 {
-            // docs/model.md's example ("Scenes"), whole: the file's name twice, the unit last.
+            // docs/model.md's example ("Scenes"), whole: the file's name once, the unit last.
             let p = path.display();
             let line = format!(
-                "error: loading scene {p}: scene {p}: environment.relative_humidity = 1.5 is out of range; allowed: [0, 1) (P/Pₛ)"
+                "error: scene {p}: environment.relative_humidity = 1.5 is out of range; allowed: [0, 1) (P/Pₛ)"
             );
             assert!(err.lines().any(|l| l == line), "expected the line {line:?} in: {err}");
         }

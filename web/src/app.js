@@ -19,7 +19,7 @@ import { HapticPanel } from './haptic.js';
 import { fetchStatus } from './devicefaults.js';
 import { StatusBar } from './status.js';
 import { Controls, Replies } from './controls.js';
-import { EventLog, LEASE_LOST_ON_CLOSE, welcomeText, stateText, pushStartedText, leaseNote, replyErrorText, closedText, restartText, lostPushText, hapticLinkNote, clockTime } from './eventlog.js';
+import { EventLog, LEASE_LOST_ON_CLOSE, welcomeText, stateText, pushStartedText, pushWarnings, leaseNote, replyErrorText, closedText, restartText, lostPushText, hapticLinkNote, clockTime } from './eventlog.js';
 import { MapOverlay } from './mapoverlay.js';
 import { Records } from './records.js';
 import { Scans } from './scans.js';
@@ -256,6 +256,7 @@ export class App {
         break;
       case 'push_started':
         log.log(pushStartedText(ev.push, st.client));
+        for (const w of pushWarnings(ev.push)) log.log(w, 'warn');
         this.charts.restartFd(st.tip?.t ?? -Infinity);
         this.map.pushStarted();
         controls.renderPush();

@@ -46,6 +46,11 @@ export function pushStartedText(push, client) {
   return `push started: #${push.particle} by ${pusher(push, client)}, to ${formatStagePoint(end)} in ${legs}`;
 }
 
+/** What the strategy plan warns of for a push (`push_started`'s `warnings`), one line each. */
+export function pushWarnings(push) {
+  return Array.isArray(push?.warnings) ? push.warnings.map((w) => `plan warning for #${push.particle}: ${w}`) : [];
+}
+
 /** A `lease` event: {text, cls, announce} (`announce`: what to tell a screen reader, or null). */
 export function leaseNote(ev, st) {
   const now = st.lease === null ? 'the lease is free' : st.lease === st.client ? 'you hold the lease' : `${holderText(st)} holds the lease`;

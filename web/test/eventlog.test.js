@@ -2,7 +2,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import {
-  welcomeText, stateText, scanSize, scanDoneNote, pusher, pushStartedText, leaseNote, replyErrorText, closedText, LEASE_LOST_ON_CLOSE,
+  welcomeText, stateText, scanSize, scanDoneNote, pusher, pushStartedText, pushWarnings, leaseNote, replyErrorText, closedText, LEASE_LOST_ON_CLOSE,
 } from '../src/eventlog.js';
 import { Session } from '../src/session.js';
 
@@ -36,6 +36,9 @@ test('a push started, by this client or another, in one leg or more', () => {
   assert.equal(pushStartedText({ ...p, path: [...p.path, [45e-6, 31e-6]] }, 5), 'push started: #2 by client 4, to (45.000, 31.000) µm in 2 legs');
   assert.equal(pushStartedText({ ...p, attempt: 2 }, 4),
     'correction 1 of #2: the scan after the push found it outside the tolerance; pushing it from (40.000, 30.000) µm to (45.000, 30.000) µm in 1 leg');
+  assert.deepEqual(pushWarnings({ ...p, warnings: ['strategy.start_height_um = 1.2 (hand-set): below the 1.26 µm'] }),
+    ['plan warning for #2: strategy.start_height_um = 1.2 (hand-set): below the 1.26 µm']);
+  assert.deepEqual(pushWarnings(p), []);
 });
 
 test('the lease: taken, lost (said aloud), changed elsewhere with or without a reason', () => {

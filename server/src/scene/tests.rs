@@ -506,3 +506,11 @@ proptest::proptest! {
         proptest::prop_assert_eq!(ranges::first_clash(&parts), every_pair);
     }
 }
+
+/// The review of issue 24: `radius_nm = 1e308` echoed 309 digits.
+#[test]
+fn a_huge_value_is_shown_in_scientific_notation() {
+    let e = err("radius_nm = 1000.0", "radius_nm = 1e308");
+    assert!(e.contains("particles[0].radius_nm = 1e308 is out of range"), "{e}");
+    assert!(e.len() < 200, "{e}");
+}

@@ -30,14 +30,17 @@ pub fn number(field: &str, value: f64, lo: f64, hi: f64, lo_open: bool, unit: &s
     if !value.is_finite() {
         return Err(Refusal::new(
             ErrorCode::NotFinite,
-            format!("{field} = {value} is not a finite number; allowed: {range}"),
+            format!(
+                "{field} = {} is not a finite number; allowed: {range}",
+                crate::shown(value)
+            ),
         ));
     }
     let above_lo = if lo_open { value > lo } else { value >= lo };
     if !above_lo || value > hi {
         return Err(Refusal::new(
             ErrorCode::OutOfRange,
-            format!("{field} = {value} is out of range; allowed: {range}"),
+            format!("{field} = {} is out of range; allowed: {range}", crate::shown(value)),
         ));
     }
     Ok(value)
@@ -275,6 +278,18 @@ mod tests {
         assert!(fields_apply(&m).unwrap_err().message.contains("pull_off_at_hand_n"));
         let m = parse_command(r#"{"type":"haptic","action":"scale","nm_per_mm":5}"#).unwrap();
         assert_eq!(fields_apply(&m), Ok(()));
+    }
+
+    /// The review of issue 24: `tolerance_nm: 1e-320` echoed 330 digits.
+    #[test]
+    fn a_refusal_shows_a_tiny_or_huge_number_in_scientific_notation() {
+        let e = push_tolerance(Some(1e-320)).unwrap_err();
+        assert_eq!(
+            e.message,
+            "tolerance_nm = 1e-320 is out of range; allowed: [1, 100000] nm"
+        );
+        let e = number("x", 1.2345e59, 0.0, 1.0, false, "µm").unwrap_err();
+        assert_eq!(e.message, "x = 1.2345e59 is out of range; allowed: [0, 1] µm");
     }
 
     #[test]

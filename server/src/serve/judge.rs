@@ -122,9 +122,31 @@ fn judge_with(st: &AppState, scene: &Scene, run: u64, p: &Pending, estimate: [f6
                 nm(p.mv.tolerance),
                 p.attempt + 1
             );
-            let (record, _) = amended(st, record, "corrected", Some(&why), Some(&judged));
-            audit_run_done(st, run, id, "corrected", Some(&why), record.as_deref());
-            launch(st, p.mv, scene, plan, p.attempt + 1);
+            // The record says `corrected` only once the correction has begun; one that cannot
+            // begin (a stop since the scan, the tip unable to get behind) ends the move here.
+            match launch(st, p.mv, scene, plan, p.attempt + 1) {
+                Ok(()) => {
+                    let (record, _) = amended(st, record, "corrected", Some(&why), Some(&judged));
+                    audit_run_done(st, run, id, "corrected", Some(&why), record.as_deref());
+                }
+                Err((outcome, failure)) => {
+                    let failure = format!(
+                        "{failure}; the scan after push {} found particle {id} {} from the target",
+                        p.attempt,
+                        nm(error)
+                    );
+                    end(
+                        st,
+                        run,
+                        id,
+                        outcome,
+                        Some(failure),
+                        Some(measured),
+                        record,
+                        Some(judged),
+                    );
+                }
+            }
         }
         // `judge` gives `Ok` or `Missed` only.
         Verdict::Failed { .. } | Verdict::NotFound => {}
@@ -354,6 +376,39 @@ mod tests {
             "{record}"
         );
         assert_eq!(record["judged"]["attempts"], 1);
+    }
+
+    /// A correction that cannot begin (here the loop's queue is full) ends the move with why, and
+    /// the record of the push it would have corrected says so, never `corrected` (the review of
+    /// issue 24 found `corrected` in a record after a stop that kept the correction from
+    /// starting).
+    #[test]
+    fn a_correction_that_cannot_begin_ends_the_move_and_its_record_says_why() {
+        let (st, p, estimate) = left_off(30e-9, 1, 25e-9);
+        while st
+            .shared
+            .commands
+            .push(LoopCommand::Stop(crate::serve::control_loop::StopReason::Operator))
+            .is_ok()
+        {}
+        let mut rx = st.channels.events.subscribe();
+        let name = format!("push-judge-full-{}-r1-p1.json", std::process::id());
+        let path = st.cfg.data_dir.join(&name);
+        std::fs::write(&path, br#"{"run":1,"particle":1,"outcome":"pushed"}"#).unwrap();
+        judge_with(&st, &st.scene.clone(), 1, &p, estimate, Ok(name.clone()));
+        let done = run_done(&mut rx);
+        let record: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        assert_eq!(done["outcome"], "error", "{done}");
+        let why = done["failure"].as_str().unwrap();
+        assert!(
+            why.contains("queue is full") && why.contains("30.0 nm from the target"),
+            "{why}"
+        );
+        assert_eq!(record["outcome"], "error", "{record}");
+        assert_eq!(done["record"], name.as_str());
+        assert!(!st.shared.busy.load(Relaxed));
+        assert!(st.activity.judging.lock().unwrap().is_empty(), "no move left pending");
     }
 
     /// The last push found outside the tolerance: `missed`, with the distance, and the

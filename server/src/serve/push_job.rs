@@ -95,6 +95,9 @@ fn audit_early_end(st: &AppState, by: u32, particle: u32, outcome: &str, failure
     });
 }
 
+/// Strategy plans kept at most (particle and tolerance pairs).
+const PLANS_KEPT: usize = 64;
+
 /// The scene with particle `particle`'s strategy plan for `tolerance` applied (hand-set values
 /// win), the plan derived on the first push that asks for it and kept; or why no strategy can
 /// push it.
@@ -116,6 +119,11 @@ pub(crate) fn strategy_scene(
             Err(e) => tracing::warn!("{e}"),
         }
         if let Ok(mut p) = st.activity.plans.lock() {
+            // One plan per particle and tolerance asked for: bounded, however many tolerances
+            // a client tries (the plans are derived again when needed).
+            if p.len() >= PLANS_KEPT {
+                p.clear();
+            }
             p.insert(key, outcome.clone());
         }
         outcome
@@ -169,25 +177,33 @@ pub(crate) fn prepare_push(st: &AppState, mv: Move, target: MoveTarget) {
         // Already there (within the planner's 10 nm): judged where the scan found it, no push.
         return judge::already_there(st, mv, &plan);
     }
-    launch(st, mv, &scene, plan, 1);
+    if let Err((outcome, failure)) = launch(st, mv, &scene, plan, 1) {
+        run_done_failed(st, mv.by, particle, outcome, failure);
+    }
 }
 
 /// Hands push `attempt` of move `mv` (the legs of `plan`, from where its local scan found the
-/// particle) to the loop, and says so (`push_started`); its end is judged by `judge.rs`.
-pub(crate) fn launch(st: &AppState, mv: Move, scene: &crate::scene::Scene, plan: MovePlan, attempt: u32) {
+/// particle) to the loop, and says so (`push_started`); its end is judged by `judge.rs`. When it
+/// cannot start, the move's outcome and why, for the caller to end the move with (nothing is
+/// said to anyone yet).
+pub(crate) fn launch(
+    st: &AppState,
+    mv: Move,
+    scene: &crate::scene::Scene,
+    plan: MovePlan,
+    attempt: u32,
+) -> Result<(), (&'static str, String)> {
     let particle = mv.particle;
     let params = scene.strategy_params(st.params.tick);
-    let prepared = match Prepared::new(scene, particle, plan.located.radius, &params) {
-        Ok(p) => p,
-        Err(e) => return run_done_failed(st, mv.by, particle, "error", e.to_string()),
-    };
+    let prepared =
+        Prepared::new(scene, particle, plan.located.radius, &params).map_err(|e| ("error", e.to_string()))?;
     if let Err(e) = prepared.check_reach(&plan.legs) {
         let push = if attempt == 1 {
             String::new()
         } else {
             format!(" (correction {})", attempt - 1)
         };
-        return run_done_failed(st, mv.by, particle, "plan", format!("particle {particle}{push}: {e}"));
+        return Err(("plan", format!("particle {particle}{push}: {e}")));
     }
     if st.activity.generation.load(Relaxed) != mv.generation || st.activity.stopping.load(Relaxed) {
         let when = if attempt == 1 {
@@ -195,7 +211,7 @@ pub(crate) fn launch(st: &AppState, mv: Move, scene: &crate::scene::Scene, plan:
         } else {
             format!("stopped before correction {} began", attempt - 1)
         };
-        return run_done_failed(st, mv.by, particle, "stopped", when);
+        return Err(("stopped", when));
     }
     let run = st.shared.runs.fetch_add(1, Relaxed) + 1;
     // Who ran it, for its record and the audit log's `run_done` (the session may be gone by
@@ -216,12 +232,22 @@ pub(crate) fn launch(st: &AppState, mv: Move, scene: &crate::scene::Scene, plan:
         .map_or(located.radius, |p| p.radius_nm * 1e-9);
     let mut path = vec![[located.x, located.y]];
     path.extend(plan.legs.iter().map(|l| [l.to.0, l.to.1]));
+    // The plan's warnings, said to everyone with the move's first push.
+    let warnings = (attempt == 1)
+        .then(|| {
+            let plans = st.activity.plans.lock().ok()?;
+            let plan = plans.get(&(particle, mv.tolerance.to_bits()))?.as_ref().ok()?;
+            Some(plan.warnings.clone())
+        })
+        .flatten()
+        .unwrap_or_default();
     let started = PushPath {
         particle,
         path,
         by: mv.by,
         run,
         attempt,
+        warnings,
     };
     if let Ok(mut j) = st.activity.judging.lock() {
         j.insert(
@@ -252,16 +278,10 @@ pub(crate) fn launch(st: &AppState, mv: Move, scene: &crate::scene::Scene, plan:
         if let Ok(mut j) = st.activity.judging.lock() {
             j.remove(&run);
         }
-        run_done_failed(
-            st,
-            mv.by,
-            particle,
-            "error",
-            "the control loop's command queue is full".into(),
-        );
-        return;
+        return Err(("error", "the control loop's command queue is full".into()));
     }
     st.broadcast_event(&ServerMessage::PushStarted(started));
+    Ok(())
 }
 
 #[cfg(test)]

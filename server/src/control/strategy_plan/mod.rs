@@ -857,7 +857,7 @@ impl<'a> Derivation<'a> {
         let prediction = predict(params, duration, f64::INFINITY, retract).map_err(|e| Fails {
             code: "model",
             reason: format!("the model's push at β = {:.0}° failed: {e}", beta.to_degrees()),
-            field: crate::physics::pushing::MODEL_FIELDS.into(),
+            field: crate::physics::pushing::MODEL_REFUSAL_FIELD.into(),
         })?;
         let set = SET_FRACTION * prediction.peak_deflection;
         // The travel to the set point, from the same (deterministic) model push.
@@ -865,7 +865,7 @@ impl<'a> Derivation<'a> {
             predict(params, duration, set, retract).map_err(|e| Fails {
                 code: "model",
                 reason: format!("the model's push at β = {:.0}° failed: {e}", beta.to_degrees()),
-                field: crate::physics::pushing::MODEL_FIELDS.into(),
+                field: crate::physics::pushing::MODEL_REFUSAL_FIELD.into(),
             })?
         } else {
             prediction
@@ -1019,6 +1019,14 @@ impl<'a> Derivation<'a> {
                 "the local scan's {:.0} nm pitch is coarse for a {:.0} nm tolerance",
                 pitch * 1e9,
                 self.tolerance * 1e9
+            ));
+        }
+        let least = crate::control::locate_and_plan::DONE_WITHIN;
+        if self.tolerance < least {
+            self.warnings.push(format!(
+                "the {:.0} nm tolerance is below the {:.0} nm a push can correct: a move that ends between the two is missed without a correction",
+                self.tolerance * 1e9,
+                least * 1e9
             ));
         }
     }

@@ -145,7 +145,7 @@ impl Stats {
 #[non_exhaustive]
 pub enum IntegrateError {
     /// The step fell below `h_min`.
-    #[error("step size {h:e} s fell below the minimum at t = {t:e} s")]
+    #[error("step size {h:.3e} s fell below the minimum at t = {t:.3e} s")]
     StepTooSmall {
         /// Time reached.
         t: f64,
@@ -161,7 +161,7 @@ pub enum IntegrateError {
         max: u64,
     },
     /// The right-hand side produced a non-finite value.
-    #[error("non-finite state at t = {t:e} s")]
+    #[error("non-finite state at t = {t:.3e} s")]
     NonFinite {
         /// Time reached.
         t: f64,

@@ -17,3 +17,7 @@ pub use steady::{SteadyInputs, SteadyState, steady_state};
 /// The scene sections that drive the pushing model (Eq 17), named by an error of a push
 /// simulation or of the estimator's prediction so that the user knows where to look.
 pub const MODEL_FIELDS: &str = "the pushing model of Eq 17 is driven by the scene's [friction], [cantilever], [particles], [environment], [push] and [physics] fields";
+
+/// The field to change when the model's integrator cannot follow a push (a strategy plan's
+/// `model` refusal): a limit of the simulation, not of the instrument, named as such.
+pub const MODEL_REFUSAL_FIELD: &str = "one of the model's inputs ([friction], [cantilever], [particles], [environment] or [push]): its stiff solver could not follow this push, a limit of the simulation rather than of the instrument";

@@ -50,7 +50,8 @@ struct Active {
     job: Box<PushJob>,
     leg: usize,
     strategy: Strategy,
-    stop: bool,
+    /// A stop was asked for, with its words (`stopped: …`).
+    stop: Option<&'static str>,
 }
 
 /// A push that ends after this tick's physics.
@@ -164,7 +165,7 @@ impl ControlLoop {
                     job,
                     leg,
                     strategy,
-                    stop: false,
+                    stop: None,
                 });
             }
             None => {
@@ -221,7 +222,7 @@ impl ControlLoop {
                 }
                 LoopCommand::Stop(why) => {
                     if let Some(a) = &mut self.active {
-                        a.stop = true;
+                        a.stop = Some(why.words());
                         a.strategy.abort(why.words(), reading.t);
                     }
                 }
@@ -229,7 +230,7 @@ impl ControlLoop {
                     self.shutting_down = true;
                     self.bilateral.release();
                     if let Some(a) = &mut self.active {
-                        a.stop = true;
+                        a.stop = Some("server shutting down");
                         a.strategy.abort("server shutting down", reading.t);
                     }
                 }
@@ -265,8 +266,13 @@ impl ControlLoop {
                 // The run ends after this tick's physics, so its record holds the final tick.
                 let (outcome, failure) = match failure {
                     Some(f) => (f.code(), Some(f.to_string())),
-                    None if a.stop => ("stopped", Some("stopped between legs".into())),
+                    // Every leg ran (a stop that came during the last retraction changed nothing
+                    // of the push): judged, and a stop since keeps a correction from starting.
                     None if last => (PUSHED, None),
+                    None if a.stop.is_some() => (
+                        "stopped",
+                        Some(format!("stopped: {} (between legs)", a.stop.unwrap_or_default())),
+                    ),
                     None => return self.next_then(a, estimate, distance, reading),
                 };
                 self.ending = Some(Ending {
@@ -493,7 +499,7 @@ impl ControlLoop {
                 self.instrument_failed = true;
                 self.reading = self.afm.read();
                 if let Some(a) = &mut self.active {
-                    a.stop = true;
+                    a.stop = Some("the push simulation failed");
                     a.strategy.abort("the push simulation failed", self.reading.t);
                 } else {
                     self.target = self.reading.stage;
