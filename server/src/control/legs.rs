@@ -61,7 +61,7 @@ pub enum PlanError {
     /// particle must lie on the stage whole, and the tip (which stays on it) must reach behind
     /// it (as the server's `push` check states it).
     #[error(
-        "target ({:.3}, {:.3}) µm is out of range for a particle {:.3} µm in radius; allowed: [{:.3}, {:.3}] µm in x and y",
+        "target ({:.2}, {:.2}) µm is outside the stage for a particle {:.3} µm in radius; allowed: [{:.3}, {:.3}] µm in x and y",
         .to.0 * 1e6, .to.1 * 1e6, .radius * 1e6, centre_bounds_um(*.radius, *.range).0, centre_bounds_um(*.radius, *.range).1
     )]
     OutOfRange {
@@ -315,7 +315,7 @@ mod tests {
         let e = p.plan((59.9 * UM, 50.0 * UM), (99.9 * UM, 50.0 * UM), &[]).unwrap_err();
         assert_eq!(
             e.to_string(),
-            "target (99.900, 50.000) µm is out of range for a particle 1.000 µm in radius; allowed: [1.000, 99.000] µm in x and y"
+            "target (99.90, 50.00) µm is outside the stage for a particle 1.000 µm in radius; allowed: [1.000, 99.000] µm in x and y"
         );
         assert!(p.plan((59.0 * UM, 50.0 * UM), (99.0 * UM, 50.0 * UM), &[]).is_ok());
         // The push's overshoot stops where the particle would leave the stage: 0.5 µm left of
