@@ -351,7 +351,7 @@ fn judge_inner(scene: &Scene, distance: f64, direction: (f64, f64), tolerance: f
     let mut scene = scene.clone();
     plan.apply(&mut scene);
     // With the plan's start height and angle (a dynamic particle or lever is refused here).
-    if let Err(e) = scene.pushable() {
+    if let Err(e) = scene.pushable(p.id) {
         return Judged::refused("scene", e.to_string(), distance);
     }
     let (x, y, r) = (p.x_um * UM, p.y_um * UM, p.radius_nm * 1e-9);

@@ -127,8 +127,10 @@ impl Scene {
     ///
     /// And the strategy's geometry (Sec 2.1): travel at the start height must clear every
     /// particle (the tip would run into it), and the parking height that gives the contact
-    /// angle β, `h = Rₐ − Rₜ + (Rₐ + Rₜ) sin β`, must put the tip's apex above the substrate.
-    pub fn pushable(&self) -> Result<(), RunError> {
+    /// angle β, `h = Rₐ − Rₜ + (Rₐ + Rₜ) sin β`, must put the tip's apex above the substrate
+    /// for particle `id`, the one pushed (a smaller particle elsewhere, which the tip never
+    /// meets at β, refused every push of a larger one: the review of issue 24).
+    pub fn pushable(&self, id: u32) -> Result<(), RunError> {
         self.model_pushable()?;
         let s = &self.file;
         let tallest = s.particles.iter().map(|p| 2.0 * p.radius_nm * 1e-3).fold(0.0, f64::max);
@@ -139,7 +141,7 @@ impl Scene {
             )));
         }
         let (sin_b, r_t) = (s.push.contact_angle_deg.to_radians().sin(), s.tip.radius_nm);
-        for (k, p) in s.particles.iter().enumerate() {
+        for (k, p) in s.particles.iter().enumerate().filter(|(_, p)| p.id == id) {
             let r_a = p.radius_nm;
             if r_a - r_t + (r_a + r_t) * sin_b <= 0.0 {
                 let min = ((r_t - r_a) / (r_t + r_a)).asin().to_degrees();
@@ -276,7 +278,7 @@ pub fn detection_offset(scene: &Scene, params: &StrategyParams) -> f64 {
 impl Prepared {
     /// The model prediction for particle `id` of `scene` with estimated radius `radius` (m).
     pub fn new(scene: &Scene, id: u32, radius: f64, params: &StrategyParams) -> Result<Prepared, RunError> {
-        scene.pushable()?;
+        scene.pushable(id)?;
         let f = &scene.file;
         let part = f
             .particles
@@ -447,5 +449,25 @@ impl Prepared {
             final_stage: reading.stage,
             retracted: truth.pushing.is_none() && !truth.on_substrate,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::scene::Scene;
+
+    /// The review of issue 24: a 10 nm particle anywhere in the scene refused every push of a
+    /// 500 nm one, because the contact-angle geometry was checked for every particle, not the
+    /// one pushed. The tip meets only the pushed particle at β.
+    #[test]
+    fn the_contact_geometry_is_checked_for_the_pushed_particle_only() {
+        let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/gold-latex-500nm.toml"))
+            .unwrap()
+            + "\n[[particles]]\nid = 9\nmaterial = \"gold\"\nradius_nm = 10.0\nx_um = 80.0\ny_um = 80.0\nyoungs_modulus_gpa = 79.0\npoisson_ratio = 0.42\ndensity_kg_per_m3 = 19300.0\nhamaker_zj = 400.0\n";
+        let s = Scene::parse("with-a-small-one", &text).unwrap();
+        assert!(s.file.push.contact_angle_deg <= 30.0);
+        s.pushable(1).expect("the 500 nm particle is met at β");
+        let e = s.pushable(9).unwrap_err().to_string();
+        assert!(e.contains("to meet particles[3] (radius 10 nm)"), "{e}");
     }
 }

@@ -604,7 +604,7 @@ fn every_shipped_scene_pushes_its_particle() {
         if s.file.name == "paper-full-dynamics" {
             // The reduction's reference: refused, with the reason, before any work.
             let e = s
-                .pushable()
+                .pushable(s.file.push.particle_id)
                 .expect_err("a dynamic particle cannot be pushed in real time");
             assert!(e.to_string().contains("physics.particle_y = \"dynamic\""), "{e}");
             continue;

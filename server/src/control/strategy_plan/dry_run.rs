@@ -18,7 +18,7 @@ pub fn dry_run(scene: &Scene, plan: &StrategyPlan) -> Result<usize, String> {
     plan.apply(&mut s);
     s.file.sensor.noise_seed = s.file.sensor.noise_seed.wrapping_add(0x9e37_79b9_7f4a_7c15);
     s.file.substrate.roughness_seed = s.file.substrate.roughness_seed.wrapping_add(0x2545_f491_4f6c_dd1d);
-    s.pushable().map_err(|e| e.to_string())?;
+    s.pushable(plan.particle).map_err(|e| e.to_string())?;
     let part = s
         .file
         .particles

@@ -360,7 +360,7 @@ impl<'a> Derivation<'a> {
             // the plan accepts, a push must not refuse.
             let mut applied = self.scene.clone();
             plan.apply(&mut applied);
-            if let Err(e) = applied.pushable() {
+            if let Err(e) = applied.pushable(self.part.id) {
                 let text = e.to_string();
                 let field = text
                     .split(" = ")
