@@ -86,6 +86,20 @@ fn judge_with(st: &AppState, scene: &Scene, run: u64, p: &Pending, estimate: [f6
             );
         }
     };
+    // The scan finds the blob nearest the estimate: it is this particle only if it has its size
+    // (a push gone wrong can leave a neighbour nearer).
+    let ratio = plan.located.radius / p.radius;
+    if !(0.5..=2.0).contains(&ratio) {
+        let why = format!(
+            "the scan after push {} found a particle {:.1} nm in radius near ({:.3}, {:.3}) µm, not particle {id} ({:.1} nm)",
+            p.attempt,
+            plan.located.radius * 1e9,
+            plan.located.x * 1e6,
+            plan.located.y * 1e6,
+            p.radius * 1e9
+        );
+        return end(st, run, id, "not_found", Some(why), Some(estimate), record, None);
+    }
     let measured = [plan.located.x, plan.located.y];
     st.remember(id, measured);
     let verdict = Verdict::judge((measured[0], measured[1]), p.target, p.mv.tolerance);
@@ -496,5 +510,22 @@ mod tests {
             "{done}"
         );
         assert!(!st.shared.busy.load(Relaxed));
+        // Another particle, a third the size, where this one was believed to be: not it.
+        let (st, p, estimate) = left_off(20e-6, 1, 25e-9);
+        st.shared
+            .snapshot
+            .lock()
+            .unwrap()
+            .particles
+            .push((99, estimate[0] + 50e-9, estimate[1], 0.3e-6));
+        let mut rx = st.channels.events.subscribe();
+        judge_with(&st, &st.scene.clone(), 1, &p, estimate, Err("no trace".into()));
+        let done = run_done(&mut rx);
+        assert_eq!(done["outcome"], "not_found", "{done}");
+        let why = done["failure"].as_str().unwrap();
+        assert!(
+            why.contains("found a particle 300") && why.contains("not particle 1 (1000.0 nm)"),
+            "{why}"
+        );
     }
 }
