@@ -37,6 +37,8 @@ pub struct PushPrediction {
     pub settled_deflection: f64,
     /// Friction phase at the end (`slip`, `roll`, `stick`).
     pub phase: &'static str,
+    /// Tip travel of the model push (m).
+    pub travel: f64,
     /// Particle displacement along the push while the tip stops, backs off and lifts (m).
     pub retract_shift: f64,
     /// Height the tip had to lift (after the back-off) before it let go of the particle (m);
@@ -47,7 +49,7 @@ pub struct PushPrediction {
 
 /// Samples of the model push the estimator reads its constants from, whatever the push's
 /// duration: a slow stage lengthens the push, never the trace (10 pm of travel per sample over
-/// the 40 nm the prediction runs).
+/// the 40 nm the prediction runs, 160 pm over the longest, 640 nm).
 pub const PREDICTION_SAMPLES: f64 = 4000.0;
 
 /// Integrator steps a prediction may take (push and retraction each): the default scene needs
@@ -199,7 +201,35 @@ pub fn predict(
         travel_to_peak,
         settled_deflection: settled,
         phase: run.final_phase,
+        travel: duration * params.speed,
     })
+}
+
+/// Tip travel of the first model push [`predict_past_separation`] runs (m).
+pub const PREDICTED_TRAVEL: f64 = 40e-9;
+
+/// Tip travel of its longest model push (m).
+pub const MAX_PREDICTED_TRAVEL: f64 = 640e-9;
+
+/// [`predict`] over a push long enough to pass the separation: 40 nm of travel (at least
+/// 20 ms), four times longer while the peak of `ζ_z` lies in the last quarter of the push, at
+/// most 640 nm. A soft lever bends tens of nm (its peak deflection, `F_shear / k_c`) before the
+/// particle shears loose; the settled constants are read from the push's second half, after
+/// the peak.
+pub fn predict_past_separation(
+    params: PushParams,
+    deflection: f64,
+    retract: RetractPlan,
+) -> Result<PushPrediction, SimulationError> {
+    let mut travel = PREDICTED_TRAVEL;
+    loop {
+        let duration = (travel / params.speed).max(0.02);
+        let p = predict(params, duration, deflection, retract)?;
+        if p.travel_to_peak <= 0.75 * p.travel || travel >= MAX_PREDICTED_TRAVEL {
+            return Ok(p);
+        }
+        travel *= 4.0;
+    }
 }
 
 /// Samples in the detector's moving mean.
@@ -419,6 +449,7 @@ mod tests {
             phase: "roll",
             retract_shift: 0.0,
             release_lift: Some(0.0),
+            travel: 40e-9,
         }
     }
 

@@ -481,12 +481,12 @@ fn a_soft_lever_trips_the_deflection_limit_and_leaves_the_particle_0_12_um_from_
     }
 }
 
-fn reading(t: f64, volts: f64, stage: [f64; 3]) -> crate::instrument::Reading {
+pub(super) fn reading(t: f64, volts: f64, stage: [f64; 3]) -> crate::instrument::Reading {
     crate::instrument::Reading { t, volts, stage }
 }
 
 /// A strategy for the gold-latex scene's particle, fed readings by hand.
-fn bare_strategy() -> (Strategy, [f64; 3]) {
+pub(super) fn bare_strategy() -> (Strategy, [f64; 3]) {
     let s = scene(&[]);
     let p = s.pushed_particle();
     let params = s.strategy_params(1e-3);
