@@ -507,7 +507,8 @@ pub(super) fn bare_strategy() -> (Strategy, [f64; 3]) {
 #[test]
 fn a_reading_on_either_rail_trips_the_deflection_limit() {
     // The safety limit is on the push's side (−4 V); a lever pulled by adhesion saturates the
-    // other rail, +10 V: that trips too, in any phase before the retraction.
+    // other rail, +10 V: that trips too while the tip is not rising off a contact (here in
+    // travel; `pull_off_tests` has the phases that ride it out).
     for (volts, expected) in [(10.0, 10.0), (-10.0, -4.0)] {
         let (mut st, start) = bare_strategy();
         st.tick(&reading(1e-3, -0.2, start));
