@@ -35,8 +35,11 @@
 //!   `1.5 (F_ad/k_c + L_t + δ_b + a₀) + 10 nm` of the detected substrate
 //!   ([`crate::control::strategy::pull_off`]); that rise must be at most the 50 µm the
 //!   strategy may lift.
-//! - **stage**: stiff against the push, `m (2π f_y)² ≥ 20 max(k_y, k_z)` (the paper's: 86 times), and settled within
-//!   0.1 s of a step, `Q/(π f_y) ≤ 0.1 s` (the paper's stage: 25 ms).
+//! - **stage**: settled within 0.1 s of a step, `Q/(π f_y) ≤ 0.1 s` (the paper's stage:
+//!   25 ms). A stage softer than `20 max(k_y, k_z)` (the paper's is 86 times stiffer than its
+//!   lever) is warned about, not refused: it yields under the push, but the pushing model
+//!   (Eq 13, the load through the stage's stiffness) predicts that yield, and the dry run judges
+//!   the result.
 //! - **longest push**: the substrate's slope moves the contact angle by at most 5° a push,
 //!   `|slope| · L ≤ 0.087 (Rₐ + Rₜ) cos β`, within [0.2, 20] µm; longer moves are split and
 //!   each leg re-parks.
@@ -78,7 +81,7 @@ pub const SET_FRACTION: f64 = 0.6;
 /// Contact angles tried, in order (degrees): the paper's 30° first.
 pub const BETAS_DEG: [f64; 8] = [30.0, 45.0, 20.0, 60.0, 15.0, 70.0, 10.0, 80.0];
 
-/// The stage's stiffness against the push, at least this many times the lever's.
+/// Below this many times the lever's stiffness the stage's yield under the push is warned about.
 pub const STAGE_STIFFNESS_RATIO: f64 = 20.0;
 
 /// The stage's ringing must die within this (s): the paper's stage (250 Hz, Q = 20) takes 25 ms.
@@ -754,10 +757,11 @@ impl<'a> Derivation<'a> {
         Ok(())
     }
 
-    /// The stage must hold its position against the push and settle between the steps: its
-    /// stiffness `m (2π f_y)²` at least [`STAGE_STIFFNESS_RATIO`] times the lever's, and its
-    /// ringing `Q/(π f_y)` dying within [`STAGE_SETTLE`].
-    fn check_stage(&self) -> Result<(), Refusal> {
+    /// The stage must settle between the steps: its ringing `Q/(π f_y)` dying within
+    /// [`STAGE_SETTLE`]. A stiffness `m (2π f_y)²` under [`STAGE_STIFFNESS_RATIO`] times the
+    /// lever's is a warning: the model's Eq 13 carries the push's load through the stage's
+    /// stiffness, so the prediction and the dry run see the yield.
+    fn check_stage(&mut self) -> Result<(), Refusal> {
         let f = &self.scene.file;
         let st = &f.stage;
         if f.physics.stage == crate::scene::file::DofFile::Off {
@@ -770,16 +774,13 @@ impl<'a> Derivation<'a> {
         let k_lever = c.k_y().max(c.k_z());
         if k_stage < STAGE_STIFFNESS_RATIO * k_lever {
             let need = (STAGE_STIFFNESS_RATIO * k_lever / m).sqrt() / (2.0 * std::f64::consts::PI);
-            return Err(self.refuse(Fails {
-                code: "stage",
-                reason: format!(
-                    "the stage's stiffness m (2π f_y)² = {} N/m is less than {} times the lever's stiffer direction (max(k_y, k_z) = {} N/m, the lateral k_y from the lever's shape): under the push it yields as much as the lever does, so the tip's position is not the stage's",
-                    short(k_stage),
-                    STAGE_STIFFNESS_RATIO,
-                    short(k_lever)
-                ),
-                field: format!("stage.resonance_hz: f_y ≥ {} Hz for this moving mass", short(need)),
-            }));
+            self.warnings.push(format!(
+                "the stage's stiffness m (2π f_y)² = {} N/m is less than {} times the lever's stiffer direction (max(k_y, k_z) = {} N/m, the lateral k_y from the lever's shape): it yields under the push, which the model predicts and the dry run checks; stage.resonance_hz ≥ {} Hz would make it negligible",
+                short(k_stage),
+                STAGE_STIFFNESS_RATIO,
+                short(k_lever),
+                short(need)
+            ));
         }
         let settle = st.quality_factor / (std::f64::consts::PI * st.resonance_hz);
         if settle > STAGE_SETTLE {

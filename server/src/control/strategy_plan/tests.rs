@@ -126,6 +126,23 @@ fn a_pull_off_beyond_the_strategys_lift_is_refused_for_adhesion() {
     );
 }
 
+/// A stage softer than 20 times the lever (the paper's stage with a 5 g moving mass: 8.6 times
+/// its lever's lateral stiffness) was refused; its yield under the push is in the model (Eq 13)
+/// and the dry run pushes it: the plan is given, with a warning that names the resonance that
+/// would make the yield negligible.
+#[test]
+fn a_stage_softer_than_20_levers_is_warned_about_not_refused() {
+    let s = untuned("paper-default", &[("moving_mass_g = 50.0", "moving_mass_g = 5.0")]);
+    let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        plan.warnings
+            .iter()
+            .any(|w| w.contains("it yields under the push") && w.contains("stage.resonance_hz ≥")),
+        "{:?}",
+        plan.warnings
+    );
+}
+
 /// A readout whose noise drowns the contact is refused naming the gain it would need.
 #[test]
 fn a_noisy_readout_is_refused_naming_the_gain_it_needs() {
