@@ -184,11 +184,12 @@ pub fn predict(
         .map(lag)
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
     let travel_to_deflection = run.trace.iter().find(|r| r.zeta_z >= deflection).map(|r| r.stage_y);
-    let peak_row = run
+    let highest = run
         .trace
         .iter()
         .max_by(|a, b| a.zeta_z.total_cmp(&b.zeta_z))
         .expect("a push trace has rows");
+    let peak_row = first_peak(&run.trace, highest.zeta_z).unwrap_or(highest);
     let (peak, travel_to_peak) = (peak_row.zeta_z, peak_row.stage_y);
     let settled = tail.iter().map(|r| r.zeta_z).sum::<f64>() / tail.len() as f64;
     Ok(PushPrediction {
@@ -203,6 +204,25 @@ pub fn predict(
         phase: run.final_phase,
         travel: duration * params.speed,
     })
+}
+
+/// The stick-phase peak of a model push: the running maximum of `ζ_z` where `ζ_z` first falls
+/// below it by a tenth of the push's highest `ζ_z` (the first slip, `t*`). A stick-slip push
+/// rises again, sometimes higher; the search and the `t*` detector meet the first peak. `None`
+/// when the push never drops that much.
+fn first_peak(
+    trace: &[crate::physics::pushing::trace::TraceRow],
+    highest: f64,
+) -> Option<&crate::physics::pushing::trace::TraceRow> {
+    let mut best = trace.first()?;
+    for r in trace {
+        if r.zeta_z > best.zeta_z {
+            best = r;
+        } else if best.zeta_z - r.zeta_z > 0.1 * highest {
+            return Some(best);
+        }
+    }
+    None
 }
 
 /// Tip travel of the first model push [`predict_past_separation`] runs (m).
