@@ -456,6 +456,32 @@ mod tests {
         }
     }
 
+    /// The stick-phase peak is the first one a tenth of the highest below which `ζ_z` falls: a
+    /// stick-slip push that rises higher later keeps its first peak; a steady push that settles
+    /// less than that below its maximum has none (the maximum is taken).
+    #[test]
+    fn the_stick_phase_peak_is_the_first_slip_not_the_highest() {
+        let row = |i: usize, z: f64| crate::physics::pushing::trace::TraceRow {
+            t: i as f64,
+            stage_y: i as f64 * 1e-9,
+            particle_y: 0.0,
+            particle_z: 0.0,
+            theta: 0.0,
+            zeta_y: 0.0,
+            zeta_z: z,
+            normal_ta: 0.0,
+            friction_ta: 0.0,
+            load_as: 0.0,
+            friction_as: 0.0,
+            phase: "stick",
+        };
+        let trace = |z: &[f64]| z.iter().enumerate().map(|(i, &z)| row(i, z)).collect::<Vec<_>>();
+        let slip = trace(&[0.0, 1.0, 2.0, 3.0, 2.5, 4.0, 2.0]);
+        assert_eq!(super::first_peak(&slip, 4.0).map(|r| r.t), Some(3.0));
+        let steady = trace(&[0.0, 1.0, 2.0, 1.95, 1.9, 1.9]);
+        assert_eq!(super::first_peak(&steady, 2.0), None);
+    }
+
     /// A prediction whose settled reading is 0.5 V at a gain of 5e8 V/m, with its peak 20 nm
     /// after the first touch and the contact search stopped 2 nm after it.
     fn fallback_prediction() -> PushPrediction {
