@@ -492,7 +492,7 @@ mod tests {
     /// The reduced campaign (each validated range's ends, every friction zero, the Eq 16
     /// bound): every case a plausible outcome or a refusal with its reason, and sound;
     /// docs/validation.md's outcome counts ("Whole pushes: the campaign"): 7 `ok`, 5 refused by
-    /// the plan with their reasons (the 0.01 N/m lever's deflection limit, the 500 N/m lever's stage, the
+    /// the plan with their reasons (the 0.01 N/m lever's deflection limit, the 500 N/m lever's dry run, the
     /// 75° tilt, the hand-set 1 mm/s, no friction), and the hand-set β = 89° `no_contact`.
     #[test]
     fn the_reduced_campaign_is_sound_with_7_ok_5_refused_1_no_contact() {
