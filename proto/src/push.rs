@@ -21,7 +21,8 @@ pub struct LegReport {
     /// Where it was asked to go (m).
     pub to: [f64; 2],
     /// `ok`, or the failure's code (`no_substrate`, `no_contact`, `particle_lost`,
-    /// `deflection_limit`, `no_separation`, `timeout`, `unphysical`, `stopped`).
+    /// `deflection_limit`, `no_separation`, `still_held`, `snapped_back`, `timeout`, `unphysical`,
+    /// `stopped`).
     pub outcome: String,
     /// The failure in words, if any.
     pub failure: Option<String>,

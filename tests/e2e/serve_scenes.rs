@@ -48,7 +48,8 @@ fn a_push_with_a_0_01_n_per_m_lever_fails_with_a_reason_and_the_server_lives() {
     push_and_still_answer(
         "soft-lever",
         &[("stiffness_n_per_m = 8.0", "stiffness_n_per_m = 0.01")],
-        // The plan refuses it before any push (its adhesion bends it past the readout's rail).
+        // The plan refuses it before any push (the lever bends past the readout before the
+        // particle shears loose).
         &[
             "refused",
             "deflection_limit",

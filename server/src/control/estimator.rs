@@ -37,6 +37,8 @@ pub struct PushPrediction {
     pub settled_deflection: f64,
     /// Friction phase at the end (`slip`, `roll`, `stick`).
     pub phase: &'static str,
+    /// Tip travel of the model push (m).
+    pub travel: f64,
     /// Particle displacement along the push while the tip stops, backs off and lifts (m).
     pub retract_shift: f64,
     /// Height the tip had to lift (after the back-off) before it let go of the particle (m);
@@ -47,7 +49,7 @@ pub struct PushPrediction {
 
 /// Samples of the model push the estimator reads its constants from, whatever the push's
 /// duration: a slow stage lengthens the push, never the trace (10 pm of travel per sample over
-/// the 40 nm the prediction runs).
+/// the 40 nm the prediction runs, 160 pm over the longest, 640 nm).
 pub const PREDICTION_SAMPLES: f64 = 4000.0;
 
 /// Integrator steps a prediction may take (push and retraction each): the default scene needs
@@ -182,11 +184,12 @@ pub fn predict(
         .map(lag)
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
     let travel_to_deflection = run.trace.iter().find(|r| r.zeta_z >= deflection).map(|r| r.stage_y);
-    let peak_row = run
+    let highest = run
         .trace
         .iter()
         .max_by(|a, b| a.zeta_z.total_cmp(&b.zeta_z))
         .expect("a push trace has rows");
+    let peak_row = first_peak(&run.trace, highest.zeta_z).unwrap_or(highest);
     let (peak, travel_to_peak) = (peak_row.zeta_z, peak_row.stage_y);
     let settled = tail.iter().map(|r| r.zeta_z).sum::<f64>() / tail.len() as f64;
     Ok(PushPrediction {
@@ -199,7 +202,54 @@ pub fn predict(
         travel_to_peak,
         settled_deflection: settled,
         phase: run.final_phase,
+        travel: duration * params.speed,
     })
+}
+
+/// The stick-phase peak of a model push: the running maximum of `ζ_z` where `ζ_z` first falls
+/// below it by a tenth of the push's highest `ζ_z` (the first slip, `t*`). A stick-slip push
+/// rises again, sometimes higher; the search and the `t*` detector meet the first peak. `None`
+/// when the push never drops that much.
+fn first_peak(
+    trace: &[crate::physics::pushing::trace::TraceRow],
+    highest: f64,
+) -> Option<&crate::physics::pushing::trace::TraceRow> {
+    let mut best = trace.first()?;
+    for r in trace {
+        if r.zeta_z > best.zeta_z {
+            best = r;
+        } else if best.zeta_z - r.zeta_z > 0.1 * highest {
+            return Some(best);
+        }
+    }
+    None
+}
+
+/// Tip travel of the first model push [`predict_past_separation`] runs (m).
+pub const PREDICTED_TRAVEL: f64 = 40e-9;
+
+/// Tip travel of its longest model push (m).
+pub const MAX_PREDICTED_TRAVEL: f64 = 640e-9;
+
+/// [`predict`] over a push long enough to pass the separation: 40 nm of travel (at least
+/// 20 ms), four times longer while the peak of `ζ_z` lies in the last quarter of the push, at
+/// most 640 nm. A soft lever bends tens of nm (its peak deflection, `F_shear / k_c`) before the
+/// particle shears loose; the settled constants are read from the push's second half, after
+/// the peak.
+pub fn predict_past_separation(
+    params: PushParams,
+    deflection: f64,
+    retract: RetractPlan,
+) -> Result<PushPrediction, SimulationError> {
+    let mut travel = PREDICTED_TRAVEL;
+    loop {
+        let duration = (travel / params.speed).max(0.02);
+        let p = predict(params, duration, deflection, retract)?;
+        if p.travel_to_peak <= 0.75 * p.travel || travel >= MAX_PREDICTED_TRAVEL {
+            return Ok(p);
+        }
+        travel *= 4.0;
+    }
 }
 
 /// Samples in the detector's moving mean.
@@ -406,6 +456,32 @@ mod tests {
         }
     }
 
+    /// The stick-phase peak is the first one a tenth of the highest below which `ζ_z` falls: a
+    /// stick-slip push that rises higher later keeps its first peak; a steady push that settles
+    /// less than that below its maximum has none (the maximum is taken).
+    #[test]
+    fn the_stick_phase_peak_is_the_first_slip_not_the_highest() {
+        let row = |i: usize, z: f64| crate::physics::pushing::trace::TraceRow {
+            t: i as f64,
+            stage_y: i as f64 * 1e-9,
+            particle_y: 0.0,
+            particle_z: 0.0,
+            theta: 0.0,
+            zeta_y: 0.0,
+            zeta_z: z,
+            normal_ta: 0.0,
+            friction_ta: 0.0,
+            load_as: 0.0,
+            friction_as: 0.0,
+            phase: "stick",
+        };
+        let trace = |z: &[f64]| z.iter().enumerate().map(|(i, &z)| row(i, z)).collect::<Vec<_>>();
+        let slip = trace(&[0.0, 1.0, 2.0, 3.0, 2.5, 4.0, 2.0]);
+        assert_eq!(super::first_peak(&slip, 4.0).map(|r| r.t), Some(3.0));
+        let steady = trace(&[0.0, 1.0, 2.0, 1.95, 1.9, 1.9]);
+        assert_eq!(super::first_peak(&steady, 2.0), None);
+    }
+
     /// A prediction whose settled reading is 0.5 V at a gain of 5e8 V/m, with its peak 20 nm
     /// after the first touch and the contact search stopped 2 nm after it.
     fn fallback_prediction() -> PushPrediction {
@@ -419,6 +495,7 @@ mod tests {
             phase: "roll",
             retract_shift: 0.0,
             release_lift: Some(0.0),
+            travel: 40e-9,
         }
     }
 

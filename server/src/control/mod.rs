@@ -16,6 +16,8 @@ pub use strategy::{Control, Failure, Phase, PushTask, Strategy, StrategyParams, 
 pub use strategy_run::{Prepared, PushRequest, RunError, RunRow, StrategyRun, push_once};
 
 #[cfg(test)]
+mod pull_off_tests;
+#[cfg(test)]
 mod tests;
 pub use locate_and_plan::{MoveError, MovePlan, MoveTarget, locate_near, plan_move};
 pub use whole_move::{DEFAULT_ATTEMPTS, MoveOptions, MoveRun, MoveRunError, PushedLeg, Verdict, move_particle};

@@ -3,7 +3,8 @@
 //! - travel at the start height to the point the push starts from;
 //! - A → B *auto-parking*: approach in z until the deflection detects the substrate (its height
 //!   is not known beforehand), then retract to the parking height that gives the contact angle
-//!   `β` on the particle;
+//!   `β` on the particle; a tip the substrate still holds there rises on until it lets go, then
+//!   comes back down ([`pull_off`]);
 //! - B → C *auto particle contact detection*: move in steps `Δ` at speed `V` until the reading
 //!   reaches `ζ_set`, then stop;
 //! - C → D *push* the requested distance at constant `V` under force control (Sec 3: the
@@ -11,17 +12,22 @@
 //! - D → E *retract* to the start height.
 //!
 //! Every phase has a time-out and every failure a typed reason; a failed run always ends with
-//! the tip retracted. The strategy sees only what the instrument measures ([`Reading`]: stage
+//! the tip retracted. A reading on the readout's rail is an emergency, except on the pull side
+//! while the tip moves up away from a contact, within the rise its pull-off needs
+//! ([`pull_off`] states the rule). The strategy sees only what the instrument measures ([`Reading`]: stage
 //! position, deflection in volts), never the simulator's state.
 
 mod outcome;
 mod params;
+pub mod pull_off;
 
 pub use outcome::{Failure, SearchStep, Summary};
 pub use params::{Control, PushTask, StrategyParams};
+pub use pull_off::pull_off_rise;
 
 use crate::control::estimator::Hxy;
 use crate::instrument::Reading;
+use pull_off::{Motion, Saturation};
 
 /// How far the tip backs off along the line of centres before it lifts (m).
 pub const BACK_OFF: f64 = 100e-9;
@@ -43,6 +49,12 @@ pub enum Phase {
     ToParkingHeight {
         /// Target stage z (m).
         z: f64,
+    },
+    /// B: the substrate still holds the tip at the parking height: rise until it lets go (the
+    /// reading back within the substrate threshold), then back down to the parking height.
+    LetGo {
+        /// The parking height's stage z (m).
+        park_z: f64,
     },
     /// B → C: steps `Δ` at `V` until the set point.
     ContactSearch {
@@ -82,6 +94,7 @@ impl Phase {
             Phase::Travel => "travel",
             Phase::Park => "park",
             Phase::ToParkingHeight { .. } => "to_parking_height",
+            Phase::LetGo { .. } => "let_go",
             Phase::ContactSearch { .. } => "contact_search",
             Phase::Push { .. } => "push",
             Phase::Hold { .. } => "hold",
@@ -112,6 +125,8 @@ pub struct Strategy {
     z_hold: (f64, u32),
     retract_z: f64,
     pause_left: Option<u32>,
+    /// The tip let go of the substrate above the parking height and is coming back down.
+    let_go: bool,
 }
 
 impl Strategy {
@@ -142,6 +157,7 @@ impl Strategy {
             z_hold: (0.0, 0),
             retract_z: first.stage[2],
             pause_left: None,
+            let_go: false,
         }
     }
 
@@ -174,6 +190,18 @@ impl Strategy {
     /// Whether the run is over.
     pub fn done(&self) -> bool {
         self.phase == Phase::Done
+    }
+
+    /// What the tip is doing, for a saturated reading ([`pull_off::judge`]).
+    fn motion(&self) -> Motion {
+        let zs = self.summary.substrate_z;
+        match self.phase {
+            Phase::Park => Motion::Detecting,
+            Phase::ToParkingHeight { z } if !self.let_go && zs.is_some_and(|zs| z > zs) => Motion::RisingOffSubstrate,
+            Phase::LetGo { .. } => Motion::RisingOffSubstrate,
+            Phase::BackOff { .. } | Phase::Retract => Motion::LeavingParticle,
+            _ => Motion::Other,
+        }
     }
 
     fn enter(&mut self, phase: Phase, t: f64) {
@@ -243,18 +271,32 @@ impl Strategy {
             );
         }
         // A saturated reading says nothing of the force but that it is beyond the readout's
-        // range, on either side (a soft lever pulled by adhesion saturates the other way):
-        // straight up, in every phase short of the retraction.
-        if r.volts.abs() >= p.full_scale && !matches!(self.phase, Phase::Retract | Phase::Done) {
+        // range: an emergency, but on the pull side while the tip rises off a contact
+        // (`pull_off`'s rule).
+        if r.volts.abs() >= p.full_scale && self.phase != Phase::Done {
             let phase = self.phase.name();
-            self.fail(
-                Failure::DeflectionLimit {
+            let rise = self.summary.substrate_z.map_or(0.0, |zs| r.stage[2] - zs);
+            let failure = match pull_off::judge(sig, self.motion(), rise, p.pull_off_rise) {
+                Saturation::RideOut => None,
+                Saturation::Emergency => Some(Failure::DeflectionLimit {
                     volts: r.volts,
                     limit: p.full_scale.copysign(r.volts),
                     phase,
-                },
-                r.t,
-            );
+                }),
+                Saturation::HeldTooLong => Some(Failure::StillHeld {
+                    rise_nm: rise * 1e9,
+                    bound_nm: p.pull_off_rise * 1e9,
+                    phase,
+                }),
+            };
+            match failure {
+                // Already going straight up: said, not restarted.
+                Some(f) if self.phase == Phase::Retract => {
+                    self.summary.failure.get_or_insert(f);
+                }
+                Some(f) => self.fail(f, r.t),
+                None => {}
+            }
         }
         if r.t - self.phase_start > p.timeout && !matches!(self.phase, Phase::Done) {
             let phase = self.phase.name();
@@ -303,14 +345,45 @@ impl Strategy {
             }
             Phase::ToParkingHeight { z } => {
                 if self.move_toward([self.target[0], self.target[1], z], p.approach_speed) {
-                    self.enter(
-                        Phase::ContactSearch {
-                            step: 1,
-                            in_step: 0.0,
-                            dwell: 0,
+                    let zs = self.summary.substrate_z.unwrap_or(z);
+                    let held = sig < -p.substrate_threshold;
+                    if held && self.let_go {
+                        self.fail(
+                            Failure::SnappedBack {
+                                height_nm: (z - zs) * 1e9,
+                            },
+                            r.t,
+                        );
+                    } else if held && z > zs {
+                        self.enter(Phase::LetGo { park_z: z }, r.t);
+                    } else {
+                        self.enter(
+                            Phase::ContactSearch {
+                                step: 1,
+                                in_step: 0.0,
+                                dwell: 0,
+                            },
+                            r.t,
+                        );
+                    }
+                }
+            }
+            Phase::LetGo { park_z } => {
+                let rise = r.stage[2] - self.summary.substrate_z.unwrap_or(park_z);
+                if sig >= -p.substrate_threshold {
+                    self.let_go = true;
+                    self.enter(Phase::ToParkingHeight { z: park_z }, r.t);
+                } else if rise > p.pull_off_rise {
+                    self.fail(
+                        Failure::StillHeld {
+                            rise_nm: rise * 1e9,
+                            bound_nm: p.pull_off_rise * 1e9,
+                            phase: "let_go",
                         },
                         r.t,
                     );
+                } else {
+                    self.target[2] += p.approach_speed * p.tick;
                 }
             }
             Phase::ContactSearch { step, in_step, dwell } => self.contact_search(r, sig, step, in_step, dwell),
@@ -336,6 +409,15 @@ impl Strategy {
                     p.approach_speed
                 };
                 if self.move_toward(goal, speed) {
+                    // Still pulled onto the rail at the start height: something holds the tip.
+                    if r.volts.abs() >= p.full_scale && sig < 0.0 && self.summary.failure.is_none() {
+                        let zs = self.summary.substrate_z.unwrap_or(goal[2]);
+                        self.summary.failure = Some(Failure::StillHeld {
+                            rise_nm: (r.stage[2] - zs) * 1e9,
+                            bound_nm: (goal[2] - zs) * 1e9,
+                            phase: "retract",
+                        });
+                    }
                     self.enter(Phase::Done, r.t);
                 }
             }

@@ -1,7 +1,7 @@
 //! Runs the strategy against the simulated instrument tick by tick, recording a trace: what
 //! `nanopush push` does, and what the server's loop will do one tick at a time.
 
-use crate::control::estimator::{Hxy, PushPrediction, RetractPlan, predict};
+use crate::control::estimator::{Hxy, PushPrediction, RetractPlan, predict_past_separation};
 use crate::control::legs::{Leg, travel_on_stage};
 use crate::control::locate_and_plan::DONE_WITHIN;
 use crate::control::strategy::{BACK_OFF, Control, HOLD, PushTask, Strategy, StrategyParams, Summary};
@@ -205,6 +205,7 @@ impl Scene {
                 ControlFile::Xyz => Control::Xyz,
             },
             z_gain: st.z_gain_nm_per_v * 1e-9,
+            pull_off_rise: crate::control::strategy::pull_off_rise(&self.tip_sample()),
         }
     }
 }
@@ -290,8 +291,6 @@ impl Prepared {
         model.interactions.r_a = radius;
         let sensor = scene.sensor();
         let set_deflection = sensor.deflection(params.set_point);
-        // Long enough to pass the separation and settle: 40 nm of travel, at least 20 ms.
-        let duration = (40e-9 / params.speed).max(0.02);
         // The strategy lifts from the parking height (after the back-off) to the start height.
         let parking = model.r_a - model.r_t + (model.r_a + model.r_t) * model.beta.sin();
         let retract = RetractPlan {
@@ -300,7 +299,8 @@ impl Prepared {
             speed: params.approach_speed,
             lift: (params.start_height - parking - BACK_OFF * model.beta.sin()).max(0.0),
         };
-        let prediction = predict(model, duration, set_deflection, retract)?;
+        // Long enough to pass the separation and settle (as the plan's).
+        let prediction = predict_past_separation(model, set_deflection, retract)?;
         // The drop at t* that the model predicts, in volts; a third of it (at least 4σ of the
         // noise) tells the peak from noise and from the stage's ringing.
         let drop = (prediction.peak_deflection - prediction.settled_deflection) * sensor.gain.abs();

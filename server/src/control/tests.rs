@@ -481,12 +481,12 @@ fn a_soft_lever_trips_the_deflection_limit_and_leaves_the_particle_0_12_um_from_
     }
 }
 
-fn reading(t: f64, volts: f64, stage: [f64; 3]) -> crate::instrument::Reading {
+pub(super) fn reading(t: f64, volts: f64, stage: [f64; 3]) -> crate::instrument::Reading {
     crate::instrument::Reading { t, volts, stage }
 }
 
 /// A strategy for the gold-latex scene's particle, fed readings by hand.
-fn bare_strategy() -> (Strategy, [f64; 3]) {
+pub(super) fn bare_strategy() -> (Strategy, [f64; 3]) {
     let s = scene(&[]);
     let p = s.pushed_particle();
     let params = s.strategy_params(1e-3);
@@ -507,7 +507,8 @@ fn bare_strategy() -> (Strategy, [f64; 3]) {
 #[test]
 fn a_reading_on_either_rail_trips_the_deflection_limit() {
     // The safety limit is on the push's side (−4 V); a lever pulled by adhesion saturates the
-    // other rail, +10 V: that trips too, in any phase before the retraction.
+    // other rail, +10 V: that trips too while the tip is not rising off a contact (here in
+    // travel; `pull_off_tests` has the phases that ride it out).
     for (volts, expected) in [(10.0, 10.0), (-10.0, -4.0)] {
         let (mut st, start) = bare_strategy();
         st.tick(&reading(1e-3, -0.2, start));

@@ -116,6 +116,22 @@ impl TipSample {
             - self.jkr.pull_off_load()
     }
 
+    /// How far the piezo must rise above a contact before the tip surely hangs free (m):
+    /// `F_ad / k_c + L_t + δ_b + a₀`. While the contact or the meniscus holds the tip, the lever
+    /// bends toward the sample by at most the adhesion over its stiffness ([`Self::adhesion`]
+    /// bounds the attraction: every term is strongest at contact), and the meniscus ruptures
+    /// at the gap `L_t + δ_b` (above `a₀`); past both the tip is on the free branch, which is
+    /// the approach's.
+    pub fn release_distance(&self) -> f64 {
+        let rupture = self
+            .long_range
+            .capillary
+            .as_ref()
+            .filter(|c| c.possible())
+            .map_or(0.0, |c| c.rupture_gap);
+        self.adhesion().max(0.0) / self.k_c + rupture + self.a0
+    }
+
     /// Moves the tip's piezo to distance `d` (m) from where `track` left it and returns the
     /// equilibrium reached: the tip follows its equilibrium quasi-statically and jumps at a
     /// fold (snap-in, pull-off), re-settling until the contact state agrees with the gap.
@@ -487,6 +503,47 @@ mod tests {
         };
         let extra = jkr.adhesion() - hertz.adhesion();
         assert!((extra - 14.137e-9).abs() < 0.001e-9, "{extra:e}");
+    }
+
+    /// The release distance bounds the rise a retraction needs before the tip hangs free (no
+    /// contact, no meniscus), and is not loose: for soft to stiff levers, wet or dry, with and
+    /// without JKR adhesion, the tip is free at or before `F_ad/k_c + L_t + δ_b + a₀`, and not
+    /// before half of it.
+    #[test]
+    fn the_tip_hangs_free_within_its_release_distance() {
+        for k_c in [0.1, 1.0, 8.0, 40.0] {
+            for wet in [false, true] {
+                for w in [0.0, 0.1] {
+                    let base = si_tip(wet);
+                    let t = TipSample {
+                        k_c,
+                        jkr: Jkr::new(30e-9, contact_modulus(70e9, 0.3, 169e9, 0.27), w),
+                        ..base
+                    };
+                    let bound = t.release_distance();
+                    let mut track = TipTrack::far(20e-9);
+                    t.track(&mut track, 20e-9);
+                    t.track(&mut track, -1e-9);
+                    assert!(track.in_contact());
+                    let step = 0.05e-9;
+                    let mut d = -1e-9;
+                    while track.in_contact() || track.state.meniscus == Meniscus::Formed {
+                        d += step;
+                        t.track(&mut track, d);
+                        assert!(
+                            d < 2.0 * bound + 10e-9,
+                            "k_c {k_c} wet {wet} w {w}: still held at {d:e}"
+                        );
+                    }
+                    assert!(
+                        d <= bound + step && d >= 0.5 * bound,
+                        "k_c {k_c} wet {wet} w {w}: free at {:.2} nm, bound {:.2} nm",
+                        d * 1e9,
+                        bound * 1e9
+                    );
+                }
+            }
+        }
     }
 
     /// The tip's track says whether it touches: not far away, yes pressed into the surface, and

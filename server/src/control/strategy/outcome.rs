@@ -40,6 +40,30 @@ pub enum Failure {
         /// Push travel (µm).
         travel_um: f64,
     },
+    /// The tip was still held (the reading saturated, or beyond the substrate threshold, on the
+    /// pull side) after rising further than its pull-off needs (see
+    /// [`super::pull_off`]): lifted straight up.
+    #[error(
+        "the tip was still held {rise_nm:.1} nm above the detected substrate in phase {phase}, past the {bound_nm:.1} nm allowed for its pull-off: the reading stayed on the pull side"
+    )]
+    StillHeld {
+        /// Rise above the detected substrate (nm).
+        rise_nm: f64,
+        /// The rise allowed (nm): `1.5 (F_ad/k_c + L_t + δ_b + a₀) + 10 nm` from the substrate,
+        /// the start height in the retraction.
+        bound_nm: f64,
+        /// Phase it happened in.
+        phase: &'static str,
+    },
+    /// The tip let go of the substrate above the parking height, and snapped back onto it coming
+    /// down to the parking height.
+    #[error(
+        "the tip snapped back onto the substrate coming down to the parking height, {height_nm:.1} nm above where the approach detected it"
+    )]
+    SnappedBack {
+        /// The parking height's rise above the detected substrate (nm).
+        height_nm: f64,
+    },
     /// The operator (or a shutdown) stopped the run.
     #[error("stopped: {reason}")]
     Stopped {
@@ -78,6 +102,8 @@ impl Failure {
             Failure::ParticleLost { .. } => "particle_lost",
             Failure::DeflectionLimit { .. } => "deflection_limit",
             Failure::NoSeparation { .. } => "no_separation",
+            Failure::StillHeld { .. } => "still_held",
+            Failure::SnappedBack { .. } => "snapped_back",
             Failure::Stopped { .. } => "stopped",
             Failure::Timeout { .. } => "timeout",
             Failure::Unphysical { .. } => "unphysical",

@@ -52,6 +52,10 @@ pub struct StrategyParams {
     pub control: Control,
     /// z-loop gain (m of height per V of error, per tick).
     pub z_gain: f64,
+    /// The rise above the detected substrate within which a reading saturated on the pull side
+    /// is ridden out, and by which the tip must have let go of the substrate (m):
+    /// [`super::pull_off::pull_off_rise`].
+    pub pull_off_rise: f64,
 }
 
 impl StrategyParams {

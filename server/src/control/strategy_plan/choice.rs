@@ -10,7 +10,8 @@ use crate::scene::file::StrategyFile;
 #[derive(Debug, Clone, PartialEq)]
 pub struct Choice {
     /// `section.field` of the scene file (`strategy.set_point_v`), or `local_scan.*` for the
-    /// local scan, which the scene does not set.
+    /// local scan and `pull_off.*` for the rise that lets go of the substrate, which the scene
+    /// does not set.
     pub key: &'static str,
     /// The value, in the unit the key names.
     pub value: f64,

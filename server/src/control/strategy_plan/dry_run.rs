@@ -83,6 +83,8 @@ pub fn field_for(why: &str) -> String {
         "particle_lost" => "friction.tip_particle_static (higher) or sensor.noise_rms_mv (lower)",
         "no_contact" => "sensor.gain_v_per_nm (larger |gain|) or friction.particle_substrate_static",
         "no_separation" => "cantilever.stiffness_n_per_m (stiffer) or friction.particle_substrate_static (lower)",
+        "still_held" => "cantilever.stiffness_n_per_m (stiffer) or environment.relative_humidity (drier)",
+        "snapped_back" => "push.contact_angle_deg (a higher parking height) or cantilever.stiffness_n_per_m (stiffer)",
         "missed" => "stage.resonance_hz (a stiffer stage) or a looser --tolerance-nm",
         "not_found" => "scan.noise_rms_nm or substrate.roughness_rms_nm (lower)",
         "timeout" => "push.speed_um_per_s (faster) or strategy.phase_timeout_s",

@@ -31,9 +31,16 @@
 //!   a fixed height: `|tilt| · √2 · range`) and four RMS of roughness, and above the parking
 //!   height plus 1.25 × the lift the model needs to let go, plus 0.2 µm; at most 50 µm.
 //! - **adhesion**: the pull-off from the substrate after auto-parking bends the lever the
-//!   other way by the tip's adhesion over `k_c`; that reading must stay within 90 % of the rail.
-//! - **stage**: stiff against the push, `m (2π f_y)² ≥ 20 max(k_y, k_z)` (the paper's: 86 times), and settled within
-//!   0.1 s of a step, `Q/(π f_y) ≤ 0.1 s` (the paper's stage: 25 ms).
+//!   other way by up to the tip's adhesion over `k_c`, and may saturate the readout on that
+//!   side: the strategy rides that out while it rises, until the tip lets go, within
+//!   `1.5 (F_ad/k_c + L_t + δ_b + a₀) + 10 nm` of the detected substrate
+//!   ([`crate::control::strategy::pull_off`]); that rise must be at most the 50 µm the
+//!   strategy may lift.
+//! - **stage**: settled within 0.1 s of a step, `Q/(π f_y) ≤ 0.1 s` (the paper's stage:
+//!   25 ms). A stage softer than `20 max(k_y, k_z)` (the paper's is 86 times stiffer than its
+//!   lever) is warned about, not refused: it yields under the push, but the pushing model
+//!   (Eq 13, the load through the stage's stiffness) predicts that yield, and the dry run judges
+//!   the result.
 //! - **longest push**: the substrate's slope moves the contact angle by at most 5° a push,
 //!   `|slope| · L ≤ 0.087 (Rₐ + Rₜ) cos β`, within [0.2, 20] µm; longer moves are split and
 //!   each leg re-parks.
@@ -59,8 +66,9 @@ mod tests;
 
 pub use choice::{Choice, Refusal, StrategyPlan, short};
 
-use crate::control::estimator::{PushPrediction, RetractPlan, predict};
+use crate::control::estimator::{PushPrediction, RetractPlan, predict_past_separation};
 use crate::control::locate_and_plan::{LOCAL_PIXELS, local_scan_size};
+use crate::control::strategy::pull_off::{PULL_OFF_MARGIN, PULL_OFF_SLACK, pull_off_rise};
 use crate::control::strategy::{BACK_OFF, HOLD};
 use crate::scene::Scene;
 use crate::scene::file::{ParticleFile, StrategyFile};
@@ -74,7 +82,7 @@ pub const SET_FRACTION: f64 = 0.6;
 /// Contact angles tried, in order (degrees): the paper's 30° first.
 pub const BETAS_DEG: [f64; 8] = [30.0, 45.0, 20.0, 60.0, 15.0, 70.0, 10.0, 80.0];
 
-/// The stage's stiffness against the push, at least this many times the lever's.
+/// Below this many times the lever's stiffness the stage's yield under the push is warned about.
 pub const STAGE_STIFFNESS_RATIO: f64 = 20.0;
 
 /// The stage's ringing must die within this (s): the paper's stage (250 Hz, Q = 20) takes 25 ms.
@@ -88,9 +96,6 @@ pub const MAX_DRY_RUN: f64 = 60.0;
 
 /// Highest start height the scene allows (m), `strategy.start_height_um`'s upper bound.
 const MAX_START: f64 = 50e-6;
-
-/// Travel of the model push the plan reads its constants from (m), as the estimator's.
-const PREDICTED_TRAVEL: f64 = 40e-9;
 
 /// The paper's stage speed (m/s), the plan's upper bound.
 const PAPER_SPEED: f64 = 1e-6;
@@ -295,30 +300,7 @@ impl<'a> Derivation<'a> {
             }));
         }
 
-        // The tip's pull-off from the substrate, rising to the parking height, bends the lever
-        // the other way by the adhesion over k_c: the reading must stay off the other rail.
-        let adhesion = self.scene.tip_sample().adhesion();
-        let k_c = f.cantilever.stiffness_n_per_m;
-        let pull_v = adhesion / k_c * ro.gain;
-        let other_room = f.sensor.full_scale_v + ro.sign * ro.baseline;
-        if pull_v.is_finite() && pull_v > 0.9 * other_room {
-            return Err(self.refuse(Fails {
-                code: "adhesion",
-                reason: format!(
-                    "the tip's adhesion to the substrate, {:.2} nN, bends the {} N/m lever {:.1} nm as it pulls off after auto-parking: {:.1} V, past the readout's rail ({:.2} V from the baseline on that side)",
-                    adhesion * 1e9,
-                    short(k_c),
-                    adhesion / k_c * 1e9,
-                    pull_v,
-                    other_room
-                ),
-                field: format!(
-                    "cantilever.stiffness_n_per_m: k_c ≥ {} N/m, or |sensor.gain_v_per_nm| ≤ {} V/nm, or a drier environment.relative_humidity",
-                    short(k_c * pull_v / (0.9 * other_room)),
-                    short(ro.gain * 1e-9 * 0.9 * other_room / pull_v)
-                ),
-            }));
-        }
+        self.check_pull_off()?;
         self.check_stage()?;
         let approach_speed = f.strategy.approach_speed_um_per_s * 1e-6;
         let v0 = if self.hand("push.speed_um_per_s") {
@@ -694,6 +676,7 @@ impl<'a> Derivation<'a> {
         );
         let longest = (max_push / v)
             .max(2.0 * start / approach_speed)
+            .max(pull_off_rise(&self.scene.tip_sample()) / approach_speed)
             .max(search / v + search / step * f.strategy.dwell_ms * 1e-3);
         let timeout = (3.0 * longest).clamp(120.0, MAX_TIMEOUT).ceil();
         if longest > MAX_TIMEOUT {
@@ -724,10 +707,69 @@ impl<'a> Derivation<'a> {
         })
     }
 
-    /// The stage must hold its position against the push and settle between the steps: its
-    /// stiffness `m (2π f_y)²` at least [`STAGE_STIFFNESS_RATIO`] times the lever's, and its
-    /// ringing `Q/(π f_y)` dying within [`STAGE_SETTLE`].
-    fn check_stage(&self) -> Result<(), Refusal> {
+    /// The tip's pull-off from the substrate after auto-parking: the lever bends the other way
+    /// by up to the adhesion over `k_c` as the stage rises, and the strategy rides out a reading
+    /// saturated on that side up to [`pull_off_rise`] above the detected substrate. That rise
+    /// must be at most what the strategy may lift, [`MAX_START`].
+    fn check_pull_off(&mut self) -> Result<(), Refusal> {
+        let ts = self.scene.tip_sample();
+        let f = &self.scene.file;
+        let ro = self.readout;
+        let adhesion = ts.adhesion();
+        let k_c = ts.k_c;
+        let bend = adhesion.max(0.0) / k_c;
+        let rise = pull_off_rise(&ts);
+        let other_room = f.sensor.full_scale_v + ro.sign * ro.baseline;
+        let pull_v = bend * ro.gain;
+        if !(rise.is_finite() && rise <= MAX_START) {
+            // 1.5 (F/k + r) + slack ≤ MAX: F/k ≤ (MAX − slack)/1.5 − r.
+            let rest = ts.release_distance() - bend;
+            let room = (MAX_START - PULL_OFF_SLACK) / PULL_OFF_MARGIN - rest;
+            return Err(self.refuse(Fails {
+                code: "adhesion",
+                reason: format!(
+                    "the tip's adhesion to the substrate, {:.2} nN, holds it until the {} N/m lever has bent {:.2} µm: letting go after auto-parking needs a rise of up to {:.1} µm (1.5 (F_ad/k_c + L_t + δ_b + a₀) + 10 nm), more than the {} µm the strategy may lift",
+                    adhesion * 1e9,
+                    short(k_c),
+                    bend * 1e6,
+                    rise * 1e6,
+                    MAX_START * 1e6
+                ),
+                field: format!(
+                    "cantilever.stiffness_n_per_m: k_c ≥ {} N/m, or a drier environment.relative_humidity",
+                    short(adhesion / room.max(1e-12))
+                ),
+            }));
+        }
+        let saturates = if pull_v >= other_room {
+            format!(
+                "the pull-off reads up to {:.1} V, past the {:.2} V of room on that side: the saturated reading is ridden out meanwhile",
+                pull_v, other_room
+            )
+        } else {
+            format!(
+                "the pull-off reads up to {:.2} V, within the {:.2} V of room on that side",
+                pull_v, other_room
+            )
+        };
+        self.choices.push(Choice {
+            key: "pull_off.rise_um",
+            value: rise * 1e6,
+            hand_set: false,
+            why: format!(
+                "the rise above the detected substrate by which the tip must have let go of it after auto-parking: 1.5 × (the adhesion {:.2} nN over k_c, {:.1} nm, plus the meniscus's rupture gap and a₀) + 10 nm; {saturates}",
+                adhesion * 1e9,
+                bend * 1e9
+            ),
+        });
+        Ok(())
+    }
+
+    /// The stage must settle between the steps: its ringing `Q/(π f_y)` dying within
+    /// [`STAGE_SETTLE`]. A stiffness `m (2π f_y)²` under [`STAGE_STIFFNESS_RATIO`] times the
+    /// lever's is a warning: the model's Eq 13 carries the push's load through the stage's
+    /// stiffness, so the prediction and the dry run see the yield.
+    fn check_stage(&mut self) -> Result<(), Refusal> {
         let f = &self.scene.file;
         let st = &f.stage;
         if f.physics.stage == crate::scene::file::DofFile::Off {
@@ -740,16 +782,13 @@ impl<'a> Derivation<'a> {
         let k_lever = c.k_y().max(c.k_z());
         if k_stage < STAGE_STIFFNESS_RATIO * k_lever {
             let need = (STAGE_STIFFNESS_RATIO * k_lever / m).sqrt() / (2.0 * std::f64::consts::PI);
-            return Err(self.refuse(Fails {
-                code: "stage",
-                reason: format!(
-                    "the stage's stiffness m (2π f_y)² = {} N/m is less than {} times the lever's stiffer direction (max(k_y, k_z) = {} N/m, the lateral k_y from the lever's shape): under the push it yields as much as the lever does, so the tip's position is not the stage's",
-                    short(k_stage),
-                    STAGE_STIFFNESS_RATIO,
-                    short(k_lever)
-                ),
-                field: format!("stage.resonance_hz: f_y ≥ {} Hz for this moving mass", short(need)),
-            }));
+            self.warnings.push(format!(
+                "the stage's stiffness m (2π f_y)² = {} N/m is less than {} times the lever's stiffer direction (max(k_y, k_z) = {} N/m, the lateral k_y from the lever's shape): it yields under the push, which the model predicts and the dry run checks; stage.resonance_hz ≥ {} Hz would make it negligible",
+                short(k_stage),
+                STAGE_STIFFNESS_RATIO,
+                short(k_lever),
+                short(need)
+            ));
         }
         let settle = st.quality_factor / (std::f64::consts::PI * st.resonance_hz);
         if settle > STAGE_SETTLE {
@@ -846,7 +885,6 @@ impl<'a> Derivation<'a> {
         let mut params = self.scene.push_params_for(self.part);
         params.beta = beta;
         params.speed = v;
-        let duration = (PREDICTED_TRAVEL / v).max(0.02);
         let retract = RetractPlan {
             hold: HOLD,
             back_off: BACK_OFF,
@@ -854,7 +892,7 @@ impl<'a> Derivation<'a> {
             lift: MAX_START - parking,
         };
         // No set point yet: the travel to it is read once the peak is known.
-        let prediction = predict(params, duration, f64::INFINITY, retract).map_err(|e| Fails {
+        let prediction = predict_past_separation(params, f64::INFINITY, retract).map_err(|e| Fails {
             code: "model",
             reason: format!("the model's push at β = {:.0}° failed: {e}", beta.to_degrees()),
             field: crate::physics::pushing::MODEL_REFUSAL_FIELD.into(),
@@ -862,7 +900,7 @@ impl<'a> Derivation<'a> {
         let set = SET_FRACTION * prediction.peak_deflection;
         // The travel to the set point, from the same (deterministic) model push.
         let prediction = if prediction.peak_deflection > 0.0 {
-            predict(params, duration, set, retract).map_err(|e| Fails {
+            predict_past_separation(params, set, retract).map_err(|e| Fails {
                 code: "model",
                 reason: format!("the model's push at β = {:.0}° failed: {e}", beta.to_degrees()),
                 field: crate::physics::pushing::MODEL_REFUSAL_FIELD.into(),
@@ -905,36 +943,45 @@ impl<'a> Derivation<'a> {
                 field: "push.contact_angle_deg (steeper) or cantilever.tilt_deg".into(),
             });
         }
-        if p.travel_to_peak > 0.75 * PREDICTED_TRAVEL {
-            return Err(Fails {
-                code: "no_separation",
-                reason: format!(
-                    "at β = {}° the particle does not shear loose within {:.0} nm of push (ζ_z still rising at {:.2} nm, {:.2} nN on the lever)",
-                    c.beta_deg,
-                    0.75 * PREDICTED_TRAVEL * 1e9,
-                    p.peak_deflection * 1e9,
-                    p.peak_deflection * k * 1e9
-                ),
-                field: "cantilever.stiffness_n_per_m (stiffer) or friction.particle_substrate_static (lower)".into(),
-            });
-        }
+        // The deflection limit first: a lever that reaches it before the model's push ends
+        // cannot push, whether or not the particle would shear loose later.
+        let separates = p.travel_to_peak <= 0.75 * p.travel;
         let peak_v = p.peak_deflection * ro.gain;
         if PEAK_SPARE * peak_v > 0.9 * ro.room {
             let need_k = k * PEAK_SPARE * peak_v / (0.9 * ro.room);
             return Err(Fails {
                 code: "deflection_limit",
                 reason: format!(
-                    "at β = {}° the lever's deflection limit is reached before the particle shears: the stick-phase peak {:.2} nm reads {:.2} V, and twice that is beyond 90 % of the readout's {:.2} V",
+                    "at β = {}° the lever's deflection limit is reached before the particle shears: the stick-phase peak {}{:.2} nm reads {:.2} V, and twice that is beyond 90 % of the readout's {:.2} V",
                     c.beta_deg,
+                    if separates {
+                        ""
+                    } else {
+                        "(still rising at the end of the model's push) "
+                    },
                     p.peak_deflection * 1e9,
                     peak_v,
                     ro.room
                 ),
                 field: format!(
-                    "cantilever.stiffness_n_per_m: k_c ≥ {} N/m needed, or |sensor.gain_v_per_nm| ≤ {} V/nm",
+                    "cantilever.stiffness_n_per_m: k_c {} {} N/m needed, or |sensor.gain_v_per_nm| ≤ {} V/nm",
+                    if separates { "≥" } else { ">" },
                     short(need_k),
                     short(gain_nm * 0.9 * ro.room / (PEAK_SPARE * peak_v))
                 ),
+            });
+        }
+        if !separates {
+            return Err(Fails {
+                code: "no_separation",
+                reason: format!(
+                    "at β = {}° the particle does not shear loose within {:.0} nm of push (ζ_z still rising at {:.2} nm, {:.2} nN on the lever)",
+                    c.beta_deg,
+                    0.75 * p.travel * 1e9,
+                    p.peak_deflection * 1e9,
+                    p.peak_deflection * k * 1e9
+                ),
+                field: "cantilever.stiffness_n_per_m (stiffer) or friction.particle_substrate_static (lower)".into(),
             });
         }
         let floor = ro.sigma + ro.pert;
