@@ -192,7 +192,8 @@ const CORRIDOR_ROUNDS: usize = 3;
 /// enough that a particle cut by a square's edge, whose centre a cut image misplaces, is found
 /// whole by the next one. A find is a particle only when it stands twice the localization
 /// threshold high, as the scene validator requires of every particle (a roughness bump is
-/// not). The pushed particle, found where it lies (within `Rₐ` of `from`), is not an obstacle.
+/// not). The pushed particle, found where it lies (within `Rₐ` of `from`, or two pixels when
+/// it is smaller), is not an obstacle.
 fn corridor_obstacles(
     surface: &Surface,
     tip: Tip,
@@ -223,7 +224,9 @@ fn corridor_obstacles(
             };
             for l in find_particles(&scan(surface, tip, params), &tip) {
                 let inside = (l.x - c.0).abs() <= inner && (l.y - c.1).abs() <= inner;
-                let own = (l.x - from.0).hypot(l.y - from.1) < planner.radius;
+                // Within its radius, or two pixels for a particle smaller than they are (a 7 nm
+                // particle is found 10 nm from where the local scan put it).
+                let own = (l.x - from.0).hypot(l.y - from.1) < planner.radius.max(2.0 * side / CORRIDOR_PIXELS as f64);
                 if inside && !own && l.height >= least_height {
                     found.push(Obstacle {
                         x: l.x,

@@ -9,7 +9,9 @@
 //! `σ`, periodic perturbation `p`, full scale) and the stage (`f_y`):
 //!
 //! - **β**: the first of 30°, 45°, 20°, 60°, 15°, 70°, 10°, 80° whose parking height
-//!   `h = Rₐ − Rₜ + (Rₐ + Rₜ) sin β` keeps the apex above the substrate and whose predicted push
+//!   `h = Rₐ − Rₜ + (Rₐ + Rₜ) sin β` keeps the apex above the substrate, lies above the height
+//!   where the tip snaps in to it (auto-parking detects the substrate there, and the tip rises
+//!   from it to `h`: a 50 nm particle at 99 % humidity has none), and whose predicted push
 //!   passes every check below (the paper's 30° first).
 //! - **set point** `ζ_set = 0.6 ζ_peak`: reached before the particle moves; its reading must be
 //!   at least `10 (σ + p)` from the baseline.
@@ -833,6 +835,11 @@ impl<'a> Derivation<'a> {
         }
         let mut first_failure: Option<Fails> = None;
         let mut tried = Vec::new();
+        // Auto-parking detects the substrate where the tip snaps in (the meniscus, the
+        // attraction), this high above it; the tip rises from there to the parking height, and
+        // a parking height below it would drive the tip down into the meniscus while the
+        // substrate still holds it (the review of issue 24).
+        let snap_in = crate::control::strategy_run::detection_offset(self.scene, &self.scene.strategy_params(1e-3));
         for &beta_deg in &betas {
             let beta = beta_deg.to_radians();
             let parking = r_a - r_t + (r_a + r_t) * beta.sin();
@@ -844,6 +851,18 @@ impl<'a> Derivation<'a> {
                         parking * 1e9
                     ),
                     field: "tip.radius_nm (a sharper tip) or push.contact_angle_deg (steeper)".into(),
+                })
+            } else if parking <= snap_in {
+                Err(Fails {
+                    code: "geometry",
+                    reason: format!(
+                        "at β = {beta_deg}° the parking height {:.2} nm is not above the {:.2} nm where the tip snaps in to the substrate: the tip would park in the meniscus, held",
+                        parking * 1e9,
+                        snap_in * 1e9
+                    ),
+                    field:
+                        "environment.relative_humidity (drier: a shorter meniscus) or push.contact_angle_deg (steeper)"
+                            .into(),
                 })
             } else {
                 self.predict_at(beta, parking, v, approach_speed)

@@ -290,3 +290,24 @@ fn the_start_height_clears_the_particles_wherever_the_tilted_substrate_rises() {
         .why;
     assert!(why.contains("the substrate's rise over the stage's diagonal"), "{why}");
 }
+
+/// The review of issue 24: a 50 nm particle at 99 % humidity. The meniscus snaps the tip in
+/// about 100 nm above the substrate, where auto-parking detects it, and every contact angle's
+/// parking height lies below that: the rise to it was negative, the tip was driven down into the
+/// meniscus and searched while held. The plan refuses, naming the humidity.
+#[test]
+fn a_parking_height_below_the_snap_in_is_refused_naming_the_humidity() {
+    let s = untuned(
+        "paper-default",
+        &[
+            ("stiffness_n_per_m = 8.0", "stiffness_n_per_m = 1.0"),
+            ("relative_humidity = 0.73", "relative_humidity = 0.99"),
+            ("gain_v_per_nm = -0.8", "gain_v_per_nm = -0.2"),
+            ("radius_nm = 1000.0", "radius_nm = 50.0"),
+        ],
+    );
+    let e = derive(&s, 1, DEFAULT_TOLERANCE).unwrap_err();
+    assert_eq!(e.code, "geometry", "{e}");
+    assert!(e.reason.contains("where the tip snaps in to the substrate"), "{e}");
+    assert!(e.field.contains("environment.relative_humidity"), "{e}");
+}
