@@ -179,7 +179,7 @@ pub fn validate(origin: &str, s: &SceneFile, hand_set: &HandSet) -> Result<(), S
             origin: origin.into(),
             field: "particles".into(),
             message: format!(
-                "{} particles; allowed: at most {MAX_PARTICLES} (every scan images each particle at every pixel: 60 000 took over a minute a push)",
+                "{} particles; allowed: at most {MAX_PARTICLES} (every scan images each particle at every pixel: 4705 took 11.5 s a push)",
                 s.particles.len()
             ),
         });
@@ -401,7 +401,7 @@ pub const MAX_PARTICLES: usize = 2000;
 /// The first pair of particles that clash, in file order: the smallest `i` with an earlier `j`
 /// of the same id or overlapping it (centres closer than the radii's sum), the smallest such
 /// `j`, and whether it is the id (checked before the overlap, for each `j`). In O(n log n) for
-/// scattered particles (a sweep along x), where every pair took minutes for 60 000.
+/// scattered particles (a sweep along x), where comparing every pair made 1.8·10⁹ comparisons for 60 000.
 pub(crate) fn first_clash(ps: &[crate::scene::file::ParticleFile]) -> Option<(usize, usize, bool)> {
     let mut best: Option<(usize, usize, bool)> = None;
     let mut keep = |i: usize, j: usize, same_id: bool| {

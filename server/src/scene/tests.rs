@@ -436,7 +436,7 @@ fn particle_toml(id: u32, x_um: f64, y_um: f64, radius_nm: f64) -> String {
     )
 }
 
-/// Issue 24.4: a 10 MB scene of 60 000 particles took 70-86 s and 173 MB for one push (every
+/// Issue 24.4: the issue's 10 MB scene took 70-86 s and 173 MB for one push (every
 /// scan images every particle, and the clash check compared every pair). A scene holds at most
 /// 2000 particles (a push of 2000 takes 5 s: docs/manipulation.md), and its file at most 4 MiB.
 #[test]
@@ -460,7 +460,7 @@ fn a_scene_holds_at_most_2000_particles_and_its_file_at_most_4_mib() {
     let e = Scene::parse("over.toml", &grid(2000)).unwrap_err().to_string();
     assert_eq!(
         e,
-        "scene over.toml: particles: 2001 particles; allowed: at most 2000 (every scan images each particle at every pixel: 60 000 took over a minute a push)"
+        "scene over.toml: particles: 2001 particles; allowed: at most 2000 (every scan images each particle at every pixel: 4705 took 11.5 s a push)"
     );
     let dir = std::env::temp_dir().join(format!("nanopush-big-scene-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();

@@ -21,7 +21,7 @@ use nanopush_proto::ws::{Judged, ServerMessage};
 use crate::control::{DEFAULT_ATTEMPTS, MoveError, MovePlan, MoveTarget, Verdict, plan_move};
 use crate::scene::Scene;
 use crate::serve::app_state::AppState;
-use crate::serve::push_job::{Move, Pending, launch, strategy_scene};
+use crate::serve::push_job::{Move, Pending, audit_early_end, launch, strategy_scene};
 use crate::serve::records::{self, Recorded};
 use crate::serve::telemetry::audit_run_done;
 
@@ -178,18 +178,7 @@ pub(crate) fn already_there(st: &AppState, mv: Move, plan: &MovePlan) {
         Verdict::Ok { error } => ("ok", format!("already {} from the target: nothing to push", nm(error))),
         _ => ("missed", missed_words(id, judged.error_m, mv.tolerance, 0, true)),
     };
-    let person = st.auth.name_of(mv.by).unwrap_or_else(|| format!("client {}", mv.by));
-    let mut args = serde_json::Map::new();
-    args.insert("particle".into(), id.into());
-    st.audit.event(crate::serve::audit::Happened {
-        person: &person,
-        address: None,
-        client: Some(mv.by),
-        command: "run_done",
-        args,
-        outcome,
-        message: Some(&why),
-    });
+    audit_early_end(st, mv.by, id, outcome, Some(&why));
     st.push_ended(false);
     st.shared.busy.store(false, Relaxed);
     st.broadcast_event(&ServerMessage::RunDone {

@@ -80,7 +80,8 @@ pub(crate) fn run_done_failed(st: &AppState, by: u32, particle: u32, outcome: &s
     });
 }
 
-fn audit_early_end(st: &AppState, by: u32, particle: u32, outcome: &str, failure: Option<&str>) {
+/// A move that ended before the loop ran it, in the audit log under the person who asked.
+pub(crate) fn audit_early_end(st: &AppState, by: u32, particle: u32, outcome: &str, failure: Option<&str>) {
     let person = st.auth.name_of(by).unwrap_or_else(|| format!("client {by}"));
     let mut args = serde_json::Map::new();
     args.insert("particle".into(), particle.into());
