@@ -285,6 +285,29 @@ pub(crate) async fn ok(ws: &mut Ws, v: Value) {
     assert_eq!(r["type"], "ok", "{r}");
 }
 
+/// Sends command `v`, whose reply must be `ok`, and returns the first message satisfying `pred`
+/// that comes before or after that reply. An event the command causes (the `lease` of a
+/// `take_lease`) travels on the broadcast channel, the reply on the client's own queue: either
+/// may reach the socket first, so waiting for the reply and then for the event could drop it.
+pub(crate) async fn ok_and(ws: &mut Ws, v: Value, secs: f64, pred: impl Fn(&Value) -> bool) -> Value {
+    let id = v["id"].as_u64().expect("a command with an id") as u32;
+    send(ws, v).await;
+    let (mut replied, mut seen) = (false, None);
+    while !replied || seen.is_none() {
+        let m = until(ws, secs, |m| {
+            ((is(m, "ok") || is(m, "error")) && m["id"] == id) || pred(m)
+        })
+        .await;
+        if (is(&m, "ok") || is(&m, "error")) && m["id"] == id {
+            assert_eq!(m["type"], "ok", "{m}");
+            replied = true;
+        } else if seen.is_none() {
+            seen = Some(m);
+        }
+    }
+    seen.unwrap()
+}
+
 /// The operator's usual start: connected with the token, welcomed as `operator`, subscribed to
 /// `stream` (command 1), holding the lease (command 2).
 pub(crate) async fn operator(addr: &str, stream: &str) -> Ws {
