@@ -319,7 +319,8 @@ fn text(r: &PushReport, runs: &[StrategyRun], plan: &StrategyPlan) -> String {
             } else {
                 String::new()
             },
-            l.failure.as_deref().unwrap_or("ok"),
+            // A leg that ran to its end is `pushed`: only the scan after the move says `ok`.
+            l.failure.as_deref().unwrap_or("pushed"),
             l.contact_step.map_or("-".into(), |v| v.to_string()),
             l.t_star.map_or("-".into(), |t| format!("{t:.3} s")),
             um(l.estimated_distance),

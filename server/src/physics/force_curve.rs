@@ -14,7 +14,7 @@
 use crate::numerics::dual::{Real, derivative};
 use crate::physics::contact::jkr::Jkr;
 use crate::physics::forces::capillary::Meniscus;
-use crate::physics::pushing::params::LongRange;
+use crate::physics::pushing::params::{Attraction, LongRange};
 
 /// A tip facing a flat sample.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -114,6 +114,16 @@ impl TipSample {
             .long_range
             .sphere_plane(self.r_t, self.a0, Meniscus::Formed, self.a0)
             - self.jkr.pull_off_load()
+    }
+
+    /// The terms of [`Self::adhesion`] that pull hardest (at contact, the meniscus formed;
+    /// [`Attraction::ranked`]).
+    pub fn adhesion_sources(&self) -> Vec<Attraction> {
+        let mut terms = self
+            .long_range
+            .terms(self.r_t, None, self.a0, Meniscus::Formed, self.a0);
+        terms.push((Attraction::Contact, -self.jkr.pull_off_load()));
+        Attraction::ranked(terms)
     }
 
     /// How far the piezo must rise above a contact before the tip surely hangs free (m):

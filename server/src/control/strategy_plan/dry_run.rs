@@ -75,15 +75,21 @@ fn judge(moved: &crate::control::whole_move::MoveRun, plan: &StrategyPlan) -> Re
     }
 }
 
-/// The scene field a dry run's failure points to.
-pub fn field_for(why: &str) -> String {
+/// The scene field a dry run's failure points to (`still_held`: the fields of the terms that
+/// hold the tip on the substrate, [`super::adhesion_field`]).
+pub fn field_for(why: &str, scene: &Scene) -> String {
     let code = why.split(':').next().unwrap_or("");
+    if code == "still_held" {
+        return format!(
+            "cantilever.stiffness_n_per_m (stiffer) or {}",
+            super::adhesion_field(super::Pair::TipSubstrate, &scene.tip_sample().adhesion_sources())
+        );
+    }
     match code {
         "deflection_limit" => "cantilever.stiffness_n_per_m (stiffer) or sensor.gain_v_per_nm (smaller |gain|)",
         "particle_lost" => "friction.tip_particle_static (higher) or sensor.noise_rms_mv (lower)",
         "no_contact" => "sensor.gain_v_per_nm (larger |gain|) or friction.particle_substrate_static",
         "no_separation" => "cantilever.stiffness_n_per_m (stiffer) or friction.particle_substrate_static (lower)",
-        "still_held" => "cantilever.stiffness_n_per_m (stiffer) or environment.relative_humidity (drier)",
         "snapped_back" => "push.contact_angle_deg (a higher parking height) or cantilever.stiffness_n_per_m (stiffer)",
         "missed" => "stage.resonance_hz (a stiffer stage) or a looser --tolerance-nm",
         "not_found" => "scan.noise_rms_nm or substrate.roughness_rms_nm (lower)",

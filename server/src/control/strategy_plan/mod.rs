@@ -61,6 +61,7 @@
 //! plan warns. When no derived strategy can pass, the plan is refused, naming the field to
 //! change and the value it would need ([`Refusal`]).
 
+mod adhesion_field;
 mod choice;
 mod dry_run;
 #[cfg(test)]
@@ -74,6 +75,7 @@ use crate::control::strategy::pull_off::{PULL_OFF_MARGIN, PULL_OFF_SLACK, pull_o
 use crate::control::strategy::{BACK_OFF, HOLD};
 use crate::scene::Scene;
 use crate::scene::file::{ParticleFile, StrategyFile};
+use adhesion_field::{Pair, field as adhesion_field};
 
 /// The default tolerance of a push (m): `ok` within 25 nm of the target.
 pub const DEFAULT_TOLERANCE: f64 = 25e-9;
@@ -328,7 +330,7 @@ impl<'a> Derivation<'a> {
                             format!("; the plan warned: {w}"),
                             w.split(" = ").next().unwrap_or("the hand-set value").to_string(),
                         ),
-                        None => (String::new(), dry_run::field_for(why)),
+                        None => (String::new(), dry_run::field_for(why, self.scene)),
                     };
                     return Err(self.refuse(Fails {
                         code: "dry_run",
@@ -598,7 +600,10 @@ impl<'a> Derivation<'a> {
                     release * 1e6,
                     MAX_START * 1e6
                 ),
-                field: "particles[].radius_nm (smaller) or environment.relative_humidity (drier: a shorter meniscus)".into(),
+                field: format!(
+                    "particles[].radius_nm (smaller) or {}",
+                    adhesion_field(Pair::TipParticle, &self.scene.push_params_for(self.part).adhesion_ta_sources())
+                ),
             }));
         }
         let start_check = (f.strategy.start_height_um * 1e-6 < lift_need).then(|| {
@@ -738,8 +743,9 @@ impl<'a> Derivation<'a> {
                     MAX_START * 1e6
                 ),
                 field: format!(
-                    "cantilever.stiffness_n_per_m: k_c ≥ {} N/m, or a drier environment.relative_humidity",
-                    short(adhesion / room.max(1e-12))
+                    "cantilever.stiffness_n_per_m: k_c ≥ {} N/m, or {}",
+                    short(adhesion / room.max(1e-12)),
+                    adhesion_field(Pair::TipSubstrate, &ts.adhesion_sources())
                 ),
             }));
         }
@@ -860,9 +866,10 @@ impl<'a> Derivation<'a> {
                         parking * 1e9,
                         snap_in * 1e9
                     ),
-                    field:
-                        "environment.relative_humidity (drier: a shorter meniscus) or push.contact_angle_deg (steeper)"
-                            .into(),
+                    field: format!(
+                        "{} or push.contact_angle_deg (steeper)",
+                        adhesion_field(Pair::TipSubstrate, &self.scene.tip_sample().adhesion_sources())
+                    ),
                 })
             } else {
                 self.predict_at(beta, parking, v, approach_speed)
@@ -1064,7 +1071,10 @@ impl<'a> Derivation<'a> {
                     c.beta_deg,
                     MAX_START * 1e6
                 ),
-                field: "environment.relative_humidity (drier) or physics.capillary".into(),
+                field: adhesion_field(
+                    Pair::TipParticle,
+                    &self.scene.push_params_for(self.part).adhesion_ta_sources(),
+                ),
             });
         }
         Ok(())

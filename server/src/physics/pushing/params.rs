@@ -47,6 +47,35 @@ pub struct Interactions {
     pub a0: f64,
 }
 
+/// One source of an adhesion: a long-range term, or the solids' JKR work of adhesion. Names the
+/// scene's field that sets it, so a refusal caused by an adhesion names what to change.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Attraction {
+    /// Van der Waals (Eqs 1-2): the Hamaker constants.
+    VanDerWaals,
+    /// The meniscus (Eq 3): the humidity.
+    Capillary,
+    /// The work-function voltage (Eq 4).
+    Electrostatic,
+    /// The JKR pull-off `(3/2)πRw` of the solid contact: the solid-liquid energy.
+    Contact,
+}
+
+impl Attraction {
+    /// The terms among `terms` (each the attraction it contributes, N, positive = pulling) that
+    /// pull at least a quarter as hard as the strongest, strongest first; empty when none pulls.
+    pub fn ranked(terms: impl IntoIterator<Item = (Attraction, f64)>) -> Vec<Attraction> {
+        let mut pulling: Vec<_> = terms.into_iter().filter(|(_, f)| f.is_finite() && *f > 0.0).collect();
+        pulling.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let strongest = pulling.first().map_or(0.0, |t| t.1);
+        pulling
+            .into_iter()
+            .filter(|t| t.1 >= 0.25 * strongest)
+            .map(|t| t.0)
+            .collect()
+    }
+}
+
 impl LongRange {
     /// Sum of the included terms between two spheres `Rₜ`, `Rₐ` at gap `h` (N, negative =
     /// attractive): Eq 1 + Eq 3 + Eq 4.
@@ -66,6 +95,35 @@ impl LongRange {
             f += vdw::sphere_plane_force(hm, r, h, a0);
         }
         self.add_capillary_electrostatic(f, h, meniscus)
+    }
+
+    /// This pair with only the term `a` kept (the others left out).
+    fn only(&self, a: Attraction) -> LongRange {
+        LongRange {
+            hamaker: self.hamaker.filter(|_| a == Attraction::VanDerWaals),
+            capillary: self.capillary.filter(|_| a == Attraction::Capillary),
+            electrostatic: self.electrostatic.filter(|_| a == Attraction::Electrostatic),
+        }
+    }
+
+    /// Each included term's attraction (N, positive = pulling) at gap `h` between two spheres,
+    /// or between a sphere `r_t` and a plane when `r_a` is `None`.
+    pub fn terms(&self, r_t: f64, r_a: Option<f64>, h: f64, meniscus: Meniscus, a0: f64) -> Vec<(Attraction, f64)> {
+        [
+            Attraction::VanDerWaals,
+            Attraction::Capillary,
+            Attraction::Electrostatic,
+        ]
+        .into_iter()
+        .map(|a| {
+            let one = self.only(a);
+            let f = match r_a {
+                Some(r_a) => one.sphere_sphere(r_t, r_a, h, meniscus, a0),
+                None => one.sphere_plane(r_t, h, meniscus, a0),
+            };
+            (a, -f)
+        })
+        .collect()
     }
 
     fn add_capillary_electrostatic<T: Real>(&self, mut f: T, h: T, meniscus: Meniscus) -> T {
@@ -198,6 +256,13 @@ impl PushParams {
             .interactions
             .tip_particle_force(self.interactions.a0, Meniscus::Formed)
             - self.jkr_ta.pull_off_load()
+    }
+    /// The terms of [`Self::adhesion_ta`] that pull hardest ([`Attraction::ranked`]).
+    pub fn adhesion_ta_sources(&self) -> Vec<Attraction> {
+        let i = &self.interactions;
+        let mut terms = i.tip_particle.terms(i.r_t, Some(i.r_a), i.a0, Meniscus::Formed, i.a0);
+        terms.push((Attraction::Contact, -self.jkr_ta.pull_off_load()));
+        Attraction::ranked(terms)
     }
 }
 
