@@ -134,6 +134,10 @@ pub struct CampaignArgs {
     /// Print one JSON object instead of the table.
     #[arg(long)]
     json: bool,
+    /// Also write each scene as `OUT/scenes/seed-N.toml` (nothing hand-set: `nanopush plan`
+    /// derives the campaign's plan from it), to reproduce one.
+    #[arg(long)]
+    scenes: bool,
 }
 
 /// Parses `I/N` with `I < N`.
@@ -216,6 +220,16 @@ pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
     }
     std::fs::create_dir_all(&a.out).map_err(|e| anyhow::anyhow!("creating {}: {e}", a.out.display()))?;
     crate::units::write_file(&a.out.join("random.csv"), &csv)?;
+    if a.scenes {
+        use nanopush_study::random_scenes::{random_scene, scene_text};
+        let dir = a.out.join("scenes");
+        std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
+        for &seed in &seeds {
+            let text = scene_text(&random_scene(seed, ranges), ranges)
+                .map_err(|e| anyhow::anyhow!("writing the scene of seed {seed}: {e}"))?;
+            crate::units::write_file(&dir.join(format!("seed-{seed}.toml")), &text)?;
+        }
+    }
     if a.json {
         let v = serde_json::json!({
             "schema": "nanopush.random_campaign", "ranges": ranges.name(), "seeds": seeds.len(), "first_seed": a.seed, "shard": [i, n],
@@ -281,7 +295,16 @@ pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
             c.summary
         )?;
     }
-    writeln!(s, "Wrote {}/random.csv.", a.out.display())?;
+    writeln!(
+        s,
+        "Wrote {}/random.csv{}.",
+        a.out.display(),
+        if a.scenes {
+            " and a scene file per seed under scenes/"
+        } else {
+            ""
+        }
+    )?;
     if t.unsound > 0 {
         anyhow::bail!("{s}the campaign found {} unsound scene(s) (UNSOUND above)", t.unsound);
     }

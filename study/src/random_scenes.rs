@@ -290,6 +290,35 @@ pub fn run_random(seed: u64, ranges: Ranges, tolerance: f64) -> RandomCase {
     RandomCase { seed, summary, judged }
 }
 
+/// The scene of `r` as a scene file that plans as the campaign planned it: the derivable
+/// settings (`[strategy]`, `push.contact_angle_deg`, `push.speed_um_per_s`) are left out, so a
+/// reload derives them all, and a comment says where it came from and how to run it.
+pub fn scene_text(r: &RandomScene, ranges: Ranges) -> Result<String, String> {
+    let mut table = toml::Table::try_from(&r.scene.file).map_err(|e| e.to_string())?;
+    table.remove("strategy");
+    if let Some(push) = table.get_mut("push").and_then(toml::Value::as_table_mut) {
+        push.remove("contact_angle_deg");
+        push.remove("speed_um_per_s");
+    }
+    let body = toml::to_string(&table).map_err(|e| e.to_string())?;
+    let deg = r.direction.1.atan2(r.direction.0).to_degrees();
+    Ok(format!(
+        "# Random scene of seed {} ({} ranges), drawn by `nanopush campaign --random 1 --seed {} --ranges {}`.\n\
+         # Nothing is hand-set: `nanopush plan --scene THIS` derives the plan the campaign used.\n\
+         # The campaign pushed particle {} by {} µm at {} degrees from +x:\n\
+         #   nanopush push --scene THIS --distance-um {} --direction-deg {}\n\n{body}",
+        r.seed,
+        ranges.name(),
+        r.seed,
+        ranges.name(),
+        r.scene.pushed_particle().id,
+        r.distance * 1e6,
+        deg,
+        r.distance * 1e6,
+        deg,
+    ))
+}
+
 /// The seeds of shard `i` of `n` among `count` seeds from `first`: every n-th, so shards share
 /// the work evenly.
 pub fn shard_seeds(first: u64, count: u64, i: u64, n: u64) -> Vec<u64> {
@@ -312,6 +341,43 @@ mod tests {
             assert!((0.2e-6..=5e-6).contains(&r.distance));
         }
         assert_eq!(shard_seeds(100, 10, 1, 3), vec![101, 104, 107]);
+    }
+
+    /// A written scene reloads to the same scene with nothing hand-set, and plans as the
+    /// campaign planned it.
+    #[test]
+    fn a_written_scene_reloads_to_the_same_scene_and_plan() {
+        for (seed, ranges) in [
+            (7, Ranges::Lab),
+            (11, Ranges::Lab),
+            (3, Ranges::Validator),
+            (130, Ranges::Validator),
+        ] {
+            let r = random_scene(seed, ranges);
+            let text = scene_text(&r, ranges).unwrap();
+            assert!(
+                text.contains(&format!("--seed {seed} --ranges {}", ranges.name())),
+                "{text}"
+            );
+            assert!(
+                !text.contains("[strategy]") && !text.contains("contact_angle_deg"),
+                "{text}"
+            );
+            let back = Scene::parse("written", &text).unwrap();
+            assert_eq!(back.file, r.scene.file, "seed {seed}");
+            assert_eq!(back.hand_set, HandSet::none(), "seed {seed}");
+        }
+        // And plans the same (a refusal here: planning is a few seconds in a debug build).
+        let r = random_scene(13, Ranges::Lab);
+        let back = Scene::parse("written", &scene_text(&r, Ranges::Lab).unwrap()).unwrap();
+        let id = r.scene.pushed_particle().id;
+        let tol = nanopush::control::strategy_plan::DEFAULT_TOLERANCE;
+        let plan = |s: &Scene| {
+            nanopush::control::strategy_plan::derive(s, id, tol)
+                .map(|p| (p.strategy, p.contact_angle_deg, p.speed_um_per_s))
+                .map_err(|e| e.to_string())
+        };
+        assert_eq!(plan(&back), plan(&r.scene));
     }
 
     /// `make test`'s seeded sample of docs/manipulation.md's random-scene campaign: lab scenes 11
