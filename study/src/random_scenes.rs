@@ -305,7 +305,8 @@ pub fn scene_text(r: &RandomScene, ranges: Ranges) -> Result<String, String> {
     Ok(format!(
         "# Random scene of seed {} ({} ranges), drawn by `nanopush campaign --random 1 --seed {} --ranges {}`.\n\
          # Nothing is hand-set: `nanopush plan --scene THIS` derives the plan the campaign used.\n\
-         # The campaign pushed particle {} by {} µm at {} degrees from +x:\n\
+         # The campaign pushed particle {} by {} µm at {} degrees from +x. The same push\n\
+         # (its stage starts elsewhere, so its numbers differ a little from the campaign's row):\n\
          #   nanopush push --scene THIS --distance-um {} --direction-deg {}\n\n{body}",
         r.seed,
         ranges.name(),
