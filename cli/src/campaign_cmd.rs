@@ -192,44 +192,49 @@ pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
     let (i, n) = a.shard.as_deref().map(parse_shard).transpose()?.unwrap_or((0, 1));
     let seeds = shard_seeds(a.seed, a.random, i, n);
     let tolerance = a.tolerance_nm * 1e-9;
-    let start = std::time::Instant::now();
-    let cases: Vec<RandomCase> = seeds.par_iter().map(|&s| run_random(s, ranges, tolerance)).collect();
-    let total = start.elapsed().as_secs_f64();
-    let t = RandomTable::of(&cases);
-    let mut csv = String::from(
-        "seed,outcome,refusal,true_error_nm,measured_error_nm,attempts,distance_um,simulated_s,wall_s,violations,reason,scene\n",
-    );
-    for c in &cases {
-        let j = &c.judged;
-        writeln!(
-            csv,
-            "{},{},{},{},{},{},{},{:.3},{:.3},{},{},{}",
-            c.seed,
-            j.outcome,
-            j.refusal.as_deref().unwrap_or(""),
-            j.true_error.map_or(String::new(), |e| format!("{:.2}", e * 1e9)),
-            j.measured_error.map_or(String::new(), |e| format!("{:.2}", e * 1e9)),
-            j.attempts,
-            j.distance * 1e6,
-            j.simulated,
-            j.wall_time,
-            j.violations.join("; ").replace(',', ";"),
-            j.reason.replace([',', '\n'], ";"),
-            c.summary.replace(',', ";")
-        )?;
-    }
+    // The output first: a bad --out is said before any work, the scenes are there to
+    // reproduce while it runs, and each finished row is appended at once, so a kill keeps what
+    // was done (the file is rewritten in seed order at the end).
     std::fs::create_dir_all(&a.out).map_err(|e| anyhow::anyhow!("creating {}: {e}", a.out.display()))?;
-    crate::units::write_file(&a.out.join("random.csv"), &csv)?;
     if a.scenes {
         use nanopush_study::random_scenes::{random_scene, scene_text};
         let dir = a.out.join("scenes");
         std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
         for &seed in &seeds {
-            let text = scene_text(&random_scene(seed, ranges), ranges)
+            let text = scene_text(&random_scene(seed, ranges), ranges, a.tolerance_nm)
                 .map_err(|e| anyhow::anyhow!("writing the scene of seed {seed}: {e}"))?;
             crate::units::write_file(&dir.join(format!("seed-{seed}.toml")), &text)?;
         }
     }
+    let csv_path = a.out.join("random.csv");
+    const HEADER: &str = "seed,outcome,refusal,true_error_nm,measured_error_nm,attempts,distance_um,simulated_s,wall_s,violations,reason,scene\n";
+    crate::units::write_file(&csv_path, HEADER)?;
+    let rows = std::sync::Mutex::new(
+        std::fs::OpenOptions::new()
+            .append(true)
+            .open(&csv_path)
+            .map_err(|e| anyhow::anyhow!("opening {}: {e}", csv_path.display()))?,
+    );
+    let start = std::time::Instant::now();
+    let cases: Vec<RandomCase> = seeds
+        .par_iter()
+        .map(|&s| {
+            let c = run_random(s, ranges, tolerance);
+            if let Ok(mut f) = rows.lock() {
+                use std::io::Write as _;
+                // A row lost here is written with the others at the end.
+                let _ = f.write_all(csv_row(&c).as_bytes());
+            }
+            c
+        })
+        .collect();
+    let total = start.elapsed().as_secs_f64();
+    let t = RandomTable::of(&cases);
+    let mut csv = String::from(HEADER);
+    for c in &cases {
+        csv.push_str(&csv_row(c));
+    }
+    crate::units::write_file(&csv_path, &csv)?;
     if a.json {
         let v = serde_json::json!({
             "schema": "nanopush.random_campaign", "ranges": ranges.name(), "seeds": seeds.len(), "first_seed": a.seed, "shard": [i, n],
@@ -309,6 +314,26 @@ pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
         anyhow::bail!("{s}the campaign found {} unsound scene(s) (UNSOUND above)", t.unsound);
     }
     Ok(s)
+}
+
+/// One scene's row of `random.csv`.
+fn csv_row(c: &nanopush_study::random_scenes::RandomCase) -> String {
+    let j = &c.judged;
+    format!(
+        "{},{},{},{},{},{},{},{:.3},{:.3},{},{},{}\n",
+        c.seed,
+        j.outcome,
+        j.refusal.as_deref().unwrap_or(""),
+        j.true_error.map_or(String::new(), |e| format!("{:.2}", e * 1e9)),
+        j.measured_error.map_or(String::new(), |e| format!("{:.2}", e * 1e9)),
+        j.attempts,
+        j.distance * 1e6,
+        j.simulated,
+        j.wall_time,
+        j.violations.join("; ").replace(',', ";"),
+        j.reason.replace([',', '\n'], ";"),
+        c.summary.replace(',', ";")
+    )
 }
 
 fn counts_text(c: &[(String, usize)]) -> String {

@@ -341,14 +341,14 @@ fn text(r: &PushReport, runs: &[StrategyRun], plan: &StrategyPlan) -> String {
     }
     let verdict = match (r.outcome.as_str(), r.measured_error) {
         ("ok", Some(e)) => format!(
-            "ok: the scan after finds it {:.1} nm from the target (tolerance {:.0} nm)",
+            "ok: the scan after finds it {:.1} nm from the target (tolerance {} nm)",
             e * 1e9,
-            r.tolerance * 1e9
+            nanopush::nm_text(r.tolerance)
         ),
         ("missed", Some(e)) => format!(
-            "missed: the scan after finds it {:.1} nm from the target, beyond the {:.0} nm tolerance, after {} push(es){}",
+            "missed: the scan after finds it {:.1} nm from the target, beyond the {} nm tolerance, after {} push(es){}",
             e * 1e9,
-            r.tolerance * 1e9,
+            nanopush::nm_text(r.tolerance),
             r.attempts,
             r.cut_short.map_or(String::new(), |c| format!(
                 ": the stage's edge cut the push {:.0} nm short of the retraction's drag, and would cut a correction the same way",

@@ -419,10 +419,10 @@ fn judge_inner(scene: &Scene, distance: f64, direction: (f64, f64), tolerance: f
     j.reason = match &moved.verdict {
         Verdict::Ok { .. } => String::new(),
         Verdict::Missed { error } => format!(
-            "the scan after the last of {} pushes finds it {:.1} nm from the target, beyond the {:.0} nm tolerance",
+            "the scan after the last of {} push(es) finds it {:.1} nm from the target, beyond the {} nm tolerance",
             moved.attempts,
             error * 1e9,
-            tolerance * 1e9
+            nanopush::nm_text(tolerance)
         ),
         Verdict::NotFound => "the scan after the push does not find the particle".into(),
         Verdict::Failed { .. } => moved.legs.last().and_then(|l| l.run.failure_text()).unwrap_or_default(),
@@ -430,9 +430,9 @@ fn judge_inner(scene: &Scene, distance: f64, direction: (f64, f64), tolerance: f
     check_traces(&scene, &moved, r, &mut j);
     if j.outcome == "ok" && true_error > tolerance {
         j.violations.push(format!(
-            "ok, but the particle is truly {:.1} nm from the target (tolerance {:.0} nm)",
+            "ok, but the particle is truly {:.2} nm from the target (tolerance {} nm)",
             true_error * 1e9,
-            tolerance * 1e9
+            nanopush::nm_text(tolerance)
         ));
     }
     // A failed push may leave a soft lever stuck to the surface by adhesion it cannot pull

@@ -290,33 +290,37 @@ pub fn run_random(seed: u64, ranges: Ranges, tolerance: f64) -> RandomCase {
     RandomCase { seed, summary, judged }
 }
 
-/// The scene of `r` as a scene file that plans as the campaign planned it: the derivable
-/// settings (`[strategy]`, `push.contact_angle_deg`, `push.speed_um_per_s`) are left out, so a
-/// reload derives them all, and a comment says where it came from and how to run it.
-pub fn scene_text(r: &RandomScene, ranges: Ranges) -> Result<String, String> {
+/// The scene of `r` as a scene file that plans as the campaign planned it at `tolerance_nm`
+/// (as the user gave it, in nm):
+/// the derivable settings (`[strategy]`, `push.contact_angle_deg`, `push.speed_um_per_s`) are
+/// left out, so a reload derives them all, and a comment says where it came from and gives the
+/// commands (with the tolerance, which the plan depends on).
+pub fn scene_text(r: &RandomScene, ranges: Ranges, tolerance_nm: f64) -> Result<String, String> {
     let mut table = toml::Table::try_from(&r.scene.file).map_err(|e| e.to_string())?;
     table.remove("strategy");
     if let Some(push) = table.get_mut("push").and_then(toml::Value::as_table_mut) {
         push.remove("contact_angle_deg");
         push.remove("speed_um_per_s");
     }
+    table.insert(
+        "description".into(),
+        format!("random scene of seed {} ({} ranges)", r.seed, ranges.name()).into(),
+    );
     let body = toml::to_string(&table).map_err(|e| e.to_string())?;
     let deg = r.direction.1.atan2(r.direction.0).to_degrees();
+    let tol = nanopush::shown(tolerance_nm);
     Ok(format!(
-        "# Random scene of seed {} ({} ranges), drawn by `nanopush campaign --random 1 --seed {} --ranges {}`.\n\
-         # Nothing is hand-set: `nanopush plan --scene THIS` derives the plan the campaign used.\n\
-         # The campaign pushed particle {} by {} µm at {} degrees from +x. The same push\n\
-         # (its stage starts elsewhere, so its numbers differ a little from the campaign's row):\n\
-         #   nanopush push --scene THIS --distance-um {} --direction-deg {}\n\n{body}",
-        r.seed,
-        ranges.name(),
-        r.seed,
-        ranges.name(),
-        r.scene.pushed_particle().id,
-        r.distance * 1e6,
-        deg,
-        r.distance * 1e6,
-        deg,
+        "# Random scene of seed {seed} ({ranges} ranges), drawn by\n\
+         #   nanopush campaign --random 1 --seed {seed} --ranges {ranges} --tolerance-nm {tol}\n\
+         # Nothing is hand-set: `nanopush plan --scene THIS --tolerance-nm {tol}` derives the plan\n\
+         # the campaign used. The campaign pushed particle {id} by {d} µm at {deg} degrees from +x.\n\
+         # The same push (its stage starts elsewhere and it scans first, so its numbers differ a\n\
+         # little from the campaign's row, and near the tolerance its outcome may too):\n\
+         #   nanopush push --scene THIS --distance-um {d} --direction-deg={deg} --tolerance-nm {tol}\n\n{body}",
+        seed = r.seed,
+        ranges = ranges.name(),
+        id = r.scene.pushed_particle().id,
+        d = r.distance * 1e6,
     ))
 }
 
@@ -355,7 +359,7 @@ mod tests {
             (130, Ranges::Validator),
         ] {
             let r = random_scene(seed, ranges);
-            let text = scene_text(&r, ranges).unwrap();
+            let text = scene_text(&r, ranges, 25.0).unwrap();
             assert!(
                 text.contains(&format!("--seed {seed} --ranges {}", ranges.name())),
                 "{text}"
@@ -365,12 +369,18 @@ mod tests {
                 "{text}"
             );
             let back = Scene::parse("written", &text).unwrap();
-            assert_eq!(back.file, r.scene.file, "seed {seed}");
+            let mut f = back.file.clone();
+            assert_eq!(
+                f.description,
+                format!("random scene of seed {seed} ({} ranges)", ranges.name())
+            );
+            f.description = r.scene.file.description.clone();
+            assert_eq!(f, r.scene.file, "seed {seed}");
             assert_eq!(back.hand_set, HandSet::none(), "seed {seed}");
         }
         // And plans the same (a refusal here: planning is a few seconds in a debug build).
         let r = random_scene(13, Ranges::Lab);
-        let back = Scene::parse("written", &scene_text(&r, Ranges::Lab).unwrap()).unwrap();
+        let back = Scene::parse("written", &scene_text(&r, Ranges::Lab, 25.0).unwrap()).unwrap();
         let id = r.scene.pushed_particle().id;
         let tol = nanopush::control::strategy_plan::DEFAULT_TOLERANCE;
         let plan = |s: &Scene| {

@@ -363,7 +363,8 @@ impl Scene {
             )));
         }
         let tallest = f.particles.iter().map(|p| 2.0 * p.radius_nm * 1e-3).fold(0.0, f64::max);
-        if f.strategy.start_height_um <= tallest {
+        // A derived start height clears it (the plan's rule): only a hand-set one is warned about.
+        if self.hand_set.contains("strategy.start_height_um") && f.strategy.start_height_um <= tallest {
             w.push(SceneWarning(format!(
                 "strategy.start_height_um = {} µm does not clear the tallest particle ({tallest} µm): moves at the start height would run into it",
                 f.strategy.start_height_um

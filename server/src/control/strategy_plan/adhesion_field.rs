@@ -19,8 +19,13 @@ fn one(pair: Pair, source: Attraction) -> &'static str {
     use Pair::*;
     match (pair, source) {
         (_, Capillary) => "environment.relative_humidity (drier: a shorter meniscus)",
-        (TipSubstrate, Electrostatic) => "environment.tip_substrate_voltage_v (smaller |U|)",
-        (TipParticle, Electrostatic) => "environment.tip_particle_voltage_v (smaller |U|)",
+        // Eq 4's charged area is 4πR r₁, and the Kelvin radius r₁ grows with the humidity.
+        (TipSubstrate, Electrostatic) => {
+            "environment.tip_substrate_voltage_v (smaller |U|) or environment.relative_humidity (drier: Eq 4's area 4πR r₁ shrinks)"
+        }
+        (TipParticle, Electrostatic) => {
+            "environment.tip_particle_voltage_v (smaller |U|) or environment.relative_humidity (drier: Eq 4's area 4πR r₁ shrinks)"
+        }
         (TipSubstrate, VanDerWaals) => "tip.hamaker_zj or substrate.hamaker_zj (smaller)",
         (TipParticle, VanDerWaals) => "tip.hamaker_zj or particles[].hamaker_zj (smaller)",
         (_, Contact) => "environment.solid_liquid_energy_mj_per_m2 (smaller: a weaker JKR contact)",
@@ -35,6 +40,21 @@ pub(super) fn field(pair: Pair, sources: &[Attraction]) -> String {
         return one(pair, Attraction::Capillary).into();
     }
     sources.iter().map(|&s| one(pair, s)).collect::<Vec<_>>().join(", or ")
+}
+
+/// The field that sets the height where the tip snaps in to the substrate: with a meniscus
+/// the scene can form, the meniscus's length (the humidity), whatever pulls hardest at contact;
+/// without one, the attraction whose pull outgrows the lever's stiffness.
+pub(super) fn snap_in_field(ts: &crate::physics::force_curve::TipSample) -> String {
+    let meniscus = ts.long_range.capillary.as_ref().is_some_and(|c| c.possible());
+    if meniscus {
+        one(Pair::TipSubstrate, Attraction::Capillary).into()
+    } else {
+        format!(
+            "cantilever.stiffness_n_per_m (stiffer), or {}",
+            field(Pair::TipSubstrate, &ts.adhesion_sources())
+        )
+    }
 }
 
 #[cfg(test)]
@@ -53,7 +73,8 @@ mod tests {
 
     /// The paper's humid scene holds its tip on the silicon by van der Waals (27.9 nN) and the
     /// meniscus (27.1 nN) about equally: both are named, the stronger first. With the meniscus
-    /// left out and 5 V between tip and substrate, the voltage alone.
+    /// left out (the humidity kept: Eq 4's area needs its Kelvin radius) and 5 V between tip and
+    /// substrate, the voltage first.
     #[test]
     fn the_fields_named_follow_the_terms_that_pull_hardest() {
         let humid = scene(&[]);
@@ -72,15 +93,21 @@ mod tests {
         ]);
         let src = charged.tip_sample().adhesion_sources();
         assert_eq!(src, [Attraction::Electrostatic]);
-        assert_eq!(
-            field(Pair::TipSubstrate, &src),
-            "environment.tip_substrate_voltage_v (smaller |U|)"
-        );
+        assert!(field(Pair::TipSubstrate, &src).starts_with("environment.tip_substrate_voltage_v (smaller |U|)"));
+        // The charged area 4πR r₁ of Eq 4 is the Kelvin radius's: the humidity is named too.
+        assert!(field(Pair::TipSubstrate, &src).contains("relative_humidity"));
         let src = charged.push_params().adhesion_ta_sources();
         assert_eq!(src, [Attraction::Electrostatic]);
+        assert!(field(Pair::TipParticle, &src).starts_with("environment.tip_particle_voltage_v (smaller |U|)"));
+        // The snap-in of a scene without a meniscus: the lever and the attraction.
+        assert!(
+            snap_in_field(&charged.tip_sample())
+                .starts_with("cantilever.stiffness_n_per_m (stiffer), or environment.tip_substrate_voltage_v")
+        );
+        // With one, its length: the humidity alone, though van der Waals pulls harder at contact.
         assert_eq!(
-            field(Pair::TipParticle, &src),
-            "environment.tip_particle_voltage_v (smaller |U|)"
+            snap_in_field(&humid.tip_sample()),
+            "environment.relative_humidity (drier: a shorter meniscus)"
         );
     }
 

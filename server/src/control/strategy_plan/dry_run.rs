@@ -62,10 +62,10 @@ fn judge(moved: &crate::control::whole_move::MoveRun, plan: &StrategyPlan) -> Re
     match moved.verdict {
         Verdict::Ok { .. } => Ok(()),
         Verdict::Missed { error } => Err(format!(
-            "missed: {:.1} nm from the target after {} pushes (tolerance {:.0} nm)",
+            "missed: {:.1} nm from the target after {} push(es) (tolerance {} nm)",
             error * 1e9,
             moved.attempts,
-            plan.tolerance * 1e9
+            crate::nm_text(plan.tolerance)
         )),
         Verdict::NotFound => Err("not_found: the scan after the push did not find the particle".into()),
         Verdict::Failed { code } => Err(format!(
