@@ -37,8 +37,9 @@ pub struct PushArgs {
     #[arg(long, value_name = "NM", default_value_t = DEFAULT_TOLERANCE * 1e9, allow_hyphen_values = true)]
     tolerance_nm: f64,
     /// Pushes at most, the first and the corrections, in [1, 10].
-    #[arg(long, default_value_t = DEFAULT_ATTEMPTS, allow_hyphen_values = true)]
-    attempts: u32,
+    // Read as a signed integer so that `-1` is told the allowed range, not u32's.
+    #[arg(long, default_value_t = DEFAULT_ATTEMPTS as i64, allow_hyphen_values = true)]
+    attempts: i64,
     /// Derive every strategy setting from the model, ignoring the scene's hand-set
     /// `[strategy]`, contact angle and speed (to compare the two).
     #[arg(long)]
@@ -154,13 +155,14 @@ fn check(a: &PushArgs, scene: &Scene) -> anyhow::Result<Request> {
             crate::units::num(a.tolerance_nm)
         );
     }
-    if !(1..=10).contains(&a.attempts) {
-        bail!("--attempts {} is out of range; allowed: [1, 10]", a.attempts);
-    }
+    let attempts = match u32::try_from(a.attempts) {
+        Ok(n) if (1..=10).contains(&n) => n,
+        _ => bail!("--attempts {} is out of range; allowed: [1, 10]", a.attempts),
+    };
     Ok(Request {
         id,
         tolerance: a.tolerance_nm * 1e-9,
-        attempts: a.attempts,
+        attempts,
         target,
         control,
         pause,

@@ -157,6 +157,15 @@ fn bad_arguments_are_refused_with_the_allowed_range() {
             vec!["push", "--distance-um", "1", "--pause-at-um", "1", "--pause-ms=-5"],
             "(0, 10000] ms",
         ),
+        // Told the range, not u32's (the review of issue 24).
+        (
+            vec!["push", "--distance-um", "1", "--attempts", "-1"],
+            "--attempts -1 is out of range; allowed: [1, 10]",
+        ),
+        (
+            vec!["push", "--distance-um", "1", "--attempts", "11"],
+            "allowed: [1, 10]",
+        ),
     ] {
         let out = run("nanopush", &args, None);
         assert_eq!(out.status.code(), Some(2), "{args:?}");
