@@ -113,10 +113,10 @@ pub fn run(scene: &Scene, reduced: bool, out: &Path) -> anyhow::Result<(String, 
 #[derive(clap::Args, Debug)]
 pub struct CampaignArgs {
     /// How many random scenes (seeds `--seed` … `--seed + N − 1`), in [1, 100000].
-    #[arg(long, value_name = "N", default_value_t = 100, allow_hyphen_values = true)]
+    #[arg(long, value_name = "N", default_value_t = 100, allow_hyphen_values = true, value_parser = crate::units::scenes_arg)]
     random: u64,
     /// The first seed.
-    #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = 0, allow_hyphen_values = true, value_parser = crate::units::seed_arg)]
     seed: u64,
     /// The generator's ranges: `lab` (the instruments and samples of a nanomanipulation lab) or
     /// `validator` (every parameter across the scene validator's whole range).

@@ -38,7 +38,7 @@ pub struct PushArgs {
     tolerance_nm: f64,
     /// Pushes at most, the first and the corrections, in [1, 10].
     // Read as a signed integer so that `-1` is told the allowed range, not u32's.
-    #[arg(long, default_value_t = DEFAULT_ATTEMPTS as i64, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = DEFAULT_ATTEMPTS as i64, allow_hyphen_values = true, value_parser = crate::units::attempts_arg)]
     attempts: i64,
     /// Derive every strategy setting from the model, ignoring the scene's hand-set
     /// `[strategy]`, contact angle and speed (to compare the two).

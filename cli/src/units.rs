@@ -75,6 +75,30 @@ pub fn write_file(path: &std::path::Path, bytes: impl AsRef<[u8]>) -> anyhow::Re
     nanopush::files::write_atomic(path, bytes.as_ref()).with_context(|| format!("writing {}", path.display()))
 }
 
+/// A whole-number argument: any integer is parsed (the command then checks its range and says
+/// it), and what is not an integer is told the allowed range `allowed` too, not only the
+/// parser's "invalid digit" (the review of issue 24: `--attempts 1.5`, `--random -1`).
+fn whole<T: std::str::FromStr>(s: &str, allowed: &str) -> Result<T, String> {
+    s.trim()
+        .parse::<T>()
+        .map_err(|_| format!("not a whole number in range; allowed: {allowed}"))
+}
+
+/// `push --attempts`: see [`whole`]; the range is checked by the command.
+pub fn attempts_arg(s: &str) -> Result<i64, String> {
+    whole(s, "[1, 10]")
+}
+
+/// `campaign --random`: see [`whole`].
+pub fn scenes_arg(s: &str) -> Result<u64, String> {
+    whole(s, "[1, 100000] scenes")
+}
+
+/// `campaign --seed`: see [`whole`].
+pub fn seed_arg(s: &str) -> Result<u64, String> {
+    whole(s, "[0, 18446744073709551615]")
+}
+
 #[cfg(test)]
 mod tests {
     use super::eng;

@@ -391,6 +391,34 @@ mod tests {
         assert_eq!(plan(&back), plan(&r.scene));
     }
 
+    /// The review of issue 24: a `deflection_limit` refusal offered a gain below what the
+    /// readout needs to see the touch (the next plan then asked for more gain), and stiffnesses
+    /// beyond the 500 N/m a scene allows. Validator seed 132 needs a stiffer lever, and a gain
+    /// cannot help; with a 296 N/m lever, neither can.
+    #[test]
+    fn a_deflection_limit_refusal_offers_only_a_way_out_the_scene_allows() {
+        let tol = nanopush::control::strategy_plan::DEFAULT_TOLERANCE;
+        let r = random_scene(132, Ranges::Validator);
+        let id = r.scene.pushed_particle().id;
+        let e = nanopush::control::strategy_plan::derive(&r.scene, id, tol).unwrap_err();
+        assert_eq!(e.code, "deflection_limit", "{e}");
+        assert!(e.field.starts_with("cantilever.stiffness_n_per_m: k_c > "), "{e}");
+        assert!(
+            e.field
+                .contains("(a smaller gain cannot help: |sensor.gain_v_per_nm| < "),
+            "{e}"
+        );
+        let mut f = r.scene.file.clone();
+        f.cantilever.stiffness_n_per_m = 296.12;
+        let stiff = Scene::from_file_with("stiff", f, HandSet::none()).unwrap();
+        let e = nanopush::control::strategy_plan::derive(&stiff, id, tol).unwrap_err();
+        assert_eq!(e.code, "deflection_limit", "{e}");
+        assert!(
+            e.field.contains("neither a stiffer lever") && e.field.contains("beyond the 500 N/m a scene allows"),
+            "{e}"
+        );
+    }
+
     /// `make test`'s seeded sample of docs/manipulation.md's random-scene campaign: lab scenes 11
     /// (its dry run loses the particle), 13 (the model's push fails) and 96 (the lever's
     /// deflection limit; once refused for adhesion) are refused with their reasons and the field

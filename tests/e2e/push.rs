@@ -166,6 +166,10 @@ fn bad_arguments_are_refused_with_the_allowed_range() {
             vec!["push", "--distance-um", "1", "--attempts", "11"],
             "allowed: [1, 10]",
         ),
+        (
+            vec!["push", "--distance-um", "1", "--attempts", "1.5"],
+            "allowed: [1, 10]",
+        ),
     ] {
         let out = run("nanopush", &args, None);
         assert_eq!(out.status.code(), Some(2), "{args:?}");

@@ -370,11 +370,22 @@ impl Scene {
                 f.strategy.start_height_um
             )));
         }
-        if f.physics.electrostatic && kelvin_radius(f.environment.relative_humidity) < self.a0() {
-            w.push(SceneWarning(format!(
-                "physics.electrostatic is on, but at environment.relative_humidity = {} there is no meniscus, so the shared area S = 4πR r₁ of Eq 4 is zero and the electrostatic force vanishes",
-                f.environment.relative_humidity
-            )));
+        let r1 = kelvin_radius(f.environment.relative_humidity);
+        if f.physics.electrostatic && r1 < self.a0() {
+            let rh = crate::shown(f.environment.relative_humidity);
+            w.push(SceneWarning(if r1 <= 0.0 {
+                format!(
+                    "physics.electrostatic is on, but at environment.relative_humidity = {rh} there is no meniscus, so the shared area S = 4πR r₁ of Eq 4 is zero and the electrostatic force vanishes"
+                )
+            } else {
+                // Eq 4 still takes its shared area from r₁: the force does not vanish (this
+                // warning once said it did, while a refusal in the same output counted a
+                // 1240 nN electrostatic pull; the review of issue 24).
+                format!(
+                    "physics.electrostatic is on, but at environment.relative_humidity = {rh} the Kelvin radius r₁ = {:.3} nm is below a₀: no meniscus forms, and Eq 4's shared area S = 4πR r₁ rests on a radius smaller than an atom (the electrostatic force scales with it; it vanishes only when dry)",
+                    r1 * 1e9
+                )
+            }));
         }
         if !friction::no_sticking_to_tip(r_a, r_t * r_a / (r_t + r_a), beta) {
             w.push(SceneWarning(

@@ -533,3 +533,26 @@ fn only_a_hand_set_start_height_is_warned_about_the_tallest_particle() {
     assert!(!derived.hand_set.contains("strategy.start_height_um"));
     assert!(!warned(&derived), "{:?}", derived.warnings);
 }
+
+/// The review of issue 24: at a humidity whose Kelvin radius is below a₀ but not zero, the
+/// warning said the electrostatic force vanishes while Eq 4 (and a refusal in the same output)
+/// counted it. It now says the area rests on that radius; at 0 % the force does vanish.
+#[test]
+fn a_sub_atomic_kelvin_radius_is_not_said_to_zero_the_electrostatic_force() {
+    let text = DEFAULT_SCENE
+        .replacen("relative_humidity = 0.73", "relative_humidity = 0.001", 1)
+        .replacen("electrostatic = false", "electrostatic = true", 1);
+    let s = Scene::parse("nearly-dry.toml", &text).unwrap();
+    let w: Vec<&str> = s
+        .warnings
+        .iter()
+        .map(|w| w.0.as_str())
+        .filter(|w| w.contains("physics.electrostatic"))
+        .collect();
+    assert_eq!(w.len(), 1, "{:?}", s.warnings);
+    assert!(
+        w[0].contains("r₁ = 0.078 nm is below a₀") && !w[0].contains("force vanishes"),
+        "{}",
+        w[0]
+    );
+}

@@ -103,6 +103,10 @@ const MAX_START: f64 = 50e-6;
 
 /// The paper's stage speed (m/s), the plan's upper bound.
 const PAPER_SPEED: f64 = 1e-6;
+/// The most the tip may press into the substrate before the reading shows the touch (m).
+const TOUCH_PRESS: f64 = 10e-9;
+/// The stiffest lever a scene allows (N/m; `scene::ranges`).
+const MAX_STIFFNESS: f64 = 500.0;
 
 /// Control tick (s).
 const TICK: f64 = 1e-3;
@@ -291,7 +295,7 @@ impl<'a> Derivation<'a> {
             }));
         }
         let press = thr / ro.gain;
-        if press > 10e-9 {
+        if press > TOUCH_PRESS {
             return Err(self.refuse(Fails {
                 code: "unreadable",
                 reason: format!(
@@ -300,7 +304,10 @@ impl<'a> Derivation<'a> {
                     thr * 1e3,
                     short(ro.gain * 1e-9)
                 ),
-                field: format!("sensor.gain_v_per_nm: |gain| ≥ {} V/nm", short(thr / 10e-9 * 1e-9)),
+                field: format!(
+                    "sensor.gain_v_per_nm: |gain| ≥ {} V/nm",
+                    short(thr / TOUCH_PRESS * 1e-9)
+                ),
             }));
         }
 
@@ -500,8 +507,8 @@ impl<'a> Derivation<'a> {
                     )
                 } else {
                     format!(
-                        "the stage rings about V/(2π f_y) at the stop, over a quarter of the {:.0} nm tolerance",
-                        self.tolerance * 1e9
+                        "the stage rings about V/(2π f_y) at the stop, over a quarter of the {} nm tolerance",
+                        crate::nm_text(self.tolerance)
                     )
                 }
             )
@@ -859,17 +866,32 @@ impl<'a> Derivation<'a> {
                     field: "tip.radius_nm (a sharper tip) or push.contact_angle_deg (steeper)".into(),
                 })
             } else if parking <= snap_in {
+                let (cause, field) = adhesion_field::snap_in_cause(
+                    &self.scene.tip_sample(),
+                    || {
+                        let mut dry = self.scene.clone();
+                        dry.file.physics.capillary = false;
+                        crate::control::strategy_run::detection_offset(&dry, &dry.strategy_params(1e-3))
+                    },
+                    parking,
+                );
+                // Even β = 90° parks the apex only 2Rₐ up: a steeper angle may not help.
+                let steeper = if 2.0 * r_a > snap_in {
+                    " or push.contact_angle_deg (steeper)".to_string()
+                } else {
+                    format!(
+                        " (no contact angle helps: even β = 90° parks at 2Rₐ = {:.2} nm)",
+                        2.0 * r_a * 1e9
+                    )
+                };
                 Err(Fails {
                     code: "geometry",
                     reason: format!(
-                        "at β = {beta_deg}° the parking height {:.2} nm is not above the {:.2} nm where the tip snaps in to the substrate: the tip would park in the meniscus, held",
+                        "at β = {beta_deg}° the parking height {:.2} nm is not above the {:.2} nm where the tip snaps in to the substrate: the tip would park where {cause} holds it",
                         parking * 1e9,
                         snap_in * 1e9
                     ),
-                    field: format!(
-                        "{} or push.contact_angle_deg (steeper)",
-                        adhesion_field::snap_in_field(&self.scene.tip_sample())
-                    ),
+                    field: format!("{field}{steeper}"),
                 })
             } else {
                 self.predict_at(beta, parking, v, approach_speed)
@@ -991,19 +1013,10 @@ impl<'a> Derivation<'a> {
                 ),
                 // Still rising: the figures scale a peak the model has not reached, so they
                 // are needed but not known to be enough (the review of issue 24 applied 1.1 × the
-                // figure and was asked for 20 times more).
-                field: format!(
-                    "cantilever.stiffness_n_per_m: k_c {} {} N/m needed{}, or |sensor.gain_v_per_nm| {} {} V/nm",
-                    if separates { "≥" } else { ">" },
-                    short(need_k),
-                    if separates {
-                        ""
-                    } else {
-                        " at the least (the model's push had not sheared the particle loose, so no stiffness is known to be enough)"
-                    },
-                    if separates { "≤" } else { "<" },
-                    short(gain_nm * 0.9 * ro.room / (PEAK_SPARE * peak_v))
-                ),
+                // figure and was asked for 20 times more). A figure outside what a scene allows,
+                // or a gain too small for the readout to see the touch or the set point, is
+                // said to be no way out rather than offered.
+                field: self.deflection_limit_field(p, separates, need_k, peak_v),
             });
         }
         if !separates {
@@ -1091,26 +1104,71 @@ impl<'a> Derivation<'a> {
 
     /// What the tolerance asks that the instrument may not give: said, not refused (the scan
     /// after the push judges).
+    /// The fields a `deflection_limit` refusal names: a stiffer lever (at most
+    /// [`MAX_STIFFNESS`]) or a smaller gain (no smaller than the readout needs to see the touch
+    /// of the substrate, [`TOUCH_PRESS`], and the set point, 10 × the noise), each figure "at
+    /// the least" when the model's peak was still rising.
+    fn deflection_limit_field(&self, p: &PushPrediction, separates: bool, need_k: f64, peak_v: f64) -> String {
+        let ro = self.readout;
+        let gain_nm = ro.gain * 1e-9;
+        let (ge, le, least, least_gain) = if separates {
+            ("≥", "≤", "", "")
+        } else {
+            (
+                ">",
+                "<",
+                " at the least (the model's push had not sheared the particle loose, so no value is known to be enough)",
+                " at the least",
+            )
+        };
+        let k_helps = need_k <= MAX_STIFFNESS;
+        let stiffer = format!("cantilever.stiffness_n_per_m: k_c {ge} {} N/m needed", short(need_k));
+        let k_no = format!("{stiffer}, beyond the {} N/m a scene allows", short(MAX_STIFFNESS));
+        let gain_max = gain_nm * 0.9 * ro.room / (PEAK_SPARE * peak_v);
+        let threshold = self
+            .choices
+            .iter()
+            .find(|c| c.key == "strategy.substrate_threshold_mv")
+            .map_or(0.03, |c| c.value * 1e-3);
+        let touch_floor = threshold / (TOUCH_PRESS * 1e9);
+        let set_floor = 10.0 * (ro.sigma + ro.pert) / (SET_FRACTION * p.peak_deflection * 1e9);
+        let gain_floor = touch_floor.max(set_floor);
+        let gain_helps = gain_max >= gain_floor;
+        let smaller = format!("|sensor.gain_v_per_nm| {le} {} V/nm", short(gain_max));
+        let gain_no = format!(
+            "{smaller}, but below {} V/nm the readout does not see the touch of the substrate or the set point",
+            short(gain_floor)
+        );
+        match (k_helps, gain_helps) {
+            (true, true) => format!("{stiffer}{least}, or {smaller}{least_gain}"),
+            (true, false) => format!("{stiffer}{least} (a smaller gain cannot help: {gain_no})"),
+            (false, true) => format!("{smaller}{least} (a stiffer lever cannot help: {k_no})"),
+            (false, false) => format!(
+                "the particle, its friction or the contact angle: neither a stiffer lever ({k_no}) nor a smaller gain ({gain_no}) can help"
+            ),
+        }
+    }
+
     fn tolerance_warnings(&mut self, p: &PushPrediction, pitch: f64) {
         if p.periodic_amplitude > self.tolerance {
             self.warnings.push(format!(
-                "the model's push is stick-slip with a {:.1} nm amplitude, more than the {:.0} nm tolerance: pushes may end outside it and be corrected",
+                "the model's push is stick-slip with a {:.1} nm amplitude, more than the {} nm tolerance: pushes may end outside it and be corrected",
                 p.periodic_amplitude * 1e9,
-                self.tolerance * 1e9
+                crate::nm_text(self.tolerance)
             ));
         }
         if pitch / 8.0 > self.tolerance {
             self.warnings.push(format!(
-                "the local scan's {:.0} nm pitch is coarse for a {:.0} nm tolerance",
+                "the local scan's {:.0} nm pitch is coarse for a {} nm tolerance",
                 pitch * 1e9,
-                self.tolerance * 1e9
+                crate::nm_text(self.tolerance)
             ));
         }
         let least = crate::control::locate_and_plan::DONE_WITHIN;
         if self.tolerance < least {
             self.warnings.push(format!(
-                "the {:.0} nm tolerance is below the {:.0} nm a push can correct: a move that ends between the two is missed without a correction",
-                self.tolerance * 1e9,
+                "the {} nm tolerance is below the {:.0} nm a push can correct: a move that ends between the two is missed without a correction",
+                crate::nm_text(self.tolerance),
                 least * 1e9
             ));
         }
