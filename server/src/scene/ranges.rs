@@ -16,6 +16,11 @@ pub struct Range {
 }
 
 impl Range {
+    /// The upper bound.
+    pub const fn hi(&self) -> f64 {
+        self.hi
+    }
+
     /// `[lo, hi]`.
     pub const fn closed(lo: f64, hi: f64, unit: &'static str) -> Range {
         Range {
@@ -90,6 +95,10 @@ const MODULUS: Range = Range::closed(0.01, 1500.0, "GPa");
 const POISSON: Range = Range::closed(0.0, 0.5, "");
 const HAMAKER: Range = Range::closed(1.0, 1000.0, "zJ");
 const MU: Range = Range::closed(0.0, 5.0, "");
+/// `cantilever.stiffness_n_per_m` (the planner names no stiffness beyond it).
+pub const STIFFNESS_N_PER_M: Range = Range::closed(0.01, 500.0, "N/m");
+/// `strategy.start_height_um` (the planner lifts no higher).
+pub const START_HEIGHT_UM: Range = Range::open_closed(0.0, 50.0, "µm");
 
 /// Every range check of a scene, in file order; the first failure is returned.
 pub fn validate(origin: &str, s: &SceneFile, hand_set: &HandSet) -> Result<(), SceneError> {
@@ -100,11 +109,7 @@ pub fn validate(origin: &str, s: &SceneFile, hand_set: &HandSet) -> Result<(), S
     c("tip.hamaker_zj", s.tip.hamaker_zj, HAMAKER)?;
 
     let k = &s.cantilever;
-    c(
-        "cantilever.stiffness_n_per_m",
-        k.stiffness_n_per_m,
-        Range::closed(0.01, 500.0, "N/m"),
-    )?;
+    c("cantilever.stiffness_n_per_m", k.stiffness_n_per_m, STIFFNESS_N_PER_M)?;
     c("cantilever.width_um", k.width_um, Range::closed(1.0, 1000.0, "µm"))?;
     c("cantilever.length_um", k.length_um, Range::closed(5.0, 5000.0, "µm"))?;
     c(
@@ -533,11 +538,7 @@ fn validate_haptic(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
 fn validate_strategy(origin: &str, s: &SceneFile, hand_set: &HandSet) -> Result<(), SceneError> {
     let c = |field: &str, v: f64, r: Range| check(origin, &format!("strategy.{field}"), v, r);
     let st = &s.strategy;
-    c(
-        "start_height_um",
-        st.start_height_um,
-        Range::open_closed(0.0, 50.0, "µm"),
-    )?;
+    c("start_height_um", st.start_height_um, START_HEIGHT_UM)?;
     c(
         "approach_speed_um_per_s",
         st.approach_speed_um_per_s,

@@ -99,14 +99,14 @@ pub const MAX_TIMEOUT: f64 = 600.0;
 pub const MAX_DRY_RUN: f64 = 60.0;
 
 /// Highest start height the scene allows (m), `strategy.start_height_um`'s upper bound.
-const MAX_START: f64 = 50e-6;
+const MAX_START: f64 = crate::scene::START_HEIGHT_UM.hi() * 1e-6;
 
 /// The paper's stage speed (m/s), the plan's upper bound.
 const PAPER_SPEED: f64 = 1e-6;
 /// The most the tip may press into the substrate before the reading shows the touch (m).
 const TOUCH_PRESS: f64 = 10e-9;
-/// The stiffest lever a scene allows (N/m; `scene::ranges`).
-const MAX_STIFFNESS: f64 = 500.0;
+/// The stiffest lever a scene allows (N/m).
+const MAX_STIFFNESS: f64 = crate::scene::STIFFNESS_N_PER_M.hi();
 
 /// Control tick (s).
 const TICK: f64 = 1e-3;
@@ -852,7 +852,7 @@ impl<'a> Derivation<'a> {
         // attraction), this high above it; the tip rises from there to the parking height, and
         // a parking height below it would drive the tip down into the meniscus while the
         // substrate still holds it (the review of issue 24).
-        let snap_in = crate::control::strategy_run::detection_offset(self.scene, &self.scene.strategy_params(1e-3));
+        let snap_in = crate::control::strategy_run::detection_offset(self.scene, &self.scene.strategy_params(TICK));
         for &beta_deg in &betas {
             let beta = beta_deg.to_radians();
             let parking = r_a - r_t + (r_a + r_t) * beta.sin();
@@ -871,7 +871,7 @@ impl<'a> Derivation<'a> {
                     || {
                         let mut dry = self.scene.clone();
                         dry.file.physics.capillary = false;
-                        crate::control::strategy_run::detection_offset(&dry, &dry.strategy_params(1e-3))
+                        crate::control::strategy_run::detection_offset(&dry, &dry.strategy_params(TICK))
                     },
                     parking,
                 );
@@ -1102,8 +1102,6 @@ impl<'a> Derivation<'a> {
         Ok(())
     }
 
-    /// What the tolerance asks that the instrument may not give: said, not refused (the scan
-    /// after the push judges).
     /// The fields a `deflection_limit` refusal names: a stiffer lever (at most
     /// [`MAX_STIFFNESS`]) or a smaller gain (no smaller than the readout needs to see the touch
     /// of the substrate, [`TOUCH_PRESS`], and the set point, 10 × the noise), each figure "at
@@ -1149,6 +1147,8 @@ impl<'a> Derivation<'a> {
         }
     }
 
+    /// What the tolerance asks that the instrument may not give: said, not refused (the scan
+    /// after the push judges).
     fn tolerance_warnings(&mut self, p: &PushPrediction, pitch: f64) {
         if p.periodic_amplitude > self.tolerance {
             self.warnings.push(format!(
