@@ -165,6 +165,18 @@ pub fn predict(
     deflection: f64,
     retract: RetractPlan,
 ) -> Result<PushPrediction, SimulationError> {
+    predict_with(params, duration, retract, |_| deflection)
+}
+
+/// [`predict`] with the set point's `ζ_z` given as a function of the push's own stick-phase peak
+/// (`deflection_of(ζ_peak)`), so one model push serves a plan that sets its set point from the
+/// peak (it was run twice, the second time only to read the travel to the set point).
+fn predict_with(
+    params: PushParams,
+    duration: f64,
+    retract: RetractPlan,
+    deflection_of: impl Fn(f64) -> f64,
+) -> Result<PushPrediction, SimulationError> {
     let model = PushModel::new(params);
     let run = run_push_within(
         model.clone(),
@@ -183,7 +195,6 @@ pub fn predict(
         .iter()
         .map(lag)
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
-    let travel_to_deflection = run.trace.iter().find(|r| r.zeta_z >= deflection).map(|r| r.stage_y);
     let highest = run
         .trace
         .iter()
@@ -191,6 +202,8 @@ pub fn predict(
         .expect("a push trace has rows");
     let peak_row = first_peak(&run.trace, highest.zeta_z).unwrap_or(highest);
     let (peak, travel_to_peak) = (peak_row.zeta_z, peak_row.stage_y);
+    let deflection = deflection_of(peak);
+    let travel_to_deflection = run.trace.iter().find(|r| r.zeta_z >= deflection).map(|r| r.stage_y);
     let settled = tail.iter().map(|r| r.zeta_z).sum::<f64>() / tail.len() as f64;
     Ok(PushPrediction {
         retract_shift: retraction.shift,
@@ -241,10 +254,31 @@ pub fn predict_past_separation(
     deflection: f64,
     retract: RetractPlan,
 ) -> Result<PushPrediction, SimulationError> {
+    past_separation(params, retract, |_| deflection)
+}
+
+/// [`predict_past_separation`] with the set point at `fraction` of the push's stick-phase peak
+/// (none when the peak is not on the push's side): what the strategy's plan derives its set
+/// point from, in the same model pushes.
+pub fn predict_with_set_fraction(
+    params: PushParams,
+    fraction: f64,
+    retract: RetractPlan,
+) -> Result<PushPrediction, SimulationError> {
+    past_separation(params, retract, |peak| {
+        if peak > 0.0 { fraction * peak } else { f64::INFINITY }
+    })
+}
+
+fn past_separation(
+    params: PushParams,
+    retract: RetractPlan,
+    deflection_of: impl Fn(f64) -> f64 + Copy,
+) -> Result<PushPrediction, SimulationError> {
     let mut travel = PREDICTED_TRAVEL;
     loop {
         let duration = (travel / params.speed).max(0.02);
-        let p = predict(params, duration, deflection, retract)?;
+        let p = predict_with(params, duration, retract, deflection_of)?;
         if p.travel_to_peak <= 0.75 * p.travel || travel >= MAX_PREDICTED_TRAVEL {
             return Ok(p);
         }

@@ -69,7 +69,7 @@ mod tests;
 
 pub use choice::{Choice, Refusal, StrategyPlan, short};
 
-use crate::control::estimator::{PushPrediction, RetractPlan, predict_past_separation};
+use crate::control::estimator::{PushPrediction, RetractPlan, predict_with_set_fraction};
 use crate::control::locate_and_plan::{LOCAL_PIXELS, local_scan_size};
 use crate::control::strategy::pull_off::{PULL_OFF_MARGIN, PULL_OFF_SLACK, pull_off_rise};
 use crate::control::strategy::{BACK_OFF, HOLD};
@@ -939,23 +939,13 @@ impl<'a> Derivation<'a> {
             speed: approach_speed,
             lift: MAX_START - parking,
         };
-        // No set point yet: the travel to it is read once the peak is known.
-        let prediction = predict_past_separation(params, f64::INFINITY, retract).map_err(|e| Fails {
+        // The set point at SET_FRACTION of the push's own peak, and the travel to it, from one
+        // model push.
+        let prediction = predict_with_set_fraction(params, SET_FRACTION, retract).map_err(|e| Fails {
             code: "model",
             reason: format!("the model's push at β = {:.0}° failed: {e}", beta.to_degrees()),
             field: crate::physics::pushing::MODEL_REFUSAL_FIELD.into(),
         })?;
-        let set = SET_FRACTION * prediction.peak_deflection;
-        // The travel to the set point, from the same (deterministic) model push.
-        let prediction = if prediction.peak_deflection > 0.0 {
-            predict_past_separation(params, set, retract).map_err(|e| Fails {
-                code: "model",
-                reason: format!("the model's push at β = {:.0}° failed: {e}", beta.to_degrees()),
-                field: crate::physics::pushing::MODEL_REFUSAL_FIELD.into(),
-            })?
-        } else {
-            prediction
-        };
         Ok(Candidate {
             beta_deg: beta.to_degrees().round(),
             parking,
