@@ -271,9 +271,14 @@ pub(crate) fn is(v: &Value, ty: &str) -> bool {
     v["type"] == ty
 }
 
+/// Whether `v` is the reply (ok or error) to command `id`.
+pub(crate) fn is_reply(v: &Value, id: u32) -> bool {
+    (is(v, "ok") || is(v, "error")) && v["id"] == id
+}
+
 /// The reply (ok or error) to command `id`.
 pub(crate) async fn reply(ws: &mut Ws, id: u32) -> Value {
-    until(ws, 10.0, |v| (is(v, "ok") || is(v, "error")) && v["id"] == id).await
+    until(ws, 10.0, |v| is_reply(v, id)).await
 }
 
 /// Sends command `v` and waits for its reply, which must be `ok` (the reply is matched by the
@@ -294,11 +299,8 @@ pub(crate) async fn ok_and(ws: &mut Ws, v: Value, secs: f64, pred: impl Fn(&Valu
     send(ws, v).await;
     let (mut replied, mut seen) = (false, None);
     while !replied || seen.is_none() {
-        let m = until(ws, secs, |m| {
-            ((is(m, "ok") || is(m, "error")) && m["id"] == id) || pred(m)
-        })
-        .await;
-        if (is(&m, "ok") || is(&m, "error")) && m["id"] == id {
+        let m = until(ws, secs, |m| is_reply(m, id) || pred(m)).await;
+        if is_reply(&m, id) {
             assert_eq!(m["type"], "ok", "{m}");
             replied = true;
         } else if seen.is_none() {
