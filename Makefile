@@ -56,11 +56,11 @@ test: setup fmt-check clippy prometheus-check unit web-test
 ## examples and integration tests too: 2-3 s a build instead of 7). Not part of `make test`: ~3600
 ## mutants, hours on 2 cores. Results in mutants.out/; `--iterate` in CARGO_MUTANTS_ARGS re-runs
 ## only what a previous run did not catch.
-## MUTANTS_FILES narrows it, e.g. make mutants MUTANTS_FILES='server/src/numerics/integrate/*.rs';
+## MUTANTS_FILES narrows it, e.g. make mutants MUTANTS_FILES='instrument/src/numerics/integrate/*.rs';
 ## MUTANTS_TESTS holds the library test filters the mutants run against, one or several (they go
 ## to the test binary: MUTANTS_TESTS='physics:: numerics::'). Test-only modules
 ## (tests.rs, *_tests.rs, the Eq 17 reference) are not mutated.
-MUTANTS_FILES ?= server/src/physics/**/*.rs server/src/numerics/**/*.rs server/src/control/**/*.rs server/src/serve/command_checks.rs proto/src/**/*.rs
+MUTANTS_FILES ?= instrument/src/physics/**/*.rs instrument/src/numerics/**/*.rs instrument/src/control/**/*.rs server/src/command_checks.rs proto/src/**/*.rs
 MUTANTS_TESTS ?=
 CARGO_MUTANTS_ARGS ?=
 mutants:

@@ -5,9 +5,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nanopush::numerics::integrate::Method;
-use nanopush::physics::pushing::{Dof, PushModel};
-use nanopush::scene::Scene;
+use nanopush_instrument::numerics::integrate::Method;
+use nanopush_instrument::physics::pushing::{Dof, PushModel};
+use nanopush_instrument::scene::Scene;
 use nanopush_proto::accuracy::{AccuracyPoint, AccuracyReport, EqualError, PushOutcome, QuasiStaticCost, ReductionRow};
 use nanopush_study::accuracy::reduction::{CompareOptions, Comparison, Summary, compare};
 use nanopush_study::accuracy::{

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 use clap::Args;
-use nanopush::control::strategy_plan::{self, DEFAULT_TOLERANCE};
+use nanopush_instrument::control::strategy_plan::{self, DEFAULT_TOLERANCE};
 
 /// Arguments of `nanopush plan`.
 #[derive(Args, Debug)]
@@ -39,7 +39,7 @@ pub fn run(a: &PlanArgs) -> anyhow::Result<String> {
     }
     let id = a.particle.unwrap_or(scene.file.push.particle_id);
     if a.derive_all {
-        scene.hand_set = nanopush::scene::hand_set::HandSet::none();
+        scene.hand_set = nanopush_instrument::scene::hand_set::HandSet::none();
     }
     let plan = strategy_plan::derive(&scene, id, a.tolerance_nm * 1e-9)?;
     if a.json {
@@ -87,7 +87,7 @@ mod tests {
     fn every_setting_has_a_line_and_the_refusal_names_the_field() {
         let p = P::parse_from(["plan", "--scene", &scene_path("gold-14nm.toml")]);
         let text = run(&p.a).unwrap();
-        for key in nanopush::scene::hand_set::DERIVABLE {
+        for key in nanopush_instrument::scene::hand_set::DERIVABLE {
             if key != "strategy.control" {
                 assert!(text.contains(&format!("{key} = ")), "{key} in\n{text}");
             }

@@ -7,12 +7,14 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nanopush::control::strategy_plan::{self, DEFAULT_TOLERANCE, StrategyPlan};
-use nanopush::control::{DEFAULT_ATTEMPTS, Failure, MoveOptions, MoveTarget, RunRow, StrategyRun, move_particle};
-use nanopush::instrument::Afm;
-use nanopush::scan::{HeightImage, Located};
-use nanopush::scene::Scene;
-use nanopush::scene::file::ControlFile;
+use nanopush_instrument::afm::Afm;
+use nanopush_instrument::control::strategy_plan::{self, DEFAULT_TOLERANCE, StrategyPlan};
+use nanopush_instrument::control::{
+    DEFAULT_ATTEMPTS, Failure, MoveOptions, MoveTarget, RunRow, StrategyRun, move_particle,
+};
+use nanopush_instrument::scan::{HeightImage, Located};
+use nanopush_instrument::scene::Scene;
+use nanopush_instrument::scene::file::ControlFile;
 use nanopush_proto::push::{LegReport, LocatedParticle, PushReport};
 
 use crate::plot::{Mark, Panel, Series, stacked};
@@ -210,7 +212,7 @@ pub fn run(a: &PushArgs) -> anyhow::Result<(String, bool)> {
     let wall = std::time::Instant::now();
     let mut scene = scene;
     if a.derive_all {
-        scene.hand_set = nanopush::scene::hand_set::HandSet::none();
+        scene.hand_set = nanopush_instrument::scene::hand_set::HandSet::none();
     }
     let plan = strategy_plan::derive(&scene, req.id, req.tolerance)?;
     plan.apply(&mut scene);
@@ -345,12 +347,12 @@ fn text(r: &PushReport, runs: &[StrategyRun], plan: &StrategyPlan) -> String {
         ("ok", Some(e)) => format!(
             "ok: the scan after finds it {:.1} nm from the target (tolerance {} nm)",
             e * 1e9,
-            nanopush::nm_text(r.tolerance)
+            nanopush_instrument::nm_text(r.tolerance)
         ),
         ("missed", Some(e)) => format!(
             "missed: the scan after finds it {:.1} nm from the target, beyond the {} nm tolerance, after {} push(es){}",
             e * 1e9,
-            nanopush::nm_text(r.tolerance),
+            nanopush_instrument::nm_text(r.tolerance),
             r.attempts,
             r.cut_short.map_or(String::new(), |c| format!(
                 ": the stage's edge cut the push {:.0} nm short of the retraction's drag, and would cut a correction the same way",
@@ -485,10 +487,10 @@ fn write_outputs(
     )?;
     for (name, img) in [("scan-before", before), ("scan-after", after)] {
         let mut gsf = Vec::new();
-        nanopush::scan::write_gsf(&mut gsf, img, name)?;
+        nanopush_instrument::scan::write_gsf(&mut gsf, img, name)?;
         crate::units::write_file(&dir.join(format!("{name}.gsf")), &gsf)?;
         let mut png = Vec::new();
-        nanopush::scan::write_png(&mut png, img)?;
+        nanopush_instrument::scan::write_png(&mut png, img)?;
         crate::units::write_file(&dir.join(format!("{name}.png")), &png)?;
     }
     crate::units::write_file(

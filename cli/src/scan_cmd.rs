@@ -5,11 +5,11 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nanopush::scan::{
+use nanopush_instrument::scan::{
     HeightImage, LocateError, Located, ScanParams, Scanner, Surface, Tip, find_particles, localize, write_gsf,
     write_png,
 };
-use nanopush::scene::{MAX_SCAN_PIXELS, MIN_SCAN_PIXELS};
+use nanopush_instrument::scene::{MAX_SCAN_PIXELS, MIN_SCAN_PIXELS};
 use nanopush_proto::scan::{LocatedParticle, ParticleCheck, ScanReport};
 
 use crate::units::eng;

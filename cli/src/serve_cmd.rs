@@ -6,13 +6,13 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nanopush::serve::app_state::{AccessConfig, ServeConfig};
-use nanopush::serve::auth::TokenFile;
-use nanopush::serve::auth::tokens::TokenTable;
-use nanopush::serve::client_addr::Cidr;
-use nanopush::serve::control_loop::LoopConfig;
-use nanopush::serve::haptic::HapticMode;
-use nanopush::serve::tls::{self, TlsSource};
+use nanopush_server::app_state::{AccessConfig, ServeConfig};
+use nanopush_server::auth::TokenFile;
+use nanopush_server::auth::tokens::TokenTable;
+use nanopush_server::client_addr::Cidr;
+use nanopush_server::control_loop::LoopConfig;
+use nanopush_server::haptic::HapticMode;
+use nanopush_server::tls::{self, TlsSource};
 
 /// Arguments of `nanopush serve`.
 #[derive(Args, Debug)]
@@ -364,7 +364,7 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
                 _ = hup.recv() => tracing::info!("SIGHUP"),
             }
         };
-        nanopush::serve::run(
+        nanopush_server::run(
             scene,
             cfg,
             loop_cfg,
@@ -422,7 +422,7 @@ mod tests {
         assert_eq!(a.telemetry_hz, 60.0);
         assert_eq!(a.haptic, "none");
         assert_eq!(a.haptic_timeout_ms, 5.0);
-        assert_eq!(a.haptic_timeout_ms, nanopush::serve::haptic::DEFAULT_TIMEOUT_MS);
+        assert_eq!(a.haptic_timeout_ms, nanopush_server::haptic::DEFAULT_TIMEOUT_MS);
         // Real-time by default, idle cores polling with it.
         assert!(!a.no_realtime && !a.allow_cpu_halt);
         check(&a).unwrap();

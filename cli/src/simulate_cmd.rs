@@ -5,9 +5,9 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nanopush::numerics::integrate::{Method, Options};
-use nanopush::physics::pushing::PushModel;
-use nanopush::physics::pushing::trace::{PushRun, run_push};
+use nanopush_instrument::numerics::integrate::{Method, Options};
+use nanopush_instrument::physics::pushing::PushModel;
+use nanopush_instrument::physics::pushing::trace::{PushRun, run_push};
 use nanopush_proto::simulate::SimulateReport;
 
 use crate::units::eng;
@@ -95,7 +95,7 @@ fn write_trace(path: &std::path::Path, run: &PushRun) -> anyhow::Result<()> {
 /// Fig 7: the settling of the particle's y during pushing.
 fn plot_settling(path: &std::path::Path, scene: &str, run: &PushRun) -> anyhow::Result<()> {
     use crate::plot::{Mark, Panel, Series, stacked};
-    let series = |label: &str, color, f: fn(&nanopush::physics::pushing::trace::TraceRow) -> f64| Series {
+    let series = |label: &str, color, f: fn(&nanopush_instrument::physics::pushing::trace::TraceRow) -> f64| Series {
         label: label.into(),
         points: run.trace.iter().map(|r| (r.t * 1e3, f(r) * 1e9)).collect(),
         mark: Mark::Line,

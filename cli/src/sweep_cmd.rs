@@ -9,7 +9,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use nanopush::scene::Scene;
+use nanopush_instrument::scene::Scene;
 use nanopush_proto::sweep::{FailedPoint, SeriesSummary, SweepReport};
 use nanopush_study::sweep::{Param, PointOptions, Shard, SweepPoint, compute_point, csv_header, csv_row, grid_value};
 use rayon::prelude::*;
@@ -488,7 +488,7 @@ mod tests {
                 0.2,
                 1e-3,
                 0.25,
-                nanopush::numerics::integrate::Method::Rodas4,
+                nanopush_instrument::numerics::integrate::Method::Rodas4,
                 1e-6,
                 false
             )

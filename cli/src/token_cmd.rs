@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
-use nanopush::serve::auth::tokens::{TokenTable, parse_role, role_name};
+use nanopush_server::auth::tokens::{TokenTable, parse_role, role_name};
 
 /// Arguments of `nanopush token`.
 #[derive(Args, Debug)]

@@ -59,20 +59,21 @@ pub fn echo(s: &str) -> String {
 /// A number as an error message shows it: as typed when short, else in scientific notation (a
 /// 1e308 is not 309 digits).
 pub fn num(v: f64) -> String {
-    nanopush::shown(v)
+    nanopush_instrument::shown(v)
 }
 
 /// `--method NAME` as an integration method, with the allowed names in the error.
-pub fn parse_method(name: &str) -> anyhow::Result<nanopush::numerics::integrate::Method> {
+pub fn parse_method(name: &str) -> anyhow::Result<nanopush_instrument::numerics::integrate::Method> {
     use anyhow::Context as _;
-    nanopush::numerics::integrate::Method::parse(name)
+    nanopush_instrument::numerics::integrate::Method::parse(name)
         .with_context(|| format!("--method {name}: unknown; allowed: rodas4, trbdf2, implicit-euler"))
 }
 
-/// [`nanopush::files::write_atomic`] with the path in the error.
+/// [`nanopush_instrument::files::write_atomic`] with the path in the error.
 pub fn write_file(path: &std::path::Path, bytes: impl AsRef<[u8]>) -> anyhow::Result<()> {
     use anyhow::Context as _;
-    nanopush::files::write_atomic(path, bytes.as_ref()).with_context(|| format!("writing {}", path.display()))
+    nanopush_instrument::files::write_atomic(path, bytes.as_ref())
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// A whole-number argument: any integer is parsed (the command then checks its range and says

@@ -15,10 +15,10 @@
 
 use std::time::Instant;
 
-use nanopush::numerics::integrate::test_problems::{Robertson, VanDerPol};
-use nanopush::numerics::integrate::{Integrator, Method, NoEvents, Options, Problem};
-use nanopush::physics::pushing::PushModel;
-use nanopush::physics::pushing::trace::{PushRun, run_push};
+use nanopush_instrument::numerics::integrate::test_problems::{Robertson, VanDerPol};
+use nanopush_instrument::numerics::integrate::{Integrator, Method, NoEvents, Options, Problem};
+use nanopush_instrument::physics::pushing::PushModel;
+use nanopush_instrument::physics::pushing::trace::{PushRun, run_push};
 
 pub mod reduction;
 
@@ -91,7 +91,7 @@ pub fn timed<R>(reps: usize, mut f: impl FnMut() -> R) -> (R, f64) {
     (last.expect("at least one repetition"), times[times.len() / 2])
 }
 
-pub use nanopush::numerics::integrate::test_problems::max_relative_error;
+pub use nanopush_instrument::numerics::integrate::test_problems::max_relative_error;
 
 fn position_rows(model: &PushModel) -> Vec<usize> {
     let m = model.mass_diagonal();
@@ -347,7 +347,7 @@ pub fn classical_reference(problem: &str) -> Option<Vec<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nanopush::scene::Scene;
+    use nanopush_instrument::scene::Scene;
 
     fn point(rtol: f64, values: Vec<f64>) -> Point {
         Point {

@@ -14,15 +14,15 @@
 
 use std::time::Instant;
 
-use nanopush::control::locate_and_plan::MoveTarget;
-use nanopush::control::strategy_plan::{self, DEFAULT_TOLERANCE};
-use nanopush::control::{
+use nanopush_instrument::afm::Afm;
+use nanopush_instrument::control::locate_and_plan::MoveTarget;
+use nanopush_instrument::control::strategy_plan::{self, DEFAULT_TOLERANCE};
+use nanopush_instrument::control::{
     DEFAULT_ATTEMPTS, MoveOptions, MoveRun, MoveRunError, RunError, RunRow, Verdict, move_particle,
 };
-use nanopush::instrument::Afm;
-use nanopush::physics::friction;
-use nanopush::scene::Scene;
-use nanopush::scene::hand_set::HandSet;
+use nanopush_instrument::physics::friction;
+use nanopush_instrument::scene::Scene;
+use nanopush_instrument::scene::hand_set::HandSet;
 
 const UM: f64 = 1e-6;
 
@@ -71,7 +71,7 @@ impl Edit {
         }
     }
 
-    fn apply(&self, scene: &Scene, f: &mut nanopush::scene::file::SceneFile) {
+    fn apply(&self, scene: &Scene, f: &mut nanopush_instrument::scene::file::SceneFile) {
         let id = f.push.particle_id;
         let fr = &mut f.friction;
         match *self {
@@ -222,7 +222,8 @@ pub fn run_case(base: &Scene, case: &[Edit]) -> PushCase {
     };
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| push_whole(base, case, &mut out)));
     if let Err(p) = result {
-        out.violations.push(format!("panic: {}", nanopush::panic_message(&*p)));
+        out.violations
+            .push(format!("panic: {}", nanopush_instrument::panic_message(&*p)));
     }
     out.wall_time = start.elapsed().as_secs_f64();
     out
@@ -335,7 +336,8 @@ pub fn push_judged(scene: &Scene, distance: f64, direction: (f64, f64), toleranc
         let mut j = Judged::refused("error", String::new(), distance);
         j.outcome = "error".into();
         j.refusal = None;
-        j.violations.push(format!("panic: {}", nanopush::panic_message(&*p)));
+        j.violations
+            .push(format!("panic: {}", nanopush_instrument::panic_message(&*p)));
         j
     });
     j.wall_time = start.elapsed().as_secs_f64();
@@ -422,7 +424,7 @@ fn judge_inner(scene: &Scene, distance: f64, direction: (f64, f64), tolerance: f
             "the scan after the last of {} push(es) finds it {:.1} nm from the target, beyond the {} nm tolerance",
             moved.attempts,
             error * 1e9,
-            nanopush::nm_text(tolerance)
+            nanopush_instrument::nm_text(tolerance)
         ),
         Verdict::NotFound => "the scan after the push does not find the particle".into(),
         Verdict::Failed { .. } => moved.legs.last().and_then(|l| l.run.failure_text()).unwrap_or_default(),
@@ -432,7 +434,7 @@ fn judge_inner(scene: &Scene, distance: f64, direction: (f64, f64), tolerance: f
         j.violations.push(format!(
             "ok, but the particle is truly {:.2} nm from the target (tolerance {} nm)",
             true_error * 1e9,
-            nanopush::nm_text(tolerance)
+            nanopush_instrument::nm_text(tolerance)
         ));
     }
     // A failed push may leave a soft lever stuck to the surface by adhesion it cannot pull

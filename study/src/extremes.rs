@@ -14,11 +14,11 @@
 
 use std::time::Instant;
 
-use nanopush::numerics::integrate::{Method, Options};
-use nanopush::physics::friction;
-use nanopush::physics::pushing::PushModel;
-use nanopush::physics::pushing::trace::run_push;
-use nanopush::scene::Scene;
+use nanopush_instrument::numerics::integrate::{Method, Options};
+use nanopush_instrument::physics::friction;
+use nanopush_instrument::physics::pushing::PushModel;
+use nanopush_instrument::physics::pushing::trace::run_push;
+use nanopush_instrument::scene::Scene;
 
 /// One parameter set (user units, as in the scene file).
 #[derive(Debug, Clone, Copy, PartialEq)]

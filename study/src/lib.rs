@@ -13,7 +13,7 @@
 //!   russell_ode) on the report's classical problems, for comparison at equal error.
 //!
 //! ```
-//! let scene = nanopush::scene::Scene::default_scene();
+//! let scene = nanopush_instrument::scene::Scene::default_scene();
 //! let report = nanopush_study::report::model_report(&scene);
 //! assert!(report.mu_feasible);
 //! ```

@@ -7,7 +7,7 @@
 //! right-hand side and the same Jacobian.
 //!
 //! Tolerances follow our convention (`atol_i = rtol · scale(i)`, as in
-//! [`Options::with_rtol`](nanopush::numerics::integrate::Options::with_rtol)):
+//! [`Options::with_rtol`](nanopush_instrument::numerics::integrate::Options::with_rtol)):
 //! - diffsol takes a per-component absolute tolerance, so it gets `rtol · scale(i)` directly;
 //! - russell_ode takes one scalar absolute tolerance (and rejects any below 10 ε), so it
 //!   integrates the scaled state `z_i = y_i / scale(i)` with `atol = rtol`: its weight
@@ -34,8 +34,8 @@ use russell_ode::{Method as RussellMethod, NoArgs, OdeSolver, Params, System};
 use russell_sparse::{CooMatrix, Sym};
 
 use crate::accuracy::{max_relative_error, timed, tolerances};
-use nanopush::numerics::integrate::test_problems::{Robertson, VanDerPol};
-use nanopush::numerics::integrate::{MAX_DIM, Problem};
+use nanopush_instrument::numerics::integrate::test_problems::{Robertson, VanDerPol};
+use nanopush_instrument::numerics::integrate::{MAX_DIM, Problem};
 
 /// One peer solver on one problem at one tolerance.
 #[derive(Debug, Clone, PartialEq)]
@@ -262,7 +262,7 @@ fn run_peer<P: Problem + Sync>(p: &P, peer: Peer, y0: &[f64], t_end: f64, rtol: 
         _ => run_diffsol(p, peer, y0, t_end, rtol),
     };
     catch_unwind(AssertUnwindSafe(run))
-        .unwrap_or_else(|panic| Err(format!("panicked: {}", nanopush::panic_message(&*panic))))
+        .unwrap_or_else(|panic| Err(format!("panicked: {}", nanopush_instrument::panic_message(&*panic))))
 }
 
 #[allow(clippy::too_many_arguments)]

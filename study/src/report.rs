@@ -2,11 +2,11 @@
 
 use nanopush_proto::model::{ForceCurvePoint, ForceCurveReport, ModelReport, SteadyStateReport};
 
-use nanopush::physics::force_curve::CurvePoint;
-use nanopush::physics::friction;
-use nanopush::physics::pushing::{PushModel, SteadyInputs, steady_state};
-use nanopush::physics::shearing::StaticPhase;
-use nanopush::scene::Scene;
+use nanopush_instrument::physics::force_curve::CurvePoint;
+use nanopush_instrument::physics::friction;
+use nanopush_instrument::physics::pushing::{PushModel, SteadyInputs, steady_state};
+use nanopush_instrument::physics::shearing::StaticPhase;
+use nanopush_instrument::scene::Scene;
 
 /// Everything `nanopush model` prints, computed from a validated scene.
 pub fn model_report(scene: &Scene) -> ModelReport {
@@ -125,8 +125,8 @@ mod tests {
     fn mu_at_the_eq16_bound_is_reported_infeasible() {
         let s = Scene::default_scene();
         let c = s.cantilever();
-        let upper = nanopush::physics::friction::mu_upper_bound(c.k_y(), c.k_z(), c.tilt);
-        let text = nanopush::scene::DEFAULT_SCENE.replacen(
+        let upper = nanopush_instrument::physics::friction::mu_upper_bound(c.k_y(), c.k_z(), c.tilt);
+        let text = nanopush_instrument::scene::DEFAULT_SCENE.replacen(
             "particle_substrate_static = 0.3",
             &format!("particle_substrate_static = {upper:.17}"),
             1,
@@ -159,7 +159,7 @@ mod tests {
     /// The retraction runs out to 1.5 adhesion/k_c beyond the start.
     #[test]
     fn the_default_force_curve_snaps_in_at_3_60_nm_and_pulls_off_at_minus_55_09_nn_at_7_05_nm() {
-        use nanopush::physics::forces::vdw::sphere_plane_force;
+        use nanopush_instrument::physics::forces::vdw::sphere_plane_force;
         let scene = Scene::default_scene();
         let ts = scene.tip_sample();
         let meniscus = 4.0 * std::f64::consts::PI * ts.r_t * scene.file.environment.surface_tension_mj_per_m2 * 1e-3;

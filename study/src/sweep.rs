@@ -27,11 +27,11 @@
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
-use nanopush::numerics::integrate::{Method, Options};
-use nanopush::physics::pushing::steady::SteadyError;
-use nanopush::physics::pushing::trace::{PushRun, run_push};
-use nanopush::physics::pushing::{Dof, PushModel, PushParams, SteadyInputs, SteadyState, steady_state};
-use nanopush::scene::{Scene, SceneError, SceneFile};
+use nanopush_instrument::numerics::integrate::{Method, Options};
+use nanopush_instrument::physics::pushing::steady::SteadyError;
+use nanopush_instrument::physics::pushing::trace::{PushRun, run_push};
+use nanopush_instrument::physics::pushing::{Dof, PushModel, PushParams, SteadyInputs, SteadyState, steady_state};
+use nanopush_instrument::scene::{Scene, SceneError, SceneFile};
 
 /// A swept scene parameter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -486,7 +486,10 @@ pub fn compute_point(base: &Scene, param: Param, index: usize, value: f64, opts:
     let dynamic = match run {
         Ok(Ok(run)) => Ok(Settled::from_run(&run, opts.tail)),
         Ok(Err(e)) => Err(format!("simulating the push: {e}")),
-        Err(panic) => Err(format!("the model panicked: {}", nanopush::panic_message(&*panic))),
+        Err(panic) => Err(format!(
+            "the model panicked: {}",
+            nanopush_instrument::panic_message(&*panic)
+        )),
     };
     SweepPoint {
         index,

@@ -1,5 +1,5 @@
 //! Issue 25's grid with the real processes, a subset sized for `make test` (the full grid is the
-//! `nanopush-haptic-grid` benchmark; every cell in one process is `server/tests/haptic_grid.rs`):
+//! `nanopush-haptic-grid` benchmark; every cell in one process is `instrument/tests/haptic_grid.rs`):
 //! the worst cells (10 N of pull-off at 10 and 1000 nm/mm, which chattered for a second and
 //! handed the hand millijoules), a tap there, and a hand that lets go. Each passes the issue's bounds, and a scale past the
 //! device's region is answered with the scales in force and the reason, which `/api/status`

@@ -256,7 +256,7 @@ fn only_the_control_loop_runs_on_its_core() {
 }
 
 /// The loop's core (the last one), its PM QoS resume latency, and the server's record of it
-/// (`serve/no_halt.rs`).
+/// (`server/src/no_halt.rs`).
 fn loop_core() -> (String, String) {
     let last = std::thread::available_parallelism().map_or(1, |n| n.get()) - 1;
     (
@@ -386,7 +386,7 @@ async fn tally_until(ws: &mut Ws, tally: &RefCell<Tally>, pred: impl Fn(&Value) 
 
 /// The lease holder's telemetry comes on a channel of its own, woken before the viewers' (in the
 /// soak its frame could come last of 500, and its gaps' p99 was +6 ms beyond the period); a
-/// session reads both and sends each frame once (`serve/frames.rs`). As the lease is given up
+/// session reads both and sends each frame once (`server/src/frames.rs`). As the lease is given up
 /// and taken again 30 times, every message is read: the holder's and a viewer's frames come
 /// each once, in order, and none is lost without a `lagged`.
 #[test]

@@ -83,7 +83,7 @@ pub fn text(o: &Output) -> (String, String) {
 }
 
 /// Core `cpu`'s PM QoS resume latency, which `nanopush serve` sets to `n/a` (poll, never halt)
-/// on its loop's core (`serve/no_halt.rs::setting_path`; this crate does not link the server).
+/// on its loop's core (`server/src/no_halt.rs::setting_path`; this crate does not link the server).
 pub fn pm_qos_setting(cpu: usize) -> String {
     format!("/sys/devices/system/cpu/cpu{cpu}/power/pm_qos_resume_latency_us")
 }

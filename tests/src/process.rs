@@ -30,7 +30,7 @@ pub fn sigterm(child: &Child) {
 }
 
 /// Stops a child as a service manager would: SIGTERM, up to 10 s to end, then SIGKILL; reaped
-/// either way. A server stopped so gives its loop's core back (`serve/no_halt.rs`); one killed
+/// either way. A server stopped so gives its loop's core back (`server/src/no_halt.rs`); one killed
 /// outright leaves it polling until another server starts and ends.
 pub fn stop(child: &mut Child) {
     if matches!(child.try_wait(), Ok(None)) {

@@ -3,7 +3,7 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { parseGsf } from '../src/gsf.js';
 
-// A GSF as `write_gsf` (server/src/scan) makes it: header, NUL padding to a multiple of 4, f32 LE.
+// A GSF as `write_gsf` (instrument/src/scan) makes it: header, NUL padding to a multiple of 4, f32 LE.
 
 function gsf(header, values) {
   const head = new TextEncoder().encode('Gwyddion Simple Field 1.0\n' + header);

@@ -26,7 +26,7 @@
 //! info packet. That `b` is the port's damping *with the hand the maker rated the device with*:
 //! a bare handle has far less (the simulated one 0.05 N·s/m, a wall of ~33 N/m), so what the
 //! region promises, and what the coupling adds for a lighter grip, is argued in
-//! `nanopush::control::bilateral::coupling`. The region at another rate or a longer measured delay follows from the formula,
+//! `nanopush_instrument::control::bilateral::coupling`. The region at another rate or a longer measured delay follows from the formula,
 //! but never beyond what the device declares ([`edge`]): at 4 kHz the formula allows the
 //! simulated device 2.67 kN/m, at which a loose grip (1 N·s/m) stays passive but rings (146
 //! chatter cycles in the grid's press at 10 nm/mm and 2.5 N, against none at 2 kN/m).
@@ -76,7 +76,7 @@ pub fn edge(declared: f64, spec_rate_hz: f64, rate_hz: f64, delay_s: f64, max_da
 
 /// The virtual coupling's damper for a felt stiffness `stiffness` (N/m) at `rate_hz` with a
 /// round-trip delay `delay_s` (N·s/m): twice the dissipation the sampled spring's leak needs,
-/// `B_c = 2 K (T/2 + T_d)` (see `nanopush::control::bilateral::coupling`).
+/// `B_c = 2 K (T/2 + T_d)` (see `nanopush_instrument::control::bilateral::coupling`).
 pub fn coupling_damping(stiffness: f64, rate_hz: f64, delay_s: f64) -> f64 {
     let b = 2.0 * stiffness.abs() * (0.5 / rate_hz + delay_s.max(0.0));
     if b.is_finite() { b } else { 0.0 }

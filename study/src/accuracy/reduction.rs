@@ -35,9 +35,9 @@
 
 use std::time::Instant;
 
-use nanopush::numerics::integrate::{Method, Options};
-use nanopush::physics::pushing::trace::{PushRun, TraceRow, run_push};
-use nanopush::physics::pushing::{Dof, PushModel, PushParams};
+use nanopush_instrument::numerics::integrate::{Method, Options};
+use nanopush_instrument::physics::pushing::trace::{PushRun, TraceRow, run_push};
+use nanopush_instrument::physics::pushing::{Dof, PushModel, PushParams};
 
 /// A drop of the offset `s − y` between two samples larger than this (m) is a jump of the
 /// particle (a slip or a roll burst): while it sticks the offset grows with the stage, while it

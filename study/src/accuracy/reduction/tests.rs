@@ -1,6 +1,6 @@
 use super::*;
-use nanopush::physics::pushing::Simulation;
-use nanopush::scene::Scene;
+use nanopush_instrument::physics::pushing::Simulation;
+use nanopush_instrument::scene::Scene;
 
 fn row(t: f64, s: f64, y: f64, phase: &'static str) -> TraceRow {
     TraceRow {
@@ -184,7 +184,7 @@ fn particle_y(s: &Simulation) -> f64 {
     s.x[s.model.layout.particle_y.pos]
 }
 
-fn probe(s: &Simulation) -> nanopush::physics::pushing::Probe<f64> {
+fn probe(s: &Simulation) -> nanopush_instrument::physics::pushing::Probe<f64> {
     s.model.probe(s.t, &s.x[..s.model.len()], &s.mode)
 }
 
@@ -225,7 +225,8 @@ fn the_full_models_first_slip_moves_2_17_nm_where_the_reduction_jumps_1_77_nm() 
     // The tip slides up the particle at the slip: between the samples around it (6.20 and
     // 6.21 ms) the full model's contact angle (−φ, the rotation being off) grows 0.2° and its
     // ζ_z turns positive, +2.08 nm, where the reduction's is −1.98 nm.
-    let angle = |pr: &nanopush::physics::pushing::Probe<f64>| (-pr.contact_ta / (p.r_t + p.r_a)).to_degrees();
+    let angle =
+        |pr: &nanopush_instrument::physics::pushing::Probe<f64>| (-pr.contact_ta / (p.r_t + p.r_a)).to_degrees();
     let (after, reduced_after) = (probe(&full), probe(&red));
     let grew = angle(&after) - angle(&b);
     eprintln!(

@@ -118,7 +118,7 @@ fn parse_args() -> Result<Opts, String> {
     }
     if !o.server.exists() {
         return Err(format!(
-            "no server binary at {}; build it with `cargo build --release -p nanopush` or pass --server",
+            "no server binary at {}; build it with `cargo build --release -p nanopush-instrument` or pass --server",
             o.server.display()
         ));
     }

@@ -22,7 +22,7 @@
 //! goal is met when it is no higher; a binomial tail says how likely a higher one is by chance.
 //!
 //! `--allow-cpu-halt` passes the flag to the server (the loop's core may halt between ticks: the
-//! behaviour before `serve/no_halt.rs`). `--alternate PHASE_S` runs the server so and, from this
+//! behaviour before `server/src/no_halt.rs`). `--alternate PHASE_S` runs the server so and, from this
 //! process, takes the machine through three regimes in turn, PHASE_S seconds each, from start to
 //! end: every core may halt; the loop's core polls (its PM QoS resume latency `n/a`, as the
 //! server would set it); every core polls (`/dev/cpu_dma_latency` = 0 held, as `cyclictest`

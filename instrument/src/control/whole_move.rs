@@ -1,0 +1,255 @@
+//! One whole move as the operator asks for it, judged by the instrument: a local scan finds the
+//! particle, the legs are planned and pushed, and a scan after the push measures where the
+//! particle is. Within the tolerance of the target it is `ok`; outside it, a corrective push
+//! from where the scan found it (the retraction's drag, a stick-slip push, a lagging stage),
+//! up to [`MoveOptions::attempts`] pushes in all; still outside, `missed`, with the distance.
+//! Used by `nanopush push`, the campaigns and the tests; the server runs its legs one tick at a
+//! time and judges the same way ([`Verdict::judge`]).
+
+use crate::afm::Afm;
+use crate::control::locate_and_plan::{MoveError, MoveTarget, locate_near, plan_move};
+use crate::control::strategy_run::{Prepared, RunError, StrategyRun};
+use crate::scan::{HeightImage, Located, ScanParams, Tip};
+use crate::scene::Scene;
+
+/// How a move is judged.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MoveOptions {
+    /// The particle must end within this of the target, as the scan after measures it (m).
+    pub tolerance: f64,
+    /// Pushes at most (the first and the corrections).
+    pub attempts: u32,
+    /// A brief stop during the first push: at this travel (m), for this long (s).
+    pub pause: Option<(f64, f64)>,
+}
+
+/// Corrective pushes after the first, at most (three pushes in all).
+pub const DEFAULT_ATTEMPTS: u32 = 3;
+
+/// The move's outcome.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Verdict {
+    /// The scan after found the particle within the tolerance of the target.
+    Ok {
+        /// Its distance from the target, as measured (m).
+        error: f64,
+    },
+    /// The scan after found it outside the tolerance after every attempt.
+    Missed {
+        /// Its distance from the target, as measured (m).
+        error: f64,
+    },
+    /// A push failed (its code, e.g. `deflection_limit`): the tip retracted, the move stopped.
+    Failed {
+        /// The failure's code.
+        code: &'static str,
+    },
+    /// The scan after the push did not find the particle.
+    NotFound,
+}
+
+impl Verdict {
+    /// Judges a measured position against the target.
+    pub fn judge(measured: (f64, f64), target: (f64, f64), tolerance: f64) -> Verdict {
+        let error = (measured.0 - target.0).hypot(measured.1 - target.1);
+        if error <= tolerance {
+            Verdict::Ok { error }
+        } else {
+            Verdict::Missed { error }
+        }
+    }
+
+    /// `ok`, `missed`, `not_found` or the failure's code.
+    pub fn code(&self) -> &'static str {
+        match self {
+            Verdict::Ok { .. } => "ok",
+            Verdict::Missed { .. } => "missed",
+            Verdict::Failed { code } => code,
+            Verdict::NotFound => "not_found",
+        }
+    }
+}
+
+/// One push of a move.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PushedLeg {
+    /// Where the controller believed the particle was (m).
+    pub from: (f64, f64),
+    /// Where it was sent (m).
+    pub to: (f64, f64),
+    /// The attempt it belongs to (1 = the first, 2.. corrections).
+    pub attempt: u32,
+    /// The run.
+    pub run: StrategyRun,
+}
+
+/// A whole move.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MoveRun {
+    /// The local scan before, and the particle in it.
+    pub before: (HeightImage, Located),
+    /// The target (m).
+    pub target: (f64, f64),
+    /// Every push, in order.
+    pub legs: Vec<PushedLeg>,
+    /// The last scan, and the particle in it (when found).
+    pub after: (HeightImage, Option<Located>),
+    /// The outcome.
+    pub verdict: Verdict,
+    /// Pushes made (attempts begun).
+    pub attempts: u32,
+    /// When a `missed` move was not corrected because the stage's edge cut the last push short
+    /// of the retraction's drag (and would cut a correction the same way): by how much (m).
+    pub cut_short: Option<f64>,
+}
+
+/// Moves particle `id` of `scene`, believed at `near` with radius about `radius_hint`, to
+/// `target` with the instrument `afm` (its tip at the start height), judged as
+/// [`MoveOptions`] says. The scene's strategy is used as it is (see
+/// [`crate::control::strategy_plan`] to derive it first).
+pub fn move_particle(
+    scene: &Scene,
+    afm: &mut Afm,
+    id: u32,
+    near: (f64, f64),
+    radius_hint: f64,
+    target: MoveTarget,
+    options: MoveOptions,
+) -> Result<MoveRun, MoveRunError> {
+    let tick = afm.tick();
+    let params = scene.strategy_params(tick);
+    let first = plan_move(scene, &afm.surface(), near, radius_hint, target)?;
+    let target = first.target;
+    let before = (first.local.clone(), first.located);
+    let prepared = Prepared::new(scene, id, first.located.radius, &params)?;
+    prepared.check_reach(&first.legs).map_err(MoveError::Plan)?;
+    let mut legs: Vec<PushedLeg> = Vec::new();
+    let mut plan = first;
+    let mut attempts = 0;
+    loop {
+        let measured = (plan.located.x, plan.located.y);
+        if attempts > 0 {
+            let verdict = Verdict::judge(measured, target, options.tolerance);
+            // No legs: within the planner's 10 nm, where no leg can correct a tighter tolerance;
+            // nor a correction the tip cannot get behind, or that the stage's edge cuts short
+            // as it cut this push.
+            if matches!(verdict, Verdict::Ok { .. })
+                || attempts >= options.attempts
+                || plan.legs.is_empty()
+                || prepared.check_reach(&plan.legs).is_err()
+                || prepared.short_of_drag(&plan.legs).is_some()
+            {
+                let cut_short = match verdict {
+                    Verdict::Missed { .. } if attempts < options.attempts => prepared.short_of_drag(&plan.legs),
+                    _ => None,
+                };
+                return Ok(MoveRun {
+                    before,
+                    target,
+                    legs,
+                    after: (plan.local, Some(plan.located)),
+                    verdict,
+                    attempts,
+                    cut_short,
+                });
+            }
+        }
+        attempts += 1;
+        let mut estimate = measured;
+        for (k, leg) in plan.legs.iter().enumerate() {
+            if k > 0 {
+                // Each later leg starts from where a local scan finds the particle, not from the
+                // estimate: its search starts a few pixels behind it.
+                match scan_after(scene, afm, estimate, prepared.radius) {
+                    (_, Ok(found)) => estimate = (found.x, found.y),
+                    (img, Err(_)) => {
+                        return Ok(MoveRun {
+                            before,
+                            target,
+                            legs,
+                            after: (img, None),
+                            verdict: Verdict::NotFound,
+                            attempts,
+                            cut_short: None,
+                        });
+                    }
+                }
+            }
+            let pause = if attempts == 1 && legs.is_empty() {
+                options.pause
+            } else {
+                None
+            };
+            let Some(request) = prepared.request(id, estimate, leg.to, pause) else {
+                continue;
+            };
+            let run = prepared.run(afm, &request, params)?;
+            let failed = run.summary.failure.map(|f| f.code());
+            legs.push(PushedLeg {
+                from: estimate,
+                to: leg.to,
+                attempt: attempts,
+                run,
+            });
+            estimate = legs.last().expect("pushed").run.summary.estimated_particle;
+            if let Some(code) = failed {
+                let (img, located) = scan_after(scene, afm, estimate, prepared.radius);
+                return Ok(MoveRun {
+                    before,
+                    target,
+                    legs,
+                    after: (img, located.ok()),
+                    verdict: Verdict::Failed { code },
+                    attempts,
+                    cut_short: None,
+                });
+            }
+        }
+        // The scan after: where the particle is now, and the legs from there.
+        // With the radius the target was checked against (the located one differs by a hair).
+        match plan_move(scene, &afm.surface(), estimate, radius_hint, MoveTarget::Point(target)) {
+            Ok(p) => plan = p,
+            Err(MoveError::NotFound { .. }) => {
+                let (img, _) = scan_after(scene, afm, estimate, prepared.radius);
+                return Ok(MoveRun {
+                    before,
+                    target,
+                    legs,
+                    after: (img, None),
+                    verdict: Verdict::NotFound,
+                    attempts,
+                    cut_short: None,
+                });
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
+}
+
+/// A local scan around `estimate` and the particle in it.
+fn scan_after(
+    scene: &Scene,
+    afm: &Afm,
+    estimate: (f64, f64),
+    radius: f64,
+) -> (HeightImage, Result<Located, crate::scan::LocateError>) {
+    locate_near(
+        &afm.surface(),
+        Tip::from_scene(scene),
+        ScanParams::from_scene(scene),
+        estimate,
+        radius,
+        scene.file.stage.range_um * 1e-6,
+    )
+}
+
+/// Why a move could not be made at all.
+#[derive(Debug, thiserror::Error)]
+pub enum MoveRunError {
+    /// Finding or planning failed.
+    #[error(transparent)]
+    Plan(#[from] MoveError),
+    /// The run could not be made.
+    #[error(transparent)]
+    Run(#[from] RunError),
+}

@@ -1,0 +1,434 @@
+//! The server's shared state: its settings, the clients' places (viewers, operators, per
+//! address), the lease, the broadcasts, and what a client that joins late is told.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering::Relaxed};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use axum::extract::ws::{Message, Utf8Bytes};
+use axum::http::StatusCode;
+use nanopush_proto::ws::{ParticleNow, PushPath, Role, ScanNow, ServerMessage};
+use tokio::sync::{broadcast, watch};
+
+use crate::control_loop::Shared;
+use crate::metrics::NetMetrics;
+use nanopush_instrument::control::StrategyParams;
+use nanopush_instrument::scan::{Sphere, Surface};
+use nanopush_instrument::scene::Scene;
+
+/// Server settings.
+#[derive(Debug, Clone)]
+pub struct ServeConfig {
+    /// Operator token.
+    pub operator_token: String,
+    /// Viewer token (None: viewers need none).
+    pub viewer_token: Option<String>,
+    /// Extra allowed browser origins.
+    pub allow_origins: Vec<String>,
+    /// Largest client message (bytes).
+    pub max_message_bytes: usize,
+    /// Messages per second per connection.
+    pub max_rate: f64,
+    /// Most viewer connections at once (operators have [`OPERATOR_PLACES`] of their own).
+    pub max_clients: u64,
+    /// Most viewer connections from one remote address.
+    pub max_clients_per_address: u64,
+    /// A WebSocket ping every this long.
+    pub ws_ping: Duration,
+    /// A WebSocket peer silent for longer than this (no pong, nothing) is closed.
+    pub ws_timeout: Duration,
+    /// An HTTP request's headers must arrive within this long.
+    pub header_timeout: Duration,
+    /// Record directory.
+    pub data_dir: PathBuf,
+    /// Static files of the web client.
+    pub web_dir: PathBuf,
+    /// The haptic link.
+    pub haptic: crate::haptic::HapticMode,
+    /// Scan line rate (Hz).
+    pub scan_line_hz: f64,
+    /// Telemetry rate to browsers (Hz).
+    pub telemetry_hz: f64,
+    /// Who may connect: the token file, the trusted proxies, TLS.
+    pub access: AccessConfig,
+}
+
+/// Access settings beyond the generated tokens.
+#[derive(Debug, Clone, Default)]
+pub struct AccessConfig {
+    /// Named people with roles (`--token-file`); None: the generated operator token.
+    pub token_file: Option<crate::auth::TokenFile>,
+    /// Reverse proxies whose `X-Forwarded-For` is believed (`--trusted-proxy`).
+    pub trusted_proxies: Vec<crate::client_addr::Cidr>,
+    /// The server's own HTTPS (`--tls-cert`/`--tls-key`, `--tls-self-signed`); session cookies
+    /// are then `Secure`.
+    pub tls: Option<crate::tls::Tls>,
+}
+
+/// Everything the handlers share, grouped by job.
+pub struct AppState {
+    /// Settings.
+    pub cfg: ServeConfig,
+    /// The scene.
+    pub scene: Scene,
+    /// Strategy settings (for push preparation).
+    pub params: StrategyParams,
+    /// The loop's shared state.
+    pub shared: Arc<Shared>,
+    /// Network counters.
+    pub net: NetMetrics,
+    /// Bound address (for the Origin check).
+    pub addr: Mutex<Option<SocketAddr>>,
+    /// Who is connected, with which places, subscriptions and the lease.
+    pub clients: Clients,
+    /// What goes out to every client.
+    pub channels: Channels,
+    /// What the instrument is doing beside the loop: scans, push preparation, shutdown.
+    pub activity: Activity,
+    /// When this server started (Unix ms) and its instance id: a page that reconnects to a
+    /// different instance knows the server restarted (and what it last saw is gone).
+    pub instance: Instance,
+    /// The haptic scales in force, in the protocol's units: the scene's, then each accepted
+    /// `haptic scale` (`/api/status`'s `haptic_scales`).
+    pub haptic_scales: Mutex<HapticScales>,
+    /// Who is connecting: credentials, cookies, live sessions, failed attempts.
+    pub auth: crate::auth::Auth,
+    /// The audit log (off until the server opens it in its data directory).
+    pub audit: crate::audit::Audit,
+}
+
+/// The haptic scales in force, as the operator sets them.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct HapticScales {
+    /// Tip nanometres per handle millimetre.
+    pub nm_per_mm: f64,
+    /// The force the hand feels at the pull-off force (N).
+    pub pull_off_at_hand_n: f64,
+}
+
+/// One run of the server: its start (Unix ms) and an id no other run shares (the start and the
+/// process id, in hex).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Instance {
+    /// This server's id.
+    pub id: String,
+    /// When it started (ms since the Unix epoch).
+    pub started_unix_ms: u64,
+}
+
+impl Instance {
+    /// This process, now.
+    pub fn now() -> Instance {
+        let started_unix_ms = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as u64);
+        Instance {
+            id: format!("{started_unix_ms:x}-{:x}", std::process::id()),
+            started_unix_ms,
+        }
+    }
+}
+
+/// The connected clients.
+pub struct Clients {
+    /// Lease holder.
+    pub lease: Mutex<Option<u32>>,
+    pub(crate) next_client: AtomicU32,
+    /// Clients subscribed to `tip`.
+    pub tip_subscribers: AtomicU64,
+    /// Clients subscribed to `scan`.
+    pub scan_subscribers: AtomicU64,
+    /// Places taken: viewers (up to `--max-clients`) and operators (up to [`OPERATOR_PLACES`],
+    /// apart, so viewers can never lock the operator out), and viewers per remote address.
+    places: Mutex<Places>,
+}
+
+/// The broadcasts every session reads.
+pub struct Channels {
+    /// Telemetry, serialized once per frame, with the frame's number.
+    pub telemetry: broadcast::Sender<(u64, Utf8Bytes)>,
+    /// The same frames for the lease holder alone, sent before everyone else's
+    /// ([`crate::telemetry::telemetry_task`]).
+    pub lease_telemetry: broadcast::Sender<(u64, Utf8Bytes)>,
+    /// Events for everyone (lease, run_done, shutdown).
+    pub events: broadcast::Sender<Utf8Bytes>,
+    /// Scan stream (text and binary frames).
+    pub scans: broadcast::Sender<Message>,
+    /// Shutdown signal for sessions and tasks.
+    pub shutdown: watch::Sender<bool>,
+}
+
+/// The instrument's work beside the control loop.
+pub struct Activity {
+    /// A scan runs.
+    pub scanning: AtomicBool,
+    /// Ask a running scan to stop.
+    pub scan_cancel: AtomicBool,
+    pub(crate) next_scan: AtomicU32,
+    /// Shutdown has begun: commands are refused from now on.
+    pub stopping: AtomicBool,
+    /// Bumped by every `stop`: a push still being prepared when it changes is dropped.
+    pub generation: AtomicU64,
+    /// Where the controller believes each particle is (m): the scene's positions, then each
+    /// push's final estimate. A push starts its local scan here (the operator's "click").
+    pub estimates: Mutex<std::collections::HashMap<u32, (f64, f64)>>,
+    /// The push running now (its planned path), for clients that join during it.
+    pub push_now: Mutex<Option<PushPath>>,
+    /// The latest scan (running or finished), for clients that join after it.
+    pub latest_scan: Mutex<Option<ScanNow>>,
+    /// Each particle's strategy plan (or why none can push it) for a tolerance (its bits),
+    /// derived once from the scene's model on the first push that asks for it: the scene does
+    /// not change while the server runs.
+    pub plans: Mutex<std::collections::HashMap<(u32, u64), PlanOutcome>>,
+    /// The pushes the loop runs whose move is judged by the scan after them, by run number
+    /// (`push_job::Pending`).
+    pub judging: Mutex<std::collections::HashMap<u64, crate::push_job::Pending>>,
+}
+
+/// A particle's strategy plan, or why none can push it.
+pub type PlanOutcome = Result<
+    nanopush_instrument::control::strategy_plan::StrategyPlan,
+    nanopush_instrument::control::strategy_plan::Refusal,
+>;
+
+/// Connections counted for admission.
+#[derive(Debug, Default)]
+struct Places {
+    viewers: u64,
+    operators: u64,
+    per_address: std::collections::HashMap<std::net::IpAddr, u64>,
+}
+
+/// Connections kept for the operator token, beyond `--max-clients` (which counts viewers).
+pub const OPERATOR_PLACES: u64 = 8;
+
+/// A place taken at the upgrade, given back when the connection ends (or fails to upgrade).
+pub(crate) struct Place {
+    st: Arc<AppState>,
+    role: Role,
+    ip: std::net::IpAddr,
+}
+
+impl Place {
+    /// Takes a place for `role` from `ip`, or says why not.
+    pub(crate) fn take(st: &Arc<AppState>, role: Role, ip: std::net::IpAddr) -> Result<Place, (StatusCode, String)> {
+        let mut p = st.clients.places.lock().expect("places lock");
+        match role {
+            Role::Operator => {
+                if p.operators >= OPERATOR_PLACES {
+                    return Err((
+                        StatusCode::SERVICE_UNAVAILABLE,
+                        format!("{OPERATOR_PLACES} operator connections are open already"),
+                    ));
+                }
+                p.operators += 1;
+            }
+            Role::Viewer => {
+                let here = p.per_address.get(&ip).copied().unwrap_or(0);
+                if here >= st.cfg.max_clients_per_address {
+                    return Err((
+                        StatusCode::TOO_MANY_REQUESTS,
+                        format!(
+                            "{here} connections from {ip} already; allowed: {} per address (--max-clients-per-address)",
+                            st.cfg.max_clients_per_address
+                        ),
+                    ));
+                }
+                if p.viewers >= st.cfg.max_clients {
+                    return Err((
+                        StatusCode::SERVICE_UNAVAILABLE,
+                        "too many clients (--max-clients)".into(),
+                    ));
+                }
+                p.viewers += 1;
+                *p.per_address.entry(ip).or_insert(0) += 1;
+            }
+        }
+        st.net.clients.fetch_add(1, Relaxed);
+        Ok(Place {
+            st: st.clone(),
+            role,
+            ip,
+        })
+    }
+}
+
+impl Drop for Place {
+    fn drop(&mut self) {
+        let Ok(mut p) = self.st.clients.places.lock() else {
+            return;
+        };
+        match self.role {
+            Role::Operator => p.operators = p.operators.saturating_sub(1),
+            Role::Viewer => {
+                p.viewers = p.viewers.saturating_sub(1);
+                if let Some(n) = p.per_address.get_mut(&self.ip) {
+                    *n = n.saturating_sub(1);
+                    if *n == 0 {
+                        p.per_address.remove(&self.ip);
+                    }
+                }
+            }
+        }
+        self.st.net.clients.fetch_sub(1, Relaxed);
+    }
+}
+
+impl AppState {
+    /// The state of a server.
+    pub fn new(cfg: ServeConfig, scene: Scene, shared: Arc<Shared>, params: StrategyParams) -> AppState {
+        AppState {
+            auth: crate::auth::Auth::new(
+                cfg.operator_token.clone(),
+                cfg.viewer_token.clone(),
+                cfg.access.token_file.clone(),
+            ),
+            audit: crate::audit::Audit::off(),
+            instance: Instance::now(),
+            haptic_scales: Mutex::new(HapticScales {
+                nm_per_mm: scene.file.haptic.nm_per_mm,
+                pull_off_at_hand_n: scene.file.haptic.pull_off_at_hand_n,
+            }),
+            cfg,
+            params,
+            shared,
+            net: NetMetrics::default(),
+            addr: Mutex::new(None),
+            clients: Clients {
+                lease: Mutex::new(None),
+                next_client: AtomicU32::new(1),
+                tip_subscribers: AtomicU64::new(0),
+                scan_subscribers: AtomicU64::new(0),
+                places: Mutex::new(Places::default()),
+            },
+            channels: Channels {
+                telemetry: broadcast::channel(64).0,
+                lease_telemetry: broadcast::channel(64).0,
+                events: broadcast::channel(256).0,
+                scans: broadcast::channel(1024).0,
+                shutdown: watch::channel(false).0,
+            },
+            activity: Activity {
+                scanning: AtomicBool::new(false),
+                scan_cancel: AtomicBool::new(false),
+                next_scan: AtomicU32::new(1),
+                plans: Mutex::new(std::collections::HashMap::new()),
+                judging: Mutex::new(std::collections::HashMap::new()),
+                stopping: AtomicBool::new(false),
+                generation: AtomicU64::new(0),
+                estimates: Mutex::new(
+                    scene
+                        .file
+                        .particles
+                        .iter()
+                        .map(|p| (p.id, (p.x_um * 1e-6, p.y_um * 1e-6)))
+                        .collect(),
+                ),
+                push_now: Mutex::new(None),
+                latest_scan: Mutex::new(None),
+            },
+            scene,
+        }
+    }
+
+    /// Records where a particle is believed to be after a push.
+    pub(crate) fn remember(&self, particle: u32, estimate: [f64; 2]) {
+        if estimate.iter().all(|v| v.is_finite())
+            && let Ok(mut e) = self.activity.estimates.lock()
+        {
+            e.insert(particle, (estimate[0], estimate[1]));
+        }
+    }
+
+    pub(crate) fn broadcast_event(&self, m: &ServerMessage) {
+        if let Ok(s) = serde_json::to_string(m) {
+            let _ = self.channels.events.send(s.into());
+        }
+    }
+
+    pub(crate) fn lease_holder(&self) -> Option<u32> {
+        *self.clients.lease.lock().expect("lease lock")
+    }
+
+    /// The lease holder's name (their token's).
+    pub(crate) fn lease_name(&self) -> Option<String> {
+        self.lease_holder().and_then(|id| self.auth.name_of(id))
+    }
+
+    /// The instrument as it is now, for a client that has just connected: the particles where
+    /// the controller believes they are, the tip, the phase, the lease, the push running and
+    /// the latest scan.
+    pub fn state_message(&self) -> ServerMessage {
+        let estimates = self.activity.estimates.lock().map(|e| e.clone()).unwrap_or_default();
+        let particles = self
+            .scene
+            .file
+            .particles
+            .iter()
+            .map(|p| {
+                let (x, y) = estimates.get(&p.id).copied().unwrap_or((p.x_um * 1e-6, p.y_um * 1e-6));
+                ParticleNow {
+                    id: p.id,
+                    x,
+                    y,
+                    radius: p.radius_nm * 1e-9,
+                }
+            })
+            .collect();
+        let (stage, phase) = self
+            .shared
+            .snapshot
+            .lock()
+            .map(|s| (s.stage, s.phase))
+            .unwrap_or(([0.0; 3], "idle"));
+        // The loop is idle while a push is prepared off it (a local scan, the plan: seconds on a
+        // crowded sample) and while a scan runs on its own thread: said as such.
+        let phase = match phase {
+            "idle" if self.activity.scanning.load(Relaxed) => "scanning",
+            "idle" if self.shared.busy.load(Relaxed) => "preparing",
+            other => other,
+        };
+        ServerMessage::State {
+            particles,
+            stage,
+            phase: phase.into(),
+            lease: self.lease_holder(),
+            lease_name: self.lease_name(),
+            push: self.activity.push_now.lock().ok().and_then(|p| p.clone()),
+            scan: self.activity.latest_scan.lock().ok().and_then(|s| s.clone()),
+        }
+    }
+
+    /// The sample as it is now (the loop's snapshot of the particles).
+    pub(crate) fn surface_now(&self) -> Surface {
+        let particles = self
+            .shared
+            .snapshot
+            .lock()
+            .map(|s| s.particles.clone())
+            .unwrap_or_default();
+        Surface {
+            topography: self.scene.topography(),
+            spheres: particles.iter().map(|&(_, x, y, r)| Sphere { x, y, r }).collect(),
+        }
+    }
+
+    /// A push ended: it no longer runs, and if it moved anything the latest scan is stale.
+    pub(crate) fn push_ended(&self, started: bool) {
+        if let Ok(mut p) = self.activity.push_now.lock() {
+            *p = None;
+        }
+        if started && let Ok(mut s) = self.activity.latest_scan.lock() {
+            if let Some(s) = s.as_mut() {
+                s.stale = true;
+            }
+        }
+    }
+}
+
+/// A server message as the text frame every client is sent, serialized once.
+pub(crate) fn to_text(m: &ServerMessage) -> Utf8Bytes {
+    serde_json::to_string(m).unwrap_or_else(|_| "{}".into()).into()
+}

@@ -1,0 +1,155 @@
+//! A scan on its own thread: lines streamed at the scan line rate, then the GSF record.
+
+use std::sync::atomic::Ordering::Relaxed;
+use std::time::{Duration, Instant};
+
+use axum::body::Bytes;
+use axum::extract::ws::Message;
+use nanopush_proto::ws::{ScanLineHeader, ScanNow, ServerMessage};
+
+use crate::app_state::{AppState, to_text};
+use crate::records::{self, write_atomic};
+use nanopush_instrument::scan::{HeightImage, ScanParams, Scanner, Tip, find_particles, write_gsf};
+
+/// A scan on its own thread: lines at the scan line rate to the `scan` stream, then the GSF
+/// record (naming `person`, who ran it). Tapping never moves particles: it images a snapshot of
+/// the sample.
+pub(crate) fn run_scan(st: &AppState, params: ScanParams, person: &str) {
+    let scan_id = st.activity.next_scan.fetch_add(1, Relaxed);
+    let surface = st.surface_now();
+    let tip = Tip::from_scene(&st.scene);
+    let img0 = params.empty_image();
+    let send_text = |m: &ServerMessage| {
+        if st.clients.scan_subscribers.load(Relaxed) > 0 {
+            let _ = st.channels.scans.send(Message::Text(to_text(m)));
+        }
+    };
+    let previous = st.activity.latest_scan.lock().ok().and_then(|s| s.clone());
+    let now = ScanNow {
+        scan: scan_id,
+        xres: img0.xres as u32,
+        yres: img0.yres as u32,
+        x_offset: img0.x_offset,
+        y_offset: img0.y_offset,
+        x_real: img0.x_real,
+        y_real: img0.y_real,
+        done: false,
+        record: None,
+        stale: false,
+    };
+    if let Ok(mut s) = st.activity.latest_scan.lock() {
+        *s = Some(now.clone());
+    }
+    send_text(&ServerMessage::ScanStart {
+        scan: scan_id,
+        xres: img0.xres as u32,
+        yres: img0.yres as u32,
+        x_offset: img0.x_offset,
+        y_offset: img0.y_offset,
+        x_real: img0.x_real,
+        y_real: img0.y_real,
+    });
+    let mut img = img0;
+    let mut scanner = Scanner::new(&surface, tip, params);
+    let line_period = Duration::from_secs_f64(1.0 / params.line_rate);
+    let mut next = Instant::now();
+    let mut cancelled = false;
+    while let Some(line) = scanner.next_line() {
+        img.data.extend_from_slice(&line.heights);
+        if st.activity.scan_cancel.load(Relaxed) || st.activity.stopping.load(Relaxed) {
+            cancelled = true;
+            break;
+        }
+        if st.clients.scan_subscribers.load(Relaxed) > 0 {
+            let heights: Vec<f32> = line.heights.iter().map(|&h| h as f32).collect();
+            let h = ScanLineHeader {
+                scan: scan_id,
+                line: line.index as u32,
+                xres: heights.len() as u32,
+                yres: params.pixels as u32,
+                y: line.y,
+            };
+            let _ = st.channels.scans.send(Message::Binary(Bytes::from(h.encode(&heights))));
+        }
+        next += line_period;
+        let now = Instant::now();
+        if next > now {
+            std::thread::sleep(next - now);
+        }
+    }
+    let (record, record_error) = if cancelled {
+        (None, None)
+    } else {
+        write_record(st, scan_id, &img, &tip, person)
+    };
+    if let Ok(mut s) = st.activity.latest_scan.lock() {
+        // A cancelled scan is not the latest picture of the sample: the one before stays.
+        *s = if cancelled {
+            previous
+        } else {
+            Some(ScanNow {
+                done: true,
+                record: record.clone(),
+                ..now
+            })
+        };
+    }
+    // Free before it is announced: a client that starts the next scan on hearing `scan_done`
+    // must not be told the last one is still running.
+    st.activity.scanning.store(false, Relaxed);
+    send_text(&ServerMessage::ScanDone {
+        scan: scan_id,
+        record,
+        record_error,
+    });
+}
+
+/// Writes scan `scan_id`'s record (`scan-T-INSTANCE-N.gsf` and its `.json` summary with the particles
+/// found, and `person`, who ran it); returns the GSF's name, or the reason it is missing.
+fn write_record(
+    st: &AppState,
+    scan_id: u32,
+    img: &HeightImage,
+    tip: &Tip,
+    person: &str,
+) -> (Option<String>, Option<String>) {
+    let (mut record, mut record_error) = (None, None);
+    // The server run in the name: two runs' scans of the same second never share one.
+    let stem = format!("scan-{}-{}-{scan_id}", records::unix_now(), st.instance.id);
+    let mut gsf = Vec::new();
+    let prepared = write_gsf(&mut gsf, img, &stem)
+        .map_err(|e| e.to_string())
+        .and_then(|()| std::fs::create_dir_all(&st.cfg.data_dir).map_err(|e| e.to_string()))
+        .map_err(|e| format!("preparing the record in {}: {e}", st.cfg.data_dir.display()));
+    if let Err(e) = &prepared {
+        tracing::error!("records: scan {scan_id}: {e}");
+        st.shared.metrics.record_failures.fetch_add(1, Relaxed);
+        record_error = Some(e.clone());
+    }
+    if prepared.is_ok() {
+        let gsf_name = format!("{stem}.gsf");
+        let summary = serde_json::json!({
+            "schema": "scan-record",
+            "scan": scan_id,
+            "person": person,
+            "gsf": gsf_name,
+            "xres": img.xres, "yres": img.yres,
+            "x_offset": img.x_offset, "y_offset": img.y_offset,
+            "x_real": img.x_real, "y_real": img.y_real,
+            "z_range": img.z_range(),
+            "particles": find_particles(img, tip).iter().map(|l| serde_json::json!({"x": l.x, "y": l.y, "radius": l.radius})).collect::<Vec<_>>(),
+        });
+        let json_name = format!("{stem}.json");
+        let ok = write_atomic(&st.cfg.data_dir.join(&gsf_name), &gsf)
+            .and_then(|()| write_atomic(&st.cfg.data_dir.join(&json_name), summary.to_string().as_bytes()));
+        match ok {
+            Ok(()) => record = Some(gsf_name),
+            Err(e) => {
+                tracing::error!("records: scan {scan_id}: {e}");
+                st.shared.metrics.record_failures.fetch_add(1, Relaxed);
+                record_error = Some(format!("writing {stem} in {}: {e}", st.cfg.data_dir.display()));
+            }
+        }
+    }
+    (record, record_error)
+}

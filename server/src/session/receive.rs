@@ -1,0 +1,270 @@
+//! The receive loop of one session: each frame admitted (rate limit, binary frames, size
+//! limit), parsed as one command, handled, and answered in order (`ok` or a typed error).
+
+use std::collections::HashSet;
+use std::sync::Arc;
+use std::time::Instant;
+
+use axum::extract::ws::{Message, Utf8Bytes};
+use futures_util::{Stream, StreamExt};
+use nanopush_proto::ws::{ClientMessage, ErrorCode, HapticAction, ServerMessage, Stream as WsStream};
+use tokio::sync::{mpsc, watch};
+use tokio::task::JoinHandle;
+
+use super::commands::handle;
+use super::{Client, REPLY_PATIENCE};
+use crate::app_state::{AppState, ServeConfig, to_text};
+use crate::command_checks::parse_command;
+use crate::haptic::api::scales_in_force;
+
+/// Why the receive loop ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Ended {
+    /// The peer closed, failed, or read no reply for [`REPLY_PATIENCE`].
+    Disconnected,
+    /// The server is shutting down.
+    ShuttingDown,
+    /// The send loop ended first.
+    SenderDone,
+    /// The peer sent a message over [`super::HARD_CAP`]: the connection is closed with 1009.
+    TooBig,
+}
+
+/// Whether `e`, a read error, is a message or frame over the size cap (tungstenite's
+/// `Capacity` error, under axum's).
+fn too_big(e: &(dyn std::error::Error + 'static)) -> bool {
+    let mut cause = Some(e);
+    while let Some(c) = cause {
+        if let Some(tungstenite::Error::Capacity(_)) = c.downcast_ref::<tungstenite::Error>() {
+            return true;
+        }
+        cause = c.source();
+    }
+    false
+}
+
+/// What becomes of one frame read.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) enum Admit {
+    /// A command's text, to parse.
+    Command(Utf8Bytes),
+    /// Nothing to answer (a ping or pong).
+    Skip,
+    /// The peer closes.
+    Close,
+    /// Refused with this error; the connection stays.
+    Refuse(ErrorCode, String),
+}
+
+/// Admits one frame at `now`: every data frame takes a token of the client's bucket
+/// (`max_rate` per second, burst `max_rate`); binary frames are not commands; a text above
+/// `max_message_bytes` is refused.
+pub(super) fn admit(cfg: &ServeConfig, c: &mut Client, msg: Message, now: Instant) -> Admit {
+    let text = match msg {
+        Message::Close(_) => return Admit::Close,
+        Message::Text(t) => Ok(t),
+        Message::Binary(b) => Err(b.len()),
+        _ => return Admit::Skip,
+    };
+    c.tokens = (c.tokens + now.duration_since(c.last).as_secs_f64() * cfg.max_rate).min(cfg.max_rate);
+    c.last = now;
+    if c.tokens < 1.0 {
+        return Admit::Refuse(
+            ErrorCode::RateLimited,
+            format!("more than {} messages per second; this one was dropped", cfg.max_rate),
+        );
+    }
+    c.tokens -= 1.0;
+    match text {
+        Err(len) => Admit::Refuse(
+            ErrorCode::Malformed,
+            format!("binary frames ({len} bytes) are not commands; send JSON text"),
+        ),
+        Ok(t) if t.len() > cfg.max_message_bytes => Admit::Refuse(
+            ErrorCode::TooLarge,
+            format!(
+                "message of {} bytes; allowed: at most {} bytes",
+                t.len(),
+                cfg.max_message_bytes
+            ),
+        ),
+        Ok(t) => Admit::Command(t),
+    }
+}
+
+/// Where the receive loop answers and what it tells the send loop.
+pub(super) struct Inbox<'a> {
+    /// Replies, in order.
+    pub replies: &'a mpsc::Sender<Utf8Bytes>,
+    /// The client's subscriptions, for the send loop.
+    pub streams: &'a watch::Sender<HashSet<WsStream>>,
+    /// The newest ping the peer answered.
+    pub answered: &'a super::keepalive::Answered,
+}
+
+/// Reads and handles commands until the peer goes, the server shuts down, or the send loop
+/// (`send`) ends.
+pub(super) async fn receive_loop<R, E>(
+    st: &Arc<AppState>,
+    mut stream: R,
+    client: &mut Client,
+    inbox: Inbox<'_>,
+    send: &mut JoinHandle<()>,
+) -> Ended
+where
+    R: Stream<Item = Result<Message, E>> + Unpin,
+    E: std::error::Error + 'static,
+{
+    let mut shutdown = st.channels.shutdown.subscribe();
+    loop {
+        let next = tokio::select! {
+            m = stream.next() => m,
+            _ = shutdown.changed() => return Ended::ShuttingDown,
+            _ = &mut *send => return Ended::SenderDone,
+        };
+        let msg = match next {
+            Some(Ok(msg)) => msg,
+            Some(Err(e)) if too_big(&e) => return Ended::TooBig,
+            _ => return Ended::Disconnected,
+        };
+        if let Message::Pong(payload) = &msg {
+            super::keepalive::pong(inbox.answered, payload);
+        }
+        let text = match admit(&st.cfg, client, msg, Instant::now()) {
+            Admit::Command(t) => t,
+            Admit::Skip => continue,
+            Admit::Close => return Ended::Disconnected,
+            Admit::Refuse(code, why) => {
+                if !reply(st, inbox.replies, None, code, why).await {
+                    return Ended::Disconnected;
+                }
+                continue;
+            }
+        };
+        if !answer(st, client, &inbox, text).await {
+            return Ended::Disconnected;
+        }
+    }
+}
+
+/// Parses and handles one command and queues its answer; `false` when the client is gone.
+async fn answer(st: &Arc<AppState>, client: &mut Client, inbox: &Inbox<'_>, text: Utf8Bytes) -> bool {
+    let parsed = match parse_command(text.as_str()) {
+        Ok(m) => m,
+        Err((id, why)) => return reply(st, inbox.replies, id, ErrorCode::Malformed, why).await,
+    };
+    let cid = parsed.id();
+    let scale = match &parsed {
+        ClientMessage::Haptic {
+            action: HapticAction::Scale,
+            nm_per_mm,
+            pull_off_at_hand_n,
+            ..
+        } => Some((*nm_per_mm, *pull_off_at_hand_n)),
+        _ => None,
+    };
+    let audited = crate::audit::describe(&parsed);
+    let handled = handle(st, client, parsed);
+    // Queued before the answer is sent, written within one group commit (`audit.rs`). The `ok`
+    // does not wait for the disk: the command's events (a lease change, a run_done) must not
+    // overtake its answer, and a stop must not wait for anything.
+    if let Some(cmd) = audited {
+        let refused = handled.as_ref().err().map(|r| (r.code, r.message.as_str()));
+        let _ = st.audit.command(&client.person, client.addr, client.id, cmd, refused);
+    }
+    match handled {
+        Ok(()) => {
+            let scales = scale.map(|(g, f)| {
+                let ts = st.scene.tip_sample();
+                scales_in_force(&st.shared.metrics.haptic, ts.k_c, ts.adhesion(), g, f)
+            });
+            if !deliver(inbox.replies, to_text(&ServerMessage::Ok { id: cid, scales })).await {
+                return false;
+            }
+            // Only a changed subscription wakes the sender (it resubscribes, dropping queued
+            // frames of the streams it did not want).
+            inbox.streams.send_if_modified(|cur| {
+                let changed = *cur != client.streams;
+                if changed {
+                    cur.clone_from(&client.streams);
+                }
+                changed
+            });
+            true
+        }
+        Err(r) => reply(st, inbox.replies, cid, r.code, r.message).await,
+    }
+}
+
+/// Queues a reply, waiting for room: a client that sends faster than it reads its replies is
+/// slowed down (its messages wait in its own socket), never answered with silence. `false` when
+/// the client has read nothing for [`REPLY_PATIENCE`] (or is gone): the session ends.
+pub(super) async fn deliver(tx: &mpsc::Sender<Utf8Bytes>, text: Utf8Bytes) -> bool {
+    tx.send_timeout(text, REPLY_PATIENCE).await.is_ok()
+}
+
+async fn reply(st: &AppState, tx: &mpsc::Sender<Utf8Bytes>, id: Option<u32>, code: ErrorCode, message: String) -> bool {
+    st.net.refused.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    deliver(tx, to_text(&ServerMessage::Error { id, code, message })).await
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use axum::body::Bytes;
+    use nanopush_proto::ws::Role;
+
+    use super::*;
+    use crate::session::tests::{client, test_state};
+
+    #[test]
+    fn data_frames_spend_the_rate_budget_and_control_frames_do_not() {
+        let st = test_state();
+        let mut c = client(1, Role::Operator);
+        let t0 = c.last;
+        let rate = st.cfg.max_rate as usize;
+        for _ in 0..rate {
+            assert!(matches!(
+                admit(&st.cfg, &mut c, Message::Text("{}".into()), t0),
+                Admit::Command(_)
+            ));
+        }
+        assert_eq!(admit(&st.cfg, &mut c, Message::Ping(Bytes::new()), t0), Admit::Skip);
+        match admit(&st.cfg, &mut c, Message::Text("{}".into()), t0) {
+            Admit::Refuse(ErrorCode::RateLimited, why) => assert!(why.contains("messages per second"), "{why}"),
+            other => panic!("{other:?}"),
+        }
+        // One second later the bucket is full again.
+        let later = t0 + Duration::from_secs(1);
+        assert!(matches!(
+            admit(&st.cfg, &mut c, Message::Text("{}".into()), later),
+            Admit::Command(_)
+        ));
+    }
+
+    #[test]
+    fn binary_and_oversized_frames_are_refused_and_a_close_ends() {
+        let st = test_state();
+        let mut c = client(1, Role::Viewer);
+        let now = c.last;
+        assert_eq!(
+            admit(&st.cfg, &mut c, Message::Binary(Bytes::from_static(b"abc")), now),
+            Admit::Refuse(
+                ErrorCode::Malformed,
+                "binary frames (3 bytes) are not commands; send JSON text".into()
+            )
+        );
+        let big = "x".repeat(st.cfg.max_message_bytes + 1);
+        match admit(&st.cfg, &mut c, Message::Text(big.into()), now) {
+            Admit::Refuse(ErrorCode::TooLarge, why) => {
+                assert!(
+                    why.contains(&format!("at most {} bytes", st.cfg.max_message_bytes)),
+                    "{why}"
+                )
+            }
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(admit(&st.cfg, &mut c, Message::Close(None), now), Admit::Close);
+    }
+}

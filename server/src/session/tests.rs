@@ -1,0 +1,229 @@
+//! The session's tests over plain channels (no network), and the state they share with the
+//! lease's and the receive loop's tests.
+
+use std::sync::Arc;
+use std::sync::atomic::Ordering::Relaxed;
+use std::time::{Duration, Instant};
+
+use axum::extract::ws::Message;
+use futures_util::SinkExt;
+use nanopush_proto::ws::Role;
+
+use super::*;
+use crate::app_state::{OPERATOR_PLACES, ServeConfig};
+use crate::control_loop::Shared;
+use nanopush_instrument::scene::Scene;
+
+/// A server's state on the default scene, with no loop running.
+pub(crate) fn test_state() -> Arc<AppState> {
+    let scene = Scene::default_scene();
+    let tick = 1e-3;
+    let base = nanopush_instrument::scan::ScanParams::from_scene(&scene);
+    let afm = nanopush_instrument::afm::Afm::from_scene(&scene, base.centre_x, base.centre_y, tick);
+    let shared = Arc::new(Shared::new(&afm));
+    let cfg = ServeConfig {
+        operator_token: "op".into(),
+        viewer_token: None,
+        allow_origins: Vec::new(),
+        max_message_bytes: 64 * 1024,
+        max_rate: 50.0,
+        max_clients: 64,
+        max_clients_per_address: 16,
+        ws_ping: Duration::from_secs(10),
+        ws_timeout: Duration::from_secs(30),
+        header_timeout: Duration::from_secs(10),
+        data_dir: std::env::temp_dir(),
+        web_dir: std::env::temp_dir(),
+        haptic: crate::haptic::HapticMode::None,
+        scan_line_hz: 100.0,
+        telemetry_hz: 60.0,
+        access: Default::default(),
+    };
+    let params = scene.strategy_params(tick);
+    Arc::new(AppState::new(cfg, scene, shared, params))
+}
+
+/// A connected client's handling state.
+pub(crate) fn client(id: u32, role: Role) -> Client {
+    Client {
+        id,
+        role,
+        person: person(role),
+        addr: std::net::IpAddr::from([127, 0, 0, 1]),
+        streams: HashSet::new(),
+        tokens: 50.0,
+        last: Instant::now(),
+    }
+}
+
+/// A person of `role` (named after it).
+pub(crate) fn person(role: Role) -> Arc<crate::auth::Person> {
+    Arc::new(crate::auth::Person {
+        name: format!("{role:?}").to_lowercase(),
+        role,
+        key: "test".into(),
+    })
+}
+
+/// Runs a session over channels; returns the client's outgoing side and incoming side.
+fn connect(
+    st: &Arc<AppState>,
+    role: Role,
+) -> (
+    futures_channel::mpsc::UnboundedSender<Result<Message, std::convert::Infallible>>,
+    futures_channel::mpsc::UnboundedReceiver<Message>,
+    tokio::task::JoinHandle<()>,
+) {
+    let (to_server, from_client) = futures_channel::mpsc::unbounded();
+    let (to_client, from_server) = futures_channel::mpsc::unbounded::<Message>();
+    let peer = "127.0.0.1:9".parse().unwrap();
+    let task = tokio::spawn(run(st.clone(), to_client, from_client, person(role), peer));
+    (to_server, from_server, task)
+}
+
+/// The next text message, parsed, skipping pings; panics after 5 s.
+async fn next_json(rx: &mut futures_channel::mpsc::UnboundedReceiver<Message>) -> serde_json::Value {
+    loop {
+        let m = tokio::time::timeout(Duration::from_secs(5), rx.next())
+            .await
+            .expect("a message within 5 s")
+            .expect("the session is open");
+        if let Message::Text(t) = m {
+            return serde_json::from_str(t.as_str()).unwrap();
+        }
+    }
+}
+
+#[tokio::test]
+async fn a_session_over_channels_welcomes_takes_the_lease_and_gives_it_back_when_the_peer_goes() {
+    let st = test_state();
+    let (mut tx, mut rx, task) = connect(&st, Role::Operator);
+    let welcome = next_json(&mut rx).await;
+    assert_eq!(welcome["type"], "welcome");
+    assert_eq!(welcome["role"], "operator");
+    let id = welcome["client"].as_u64().unwrap() as u32;
+    assert_eq!(next_json(&mut rx).await["type"], "state");
+    tx.send(Ok(Message::Text(r#"{"type":"take_lease","id":7}"#.into())))
+        .await
+        .unwrap();
+    // The reply and the broadcast may come in either order.
+    let (a, b) = (next_json(&mut rx).await, next_json(&mut rx).await);
+    let (ok, lease) = if a["type"] == "ok" { (a, b) } else { (b, a) };
+    assert_eq!(ok["id"], 7);
+    assert_eq!(lease["type"], "lease");
+    assert_eq!(lease["holder"], id);
+    assert_eq!(st.lease_holder(), Some(id));
+    // A command refused is answered with its id and code; the session goes on.
+    tx.send(Ok(Message::Text(r#"{"type":"scan","id":8,"size_um":-1}"#.into())))
+        .await
+        .unwrap();
+    let err = next_json(&mut rx).await;
+    assert_eq!(
+        (err["type"].as_str(), err["id"].as_u64()),
+        (Some("error"), Some(8)),
+        "{err}"
+    );
+    // The peer goes: the session ends and the lease is free.
+    drop(tx);
+    tokio::time::timeout(Duration::from_secs(5), task)
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(st.lease_holder(), None);
+}
+
+#[tokio::test]
+async fn a_viewers_subscription_is_counted_and_given_back() {
+    let st = test_state();
+    let (mut tx, mut rx, task) = connect(&st, Role::Viewer);
+    next_json(&mut rx).await;
+    next_json(&mut rx).await;
+    tx.send(Ok(Message::Text(
+        r#"{"type":"subscribe","id":1,"streams":["tip"]}"#.into(),
+    )))
+    .await
+    .unwrap();
+    assert_eq!(next_json(&mut rx).await["type"], "ok");
+    assert_eq!(st.clients.tip_subscribers.load(Relaxed), 1);
+    tx.send(Ok(Message::Text(r#"{"type":"take_lease","id":2}"#.into())))
+        .await
+        .unwrap();
+    assert_eq!(next_json(&mut rx).await["code"], "forbidden");
+    drop(tx);
+    tokio::time::timeout(Duration::from_secs(5), task)
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(st.clients.tip_subscribers.load(Relaxed), 0);
+}
+
+#[tokio::test]
+async fn a_shutdown_is_announced_and_the_socket_closed() {
+    let st = test_state();
+    let (_tx, mut rx, task) = connect(&st, Role::Viewer);
+    next_json(&mut rx).await;
+    next_json(&mut rx).await;
+    st.channels.shutdown.send(true).unwrap();
+    assert_eq!(next_json(&mut rx).await["type"], "shutdown");
+    let close = tokio::time::timeout(Duration::from_secs(5), rx.next()).await.unwrap();
+    assert!(
+        matches!(close, Some(Message::Close(Some(ref f))) if f.code == 1001),
+        "{close:?}"
+    );
+    tokio::time::timeout(Duration::from_secs(5), task)
+        .await
+        .unwrap()
+        .unwrap();
+}
+
+/// docs/server.md, "The teleoperation server": the operator token's 8 places, idle HTTP connections
+/// closed after 60 s, a 5 s send budget per frame, a client that reads no reply for 30 s
+/// closed, messages up to 8 MiB refused with `too_large` (above it the connection closes),
+/// SCHED_FIFO priority 50 for the loop. (The 8 places are also tested end to end:
+/// `tests/e2e/serve_hostile.rs::the_operator_token_has_8_places_and_a_ninth_is_refused`.)
+#[test]
+fn the_documented_server_limits_8_places_60_s_idle_5_s_send_30_s_replies_8_mib_fifo_50() {
+    assert_eq!(OPERATOR_PLACES, 8);
+    assert_eq!(crate::IDLE_HTTP, Duration::from_secs(60));
+    assert_eq!(SEND_BUDGET, Duration::from_secs(5));
+    assert_eq!(REPLY_PATIENCE, Duration::from_secs(30));
+    assert_eq!(HARD_CAP, 8 * 1024 * 1024);
+    assert_eq!(crate::control_loop::realtime::LOOP_PRIORITY, 50);
+}
+
+/// The haptic scales in force start at the scene's and follow each accepted `haptic scale` (a
+/// refused one changes nothing): `/api/status` shows them (issue 26).
+#[test]
+fn the_haptic_scales_in_force_follow_accepted_scale_commands() {
+    use nanopush_proto::ws::{ClientMessage, HapticAction};
+    let st = test_state();
+    let start = *st.haptic_scales.lock().unwrap();
+    assert_eq!(start.nm_per_mm, st.scene.file.haptic.nm_per_mm);
+    assert_eq!(start.pull_off_at_hand_n, st.scene.file.haptic.pull_off_at_hand_n);
+    let mut c = client(1, Role::Operator);
+    super::lease::take(&st, &c).unwrap();
+    let scale = |nm: Option<f64>, po: Option<f64>| ClientMessage::Haptic {
+        id: None,
+        action: HapticAction::Scale,
+        nm_per_mm: nm,
+        pull_off_at_hand_n: po,
+    };
+    super::commands::handle(&st, &mut c, scale(Some(20.0), None)).unwrap();
+    assert_eq!(st.haptic_scales.lock().unwrap().nm_per_mm, 20.0);
+    assert_eq!(
+        st.haptic_scales.lock().unwrap().pull_off_at_hand_n,
+        start.pull_off_at_hand_n
+    );
+    assert!(
+        super::commands::handle(&st, &mut c, scale(None, Some(50.0))).is_err(),
+        "out of range"
+    );
+    super::commands::handle(&st, &mut c, scale(None, Some(2.5))).unwrap();
+    assert_eq!(
+        *st.haptic_scales.lock().unwrap(),
+        crate::app_state::HapticScales {
+            nm_per_mm: 20.0,
+            pull_off_at_hand_n: 2.5
+        }
+    );
+}

@@ -1,0 +1,111 @@
+//! Telemetry to the browsers at its own rate, and the loop's events forwarded to everyone.
+
+use std::sync::Arc;
+use std::sync::atomic::Ordering::Relaxed;
+use std::time::Duration;
+
+use nanopush_proto::ws::{ServerMessage, Telemetry};
+use tokio::sync::mpsc;
+
+use crate::app_state::{AppState, to_text};
+use crate::control_loop::{LoopEvent, PUSHED};
+use crate::haptic::api::haptic_telemetry;
+use crate::judge;
+use crate::records;
+
+/// A record's name, or the reason it is missing, as the two fields of a message.
+fn split(r: records::Recorded) -> (Option<String>, Option<String>) {
+    match r {
+        Ok(name) => (Some(name), None),
+        Err(why) => (None, Some(why)),
+    }
+}
+
+/// A push's end in the audit log, under the person who ran it.
+pub(crate) fn audit_run_done(
+    st: &AppState,
+    run: u64,
+    particle: u32,
+    outcome: &str,
+    failure: Option<&str>,
+    record: Option<&str>,
+) {
+    let person = st.audit.runs.lock().ok().and_then(|mut p| p.remove(&run));
+    let mut args = serde_json::Map::new();
+    args.insert("run".into(), run.into());
+    args.insert("particle".into(), particle.into());
+    if let Some(r) = record {
+        args.insert("record".into(), r.into());
+    }
+    st.audit.event(crate::audit::Happened {
+        person: person.as_deref().unwrap_or("unknown"),
+        address: None,
+        client: None,
+        command: "run_done",
+        args,
+        outcome,
+        message: failure,
+    });
+}
+
+/// Telemetry at `telemetry_hz`, produced only while someone subscribes to `tip`, to the lease
+/// holder first, then to everyone else; and loop events forwarded to everyone.
+pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiver<(LoopEvent, records::Recorded)>) {
+    let mut tick = tokio::time::interval(Duration::from_secs_f64(1.0 / st.cfg.telemetry_hz));
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let mut shutdown = st.channels.shutdown.subscribe();
+    // The frames' numbers, from 1.
+    let mut seq = 0;
+    loop {
+        tokio::select! {
+            _ = tick.tick() => {
+                if st.clients.tip_subscribers.load(Relaxed) == 0 {
+                    continue;
+                }
+                let s = match st.shared.snapshot.lock() {
+                    Ok(s) => Telemetry { t: s.t, seq: seq + 1, stage: s.stage, volts: s.volts, phase: if st.activity.scanning.load(Relaxed) && s.phase == "idle" { "scanning".into() } else { s.phase.into() }, estimate: s.estimate, tip_force_n: st.shared.metrics.haptic.tip_force_n(), haptic: haptic_telemetry(&st.shared.metrics.haptic) },
+                    Err(_) => continue,
+                };
+                // The operator's frame first, so that the lease holder's gaps do not grow with
+                // the number of viewers woken before it (docs/benchmarks.md, "Soak"). Its
+                // session is woken first and, with this task yielding, normally sends before
+                // the viewers' are woken. Each frame goes into both channels; the holder's
+                // session reads both and sends each number once (`frames::Frames`).
+                seq = s.seq;
+                let frame = (seq, to_text(&ServerMessage::Telemetry(s)));
+                if st.channels.lease_telemetry.send(frame.clone()).is_ok() {
+                    tokio::task::yield_now().await;
+                }
+                let _ = st.channels.telemetry.send(frame);
+            }
+            e = events.recv() => {
+                let Some((LoopEvent::RunDone { run, particle, outcome, failure, estimate, .. }, record)) = e else { break };
+                if outcome == PUSHED {
+                    // The legs ran: the scan after the push decides (`judge.rs`).
+                    judge::on_pushed(&st, run, particle, estimate, record);
+                    continue;
+                }
+                if let Ok(mut j) = st.activity.judging.lock() {
+                    j.remove(&run);
+                }
+                st.remember(particle, estimate);
+                st.push_ended(true);
+                let (record, record_error) = split(record);
+                audit_run_done(&st, run, particle, outcome, failure.as_deref(), record.as_deref());
+                st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record, record_error, judged: None });
+            }
+            _ = shutdown.changed() => {
+                // Forward what the recorder still finishes (the aborted run's record).
+                while let Some((LoopEvent::RunDone { run, particle, outcome, mut failure, estimate, .. }, record)) = events.recv().await {
+                    if outcome == PUSHED {
+                        failure = Some("the server shut down before the scan after the push could judge it".into());
+                    }
+                    let (record, record_error) = split(record);
+                    audit_run_done(&st, run, particle, outcome, failure.as_deref(), record.as_deref());
+                    st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record, record_error, judged: None });
+                }
+                break;
+            }
+        }
+    }
+}
