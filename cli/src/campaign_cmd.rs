@@ -126,7 +126,7 @@ pub struct CampaignArgs {
     #[arg(long, value_name = "I/N")]
     shard: Option<String>,
     /// The pushes' tolerance (nm), in [1, 100000].
-    #[arg(long, value_name = "NM", default_value_t = nanopush_instrument::control::strategy_plan::DEFAULT_TOLERANCE * 1e9, allow_hyphen_values = true)]
+    #[arg(long, value_name = "NM", default_value_t = nanopush_instrument::control::derive::DEFAULT_TOLERANCE * 1e9, allow_hyphen_values = true)]
     tolerance_nm: f64,
     /// Write `random.csv` (a row per scene) here.
     #[arg(long, default_value = "campaign-out")]

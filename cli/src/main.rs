@@ -89,7 +89,7 @@ fn print_stdout(text: &str) -> ExitCode {
 /// the exit status is 2): `{"schema", "outcome": "refused", "particle", "code", "reason",
 /// "field"}`.
 fn refusal_json(schema: &str, e: &anyhow::Error) -> Option<String> {
-    let r = e.downcast_ref::<nanopush_instrument::control::strategy_plan::Refusal>()?;
+    let r = e.downcast_ref::<nanopush_instrument::control::derive::Refusal>()?;
     let v = serde_json::json!({
         "schema": schema,
         "version": nanopush_proto::VERSION,

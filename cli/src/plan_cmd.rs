@@ -1,12 +1,12 @@
 //! `nanopush plan`: the push strategy derived from the scene's model, each setting with its
-//! reason, or why no strategy can push the particle (`control::strategy_plan`).
+//! reason, or why no strategy can push the particle (`control::derive`).
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::bail;
 use clap::Args;
-use nanopush_instrument::control::strategy_plan::{self, DEFAULT_TOLERANCE};
+use nanopush_instrument::control::derive::{self, DEFAULT_TOLERANCE};
 
 /// Arguments of `nanopush plan`.
 #[derive(Args, Debug)]
@@ -41,7 +41,7 @@ pub fn run(a: &PlanArgs) -> anyhow::Result<String> {
     if a.derive_all {
         scene.hand_set = nanopush_instrument::scene::hand_set::HandSet::none();
     }
-    let plan = strategy_plan::derive(&scene, id, a.tolerance_nm * 1e-9)?;
+    let plan = derive::derive(&scene, id, a.tolerance_nm * 1e-9)?;
     if a.json {
         let choices: Vec<serde_json::Value> = plan
             .choices

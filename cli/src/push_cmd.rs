@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use clap::Args;
 use nanopush_instrument::afm::Afm;
-use nanopush_instrument::control::strategy_plan::{self, DEFAULT_TOLERANCE, StrategyPlan};
+use nanopush_instrument::control::derive::{self, DEFAULT_TOLERANCE, DerivedStrategy};
 use nanopush_instrument::control::{
     DEFAULT_ATTEMPTS, Failure, MoveOptions, MoveTarget, RunRow, StrategyRun, move_particle,
 };
@@ -214,7 +214,7 @@ pub fn run(a: &PushArgs) -> anyhow::Result<(String, bool)> {
     if a.derive_all {
         scene.hand_set = nanopush_instrument::scene::hand_set::HandSet::none();
     }
-    let plan = strategy_plan::derive(&scene, req.id, req.tolerance)?;
+    let plan = derive::derive(&scene, req.id, req.tolerance)?;
     plan.apply(&mut scene);
     scene.file.strategy.control = req.control;
     let f = &scene.file;
@@ -287,7 +287,7 @@ pub fn run(a: &PushArgs) -> anyhow::Result<(String, bool)> {
     Ok((text(&report, &runs, &plan), ok))
 }
 
-fn text(r: &PushReport, runs: &[StrategyRun], plan: &StrategyPlan) -> String {
+fn text(r: &PushReport, runs: &[StrategyRun], plan: &DerivedStrategy) -> String {
     let mut s = String::new();
     for w in &plan.warnings {
         let _ = writeln!(s, "warning: {w}");

@@ -188,10 +188,8 @@ pub struct Activity {
 }
 
 /// A particle's strategy plan, or why none can push it.
-pub type PlanOutcome = Result<
-    nanopush_instrument::control::strategy_plan::StrategyPlan,
-    nanopush_instrument::control::strategy_plan::Refusal,
->;
+pub type PlanOutcome =
+    Result<nanopush_instrument::control::derive::DerivedStrategy, nanopush_instrument::control::derive::Refusal>;
 
 /// Connections counted for admission.
 #[derive(Debug, Default)]

@@ -1,5 +1,5 @@
 //! A move judged by the instrument, as `nanopush push` judges it
-//! ([`nanopush_instrument::control::whole_move`]): when the loop has run a push's legs (`pushed`), a local scan
+//! ([`nanopush_instrument::control::moves::run`]): when the loop has run a push's legs (`pushed`), a local scan
 //! around the controller's estimate finds the particle. Within the move's tolerance of the target
 //! it is `ok`; outside it, a correction is pushed from where the scan found it, up to
 //! [`DEFAULT_ATTEMPTS`] pushes in all; still outside, `missed`, with the distance. The estimate
@@ -22,7 +22,7 @@ use crate::app_state::AppState;
 use crate::push_job::{Move, Pending, audit_early_end, launch, strategy_scene};
 use crate::records::{self, Recorded};
 use crate::telemetry::audit_run_done;
-use nanopush_instrument::control::{DEFAULT_ATTEMPTS, MoveError, MovePlan, MoveTarget, Verdict, plan_move};
+use nanopush_instrument::control::{DEFAULT_ATTEMPTS, MoveError, MoveRoute, MoveTarget, Verdict, route_move};
 use nanopush_instrument::scene::Scene;
 
 /// The loop ran run `run`'s legs (`pushed`) and left the particle believed at `estimate`:
@@ -62,7 +62,7 @@ fn judge(st: &AppState, run: u64, p: &Pending, estimate: [f64; 2], record: Recor
 fn judge_with(st: &AppState, scene: &Scene, run: u64, p: &Pending, estimate: [f64; 2], record: Recorded) {
     let id = p.mv.particle;
     let near = (estimate[0], estimate[1]);
-    let plan = match plan_move(scene, &st.surface_now(), near, p.radius, MoveTarget::Point(p.target)) {
+    let plan = match route_move(scene, &st.surface_now(), near, p.radius, MoveTarget::Point(p.target)) {
         Ok(plan) => plan,
         Err(MoveError::NotFound { .. }) => {
             let why = format!(
@@ -169,7 +169,7 @@ fn judge_with(st: &AppState, scene: &Scene, run: u64, p: &Pending, estimate: [f6
 
 /// A move whose particle the first local scan found already within the planner's reach of the
 /// target: judged there, without a push.
-pub(crate) fn already_there(st: &AppState, mv: Move, plan: &MovePlan) {
+pub(crate) fn already_there(st: &AppState, mv: Move, plan: &MoveRoute) {
     let id = mv.particle;
     let measured = [plan.located.x, plan.located.y];
     st.remember(id, measured);
@@ -193,7 +193,7 @@ pub(crate) fn already_there(st: &AppState, mv: Move, plan: &MovePlan) {
 }
 
 /// What the scan found, for `run_done` and the record.
-fn judged(plan: &MovePlan, target: (f64, f64), tolerance: f64, attempts: u32) -> Judged {
+fn judged(plan: &MoveRoute, target: (f64, f64), tolerance: f64, attempts: u32) -> Judged {
     let (x, y) = (plan.located.x, plan.located.y);
     Judged {
         measured: [x, y],
@@ -222,7 +222,7 @@ fn missed_words(id: u32, error: f64, tolerance: f64, pushes: u32, no_leg: bool) 
     let why = if no_leg {
         format!(
             ": closer than the {} a push can correct",
-            nm(nanopush_instrument::control::locate_and_plan::DONE_WITHIN)
+            nm(nanopush_instrument::control::moves::locate::DONE_WITHIN)
         )
     } else {
         String::new()

@@ -10,19 +10,19 @@ use crate::app_state::AppState;
 use crate::command_checks::Refusal;
 use crate::control_loop::{LoopCommand, PushJob};
 use crate::judge;
-use nanopush_instrument::control::strategy_plan::{self, derive};
-use nanopush_instrument::control::{MovePlan, MoveTarget, Prepared, plan_move};
+use nanopush_instrument::control::derive::{self, derive};
+use nanopush_instrument::control::{MoveRoute, MoveTarget, Prepared, route_move};
 
 /// Whether a particle of radius `r` (m) can be pushed to `p` (m): its centre at least a radius
 /// inside the stage's `[0, range]` square, so the particle stays on the stage and the tip, which
 /// stays inside it, can reach behind it. Checked as the planner checks it
-/// ([`nanopush_instrument::control::legs::on_stage`]: in µm, the bounds rounded inward to the nanometre, as
+/// ([`nanopush_instrument::control::route::on_stage`]: in µm, the bounds rounded inward to the nanometre, as
 /// the refusal prints them).
 pub(crate) fn on_stage(p: (f64, f64), r: f64, range: f64) -> Result<(), Refusal> {
-    if nanopush_instrument::control::legs::on_stage(p, r, range) {
+    if nanopush_instrument::control::route::on_stage(p, r, range) {
         return Ok(());
     }
-    let (lo, hi) = nanopush_instrument::control::legs::centre_bounds_um(r, range);
+    let (lo, hi) = nanopush_instrument::control::route::centre_bounds_um(r, range);
     Err(Refusal::new(
         ErrorCode::OutOfRange,
         format!(
@@ -106,7 +106,7 @@ pub(crate) fn strategy_scene(
     st: &AppState,
     particle: u32,
     tolerance: f64,
-) -> Result<nanopush_instrument::scene::Scene, strategy_plan::Refusal> {
+) -> Result<nanopush_instrument::scene::Scene, derive::Refusal> {
     let key = (particle, tolerance.to_bits());
     let cached = st.activity.plans.lock().ok().and_then(|p| p.get(&key).cloned());
     let outcome = cached.unwrap_or_else(|| {
@@ -156,7 +156,7 @@ pub(crate) fn prepare_push(st: &AppState, mv: Move, target: MoveTarget) {
         Ok(s) => s,
         Err(refusal) => return run_done_failed(st, mv.by, particle, "refused", refusal.to_string()),
     };
-    let plan = match plan_move(&scene, &st.surface_now(), nominal, part.radius_nm * 1e-9, target) {
+    let plan = match route_move(&scene, &st.surface_now(), nominal, part.radius_nm * 1e-9, target) {
         Ok(p) => p,
         Err(e) => return run_done_failed(st, mv.by, particle, "plan", format!("particle {particle}: {e}")),
     };
@@ -191,7 +191,7 @@ pub(crate) fn launch(
     st: &AppState,
     mv: Move,
     scene: &nanopush_instrument::scene::Scene,
-    plan: MovePlan,
+    plan: MoveRoute,
     attempt: u32,
 ) -> Result<(), (&'static str, String)> {
     let particle = mv.particle;

@@ -15,8 +15,8 @@
 use std::time::Instant;
 
 use nanopush_instrument::afm::Afm;
-use nanopush_instrument::control::locate_and_plan::MoveTarget;
-use nanopush_instrument::control::strategy_plan::{self, DEFAULT_TOLERANCE};
+use nanopush_instrument::control::derive::{self, DEFAULT_TOLERANCE};
+use nanopush_instrument::control::moves::locate::MoveTarget;
 use nanopush_instrument::control::{
     DEFAULT_ATTEMPTS, MoveOptions, MoveRun, MoveRunError, RunError, RunRow, Verdict, move_particle,
 };
@@ -346,7 +346,7 @@ pub fn push_judged(scene: &Scene, distance: f64, direction: (f64, f64), toleranc
 
 fn judge_inner(scene: &Scene, distance: f64, direction: (f64, f64), tolerance: f64) -> Judged {
     let p = scene.pushed_particle();
-    let plan = match strategy_plan::derive(scene, p.id, tolerance) {
+    let plan = match derive::derive(scene, p.id, tolerance) {
         Ok(plan) => plan,
         Err(e) => return Judged::refused(e.code, e.to_string(), distance),
     };
@@ -374,7 +374,7 @@ fn judge_inner(scene: &Scene, distance: f64, direction: (f64, f64), tolerance: f
     let target = MoveTarget::Distance { distance, direction };
     let moved = match move_particle(&scene, &mut afm, p.id, (x, y), r, target, options) {
         Ok(m) => m,
-        Err(MoveRunError::Plan(e)) => return Judged::refused("locate", e.to_string(), distance),
+        Err(MoveRunError::Locate(e)) => return Judged::refused("locate", e.to_string(), distance),
         Err(MoveRunError::Run(RunError::Predict(e))) => {
             return Judged::refused("model", format!("the estimator's prediction failed: {e}"), distance);
         }

@@ -1,7 +1,7 @@
 //! Random valid scenes nobody tuned (issue 24.3): a seeded generator draws every physical
 //! parameter across the scene validator's ranges (log-uniformly where a range spans decades),
 //! sets no strategy by hand, and keeps a draw only if the validator accepts it. Each scene is
-//! then planned ([`nanopush_instrument::control::strategy_plan`]) and, when the plan accepts it, pushed
+//! then planned ([`nanopush_instrument::control::derive`]) and, when the plan accepts it, pushed
 //! whole and judged as `nanopush push` judges ([`crate::campaign::push_judged`]).
 
 use nanopush_instrument::scene::Scene;
@@ -382,9 +382,9 @@ mod tests {
         let r = random_scene(13, Ranges::Lab);
         let back = Scene::parse("written", &scene_text(&r, Ranges::Lab, 25.0).unwrap()).unwrap();
         let id = r.scene.pushed_particle().id;
-        let tol = nanopush_instrument::control::strategy_plan::DEFAULT_TOLERANCE;
+        let tol = nanopush_instrument::control::derive::DEFAULT_TOLERANCE;
         let plan = |s: &Scene| {
-            nanopush_instrument::control::strategy_plan::derive(s, id, tol)
+            nanopush_instrument::control::derive::derive(s, id, tol)
                 .map(|p| (p.strategy, p.contact_angle_deg, p.speed_um_per_s))
                 .map_err(|e| e.to_string())
         };
@@ -397,10 +397,10 @@ mod tests {
     /// cannot help; with a 296 N/m lever, neither can.
     #[test]
     fn a_deflection_limit_refusal_offers_only_a_way_out_the_scene_allows() {
-        let tol = nanopush_instrument::control::strategy_plan::DEFAULT_TOLERANCE;
+        let tol = nanopush_instrument::control::derive::DEFAULT_TOLERANCE;
         let r = random_scene(132, Ranges::Validator);
         let id = r.scene.pushed_particle().id;
-        let e = nanopush_instrument::control::strategy_plan::derive(&r.scene, id, tol).unwrap_err();
+        let e = nanopush_instrument::control::derive::derive(&r.scene, id, tol).unwrap_err();
         assert_eq!(e.code, "deflection_limit", "{e}");
         assert!(e.field.starts_with("cantilever.stiffness_n_per_m: k_c > "), "{e}");
         assert!(
@@ -411,7 +411,7 @@ mod tests {
         let mut f = r.scene.file.clone();
         f.cantilever.stiffness_n_per_m = 296.12;
         let stiff = Scene::from_file_with("stiff", f, HandSet::none()).unwrap();
-        let e = nanopush_instrument::control::strategy_plan::derive(&stiff, id, tol).unwrap_err();
+        let e = nanopush_instrument::control::derive::derive(&stiff, id, tol).unwrap_err();
         assert_eq!(e.code, "deflection_limit", "{e}");
         assert!(
             e.field.contains("neither a stiffer lever") && e.field.contains("beyond the 500 N/m a scene allows"),

@@ -1,23 +1,25 @@
 //! Control: the manipulation strategy of Sec 2.1 and the force-controlled pushing of Sec 3.
+//!
+//! - [`strategy`]: the strategy's state machine (Fig 2) and its runner;
+//! - [`estimator`]: the particle-position feedback of Eq 19 and the model's prediction of a push;
+//! - [`route`]: the legs of a path of straight pushes around the other particles;
+//! - [`moves`]: a whole move (locate, route, push, judge by the scan after);
+//! - [`derive`]: the strategy's settings derived from the scene's model, and its dry run;
+//! - [`bilateral`]: the haptic z-control law.
 
 pub mod bilateral;
+pub mod derive;
 pub mod estimator;
-pub mod legs;
-pub mod locate_and_plan;
+pub mod moves;
+pub mod route;
 pub mod strategy;
-pub mod strategy_plan;
-pub mod strategy_run;
-pub mod whole_move;
 
 pub use bilateral::{Bilateral, BilateralParams};
 pub use estimator::{Hxy, PeakDetector, PushPrediction, RetractPlan, predict};
-pub use legs::{Leg, Obstacle, PlanError, Planner};
+pub use moves::{
+    DEFAULT_ATTEMPTS, MoveError, MoveOptions, MoveRoute, MoveRun, MoveRunError, MoveTarget, PushedLeg, Verdict,
+};
+pub use moves::{locate_near, move_particle, route_move};
+pub use route::{Leg, Obstacle, RouteError, Router};
 pub use strategy::{Control, Failure, Phase, PushTask, Strategy, StrategyParams, Summary};
-pub use strategy_run::{Prepared, PushRequest, RunError, RunRow, StrategyRun, push_once};
-
-#[cfg(test)]
-mod pull_off_tests;
-#[cfg(test)]
-mod tests;
-pub use locate_and_plan::{MoveError, MovePlan, MoveTarget, locate_near, plan_move};
-pub use whole_move::{DEFAULT_ATTEMPTS, MoveOptions, MoveRun, MoveRunError, PushedLeg, Verdict, move_particle};
+pub use strategy::{Prepared, PushRequest, RunError, RunRow, StrategyRun, push_once};

@@ -486,7 +486,7 @@ fn validate_scan(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
     // when it is more than max(6σ, 0.5 nm) above the levelled substrate, σ the image's noise
     // (scan noise and roughness); a particle whose height 2Rₐ is not twice that cannot be found
     // before a push. (The local scan's pixels follow the particle and tip radii, see
-    // `control::locate_and_plan::local_scan_size`, so the pitch never hides it.)
+    // `control::moves::locate::local_scan_size`, so the pitch never hides it.)
     let sigma = sc.noise_rms_nm.hypot(s.substrate.roughness_rms_nm);
     let threshold = (6.0 * sigma).max(0.5);
     for (k, p) in s.particles.iter().enumerate() {
@@ -582,7 +582,7 @@ fn validate_strategy(origin: &str, s: &SceneFile, hand_set: &HandSet) -> Result<
     )?;
     c("z_gain_nm_per_v", st.z_gain_nm_per_v, Range::closed(0.0, 100.0, "nm/V"))?;
     // The levels below are checked against the sensor when the scene gives them; otherwise the
-    // plan derives them from the sensor and the model (`control::strategy_plan`).
+    // plan derives them from the sensor and the model (`control::derive`).
     let given = |key: &str| hand_set.contains(key);
     // A push bends the lever up (ζ_z > 0): the reading moves from the baseline along the gain.
     let dir = s.sensor.gain_v_per_nm.signum();

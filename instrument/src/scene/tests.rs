@@ -375,7 +375,7 @@ fn the_shipped_scenes_are_what_the_docs_table_says() {
     assert!(gold.file.physics.electrostatic);
     assert_eq!(gold.hand_set.keys().count(), 0, "gold-14nm sets no strategy by hand");
     let minimal = load("minimal.toml");
-    let plan = crate::control::strategy_plan::derive(&minimal, 1, 25e-9).expect("a plan");
+    let plan = crate::control::derive::derive(&minimal, 1, 25e-9).expect("a plan");
     assert_eq!(plan.contact_angle_deg, 45.0);
     let minimal = minimal.file;
     let ph = &minimal.physics;

@@ -88,10 +88,10 @@ pub struct PushTask {
     pub pause: Option<(f64, u32)>,
     /// How far above the true substrate auto-parking detects it (m): the snap-in (and the tick
     /// the reading takes to pass the threshold) stops the approach early, by up to a few nm
-    /// ([`crate::control::strategy_run::detection_offset`]). The parking height makes up for it.
+    /// ([`crate::control::strategy::runner::detection_offset`]). The parking height makes up for it.
     pub detect_offset: f64,
     /// The farthest the particle may be pushed (m, along `direction`) and still lie on the
-    /// stage whole ([`crate::control::legs::travel_on_stage`]): the push stops there even when
+    /// stage whole ([`crate::control::route::travel_on_stage`]): the push stops there even when
     /// the retraction's drag asks for more, and the particle then ends short (the move is judged
     /// by the scan after it).
     pub max_travel: f64,

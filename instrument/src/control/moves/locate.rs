@@ -3,7 +3,7 @@
 //! around the other particles the scene's overview scan shows. Used by `nanopush push` and by
 //! the server alike.
 
-use crate::control::legs::{Leg, Obstacle, PlanError, Planner};
+use crate::control::route::{Leg, Obstacle, RouteError, Router};
 use crate::scan::{HeightImage, LocateError, Located, ScanParams, Surface, Tip, find_particles, localize, scan};
 use crate::scene::Scene;
 
@@ -36,7 +36,7 @@ impl MoveTarget {
     }
 }
 
-/// Why a move cannot be planned.
+/// Why a move cannot be routed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MoveError {
     /// The local scan shows no particle near the believed position.
@@ -49,12 +49,12 @@ pub enum MoveError {
     },
     /// No path.
     #[error(transparent)]
-    Plan(#[from] PlanError),
+    Route(#[from] RouteError),
 }
 
-/// A planned move.
+/// A routed move: the particle located and the legs to its target.
 #[derive(Debug, Clone, PartialEq)]
-pub struct MovePlan {
+pub struct MoveRoute {
     /// The local scan.
     pub local: HeightImage,
     /// The particle as the local scan shows it.
@@ -107,14 +107,14 @@ pub fn locate_near(
 /// Locates the particle believed at `near` (radius about `radius_hint`) and plans its move to
 /// `target` around the other particles of the scene's overview scan (`[scan]`), with the
 /// strategy's longest push and clearance. The target keeps a particle of `radius_hint` on the
-/// stage ([`Planner::edge_radius`]).
-pub fn plan_move(
+/// stage ([`Router::edge_radius`]).
+pub fn route_move(
     scene: &Scene,
     surface: &Surface,
     near: (f64, f64),
     radius_hint: f64,
     target: MoveTarget,
-) -> Result<MovePlan, MoveError> {
+) -> Result<MoveRoute, MoveError> {
     let tip = Tip::from_scene(scene);
     let base = ScanParams::from_scene(scene);
     let range = scene.file.stage.range_um * 1e-6;
@@ -123,7 +123,7 @@ pub fn plan_move(
     let from = (located.x, located.y);
     let to = target.point(from);
     if (to.0 - from.0).hypot(to.1 - from.1) < DONE_WITHIN {
-        return Ok(MovePlan {
+        return Ok(MoveRoute {
             local,
             located,
             target: to,
@@ -143,7 +143,7 @@ pub fn plan_move(
         })
         .collect();
     let st = &scene.file.strategy;
-    let planner = Planner {
+    let router = Router {
         radius: located.radius,
         edge_radius: radius_hint,
         max_push: st.max_push_um * 1e-6,
@@ -152,11 +152,11 @@ pub fn plan_move(
         range: scene.file.stage.range_um * 1e-6,
     };
     let mut obstacles = obstacles;
-    let mut legs = planner.plan(from, to, &obstacles)?;
+    let mut legs = router.route(from, to, &obstacles)?;
     // Particles too small for the overview's pixels, found by scanning the legs' corridors;
     // each find re-plans, and the new legs are scanned in turn.
     for _ in 0..CORRIDOR_ROUNDS {
-        let found = corridor_obstacles(surface, tip, base, &planner, &legs, from);
+        let found = corridor_obstacles(surface, tip, base, &router, &legs, from);
         let near = |a: &Obstacle, b: &Obstacle| (a.x - b.x).hypot(a.y - b.y) < a.radius + b.radius + 2.0 * base.pixel();
         let new: Vec<Obstacle> = found
             .into_iter()
@@ -166,9 +166,9 @@ pub fn plan_move(
             break;
         }
         obstacles.extend(new);
-        legs = planner.plan(from, to, &obstacles)?;
+        legs = router.route(from, to, &obstacles)?;
     }
-    Ok(MovePlan {
+    Ok(MoveRoute {
         local,
         located,
         target: to,
@@ -184,7 +184,7 @@ const CORRIDOR_ROUNDS: usize = 3;
 
 /// The particles in the corridors the legs sweep that the overview scan may be too coarse to
 /// show (a 25 nm gold particle is a pixel of a 50 µm, 256-pixel overview, and a push went
-/// through it: the review of issue 24). The corridor is the planner's for an obstacle smaller
+/// through it: the review of issue 24). The corridor is the router's for an obstacle smaller
 /// than the overview shows: `h = Rₐ + clearance + 2 overview pixels` either side of each leg
 /// and its run-up. It is covered by square scans of [`CORRIDOR_PIXELS`] a side, one every `2h`
 /// along the leg, each counting only what it finds in its inner square of half-side `h√2` (which
@@ -198,19 +198,19 @@ fn corridor_obstacles(
     surface: &Surface,
     tip: Tip,
     base: ScanParams,
-    planner: &Planner,
+    router: &Router,
     legs: &[Leg],
     from: (f64, f64),
 ) -> Vec<Obstacle> {
-    let h = planner.radius + planner.clearance + 2.0 * base.pixel();
+    let h = router.radius + router.clearance + 2.0 * base.pixel();
     let inner = h * std::f64::consts::SQRT_2;
-    let side = 2.0 * (inner + planner.radius + tip.radius);
+    let side = 2.0 * (inner + router.radius + tip.radius);
     let least_height = 2.0 * (6.0 * base.noise_rms).max(0.5e-9);
     let mut found = Vec::new();
     for leg in legs {
         let d = leg.direction();
-        let start = (leg.from.0 - d.0 * planner.run_up, leg.from.1 - d.1 * planner.run_up);
-        let len = leg.length() + planner.run_up;
+        let start = (leg.from.0 - d.0 * router.run_up, leg.from.1 - d.1 * router.run_up);
+        let len = leg.length() + router.run_up;
         let squares = (len / (2.0 * h)).ceil().max(1.0) as usize;
         for k in 0..squares {
             let a = (k as f64 + 0.5) * len / squares as f64;
@@ -226,7 +226,7 @@ fn corridor_obstacles(
                 let inside = (l.x - c.0).abs() <= inner && (l.y - c.1).abs() <= inner;
                 // Within its radius, or two pixels for a particle smaller than they are (a 7 nm
                 // particle is found 10 nm from where the local scan put it).
-                let own = (l.x - from.0).hypot(l.y - from.1) < planner.radius.max(2.0 * side / CORRIDOR_PIXELS as f64);
+                let own = (l.x - from.0).hypot(l.y - from.1) < router.radius.max(2.0 * side / CORRIDOR_PIXELS as f64);
                 if inside && !own && l.height >= least_height {
                     found.push(Obstacle {
                         x: l.x,
@@ -255,8 +255,8 @@ mod tests {
         let small = "\n[[particles]]\nid = 9\nmaterial = \"gold\"\nradius_nm = 25.0\nx_um = 43.0\ny_um = 30.0\nyoungs_modulus_gpa = 79.0\npoisson_ratio = 0.42\ndensity_kg_per_m3 = 19300.0\nhamaker_zj = 400.0\n";
         let target = MoveTarget::Point((45e-6, 30e-6));
         let plain = Scene::parse("plain", &text).unwrap();
-        let plan = plan_move(&plain, &Surface::from_scene(&plain), (40e-6, 30e-6), 500e-9, target).unwrap();
-        assert_eq!(plan.legs.len(), 1, "{:?}", plan.legs);
+        let route = route_move(&plain, &Surface::from_scene(&plain), (40e-6, 30e-6), 500e-9, target).unwrap();
+        assert_eq!(route.legs.len(), 1, "{:?}", route.legs);
         let with = Scene::parse("with", &(text + small)).unwrap();
         let overview = find_particles(
             &scan(
@@ -270,9 +270,9 @@ mod tests {
             overview.iter().all(|l| (l.x - 43e-6).hypot(l.y - 30e-6) > 0.2e-6),
             "the overview does not show it: {overview:?}"
         );
-        let plan = plan_move(&with, &Surface::from_scene(&with), (40e-6, 30e-6), 500e-9, target).unwrap();
-        assert!(plan.legs.len() >= 2, "{:?}", plan.legs);
-        let p = Planner {
+        let route = route_move(&with, &Surface::from_scene(&with), (40e-6, 30e-6), 500e-9, target).unwrap();
+        assert!(route.legs.len() >= 2, "{:?}", route.legs);
+        let p = Router {
             radius: 500e-9,
             edge_radius: 500e-9,
             max_push: 20e-6,
@@ -285,10 +285,10 @@ mod tests {
             y: 30e-6,
             radius: 25e-9,
         };
-        for l in &plan.legs {
+        for l in &route.legs {
             let leg = Leg { from: l.from, to: l.to };
             assert!(
-                p.plan(leg.from, leg.to, &[o]).is_ok_and(|legs| legs.len() == 1),
+                p.route(leg.from, leg.to, &[o]).is_ok_and(|legs| legs.len() == 1),
                 "{leg:?} passes the neighbour"
             );
         }
@@ -304,24 +304,24 @@ mod tests {
             distance: 30e-6,
             direction: (0.0, 1.0),
         };
-        let plan = plan_move(&scene, &surface, near, 1e-6, target).unwrap();
-        assert!((plan.located.x - p.x_um * 1e-6).abs() < 50e-9);
-        assert!((plan.located.radius - 1e-6).abs() < 0.05e-6);
+        let route = route_move(&scene, &surface, near, 1e-6, target).unwrap();
+        assert!((route.located.x - p.x_um * 1e-6).abs() < 50e-9);
+        assert!((route.located.radius - 1e-6).abs() < 0.05e-6);
         // 30 µm with pushes of at most 20 µm: two legs, ending at the target.
-        assert_eq!(plan.legs.len(), 2);
-        assert_eq!(plan.legs.last().unwrap().to, plan.target);
+        assert_eq!(route.legs.len(), 2);
+        assert_eq!(route.legs.last().unwrap().to, route.target);
         // Already there: no legs.
-        let here = plan_move(
+        let here = route_move(
             &scene,
             &surface,
             near,
             1e-6,
-            MoveTarget::Point((plan.located.x, plan.located.y)),
+            MoveTarget::Point((route.located.x, route.located.y)),
         )
         .unwrap();
         assert!(here.legs.is_empty());
         // Nothing near a point of bare substrate.
-        let e = plan_move(&scene, &surface, (20e-6, 20e-6), 1e-6, target).unwrap_err();
+        let e = route_move(&scene, &surface, (20e-6, 20e-6), 1e-6, target).unwrap_err();
         assert!(matches!(e, MoveError::NotFound { .. }), "{e}");
     }
 

@@ -67,10 +67,10 @@ mod dry_run;
 #[cfg(test)]
 mod tests;
 
-pub use choice::{Choice, Refusal, StrategyPlan, short};
+pub use choice::{Choice, DerivedStrategy, Refusal, short};
 
 use crate::control::estimator::{PushPrediction, RetractPlan, predict_with_set_fraction};
-use crate::control::locate_and_plan::{LOCAL_PIXELS, local_scan_size};
+use crate::control::moves::locate::{LOCAL_PIXELS, local_scan_size};
 use crate::control::strategy::pull_off::{PULL_OFF_MARGIN, PULL_OFF_SLACK, pull_off_rise};
 use crate::control::strategy::{BACK_OFF, HOLD};
 use crate::scene::Scene;
@@ -167,7 +167,7 @@ struct Fails {
 }
 
 /// Derives the strategy for pushing particle `id` of `scene` to within `tolerance` (m).
-pub fn derive(scene: &Scene, id: u32, tolerance: f64) -> Result<StrategyPlan, Refusal> {
+pub fn derive(scene: &Scene, id: u32, tolerance: f64) -> Result<DerivedStrategy, Refusal> {
     Derivation::new(scene, id, tolerance)?.run()
 }
 
@@ -244,7 +244,7 @@ impl<'a> Derivation<'a> {
         value
     }
 
-    fn run(mut self) -> Result<StrategyPlan, Refusal> {
+    fn run(mut self) -> Result<DerivedStrategy, Refusal> {
         // A model no push can run (dynamic degrees of freedom) is refused before anything is
         // derived or dry-run.
         if let Err(e) = self.scene.model_pushable() {
@@ -399,7 +399,13 @@ impl<'a> Derivation<'a> {
     }
 
     /// Every setting that follows from the contact angle's predicted push.
-    fn settings(&mut self, cand: Candidate, r_a: f64, r_t: f64, approach_speed: f64) -> Result<StrategyPlan, Refusal> {
+    fn settings(
+        &mut self,
+        cand: Candidate,
+        r_a: f64,
+        r_t: f64,
+        approach_speed: f64,
+    ) -> Result<DerivedStrategy, Refusal> {
         let f = &self.scene.file;
         let ro = self.readout;
         let beta_hand = self.hand("push.contact_angle_deg");
@@ -708,7 +714,7 @@ impl<'a> Derivation<'a> {
         );
         self.tolerance_warnings(&pred, pitch);
         self.file = resolved(self.scene, &self.choices);
-        Ok(StrategyPlan {
+        Ok(DerivedStrategy {
             particle: self.part.id,
             tolerance: self.tolerance,
             choices: self.choices.clone(),
@@ -852,7 +858,7 @@ impl<'a> Derivation<'a> {
         // attraction), this high above it; the tip rises from there to the parking height, and
         // a parking height below it would drive the tip down into the meniscus while the
         // substrate still holds it (the review of issue 24).
-        let snap_in = crate::control::strategy_run::detection_offset(self.scene, &self.scene.strategy_params(TICK));
+        let snap_in = crate::control::strategy::runner::detection_offset(self.scene, &self.scene.strategy_params(TICK));
         for &beta_deg in &betas {
             let beta = beta_deg.to_radians();
             let parking = r_a - r_t + (r_a + r_t) * beta.sin();
@@ -871,7 +877,7 @@ impl<'a> Derivation<'a> {
                     || {
                         let mut dry = self.scene.clone();
                         dry.file.physics.capillary = false;
-                        crate::control::strategy_run::detection_offset(&dry, &dry.strategy_params(TICK))
+                        crate::control::strategy::runner::detection_offset(&dry, &dry.strategy_params(TICK))
                     },
                     parking,
                 );
@@ -1154,7 +1160,7 @@ impl<'a> Derivation<'a> {
                 crate::nm_text(self.tolerance)
             ));
         }
-        let least = crate::control::locate_and_plan::DONE_WITHIN;
+        let least = crate::control::moves::locate::DONE_WITHIN;
         if self.tolerance < least {
             self.warnings.push(format!(
                 "the {} nm tolerance is below the {:.0} nm a push can correct: a move that ends between the two is missed without a correction",

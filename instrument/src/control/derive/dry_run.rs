@@ -1,10 +1,10 @@
 //! The plan's dry run: the whole strategy on the scene's model, as a real push would run it,
 //! before the plan is given out.
 
-use super::StrategyPlan;
+use super::DerivedStrategy;
 use crate::afm::Afm;
-use crate::control::locate_and_plan::MoveTarget;
-use crate::control::whole_move::{DEFAULT_ATTEMPTS, MoveOptions, Verdict, move_particle};
+use crate::control::moves::locate::MoveTarget;
+use crate::control::moves::run::{DEFAULT_ATTEMPTS, MoveOptions, Verdict, move_particle};
 use crate::scene::Scene;
 
 /// Runs `plan` on a copy of `scene` with other seeds for the readout's noise and the
@@ -13,7 +13,7 @@ use crate::scene::Scene;
 /// (the contact angle falls on the way up, rises on the way down), each from where a local scan
 /// finds the particle and judged with the plan's tolerance; a leg that would leave the stage is
 /// not run. The legs run, or `Err` saying how one failed.
-pub fn dry_run(scene: &Scene, plan: &StrategyPlan) -> Result<usize, String> {
+pub fn dry_run(scene: &Scene, plan: &DerivedStrategy) -> Result<usize, String> {
     let mut s = scene.clone();
     plan.apply(&mut s);
     s.file.sensor.noise_seed = s.file.sensor.noise_seed.wrapping_add(0x9e37_79b9_7f4a_7c15);
@@ -58,7 +58,7 @@ pub fn dry_run(scene: &Scene, plan: &StrategyPlan) -> Result<usize, String> {
     Ok(legs)
 }
 
-fn judge(moved: &crate::control::whole_move::MoveRun, plan: &StrategyPlan) -> Result<(), String> {
+fn judge(moved: &crate::control::moves::run::MoveRun, plan: &DerivedStrategy) -> Result<(), String> {
     match moved.verdict {
         Verdict::Ok { .. } => Ok(()),
         Verdict::Missed { error } => Err(format!(

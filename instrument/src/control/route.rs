@@ -1,10 +1,10 @@
 //! 2-D positioning (the paper's goal) with straight pushes: a target one push cannot reach gets
-//! a plan of several. A leg is never longer than the longest single push, and a leg's swept
+//! a route of several. A leg is never longer than the longest single push, and a leg's swept
 //! corridor (the particle's width plus the clearance, plus the tip's approach run behind it) must
-//! not touch another particle; when the straight line is blocked the plan goes around the
+//! not touch another particle; when the straight line is blocked the route goes around the
 //! blocking particle through one side-step waypoint.
 
-/// A particle the plan must keep clear of (m).
+/// A particle the route must keep clear of (m).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Obstacle {
     /// Centre x (m).
@@ -15,7 +15,7 @@ pub struct Obstacle {
     pub radius: f64,
 }
 
-/// One straight push of a plan.
+/// One straight push of a route.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Leg {
     /// Where the particle starts (m).
@@ -41,9 +41,9 @@ impl Leg {
     }
 }
 
-/// Why no plan exists.
+/// Why no route exists.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum PlanError {
+pub enum RouteError {
     /// Neither the straight line nor a detour around the blocking particle is clear.
     #[error(
         "no clear path from ({:.2}, {:.2}) µm to ({:.2}, {:.2}) µm: blocked by the particle at ({:.2}, {:.2}) µm",
@@ -96,13 +96,13 @@ pub enum PlanError {
 /// `[0, range]` (the contact search's run-up further back may be clamped to the stage: the
 /// search then starts closer). The push's overshoot past a leg's end (the retraction's drag made
 /// up for) is kept on the stage by the push itself ([`crate::control::PushTask::max_travel`]).
-pub fn check_reach(legs: &[Leg], behind: f64, range: f64) -> Result<(), PlanError> {
+pub fn check_reach(legs: &[Leg], behind: f64, range: f64) -> Result<(), RouteError> {
     let on = |p: (f64, f64)| [p.0, p.1].iter().all(|v| (0.0..=range).contains(v));
     for (k, leg) in legs.iter().enumerate() {
         let d = leg.direction();
         let back = (leg.from.0 - d.0 * behind, leg.from.1 - d.1 * behind);
         if !on(back) {
-            return Err(PlanError::OffStage {
+            return Err(RouteError::OffStage {
                 what: format!("push {} would need the tip at", k + 1),
                 at: back,
                 lo: 0.0,
@@ -152,9 +152,9 @@ pub fn travel_on_stage(from: (f64, f64), d: (f64, f64), r: f64, range: f64) -> f
     axis(from.0, d.0).min(axis(from.1, d.1)).max(0.0)
 }
 
-/// The planner's settings (m).
+/// The router's settings (m).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Planner {
+pub struct Router {
     /// Radius of the pushed particle.
     pub radius: f64,
     /// Its radius as the move's target was checked against (the scene's, which the server's
@@ -172,7 +172,7 @@ pub struct Planner {
     pub range: f64,
 }
 
-impl Planner {
+impl Router {
     /// The first obstacle whose distance to the swept segment (extended backwards by the
     /// run-up, where the tip travels at parking height) is below the two radii plus clearance.
     fn blocker(&self, from: (f64, f64), to: (f64, f64), obstacles: &[Obstacle]) -> Option<Obstacle> {
@@ -204,10 +204,10 @@ impl Planner {
 
     /// The legs that take a particle from `from` to `to` avoiding `obstacles` (the other
     /// particles).
-    pub fn plan(&self, from: (f64, f64), to: (f64, f64), obstacles: &[Obstacle]) -> Result<Vec<Leg>, PlanError> {
+    pub fn route(&self, from: (f64, f64), to: (f64, f64), obstacles: &[Obstacle]) -> Result<Vec<Leg>, RouteError> {
         let inside = |p: (f64, f64)| on_stage(p, self.edge_radius, self.range);
         if !inside(to) {
-            return Err(PlanError::OutOfRange {
+            return Err(RouteError::OutOfRange {
                 to,
                 radius: self.edge_radius,
                 range: self.range,
@@ -233,7 +233,7 @@ impl Planner {
                 return Ok(legs);
             }
         }
-        Err(PlanError::Blocked {
+        Err(RouteError::Blocked {
             from,
             to,
             blocker: (b.x, b.y),
@@ -247,8 +247,8 @@ mod tests {
 
     const UM: f64 = 1e-6;
 
-    fn planner() -> Planner {
-        Planner {
+    fn router() -> Router {
+        Router {
             radius: 0.5 * UM,
             edge_radius: 0.5 * UM,
             max_push: 12.0 * UM,
@@ -258,14 +258,14 @@ mod tests {
         }
     }
 
-    fn clear_of(legs: &[Leg], o: &Obstacle, p: &Planner) -> bool {
+    fn clear_of(legs: &[Leg], o: &Obstacle, p: &Router) -> bool {
         legs.iter().all(|l| p.blocker(l.from, l.to, &[*o]).is_none())
     }
 
     #[test]
     fn a_short_clear_move_is_one_leg() {
-        let legs = planner()
-            .plan((40.0 * UM, 30.0 * UM), (45.0 * UM, 30.0 * UM), &[])
+        let legs = router()
+            .route((40.0 * UM, 30.0 * UM), (45.0 * UM, 30.0 * UM), &[])
             .unwrap();
         assert_eq!(legs.len(), 1);
         assert!((legs[0].length() - 5.0 * UM).abs() < 1e-12);
@@ -273,8 +273,8 @@ mod tests {
 
     #[test]
     fn a_long_move_is_split_into_equal_legs_within_the_longest_push() {
-        let p = planner();
-        let legs = p.plan((10.0 * UM, 10.0 * UM), (40.0 * UM, 50.0 * UM), &[]).unwrap();
+        let p = router();
+        let legs = p.route((10.0 * UM, 10.0 * UM), (40.0 * UM, 50.0 * UM), &[]).unwrap();
         // 50 µm in legs of at most 12 µm: 5 legs of 10 µm, end to end.
         assert_eq!(legs.len(), 5);
         for w in legs.windows(2) {
@@ -286,7 +286,7 @@ mod tests {
 
     #[test]
     fn a_blocked_line_goes_around_the_blocker() {
-        let p = planner();
+        let p = router();
         let o = Obstacle {
             x: 50.0 * UM,
             y: 30.2 * UM,
@@ -294,7 +294,7 @@ mod tests {
         };
         let (from, to) = ((40.0 * UM, 30.0 * UM), (60.0 * UM, 30.0 * UM));
         assert!(p.blocker(from, to, &[o]).is_some());
-        let legs = p.plan(from, to, &[o]).unwrap();
+        let legs = p.route(from, to, &[o]).unwrap();
         assert!(legs.len() >= 2);
         assert!(clear_of(&legs, &o, &p));
         assert_eq!(legs.first().unwrap().from, from);
@@ -307,17 +307,19 @@ mod tests {
     /// cannot get behind is refused.
     #[test]
     fn the_whole_way_stays_on_the_stage_target_overshoot_and_the_tips_reach() {
-        let p = Planner {
+        let p = Router {
             radius: 1.0 * UM,
             edge_radius: 1.0 * UM,
-            ..planner()
+            ..router()
         };
-        let e = p.plan((59.9 * UM, 50.0 * UM), (99.9 * UM, 50.0 * UM), &[]).unwrap_err();
+        let e = p
+            .route((59.9 * UM, 50.0 * UM), (99.9 * UM, 50.0 * UM), &[])
+            .unwrap_err();
         assert_eq!(
             e.to_string(),
             "target (99.90, 50.00) µm is outside the stage for a particle 1.000 µm in radius; allowed: [1.000, 99.000] µm in x and y"
         );
-        assert!(p.plan((59.0 * UM, 50.0 * UM), (99.0 * UM, 50.0 * UM), &[]).is_ok());
+        assert!(p.route((59.0 * UM, 50.0 * UM), (99.0 * UM, 50.0 * UM), &[]).is_ok());
         // The push's overshoot stops where the particle would leave the stage: 0.5 µm left of
         // the 0.977 µm, along x; along y nothing; diagonally, the nearer edge.
         let r = 1.0 * UM;
@@ -343,9 +345,9 @@ mod tests {
 
     #[test]
     fn targets_outside_the_stage_and_walled_in_paths_are_refused() {
-        let p = planner();
+        let p = router();
         let e = p
-            .plan((40.0 * UM, 30.0 * UM), (140.0 * UM, 30.0 * UM), &[])
+            .route((40.0 * UM, 30.0 * UM), (140.0 * UM, 30.0 * UM), &[])
             .unwrap_err();
         assert!(e.to_string().contains("allowed: [0.500, 99.500] µm in x and y"), "{e}");
         // A wall of particles across the whole path, 3 µm apart.
@@ -357,8 +359,8 @@ mod tests {
             })
             .collect();
         let e = p
-            .plan((40.0 * UM, 30.0 * UM), (60.0 * UM, 30.0 * UM), &wall)
+            .route((40.0 * UM, 30.0 * UM), (60.0 * UM, 30.0 * UM), &wall)
             .unwrap_err();
-        assert!(matches!(e, PlanError::Blocked { .. }), "{e}");
+        assert!(matches!(e, RouteError::Blocked { .. }), "{e}");
     }
 }

@@ -17,17 +17,10 @@
 //! ([`pull_off`] states the rule). The strategy sees only what the instrument measures ([`Reading`]: stage
 //! position, deflection in volts), never the simulator's state.
 
-mod outcome;
-mod params;
-pub mod pull_off;
-
-pub use outcome::{Failure, SearchStep, Summary};
-pub use params::{Control, PushTask, StrategyParams};
-pub use pull_off::pull_off_rise;
-
+use super::pull_off::{self, Motion, Saturation};
+use super::{Control, Failure, PushTask, SearchStep, StrategyParams, Summary};
 use crate::afm::Reading;
 use crate::control::estimator::Hxy;
-use pull_off::{Motion, Saturation};
 
 /// How far the tip backs off along the line of centres before it lifts (m).
 pub const BACK_OFF: f64 = 100e-9;

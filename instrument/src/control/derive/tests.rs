@@ -19,7 +19,7 @@ fn untuned(name: &str, edit: &[(&str, &str)]) -> Scene {
     s
 }
 
-fn value(plan: &StrategyPlan, key: &str) -> f64 {
+fn value(plan: &DerivedStrategy, key: &str) -> f64 {
     plan.choices
         .iter()
         .find(|c| c.key == key)

@@ -44,7 +44,7 @@ pub fn short(v: f64) -> String {
 
 /// The strategy for pushing one particle of a scene, derived from the scene's model.
 #[derive(Debug, Clone, PartialEq)]
-pub struct StrategyPlan {
+pub struct DerivedStrategy {
     /// The particle (id).
     pub particle: u32,
     /// How close to the target the particle must end for `ok` (m).
@@ -65,7 +65,7 @@ pub struct StrategyPlan {
     pub prediction: PushPrediction,
 }
 
-impl StrategyPlan {
+impl DerivedStrategy {
     /// Writes the resolved settings into the scene (hand-set ones are unchanged by
     /// construction).
     pub fn apply(&self, scene: &mut Scene) {

@@ -3,8 +3,8 @@
 
 use crate::afm::{Afm, AfmError};
 use crate::control::estimator::{Hxy, PushPrediction, RetractPlan, predict_past_separation};
-use crate::control::legs::{Leg, travel_on_stage};
-use crate::control::locate_and_plan::DONE_WITHIN;
+use crate::control::moves::locate::DONE_WITHIN;
+use crate::control::route::{Leg, travel_on_stage};
 use crate::control::strategy::{BACK_OFF, Control, HOLD, PushTask, Strategy, StrategyParams, Summary};
 use crate::physics::pushing::SimulationError;
 use crate::scene::Scene;
@@ -318,10 +318,10 @@ impl Prepared {
         })
     }
 
-    /// [`crate::control::legs::check_reach`] for `legs`: the tip reaches the particle's back,
+    /// [`crate::control::route::check_reach`] for `legs`: the tip reaches the particle's back,
     /// on the stage.
-    pub fn check_reach(&self, legs: &[Leg]) -> Result<(), crate::control::PlanError> {
-        crate::control::legs::check_reach(legs, self.radius + self.tip_radius, self.range)
+    pub fn check_reach(&self, legs: &[Leg]) -> Result<(), crate::control::RouteError> {
+        crate::control::route::check_reach(legs, self.radius + self.tip_radius, self.range)
     }
 
     /// How much of the retraction's drag the pushes of `legs` cannot make up for (m), because

@@ -7,8 +7,8 @@
 //! time and judges the same way ([`Verdict::judge`]).
 
 use crate::afm::Afm;
-use crate::control::locate_and_plan::{MoveError, MoveTarget, locate_near, plan_move};
-use crate::control::strategy_run::{Prepared, RunError, StrategyRun};
+use crate::control::moves::locate::{MoveError, MoveTarget, locate_near, route_move};
+use crate::control::strategy::runner::{Prepared, RunError, StrategyRun};
 use crate::scan::{HeightImage, Located, ScanParams, Tip};
 use crate::scene::Scene;
 
@@ -106,7 +106,7 @@ pub struct MoveRun {
 /// Moves particle `id` of `scene`, believed at `near` with radius about `radius_hint`, to
 /// `target` with the instrument `afm` (its tip at the start height), judged as
 /// [`MoveOptions`] says. The scene's strategy is used as it is (see
-/// [`crate::control::strategy_plan`] to derive it first).
+/// [`crate::control::derive`] to derive it first).
 pub fn move_particle(
     scene: &Scene,
     afm: &mut Afm,
@@ -118,36 +118,36 @@ pub fn move_particle(
 ) -> Result<MoveRun, MoveRunError> {
     let tick = afm.tick();
     let params = scene.strategy_params(tick);
-    let first = plan_move(scene, &afm.surface(), near, radius_hint, target)?;
+    let first = route_move(scene, &afm.surface(), near, radius_hint, target)?;
     let target = first.target;
     let before = (first.local.clone(), first.located);
     let prepared = Prepared::new(scene, id, first.located.radius, &params)?;
-    prepared.check_reach(&first.legs).map_err(MoveError::Plan)?;
+    prepared.check_reach(&first.legs).map_err(MoveError::Route)?;
     let mut legs: Vec<PushedLeg> = Vec::new();
-    let mut plan = first;
+    let mut route = first;
     let mut attempts = 0;
     loop {
-        let measured = (plan.located.x, plan.located.y);
+        let measured = (route.located.x, route.located.y);
         if attempts > 0 {
             let verdict = Verdict::judge(measured, target, options.tolerance);
-            // No legs: within the planner's 10 nm, where no leg can correct a tighter tolerance;
+            // No legs: within the route's 10 nm, where no leg can correct a tighter tolerance;
             // nor a correction the tip cannot get behind, or that the stage's edge cuts short
             // as it cut this push.
             if matches!(verdict, Verdict::Ok { .. })
                 || attempts >= options.attempts
-                || plan.legs.is_empty()
-                || prepared.check_reach(&plan.legs).is_err()
-                || prepared.short_of_drag(&plan.legs).is_some()
+                || route.legs.is_empty()
+                || prepared.check_reach(&route.legs).is_err()
+                || prepared.short_of_drag(&route.legs).is_some()
             {
                 let cut_short = match verdict {
-                    Verdict::Missed { .. } if attempts < options.attempts => prepared.short_of_drag(&plan.legs),
+                    Verdict::Missed { .. } if attempts < options.attempts => prepared.short_of_drag(&route.legs),
                     _ => None,
                 };
                 return Ok(MoveRun {
                     before,
                     target,
                     legs,
-                    after: (plan.local, Some(plan.located)),
+                    after: (route.local, Some(route.located)),
                     verdict,
                     attempts,
                     cut_short,
@@ -156,7 +156,7 @@ pub fn move_particle(
         }
         attempts += 1;
         let mut estimate = measured;
-        for (k, leg) in plan.legs.iter().enumerate() {
+        for (k, leg) in route.legs.iter().enumerate() {
             if k > 0 {
                 // Each later leg starts from where a local scan finds the particle, not from the
                 // estimate: its search starts a few pixels behind it.
@@ -207,8 +207,8 @@ pub fn move_particle(
         }
         // The scan after: where the particle is now, and the legs from there.
         // With the radius the target was checked against (the located one differs by a hair).
-        match plan_move(scene, &afm.surface(), estimate, radius_hint, MoveTarget::Point(target)) {
-            Ok(p) => plan = p,
+        match route_move(scene, &afm.surface(), estimate, radius_hint, MoveTarget::Point(target)) {
+            Ok(p) => route = p,
             Err(MoveError::NotFound { .. }) => {
                 let (img, _) = scan_after(scene, afm, estimate, prepared.radius);
                 return Ok(MoveRun {
@@ -246,9 +246,9 @@ fn scan_after(
 /// Why a move could not be made at all.
 #[derive(Debug, thiserror::Error)]
 pub enum MoveRunError {
-    /// Finding or planning failed.
+    /// Finding or routing failed.
     #[error(transparent)]
-    Plan(#[from] MoveError),
+    Locate(#[from] MoveError),
     /// The run could not be made.
     #[error(transparent)]
     Run(#[from] RunError),

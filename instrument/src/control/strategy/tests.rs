@@ -1,8 +1,8 @@
 //! The strategy against the simulated instrument: contact detection in the paper's geometry, the
 //! distance pushed, and every failure path ending retracted with its reason.
 
-use super::*;
 use crate::afm::Afm;
+use crate::control::*;
 use crate::scene::Scene;
 
 const UM: f64 = 1e-6;
@@ -233,7 +233,7 @@ fn push_as_the_cli_does(scene: &Scene, distance: f64) -> (StrategyRun, f64) {
     let p = scene.pushed_particle();
     let click = (p.x_um * UM, p.y_um * UM);
     let mut afm = Afm::from_scene(scene, (click.0 - 8.0 * UM).max(0.0), click.1, 1e-3);
-    let (_, located) = crate::control::locate_and_plan::locate_near(
+    let (_, located) = crate::control::moves::locate::locate_near(
         &afm.surface(),
         crate::scan::Tip::from_scene(scene),
         crate::scan::ScanParams::from_scene(scene),
@@ -614,11 +614,11 @@ fn every_shipped_scene_pushes_its_particle() {
         let (x, y, r) = (p.x_um * UM, p.y_um * UM, p.radius_nm * 1e-9);
         let surface = crate::scan::Surface::from_scene(&s);
         let distance = (2.0 * r).clamp(0.1 * UM, 1.0 * UM);
-        let target = crate::control::locate_and_plan::MoveTarget::Distance {
+        let target = crate::control::moves::locate::MoveTarget::Distance {
             distance,
             direction: (1.0, 0.0),
         };
-        let plan = crate::control::locate_and_plan::plan_move(&s, &surface, (x, y), r, target)
+        let plan = crate::control::moves::locate::route_move(&s, &surface, (x, y), r, target)
             .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         let found = plan.located;
         let start = x - (s.file.strategy.approach_distance_um + 2.0) * UM;
@@ -652,7 +652,7 @@ fn every_shipped_scene_pushes_its_particle() {
 /// and the server push with): hand-set values win.
 fn planned(scene: &Scene) -> Scene {
     let mut s = scene.clone();
-    let plan = crate::control::strategy_plan::derive(scene, scene.file.push.particle_id, 25e-9)
+    let plan = crate::control::derive::derive(scene, scene.file.push.particle_id, 25e-9)
         .unwrap_or_else(|e| panic!("{}: {e}", scene.origin));
     plan.apply(&mut s);
     s
@@ -676,7 +676,7 @@ fn gold_14nm_detects_its_substrate_3_0_nm_high_and_the_parking_makes_up_for_it()
     let ground = s.topography().height(x, y);
     let detected = run.summary.substrate_z.expect("the snap-in found the substrate");
     assert_digits("detected substrate (nm)", (detected - ground) / 1e-9, 3.0, 0.05);
-    let predicted = crate::control::strategy_run::detection_offset(&s, &s.strategy_params(1e-3));
+    let predicted = crate::control::strategy::runner::detection_offset(&s, &s.strategy_params(1e-3));
     assert!(
         ((detected - ground) - predicted).abs() < 1.0e-9,
         "predicted {:.2} nm, detected {:.2} nm",
@@ -708,7 +708,7 @@ fn the_strategy_defaults_are_the_documented_ones() {
     );
     assert_eq!((f.approach_distance_um, f.phase_timeout_s), (4.25, 120.0));
     assert_eq!((strategy::HOLD, strategy::BACK_OFF), (0.05, 100e-9));
-    assert_eq!(crate::control::locate_and_plan::LOCAL_PIXELS, 128);
+    assert_eq!(crate::control::moves::locate::LOCAL_PIXELS, 128);
 }
 
 /// docs/manipulation.md on the shipped scenes ("Sensor gains and the shipped scenes"): `minimal`
