@@ -126,7 +126,7 @@ pub struct CampaignArgs {
     #[arg(long, value_name = "I/N")]
     shard: Option<String>,
     /// The pushes' tolerance (nm), in [1, 100000].
-    #[arg(long, value_name = "NM", default_value_t = nanopush_instrument::control::derive::DEFAULT_TOLERANCE * 1e9, allow_hyphen_values = true)]
+    #[arg(long, value_name = "NM", default_value_t = nanopush_proto::push::TOLERANCE_NM, allow_hyphen_values = true)]
     tolerance_nm: f64,
     /// Write `random.csv` (a row per scene) here.
     #[arg(long, default_value = "campaign-out")]
@@ -174,12 +174,7 @@ pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
     if !(1..=100_000).contains(&a.random) {
         anyhow::bail!("--random {} is out of range; allowed: [1, 100000] scenes", a.random);
     }
-    if !(a.tolerance_nm.is_finite() && (1.0..=100_000.0).contains(&a.tolerance_nm)) {
-        anyhow::bail!(
-            "--tolerance-nm {} is out of range; allowed: [1, 100000] nm",
-            crate::units::num(a.tolerance_nm)
-        );
-    }
+    crate::units::check_tolerance_nm(a.tolerance_nm)?;
     // The seeds run from --seed to --seed + N − 1: past the largest u64 they wrapped to 0.
     if a.seed.checked_add(a.random - 1).is_none() {
         anyhow::bail!(

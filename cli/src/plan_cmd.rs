@@ -4,9 +4,8 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-use anyhow::bail;
 use clap::Args;
-use nanopush_instrument::control::derive::{self, DEFAULT_TOLERANCE};
+use nanopush_instrument::control::derive;
 
 /// Arguments of `nanopush plan`.
 #[derive(Args, Debug)]
@@ -18,7 +17,7 @@ pub struct PlanArgs {
     #[arg(long, allow_hyphen_values = true)]
     particle: Option<u32>,
     /// The push's tolerance (nm), in [1, 100000].
-    #[arg(long, value_name = "NM", default_value_t = DEFAULT_TOLERANCE * 1e9, allow_hyphen_values = true)]
+    #[arg(long, value_name = "NM", default_value_t = nanopush_proto::push::TOLERANCE_NM, allow_hyphen_values = true)]
     tolerance_nm: f64,
     /// Ignore the scene's hand-set values: derive every setting.
     #[arg(long)]
@@ -31,12 +30,7 @@ pub struct PlanArgs {
 /// Runs the command: the plan, or the refusal as an error (exit 2).
 pub fn run(a: &PlanArgs) -> anyhow::Result<String> {
     let mut scene = crate::load_scene(a.scene.as_ref())?;
-    if !(a.tolerance_nm.is_finite() && (1.0..=100_000.0).contains(&a.tolerance_nm)) {
-        bail!(
-            "--tolerance-nm {} is out of range; allowed: [1, 100000] nm",
-            a.tolerance_nm
-        );
-    }
+    crate::units::check_tolerance_nm(a.tolerance_nm)?;
     let id = a.particle.unwrap_or(scene.file.push.particle_id);
     if a.derive_all {
         scene.hand_set = nanopush_instrument::scene::hand_set::HandSet::none();

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use clap::Args;
 use nanopush_instrument::afm::Afm;
-use nanopush_instrument::control::derive::{self, DEFAULT_TOLERANCE, DerivedStrategy};
+use nanopush_instrument::control::derive::{self, DerivedStrategy};
 use nanopush_instrument::control::{
     DEFAULT_ATTEMPTS, Failure, MoveOptions, MoveTarget, RunRow, StrategyRun, move_particle,
 };
@@ -36,7 +36,7 @@ pub struct PushArgs {
     direction_deg: f64,
     /// The move is `ok` when the scan after it finds the particle within this of the target
     /// (nm), in [1, 100000]; otherwise a correction is pushed, and after the last `missed`.
-    #[arg(long, value_name = "NM", default_value_t = DEFAULT_TOLERANCE * 1e9, allow_hyphen_values = true)]
+    #[arg(long, value_name = "NM", default_value_t = nanopush_proto::push::TOLERANCE_NM, allow_hyphen_values = true)]
     tolerance_nm: f64,
     /// Pushes at most, the first and the corrections, in [1, 10].
     // Read as a signed integer so that `-1` is told the allowed range, not u32's.
@@ -151,12 +151,7 @@ fn check(a: &PushArgs, scene: &Scene) -> anyhow::Result<Request> {
             Some((at * UM, a.pause_ms * 1e-3))
         }
     };
-    if !(a.tolerance_nm.is_finite() && (1.0..=100_000.0).contains(&a.tolerance_nm)) {
-        bail!(
-            "--tolerance-nm {} is out of range; allowed: [1, 100000] nm",
-            crate::units::num(a.tolerance_nm)
-        );
-    }
+    crate::units::check_tolerance_nm(a.tolerance_nm)?;
     let attempts = match u32::try_from(a.attempts) {
         Ok(n) if (1..=10).contains(&n) => n,
         _ => bail!("--attempts {} is out of range; allowed: [1, 10]", a.attempts),

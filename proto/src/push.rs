@@ -2,6 +2,14 @@
 
 use serde::{Deserialize, Serialize};
 
+/// A push's tolerance when the user gives none (nm): `ok` within 25 nm of the target, on the
+/// command line, in the server and in the page.
+pub const TOLERANCE_NM: f64 = 25.0;
+
+/// The allowed range of a push's tolerance (nm), on the command line, in the server and in the
+/// page.
+pub const TOLERANCE_RANGE_NM: (f64, f64) = (1.0, 100_000.0);
+
 /// A particle located in a scan.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct LocatedParticle {

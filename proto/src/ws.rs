@@ -89,7 +89,8 @@ pub enum ClientMessage {
         #[serde(default)]
         to_y_um: Option<f64>,
         /// The push is `ok` when the scan after it finds the particle within this of the target
-        /// (nm); [`PUSH_TOLERANCE_NM`] (25 nm) when left out; allowed: [1, 100000] nm.
+        /// (nm); [`crate::push::TOLERANCE_NM`] when left out, within
+        /// [`crate::push::TOLERANCE_RANGE_NM`].
         #[serde(default)]
         tolerance_nm: Option<f64>,
     },
@@ -278,12 +279,6 @@ pub struct PushPath {
 fn first_attempt() -> u32 {
     1
 }
-
-/// A push's tolerance when the command gives none (nm).
-pub const PUSH_TOLERANCE_NM: f64 = 25.0;
-
-/// The allowed range of a push's `tolerance_nm`.
-pub const PUSH_TOLERANCE_RANGE_NM: (f64, f64) = (1.0, 100_000.0);
 
 /// A move judged by the scan after its last push (SI).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -1,7 +1,8 @@
 //! Checks of client commands: finite numbers, ranges, known particles. Each refusal is a typed
 //! error naming the field, the value and the allowed range.
 
-use nanopush_proto::ws::{ClientMessage, ErrorCode, HapticAction, PUSH_TOLERANCE_NM, PUSH_TOLERANCE_RANGE_NM};
+use nanopush_proto::push::{TOLERANCE_NM, TOLERANCE_RANGE_NM};
+use nanopush_proto::ws::{ClientMessage, ErrorCode, HapticAction};
 
 use nanopush_instrument::control::MoveTarget;
 
@@ -162,13 +163,13 @@ pub fn fields_apply(msg: &ClientMessage) -> Result<(), Refusal> {
     Ok(())
 }
 
-/// A push's tolerance (m) from its `tolerance_nm` ([`PUSH_TOLERANCE_NM`] when left out),
-/// checked against [`PUSH_TOLERANCE_RANGE_NM`].
+/// A push's tolerance (m) from its `tolerance_nm` ([`TOLERANCE_NM`] when left out),
+/// checked against [`TOLERANCE_RANGE_NM`].
 pub fn push_tolerance(tolerance_nm: Option<f64>) -> Result<f64, Refusal> {
-    let (lo, hi) = PUSH_TOLERANCE_RANGE_NM;
+    let (lo, hi) = TOLERANCE_RANGE_NM;
     let t = number(
         "tolerance_nm",
-        tolerance_nm.unwrap_or(PUSH_TOLERANCE_NM),
+        tolerance_nm.unwrap_or(TOLERANCE_NM),
         lo,
         hi,
         false,

@@ -77,8 +77,9 @@ use crate::scene::Scene;
 use crate::scene::file::{ParticleFile, StrategyFile};
 use adhesion_field::{Pair, field as adhesion_field};
 
-/// The default tolerance of a push (m): `ok` within 25 nm of the target.
-pub const DEFAULT_TOLERANCE: f64 = 25e-9;
+/// The default tolerance of a push (m): `ok` within [`nanopush_proto::push::TOLERANCE_NM`] of
+/// the target.
+pub const DEFAULT_TOLERANCE: f64 = nanopush_proto::push::TOLERANCE_NM * 1e-9;
 
 /// The set point as a fraction of the stick-phase peak deflection.
 pub const SET_FRACTION: f64 = 0.6;
