@@ -100,6 +100,16 @@ pub fn seed_arg(s: &str) -> Result<u64, String> {
     whole(s, "[0, 18446744073709551615]")
 }
 
+/// A `--tolerance-nm` within [`TOLERANCE_RANGE_NM`](nanopush_proto::push::TOLERANCE_RANGE_NM),
+/// or an error naming the flag and the range.
+pub fn check_tolerance_nm(v: f64) -> anyhow::Result<()> {
+    let (lo, hi) = nanopush_proto::push::TOLERANCE_RANGE_NM;
+    if !(v.is_finite() && (lo..=hi).contains(&v)) {
+        anyhow::bail!("--tolerance-nm {} is out of range; allowed: [{lo}, {hi}] nm", num(v));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::eng;
@@ -125,14 +135,4 @@ mod tests {
         assert_eq!(eng(-904.8e-9, "N"), "-904.8000 nN");
         assert_eq!(eng(0.0, "m"), "0 m");
     }
-}
-
-/// A `--tolerance-nm` within [`TOLERANCE_RANGE_NM`](nanopush_proto::push::TOLERANCE_RANGE_NM),
-/// or an error naming the flag and the range.
-pub fn check_tolerance_nm(v: f64) -> anyhow::Result<()> {
-    let (lo, hi) = nanopush_proto::push::TOLERANCE_RANGE_NM;
-    if !(v.is_finite() && (lo..=hi).contains(&v)) {
-        anyhow::bail!("--tolerance-nm {} is out of range; allowed: [{lo}, {hi}] nm", num(v));
-    }
-    Ok(())
 }
