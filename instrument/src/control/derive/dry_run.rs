@@ -82,7 +82,10 @@ pub fn field_for(why: &str, scene: &Scene) -> String {
     if code == "still_held" {
         return format!(
             "cantilever.stiffness_n_per_m (stiffer) or {}",
-            super::adhesion_field(super::Pair::TipSubstrate, &scene.tip_sample().adhesion_sources())
+            super::adhesion_field::field(
+                super::adhesion_field::Pair::TipSubstrate,
+                &scene.tip_sample().adhesion_sources()
+            )
         );
     }
     match code {

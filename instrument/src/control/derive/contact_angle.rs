@@ -1,0 +1,139 @@
+//! The contact angle β: the hand-set one, or the first of [`BETAS_DEG`] whose parking height
+//! is above the snap-in and whose predicted push passes the model's checks.
+
+use super::adhesion_field;
+use super::{BACK_OFF, BETAS_DEG, Candidate, Derivation, Fails, MAX_START, Refusal, SET_FRACTION, TICK};
+use crate::control::estimator::{RetractPlan, predict_with_set_fraction};
+use crate::control::strategy::HOLD;
+
+impl Derivation<'_> {
+    /// The contact angle: the hand-set one, or the first of [`BETAS_DEG`] whose predicted push
+    /// passes [`Derivation::check`].
+    pub(super) fn contact_angle(
+        &mut self,
+        r_a: f64,
+        r_t: f64,
+        v: f64,
+        approach_speed: f64,
+        skip: &[f64],
+    ) -> Result<Candidate, Refusal> {
+        let hand = self.hand("push.contact_angle_deg");
+        let betas: Vec<f64> = if hand {
+            vec![self.scene.file.push.contact_angle_deg]
+        } else {
+            BETAS_DEG.iter().copied().filter(|b| !skip.contains(b)).collect()
+        };
+        if betas.is_empty() {
+            return Err(self.refuse(Fails {
+                code: "dry_run",
+                reason: "no contact angle left to try".into(),
+                field: "push.contact_angle_deg".into(),
+            }));
+        }
+        let mut first_failure: Option<Fails> = None;
+        let mut tried = Vec::new();
+        // Auto-parking detects the substrate where the tip snaps in (the meniscus, the
+        // attraction), this high above it; the tip rises from there to the parking height, and
+        // a parking height below it would drive the tip down into the meniscus while the
+        // substrate still holds it (the review of issue 24).
+        let snap_in = crate::control::strategy::runner::detection_offset(self.scene, &self.scene.strategy_params(TICK));
+        for &beta_deg in &betas {
+            let beta = beta_deg.to_radians();
+            let parking = r_a - r_t + (r_a + r_t) * beta.sin();
+            let result = if parking <= 0.05 * r_a {
+                Err(Fails {
+                    code: "geometry",
+                    reason: format!(
+                        "at β = {beta_deg}° the parking height Rₐ − Rₜ + (Rₐ + Rₜ) sin β = {:.2} nm leaves the apex within 5 % of Rₐ of the substrate",
+                        parking * 1e9
+                    ),
+                    field: "tip.radius_nm (a sharper tip) or push.contact_angle_deg (steeper)".into(),
+                })
+            } else if parking <= snap_in {
+                let (cause, field) = adhesion_field::snap_in_cause(
+                    &self.scene.tip_sample(),
+                    || {
+                        let mut dry = self.scene.clone();
+                        dry.file.physics.capillary = false;
+                        crate::control::strategy::runner::detection_offset(&dry, &dry.strategy_params(TICK))
+                    },
+                    parking,
+                );
+                // Even β = 90° parks the apex only 2Rₐ up: a steeper angle may not help.
+                let steeper = if 2.0 * r_a > snap_in {
+                    " or push.contact_angle_deg (steeper)".to_string()
+                } else {
+                    format!(
+                        " (no contact angle helps: even β = 90° parks at 2Rₐ = {:.2} nm)",
+                        2.0 * r_a * 1e9
+                    )
+                };
+                Err(Fails {
+                    code: "geometry",
+                    reason: format!(
+                        "at β = {beta_deg}° the parking height {:.2} nm is not above the {:.2} nm where the tip snaps in to the substrate: the tip would park where {cause} holds it",
+                        parking * 1e9,
+                        snap_in * 1e9
+                    ),
+                    field: format!("{field}{steeper}"),
+                })
+            } else {
+                self.predict_at(beta, parking, v, approach_speed)
+                    .and_then(|c| self.check(&c).map(|()| c))
+            };
+            tried.push(beta_deg);
+            match result {
+                Ok(c) => return Ok(c),
+                Err(f) if hand => {
+                    // The hand-set angle wins; its failure is a warning, when the model could
+                    // say anything at all.
+                    let warning = format!(
+                        "push.contact_angle_deg = {beta_deg} (hand-set): {}; change {}",
+                        f.reason, f.field
+                    );
+                    if let Ok(c) = self.predict_at(beta, parking, v, approach_speed)
+                        && c.prediction.peak_deflection > 0.0
+                    {
+                        self.warnings.push(warning);
+                        return Ok(c);
+                    }
+                    return Err(self.refuse(f));
+                }
+                Err(f) => {
+                    if first_failure.is_none() {
+                        first_failure = Some(f);
+                    }
+                }
+            }
+        }
+        let f = first_failure.expect("at least one angle tried");
+        Err(self.refuse(Fails {
+            reason: format!("{} (and at every other contact angle tried: {tried:?}°)", f.reason),
+            ..f
+        }))
+    }
+
+    fn predict_at(&self, beta: f64, parking: f64, v: f64, approach_speed: f64) -> Result<Candidate, Fails> {
+        let mut params = self.scene.push_params_for(self.part);
+        params.beta = beta;
+        params.speed = v;
+        let retract = RetractPlan {
+            hold: HOLD,
+            back_off: BACK_OFF,
+            speed: approach_speed,
+            lift: MAX_START - parking,
+        };
+        // The set point at SET_FRACTION of the push's own peak, and the travel to it, from one
+        // model push.
+        let prediction = predict_with_set_fraction(params, SET_FRACTION, retract).map_err(|e| Fails {
+            code: "model",
+            reason: format!("the model's push at β = {:.0}° failed: {e}", beta.to_degrees()),
+            field: crate::physics::pushing::MODEL_REFUSAL_FIELD.into(),
+        })?;
+        Ok(Candidate {
+            beta_deg: beta.to_degrees().round(),
+            parking,
+            prediction,
+        })
+    }
+}

@@ -1,0 +1,204 @@
+//! One derivation of the strategy: the checks of the scene, then each contact angle that passes
+//! the model's checks gets its settings and a dry run, until one ends `ok`.
+
+use super::readout::Readout;
+use super::{Choice, DerivedStrategy, Fails, MAX_DRY_RUN, PAPER_SPEED, Refusal, dry_run, short};
+use crate::scene::Scene;
+use crate::scene::file::{ParticleFile, StrategyFile};
+
+/// One derivation: the scene and particle it is for, and the choices and warnings so far.
+pub(super) struct Derivation<'a> {
+    pub(super) scene: &'a Scene,
+    pub(super) part: &'a ParticleFile,
+    pub(super) tolerance: f64,
+    pub(super) readout: Readout,
+    pub(super) file: StrategyFile,
+    pub(super) choices: Vec<Choice>,
+    pub(super) warnings: Vec<String>,
+}
+
+impl<'a> Derivation<'a> {
+    pub(super) fn new(scene: &'a Scene, id: u32, tolerance: f64) -> Result<Derivation<'a>, Refusal> {
+        let part = scene
+            .file
+            .particles
+            .iter()
+            .find(|p| p.id == id)
+            .ok_or_else(|| Refusal {
+                particle: id,
+                code: "geometry",
+                reason: format!("the scene has no particle with id {id}"),
+                field: "push.particle_id".into(),
+            })?;
+        Ok(Derivation {
+            scene,
+            part,
+            tolerance,
+            readout: Readout::of(scene),
+            file: scene.file.strategy.clone(),
+            choices: Vec::new(),
+            warnings: Vec::new(),
+        })
+    }
+
+    pub(super) fn hand(&self, key: &str) -> bool {
+        self.scene.hand_set.contains(key)
+    }
+
+    pub(super) fn refuse(&self, fails: Fails) -> Refusal {
+        Refusal {
+            particle: self.part.id,
+            code: fails.code,
+            reason: fails.reason,
+            field: fails.field,
+        }
+    }
+
+    /// Records a choice: the hand-set value when there is one (warned about if `check` says it
+    /// cannot work), else the derived one. Returns the value in force.
+    pub(super) fn choose(
+        &mut self,
+        key: &'static str,
+        hand_value: f64,
+        derived: f64,
+        why: String,
+        check: Option<String>,
+    ) -> f64 {
+        let hand_set = self.hand(key);
+        let value = if hand_set { hand_value } else { derived };
+        if hand_set && let Some(problem) = check {
+            self.warnings.push(format!(
+                "{key} = {} (hand-set): {problem}; the model suggests {}",
+                short(hand_value),
+                short(derived)
+            ));
+        }
+        let why = if hand_set && (hand_value - derived).abs() > 1e-12 * derived.abs().max(1e-30) {
+            format!("given by the scene; derived would be {}: {why}", short(derived))
+        } else {
+            why
+        };
+        self.choices.push(Choice {
+            key,
+            value,
+            hand_set,
+            why,
+        });
+        value
+    }
+
+    pub(super) fn run(mut self) -> Result<DerivedStrategy, Refusal> {
+        self.check_model()?;
+        let f = &self.scene.file;
+        let (r_a, r_t) = (self.part.radius_nm * 1e-9, f.tip.radius_nm * 1e-9);
+        self.substrate_threshold()?;
+        self.check_pull_off()?;
+        self.check_stage()?;
+        let approach_speed = f.strategy.approach_speed_um_per_s * 1e-6;
+        let v0 = if self.hand("push.speed_um_per_s") {
+            f.push.speed_um_per_s * 1e-6
+        } else {
+            PAPER_SPEED
+        };
+        // Each angle that passes the checks is tried in a dry run of the whole strategy on the
+        // model; the first that ends `ok` is the plan.
+        let (base_choices, base_warnings) = (self.choices.clone(), self.warnings.clone());
+        let mut rejected: Vec<(f64, String, Vec<String>)> = Vec::new();
+        loop {
+            let skip: Vec<f64> = rejected.iter().map(|r| r.0).collect();
+            let cand = match self.contact_angle(r_a, r_t, v0, approach_speed, &skip) {
+                Ok(c) => c,
+                Err(refusal) if rejected.is_empty() => return Err(refusal),
+                Err(_) => return Err(self.every_dry_run_failed(&rejected)),
+            };
+            let mut plan = self.settings(cand, r_a, r_t, approach_speed)?;
+            // The geometry a push checks before it moves (hand-set values may break it): what
+            // the plan accepts, a push must not refuse.
+            let mut applied = self.scene.clone();
+            plan.apply(&mut applied);
+            if let Err(e) = applied.pushable(self.part.id) {
+                let text = e.to_string();
+                let field = text
+                    .split(" = ")
+                    .next()
+                    .filter(|k| k.contains('.'))
+                    .unwrap_or("strategy");
+                return Err(self.refuse(Fails {
+                    code: "geometry",
+                    reason: text.clone(),
+                    field: field.to_string(),
+                }));
+            }
+            // A dry run that would take longer than a real push may is not run: said instead.
+            let dry_run_time = 2.0 * (1e-6 + plan.strategy.search_range_um * 1e-6) / (plan.speed_um_per_s * 1e-6);
+            if dry_run_time > MAX_DRY_RUN {
+                plan.warnings.push(format!(
+                    "no dry run: at {} µm/s it would take {dry_run_time:.0} s of simulated time (at most {MAX_DRY_RUN:.0} s)",
+                    short(plan.speed_um_per_s)
+                ));
+                return Ok(plan);
+            }
+            match dry_run::dry_run(self.scene, &plan) {
+                Ok(0) => {
+                    plan.warnings.push(
+                        "no dry run: neither leg of it (up and down the slope, 0.3-1 µm) stays on the stage from this particle"
+                            .into(),
+                    );
+                    return Ok(plan);
+                }
+                Ok(_) => return Ok(plan),
+                Err(why) if self.hand("push.contact_angle_deg") => {
+                    plan.warnings
+                        .push(format!("the plan's dry run on the model fails: {why}"));
+                    return Ok(plan);
+                }
+                Err(why) => {
+                    rejected.push((cand.beta_deg, why, plan.warnings.clone()));
+                    self.choices = base_choices.clone();
+                    self.warnings = base_warnings.clone();
+                }
+            }
+        }
+    }
+
+    /// A model no push can run (dynamic degrees of freedom) is refused before anything is
+    /// derived or dry-run.
+    fn check_model(&self) -> Result<(), Refusal> {
+        if let Err(e) = self.scene.model_pushable() {
+            let text = e.to_string();
+            let field = text
+                .split("physics.")
+                .nth(1)
+                .and_then(|r| r.split(" = ").next())
+                .map_or("physics".to_string(), |k| format!("physics.{k} = \"quasi_static\""));
+            return Err(self.refuse(Fails {
+                code: "model",
+                reason: text,
+                field,
+            }));
+        }
+        Ok(())
+    }
+
+    /// The refusal when every angle that passes the model's checks fails its dry run:
+    /// `rejected` holds each angle, why its dry run failed, and the plan's warnings then.
+    fn every_dry_run_failed(&self, rejected: &[(f64, String, Vec<String>)]) -> Refusal {
+        let (beta, why, warned) = &rejected[0];
+        let angles: Vec<f64> = rejected.iter().map(|r| r.0).collect();
+        // A hand-set value the plan warned about is the likelier cause.
+        let (hand, field) = match warned.iter().find(|w| w.contains("(hand-set)")) {
+            Some(w) => (
+                format!("; the plan warned: {w}"),
+                w.split(" = ").next().unwrap_or("the hand-set value").to_string(),
+            ),
+            None => (String::new(), dry_run::field_for(why, self.scene)),
+        };
+        self.refuse(Fails {
+            code: "dry_run",
+            reason: format!(
+                "the strategy passes the model's checks but its dry run on the model fails at every such angle ({angles:?}°); at β = {beta}°: {why}{hand}"
+            ),
+            field,
+        })
+    }
+}
