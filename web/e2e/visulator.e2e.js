@@ -53,11 +53,11 @@ test('the tip is on screen, drawn over everything, and no label or panel covers 
   // The 3D view is the optional companion: shown on request.
   assert.equal(await op.isVisible('#view3d'), false, 'the 3D view is hidden until asked for');
   await op.click('#toggle-3d');
-  await op.waitForFunction(() => window.nanopush.view.frames >= 3 && window.nanopush.view.tip.visible, null, { timeout: 10000 });
+  await op.waitForFunction(() => window.nanopush.view.frames >= 3 && window.nanopush.view.tip.ball.visible, null, { timeout: 10000 });
   await op.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
   const t = await op.evaluate(() => {
     const v = window.nanopush.view;
-    const p = v.tip.position.clone().project(v.camera);
+    const p = v.tip.ball.position.clone().project(v.camera);
     const r = v.container.getBoundingClientRect();
     const x = r.left + ((p.x + 1) / 2) * r.width;
     const y = r.top + ((1 - p.y) / 2) * r.height;
@@ -65,7 +65,7 @@ test('the tip is on screen, drawn over everything, and no label or panel covers 
     return {
       onScreen: Math.abs(p.x) < 1 && Math.abs(p.y) < 1,
       covered: hit ? (hit.closest('.plabel, .overlay > *') ? hit.className || hit.tagName : null) : 'nothing',
-      depthTest: v.tip.material.depthTest,
+      depthTest: v.tip.ball.material.depthTest,
     };
   });
   assert.ok(t.onScreen, 'the tip is in the view');
@@ -169,18 +169,18 @@ test('a viewer cannot command and sees the operator\'s push path, not its own fo
   assert.equal(await v.isVisible('#scan-form'), false);
   assert.match(await v.textContent('#why'), /Viewer connection/);
   // The viewer's own form would preview 5 µm along +x: it must not be drawn.
-  assert.equal(await v.evaluate(() => window.nanopush.view.preview.visible), false);
+  assert.equal(await v.evaluate(() => window.nanopush.view.marks.preview.visible), false);
   const from = (await getJson(srv.base, '/api/status')).particles.find((p) => p.id === 1);
   await pushBy(op, 2, 90);
-  await v.waitForFunction(() => window.nanopush.view.pushPath.visible, null, { timeout: 30000 });
-  const pts = await v.evaluate(() => window.nanopush.view.pushPathPoints);
+  await v.waitForFunction(() => window.nanopush.view.marks.pushPath.visible, null, { timeout: 30000 });
+  const pts = await v.evaluate(() => window.nanopush.view.marks.pathPoints);
   const end = pts[pts.length - 1];
   assert.ok(Math.abs(end[0] - from.x * 1e6) < 0.1 && Math.abs(end[1] - (from.y * 1e6 + 2)) < 0.1, `path ends at ${end}`);
-  assert.equal(await v.evaluate(() => window.nanopush.view.preview.visible), false);
+  assert.equal(await v.evaluate(() => window.nanopush.view.marks.preview.visible), false);
   assert.match(await v.textContent('#push-now'), /Pushing #1 \(client \d+\)/);
   await shot(v, '05-viewer-sees-push');
   await waitText(v, '#lastrun', /^push of #1 ok/, 60000);
-  assert.equal(await v.evaluate(() => window.nanopush.view.pushPath.visible), false, 'the path goes when the push ends');
+  assert.equal(await v.evaluate(() => window.nanopush.view.marks.pushPath.visible), false, 'the path goes when the push ends');
   assert.deepEqual(v.errors, []);
   await v.context().close();
 });
