@@ -102,8 +102,12 @@ test('session: replies are matched to their commands by id; errors are kept in a
   assert.equal(s.state.errors.at(-1).message, 'n59');
   assert.equal(s.state.lastError.message, 'n59');
 
-  // Unknown message types are tolerated.
+  // Unknown message types are tolerated, those named like Object's methods too.
   assert.deepEqual(s.apply({ type: 'future_thing' }), { kind: 'unknown', type: 'future_thing' });
+  for (const type of ['toString', 'constructor', '__proto__', 'hasOwnProperty']) {
+    assert.deepEqual(s.apply({ type }), { kind: 'unknown', type }, type);
+  }
+  assert.equal(s.state.lastError.message, 'n59', 'and logged as no error');
 });
 
 test('session: lagged messages are counted; telemetry keeps a 10 s trace', () => {
