@@ -9,9 +9,10 @@ function scanOf(xres, yres, f, received = null) {
   return { xres, yres, heights, received: received ?? new Uint8Array(yres).fill(1) };
 }
 
-test('mean-plane levelling removes a tilted plane exactly (least squares of z = a + b i + c j)', () => {
+test('mean-plane levelling removes a tilted plane exactly', () => {
   const s = scanOf(16, 12, (i, j) => 1e-8 + 2e-9 * i - 3e-9 * j);
   const out = level(s, 'plane');
+  // Least squares of z = a + b i + c j.
   for (const v of out) assert.ok(Math.abs(v) < 1e-14, `residual ${v}`);
   // A bump on the plane stays, the plane goes: the corners sit at the same level.
   // (A bump symmetric about the centre does not tilt the fitted plane.)
@@ -21,7 +22,7 @@ test('mean-plane levelling removes a tilted plane exactly (least squares of z = 
   assert.ok(lb[8 * 16 + 8] - lb[0] > 0.9e-7);
 });
 
-test('line-by-line levelling takes each line\'s mean away; lines not received are NaN', () => {
+test('line-by-line levelling takes each line\'s mean; missing lines are NaN', () => {
   const rec = new Uint8Array([1, 1, 0, 1]);
   const s = scanOf(4, 4, (i, j) => j * 1e-9 + (i === 0 ? 4e-9 : 0), rec);
   const out = level(s, 'line');
@@ -40,7 +41,7 @@ test('tick steps are 1, 2 or 5 times a power of ten', () => {
   assert.equal(niceStep(1000, 4), 200);
 });
 
-test('a profile along a row reads the pixels; along a diagonal it interpolates', () => {
+test('a profile reads a row\'s pixels and interpolates along a diagonal', () => {
   const s = scanOf(5, 5, (i, j) => i + 10 * j);
   const row = profileAlong(s.heights, 5, 5, 0, 2, 4, 2);
   assert.deepEqual([...row.h], [20, 21, 22, 23, 24]);

@@ -19,7 +19,7 @@ test('the target at a picked point, sized as the markers; null hides it', () => 
   assert.equal(m.target.visible, false);
 });
 
-test('preview: an arrow of the push\'s length and heading, lifted as exaggerated', () => {
+test('the preview: an arrow of the push, lifted as the heights are', () => {
   const m = marks();
   // 4 µm along 90° from a particle 10 nm up, the heights exaggerated 20×: 0.2 µm up.
   m.setPreview({ x: 5, y: 6, z: 0.01 }, 90, 4, 0.5, 20);

@@ -20,9 +20,9 @@ globalThis.document = { createElement: element };
 const gold = { id: 1, radius: 7e-9, x: 10e-6, y: 20e-6, material: 'gold' };
 const big = { id: 2, radius: 1e-6, x: 30e-6, y: 40e-6, material: '' };
 
-test('tiny particles are drawn at least stage/250, larger ones at their radius', () => {
+test('tiny particles are drawn at a minimum size, larger ones as they are', () => {
   // A 7 nm particle on a 100 µm stage: 0.4 µm; a 1 µm one: 1 µm.
-  assert.equal(shownRadiusUm(7e-9, 100), 0.4);
+  assert.equal(shownRadiusUm(7e-9, 100), 0.4, 'stage/250');
   assert.equal(shownRadiusUm(1e-6, 100), 1);
 });
 

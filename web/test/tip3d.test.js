@@ -9,7 +9,7 @@ const marker = () => new TipMarker(new THREE.Group(), new THREE.Group());
 const flat = { markerUm: 0.5, exaggeration: 1, surfaceUnder: () => 0 };
 const tipAt = (x, y, z, estimate = null) => ({ stage: [x, y, z], estimate });
 
-test('the ball sits on the apex, heights exaggerated; drop line to the surface', () => {
+test('the ball sits on the apex, heights exaggerated; a drop line below', () => {
   const m = marker();
   // 20 nm up over a 5 nm surface, exaggerated 100×: 2 µm and 0.5 µm.
   assert.equal(m.set(tipAt(10e-6, 20e-6, 20e-9), { markerUm: 0.5, exaggeration: 100, surfaceUnder: () => 0.005 }), true);
@@ -26,7 +26,7 @@ test('the ball sits on the apex, heights exaggerated; drop line to the surface',
   assert.equal(m.drop.visible, false);
 });
 
-test('an idle tip (same position, same estimate) changes nothing and costs no frame', () => {
+test('an idle tip (same position and estimate) costs no frame', () => {
   const m = marker();
   assert.equal(m.set(tipAt(1e-6, 1e-6, 0), flat), true);
   assert.equal(m.set(tipAt(1e-6, 1e-6, 0), flat), false);
@@ -36,10 +36,10 @@ test('an idle tip (same position, same estimate) changes nothing and costs no fr
   assert.equal(m.trailLen, 2, 'without a trail point');
 });
 
-test(`the trail keeps the newest ${TRAIL_N} positions, oldest first`, () => {
+test('the trail keeps the newest positions, oldest first', () => {
   const m = marker();
   for (let i = 0; i < TRAIL_N + 5; i++) m.set(tipAt(i * 1e-6, 0, 0), flat);
-  assert.equal(m.trailLen, TRAIL_N);
+  assert.equal(m.trailLen, TRAIL_N, `${TRAIL_N} positions`);
   assert.deepEqual(m.trail.geometry.drawRange, { start: 0, count: 900 });
   assert.equal(m.trailPos[0], 5, 'positions 0-4 dropped');
   assert.equal(m.trailPos[3 * (TRAIL_N - 1)], 904);
@@ -47,17 +47,17 @@ test(`the trail keeps the newest ${TRAIL_N} positions, oldest first`, () => {
   assert.equal(m.trail.geometry.drawRange.count, 0);
 });
 
-test('the pushed particle\'s estimate: a ring twice the ball, hidden without one', () => {
+test('the pushed particle\'s estimate: a ring, hidden without one', () => {
   const m = marker();
   m.set(tipAt(1e-6, 1e-6, 0, [3e-6, 4e-6]), flat);
   assert.equal(m.estimate.visible, true);
   assert.deepEqual(m.estimate.position.toArray().map((v) => +v.toFixed(9)), [3, 4, 0.01]);
-  assert.equal(m.estimate.scale.x, 0.6);
+  assert.equal(m.estimate.scale.x, 0.6, 'twice the ball');
   m.set(tipAt(2e-6, 1e-6, 0), flat);
   assert.equal(m.estimate.visible, false);
 });
 
-test(`the ball is at least ${TIP_MIN_PX} px on screen however far the camera is`, () => {
+test('the ball keeps a minimum size on screen however far the camera is', () => {
   const m = marker();
   m.set(tipAt(0, 0, 0), flat);
   const camera = new THREE.PerspectiveCamera(40, 1, 0.01, 20000);
@@ -65,7 +65,8 @@ test(`the ball is at least ${TIP_MIN_PX} px on screen however far the camera is`
   camera.position.set(0, 0, 1000 + m.ball.position.z);
   m.scaleToScreen(camera, 700);
   const perPx = (2 * 1000 * Math.tan((20 * Math.PI) / 180)) / 700;
-  assert.ok(Math.abs(m.ball.scale.x - 7 * perPx) < 1e-9, `${m.ball.scale.x}`);
+  assert.equal(TIP_MIN_PX, 7);
+  assert.ok(Math.abs(m.ball.scale.x - 7 * perPx) < 1e-9, `7 px: ${m.ball.scale.x} µm`);
   assert.ok(Math.abs(m.shadow.scale.x - 1.1 * 7 * perPx) < 1e-9);
   // Close by, its own size (0.3 µm) is more than 7 px.
   camera.position.set(0, 0, 1 + m.ball.position.z);
