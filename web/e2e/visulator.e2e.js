@@ -1,5 +1,5 @@
 // The Nano Visulator in a real browser (Debian's chromium, headless, WebGL2 on SwiftShader)
-// against the real `nanopush serve` (issue 11). Run by `make web-test` (`npm run e2e`); the
+// against the real `nanopush serve`. Run by `make web-test` (`npm run e2e`); the
 // server binary must be built (target/debug, or $CARGO_TARGET_DIR, or $NANOPUSH_BIN).
 // Screenshots go to web/test-results/. The tests run in order and share one server: the
 // operator's scan and push are what the late viewer must see.
@@ -29,7 +29,7 @@ const state = (page) => page.evaluate(() => {
   return { particles: s.particles, lease: s.lease, client: s.client, scan: s.scan && { id: s.scan.id, lines: s.scan.lines, yres: s.scan.yres, x_real: s.scan.x_real, y_real: s.scan.y_real, done: s.scan.done, record: s.scan.record }, stale: s.scanStale, push: s.push };
 });
 
-test('the operator page loads with no console errors, and axe finds no violations', async () => {
+test('the operator page loads with no console errors or axe violations', async () => {
   op = await newPage(browser);
   await op.goto(srv.url);
   await ready(op);
@@ -41,7 +41,7 @@ test('the operator page loads with no console errors, and axe finds no violation
   await shot(op, '01-operator-loaded');
 });
 
-test('the tip is on screen, drawn over everything, and no label or panel covers it', async () => {
+test('the tip is on screen, drawn over everything, covered by nothing', async () => {
   // On the height image (the map) first: the tip's mark sits inside the image.
   await op.waitForFunction(() => !document.querySelector('.map-dot.tip').hidden, null, { timeout: 10000 });
   const onMap = await op.evaluate(() => {
@@ -53,11 +53,11 @@ test('the tip is on screen, drawn over everything, and no label or panel covers 
   // The 3D view is the optional companion: shown on request.
   assert.equal(await op.isVisible('#view3d'), false, 'the 3D view is hidden until asked for');
   await op.click('#toggle-3d');
-  await op.waitForFunction(() => window.nanopush.view.frames >= 3 && window.nanopush.view.tip.visible, null, { timeout: 10000 });
+  await op.waitForFunction(() => window.nanopush.view.frames >= 3 && window.nanopush.view.tip.ball.visible, null, { timeout: 10000 });
   await op.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
   const t = await op.evaluate(() => {
     const v = window.nanopush.view;
-    const p = v.tip.position.clone().project(v.camera);
+    const p = v.tip.ball.position.clone().project(v.camera);
     const r = v.container.getBoundingClientRect();
     const x = r.left + ((p.x + 1) / 2) * r.width;
     const y = r.top + ((1 - p.y) / 2) * r.height;
@@ -65,7 +65,7 @@ test('the tip is on screen, drawn over everything, and no label or panel covers 
     return {
       onScreen: Math.abs(p.x) < 1 && Math.abs(p.y) < 1,
       covered: hit ? (hit.closest('.plabel, .overlay > *') ? hit.className || hit.tagName : null) : 'nothing',
-      depthTest: v.tip.material.depthTest,
+      depthTest: v.tip.ball.material.depthTest,
     };
   });
   assert.ok(t.onScreen, 'the tip is in the view');
@@ -75,7 +75,7 @@ test('the tip is on screen, drawn over everything, and no label or panel covers 
   assert.equal(await op.isVisible('#view3d'), false);
 });
 
-test('the operator takes the lease, scans and pushes a particle; /api/status shows it moved', async () => {
+test('the operator scans and pushes; /api/status shows the particle moved', async () => {
   await op.click('#take-lease');
   await op.waitForFunction(() => window.nanopush.session.hasLease);
   await op.fill('#scan-size', '10');
@@ -104,13 +104,13 @@ test('the operator takes the lease, scans and pushes a particle; /api/status sho
   await shot(op, '02-operator-pushed');
 });
 
-test('a viewer joining after the push sees the moved particle and the latest scan', async () => {
+test('a viewer joining after the push sees the moved particle and the scan', async () => {
   const status = await getJson(srv.base, '/api/status');
   const x = status.particles.find((p) => p.id === 1).x;
   const v = await newPage(browser);
   await v.goto(srv.base + '/');
   await ready(v);
-  // The moved particle first (the page used to show the scene file's position).
+  // The moved particle first: where the server has it, not the scene file's position.
   try {
     await v.waitForFunction((want) => Math.abs(window.nanopush.session.state.particles.find((p) => p.id === 1).x - want) < 1e-12, x, { timeout: 10000 });
   } catch {
@@ -130,8 +130,8 @@ test('a viewer joining after the push sees the moved particle and the latest sca
   const op2 = await newPage(browser);
   await op2.goto(srv.url);
   await ready(op2);
-  // (Its scan form is disabled: the first operator holds the lease. The form was centred on
-  // the particle as the server has it.)
+  // (Its scan form is disabled: the first operator holds the lease. The form is centred on the
+  // particle as the server has it.)
   await op2.waitForFunction((v) => document.querySelector('#scan-x').value === v, (x * 1e6).toFixed(2), { timeout: 5000 });
   assert.deepEqual(v.errors, []);
   assert.deepEqual(op2.errors, []);
@@ -140,8 +140,8 @@ test('a viewer joining after the push sees the moved particle and the latest sca
   await op2.context().close();
 });
 
-test('a push that never starts (target 60 µm away) shows its failure code, reason and record', async () => {
-  await pushBy(op, 60, 0);
+test('a push that never starts shows its failure code, reason and record', async () => {
+  await pushBy(op, 60, 0); // a target 60 µm away, off the stage
   try {
     await waitText(op, '#log', /push of #1 failed: plan/, 30000);
   } catch (e) {
@@ -157,7 +157,7 @@ test('a push that never starts (target 60 µm away) shows its failure code, reas
   await shot(op, '04-failed-push');
 });
 
-test('a viewer cannot command and sees the operator\'s push path, not its own form\'s', async () => {
+test('a viewer cannot command; sees the operator\'s push path, not its form\'s', async () => {
   const v = await newPage(browser);
   await v.goto(srv.base + '/');
   await ready(v);
@@ -169,23 +169,23 @@ test('a viewer cannot command and sees the operator\'s push path, not its own fo
   assert.equal(await v.isVisible('#scan-form'), false);
   assert.match(await v.textContent('#why'), /Viewer connection/);
   // The viewer's own form would preview 5 µm along +x: it must not be drawn.
-  assert.equal(await v.evaluate(() => window.nanopush.view.preview.visible), false);
+  assert.equal(await v.evaluate(() => window.nanopush.view.marks.preview.visible), false);
   const from = (await getJson(srv.base, '/api/status')).particles.find((p) => p.id === 1);
   await pushBy(op, 2, 90);
-  await v.waitForFunction(() => window.nanopush.view.pushPath.visible, null, { timeout: 30000 });
-  const pts = await v.evaluate(() => window.nanopush.view.pushPathPoints);
+  await v.waitForFunction(() => window.nanopush.view.marks.pushPath.visible, null, { timeout: 30000 });
+  const pts = await v.evaluate(() => window.nanopush.view.marks.pathPoints);
   const end = pts[pts.length - 1];
   assert.ok(Math.abs(end[0] - from.x * 1e6) < 0.1 && Math.abs(end[1] - (from.y * 1e6 + 2)) < 0.1, `path ends at ${end}`);
-  assert.equal(await v.evaluate(() => window.nanopush.view.preview.visible), false);
+  assert.equal(await v.evaluate(() => window.nanopush.view.marks.preview.visible), false);
   assert.match(await v.textContent('#push-now'), /Pushing #1 \(client \d+\)/);
   await shot(v, '05-viewer-sees-push');
   await waitText(v, '#lastrun', /^push of #1 ok/, 60000);
-  assert.equal(await v.evaluate(() => window.nanopush.view.pushPath.visible), false, 'the path goes when the push ends');
+  assert.equal(await v.evaluate(() => window.nanopush.view.marks.pushPath.visible), false, 'the path goes when the push ends');
   assert.deepEqual(v.errors, []);
   await v.context().close();
 });
 
-test('the 2D image\'s axes, scale bar and line profile hold the right physical lengths', async () => {
+test('the 2D image\'s axes, scale bar and profile hold the physical lengths', async () => {
   const s = (await state(op)).scan;
   const g = await op.evaluate(() => window.nanopush.image2d.geometry());
   // x ticks: metres per pixel times the image width is the scan's width.
@@ -225,11 +225,11 @@ test('the 2D image\'s axes, scale bar and line profile hold the right physical l
   await shot(op, '06-image-profile');
 });
 
-test('a viewer who joins mid-scan ends with the whole scan (512²), and Stop ends a push at once with it on screen', async () => {
+test('a viewer back mid-scan gets the whole scan; Stop ends a push at once', async () => {
   await op.fill('#scan-size', '16');
   await op.fill('#scan-px', '512');
-  // A viewer loses its connection while the lines stream and joins again mid-scan (issue 26: a
-  // viewer that joined mid-scan kept 133 of 256 lines, the rest blank, after "scan complete").
+  // A viewer loses its connection while the lines of a 512² scan stream and joins again
+  // mid-scan: it ends with every line, none blank, and the scan on screen for what follows.
   const late = await newPage(browser);
   await late.goto(srv.base + '/');
   await ready(late);
@@ -257,7 +257,7 @@ test('a viewer who joins mid-scan ends with the whole scan (512²), and Stop end
     await op.waitForFunction(() => !['idle', 'scanning'].includes(window.nanopush.session.state.phase), null, { timeout: 30000 });
     runs.push(await timedStop(op));
     const text = await waitText(op, '#lastrun', /^push of #1 stopped/, 60000);
-    // A stop is said once, in a neutral colour (it was "failed: stopped: stopped: …" in red).
+    // A stop is no failure: said once ("stopped: …", not "failed: stopped: …"), in a neutral colour.
     assert.match(text, /^push of #1 stopped: stop requested by the operator, particle left at/);
     assert.equal(await op.getAttribute('#lastrun', 'class'), 'lastrun neutral');
     await op.waitForFunction(() => window.nanopush.session.state.phase === 'idle', null, { timeout: 30000 });
@@ -267,7 +267,7 @@ test('a viewer who joins mid-scan ends with the whole scan (512²), and Stop end
   await shot(op, '07-stopped-512');
 });
 
-test('at 1280×720 and 1600×1000 the image (axes, scale bar, profile), Stop and the lease are in view, and nothing jumps', async () => {
+test('at 1280×720 and 1600×1000 the image, Stop and the lease stay in view', async () => {
   for (const [width, height] of [[1280, 720], [1600, 1000]]) {
     const p = await newPage(browser, { width, height });
     await p.goto(srv.url);
@@ -305,7 +305,7 @@ test('at 1280×720 and 1600×1000 the image (axes, scale bar, profile), Stop and
   }
 });
 
-test('keyboard only: Tab to the map, choose a particle, move, Enter picks the push target; s / e draw the profile', async () => {
+test('keyboard only: a particle and a push target picked, a profile drawn', async () => {
   await op.waitForFunction(() => window.nanopush.session.hasLease);
   await op.evaluate(() => document.activeElement?.blur());
   let tabs = 0;
@@ -344,7 +344,7 @@ test('keyboard only: Tab to the map, choose a particle, move, Enter picks the pu
   await op.check('input[name=mode][value=by]');
 });
 
-test('a 390×844 phone: no horizontal scroll, controls right after the image and reachable', async () => {
+test('a phone (390×844): no sideways scroll, controls after the image', async () => {
   const p = await newPage(browser, { width: 390, height: 844 });
   await p.goto(srv.url);
   await ready(p);
@@ -364,7 +364,7 @@ test('a 390×844 phone: no horizontal scroll, controls right after the image and
       const h = document.elementFromPoint(r.left + r.width / 2, r.top + r.height / 2);
       return { ok: h === e || e.contains(h), right: r.right, inner: window.innerWidth };
     });
-    assert.ok(hit.ok && hit.right <= hit.inner, `${sel}: ${JSON.stringify(hit)}`);
+    assert.ok(hit.ok && hit.right <= hit.inner, `${sel} reachable: ${JSON.stringify(hit)}`);
   }
   await p.evaluate(() => window.scrollTo(0, 0));
   await shot(p, '08-phone');
@@ -372,7 +372,7 @@ test('a 390×844 phone: no horizontal scroll, controls right after the image and
   await p.context().close();
 });
 
-test('the monitoring view is read-only, shows the instrument, and axe finds no violations', async () => {
+test('the monitoring view is read-only, shows the instrument, passes axe', async () => {
   const m = await newPage(browser, { width: 1280, height: 800 });
   await m.goto(srv.base + '/?view=monitor');
   await waitText(m, '#m-phase', /idle|scanning|\w+/, 10000);
@@ -387,7 +387,7 @@ test('the monitoring view is read-only, shows the instrument, and axe finds no v
   await m.context().close();
 });
 
-test('with a haptic link, the haptic panel shows it and the lease holder can engage', async () => {
+test('with a haptic link the panel shows it and the lease holder can engage', async () => {
   const hs = await startServer({ haptic: 'sim', webDir: process.env.E2E_WEB_DIR || WEB });
   try {
     const p = await newPage(browser);
@@ -396,11 +396,11 @@ test('with a haptic link, the haptic panel shows it and the lease holder can eng
     await p.waitForSelector('#haptic-panel', { state: 'visible', timeout: 20000 });
     await waitText(p, '#hap-link', /^up$/, 20000);
     await p.waitForSelector('#chart-hap canvas', { timeout: 10000 });
-    // The device's fault counters (issue 28), from /api/status every 2 s while the panel shows.
+    // The device's fault counters, from /api/status every 2 s while the panel shows.
     const dev = await waitText(p, '#hap-device', /faults: none|faults:/, 8000);
     assert.match(dev, /^(\d+(\.\d+)? k?Hz · )?faults: /, dev);
     assert.match(await p.getAttribute('#hap-device', 'class'), /^(|warn|bad)$/);
-    // The scales in force (issue 25): the scene's default, inside the device's region.
+    // The scales in force: the scene's default, inside the device's region.
     await waitText(p, '#hap-scales', /^10 nm\/mm, 1\.000 N pull-off, felt \d+ N\/m$/, 8000);
     // The monitor shows the same line.
     const m = await newPage(browser, { width: 1280, height: 800 });
@@ -426,8 +426,7 @@ test('with a haptic link, the haptic panel shows it and the lease holder can eng
     await waitText(p, '#hap-phase', /approach|park|settle|ramp|engaged/, 20000);
     await shot(p, '11-haptic');
     // The link lost (the bridge frozen with SIGSTOP, so it is not restarted) and back: both in
-    // the Events log, the losses counted, Engage disabled while it is down (issue 26: the page
-    // showed only a brief "ramp").
+    // the Events log, the losses counted, Engage disabled while it is down.
     const { pid } = (await getJson(hs.base, '/api/status')).haptic;
     assert.ok(pid > 0, 'the bridge runs');
     process.kill(pid, 'SIGSTOP');
@@ -451,7 +450,7 @@ test('with a haptic link, the haptic panel shows it and the lease holder can eng
   }
 });
 
-test('served without its build (web/dist), the page says how to build it and the server warns at start', async () => {
+test('served unbuilt (no web/dist), the page and the server say how to build', async () => {
   const dir = mkdtempSync(join(tmpdir(), 'nanopush-web-bare-'));
   const web = process.env.E2E_WEB_DIR || WEB;
   symlinkSync(join(web, 'index.html'), join(dir, 'index.html'));

@@ -1,4 +1,4 @@
-// The haptic device's fault counters in one line (issue 28), for the haptic panel (src/haptic.js)
+// The haptic device's fault counters in one line, for the haptic panel (src/haptic.js)
 // and the monitor's tile (src/monitor.js), both from `/api/status`'s `haptic` object: its
 // `rate_hz` (the bridge's device cycle rate) and `device_faults` (counters by kind, and `side`:
 // the side at fault of each kind, `device`, `bridge` or `cable`). And `StatusPoller`: fetches

@@ -1,13 +1,13 @@
 // The haptic panel, shown once telemetry carries a `haptic` object (the server runs a haptic
 // link: `--haptic sim|external`): link up/down, the z-control phase (engaged or not), the
 // handle's position and the force at the hand, the tip force, the passivity controller, the
-// scales in force (lowered, and why, when the device cannot render those asked: issue 25), and a
-// scrolling plot of the force at the hand, and the device's fault counters (issue 28: the line
-// `deviceFaultsLine` of src/devicefaults.js makes, from /api/status every 2 s while the panel is
-// shown and the page is visible). The lease holder gets engage / release / re-centre
-// and the scales; the commands are built (and range-checked) by wire.js. The plot is redrawn by
-// the page's frame scheduler (src/frame.js), at most ~7 times a second. `hapticFields` and
-// `HapticTrace` are pure (Node tests).
+// scales in force (lowered, and why, when the device cannot render those asked), a scrolling
+// plot of the force at the hand, and the device's fault counters (the line `deviceFaultsLine` of
+// src/devicefaults.js makes, from /api/status every 2 s while the panel is shown and the page is
+// visible). The lease holder gets engage / release / re-centre and the scales; the commands are
+// built (and range-checked) by wire.js. The plot is redrawn by the page's frame scheduler
+// (src/frame.js), at most ~7 times a second. `hapticFields` and `HapticTrace` are pure (Node
+// tests).
 import uPlot from 'uplot';
 import { StatusPoller, deviceFaultsLine } from './devicefaults.js';
 
@@ -40,7 +40,7 @@ export function scalesText(sc) {
   return `${Number(sc.nm_per_mm.toPrecision(4))} nm per mm · pull-off felt as ${Number(sc.pull_off_at_hand_n.toPrecision(4))} N`;
 }
 
-/** Why the scales in force differ from those asked (issue 25), as the panel says it. */
+/** Why the scales in force differ from those asked, as the panel says it. */
 const LIMITS = {
   renderable_region: "lowered to the device's renderable region",
   energy_bounding: 'halved: the passivity damper stayed at its cap (energy bounding)',

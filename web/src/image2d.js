@@ -1,15 +1,16 @@
 // The 2D height image, as an AFM user reads one (Gwyddion's views): the scan in false colour
 // with physical axes in a unit chosen for its size (nm or µm), a scale bar, a labelled colour
-// bar, plane levelling (mean plane / line by line / none), a cursor readout of x, y and height,
-// and a line profile (drag a line across the image, see the height along it in nm; or put its
-// ends at the keyboard cursor of the map layer, src/mapoverlay.js, which sits on top and takes
-// the pointer). Without a scan it shows the whole stage, axes and all, so the map layer has
+// bar, plane levelling (mean plane / line by line / none: the maths in src/heightmap.js), a
+// cursor readout of x, y and height, and a line profile (drag a line across the image, see the
+// height along it in nm; or put its ends at the keyboard cursor of the map layer,
+// src/mapoverlay.js, which sits on top and takes the pointer). Without a scan it shows the whole stage, axes and all, so the map layer has
 // somewhere to draw the particles and the tip.
 // The scan is the Session's scan object (heights in m, row 0 = lowest y); it grows line by line
 // and is drawn at most once per animation frame (by the page's frame scheduler, src/frame.js),
 // only when something changed.
 import { viridisTable } from './colormap.js';
 import { lengthUnit, formatLength } from './format.js';
+import { level, profileAlong } from './heightmap.js';
 
 const SVG = 'http://www.w3.org/2000/svg';
 const M = { left: 58, right: 86, top: 10, bottom: 42 }; // margins (CSS px) around the image
@@ -26,92 +27,6 @@ export function niceStep(span, n = 5) {
   const p = 10 ** Math.floor(Math.log10(raw));
   const f = raw / p;
   return (f < 1.5 ? 1 : f < 3.5 ? 2 : f < 7.5 ? 5 : 10) * p;
-}
-
-/**
- * Levelled heights (m) of the received lines: `none`; `plane`, the least-squares mean plane
- * z = a + b·i + c·j subtracted; `line`, each line's mean subtracted (Gwyddion's "align rows").
- * Pixels of lines not yet received are NaN.
- */
-export function level(scan, mode) {
-  const { xres, yres, heights, received } = scan;
-  const out = new Float32Array(xres * yres).fill(NaN);
-  if (mode === 'line') {
-    for (let j = 0; j < yres; j++) {
-      if (!received[j]) continue;
-      let s = 0;
-      let n = 0;
-      for (let i = 0; i < xres; i++) {
-        const h = heights[j * xres + i];
-        if (Number.isFinite(h)) {
-          s += h;
-          n++;
-        }
-      }
-      const m = n ? s / n : 0;
-      for (let i = 0; i < xres; i++) out[j * xres + i] = heights[j * xres + i] - m;
-    }
-    return out;
-  }
-  let a = 0;
-  let b = 0;
-  let c = 0;
-  if (mode === 'plane') {
-    // Normal equations of z = a + b i + c j over the finite pixels.
-    let n = 0; let si = 0; let sj = 0; let sii = 0; let sjj = 0; let sij = 0; let sz = 0; let siz = 0; let sjz = 0;
-    for (let j = 0; j < yres; j++) {
-      if (!received[j]) continue;
-      for (let i = 0; i < xres; i++) {
-        const z = heights[j * xres + i];
-        if (!Number.isFinite(z)) continue;
-        n++; si += i; sj += j; sii += i * i; sjj += j * j; sij += i * j; sz += z; siz += i * z; sjz += j * z;
-      }
-    }
-    if (n >= 3) {
-      // Solve the 3×3 system by Cramer's rule (centred sums keep it well conditioned).
-      const mi = si / n; const mj = sj / n; const mz = sz / n;
-      const cii = sii - n * mi * mi; const cjj = sjj - n * mj * mj; const cij = sij - n * mi * mj;
-      const ciz = siz - n * mi * mz; const cjz = sjz - n * mj * mz;
-      const det = cii * cjj - cij * cij;
-      if (Math.abs(det) > 1e-12) {
-        b = (ciz * cjj - cjz * cij) / det;
-        c = (cjz * cii - ciz * cij) / det;
-      } else if (cii > 0) {
-        b = ciz / cii;
-      } else if (cjj > 0) {
-        c = cjz / cjj;
-      }
-      a = mz - b * mi - c * mj;
-    } else if (n > 0) {
-      a = sz / n;
-    }
-  }
-  for (let j = 0; j < yres; j++) {
-    if (!received[j]) continue;
-    for (let i = 0; i < xres; i++) out[j * xres + i] = heights[j * xres + i] - (a + b * i + c * j);
-  }
-  return out;
-}
-
-/** Heights along the segment from (i0, j0) to (i1, j1) (pixel coordinates), bilinear. */
-export function profileAlong(data, xres, yres, i0, j0, i1, j1) {
-  const n = Math.max(2, Math.ceil(Math.hypot(i1 - i0, j1 - j0)) + 1);
-  const t = new Float64Array(n);
-  const h = new Float64Array(n);
-  const at = (i, j) => data[Math.min(yres - 1, Math.max(0, j)) * xres + Math.min(xres - 1, Math.max(0, i))];
-  for (let k = 0; k < n; k++) {
-    const f = k / (n - 1);
-    const x = i0 + f * (i1 - i0);
-    const y = j0 + f * (j1 - j0);
-    const ix = Math.floor(x);
-    const iy = Math.floor(y);
-    const fx = x - ix;
-    const fy = y - iy;
-    const v = (1 - fx) * (1 - fy) * at(ix, iy) + fx * (1 - fy) * at(ix + 1, iy) + (1 - fx) * fy * at(ix, iy + 1) + fx * fy * at(ix + 1, iy + 1);
-    t[k] = f;
-    h[k] = v;
-  }
-  return { t, h };
 }
 
 function el(name, attrs = {}, parent = null) {

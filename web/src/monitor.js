@@ -15,7 +15,7 @@ import { commands } from './wire.js';
 import { deviceFaultsLine } from './devicefaults.js';
 import { clockTime } from './eventlog.js';
 import { viridisTable } from './colormap.js';
-import { level } from './image2d.js';
+import { level } from './heightmap.js';
 
 const POLL_MS = 1000;
 const RUNS_MS = 5000;

@@ -12,7 +12,7 @@ export function outcomeText(run) {
 
 /**
  * Rows the table shows at most: a data directory grows by four files a push and a scan, and ten
- * thousand rows froze the page (Stop included) for 3.5 s each time the list was refreshed.
+ * thousand rows hold the page (Stop included) for 3.5 s each time the list is refreshed.
  */
 export const RECORDS_SHOWN = 200;
 

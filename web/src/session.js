@@ -130,6 +130,193 @@ export function initialState({ traceSeconds = 10 } = {}) {
   };
 }
 
+/**
+ * The server's JSON messages (proto/README.md), one handler per `type`: `handlers[type](session,
+ * msg)` changes the store (`session.state`) and returns what changed, as an event {kind, ...}
+ * from which the page marks the views to redraw. A new message is one more entry.
+ */
+const handlers = {
+  welcome(session, m) {
+    const s = session.state;
+    s.version = m.version;
+    s.client = m.client;
+    s.role = m.role;
+    s.name = m.name ?? null;
+    s.lease = m.lease ?? null;
+    s.leaseName = m.lease_name ?? null;
+    s.scene = m.scene;
+    s.tickHz = m.tick_hz;
+    s.stateReceived = false;
+    if (m.version !== WS_VERSION) {
+      session.logError('version', `the server speaks protocol ${m.version}, this page ${WS_VERSION}`);
+    }
+    const previous = s.instance;
+    const instance = m.instance ?? null;
+    s.restarted = previous !== null && instance !== null && instance !== previous;
+    s.instance = instance;
+    if (s.restarted && s.scan) {
+      // The previous run's scan: one it never finished never will be, and the restarted
+      // server's sample (the scene's) is not what it shows. Its scan ids start again.
+      s.scan.previousRun = true;
+      s.scan.interrupted = !s.scan.done;
+      s.scanStale = true;
+    }
+    s.startedUnixMs = m.started_unix_ms ?? null;
+    return { kind: 'welcome', restarted: s.restarted, previous };
+  },
+
+  state(session, m) {
+    const s = session.state;
+    s.stateReceived = true;
+    s.lease = m.lease ?? null;
+    s.leaseName = m.lease_name ?? null;
+    s.phase = m.phase ?? null;
+    if (Array.isArray(m.stage)) s.tip = { t: null, stage: m.stage, volts: 0, phase: m.phase, estimate: null, force: 0 };
+    for (const q of m.particles ?? []) {
+      const p = s.particles.find((pp) => pp.id === q.id);
+      if (p) {
+        p.x = q.x;
+        p.y = q.y;
+        p.radius = q.radius;
+      } else {
+        s.particles.push({ id: q.id, material: '', radius: q.radius, x: q.x, y: q.y });
+      }
+    }
+    s.serverParticles = (m.particles ?? []).map((q) => ({ ...q }));
+    s.push = m.push ? { ...m.push } : null;
+    const sc = m.scan ?? null;
+    let scanChanged = false;
+    let scanFinished = false;
+    if (sc && (!s.scan || s.scan.id !== sc.scan || s.scan.previousRun)) {
+      session.startScan({ ...sc, type: 'scan_start' });
+      s.scan.done = !!sc.done;
+      s.scan.record = sc.record ?? null;
+      scanChanged = true;
+    } else if (sc && sc.done && !s.scan.done) {
+      // The scan shown ended while this page was away: done, and its record has the lines
+      // this page missed.
+      s.scan.done = true;
+      s.scan.record = sc.record ?? null;
+      scanFinished = true;
+    }
+    s.scanStale = sc ? !!sc.stale : !!s.scan?.previousRun;
+    return { kind: 'state', scan: sc, scanChanged, scanFinished };
+  },
+
+  push_started(session, m) {
+    const s = session.state;
+    s.push = { particle: m.particle, path: m.path ?? [], by: m.by ?? null, run: m.run ?? null };
+    return { kind: 'push_started', push: s.push };
+  },
+
+  ok(session, m) {
+    const c = m.id != null ? session.state.commands.get(m.id) : undefined;
+    if (c) {
+      c.status = 'ok';
+      c.code = null;
+      c.message = null;
+    }
+    return { kind: 'reply', ok: true, id: m.id ?? null, command: c ?? null };
+  },
+
+  error(session, m) {
+    const c = m.id != null ? session.state.commands.get(m.id) : undefined;
+    if (c) {
+      c.status = 'error';
+      c.code = m.code;
+      c.message = m.message;
+    }
+    session.logError(m.code, m.message, m.id);
+    return { kind: 'reply', ok: false, id: m.id ?? null, command: c ?? null };
+  },
+
+  telemetry(session, m) {
+    const s = session.state;
+    const force = Number.isFinite(m.tip_force_n) ? m.tip_force_n : 0;
+    s.tip = { t: m.t, stage: m.stage, volts: m.volts, phase: m.phase, estimate: m.estimate ?? null, force, haptic: m.haptic ?? null };
+    s.phase = m.phase;
+    s.telemetryCount++;
+    const tr = s.trace;
+    // A server restart starts its clock again: drop a trace that ran ahead.
+    if (tr.t.length && m.t < tr.t[tr.t.length - 1]) {
+      tr.t.length = 0;
+      tr.volts.length = 0;
+      tr.z.length = 0;
+      tr.force.length = 0;
+    }
+    tr.t.push(m.t);
+    tr.volts.push(m.volts);
+    tr.z.push(m.stage[2]);
+    tr.force.push(force);
+    let drop = 0;
+    while (drop < tr.t.length && tr.t[drop] < m.t - tr.seconds) drop++;
+    if (drop) {
+      tr.t.splice(0, drop);
+      tr.volts.splice(0, drop);
+      tr.z.splice(0, drop);
+      tr.force.splice(0, drop);
+    }
+    return { kind: 'telemetry' };
+  },
+
+  lagged(session, m) {
+    const s = session.state;
+    s.lagged.events++;
+    s.lagged.skipped += m.skipped ?? 0;
+    return { kind: 'lagged' };
+  },
+
+  lease(session, m) {
+    const s = session.state;
+    const before = s.lease;
+    const hadIt = before !== null && before === s.client;
+    s.lease = m.holder ?? null;
+    s.leaseName = m.holder_name ?? null;
+    s.leaseNote = m.reason ?? null;
+    const lost = hadIt && s.lease !== s.client;
+    return { kind: 'lease', before, lost, reason: m.reason ?? null };
+  },
+
+  run_done(session, m) {
+    const s = session.state;
+    s.lastRun = m;
+    s.push = null;
+    if (Array.isArray(m.estimate)) s.scanStale = s.scan !== null;
+    s.runs.push(m);
+    if (s.runs.length > RUNS_MAX) s.runs.splice(0, s.runs.length - RUNS_MAX);
+    const p = s.particles.find((q) => q.id === m.particle);
+    if (p && Array.isArray(m.estimate)) {
+      p.x = m.estimate[0];
+      p.y = m.estimate[1];
+    }
+    const q = (s.serverParticles ?? []).find((qq) => qq.id === m.particle);
+    if (q && Array.isArray(m.estimate)) {
+      q.x = m.estimate[0];
+      q.y = m.estimate[1];
+    }
+    return { kind: 'run_done', run: m };
+  },
+
+  scan_start(session, m) {
+    if (!session.startScan(m)) return { kind: 'error' };
+    return { kind: 'scan_start' };
+  },
+
+  scan_done(session, m) {
+    const s = session.state;
+    if (s.scan && s.scan.id === m.scan) {
+      s.scan.done = true;
+      s.scan.record = m.record ?? null;
+    }
+    return { kind: 'scan_done', record: m.record ?? null, record_error: m.record_error ?? null };
+  },
+
+  shutdown(session, m) {
+    session.state.shutdown = m.reason ?? '';
+    return { kind: 'shutdown' };
+  },
+};
+
 export class Session {
   constructor(opts) {
     this.state = initialState(opts);
@@ -232,201 +419,41 @@ export class Session {
       this.logError('client_parse', 'a server message without a type');
       return { kind: 'error' };
     }
-    const s = this.state;
-    switch (msg.type) {
-      case 'welcome':
-        s.version = msg.version;
-        s.client = msg.client;
-        s.role = msg.role;
-        s.name = msg.name ?? null;
-        s.lease = msg.lease ?? null;
-        s.leaseName = msg.lease_name ?? null;
-        s.scene = msg.scene;
-        s.tickHz = msg.tick_hz;
-        s.stateReceived = false;
-        if (msg.version !== WS_VERSION) {
-          this.logError('version', `the server speaks protocol ${msg.version}, this page ${WS_VERSION}`);
-        }
-        {
-          const previous = s.instance;
-          const instance = msg.instance ?? null;
-          s.restarted = previous !== null && instance !== null && instance !== previous;
-          s.instance = instance;
-          if (s.restarted && s.scan) {
-            // The previous run's scan: one it never finished never will be, and the restarted
-            // server's sample (the scene's) is not what it shows. Its scan ids start again.
-            s.scan.previousRun = true;
-            s.scan.interrupted = !s.scan.done;
-            s.scanStale = true;
-          }
-          s.startedUnixMs = msg.started_unix_ms ?? null;
-          return { kind: 'welcome', restarted: s.restarted, previous };
-        }
-      case 'state': {
-        s.stateReceived = true;
-        s.lease = msg.lease ?? null;
-        s.leaseName = msg.lease_name ?? null;
-        s.phase = msg.phase ?? null;
-        if (Array.isArray(msg.stage)) s.tip = { t: null, stage: msg.stage, volts: 0, phase: msg.phase, estimate: null, force: 0 };
-        for (const q of msg.particles ?? []) {
-          const p = s.particles.find((pp) => pp.id === q.id);
-          if (p) {
-            p.x = q.x;
-            p.y = q.y;
-            p.radius = q.radius;
-          } else {
-            s.particles.push({ id: q.id, material: '', radius: q.radius, x: q.x, y: q.y });
-          }
-        }
-        s.serverParticles = (msg.particles ?? []).map((q) => ({ ...q }));
-        s.push = msg.push ? { ...msg.push } : null;
-        const sc = msg.scan ?? null;
-        let scanChanged = false;
-        let scanFinished = false;
-        if (sc && (!s.scan || s.scan.id !== sc.scan || s.scan.previousRun)) {
-          this.startScan({ ...sc, type: 'scan_start' });
-          s.scan.done = !!sc.done;
-          s.scan.record = sc.record ?? null;
-          scanChanged = true;
-        } else if (sc && sc.done && !s.scan.done) {
-          // The scan shown ended while this page was away: done, and its record has the lines
-          // this page missed.
-          s.scan.done = true;
-          s.scan.record = sc.record ?? null;
-          scanFinished = true;
-        }
-        s.scanStale = sc ? !!sc.stale : !!s.scan?.previousRun;
-        return { kind: 'state', scan: sc, scanChanged, scanFinished };
-      }
-      case 'push_started':
-        s.push = { particle: msg.particle, path: msg.path ?? [], by: msg.by ?? null, run: msg.run ?? null };
-        return { kind: 'push_started', push: s.push };
-      case 'ok': {
-        const c = msg.id != null ? s.commands.get(msg.id) : undefined;
-        if (c) {
-          c.status = 'ok';
-          c.code = null;
-          c.message = null;
-        }
-        return { kind: 'reply', ok: true, id: msg.id ?? null, command: c ?? null };
-      }
-      case 'error': {
-        const c = msg.id != null ? s.commands.get(msg.id) : undefined;
-        if (c) {
-          c.status = 'error';
-          c.code = msg.code;
-          c.message = msg.message;
-        }
-        this.logError(msg.code, msg.message, msg.id);
-        return { kind: 'reply', ok: false, id: msg.id ?? null, command: c ?? null };
-      }
-      case 'telemetry': {
-        const force = Number.isFinite(msg.tip_force_n) ? msg.tip_force_n : 0;
-        s.tip = { t: msg.t, stage: msg.stage, volts: msg.volts, phase: msg.phase, estimate: msg.estimate ?? null, force, haptic: msg.haptic ?? null };
-        s.phase = msg.phase;
-        s.telemetryCount++;
-        const tr = s.trace;
-        // A server restart starts its clock again: drop a trace that ran ahead.
-        if (tr.t.length && msg.t < tr.t[tr.t.length - 1]) {
-          tr.t.length = 0;
-          tr.volts.length = 0;
-          tr.z.length = 0;
-          tr.force.length = 0;
-        }
-        tr.t.push(msg.t);
-        tr.volts.push(msg.volts);
-        tr.z.push(msg.stage[2]);
-        tr.force.push(force);
-        let drop = 0;
-        while (drop < tr.t.length && tr.t[drop] < msg.t - tr.seconds) drop++;
-        if (drop) {
-          tr.t.splice(0, drop);
-          tr.volts.splice(0, drop);
-          tr.z.splice(0, drop);
-          tr.force.splice(0, drop);
-        }
-        return { kind: 'telemetry' };
-      }
-      case 'lagged':
-        s.lagged.events++;
-        s.lagged.skipped += msg.skipped ?? 0;
-        return { kind: 'lagged' };
-      case 'lease': {
-        const before = s.lease;
-        const hadIt = before !== null && before === s.client;
-        s.lease = msg.holder ?? null;
-        s.leaseName = msg.holder_name ?? null;
-        s.leaseNote = msg.reason ?? null;
-        const lost = hadIt && s.lease !== s.client;
-        return { kind: 'lease', before, lost, reason: msg.reason ?? null };
-      }
-      case 'run_done': {
-        s.lastRun = msg;
-        s.push = null;
-        if (Array.isArray(msg.estimate)) s.scanStale = s.scan !== null;
-        s.runs.push(msg);
-        if (s.runs.length > RUNS_MAX) s.runs.splice(0, s.runs.length - RUNS_MAX);
-        const p = s.particles.find((q) => q.id === msg.particle);
-        if (p && Array.isArray(msg.estimate)) {
-          p.x = msg.estimate[0];
-          p.y = msg.estimate[1];
-        }
-        const q = (s.serverParticles ?? []).find((qq) => qq.id === msg.particle);
-        if (q && Array.isArray(msg.estimate)) {
-          q.x = msg.estimate[0];
-          q.y = msg.estimate[1];
-        }
-        return { kind: 'run_done', run: msg };
-      }
-      case 'scan_start':
-        if (!this.startScan(msg)) return { kind: 'error' };
-        return { kind: 'scan_start' };
-      case 'scan_done':
-        if (s.scan && s.scan.id === msg.scan) {
-          s.scan.done = true;
-          s.scan.record = msg.record ?? null;
-        }
-        return { kind: 'scan_done', record: msg.record ?? null, record_error: msg.record_error ?? null };
-      case 'shutdown':
-        s.shutdown = msg.reason ?? '';
-        return { kind: 'shutdown' };
-      default:
-        return { kind: 'unknown', type: msg.type };
-    }
+    // Own keys only: a type named like an Object method (`toString`) is no message either.
+    if (!Object.hasOwn(handlers, msg.type)) return { kind: 'unknown', type: msg.type };
+    return handlers[msg.type](this, msg);
   }
 
   /** A new, empty scan (from `scan_start`, `state` or a record); false when its size is absurd. */
   startScan(msg) {
     const s = this.state;
-    {
-        const n = msg.xres * msg.yres;
-        if (!Number.isInteger(n) || n <= 0 || n > 512 * 512) {
-          this.logError('client_scan', `scan_start with ${msg.xres}×${msg.yres} pixels`);
-          s.scan = null;
-          return false;
-        }
-        s.scanStale = false;
-        s.scan = {
-          id: msg.scan,
-          xres: msg.xres,
-          yres: msg.yres,
-          x_offset: msg.x_offset,
-          y_offset: msg.y_offset,
-          x_real: msg.x_real,
-          y_real: msg.y_real,
-          heights: new Float32Array(n), // row-major, row 0 = line 0 = lowest y
-          received: new Uint8Array(msg.yres),
-          lines: 0,
-          min: Infinity,
-          max: -Infinity,
-          done: false,
-          record: null,
-          previousRun: false, // shown from before a server restart
-          interrupted: false, // that server never finished it
-          version: 0, // bumped by every change of the heights
-        };
-        return true;
+    const n = msg.xres * msg.yres;
+    if (!Number.isInteger(n) || n <= 0 || n > 512 * 512) {
+      this.logError('client_scan', `scan_start with ${msg.xres}×${msg.yres} pixels`);
+      s.scan = null;
+      return false;
     }
+    s.scanStale = false;
+    s.scan = {
+      id: msg.scan,
+      xres: msg.xres,
+      yres: msg.yres,
+      x_offset: msg.x_offset,
+      y_offset: msg.y_offset,
+      x_real: msg.x_real,
+      y_real: msg.y_real,
+      heights: new Float32Array(n), // row-major, row 0 = line 0 = lowest y
+      received: new Uint8Array(msg.yres),
+      lines: 0,
+      min: Infinity,
+      max: -Infinity,
+      done: false,
+      record: null,
+      previousRun: false, // shown from before a server restart
+      interrupted: false, // that server never finished it
+      version: 0, // bumped by every change of the heights
+    };
+    return true;
   }
 
   /**

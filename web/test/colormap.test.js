@@ -2,7 +2,7 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { viridis, viridisTable } from '../src/colormap.js';
 
-test('viridis runs from dark purple to yellow, brighter all the way, and clamps', () => {
+test('viridis: dark purple to yellow, brighter all the way, clamped', () => {
   assert.deepEqual(viridis(0).map((c) => Math.round(c * 255)), [68, 1, 84]);
   assert.deepEqual(viridis(1).map((c) => Math.round(c * 255)), [253, 231, 37]);
   assert.deepEqual(viridis(-3), viridis(0));

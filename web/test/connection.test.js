@@ -6,15 +6,14 @@ import { wsUrl, apiUrl, backoffMs, reconnectText, Connection, exchangeToken, sig
 import { Session } from '../src/session.js';
 import { commands } from '../src/wire.js';
 
-test('the WebSocket URL carries the page token; without one the page is a viewer', () => {
+test('the WebSocket URL carries the page token; without one, a viewer', () => {
   assert.equal(wsUrl({ protocol: 'http:', host: '127.0.0.1:8080', search: '?token=abc%2Bd' }), 'ws://127.0.0.1:8080/ws?token=abc%2Bd');
   assert.equal(wsUrl({ protocol: 'http:', host: 'localhost:9', search: '' }), 'ws://localhost:9/ws');
   assert.equal(wsUrl({ protocol: 'https:', host: 'h', search: '?x=1&token=t' }), 'wss://h/ws?token=t');
 });
 
-test('reconnect backoff doubles from 0.5 s and stops at 15 s', () => {
-  // Issue 26: the back-off reached 7.3 s after the server came back; a local instrument is
-  // tried at least every 2 s.
+test('reconnect backoff doubles from 0.25 s and stops at 2 s', () => {
+  // A local instrument is tried at least every 2 s: a server back up is seen within 2 s.
   assert.deepEqual([1, 2, 3, 4, 5, 6, 7, 10].map((n) => backoffMs(n)), [250, 500, 1000, 2000, 2000, 2000, 2000, 2000]);
 });
 
@@ -102,7 +101,7 @@ function harness({ fail = 0 } = {}) {
   return { session, timers, sockets, seen, conn };
 }
 
-test('a connection opens, passes messages on, and sends commands numbered by the Session', () => {
+test('a connection opens, passes messages on, sends commands with ids', () => {
   const h = harness();
   h.conn.connect();
   assert.equal(h.session.state.connection, 'connecting');
@@ -115,12 +114,12 @@ test('a connection opens, passes messages on, and sends commands numbered by the
   assert.equal(h.session.state.connection, 'open');
   h.sockets[0].onmessage({ data: '{"type":"ping"}' });
   const m = h.conn.send(commands.takeLease());
-  assert.deepEqual(m, { type: 'take_lease', id: 1 });
+  assert.deepEqual(m, { type: 'take_lease', id: 1 }, 'numbered by the Session');
   assert.deepEqual(h.sockets[0].sent, ['{"type":"take_lease","id":1}']);
   assert.deepEqual(h.seen, ['change connecting', 'change connecting', 'open', 'msg {"type":"ping"}', 'send #1']);
 });
 
-test('a closed connection reconnects after 0.25 s, 0.5 s, 1 s …, counting down; an open resets the count', () => {
+test('a closed connection reconnects with backoff, counting down', () => {
   const h = harness();
   h.conn.connect();
   h.sockets[0].open();
@@ -185,7 +184,7 @@ test('a socket made asynchronously (the demo) is attached when it comes', async 
   assert.equal(session.state.connection, 'open');
 });
 
-test('onClose says whether the socket had opened: a refused reconnect attempt is no new "connection closed" (review of issue 26)', () => {
+test('onClose tells a refused reconnect from a connection that closed', () => {
   const session = new Session();
   const timers = fakeTimers();
   const sockets = [];
@@ -209,10 +208,10 @@ test('onClose says whether the socket had opened: a refused reconnect attempt is
     timers.run(2000);
     sockets[i].close();
   }
-  assert.deepEqual(closes, [true, false, false, false, false, false]);
+  assert.deepEqual(closes, [true, false, false, false, false, false], 'one "connection closed", five refused attempts');
 });
 
-test('a server that goes silent (hung, or a network that drops packets without closing) is given up after 5 s and tried again; a handshake that never finishes too (review of issue 26)', () => {
+test('a silent socket or a handshake that never ends is given up, retried', () => {
   const session = new Session();
   const timers = fakeTimers();
   const sockets = [];
@@ -238,7 +237,8 @@ test('a server that goes silent (hung, or a network that drops packets without c
   }
   assert.deepEqual(closes, []);
   assert.equal(session.state.connection, 'open');
-  // Then nothing: given up within a second of 5 s.
+  // Then nothing (a hung server, or a network that drops packets without closing): given up
+  // within a second of 5 s.
   timers.run(5000);
   assert.equal(closes.length, 0, 'not before 5 s');
   timers.run(1000);
@@ -260,10 +260,11 @@ test('a server that goes silent (hung, or a network that drops packets without c
   assert.equal(session.state.connection, 'open');
 });
 
-test('a socket promised and refused (the demo\'s module did not load) is logged and retried, not an unhandled rejection (review of issue 26)', async () => {
+test('a socket promised and refused is logged and retried, not thrown', async () => {
   const session = new Session();
   const timers = fakeTimers();
   let tries = 0;
+  // The demo's module did not load: no unhandled rejection, an error logged and a retry.
   const conn = new Connection(session, { url: 'u', open: () => { tries++; return Promise.reject(new Error('no module')); }, timers, now: timers.now });
   conn.connect();
   await new Promise((r) => setImmediate(r));
@@ -274,7 +275,7 @@ test('a socket promised and refused (the demo\'s module did not load) is logged 
   await new Promise((r) => setImmediate(r));
 });
 
-test('the URL token is exchanged for the session cookie and removed from the address bar, other parameters kept (issue 27)', async () => {
+test('the URL token is exchanged for the cookie and leaves the address bar', async () => {
   const calls = [];
   const replaced = [];
   const fetchFn = async (url, init) => {
@@ -289,7 +290,7 @@ test('the URL token is exchanged for the session cookie and removed from the add
   assert.equal(calls[0].url, '/api/session');
   assert.equal(calls[0].init.method, 'POST');
   assert.equal(calls[0].init.headers.Authorization, 'Bearer npt_ab_cd');
-  assert.deepEqual(replaced, ['/?view=monitor']);
+  assert.deepEqual(replaced, ['/?view=monitor'], 'the token gone, the other parameters kept');
   // Refused: the token stays (the connection carries it and says why); no token: nothing asked.
   const refused = async () => ({ ok: false, json: async () => ({}) });
   assert.equal(await exchangeToken(loc, { fetchFn: refused, history }), null);
@@ -298,10 +299,10 @@ test('the URL token is exchanged for the session cookie and removed from the add
   assert.equal(calls.length, 1);
 });
 
-test('a server that does not know this person says how to sign in; one that does, or cannot be asked, says nothing (issue 27)', async () => {
+test('signInNote: how to sign in when the server does not know this person', async () => {
   const answer = (status, text = '') => async () => ({ status, ok: status < 300, text: async () => text });
   assert.match(await signInNote({ fetchFn: answer(401) }), /needs your token.*\?token=/);
   assert.match(await signInNote({ fetchFn: answer(429, 'too many failed attempts from 10.0.0.9; try again in 5 s') }), /too many failed attempts from 10\.0\.0\.9/);
-  assert.equal(await signInNote({ fetchFn: answer(200) }), null);
-  assert.equal(await signInNote({ fetchFn: async () => { throw new Error('offline'); } }), null);
+  assert.equal(await signInNote({ fetchFn: answer(200) }), null, 'known: nothing to say');
+  assert.equal(await signInNote({ fetchFn: async () => { throw new Error('offline'); } }), null, 'cannot be asked: nothing to say');
 });

@@ -11,10 +11,10 @@ const ZERO = { bad_packets: 0, timeouts: 0, seq_gaps: 0, out_of_range: 0, watchd
 /** `/api/status`'s `haptic` with these counters (the others zero) and the server's `side`. */
 const hap = (counts = {}, rate = 1000) => ({ link: 'up', rate_hz: rate, device_faults: { ...ZERO, ...counts, side: { ...FAULT_SIDES } } });
 
-test('unknown faults are a dash: no haptic object, nulls before the first sample', () => {
+test('unknown faults are a dash: no haptic object, or nulls', () => {
   assert.deepEqual(deviceFaultsLine(null), { text: '–', cls: '' });
   assert.deepEqual(deviceFaultsLine(undefined), { text: '–', cls: '' });
-  assert.deepEqual(deviceFaultsLine({ link: 'down', rate_hz: null, device_faults: null }), { text: '–', cls: '' });
+  assert.deepEqual(deviceFaultsLine({ link: 'down', rate_hz: null, device_faults: null }), { text: '–', cls: '' }, 'before the first sample');
   assert.deepEqual(deviceFaultsLine({ link: 'off' }), { text: '–', cls: '' });
 });
 
@@ -23,7 +23,7 @@ test('all counters zero: "faults: none", uncoloured', () => {
   assert.deepEqual(deviceFaultsLine(hap({}, null)), { text: 'faults: none', cls: '' }, 'no rate known: the faults alone');
 });
 
-test('the example of the issue: device faults, and a lost device reopened', () => {
+test('device faults and a lost device reopened: one line, a warning', () => {
   assert.deepEqual(deviceFaultsLine(hap({ bad_packets: 2, timeouts: 1, losses: 1, reopens: 1 })), {
     text: '1 kHz · faults: device 3 (2 bad packets, 1 late answer) · bridge 0 · cable 1 lost, 1 reopened',
     cls: 'warn',
@@ -51,7 +51,7 @@ test('a device lost and not reopened is bad; reopened again it is a warning', ()
   assert.equal(deviceFaultsLine(hap({ losses: 3, reopens: 3 })).cls, 'warn');
 });
 
-test('the sides come from the server\'s `side` when it gives them, else the known ones', () => {
+test('each kind\'s side: the server\'s `side`, else the known one', () => {
   const h = hap({ bad_packets: 1 });
   h.device_faults.side.bad_packets = 'cable';
   assert.equal(deviceFaultsLine(h).text, '1 kHz · faults: device 0 · bridge 0 · cable 1 bad packet, 0 lost, 0 reopened');
@@ -66,7 +66,7 @@ test('the rate in words', () => {
   assert.deepEqual([null, undefined, 0, -1, NaN, Infinity].map(rateText), [null, null, null, null, null, null]);
 });
 
-test('fetchStatus asks /api/status with the page token and refuses an error status', async () => {
+test('fetchStatus asks /api/status with the token, refuses an error status', async () => {
   const asked = [];
   const ok = async (url) => { asked.push(url); return { ok: true, json: async () => ({ haptic: null }) }; };
   assert.deepEqual(await fetchStatus({ search: '?token=a%2Bb' }, ok), { haptic: null });
@@ -111,7 +111,7 @@ function fakeFetches() {
 }
 const flush = () => new Promise((r) => setImmediate(r));
 
-test('the poller fetches every period after the last answer, never two at once, only while started', async () => {
+test('the poller: a period after each answer, one at a time, while started', async () => {
   const timers = fakeTimers();
   const fetches = fakeFetches();
   const got = [];
@@ -152,7 +152,7 @@ test('the poller fetches every period after the last answer, never two at once, 
   assert.equal(fetches.waiting.length, 1);
 });
 
-test('the poller survives a fetch that throws at once and an onStatus that throws', async () => {
+test('the poller survives a fetch and an onStatus that throw', async () => {
   const timers = fakeTimers();
   const errors = [];
   let n = 0;
@@ -192,11 +192,11 @@ function panel({ fetchStatus: fetchFn, timers }) {
 
 const telemetry = { link: 'up', phase: 'idle', handle_m: 0, force_n: 0, tip_force_n: 0, pc_active: false };
 
-test('the haptic panel shows the device line from /api/status every 2 s, only while it is visible', async () => {
+test('the panel\'s device row polls /api/status only while it is visible', async () => {
   const timers = fakeTimers();
   const fetches = fakeFetches();
   const { p, els, setHidden } = panel({ fetchStatus: fetches, timers });
-  assert.equal(DEVICE_FAULTS_PERIOD_MS, 2000);
+  assert.equal(DEVICE_FAULTS_PERIOD_MS, 2000, 'every 2 s');
   timers.run(10000);
   assert.equal(fetches.waiting.length, 0, 'the panel is hidden (no haptic link yet): no fetch');
   p.update(null, null);
@@ -230,7 +230,7 @@ test('the haptic panel shows the device line from /api/status every 2 s, only wh
   setHidden(true);
 });
 
-test('a haptic panel with no way to fetch (the demo) keeps its dash and polls nothing', () => {
+test('a panel with no way to fetch (the demo) keeps its dash, polls nothing', () => {
   const timers = fakeTimers();
   const { p, els } = panel({ fetchStatus: undefined, timers });
   p.update(1, telemetry);

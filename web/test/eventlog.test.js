@@ -41,7 +41,7 @@ test('a push started, by this client or another, in one leg or more', () => {
   assert.deepEqual(pushWarnings(p), []);
 });
 
-test('the lease: taken, lost (said aloud), changed elsewhere with or without a reason', () => {
+test('the lease: taken, lost (said aloud), changed elsewhere, with reasons', () => {
   const s = new Session();
   s.apply({ type: 'welcome', version: 1, client: 4, role: 'operator', lease: null, scene: 'g', tick_hz: 1000 });
   let ev = s.apply({ type: 'lease', holder: 4 });
@@ -65,7 +65,7 @@ test('errors and a closed connection', () => {
   assert.match(LEASE_LOST_ON_CLOSE, /^you lost the lease: the connection closed/);
 });
 
-test('the lease holder is named where the server names them (issue 27)', () => {
+test('the lease holder is named where the server names them', () => {
   const s = new Session();
   s.apply({ type: 'welcome', version: 1, client: 2, role: 'viewer', name: 'bob', lease: 5, lease_name: 'alice', scene: 'x', tick_hz: 1000 });
   assert.equal(welcomeText(s.state), 'welcome: client 2 (bob), viewer, scene x, 1000 Hz');

@@ -26,9 +26,9 @@ test('formatLength by default: fixed decimals, nm below 1 µm, µm above', () =>
   assert.equal(formatLength(16e-6), '16.0 µm');
 });
 
-// With `digits`: the 2D image's scale bar (6 digits, the unit of the scan's larger side) and
-// what `formatLen` of the former protocol.js was (3 digits, the length's own unit).
-test('formatLength with digits: significant digits in the unit lengthUnit(ref) picks', () => {
+// With `digits`: significant digits, in the unit of `ref` (the 2D image's scale bar: 6 digits, the
+// unit of the scan's larger side) or, without one, of the length itself.
+test('formatLength with digits: significant digits in lengthUnit(ref)\'s unit', () => {
   assert.equal(formatLength(1.5e-6, { digits: 3 }), '1500 nm', 'below 2 µm: nm, where the default says 1.50 µm');
   assert.equal(formatLength(2e-6, { digits: 3 }), '2 µm');
   assert.equal(formatLength(123.456e-9, { digits: 3 }), '123 nm');

@@ -31,17 +31,17 @@ function fake() {
   };
 }
 
-test('live views refresh every frame while frames are quick, else 3 frame times apart within [250 ms, 1 s]', () => {
+test('live views: every frame while frames are quick, else 3 frame times', () => {
   assert.equal(livePeriodMs(16.7), 0);
-  assert.equal(livePeriodMs(40), 0);
-  assert.equal(livePeriodMs(41), 250);
+  assert.equal(livePeriodMs(40), 0, 'frames of up to 40 ms are quick');
+  assert.equal(livePeriodMs(41), 250, 'at least 250 ms');
   assert.equal(livePeriodMs(100), 300);
   assert.equal(livePeriodMs(250), 750);
   assert.equal(livePeriodMs(400), 1000);
-  assert.equal(livePeriodMs(2000), 1000);
+  assert.equal(livePeriodMs(2000), 1000, 'at most 1 s');
 });
 
-test('one loop: a view is drawn in the next frame after a mark, once however many marks, with the parts marked', () => {
+test('one loop: a marked view is drawn once in the next frame, with its parts', () => {
   const f = fake();
   const drawn = [];
   const a = f.s.register('a', (parts, now) => drawn.push(['a', [...parts].sort(), now]));
@@ -57,7 +57,7 @@ test('one loop: a view is drawn in the next frame after a mark, once however man
   a.mark('tip');
   assert.deepEqual(drawn, [], 'not drawn on a mark');
   f.frame(33);
-  assert.deepEqual(drawn, [['a', ['charts', 'tip'], 33]]);
+  assert.deepEqual(drawn, [['a', ['charts', 'tip'], 33]], 'three marks, one draw, with the parts marked');
   assert.equal(a.frames, 1);
   assert.equal(b.frames, 0);
   f.frame(50);
@@ -69,7 +69,7 @@ test('one loop: a view is drawn in the next frame after a mark, once however man
   assert.equal(f.s.frames, 4);
 });
 
-test('a view marked by an earlier view\'s draw is drawn in the same frame; by a later one\'s, in the next', () => {
+test('a view marked during a frame\'s draws: this frame if later, else the next', () => {
   const f = fake();
   const log = [];
   let late;
@@ -84,26 +84,26 @@ test('a view marked by an earlier view\'s draw is drawn in the same frame; by a 
   f.s.start();
   first.mark();
   f.frame(16);
-  assert.deepEqual(log, ['first', 'late']);
+  assert.deepEqual(log, ['first', 'late'], 'marked by an earlier view: drawn in the same frame');
   f.frame(33);
-  assert.deepEqual(log, ['first', 'late', 'first', 'late']);
+  assert.deepEqual(log, ['first', 'late', 'first', 'late'], 'marked by a later view: drawn in the next');
 });
 
-test('frameInterval follows the frames\' spacing (smoothed 0.2, gaps counted at most 2 s)', () => {
+test('frameInterval follows the frames\' spacing, smoothed, gaps capped', () => {
   const f = fake();
   f.s.start();
   assert.equal(f.s.frameInterval, 16.7);
   f.frame(1000);
   assert.equal(f.s.frameInterval, 16.7, 'the first frame has no interval');
   f.frame(1100);
-  assert.ok(Math.abs(f.s.frameInterval - (16.7 + 0.2 * (100 - 16.7))) < 1e-9, `${f.s.frameInterval}`);
+  assert.ok(Math.abs(f.s.frameInterval - (16.7 + 0.2 * (100 - 16.7))) < 1e-9, `smoothed by 0.2: ${f.s.frameInterval}`);
   for (let t = 1200; t <= 9000; t += 100) f.frame(t);
   assert.ok(Math.abs(f.s.frameInterval - 100) < 0.01, `${f.s.frameInterval}`);
   f.frame(19000);
-  assert.ok(Math.abs(f.s.frameInterval - (100 + 0.2 * (2000 - 100))) < 0.01, `${f.s.frameInterval}`);
+  assert.ok(Math.abs(f.s.frameInterval - (100 + 0.2 * (2000 - 100))) < 0.01, `a 10 s gap counted as 2 s: ${f.s.frameInterval}`);
 });
 
-test('a period spaces the draws: live views at livePeriodMs of the measured frame interval', () => {
+test('a period spaces the draws: live views at livePeriodMs(frame interval)', () => {
   const f = fake();
   const at = [];
   const live = f.s.register('live', (parts, now) => at.push(now), { period: () => livePeriodMs(f.s.frameInterval) });
@@ -143,7 +143,7 @@ test('a period spaces the draws: live views at livePeriodMs of the measured fram
   assert.deepEqual(drawn, [1000, 1128, 1256, 1384, 1512]);
 });
 
-test('after a slow draw a view waits as long as it took; quick draws and other views do not wait', () => {
+test('after a slow draw a view waits as long as it took; quick ones do not', () => {
   const f = fake();
   let cost = 30;
   const drawn = [];
@@ -202,7 +202,7 @@ test('a draw that throws is reported; the other views and the loop go on', () =>
   assert.equal(bad.dirty, false);
 });
 
-test('aligned views draw on the same frames: each at the first frame of its period\'s slot of the clock', () => {
+test('aligned views draw in the same frames: the first of each period\'s slot', () => {
   // A software renderer pays for a whole frame whenever anything on screen changes: the tip
   // (every 50 ms), the map (100 ms) and the plots (200 ms) change in the same frames, and the
   // frames between stay clean.

@@ -15,7 +15,7 @@ function gsf(header, values) {
   return out.buffer;
 }
 
-test('parseGsf reads a record and refuses a wrong size or a foreign file, saying which', () => {
+test('parseGsf reads a record; refuses a wrong size or a foreign file', () => {
   const g = parseGsf(gsf('XRes = 3\nYRes = 2\nXReal = 2e-06\nYReal = 2e-06\nXOffset = 1e-05\nYOffset = 2e-05\nTitle = scan\n', [1, 2, 3, 4, 5, 6]));
   assert.equal(g.xres, 3);
   assert.equal(g.yres, 2);

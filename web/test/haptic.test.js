@@ -18,7 +18,7 @@ test('the fields of an engaged handle on a live link', () => {
   });
 });
 
-test('the scales in force: as asked, lowered to the renderable region, halved by energy bounding', () => {
+test('the scales in force: as asked, lowered, or halved, and why', () => {
   const s = { nm_per_mm: 10, pull_off_at_hand_n: 1, asked_pull_off_at_hand_n: 1, felt_stiffness_n_per_m: 1452.4, limit: 'none' };
   assert.deepEqual(scalesField(s), { text: '10 nm/mm, 1.000 N pull-off, felt 1452 N/m', cls: '' });
   const region = { ...s, pull_off_at_hand_n: 1.3772, asked_pull_off_at_hand_n: 10, felt_stiffness_n_per_m: 2000, limit: 'renderable_region' };
@@ -37,17 +37,17 @@ test('a link down, not engaged, no handle reading', () => {
   assert.equal(hapticFields({ link: 'up', phase: 'approach', tip_force_n: 0 }).engaged.text, 'no');
 });
 
-test('the plot keeps the last 10 s of the force at the hand; a server restart starts it again', () => {
+test('the force at the hand\'s last 10 s; a server restart starts it again', () => {
   const tr = new HapticTrace();
   for (let i = 0; i <= 300; i++) tr.push(i / 10, i);
-  assert.equal(tr.t[0], 20);
+  assert.equal(tr.t[0], 20, 'samples from t = 20 s to 30 s: the last 10 s');
   assert.equal(tr.t.length, 101);
   const [x, y] = tr.data();
   assert.equal(x[0], -10);
   assert.equal(x[x.length - 1], 0);
   assert.equal(y[y.length - 1], 300);
   tr.push(1, 7);
-  assert.deepEqual([tr.t, tr.f], [[1], [7]]);
+  assert.deepEqual([tr.t, tr.f], [[1], [7]], 'the clock went back (a restart): a new plot');
   const [ex, ey] = new HapticTrace().data();
   assert.deepEqual([ex.length, ey.length], [0, 0]);
 });

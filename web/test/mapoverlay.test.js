@@ -6,14 +6,14 @@ import { toPx, toStage, nearestParticle, stepCursor, TrailBuffer, foundParticles
 const g = { x: 50, y: 10, w: 400, h: 200 };
 const e = { x_offset: 30e-6, y_offset: 20e-6, x_real: 20e-6, y_real: 10e-6 };
 
-test('stage metres to the image\'s pixels and back: y up, the scan\'s corner at the axes\' origin', () => {
+test('stage metres to the image\'s pixels and back: y up, origin at the scan', () => {
   assert.deepEqual(toPx(g, e, 30e-6, 20e-6), [50, 210], 'the lower left corner');
   assert.deepEqual(toPx(g, e, 50e-6, 30e-6).map((v) => Math.round(v * 1e6) / 1e6), [450, 10], 'the upper right');
   const [x, y] = toStage(g, e, 150, 110);
   assert.ok(Math.abs(x - 35e-6) < 1e-15 && Math.abs(y - 25e-6) < 1e-15, `${x} ${y}`);
 });
 
-test('a pick selects the nearest particle whose ring holds the point, tiny ones by a minimum ring', () => {
+test('a pick takes the nearest particle whose ring holds it; a minimum ring', () => {
   const ps = [{ id: 1, x: 40e-6, y: 25e-6, radius: 0.5e-6 }, { id: 2, x: 41e-6, y: 25e-6, radius: 0.7e-6 }, { id: 3, x: 45e-6, y: 25e-6, radius: 7e-9 }];
   assert.equal(nearestParticle(ps, 40.6e-6, 25e-6, 0.1e-6).id, 2, 'inside both rings: the nearer centre');
   assert.equal(nearestParticle(ps, 40.2e-6, 25e-6, 0.1e-6).id, 1);
@@ -22,16 +22,16 @@ test('a pick selects the nearest particle whose ring holds the point, tiny ones 
   assert.equal(nearestParticle(ps, 35e-6, 22e-6, 0.1e-6), null);
 });
 
-test('the keyboard cursor moves 1 % of the image a press, 10 % with Shift, and stays inside', () => {
+test('the keyboard cursor steps across the image, further with Shift', () => {
   const c = stepCursor([40e-6, 25e-6], 'ArrowRight', false, e);
-  assert.ok(Math.abs(c[0] - 40.2e-6) < 1e-15 && c[1] === 25e-6);
+  assert.ok(Math.abs(c[0] - 40.2e-6) < 1e-15 && c[1] === 25e-6, '1 % of the 20 µm image');
   const u = stepCursor([40e-6, 25e-6], 'ArrowUp', true, e);
-  assert.ok(Math.abs(u[1] - 26e-6) < 1e-15, 'up is +y');
+  assert.ok(Math.abs(u[1] - 26e-6) < 1e-15, 'up is +y; with Shift 10 % of the 10 µm image');
   assert.deepEqual(stepCursor([30e-6, 20e-6], 'ArrowLeft', true, e), [30e-6, 20e-6], 'clamped at the edge');
   assert.equal(stepCursor([30e-6, 20e-6], 'Enter', false, e), null);
 });
 
-test('the push trail keeps a point once the tip moved a pixel, and at most its length', () => {
+test('the push trail: a point per pixel the tip moved, at most its length', () => {
   const t = new TrailBuffer(3);
   assert.equal(t.add(0, 0, 1e-7), true);
   assert.equal(t.add(0.5e-7, 0, 1e-7), false, 'less than a pixel');
@@ -41,7 +41,8 @@ test('the push trail keeps a point once the tip moved a pixel, and at most its l
   assert.equal(t.pts.length, 0);
 });
 
-test('the particles a scan record says it found are kept only when they are numbers (a hand-edited or damaged summary drew NaN rings and console errors)', () => {
+test('a scan record\'s particles are kept only when they are numbers', () => {
+  // A hand-edited or damaged summary must draw no NaN rings and raise no console errors.
   const good = { x: 1e-6, y: 2e-6, radius: 5e-7 };
   assert.deepEqual(foundParticles([good, { x: 'a', y: 2e-6, radius: 5e-7 }, { x: 1e-6, y: null, radius: 1 }, { x: 1, y: 1, radius: -1 }, null, 7]), [good]);
   assert.deepEqual(foundParticles('particles'), []);

@@ -4,7 +4,7 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { statusTiles, alertsOf, downText, runLine } from '../src/monitor.js';
 
-test('the tiles of a busy instrument with overruns and an engaged haptic link', () => {
+test('the tiles of a busy instrument: overruns, an engaged haptic link', () => {
   const tiles = statusTiles({
     scene: 'gold-latex', phase: 'pushing', busy: true, clients: 3, lease: 4, uptime_s: 125.7,
     loop: { ticks: 5000, overruns: 2, realtime: true, period_error_p99_bound_s: 4.2e-5 },
@@ -40,10 +40,11 @@ test('an idle instrument with no haptic link, no p99 yet and a free lease', () =
   assert.deepEqual(statusTiles(lost).find((t) => t[0] === 'm-hapdev'), ['m-hapdev', '1 kHz · faults: device 0 · bridge 0 · cable 2 lost, 1 reopened', 'bad']);
 });
 
-test('alerts: healthy is "none"; overruns, a lost haptic link (worse while engaged), faults, dropped frames', () => {
+test('alerts: "none" when healthy, else each in words', () => {
   assert.deepEqual(alertsOf({ loop: { overruns: 0 }, haptic: { link: 'up' }, dropped_frames: 0 }), []);
   assert.deepEqual(alertsOf({ loop: { overruns: 3 }, haptic: { link: 'down', engaged: true, fault: 'link_lost' }, dropped_frames: 7 }),
-    ['3 loop overruns', 'haptic link down while engaged', 'haptic fault: link_lost', '7 telemetry frames dropped']);
+    ['3 loop overruns', 'haptic link down while engaged', 'haptic fault: link_lost', '7 telemetry frames dropped'],
+    'overruns, a lost haptic link (worse while engaged), faults, dropped frames');
   const t = new Map(statusTiles({ loop: { overruns: 0 }, haptic: { link: 'up', link_downs: 2 }, uptime_s: 600, started_unix_ms: Date.UTC(2026, 0, 1, 12, 0, 0) }).map(([id, text, cls]) => [id, [text, cls]]));
   assert.deepEqual(t.get('m-alerts'), ['none', 'good']);
   assert.equal(t.get('m-haptic')[0], 'up, 2 link losses');
@@ -51,10 +52,10 @@ test('alerts: healthy is "none"; overruns, a lost haptic link (worse while engag
   assert.deepEqual(statusTiles({ loop: { period_error_p99_bound_s: 0.1 } }).find((x) => x[0] === 'm-jitter'), ['m-jitter', '≤ 100 ms', 'warn']);
 });
 
-test('the down banner names the time, and a run of the history reads as the page\'s', () => {
+test('the down banner names the time; a history line reads as the page\'s', () => {
   assert.match(downText(Date.UTC(2026, 0, 1, 12, 0, 0), 'Failed to fetch'), /^server down since \d\d:\d\d:\d\d \(Failed to fetch\); what is shown below is from before$/);
   const l = runLine({ record: 'push-1-r1-p1.json', modified: 1767268800, run: 1, particle: 1, outcome: 'stopped', failure: 'stopped: the lease holder disconnected', estimate: [1e-6, 2e-6] });
   assert.match(l, /^\d\d:\d\d:\d\d push of #1 stopped: the lease holder disconnected, particle left at \(1\.00, 2\.00\) µm \(record push-1-r1-p1\.json\)$/);
-  // Who ran it, where the record says (issue 27).
+  // Who ran it, where the record says.
   assert.match(runLine({ record: 'push-1-r2-p1.json', modified: 1767268800, run: 2, particle: 1, outcome: 'ok', failure: null, estimate: [1e-6, 2e-6], person: 'alice' }), / — alice$/);
 });

@@ -14,7 +14,8 @@ test('the image\'s title: a record opened, else the live scan', () => {
   assert.equal(scanTitle('scan-1-2.gsf', { id: -1 }), '· record scan-1-2.gsf');
 });
 
-test('a scan the server never finished (it restarted) says so, not "line 44/512" as if it ran on', () => {
+test('a scan the server never finished (it restarted) says it was cut off', () => {
+  // Not "line 44/512", as if it ran on.
   assert.equal(progressText({ id: 1, done: false, interrupted: true, previousRun: true, lines: 44, yres: 512 }, true), 'scan 1 interrupted at line 44/512 · from before the server restarted');
   assert.equal(progressText({ id: 1, done: true, previousRun: true, lines: 32, yres: 32 }, true), 'scan 1 complete · from before the server restarted');
 });

@@ -65,7 +65,7 @@ test('session: a welcome of another protocol version is logged', () => {
   assert.equal(s.state.lastError.code, 'version');
 });
 
-test('session: replies are matched to their commands by id; errors are kept in a log', () => {
+test('session: replies matched to their commands by id; errors in a log', () => {
   const s = new Session();
   s.apply({ type: 'welcome', version: 1, client: 1, role: 'operator', lease: null, scene: 's', tick_hz: 1000 });
   const a = s.issue(commands.takeLease());
@@ -102,8 +102,12 @@ test('session: replies are matched to their commands by id; errors are kept in a
   assert.equal(s.state.errors.at(-1).message, 'n59');
   assert.equal(s.state.lastError.message, 'n59');
 
-  // Unknown message types are tolerated.
+  // Unknown message types are tolerated, those named like Object's methods too.
   assert.deepEqual(s.apply({ type: 'future_thing' }), { kind: 'unknown', type: 'future_thing' });
+  for (const type of ['toString', 'constructor', '__proto__', 'hasOwnProperty']) {
+    assert.deepEqual(s.apply({ type }), { kind: 'unknown', type }, type);
+  }
+  assert.equal(s.state.lastError.message, 'n59', 'and logged as no error');
 });
 
 test('session: lagged messages are counted; telemetry keeps a 10 s trace', () => {
@@ -183,7 +187,7 @@ test('session: a scan assembles its binary lines into the height array', () => {
   assert.equal(s.state.scan, null);
 });
 
-test('session: the scene gives particles in metres; run_done moves the pushed one', () => {
+test('session: the scene\'s particles in metres; run_done moves the pushed one', () => {
   const scene = { name: 'g', particles: [{ id: 1, radius_nm: 500, x_um: 70, y_um: 45, material: 'latex' }, { id: 2, radius_nm: 7, x_um: 10, y_um: 20 }], stage: { range_um: 80 } };
   assert.deepEqual(sceneParticles(scene)[0], { id: 1, material: 'latex', radius: 500e-9, x: 70e-6, y: 45e-6 });
   assert.deepEqual(sceneParticles({}), []);
@@ -211,7 +215,7 @@ function openSession(client = 4) {
   return s;
 }
 
-test('session: the state after welcome moves particles, sets lease, phase, push and an unfinished scan', () => {
+test('session: state after welcome: particles, lease, phase, push, scan', () => {
   const s = openSession(4);
   const ev = s.apply({
     type: 'state', particles: [{ id: 1, x: 45e-6, y: 31e-6, radius: 5e-7 }], stage: [1e-6, 2e-6, 3e-6], phase: 'pushing', lease: 9,
@@ -241,7 +245,7 @@ test('session: the state after welcome moves particles, sets lease, phase, push 
   assert.equal(s.state.lease, null);
 });
 
-test('session: a push that never started (estimate null) is a run like any other, and clears the push path', () => {
+test('session: a push that never started is a run; it clears the push path', () => {
   const s = openSession(4);
   s.apply({ type: 'push_started', particle: 1, path: [[40e-6, 30e-6], [50e-6, 30e-6]], by: 4 });
   assert.deepEqual(s.state.push.path[1], [50e-6, 30e-6]);
@@ -249,7 +253,7 @@ test('session: a push that never started (estimate null) is a run like any other
   const ev = s.apply(r);
   assert.equal(ev.kind, 'run_done');
   assert.equal(s.state.push, null);
-  assert.equal(s.state.particles[0].x, 40e-6, 'not moved');
+  assert.equal(s.state.particles[0].x, 40e-6, 'not moved: no estimate');
   assert.equal(describeRun(r), 'push of #1 failed: plan: particle 1: target out of reach, it never started (no record)');
   assert.equal(describeRun({ particle: 2, outcome: 'ok', estimate: [5e-5, 6e-5], record: 'push-1.csv' }), 'push of #2 ok, particle now at (50.00, 60.00) µm (record push-1.csv)');
   const judged = { measured: [5e-5, 6e-5], target: [5e-5, 6.0000002e-5], error_m: 2.49e-9, tolerance_m: 25e-9, attempts: 2 };
@@ -261,7 +265,7 @@ test('session: a push that never started (estimate null) is a run like any other
     'push of #2 stopped: stop requested by the operator, particle left at (50.0, 60.0) nm (no record: disk full)');
 });
 
-test('session: losing the lease is told apart from a lease changing elsewhere, with the server\'s reason', () => {
+test('session: losing the lease is told from a change elsewhere, with why', () => {
   const s = openSession(4);
   assert.equal(s.apply({ type: 'lease', holder: 4 }).lost, false);
   const ev = s.apply({ type: 'lease', holder: null, reason: 'client 4 disconnected' });
@@ -270,25 +274,25 @@ test('session: losing the lease is told apart from a lease changing elsewhere, w
   assert.equal(s.apply({ type: 'lease', holder: 7 }).lost, false);
 });
 
-test('session: telemetry keeps the tip force (N) in the trace; a run_done after a scan marks it stale', () => {
+test('session: tip force in the trace; a run_done after a scan marks it stale', () => {
   const s = openSession(4);
   s.apply({ type: 'telemetry', t: 1, stage: [0, 0, 1e-6], volts: 0.1, phase: 'idle', estimate: null, tip_force_n: 2.5e-9 });
-  assert.deepEqual(s.state.trace.force, [2.5e-9]);
+  assert.deepEqual(s.state.trace.force, [2.5e-9], 'in N');
   s.apply({ type: 'scan_start', scan: 1, xres: 8, yres: 8, x_offset: 0, y_offset: 0, x_real: 1e-6, y_real: 1e-6 });
   assert.equal(s.state.scanStale, false);
   s.apply({ type: 'run_done', particle: 1, outcome: 'ok', failure: null, estimate: [41e-6, 30e-6], record: 'r', record_error: null });
   assert.equal(s.state.scanStale, true);
 });
 
-test('the set point as a force: the gold-latex scene\'s −1.5 V is 3.25 nm of deflection, 26 nN at 8 N/m', () => {
+test('the set point as a tip force: its deflection times the stiffness', () => {
   // scenes/gold-latex-500nm.toml: set_point_v −1.5, baseline_v −0.2, gain_v_per_nm −0.4, k 8 N/m.
   const f = setPointForceN({ strategy: { set_point_v: -1.5 }, sensor: { baseline_v: -0.2, gain_v_per_nm: -0.4 }, cantilever: { stiffness_n_per_m: 8 } });
-  assert.ok(Math.abs(f - 26e-9) < 1e-15, `${f}`);
+  assert.ok(Math.abs(f - 26e-9) < 1e-15, `−1.5 V is 3.25 nm of deflection, 26 nN at 8 N/m: ${f}`);
   assert.equal(setPointForceN({ strategy: {} }), null);
 });
 
-test('a stop is not a failure: "stopped" runs say who stopped them, once, in a neutral colour; a miss is amber', () => {
-  // Issue 26: the record said "failed: stopped: stopped: stop requested by the operator".
+test('a stop is no failure: who stopped it, said once, neutral; a miss amber', () => {
+  // Said once: the server's `failure` already starts "stopped: ".
   const stop = { particle: 1, outcome: 'stopped', failure: 'stopped: the lease holder disconnected', estimate: [1e-6, 2e-6], record: 'push-1.json' };
   assert.equal(describeRun(stop), 'push of #1 stopped: the lease holder disconnected, particle left at (1.00, 2.00) µm (record push-1.json)');
   assert.equal(runClass(stop), 'neutral');
@@ -299,7 +303,7 @@ test('a stop is not a failure: "stopped" runs say who stopped them, once, in a n
   assert.match(describeRun(missed), /^push of #3 missed: ended 0\.40 µm from the target/);
 });
 
-test('a push running when the connection closes is kept as lost; a restart is told from the instance id', () => {
+test('a push running at a close is kept as lost; a restart told by instance', () => {
   const s = openSession(4);
   s.apply({ type: 'welcome', version: WS_VERSION, client: 4, role: 'operator', lease: 4, scene: 'g', tick_hz: 1000, instance: 'a-1', started_unix_ms: 1000 });
   assert.equal(s.state.instance, 'a-1');
@@ -333,12 +337,12 @@ test('the haptic handle may be engaged only while its link is up', () => {
   assert.equal(c.hapticEngage.enabled, true);
 });
 
-// Found by the review of issue 26: the scan shown across a reconnect.
+// The scan shown across a reconnect.
 const welcomeOf = (instance, client = 5) => ({ type: 'welcome', version: WS_VERSION, client, role: 'viewer', lease: null, scene: 'g', tick_hz: 1000, instance, started_unix_ms: 1000 });
 const scanOf = (id, extra = {}) => ({ scan: id, xres: 4, yres: 3, x_offset: 0, y_offset: 0, x_real: 1e-6, y_real: 1e-6, done: false, record: null, stale: false, ...extra });
 const stateWith = (scan) => ({ type: 'state', particles: [], stage: [0, 0, 1e-6], phase: 'idle', lease: null, push: null, scan });
 
-test('a scan that ended while the page was away (same server) is marked done and fetched whole, not left at its last line', () => {
+test('a scan that ended while away (same server) is done and fetched whole', () => {
   const s = openSession(5);
   s.apply(welcomeOf('a-1'));
   s.apply(stateWith(scanOf(3)));
@@ -353,7 +357,7 @@ test('a scan that ended while the page was away (same server) is marked done and
   assert.equal(ev.scanChanged, false);
 });
 
-test('after a server restart the previous run\'s scan is never taken for the new one\'s: an unfinished one is interrupted, and the same id is another scan', () => {
+test('after a restart the previous run\'s scan is never the new one\'s', () => {
   const s = openSession(5);
   s.apply(welcomeOf('a-1'));
   s.apply(stateWith(scanOf(1)));
@@ -372,7 +376,7 @@ test('after a server restart the previous run\'s scan is never taken for the new
   assert.equal(s.state.scanStale, false);
 });
 
-test('a push lost from sight is matched to its own record (server run and run number), never to an earlier push of that particle (review of issue 26)', () => {
+test('a lost push is matched to its own record, never to an earlier push', () => {
   const s = openSession(4);
   s.apply({ type: 'welcome', version: WS_VERSION, client: 4, role: 'operator', lease: 4, scene: 'g', tick_hz: 1000, instance: 'a-1', started_unix_ms: 1000 });
   s.apply({ type: 'push_started', particle: 1, path: [[40e-6, 30e-6], [41e-6, 30e-6]], by: 4, run: 2 });
@@ -389,6 +393,6 @@ test('a push lost from sight is matched to its own record (server run and run nu
   ];
   assert.equal(lostPushRun(runs, lost), null, 'killed: no record of it');
   const own = { record: 'push-8-r2-p1.json', modified: Math.floor(now), instance: 'a-1', run: 2, particle: 1, outcome: 'stopped', failure: 'stopped: the lease holder disconnected' };
-  assert.equal(lostPushRun([runs[0], own, runs[1]], lost), own);
+  assert.equal(lostPushRun([runs[0], own, runs[1]], lost), own, 'server run a-1, run 2, particle 1');
   assert.equal(lostPushRun(null, lost), null);
 });

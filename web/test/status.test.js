@@ -21,7 +21,7 @@ test('before and while connecting, open (or the demo), and closed', () => {
   assert.deepEqual(statusFields(s.state).conn, { kind: 'closed', text: 'closed' });
 });
 
-test('the lease (mine or another\'s), the phase, lagged messages and the last error', () => {
+test('the lease (mine or another\'s), the phase, lags and the last error', () => {
   const s = new Session();
   s.opened();
   s.apply({ type: 'welcome', version: 1, client: 4, role: 'operator', lease: 4, scene: 'g', tick_hz: 1000 });
@@ -63,12 +63,13 @@ test('StatusBar writes the fields into the page', () => {
   assert.equal(txt.textContent, 'reconnecting in 1.0 s (attempt 2)');
 });
 
-test('while disconnected, what the server said is "unknown", not the last value seen', () => {
+test('while disconnected, what the server said is "unknown", not stale', () => {
   const s = new Session();
   s.opened();
   s.apply({ type: 'welcome', version: 1, client: 4, role: 'operator', lease: 4, scene: 'g', tick_hz: 1000 });
   s.apply({ type: 'telemetry', t: 1, stage: [0, 0, 1e-6], volts: 0, phase: 'approach', estimate: null });
   s.closed(1, 250);
   const f = statusFields(s.state);
-  assert.deepEqual([f.role, f.client, f.lease.text, f.lease.cls, f.phase], ['unknown', 'unknown', 'unknown', 'unknown', 'unknown']);
+  assert.deepEqual([f.role, f.client, f.lease.text, f.lease.cls, f.phase], ['unknown', 'unknown', 'unknown', 'unknown', 'unknown'],
+    'not the last seen: operator, client 4, holding the lease, approach');
 });
