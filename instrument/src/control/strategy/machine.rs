@@ -246,11 +246,36 @@ impl Strategy {
     }
 
     /// One control tick: takes the newest reading, returns the stage target for the end of the
-    /// next tick.
+    /// next tick. The guards come first (the safety limit, a saturated reading, the phase's
+    /// time-out), then the phase's own step.
     pub fn tick(&mut self, r: &Reading) -> [f64; 3] {
+        let sig = self.params.signal(r.volts);
+        self.guard_safety_limit(r, sig);
+        self.guard_saturation(r, sig);
+        self.guard_timeout(r);
+        match self.phase.clone() {
+            Phase::Travel => self.travel(r),
+            Phase::Park => self.park(r, sig),
+            Phase::ToParkingHeight { z } => self.rise_to_parking_height(r, sig, z),
+            Phase::LetGo { park_z } => self.rise_until_let_go(r, sig, park_z),
+            Phase::ContactSearch { step, in_step, dwell } => self.contact_search(r, sig, step, in_step, dwell),
+            Phase::Push { from } => self.push(r, sig, from),
+            Phase::Hold { ticks } => self.hold(r, ticks),
+            Phase::BackOff { goal } => {
+                if self.move_toward(goal, self.params.approach_speed) {
+                    self.enter(Phase::Retract, r.t);
+                }
+            }
+            Phase::Retract => self.retract(r, sig),
+            Phase::Done => {}
+        }
+        self.target
+    }
+
+    /// Safety first, in every phase that can touch something: a reading past the safety limit
+    /// fails the run.
+    fn guard_safety_limit(&mut self, r: &Reading, sig: f64) {
         let p = self.params;
-        let sig = p.signal(r.volts);
-        // Safety first, in every phase that can touch something.
         let limit = p.signal(p.safety_limit);
         if sig > limit && !matches!(self.phase, Phase::Retract | Phase::BackOff { .. } | Phase::Done) {
             let phase = self.phase.name();
@@ -263,160 +288,180 @@ impl Strategy {
                 r.t,
             );
         }
-        // A saturated reading says nothing of the force but that it is beyond the readout's
-        // range: an emergency, but on the pull side while the tip rises off a contact
-        // (`pull_off`'s rule).
-        if r.volts.abs() >= p.full_scale && self.phase != Phase::Done {
-            let phase = self.phase.name();
-            let rise = self.summary.substrate_z.map_or(0.0, |zs| r.stage[2] - zs);
-            let failure = match pull_off::judge(sig, self.motion(), rise, p.pull_off_rise) {
-                Saturation::RideOut => None,
-                Saturation::Emergency => Some(Failure::DeflectionLimit {
-                    volts: r.volts,
-                    limit: p.full_scale.copysign(r.volts),
+    }
+
+    /// A saturated reading says nothing of the force but that it is beyond the readout's range:
+    /// an emergency, but on the pull side while the tip rises off a contact (`pull_off`'s rule).
+    fn guard_saturation(&mut self, r: &Reading, sig: f64) {
+        let p = self.params;
+        let saturated = r.volts.abs() >= p.full_scale;
+        if !saturated || self.phase == Phase::Done {
+            return;
+        }
+        let phase = self.phase.name();
+        let rise = self.summary.substrate_z.map_or(0.0, |zs| r.stage[2] - zs);
+        let failure = match pull_off::judge(sig, self.motion(), rise, p.pull_off_rise) {
+            Saturation::RideOut => None,
+            Saturation::Emergency => Some(Failure::DeflectionLimit {
+                volts: r.volts,
+                limit: p.full_scale.copysign(r.volts),
+                phase,
+            }),
+            Saturation::HeldTooLong => Some(Failure::StillHeld {
+                rise_nm: rise * 1e9,
+                bound_nm: p.pull_off_rise * 1e9,
+                phase,
+            }),
+        };
+        match failure {
+            // Already going straight up: said, not restarted.
+            Some(f) if self.phase == Phase::Retract => {
+                self.summary.failure.get_or_insert(f);
+            }
+            Some(f) => self.fail(f, r.t),
+            None => {}
+        }
+    }
+
+    /// A phase past its time-out fails the run; a back-off that cannot finish lifts anyway, and
+    /// a retract that cannot finish stops where it is.
+    fn guard_timeout(&mut self, r: &Reading) {
+        let p = self.params;
+        let overdue = r.t - self.phase_start > p.timeout;
+        if !overdue || self.phase == Phase::Done {
+            return;
+        }
+        let phase = self.phase.name();
+        if matches!(self.phase, Phase::BackOff { .. }) {
+            self.enter(Phase::Retract, r.t);
+        } else if self.phase == Phase::Retract {
+            if self.summary.failure.is_none() {
+                self.summary.failure = Some(Failure::Timeout {
                     phase,
-                }),
-                Saturation::HeldTooLong => Some(Failure::StillHeld {
+                    timeout_s: p.timeout,
+                });
+            }
+            self.enter(Phase::Done, r.t);
+        } else {
+            self.fail(
+                Failure::Timeout {
+                    phase,
+                    timeout_s: p.timeout,
+                },
+                r.t,
+            );
+        }
+    }
+
+    /// Travel at the start height to the search start.
+    fn travel(&mut self, r: &Reading) {
+        let (x, y) = self.task.search_start();
+        if self.move_toward([x, y, self.target[2]], self.params.travel_speed) {
+            self.enter(Phase::Park, r.t);
+        }
+    }
+
+    /// A → B: down in z until the reading detects the substrate, then to the parking height; no
+    /// substrate within twice the start height fails the run.
+    fn park(&mut self, r: &Reading, sig: f64) {
+        let p = self.params;
+        if sig.abs() > p.substrate_threshold {
+            let zs = r.stage[2];
+            self.summary.substrate_z = Some(zs);
+            self.retract_z = zs + p.start_height;
+            let z = zs + self.task.parking_rise();
+            self.enter(Phase::ToParkingHeight { z }, r.t);
+        } else if self.retract_z - self.target[2] > 2.0 * p.start_height {
+            let range_um = (self.retract_z - self.target[2]) * 1e6;
+            self.fail(Failure::NoSubstrate { range_um }, r.t);
+        } else {
+            self.target[2] -= p.approach_speed * p.tick;
+        }
+    }
+
+    /// B: up to the parking height `z`; a tip the substrate still holds there rises until it lets
+    /// go, and one that snaps back after letting go fails the run.
+    fn rise_to_parking_height(&mut self, r: &Reading, sig: f64, z: f64) {
+        let p = self.params;
+        if !self.move_toward([self.target[0], self.target[1], z], p.approach_speed) {
+            return;
+        }
+        let zs = self.summary.substrate_z.unwrap_or(z);
+        let held = sig < -p.substrate_threshold;
+        if held && self.let_go {
+            self.fail(
+                Failure::SnappedBack {
+                    height_nm: (z - zs) * 1e9,
+                },
+                r.t,
+            );
+        } else if held && z > zs {
+            self.enter(Phase::LetGo { park_z: z }, r.t);
+        } else {
+            self.enter(
+                Phase::ContactSearch {
+                    step: 1,
+                    in_step: 0.0,
+                    dwell: 0,
+                },
+                r.t,
+            );
+        }
+    }
+
+    /// B: rise until the substrate lets go of the tip (the reading back within the threshold),
+    /// then back down to the parking height; held past the pull-off's rise fails the run.
+    fn rise_until_let_go(&mut self, r: &Reading, sig: f64, park_z: f64) {
+        let p = self.params;
+        let rise = r.stage[2] - self.summary.substrate_z.unwrap_or(park_z);
+        if sig >= -p.substrate_threshold {
+            self.let_go = true;
+            self.enter(Phase::ToParkingHeight { z: park_z }, r.t);
+        } else if rise > p.pull_off_rise {
+            self.fail(
+                Failure::StillHeld {
                     rise_nm: rise * 1e9,
                     bound_nm: p.pull_off_rise * 1e9,
-                    phase,
-                }),
-            };
-            match failure {
-                // Already going straight up: said, not restarted.
-                Some(f) if self.phase == Phase::Retract => {
-                    self.summary.failure.get_or_insert(f);
-                }
-                Some(f) => self.fail(f, r.t),
-                None => {}
-            }
+                    phase: "let_go",
+                },
+                r.t,
+            );
+        } else {
+            self.target[2] += p.approach_speed * p.tick;
         }
-        if r.t - self.phase_start > p.timeout && !matches!(self.phase, Phase::Done) {
-            let phase = self.phase.name();
-            if matches!(self.phase, Phase::BackOff { .. }) {
-                // Backing off cannot finish: lift anyway.
-                self.enter(Phase::Retract, r.t);
-            } else if self.phase == Phase::Retract {
-                // A retract that cannot finish has nothing left to do: stop where it is, and say so.
-                if self.summary.failure.is_none() {
-                    self.summary.failure = Some(Failure::Timeout {
-                        phase,
-                        timeout_s: p.timeout,
-                    });
-                }
-                self.enter(Phase::Done, r.t);
-            } else {
-                self.fail(
-                    Failure::Timeout {
-                        phase,
-                        timeout_s: p.timeout,
-                    },
-                    r.t,
-                );
-            }
+    }
+
+    /// D: the stage held still for its ticks, then the back-off.
+    fn hold(&mut self, r: &Reading, ticks: u32) {
+        if ticks == 0 {
+            let goal = self.back_off_goal();
+            self.enter(Phase::BackOff { goal }, r.t);
+        } else {
+            self.phase = Phase::Hold { ticks: ticks - 1 };
         }
-        match self.phase.clone() {
-            Phase::Travel => {
-                let (x, y) = self.task.search_start();
-                if self.move_toward([x, y, self.target[2]], p.travel_speed) {
-                    self.enter(Phase::Park, r.t);
-                }
+    }
+
+    /// D → E: up to the start height (faster after a failure). Still pulled onto the rail there,
+    /// something holds the tip: said.
+    fn retract(&mut self, r: &Reading, sig: f64) {
+        let p = self.params;
+        let goal = [self.target[0], self.target[1], self.retract_z.max(self.target[2])];
+        let speed = if self.summary.failure.is_some() {
+            p.travel_speed.max(p.approach_speed)
+        } else {
+            p.approach_speed
+        };
+        if self.move_toward(goal, speed) {
+            if r.volts.abs() >= p.full_scale && sig < 0.0 && self.summary.failure.is_none() {
+                let zs = self.summary.substrate_z.unwrap_or(goal[2]);
+                self.summary.failure = Some(Failure::StillHeld {
+                    rise_nm: (r.stage[2] - zs) * 1e9,
+                    bound_nm: (goal[2] - zs) * 1e9,
+                    phase: "retract",
+                });
             }
-            Phase::Park => {
-                if sig.abs() > p.substrate_threshold {
-                    let zs = r.stage[2];
-                    self.summary.substrate_z = Some(zs);
-                    self.retract_z = zs + p.start_height;
-                    let z = zs + self.task.parking_rise();
-                    self.enter(Phase::ToParkingHeight { z }, r.t);
-                } else if self.retract_z - self.target[2] > 2.0 * p.start_height {
-                    let range_um = (self.retract_z - self.target[2]) * 1e6;
-                    self.fail(Failure::NoSubstrate { range_um }, r.t);
-                } else {
-                    self.target[2] -= p.approach_speed * p.tick;
-                }
-            }
-            Phase::ToParkingHeight { z } => {
-                if self.move_toward([self.target[0], self.target[1], z], p.approach_speed) {
-                    let zs = self.summary.substrate_z.unwrap_or(z);
-                    let held = sig < -p.substrate_threshold;
-                    if held && self.let_go {
-                        self.fail(
-                            Failure::SnappedBack {
-                                height_nm: (z - zs) * 1e9,
-                            },
-                            r.t,
-                        );
-                    } else if held && z > zs {
-                        self.enter(Phase::LetGo { park_z: z }, r.t);
-                    } else {
-                        self.enter(
-                            Phase::ContactSearch {
-                                step: 1,
-                                in_step: 0.0,
-                                dwell: 0,
-                            },
-                            r.t,
-                        );
-                    }
-                }
-            }
-            Phase::LetGo { park_z } => {
-                let rise = r.stage[2] - self.summary.substrate_z.unwrap_or(park_z);
-                if sig >= -p.substrate_threshold {
-                    self.let_go = true;
-                    self.enter(Phase::ToParkingHeight { z: park_z }, r.t);
-                } else if rise > p.pull_off_rise {
-                    self.fail(
-                        Failure::StillHeld {
-                            rise_nm: rise * 1e9,
-                            bound_nm: p.pull_off_rise * 1e9,
-                            phase: "let_go",
-                        },
-                        r.t,
-                    );
-                } else {
-                    self.target[2] += p.approach_speed * p.tick;
-                }
-            }
-            Phase::ContactSearch { step, in_step, dwell } => self.contact_search(r, sig, step, in_step, dwell),
-            Phase::Push { from } => self.push(r, sig, from),
-            Phase::Hold { ticks } => {
-                if ticks == 0 {
-                    let goal = self.back_off_goal();
-                    self.enter(Phase::BackOff { goal }, r.t);
-                } else {
-                    self.phase = Phase::Hold { ticks: ticks - 1 };
-                }
-            }
-            Phase::BackOff { goal } => {
-                if self.move_toward(goal, p.approach_speed) {
-                    self.enter(Phase::Retract, r.t);
-                }
-            }
-            Phase::Retract => {
-                let goal = [self.target[0], self.target[1], self.retract_z.max(self.target[2])];
-                let speed = if self.summary.failure.is_some() {
-                    p.travel_speed.max(p.approach_speed)
-                } else {
-                    p.approach_speed
-                };
-                if self.move_toward(goal, speed) {
-                    // Still pulled onto the rail at the start height: something holds the tip.
-                    if r.volts.abs() >= p.full_scale && sig < 0.0 && self.summary.failure.is_none() {
-                        let zs = self.summary.substrate_z.unwrap_or(goal[2]);
-                        self.summary.failure = Some(Failure::StillHeld {
-                            rise_nm: (r.stage[2] - zs) * 1e9,
-                            bound_nm: (goal[2] - zs) * 1e9,
-                            phase: "retract",
-                        });
-                    }
-                    self.enter(Phase::Done, r.t);
-                }
-            }
-            Phase::Done => {}
+            self.enter(Phase::Done, r.t);
         }
-        self.target
     }
 
     fn contact_search(&mut self, r: &Reading, sig: f64, step: u32, in_step: f64, dwell: u32) {
