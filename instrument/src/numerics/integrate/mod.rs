@@ -5,6 +5,9 @@ mod driver;
 pub(crate) mod linalg;
 pub(crate) mod methods;
 mod problem;
+/// The reference problems, for the tests here and the studies' work-precision report (feature
+/// `test-problems`): not part of the instrument.
+#[cfg(any(test, feature = "test-problems"))]
 pub mod test_problems;
 
 pub use driver::{Integrator, MAX_EVENTS};
