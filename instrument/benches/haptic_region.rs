@@ -1,4 +1,4 @@
-//! The haptic z-control's renderable region and transparency (issue 25), printed, not timed:
+//! The haptic z-control's renderable region and transparency, printed, not timed:
 //!
 //! ```text
 //! cargo bench -p nanopush-instrument --bench haptic_region
@@ -78,7 +78,7 @@ fn main() {
     grid_summary();
 }
 
-/// Issue 25's grid in one process at 1 and 4 kHz (the measures on 1 ms samples, the energy from
+/// The haptic grid in one process at 1 and 4 kHz (the measures on 1 ms samples, the energy from
 /// every device cycle): per rate, the cells that pass, the lowest closed-cycle energy, the most
 /// chatter and the largest tip swing.
 fn grid_summary() {

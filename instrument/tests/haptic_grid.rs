@@ -1,7 +1,7 @@
-//! Issue 25's grid, in one process and tick by tick (the bridge's device cycle with the
+//! The haptic grid, in one process and tick by tick (the bridge's device cycle with the
 //! simulated handle and hand, the server's law, the simulated instrument, one tick of delay each
-//! way, as `haptic_loop.rs` joins them): every position scale × pull-off scale × operator the
-//! issue names, at the scales a `scale` request accepts. Each cell must end its closed cycle
+//! way, as `haptic_loop.rs` joins them): every position scale × pull-off scale × operator of the
+//! grid, at the scales a `scale` request accepts. Each cell must end its closed cycle
 //! (free space → contact → free space) with the raw port's energy `−Σ F·Δx ≥ −1 µJ`, never
 //! render more than the device's force, chatter in at most 50 cycles (the hand force's second
 //! difference above 0.05 N), and keep the tip force, while the hand holds it in contact, within
@@ -32,11 +32,11 @@ fn run(nm_per_mm: f64, pull_off_n: f64, script: &str) -> Vec<CycleRow> {
     rows
 }
 
-/// Issue 25's failure, first: the press at 10 nm/mm and 10 N handed the hand energy nothing
-/// stored (−4.1 mJ) and buzzed for a second (1308-1820 cycles of chatter). Limited to the
-/// device's region it ends positive and calm.
+/// The press at 10 nm/mm and 10 N, unlimited, hands the hand energy nothing stored (−4.1 mJ)
+/// and buzzes for a second (1308-1820 cycles of chatter). Limited to the device's region it
+/// ends positive and calm.
 #[test]
-fn issue_25_a_press_at_10_nm_per_mm_and_10_n_is_passive_and_calm() {
+fn a_hard_press_at_high_scaling_is_passive_and_calm() {
     let v = judge(&run(10.0, 10.0, "press"), 2.5);
     assert!(v.passes(), "{v:?}");
 }
@@ -95,7 +95,7 @@ fn every_cell_of_the_grid_is_passive_calm_and_keeps_the_tip_steady() {
     assert!(failed.is_empty(), "cells that fail:\n{}", failed.join("\n"));
 }
 
-/// A device that renders less damping than the coupling's damper needs (review of issue 25): the
+/// A device that renders less damping than the coupling's damper needs: the
 /// simulated handle declaring 1.5 N·s/m, or 0.5 (the serial fixture's board declares 1.5; an info
 /// packet may say anything in (0, 1000]). The damper `2K (T/2 + T_d)` at the default was 4.36
 /// N·s/m, which the bridge clamped to 1.5, and the let-go press handed the hand −1.36 mJ in 113

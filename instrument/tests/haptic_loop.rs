@@ -123,13 +123,13 @@ fn spread(rows: &[CycleRow], a: usize, b: usize) -> f64 {
 }
 
 /// The press at twice the force scale (the contact felt as 2.9 kN/m) with a medium grip used to
-/// chatter without the passivity controller (issue 25): the scale is past the simulated
+/// chatter without the passivity controller: the scale is past the simulated
 /// device's renderable region (2 kN/m at 1 kHz with a tick of delay), so the force scale in
 /// force is lowered to its edge, and the hand rests on the surface with the controller off as
 /// with it on: the handle spans less than 10 µm in the second half of the hold, the contact
 /// changes a handful of times, never more than 2.5 N.
 #[test]
-fn a_force_scale_past_the_region_is_limited_and_rests_without_the_passivity_controller() {
+fn a_force_scale_past_the_region_is_limited_and_rests_unassisted() {
     for passivity in [false, true] {
         let r = run("press", passivity, 2.0, 4.0, 14_000);
         let e = r.engaged_at.expect("engaged");

@@ -468,7 +468,7 @@ mod tests {
         let states = [1e-9, 2e-9, 3e-9];
         let ok = Unphysical::check(&states, 1e-9, (50e-6, 50e-6), (50.001e-6, 50e-6), 1e-9, R, 100e-6);
         assert_eq!(ok, None);
-        // 38.6 mm in one tick (issue 13.2).
+        // 38.6 mm in one tick: a contact broken by a far Newton root.
         let jump =
             Unphysical::check(&states, 1e-9, (49.8e-6, 50e-6), (38.648e-3, 50e-6), 1e-9, R, 100e-6).expect("trips");
         assert!(jump.what.starts_with("particle x"), "outside the stage first: {jump:?}");
@@ -508,7 +508,7 @@ mod tests {
     /// ticks at the scene's fastest speed (a dynamic stage lags its command and catches up after it
     /// stops). The paper scene's fastest is its 10 µm/s travel: 30 nm in three 1 ms ticks.
     #[test]
-    fn the_guard_allows_the_commanded_travel_or_three_ticks_at_the_fastest_speed() {
+    fn the_guard_allows_the_commanded_travel_or_three_ticks_at_top_speed() {
         let s = Scene::default_scene();
         let st = &s.file.strategy;
         assert_eq!(

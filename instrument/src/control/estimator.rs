@@ -443,7 +443,7 @@ mod tests {
     /// level's first sample, where the running maximum was first reached); a 3-sample mean would
     /// fire on the first, a 5-sample one on neither.
     #[test]
-    fn the_t_star_detector_is_a_4_sample_mean_falling_the_margin_below_its_maximum() {
+    fn the_t_star_detector_is_a_short_mean_falling_below_its_maximum() {
         assert_eq!(WINDOW, 4);
         for (drop, fires) in [(0.99, false), (1.01, true)] {
             let mut d = PeakDetector::new(0.25);
@@ -465,8 +465,8 @@ mod tests {
         }
     }
 
-    /// The retraction's step budget is checked while the push runs (cargo-mutants: the check as
-    /// `steps == budget` survived, since the steps pass any budget between two checks).
+    /// The retraction's step budget is checked while the push runs, as `steps ≥ budget`: the
+    /// steps pass any budget between two checks.
     #[test]
     fn the_retraction_stops_at_its_step_budget_and_names_it() {
         let plan = RetractPlan {
@@ -535,10 +535,10 @@ mod tests {
 
     /// A fast contact search that stopped past the peak leaves no peak to see: `t*` is taken
     /// once the travel since the touch is past the model's peak plus 10 nm, the 4-sample mean
-    /// is within the margin of the settled level, and the window is full (cargo-mutants: every
-    /// part of this fallback and the detector's mean survived `control::`).
+    /// is within the margin of the settled level, and the window is full; each part of this
+    /// fallback and the detector's mean is checked.
     #[test]
-    fn a_search_stopped_past_the_peak_separates_once_settled_past_the_models_peak() {
+    fn a_search_stopped_past_the_peak_separates_once_settled() {
         let (margin, gain) = (0.05, 5e8);
         // Past the peak from the first sample, at the settled level: the fourth sample fills
         // the window, and only then is t* taken.
@@ -591,7 +591,7 @@ mod tests {
         assert_eq!(h.detector.peak, Some((0.0, 1.0)));
         // A fall that lands the (then frozen) mean inside the settled band at once: 3 × 1.0
         // and −0.9 V average 0.525 V, within 0.05 V of 0.5 V, past the model's peak. The
-        // fallback must not take t* again (cargo-mutants: its guard's `&&` as `||` survived).
+        // fallback must not take t* again (its guard is a conjunction).
         let mut h = Hxy::new(fallback_prediction(), 0.05, 5e8);
         for k in 0..4 {
             h.update(k as f64 * 1e-3, 1.0, 0.0);
@@ -638,7 +638,7 @@ mod tests {
             "steady, not periodic: {:e}",
             p.periodic_amplitude
         );
-        // Fig 7's settled lag, 0.669 nm (issue 14: this once allowed anything up to 20 nm).
+        // Fig 7's settled lag, 0.669 nm, to its printed digits.
         assert!(
             (p.settle_offset - 0.669e-9).abs() < 0.002e-9,
             "δ° = {:e}",

@@ -301,8 +301,8 @@ mod tests {
         assert_eq!(legs.last().unwrap().to, to);
     }
 
-    /// Issue 24.4: a push to 99.9 µm of a 1 µm particle took its centre to 100.88 µm (the
-    /// push goes 0.977 µm further for the retraction's drag). The target must keep the particle
+    /// A push to 99.9 µm of a 1 µm particle would take its centre to 100.88 µm (the push goes
+    /// 0.977 µm further for the retraction's drag). The target must keep the particle
     /// on the stage whole; the push's overshoot is cut where it would leave it; a push the tip
     /// cannot get behind is refused.
     #[test]

@@ -122,7 +122,7 @@ mod tests {
     /// paper's `b_y = b_z` (the model damps both axes alike) its quality factor `√(λ m_c*)/b_y` is
     /// ≈ 2700 (= Q_c √(λ/k_z), 2677).
     #[test]
-    fn the_default_levers_lateral_mode_rings_at_3_7_mhz_with_q_2700() {
+    fn the_default_levers_lateral_mode_has_its_documented_frequency_and_q() {
         let c = crate::scene::Scene::default_scene().cantilever();
         let k = c.stiffness_yz();
         let (a, b, d) = (k[(0, 0)], k[(0, 1)], k[(1, 1)]);

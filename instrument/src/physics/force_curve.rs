@@ -472,8 +472,8 @@ mod tests {
         }
     }
 
-    /// Issue 13.5: the pull-off was read off the grid (−53.8 nN at 200 steps against
-    /// −55.1 nN from the equations). With Hertz contacts (γ_SL = 0, no JKR adhesion) the
+    /// The pull-off is not read off the grid (−53.8 nN at 200 steps against −55.1 nN from the
+    /// equations). With Hertz contacts (γ_SL = 0, no JKR adhesion) the
     /// contact leaves at zero indentation, where the force is exactly the long-range
     /// attraction at the cut-off: the meniscus `4πRₜγ_L` plus van der Waals `HRₜ/(6a₀²)`,
     /// in closed form. Root-finding reaches it to 10⁻⁹ at any grid.

@@ -80,7 +80,7 @@ mod tests {
     }
 
     #[test]
-    fn y_star_is_0_22_nm() {
+    fn y_star_is_the_papers_value() {
         let y = paper().shearing_point().unwrap();
         assert!((y - 0.2215e-9).abs() < 0.001e-9, "{y}");
     }
@@ -143,8 +143,8 @@ mod tests {
         }
     }
 
-    /// Issue 13.5: exactly at the Eq 16 bound the denominator was a rounding residue and y*
-    /// came out as 1.5·10⁷ m.
+    /// Exactly at the Eq 16 bound the denominator is a rounding residue (y* would come out as
+    /// 1.5·10⁷ m): no shearing.
     #[test]
     fn at_the_eq16_bound_no_shearing() {
         let mut p = paper();

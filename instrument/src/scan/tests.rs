@@ -183,8 +183,7 @@ struct Row {
 
 /// Localization of every particle of the two shipped particle scenes, noise on (0.2 nm RMS, the
 /// seeded noise: every figure is deterministic), held to docs/manipulation.md's table ("Scans
-/// (`nanopush scan`)") to its printed digits, row by row (issue 14: this test once allowed a whole
-/// pixel, 195-391 nm, then 4-25 times the printed figures): the pixel pitch, the worst particle's
+/// (`nanopush scan`)") to its printed digits, row by row: the pixel pitch, the worst particle's
 /// position error (gold-latex: along its 6 mrad tilt and across), its radius error, and its radius from the
 /// half-height width; the 64-pixel row too. Then the `H/2` cross-check: 7 % off for the 0.5 µm
 /// particles at 128 pixels, 0.03-0.2 % at 256.
@@ -318,7 +317,7 @@ fn shipped_particles_are_localized_as_the_docs_say() {
 /// nm mid-sweep on the 50 µm frame) and by `−v t` in x, `t` the time the raster reaches it.
 /// Measured against the same scan without them, within 0.1 nm.
 #[test]
-fn drift_and_hysteresis_put_the_gold_latex_particles_18_8_to_23_9_nm_off() {
+fn drift_and_hysteresis_put_the_gold_latex_particles_off_as_documented() {
     let sc = scene("gold-latex-500nm");
     let (s, t, base) = (
         Surface::from_scene(&sc),
@@ -467,11 +466,10 @@ fn scan_section_is_optional_and_validated() {
 }
 
 /// A sphere on a steep substrate (100 mrad, the validator's largest tilt) is located where it
-/// is (review of issue 24: 46 nm downhill, which let a push end `ok` 29 nm from its target at a
-/// 25 nm tolerance). The fit's model had the substrate's plane added to the sphere's image, a
-/// sphere sheared along the slope whose top lies `≈ θ (Rₐ + Rₜ)` uphill of its centre; the
-/// sphere rests on the substrate with its top above its centre, and the image is the higher of
-/// the two. At 500 nm and 1 µm radius, tilted along x, y and both, at two pitches.
+/// is (not 46 nm downhill, which would let a push end `ok` 29 nm from its target at a 25 nm
+/// tolerance). A model that adds the substrate's plane to the sphere's image fits a sphere
+/// sheared along the slope, whose top lies `≈ θ (Rₐ + Rₜ)` uphill of its centre; but the sphere
+/// rests on the substrate with its top above its centre, and the image is the higher of the two. At 500 nm and 1 µm radius, tilted along x, y and both, at two pitches.
 #[test]
 fn a_sphere_on_a_steep_substrate_is_located_where_it_is() {
     let t = tip();

@@ -192,7 +192,7 @@ mod tests {
     /// docs/manipulation.md, "Scans (`nanopush scan`)": a sphere is imaged by the apex alone up to
     /// `Rₐ = Rₜ(1 − sin θ)/(1 + sin θ)`, 14.7 nm for a 30 nm tip at 20°; beyond it, by the flank.
     #[test]
-    fn the_apex_regime_ends_at_14_7_nm_for_a_30_nm_tip_at_20_deg() {
+    fn the_apex_regime_ends_where_the_cone_takes_over() {
         let t = tip(30.0, 20.0);
         let s = 20f64.to_radians().sin();
         let edge = 30.0 * NM * (1.0 - s) / (1.0 + s);

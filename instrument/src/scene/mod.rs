@@ -378,9 +378,8 @@ impl Scene {
                     "physics.electrostatic is on, but at environment.relative_humidity = {rh} there is no meniscus, so the shared area S = 4πR r₁ of Eq 4 is zero and the electrostatic force vanishes"
                 )
             } else {
-                // Eq 4 still takes its shared area from r₁: the force does not vanish (this
-                // warning once said it did, while a refusal in the same output counted a
-                // 1240 nN electrostatic pull; the review of issue 24).
+                // Eq 4 still takes its shared area from r₁: the force does not vanish (a refusal
+                // in the same output may count a 1240 nN electrostatic pull).
                 format!(
                     "physics.electrostatic is on, but at environment.relative_humidity = {rh} the Kelvin radius r₁ = {:.3} nm is below a₀: no meniscus forms, and Eq 4's shared area S = 4πR r₁ rests on a radius smaller than an atom (the electrostatic force scales with it; it vanishes only when dry)",
                     r1 * 1e9

@@ -146,8 +146,8 @@ fn mu_above_eq16_is_a_warning() {
     );
 }
 
-/// Issue 13.5: with μ_as exactly at the Eq 16 bound `model` reported the push feasible and
-/// y* = 1.5·10⁷ m, with no warning.
+/// With μ_as exactly at the Eq 16 bound the push is infeasible and warned about (not feasible
+/// with y* = 1.5·10⁷ m).
 #[test]
 fn mu_at_the_eq16_bound_is_a_warning_and_infeasible() {
     let s = Scene::default_scene();
@@ -329,7 +329,7 @@ fn strategy_values_are_checked_against_the_sensor() {
     assert_eq!(s.file.strategy.set_point_v, -1.5);
 }
 
-/// Issue 13.6: a particle a scan cannot find is refused at load, naming the field and the
+/// A particle a scan cannot find is refused at load, naming the field and the
 /// threshold.
 #[test]
 fn a_particle_below_the_scan_noise_is_refused() {
@@ -397,7 +397,7 @@ fn shipped(name: &str) -> Scene {
 /// every baseline at −0.2 V; so `ζ_set = −1.5 V` is `(ζ_set − baseline)/gain` = 1.625 nm of
 /// deflection in paper-default and 3.25 nm in gold-latex-500nm.
 #[test]
-fn the_sensor_gains_are_minus_0_8_0_4_0_8_0_2_v_per_nm_and_the_set_point_1_625_and_3_25_nm() {
+fn the_shipped_sensor_gains_and_set_points_are_documented() {
     for (name, gain) in [
         ("paper-default.toml", -0.8),
         ("gold-latex-500nm.toml", -0.4),
@@ -424,7 +424,7 @@ fn the_sensor_gains_are_minus_0_8_0_4_0_8_0_2_v_per_nm_and_the_set_point_1_625_a
 /// (`nanopush scan`)"): its substrate rises 6 mrad along x, and its reading carries a periodic
 /// perturbation of 20 mV at 3 Hz.
 #[test]
-fn gold_latex_rises_6_mrad_and_its_reading_is_perturbed_20_mv_at_3_hz() {
+fn gold_latex_has_a_tilted_substrate_and_a_perturbed_reading() {
     let f = shipped("gold-latex-500nm.toml").file;
     assert_eq!((f.substrate.tilt_x_mrad, f.substrate.tilt_y_mrad), (6.0, 0.0));
     assert_eq!((f.sensor.perturbation_mv, f.sensor.perturbation_hz), (20.0, 3.0));
@@ -436,11 +436,11 @@ fn particle_toml(id: u32, x_um: f64, y_um: f64, radius_nm: f64) -> String {
     )
 }
 
-/// Issue 24.4: the issue's 10 MB scene took 70-86 s and 173 MB for one push (every
-/// scan images every particle, and the clash check compared every pair). A scene holds at most
+/// A 10 MB scene would take 70-86 s and 173 MB for one push (every scan images every
+/// particle). A scene holds at most
 /// 2000 particles (a push of 2000 takes 5 s: docs/manipulation.md), and its file at most 4 MiB.
 #[test]
-fn a_scene_holds_at_most_2000_particles_and_its_file_at_most_4_mib() {
+fn a_scene_is_refused_past_its_particle_and_file_size_limits() {
     assert_eq!((MAX_PARTICLES, MAX_SCENE_BYTES), (2000, 4 << 20));
     let grid = |n: u32| -> String {
         let mut text = DEFAULT_SCENE.to_string();
@@ -507,7 +507,7 @@ proptest::proptest! {
     }
 }
 
-/// The review of issue 24: `radius_nm = 1e308` echoed 309 digits.
+/// `radius_nm = 1e308` is shown in scientific notation, not as 309 digits.
 #[test]
 fn a_huge_value_is_shown_in_scientific_notation() {
     let e = err("radius_nm = 1000.0", "radius_nm = 1e308");
@@ -516,8 +516,7 @@ fn a_huge_value_is_shown_in_scientific_notation() {
 }
 
 /// The start height clearing the tallest particle is the plan's to derive: a scene that does
-/// not give it is not warned about the default it will not use (the review of issue 24 saw the
-/// warning on 8 of 40 random scenes with no `[strategy]`); a hand-set one that does not clear it
+/// not give it is not warned about the default it will not use; a hand-set one that does not clear it
 /// still is.
 #[test]
 fn only_a_hand_set_start_height_is_warned_about_the_tallest_particle() {
@@ -534,9 +533,8 @@ fn only_a_hand_set_start_height_is_warned_about_the_tallest_particle() {
     assert!(!warned(&derived), "{:?}", derived.warnings);
 }
 
-/// The review of issue 24: at a humidity whose Kelvin radius is below a₀ but not zero, the
-/// warning said the electrostatic force vanishes while Eq 4 (and a refusal in the same output)
-/// counted it. It now says the area rests on that radius; at 0 % the force does vanish.
+/// At a humidity whose Kelvin radius is below a₀ but not zero, the warning says Eq 4's area
+/// rests on that radius (the force does not vanish, as Eq 4 counts it); at 0 % it does vanish.
 #[test]
 fn a_sub_atomic_kelvin_radius_is_not_said_to_zero_the_electrostatic_force() {
     let text = DEFAULT_SCENE

@@ -242,7 +242,7 @@ mod tests {
     /// The damper pinned at its cap for 50 ms is tolerated, for 51 it halves the force scale
     /// (energy bounding), again after another 51, and a new scale starts over.
     #[test]
-    fn a_damper_pinned_for_more_than_50_ms_halves_the_force_scale() {
+    fn a_damper_pinned_too_long_halves_the_force_scale() {
         let p = Scene::default_scene().bilateral_params(1e-3);
         let mut c = Coupling::new(p.tick);
         for _ in 0..50 {

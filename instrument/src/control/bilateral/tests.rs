@@ -347,7 +347,7 @@ fn a_new_scale_ramps_in_again() {
 /// docs/haptics.md, "Haptic z-control": the force ramps in "once the force the hand would get has
 /// stayed below 0.2 N for 3 ticks", "over 1 s".
 #[test]
-fn engagement_waits_for_0_2_n_over_3_ticks_and_ramps_over_1_s() {
+fn engagement_waits_for_a_small_force_then_ramps_in() {
     assert_eq!((ENGAGE_FORCE, ENGAGE_TICKS, RAMP), (0.2, 3, 1.0));
 }
 
@@ -358,7 +358,7 @@ fn engagement_waits_for_0_2_n_over_3_ticks_and_ramps_over_1_s() {
 /// at the force scale ×2 of the haptic loop's table), and the snap-in's stored energy at the
 /// hand, ½F²/K with F = 1 N, is 0.34 mJ.
 #[test]
-fn the_paper_scenes_hand_stops_at_3_80_nm_feels_1_n_and_a_1_45_kn_per_m_contact() {
+fn the_paper_scenes_hand_stops_at_the_contact_and_feels_its_stiffness() {
     let scene = Scene::default_scene();
     let f = &scene.file;
     assert_eq!(
@@ -394,10 +394,9 @@ fn the_paper_scenes_hand_stops_at_3_80_nm_feels_1_n_and_a_1_45_kn_per_m_contact(
 /// `Scene::bilateral_params` from the paper scene's file by hand (`[haptic]` at its defaults): at
 /// most 300 nm above the surface; the approach searches the strategy's 10 µm below its 3 µm start;
 /// the tip touches when the lever bends by 5 σ of the readout's noise, at least 0.2 nm (5 mV at
-/// 0.8 V/nm is 6.25 pm, so 0.2 nm here; 100 mV is 0.625 nm). Before, only the scales and the
-/// deflection limit were checked (cargo-mutants).
+/// 0.8 V/nm is 6.25 pm, so 0.2 nm here; 100 mV is 0.625 nm).
 #[test]
-fn the_paper_scenes_limits_by_hand_300_nm_up_13_um_of_search_0_2_nm_to_touch() {
+fn the_paper_scenes_haptic_limits_follow_its_strategy_and_sensor() {
     let mut scene = Scene::default_scene();
     let p = scene.bilateral_params(1e-3);
     let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
@@ -450,7 +449,7 @@ fn every_phase_has_its_protocol_name() {
 /// voltage, `k_z (V − V₀)/G` (Eqs 11-12), and the hand gets it times the ramp and `g_f` once it
 /// is beyond the sensor's noise (`|ζ| > ζ_c`; within it, nothing: the noise is not rendered).
 #[test]
-fn the_ramp_adds_a_tick_over_1_s_each_tick_and_the_hand_feels_g_f_times_k_z_zeta() {
+fn the_ramp_grows_each_tick_and_the_hand_feels_the_scaled_force() {
     let mut rig = Rig::new();
     let p = rig.law.params;
     rig.law.engage(rig.stage);
@@ -579,7 +578,7 @@ impl Ideal {
 /// does not feel, the tip stops 20 nm past the deflection limit below it and the hand meets a
 /// wall `g_f k_z (z_lo − z_des)` with the wall's stiffness in the local model.
 #[test]
-fn the_tip_stays_between_300_nm_above_and_the_limit_plus_20_nm_below_and_the_hand_meets_a_wall() {
+fn the_tip_stays_within_its_limits_and_the_hand_meets_a_wall() {
     let mut s = Ideal::engaged(0.0);
     let p = s.law.params;
     let zc = s.law.contact_z().unwrap();

@@ -126,8 +126,8 @@ mod tests {
                 "environment.relative_humidity (drier: a shorter meniscus)"
             )
         );
-        // When the rest would, the attraction (the review's 5 V at 38 % humidity on a 0.05 N/m
-        // lever snapped in at 60 nm with or without the meniscus).
+        // When the rest would, the attraction (5 V at 38 % humidity on a 0.05 N/m lever snaps
+        // in at 60 nm with or without the meniscus).
         let (cause, f) = snap_in_cause(&humid.tip_sample(), || 60e-9, 50e-9);
         assert_eq!(cause, "the attraction");
         assert!(

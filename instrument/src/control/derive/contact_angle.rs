@@ -35,7 +35,7 @@ impl Derivation<'_> {
         // Auto-parking detects the substrate where the tip snaps in (the meniscus, the
         // attraction), this high above it; the tip rises from there to the parking height, and
         // a parking height below it would drive the tip down into the meniscus while the
-        // substrate still holds it (the review of issue 24).
+        // substrate still holds it.
         let snap_in = crate::control::strategy::runner::detection_offset(self.scene, &self.scene.strategy_params(TICK));
         for &beta_deg in &betas {
             let beta = beta_deg.to_radians();

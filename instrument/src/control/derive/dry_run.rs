@@ -90,9 +90,8 @@ pub fn field_for(why: &str, scene: &Scene) -> String {
     }
     match code {
         "deflection_limit" => "cantilever.stiffness_n_per_m (stiffer) or sensor.gain_v_per_nm (smaller |gain|)",
-        // The review of issue 24 raised both to their limits and the dry run lost the particle
-        // at the same travel: the instrument and the model's push disagree, and no field is
-        // known to settle it.
+        // Both raised to their limits, the dry run loses the particle at the same travel: the
+        // instrument and the model's push disagree, and no field is known to settle it.
         "particle_lost" => {
             "friction.tip_particle_static (higher), though no field is known to help: the dry run lost the particle that the model's push kept"
         }

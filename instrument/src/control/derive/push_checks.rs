@@ -56,8 +56,8 @@ impl Derivation<'_> {
                     ro.room
                 ),
                 // Still rising: the figures scale a peak the model has not reached, so they
-                // are needed but not known to be enough (the review of issue 24 applied 1.1 × the
-                // figure and was asked for 20 times more). A figure outside what a scene allows,
+                // are needed but not known to be enough (1.1 × the figure, applied, can ask for 20
+                // times more). A figure outside what a scene allows,
                 // or a gain too small for the readout to see the touch or the set point, is
                 // said to be no way out rather than offered.
                 field: self.deflection_limit_field(p, separates, need_k, peak_v),

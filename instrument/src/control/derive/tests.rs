@@ -64,13 +64,13 @@ fn every_shipped_scene_gets_a_plan_with_a_reason_for_every_setting() {
 /// `minimal` bends the lever down at 30° (the set point's side is never reached): the plan goes
 /// on to 45°, as the scene was once tuned by hand.
 #[test]
-fn minimal_is_planned_at_45_deg_because_30_bends_the_lever_down() {
+fn minimal_skips_an_angle_that_bends_the_lever_down() {
     let s = untuned("minimal", &[]);
     let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
     assert_eq!(plan.contact_angle_deg, 45.0);
 }
 
-/// Issue 24's example: a lever too soft to shear the particle loose within the readout is
+/// A lever too soft to shear the particle loose within the readout is
 /// refused, naming the stiffness it would need (and the gain that would fit).
 #[test]
 fn a_soft_lever_is_refused_naming_the_stiffness_it_needs() {
@@ -133,7 +133,7 @@ fn a_pull_off_beyond_the_strategys_lift_is_refused_for_adhesion() {
 /// and the dry run pushes it: the plan is given, with a warning that names the resonance that
 /// would make the yield negligible.
 #[test]
-fn a_stage_softer_than_20_levers_is_warned_about_not_refused() {
+fn a_soft_stage_is_warned_about_not_refused() {
     let s = untuned("paper-default", &[("moving_mass_g = 50.0", "moving_mass_g = 5.0")]);
     let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap_or_else(|e| panic!("{e}"));
     assert!(
@@ -182,7 +182,7 @@ fn a_hand_set_set_point_beyond_the_peak_wins_and_is_warned_about() {
 /// `[strategy]`: it loads (the default −1.5 V set point is not the scene's), and the plan puts
 /// the set point above the baseline.
 #[test]
-fn a_positive_gain_scene_without_a_strategy_loads_and_gets_a_set_point_above_the_baseline() {
+fn a_positive_gain_gets_a_set_point_above_the_baseline() {
     let text = scene_text("gold-14nm").replacen("gain_v_per_nm = -0.8", "gain_v_per_nm = 0.8", 1);
     let s = Scene::parse("positive gain", &text).expect("loads: its strategy is derived");
     let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
@@ -192,7 +192,7 @@ fn a_positive_gain_scene_without_a_strategy_loads_and_gets_a_set_point_above_the
 /// A stage speed of 1 mm/s set by hand (valid) crosses the whole stick phase within a tick: the
 /// plan warns and derives a slower one, without an overflow on the way.
 #[test]
-fn a_hand_set_1_mm_per_s_is_warned_about() {
+fn a_hand_set_top_speed_is_warned_about() {
     let mut s = untuned("paper-default", &[("speed_um_per_s = 1.0", "speed_um_per_s = 1000.0")]);
     s.hand_set.insert("push.speed_um_per_s");
     s.hand_set.insert("push.contact_angle_deg");
@@ -207,12 +207,11 @@ fn a_hand_set_1_mm_per_s_is_warned_about() {
     assert!(warned, "{plan:?}");
 }
 
-/// What the plan accepts a push must not refuse (review of issue 24): a hand-set start height
-/// below the particle, with the contact angle hand-set too (so the dry run's failure was only a
-/// warning), was planned with exit 0 and then refused by `push`. It is refused by the plan now,
-/// naming the field.
+/// What the plan accepts a push must not refuse: a hand-set start height below the particle,
+/// with the contact angle hand-set too (so the dry run's failure is only a warning), is refused
+/// by the plan, naming the field, as `push` refuses it.
 #[test]
-fn a_hand_set_start_height_below_the_particle_is_refused_by_the_plan_as_by_the_push() {
+fn a_start_height_below_the_particle_is_refused_by_plan_and_push() {
     let text = scene_text("gold-latex-500nm");
     let from = text
         .lines()
@@ -241,8 +240,8 @@ fn a_dynamic_model_is_refused_before_any_dry_run_with_the_field_to_change() {
     assert!(r.reason.contains("cannot be pushed"), "{}", r.reason);
 }
 
-/// A dry run with no leg that stays on the stage ran nothing and still passed silently (review
-/// of issue 24): the plan says so.
+/// A dry run with no leg that stays on the stage runs nothing: the plan says so, rather than
+/// passing silently.
 #[test]
 fn a_dry_run_with_no_room_for_a_leg_is_said_not_passed() {
     let mut text = scene_text("minimal");
@@ -267,8 +266,7 @@ fn a_dry_run_with_no_room_for_a_leg_is_said_not_passed() {
     assert!(value(&plan, "strategy.max_push_um") <= 2.6);
 }
 
-/// The tip travels at the start height, and a tilted substrate rises under it (the review of
-/// issue 24: the derived start height ignored the slope). gold-latex-500nm rises 6 mrad along x:
+/// The tip travels at the start height, and a tilted substrate rises under it. gold-latex-500nm rises 6 mrad along x:
 /// over the stage's 141 µm diagonal, 0.85 µm, which the start height adds to its clearance of
 /// the particles; level, it does not.
 #[test]
@@ -293,10 +291,10 @@ fn the_start_height_clears_the_particles_wherever_the_tilted_substrate_rises() {
     assert!(why.contains("the substrate's rise over the stage's diagonal"), "{why}");
 }
 
-/// The review of issue 24: a 50 nm particle at 99 % humidity. The meniscus snaps the tip in
-/// about 100 nm above the substrate, where auto-parking detects it, and every contact angle's
-/// parking height lies below that: the rise to it was negative, the tip was driven down into the
-/// meniscus and searched while held. The plan refuses, naming the humidity.
+/// A 50 nm particle at 99 % humidity. The meniscus snaps the tip in about 100 nm above the
+/// substrate, where auto-parking detects it, and every contact angle's parking height lies below
+/// that: the rise to it would be negative, driving the tip down into the meniscus to search while
+/// held. The plan refuses, naming the humidity.
 #[test]
 fn a_parking_height_below_the_snap_in_is_refused_naming_the_humidity() {
     let s = untuned(

@@ -183,8 +183,8 @@ const CORRIDOR_PIXELS: usize = 128;
 const CORRIDOR_ROUNDS: usize = 3;
 
 /// The particles in the corridors the legs sweep that the overview scan may be too coarse to
-/// show (a 25 nm gold particle is a pixel of a 50 µm, 256-pixel overview, and a push went
-/// through it: the review of issue 24). The corridor is the router's for an obstacle smaller
+/// show (a 25 nm gold particle is a pixel of a 50 µm, 256-pixel overview, and a push would go
+/// through it). The corridor is the router's for an obstacle smaller
 /// than the overview shows: `h = Rₐ + clearance + 2 overview pixels` either side of each leg
 /// and its run-up. It is covered by square scans of [`CORRIDOR_PIXELS`] a side, one every `2h`
 /// along the leg, each counting only what it finds in its inner square of half-side `h√2` (which
@@ -244,12 +244,12 @@ fn corridor_obstacles(
 mod tests {
     use super::*;
 
-    /// The review of issue 24: a 25 nm gold particle 3 µm ahead of a 500 nm one is a pixel of
-    /// the 50 µm overview, and the push went through it. The corridor scans find it and the
+    /// A 25 nm gold particle 3 µm ahead of a 500 nm one is a pixel of the 50 µm overview,
+    /// which a push would go through. The corridor scans find it and the
     /// plan goes around; without it the same move is one leg (no roughness bump or cut image
     /// is taken for a particle).
     #[test]
-    fn a_neighbour_too_small_for_the_overview_is_found_in_the_corridor_and_avoided() {
+    fn a_neighbour_the_overview_misses_is_found_in_the_corridor() {
         let text =
             std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/gold-latex-500nm.toml")).unwrap();
         let small = "\n[[particles]]\nid = 9\nmaterial = \"gold\"\nradius_nm = 25.0\nx_um = 43.0\ny_um = 30.0\nyoungs_modulus_gpa = 79.0\npoisson_ratio = 0.42\ndensity_kg_per_m3 = 19300.0\nhamaker_zj = 400.0\n";
@@ -330,7 +330,7 @@ mod tests {
     /// 4.25 nm pixels, where a fixed 4 µm scan's pixels were 31 nm; a 10 µm particle gets the whole
     /// 100 µm stage.
     #[test]
-    fn a_14_nm_particle_gets_a_544_nm_local_scan_with_4_25_nm_pixels() {
+    fn a_tiny_particle_gets_a_local_scan_four_pixels_across_it() {
         let size = local_scan_size(7e-9, 10e-9, 100e-6);
         assert!((size - 544e-9).abs() < 1e-21, "{size:e}");
         assert!((size / LOCAL_PIXELS as f64 - 4.25e-9).abs() < 1e-21);

@@ -157,7 +157,7 @@ fn a_push_side_saturation_trips_the_deflection_limit_while_rising() {
 /// Elsewhere the pull side is still an emergency: in the contact search (the tip moves along the
 /// substrate, not away from it).
 #[test]
-fn a_pull_side_saturation_in_the_contact_search_trips_the_deflection_limit() {
+fn a_pull_side_saturation_while_searching_trips_the_deflection_limit() {
     let mut fed = Fed::parking();
     let (pull, baseline) = (fed.pull_rail(), fed.st.params.baseline);
     fed.run(

@@ -129,7 +129,7 @@ impl Scene {
     /// particle (the tip would run into it), and the parking height that gives the contact
     /// angle β, `h = Rₐ − Rₜ + (Rₐ + Rₜ) sin β`, must put the tip's apex above the substrate
     /// for particle `id`, the one pushed (a smaller particle elsewhere, which the tip never
-    /// meets at β, refused every push of a larger one: the review of issue 24).
+    /// meets at β, must not refuse the push of a larger one).
     pub fn pushable(&self, id: u32) -> Result<(), RunError> {
         self.model_pushable()?;
         let s = &self.file;
@@ -456,9 +456,9 @@ impl Prepared {
 mod tests {
     use crate::scene::Scene;
 
-    /// The review of issue 24: a 10 nm particle anywhere in the scene refused every push of a
-    /// 500 nm one, because the contact-angle geometry was checked for every particle, not the
-    /// one pushed. The tip meets only the pushed particle at β.
+    /// A 10 nm particle elsewhere in the scene does not refuse the push of a 500 nm one: the
+    /// contact-angle geometry is checked for the pushed particle only, the one the tip meets
+    /// at β.
     #[test]
     fn the_contact_geometry_is_checked_for_the_pushed_particle_only() {
         let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/gold-latex-500nm.toml"))

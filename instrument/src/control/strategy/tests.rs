@@ -275,7 +275,7 @@ fn assert_digits(what: &str, value: f64, readme: f64, half_unit: f64) {
 /// `retract_shift`) and ends 8.3 nm short (552 nm when its travel did not count the drag: a
 /// correction could never make that up). The stick-phase peak the model predicts for these particles is 5.64 nm of `ζ_z`.
 #[test]
-fn gold_latex_6_um_ends_minus_14_3_nm_xy_minus_8_3_nm_z_drifts_0_129_v_xy_minus_0_024_v_xyz_and_z() {
+fn a_long_gold_latex_push_ends_as_documented_under_each_control() {
     use crate::scene::file::ControlFile;
     let base = scene(&[]);
     let run_with = |control: ControlFile| {
@@ -336,7 +336,7 @@ fn gold_latex_6_um_ends_minus_14_3_nm_xy_minus_8_3_nm_z_drifts_0_129_v_xy_minus_
 /// 0.9 nm short after 12.9 s of simulated time; the estimator's model predicts a retraction drag of
 /// −0.977 µm for the 1 µm particle and a stick-phase peak of 2.57 nm of `ζ_z`.
 #[test]
-fn paper_default_1_um_touches_at_step_43_ends_minus_0_9_nm_drag_minus_0_977_um_peak_2_57_nm() {
+fn the_paper_default_push_touches_ends_and_drags_as_documented() {
     let (run, simulated) = push_as_the_cli_does(&default_scene(&[]), 1.0 * UM);
     assert_eq!(run.summary.failure, None);
     assert_eq!(run.summary.contact_step, Some(43));
@@ -362,7 +362,7 @@ fn paper_default_1_um_touches_at_step_43_ends_minus_0_9_nm_drag_minus_0_977_um_p
     assert_retracted(&run);
 }
 
-/// Issue 14: the `no_separation` failure had no test. An estimator whose `t*` detector never
+/// The `no_separation` failure. An estimator whose `t*` detector never
 /// fires (a margin of 1 kV, and a model peak 1 m away so the fast-search fallback never takes
 /// over) pushes on past the distance plus the settled lag plus 2 µm: the run fails with
 /// `no_separation`, backs off and retracts.
@@ -408,9 +408,8 @@ fn a_push_that_never_sees_the_separation_fails_and_retracts() {
     assert!(truth.pushing.is_none() && !truth.on_substrate, "retracted");
 }
 
-/// Issue 13.1: `push.speed_um_per_s = 1e-6` is valid, and the estimator's model prediction
-/// sized its trace by duration / sample (41.6 GB) and aborted the process. The prediction is
-/// bounded by design: a fixed number of samples whatever the speed, and a step budget.
+/// `push.speed_um_per_s = 1e-6` is valid; a prediction sized by duration / sample would take
+/// 41.6 GB. The prediction is bounded by design: a fixed number of samples whatever the speed, and a step budget.
 #[test]
 fn a_slow_push_prediction_is_bounded_in_memory_and_time() {
     for speed in ["1e-6", "1e-4"] {
@@ -435,7 +434,7 @@ fn default_scene(edit: &[(&str, &str)]) -> Scene {
     Scene::parse("paper-default (test)", &text).expect("valid scene")
 }
 
-/// Issue 13.2: with `k_c = 0.01 N/m` (valid) the particle jumped from 49.8 µm to 38 648 µm in
+/// With `k_c = 0.01 N/m` (valid) the particle once jumped from 49.8 µm to 38 648 µm in
 /// one tick when the contact broke during the retraction, the reading went to +438 V, and the
 /// push reported `ok`. The cause: after a friction switch in the roll, the quasi-static balance
 /// had vanished and Newton's method walked the particle off to a far root (in the estimator's
@@ -445,7 +444,7 @@ fn default_scene(edit: &[(&str, &str)]) -> Scene {
 /// particle 0.12 µm from where it was at 0.01 N/m (docs/manipulation.md's figure, "Physics
 /// guarded every tick").
 #[test]
-fn a_soft_lever_trips_the_deflection_limit_and_leaves_the_particle_0_12_um_from_where_it_was() {
+fn a_soft_lever_trips_the_deflection_limit_and_barely_moves_the_particle() {
     for k in ["0.01", "0.02"] {
         let s = default_scene(&[("stiffness_n_per_m = 8.0", &format!("stiffness_n_per_m = {k}"))]);
         let run = push(&s, 1.0 * UM, (0.0, 0.0));
@@ -550,13 +549,13 @@ fn an_unphysical_instrument_state_fails_the_push_and_retracts() {
     assert_eq!(st.summary.failure, Some(f));
 }
 
-/// Issue 13.3: zero friction on every pair failed at t = 0 ("step size 3.2e-21 s fell below the
+/// Zero friction on every pair once failed at t = 0 ("step size 3.2e-21 s fell below the
 /// minimum", naming no field): with no torque on the particle its rotation is undetermined.
 /// The model leaves the rotation out; such a particle slides ahead of the tip, the reading
 /// never reaches ζ_set, and the outcome says the search pushed it: 4.859 µm (docs/manipulation.md's
 /// figure, "Outcomes that say what happened").
 #[test]
-fn a_frictionless_particle_is_pushed_4_859_um_by_the_search_and_the_outcome_says_so() {
+fn a_frictionless_particle_pushed_by_the_search_is_said_so() {
     let s = default_scene(&[
         ("particle_substrate_static = 0.3", "particle_substrate_static = 0.0"),
         ("particle_substrate_kinetic = 0.2", "particle_substrate_kinetic = 0.0"),
@@ -584,8 +583,8 @@ fn a_frictionless_particle_is_pushed_4_859_um_by_the_search_and_the_outcome_says
     assert_eq!(ok.failure_text(), None);
 }
 
-/// Issue 13.6: every shipped scene pushes its particle (`gold-14nm` failed with "particle not
-/// found in a scan": its 4 µm local scan had 31 nm pixels for a 14 nm particle). The scene's
+/// Every shipped scene pushes its particle (`gold-14nm` too: a 4 µm local scan's 31 nm pixels
+/// would miss its 14 nm particle). The scene's
 /// own particle, found by the local scan as an operator would, pushed a diameter (0.1-1 µm) along
 /// +x; the outcome is ok and the error within the particle's radius.
 #[test]
@@ -666,7 +665,7 @@ fn planned(scene: &Scene) -> Scene {
 /// detection offset is now predicted from the force curve (`detection_offset`) and the parking
 /// height makes up for it: the derived plan's angle is the one the tip meets.
 #[test]
-fn gold_14nm_detects_its_substrate_3_0_nm_high_and_the_parking_makes_up_for_it() {
+fn gold_14nm_parks_right_though_it_detects_the_substrate_high() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/gold-14nm.toml");
     let s = planned(&Scene::from_path(&path).unwrap());
     let p = s.pushed_particle();
@@ -718,7 +717,7 @@ fn the_strategy_defaults_are_the_documented_ones() {
 /// the instrument's search pushes the particle ahead without the reading ever reaching ζ_set, and
 /// fails with `no_contact`.
 #[test]
-fn minimal_at_30_deg_bends_the_lever_down_to_minus_1_15_nm_and_never_reaches_the_set_point() {
+fn a_push_that_bends_the_lever_down_never_reaches_the_set_point() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/minimal.toml");
     let text = std::fs::read_to_string(&path).unwrap();
     let (from, to) = ("particle_id = 1\n", "particle_id = 1\ncontact_angle_deg = 30.0\n");
@@ -756,7 +755,7 @@ fn minimal_at_30_deg_bends_the_lever_down_to_minus_1_15_nm_and_never_reaches_the
 /// (`peak_deflection − settled_deflection`, in volts), or by four times the readout noise when that
 /// is larger. Every shipped scene's margin is the third of its drop; a 200 mV noise makes it 0.8 V.
 #[test]
-fn the_t_star_margin_is_a_third_of_the_predicted_drop_or_four_times_the_noise() {
+fn the_t_star_margin_is_a_third_of_the_drop_or_four_sigma() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
     let margin = |s: &Scene| {
         let params = s.strategy_params(1e-3);
@@ -778,13 +777,13 @@ fn the_t_star_margin_is_a_third_of_the_predicted_drop_or_four_times_the_noise() 
     assert!((m - 0.8).abs() < 1e-12, "margin {m} V");
 }
 
-/// Issue 24.1: a 10 µm particle (valid) under the paper's wet meniscus holds the tip for
+/// A 10 µm particle (valid) under the paper's wet meniscus holds the tip for
 /// micrometres as it lifts, `(Rₐ + Rₜ)(1 − sin β)` ≈ 5 µm and more, and rolls back with it. The
 /// estimator's retraction prediction stopped lifting at 2 µm, so it did not see that drag: a
 /// 5 µm push ended 7.1 µm short (at −2.117 µm) and said `ok`. Predicted to the release, the
 /// push makes up for the drag.
 #[test]
-fn a_10_um_particle_dragged_back_by_the_lift_ends_where_it_was_sent() {
+fn a_large_particle_dragged_back_by_the_lift_ends_where_it_was_sent() {
     let s = default_scene(&[
         ("radius_nm = 1000.0 ", "radius_nm = 10000.0 "),
         ("start_height_um = 3.0", "start_height_um = 21.0"),

@@ -193,7 +193,7 @@ mod tests {
     use super::Stats;
 
     /// Every counter adds up and the largest local error is kept (the run reports, the
-    /// accuracy table and docs/validation.md's step counts read these; cargo-mutants found no test).
+    /// accuracy table and docs/validation.md's step counts read these).
     #[test]
     fn stats_add_every_field() {
         let mut a = Stats {

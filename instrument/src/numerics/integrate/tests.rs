@@ -56,8 +56,8 @@ fn prothero_robinson_error(method: Method, lambda: f64, h: f64) -> f64 {
     (y[0] - ProtheroRobinson::phi(1.0)).abs()
 }
 
-/// Issue 14: every reference problem was autonomous, so Rodas4 without its `∂f/∂t` terms, or
-/// with every stage evaluated at `t`, passed the suite. On the time-dependent, nonlinear
+/// An autonomous problem cannot tell Rodas4 without its `∂f/∂t` terms, or with every stage
+/// evaluated at `t`, from the method. On the time-dependent, nonlinear
 /// Prothero-Robinson problem (mildly stiff, `hλ` from −1 to −0.125) every method shows its
 /// classical order.
 #[test]

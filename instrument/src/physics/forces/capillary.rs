@@ -138,7 +138,7 @@ mod tests {
     /// `r₁ < a₀`, i.e. below `P/Pₛ = exp(−0.54/0.165)` = 3.8 % ≈ 4 % RH (no meniscus at 3.7 %, one
     /// at 3.9 %), and `r₁ ≤ 100 nm` near saturation.
     #[test]
-    fn no_meniscus_below_4_percent_rh_and_r1_at_most_100_nm() {
+    fn no_meniscus_when_too_dry_and_the_kelvin_radius_is_capped() {
         let threshold = (-KELVIN_LENGTH / A0).exp();
         assert!((threshold - 0.04).abs() < 0.005, "{threshold}");
         let at = |rh: f64| Capillary::new(1e-6, 0.144, rh, 0.1e-9, A0);
@@ -150,7 +150,7 @@ mod tests {
     }
 
     #[test]
-    fn adhesion_as_is_905_nn() {
+    fn the_particle_substrate_adhesion_is_pinned() {
         // A_as = 4π Rₐ γ_L = 905 nN for Rₐ = 1 µm (docs/errata.md, "The paper's figures reproduced as tests"): the substrate form
         // of Eq 3 at contact.
         let c = Capillary::new(1e-6, 2.0 * 0.072, 0.73, 0.0, A0);
@@ -198,8 +198,7 @@ mod tests {
         assert_eq!(kelvin_radius(0.0), 0.0);
     }
 
-    /// Issue 14: the formation gap pinned by hand (a doubled `L_t` passed every test that read
-    /// it back from the struct): at 73 % RH, `r₁ = 0.54 nm / ln(1/0.73) = 1.7159 nm`, so on
+    /// The formation gap pinned by hand, not read back from the struct: at 73 % RH, `r₁ = 0.54 nm / ln(1/0.73) = 1.7159 nm`, so on
     /// approach the meniscus forms at `L_t = 2r₁ = 3.432 nm` above the cut-off, and not at
     /// 3.46 nm.
     #[test]

@@ -230,8 +230,8 @@ mod tests {
         assert!(s.y > 0.0 && s.y < 50e-9, "y = {}", s.y);
     }
 
-    /// Issue 14: the magnitude test accepted 0 < y < 50 nm and never checked ζ_z, so a flipped
-    /// sign of the contact-angle correction `Δy` passed. Here Eq 18's three linear lines, written
+    /// Eq 18 solved independently, so that a flipped sign of the contact-angle correction `Δy`
+    /// shows: Eq 18's three linear lines, written
     /// again from the paper (Eq 17's `F_y^c`, `F_z^c`; `ζ_y`, `ζ_z` and `y = ζ_y cos α +
     /// ζ_z sin α + Δy`, `Δy = (ζ_y sin α − ζ_z cos α) sin β cos β`), are solved as one 3×3
     /// system by LU — a different route from the closed-form substitution — and `y`, `ζ_y`,

@@ -154,7 +154,7 @@ mod tests {
     use crate::scene::Scene;
 
     /// docs/model.md's `nanopush simulate` and Fig 7 figures ("`nanopush simulate`", "The paper's
-    /// figures"), pinned (issue 14): the default scene pushed 50 ms at 1 µm/s (Rodas4, rtol 1e-6) —
+    /// figures"), pinned: the default scene pushed 50 ms at 1 µm/s (Rodas4, rtol 1e-6) —
     /// the tip contact slips at 5.2 ms (the switch located to 1 µs; the first 0.1 ms sample that
     /// rolls is 5.3 ms) and the particle rolls from then on, 49.3 nm of travel for 50.0 nm of
     /// stage, the offset behind the stage settling at 0.669 nm after peaking at 1.33 nm; with
@@ -225,7 +225,7 @@ mod tests {
     /// global error of 1.5 fm: the difference in final particle y from the rerun at rtol/100 with
     /// the same sampling, as `simulate` computes it.
     #[test]
-    fn simulate_takes_518_steps_for_50_0_nm_of_stage_with_an_estimated_error_of_1_5_fm() {
+    fn simulates_step_count_and_error_estimate_are_pinned() {
         let push = |rtol: f64| {
             let model = PushModel::new(Scene::default_scene().push_params());
             run_push(model, Method::Rodas4, Options::with_rtol(rtol), 0.05, 1e-4).unwrap()

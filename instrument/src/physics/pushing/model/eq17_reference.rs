@@ -10,9 +10,8 @@
 //! with nalgebra vectors and matrices, the rotation as a matrix and Newton's third law as a
 //! negation, so a slip of sign or factor in either version shows as a mismatch.
 //!
-//! (Issue 14: cargo-mutants found about a hundred changes to `eval` that the physics tests did
-//! not notice, because they looked at settled states and signs; this test compares every row
-//! and probe field to 1e-9.)
+//! Tests of settled states and signs miss most slips in `eval`: this compares every row and
+//! probe field to 1e-9.
 
 use super::*;
 use crate::scene::{DEFAULT_SCENE, Scene};

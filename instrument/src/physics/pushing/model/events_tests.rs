@@ -1,7 +1,6 @@
 //! Tests of the hybrid part of the Eq 17 model: the switching functions against their
 //! definitions, the transitions of the tip contact, and the rates of the quasi-static rows
-//! against finite differences of balanced states. (Issue 14: cargo-mutants found changes to the
-//! switching functions, the tip's transitions and `state_rate_from` that no test noticed.)
+//! against finite differences of balanced states.
 
 use super::*;
 use crate::scene::{DEFAULT_SCENE, Scene};

@@ -276,7 +276,7 @@ fn shearing_point_tends_to_eq15_with_rigid_contacts() {
 /// rotation off as in Eq 15, ideal stage: the particle shears after 6.3 nm of stage travel, not Eq
 /// 15's y* = 0.22 nm; the tip's Hertz indentation into the soft latex takes up the difference.
 #[test]
-fn the_default_scene_shears_after_6_3_nm_of_travel_not_0_22_nm() {
+fn the_default_scene_shears_later_than_y_star_says() {
     let p = scene_with(
         "van_der_waals = true\ncapillary = true\nelectrostatic = false\nparticle_y = \"quasi_static\"\nparticle_z = \"quasi_static\"\nparticle_rotation = \"off\"\ncantilever = \"quasi_static\"\nstage = \"off\"\n",
     );
@@ -407,8 +407,7 @@ fn ideal_stage_moves_at_v() {
     assert!((pr.stage - 2e-3 * m.p.speed).abs() < 1e-20);
 }
 
-/// The stage follows Eq 13 with the friction load. (Issue 14: the test before this one compared
-/// 0 with −0, no friction load at the initial state, so a flipped sign of the load passed.) Here the particle has been pushed 2 nm along +y over a
+/// The stage follows Eq 13 with the friction load, with a load to see its sign: the particle has been pushed 2 nm along +y over a
 /// sticking substrate contact, so the substrate holds it back (`f_as < 0` on the particle).
 /// Newton's third law: the particle drags the substrate, and so the stage that carries it, along
 /// +y in the lab, against the stage's own motion (the stage moves the substrate −y under the

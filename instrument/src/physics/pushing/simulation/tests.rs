@@ -338,7 +338,7 @@ fn steps_per_tick(model: PushModel, ticks: usize) -> Vec<(u64, u64)> {
 /// benchmarked tick is 1 step of six model evaluations (Rodas4's six stages, the Jacobian from the
 /// dual numbers of the last).
 #[test]
-fn the_default_scene_takes_13_to_3_steps_per_tick_and_5_plus_1_rejection_at_20_ms() {
+fn the_default_scenes_step_counts_per_tick_are_pinned() {
     let ticks = steps_per_tick(scene("paper-default.toml"), 50);
     assert_eq!(ticks[0], (13, 1), "first tick");
     assert_eq!(ticks[20], (5, 1), "the benchmarked tick, 20-21 ms");
@@ -358,7 +358,7 @@ fn the_default_scene_takes_13_to_3_steps_per_tick_and_5_plus_1_rejection_at_20_m
 /// takes 62 941 steps (and 6699 rejections), ~16 ns a step, against the 6 steps of the tick before
 /// it. (~5 s in debug.)
 #[test]
-fn the_full_models_first_slip_takes_62_941_steps_in_one_tick_at_the_reduced_t_star() {
+fn the_full_models_first_slip_step_count_is_pinned() {
     let rotation_off = |name: &str| {
         let mut model = scene(name);
         model.p.dofs.particle_rotation = crate::physics::pushing::params::Dof::Off;
