@@ -4,7 +4,7 @@
 //! - [`estimator`]: the particle-position feedback of Eq 19 and the model's prediction of a push;
 //! - [`route`]: the legs of a path of straight pushes around the other particles;
 //! - [`moves`]: a whole move (locate, route, push, judge by the scan after);
-//! - [`derive`]: the strategy's settings derived from the scene's model, and its dry run;
+//! - [`derive`](mod@derive): the strategy's settings derived from the scene's model, and its dry run;
 //! - [`bilateral`]: the haptic z-control law.
 
 pub mod bilateral;

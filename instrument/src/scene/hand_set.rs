@@ -1,5 +1,5 @@
 //! Which strategy settings the scene's author wrote down. The planner
-//! ([`crate::control::planner`]) derives every setting from the model; a value the author wrote
+//! ([`crate::control::derive`]) derives every setting from the model; a value the author wrote
 //! wins over the derived one (and is warned about when it cannot work).
 
 use std::collections::BTreeSet;

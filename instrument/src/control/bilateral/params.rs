@@ -8,7 +8,7 @@ pub struct BilateralParams {
     /// Tip metres per handle metre (`g_p`).
     pub position_gain: f64,
     /// Hand newtons per tip newton (`g_f`), as asked: the one in force may be lower
-    /// ([`Coupling::force_gain`]).
+    /// ([`Coupling::force_gain`](super::coupling::Coupling::force_gain)).
     pub force_gain: f64,
     /// The tip-sample pull-off force (N), which `g_f` maps to the hand.
     pub adhesion: f64,

@@ -2,7 +2,7 @@
 //! scene (`nanopush plan`; `push` and the server use it for every setting the scene does not
 //! give by hand).
 //!
-//! The model's push at constant speed ([`predict`]) gives what the strategy needs: the
+//! The model's push at constant speed ([`predict`](crate::control::estimator::predict)) gives what the strategy needs: the
 //! stick-phase peak deflection `ζ_peak` before the particle-substrate separation `t*`, the tip
 //! travel to it, the settled deflection `ζ°` after it, and, lifting the tip until it lets go,
 //! the lift that takes and the drag it causes. From these, with the readout (gain `g`, noise
