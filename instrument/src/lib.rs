@@ -27,6 +27,7 @@
 #![deny(missing_docs)]
 
 pub mod afm;
+pub mod assembly;
 pub mod control;
 pub mod files;
 pub mod numerics;

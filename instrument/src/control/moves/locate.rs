@@ -149,6 +149,7 @@ pub fn route_move(
         max_push: st.max_push_um * 1e-6,
         clearance: st.clearance_um * 1e-6,
         run_up: st.approach_distance_um * 1e-6 + 2.0 * located.radius,
+        tip_radius: tip.radius,
         range: scene.file.stage.range_um * 1e-6,
     };
     let mut obstacles = obstacles;
@@ -278,6 +279,7 @@ mod tests {
             max_push: 20e-6,
             clearance: with.file.strategy.clearance_um * 1e-6,
             run_up: 0.0,
+            tip_radius: 30e-9,
             range: 100e-6,
         };
         let o = Obstacle {

@@ -8,6 +8,8 @@
 
 use crate::afm::Afm;
 use crate::control::moves::locate::{MoveError, MoveTarget, locate_near, route_move};
+use crate::control::moves::locate::MoveRoute;
+use crate::control::strategy::StrategyParams;
 use crate::control::strategy::runner::{Prepared, RunError, StrategyRun};
 use crate::scan::{HeightImage, Located, ScanParams, Tip};
 use crate::scene::Scene;
@@ -103,10 +105,53 @@ pub struct MoveRun {
     pub cut_short: Option<f64>,
 }
 
+/// How a move finds its particle and routes its legs, before its first push and after each
+/// (the scan after), and what it computes once for the particle before pushing it.
+pub trait MoveRouting {
+    /// The particle believed at `near` (radius about `radius_hint`) located, and its legs to
+    /// `target`.
+    fn route(&mut self, afm: &Afm, near: (f64, f64), radius_hint: f64, target: MoveTarget) -> Result<MoveRoute, MoveError>;
+
+    /// The model's prediction and the contact geometry for particle `id` as located with
+    /// `radius` (m).
+    fn prepare(&mut self, scene: &Scene, id: u32, radius: f64, params: &StrategyParams) -> Result<Prepared, RunError> {
+        Prepared::new(scene, id, radius, params)
+    }
+
+    /// A local scan around `estimate` and the particle of radius about `radius` in it: between
+    /// the legs of a move, and after a push that failed.
+    fn locate(
+        &mut self,
+        scene: &Scene,
+        afm: &Afm,
+        estimate: (f64, f64),
+        radius: f64,
+    ) -> (HeightImage, Result<Located, crate::scan::LocateError>) {
+        locate_near(
+            &afm.surface(),
+            Tip::from_scene(scene),
+            ScanParams::from_scene(scene),
+            estimate,
+            radius,
+            scene.file.stage.range_um * 1e-6,
+        )
+    }
+}
+
+/// `nanopush push`'s routing: a local scan finds the particle, and the legs go around the
+/// particles the scene's overview scan and the corridors' scans show ([`route_move`]).
+pub struct OverviewRouting<'a>(pub &'a Scene);
+
+impl MoveRouting for OverviewRouting<'_> {
+    fn route(&mut self, afm: &Afm, near: (f64, f64), radius_hint: f64, target: MoveTarget) -> Result<MoveRoute, MoveError> {
+        route_move(self.0, &afm.surface(), near, radius_hint, target)
+    }
+}
+
 /// Moves particle `id` of `scene`, believed at `near` with radius about `radius_hint`, to
 /// `target` with the instrument `afm` (its tip at the start height), judged as
-/// [`MoveOptions`] says. The scene's strategy is used as it is (see
-/// [`crate::control::derive`] to derive it first).
+/// [`MoveOptions`] says, routed as `nanopush push` routes ([`OverviewRouting`]). The scene's
+/// strategy is used as it is (see [`crate::control::derive`] to derive it first).
 pub fn move_particle(
     scene: &Scene,
     afm: &mut Afm,
@@ -116,12 +161,27 @@ pub fn move_particle(
     target: MoveTarget,
     options: MoveOptions,
 ) -> Result<MoveRun, MoveRunError> {
+    move_particle_with(scene, afm, id, near, radius_hint, target, options, &mut OverviewRouting(scene))
+}
+
+/// [`move_particle`] with its own routing.
+#[allow(clippy::too_many_arguments)]
+pub fn move_particle_with(
+    scene: &Scene,
+    afm: &mut Afm,
+    id: u32,
+    near: (f64, f64),
+    radius_hint: f64,
+    target: MoveTarget,
+    options: MoveOptions,
+    routing: &mut dyn MoveRouting,
+) -> Result<MoveRun, MoveRunError> {
     let tick = afm.tick();
     let params = scene.strategy_params(tick);
-    let first = route_move(scene, &afm.surface(), near, radius_hint, target)?;
+    let first = routing.route(afm, near, radius_hint, target)?;
     let target = first.target;
     let before = (first.local.clone(), first.located);
-    let prepared = Prepared::new(scene, id, first.located.radius, &params)?;
+    let prepared = routing.prepare(scene, id, first.located.radius, &params)?;
     prepared.check_reach(&first.legs).map_err(MoveError::Route)?;
     let mut legs: Vec<PushedLeg> = Vec::new();
     let mut route = first;
@@ -160,7 +220,7 @@ pub fn move_particle(
             if k > 0 {
                 // Each later leg starts from where a local scan finds the particle, not from the
                 // estimate: its search starts a few pixels behind it.
-                match scan_after(scene, afm, estimate, prepared.radius) {
+                match routing.locate(scene, afm, estimate, prepared.radius) {
                     (_, Ok(found)) => estimate = (found.x, found.y),
                     (img, Err(_)) => {
                         return Ok(MoveRun {
@@ -193,7 +253,7 @@ pub fn move_particle(
             });
             estimate = legs.last().expect("pushed").run.summary.estimated_particle;
             if let Some(code) = failed {
-                let (img, located) = scan_after(scene, afm, estimate, prepared.radius);
+                let (img, located) = routing.locate(scene, afm, estimate, prepared.radius);
                 return Ok(MoveRun {
                     before,
                     target,
@@ -207,10 +267,10 @@ pub fn move_particle(
         }
         // The scan after: where the particle is now, and the legs from there.
         // With the radius the target was checked against (the located one differs by a hair).
-        match route_move(scene, &afm.surface(), estimate, radius_hint, MoveTarget::Point(target)) {
+        match routing.route(afm, estimate, radius_hint, MoveTarget::Point(target)) {
             Ok(p) => route = p,
             Err(MoveError::NotFound { .. }) => {
-                let (img, _) = scan_after(scene, afm, estimate, prepared.radius);
+                let (img, _) = routing.locate(scene, afm, estimate, prepared.radius);
                 return Ok(MoveRun {
                     before,
                     target,
@@ -224,23 +284,6 @@ pub fn move_particle(
             Err(e) => return Err(e.into()),
         }
     }
-}
-
-/// A local scan around `estimate` and the particle in it.
-fn scan_after(
-    scene: &Scene,
-    afm: &Afm,
-    estimate: (f64, f64),
-    radius: f64,
-) -> (HeightImage, Result<Located, crate::scan::LocateError>) {
-    locate_near(
-        &afm.surface(),
-        Tip::from_scene(scene),
-        ScanParams::from_scene(scene),
-        estimate,
-        radius,
-        scene.file.stage.range_um * 1e-6,
-    )
 }
 
 /// Why a move could not be made at all.

@@ -1,8 +1,11 @@
 //! 2-D positioning (the paper's goal) with straight pushes: a target one push cannot reach gets
 //! a route of several. A leg is never longer than the longest single push, and a leg's swept
 //! corridor (the particle's width plus the clearance, plus the tip's approach run behind it) must
-//! not touch another particle; when the straight line is blocked the route goes around the
-//! blocking particle through one side-step waypoint.
+//! not touch another particle. When the straight line is blocked the route goes around the
+//! blocking particle through one side-step waypoint; when that is blocked too, it is the
+//! cheapest route a visibility graph over all the particles holds ([`search`]).
+
+mod search;
 
 /// A particle the route must keep clear of (m).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -44,7 +47,7 @@ impl Leg {
 /// Why no route exists.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RouteError {
-    /// Neither the straight line nor a detour around the blocking particle is clear.
+    /// No route around the particles is clear: the straight line is blocked, and no detour.
     #[error(
         "no clear path from ({:.2}, {:.2}) µm to ({:.2}, {:.2}) µm: blocked by the particle at ({:.2}, {:.2}) µm",
         .from.0 * 1e6, .from.1 * 1e6, .to.0 * 1e6, .to.1 * 1e6, .blocker.0 * 1e6, .blocker.1 * 1e6
@@ -168,6 +171,9 @@ pub struct Router {
     pub clearance: f64,
     /// Run-up behind the particle that the tip needs (the contact search's start).
     pub run_up: f64,
+    /// Radius of the tip (m): at the start of every push it reaches the particle's back,
+    /// `Rₐ + Rₜ` behind its centre, on the stage.
+    pub tip_radius: f64,
     /// Stage range `[0, range]` in x and y.
     pub range: f64,
 }
@@ -192,12 +198,18 @@ impl Router {
     fn split(&self, from: (f64, f64), to: (f64, f64), out: &mut Vec<Leg>) {
         let len = (to.0 - from.0).hypot(to.1 - from.1);
         let n = (len / self.max_push).ceil().max(1.0) as usize;
-        for k in 0..n {
+        // The ends exactly where asked: `from + 1.0 (to − from)` can miss `to` by a rounding.
+        let at = |k: usize| {
+            if k == n {
+                return to;
+            }
             let a = k as f64 / n as f64;
-            let b = (k + 1) as f64 / n as f64;
+            (from.0 + a * (to.0 - from.0), from.1 + a * (to.1 - from.1))
+        };
+        for k in 0..n {
             out.push(Leg {
-                from: (from.0 + a * (to.0 - from.0), from.1 + a * (to.1 - from.1)),
-                to: (from.0 + b * (to.0 - from.0), from.1 + b * (to.1 - from.1)),
+                from: at(k),
+                to: at(k + 1),
             });
         }
     }
@@ -233,6 +245,12 @@ impl Router {
                 return Ok(legs);
             }
         }
+        if let Some(way) = self.search(from, to, obstacles) {
+            for pair in way.windows(2) {
+                self.split(pair[0], pair[1], &mut legs);
+            }
+            return Ok(legs);
+        }
         Err(RouteError::Blocked {
             from,
             to,
@@ -242,125 +260,4 @@ impl Router {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    const UM: f64 = 1e-6;
-
-    fn router() -> Router {
-        Router {
-            radius: 0.5 * UM,
-            edge_radius: 0.5 * UM,
-            max_push: 12.0 * UM,
-            clearance: 0.5 * UM,
-            run_up: 5.0 * UM,
-            range: 100.0 * UM,
-        }
-    }
-
-    fn clear_of(legs: &[Leg], o: &Obstacle, p: &Router) -> bool {
-        legs.iter().all(|l| p.blocker(l.from, l.to, &[*o]).is_none())
-    }
-
-    #[test]
-    fn a_short_clear_move_is_one_leg() {
-        let legs = router()
-            .route((40.0 * UM, 30.0 * UM), (45.0 * UM, 30.0 * UM), &[])
-            .unwrap();
-        assert_eq!(legs.len(), 1);
-        assert!((legs[0].length() - 5.0 * UM).abs() < 1e-12);
-    }
-
-    #[test]
-    fn a_long_move_is_split_into_equal_legs_within_the_longest_push() {
-        let p = router();
-        let legs = p.route((10.0 * UM, 10.0 * UM), (40.0 * UM, 50.0 * UM), &[]).unwrap();
-        // 50 µm in legs of at most 12 µm: 5 legs of 10 µm, end to end.
-        assert_eq!(legs.len(), 5);
-        for w in legs.windows(2) {
-            assert_eq!(w[0].to, w[1].from);
-        }
-        assert!(legs.iter().all(|l| (l.length() - 10.0 * UM).abs() < 1e-9));
-        assert_eq!(legs.last().unwrap().to, (40.0 * UM, 50.0 * UM));
-    }
-
-    #[test]
-    fn a_blocked_line_goes_around_the_blocker() {
-        let p = router();
-        let o = Obstacle {
-            x: 50.0 * UM,
-            y: 30.2 * UM,
-            radius: 0.5 * UM,
-        };
-        let (from, to) = ((40.0 * UM, 30.0 * UM), (60.0 * UM, 30.0 * UM));
-        assert!(p.blocker(from, to, &[o]).is_some());
-        let legs = p.route(from, to, &[o]).unwrap();
-        assert!(legs.len() >= 2);
-        assert!(clear_of(&legs, &o, &p));
-        assert_eq!(legs.first().unwrap().from, from);
-        assert_eq!(legs.last().unwrap().to, to);
-    }
-
-    /// A push to 99.9 µm of a 1 µm particle would take its centre to 100.88 µm (the push goes
-    /// 0.977 µm further for the retraction's drag). The target must keep the particle
-    /// on the stage whole; the push's overshoot is cut where it would leave it; a push the tip
-    /// cannot get behind is refused.
-    #[test]
-    fn the_whole_way_stays_on_the_stage_target_overshoot_and_the_tips_reach() {
-        let p = Router {
-            radius: 1.0 * UM,
-            edge_radius: 1.0 * UM,
-            ..router()
-        };
-        let e = p
-            .route((59.9 * UM, 50.0 * UM), (99.9 * UM, 50.0 * UM), &[])
-            .unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            "target (99.90, 50.00) µm is outside the stage for a particle 1.000 µm in radius; allowed: [1.000, 99.000] µm in x and y"
-        );
-        assert!(p.route((59.0 * UM, 50.0 * UM), (99.0 * UM, 50.0 * UM), &[]).is_ok());
-        // The push's overshoot stops where the particle would leave the stage: 0.5 µm left of
-        // the 0.977 µm, along x; along y nothing; diagonally, the nearer edge.
-        let r = 1.0 * UM;
-        assert!((travel_on_stage((98.5 * UM, 50.0 * UM), (1.0, 0.0), r, 100.0 * UM) - 0.5 * UM).abs() < 1e-12);
-        assert!((travel_on_stage((98.5 * UM, 50.0 * UM), (-1.0, 0.0), r, 100.0 * UM) - 97.5 * UM).abs() < 1e-12);
-        let diag = (0.6, 0.8);
-        assert!((travel_on_stage((90.0 * UM, 95.0 * UM), diag, r, 100.0 * UM) - 5.0 * UM).abs() < 1e-12);
-        assert_eq!(travel_on_stage((99.5 * UM, 50.0 * UM), (1.0, 0.0), r, 100.0 * UM), 0.0);
-        // Pushed toward −x from 99.5 µm: the tip would have to be at 100.53 µm.
-        let leg = |from: f64, to: f64| Leg {
-            from: (from * UM, 50.0 * UM),
-            to: (to * UM, 50.0 * UM),
-        };
-        let e = check_reach(&[leg(40.0, 41.0), leg(99.5, 90.0)], 1.03 * UM, 100.0 * UM).unwrap_err();
-        assert!(
-            e.to_string().starts_with(
-                "push 2 would need the tip at (100.530, 50.000) µm, off the stage: allowed [0.000, 100.000] µm"
-            ),
-            "{e}"
-        );
-        assert_eq!(check_reach(&[leg(98.97, 90.0)], 1.03 * UM, 100.0 * UM), Ok(()));
-    }
-
-    #[test]
-    fn targets_outside_the_stage_and_walled_in_paths_are_refused() {
-        let p = router();
-        let e = p
-            .route((40.0 * UM, 30.0 * UM), (140.0 * UM, 30.0 * UM), &[])
-            .unwrap_err();
-        assert!(e.to_string().contains("allowed: [0.500, 99.500] µm in x and y"), "{e}");
-        // A wall of particles across the whole path, 3 µm apart.
-        let wall: Vec<Obstacle> = (0..=33)
-            .map(|k| Obstacle {
-                x: 50.0 * UM,
-                y: k as f64 * 3.0 * UM,
-                radius: 0.5 * UM,
-            })
-            .collect();
-        let e = p
-            .route((40.0 * UM, 30.0 * UM), (60.0 * UM, 30.0 * UM), &wall)
-            .unwrap_err();
-        assert!(matches!(e, RouteError::Blocked { .. }), "{e}");
-    }
-}
+mod tests;

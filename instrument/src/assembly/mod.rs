@@ -1,0 +1,23 @@
+//! Assembly: many particles pushed into a 2-D pattern, the paper's purpose ("2-D positioning
+//! and assembly of nanoparticles") done as the field does it since — assign particles to sites
+//! at least total cost and order the moves so that none collide (Barredo et al., *Science* 354,
+//! 2016), route each around the others and re-plan after every scan (Celotta et al., *Rev. Sci.
+//! Instrum.* 85, 2014; Kalff et al., *Nature Nanotechnology* 11, 2016). The pushing is the
+//! paper's: each move is a `nanopush push`, judged by the scan after it.
+//!
+//! - [`pattern`]: the target sites, from a file or a generator (line, grid, ring, letters);
+//! - [`assign`]: which particle fills which site (Kuhn-Munkres);
+//! - [`plan`]: the order of the moves and their routes, played out on the positions;
+//! - [`run`]: an assembly against the simulated AFM, re-planned after every move from its
+//!   local scans.
+
+pub mod assign;
+mod letters;
+pub mod pattern;
+pub mod plan;
+mod routing;
+pub mod run;
+
+pub use pattern::{Pattern, PatternError, Site};
+pub use run::{AssemblyOptions, AssemblyRun, Event, MoveRecord, Outcome, SiteReport, assemble};
+pub use plan::{Constraints, Plan, PlanSettings, PlannedMove, Purpose, Seen, SiteState, Unfilled, plan};
