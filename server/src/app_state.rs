@@ -121,9 +121,7 @@ pub struct Instance {
 impl Instance {
     /// This process, now.
     pub fn now() -> Instance {
-        let started_unix_ms = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_millis() as u64);
+        let started_unix_ms = crate::clock::unix_ms();
         Instance {
             id: format!("{started_unix_ms:x}-{:x}", std::process::id()),
             started_unix_ms,

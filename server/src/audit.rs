@@ -23,13 +23,13 @@ use std::net::IpAddr;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering::Relaxed};
 use std::sync::{Arc, Mutex, mpsc};
-use std::time::{SystemTime, UNIX_EPOCH};
 
 use nanopush_proto::ws::{ClientMessage, ErrorCode, Role};
 use serde::Serialize;
 
 use crate::auth::Person;
 use crate::auth::tokens::role_name;
+use crate::clock::{rfc3339, unix_ms};
 
 /// Who ran each push (by run number), for its record and its `run_done` line.
 pub type RunPeople = Arc<Mutex<HashMap<u64, String>>>;
@@ -106,35 +106,6 @@ struct Entry<'a> {
     code: Option<ErrorCode>,
     #[serde(skip_serializing_if = "Option::is_none")]
     message: Option<&'a str>,
-}
-
-/// UTC time as RFC 3339 with milliseconds, from ms since the epoch (civil-from-days, H. Hinnant).
-pub fn rfc3339(unix_ms: u64) -> String {
-    let secs = unix_ms / 1000;
-    let days = (secs / 86_400) as i64;
-    let sod = secs % 86_400;
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + i64::from(m <= 2);
-    format!(
-        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}.{:03}Z",
-        sod / 3600,
-        sod / 60 % 60,
-        sod % 60,
-        unix_ms % 1000
-    )
-}
-
-fn now_ms() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as u64)
 }
 
 /// A command's name and arguments, when it changes the instrument (None for `ping`,
@@ -244,7 +215,7 @@ impl Audit {
         (command, args): (&str, serde_json::Map<String, serde_json::Value>),
         refused: Option<(ErrorCode, &str)>,
     ) -> Option<Durable> {
-        let unix_ms = now_ms();
+        let unix_ms = unix_ms();
         self.append(
             &Entry {
                 time: rfc3339(unix_ms),
@@ -266,7 +237,7 @@ impl Audit {
     /// Something the server did on an operator's behalf (`lease_lost` when their connection
     /// closed, `run_done` when their push ended), with its `outcome`.
     pub fn event(&self, e: Happened<'_>) {
-        let unix_ms = now_ms();
+        let unix_ms = unix_ms();
         let _ = self.append(
             &Entry {
                 time: rfc3339(unix_ms),
@@ -337,7 +308,7 @@ impl Writer {
             let mut text = String::new();
             let shed = self.shed.load(Relaxed);
             if shed > self.shed_logged {
-                let unix_ms = now_ms();
+                let unix_ms = unix_ms();
                 let said = serde_json::json!({
                     "time": rfc3339(unix_ms), "unix_ms": unix_ms, "person": "-", "role": "-",
                     "address": "-", "command": "refusals_not_logged", "outcome": "shed",
@@ -397,13 +368,6 @@ fn write_whole(f: &mut std::fs::File, bytes: &[u8]) -> std::io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn times_are_utc_rfc3339_with_milliseconds() {
-        assert_eq!(rfc3339(0), "1970-01-01T00:00:00.000Z");
-        assert_eq!(rfc3339(951_782_400_123), "2000-02-29T00:00:00.123Z");
-        assert_eq!(rfc3339(1_798_761_599_999), "2026-12-31T23:59:59.999Z");
-    }
 
     #[test]
     fn commands_that_change_the_instrument_are_described_and_the_others_are_not() {

@@ -7,6 +7,7 @@ pub mod app_state;
 pub mod audit;
 pub mod auth;
 pub mod client_addr;
+pub mod clock;
 pub mod command_checks;
 pub mod control_loop;
 pub mod data_dir;

@@ -34,6 +34,7 @@ use self::cookie::{Claims, CookieKey};
 use self::limiter::FailureLimiter;
 use self::reload::{FileWatch, Stamp};
 use self::tokens::TokenTable;
+use crate::clock::unix_now;
 
 pub use self::reload::{FILE_POLL, SETTLE, watch_token_file};
 
@@ -254,7 +255,7 @@ impl Auth {
     /// The person a session cookie names, or None: not signed by this server, too old, or its
     /// credential revoked (such cookies are as none).
     pub fn person_for_cookie(&self, cookie: &str) -> Option<Arc<Person>> {
-        let c = self.cookie_key.as_ref()?.open(cookie, crate::records::unix_now())?;
+        let c = self.cookie_key.as_ref()?.open(cookie, unix_now())?;
         let p = Person {
             name: c.name,
             role: c.role,
@@ -335,7 +336,7 @@ impl Auth {
                 role: person.role,
                 key: person.key.clone(),
             },
-            crate::records::unix_now(),
+            unix_now(),
         );
         self.counters.logins.fetch_add(1, Relaxed);
         Some(value)
