@@ -36,7 +36,7 @@ use self::reload::{FileWatch, Stamp};
 use self::tokens::TokenTable;
 use crate::clock::unix_now;
 
-pub use self::reload::{FILE_POLL, SETTLE, watch_token_file};
+pub use self::reload::{FILE_POLL, SETTLE};
 
 /// A person, as a credential names them.
 #[derive(Debug, Clone, PartialEq, Eq)]
