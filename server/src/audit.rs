@@ -256,6 +256,27 @@ impl Audit {
         );
     }
 
+    /// A push's end (`run_done`), under the person who ran it ([`Audit::runs`], forgotten now),
+    /// with its record.
+    pub fn run_done(&self, run: u64, particle: u32, outcome: &str, failure: Option<&str>, record: Option<&str>) {
+        let person = self.runs.lock().ok().and_then(|mut p| p.remove(&run));
+        let mut args = serde_json::Map::new();
+        args.insert("run".into(), run.into());
+        args.insert("particle".into(), particle.into());
+        if let Some(r) = record {
+            args.insert("record".into(), r.into());
+        }
+        self.event(Happened {
+            person: person.as_deref().unwrap_or("unknown"),
+            address: None,
+            client: None,
+            command: "run_done",
+            args,
+            outcome,
+            message: failure,
+        });
+    }
+
     /// The Prometheus text of the counters.
     pub fn render_metrics(&self) -> String {
         format!(

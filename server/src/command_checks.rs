@@ -1,4 +1,5 @@
-//! Checks of client commands: finite numbers, ranges, known particles. Each refusal is a typed
+//! Checks of client commands: one JSON object per message, finite numbers, ranges, a target on
+//! the stage. Each refusal is a typed
 //! error naming the field, the value and the allowed range.
 
 use nanopush_proto::push::{TOLERANCE_NM, TOLERANCE_RANGE_NM};
@@ -176,6 +177,27 @@ pub fn push_tolerance(tolerance_nm: Option<f64>) -> Result<f64, Refusal> {
         "nm",
     )?;
     Ok(t * 1e-9)
+}
+
+/// Whether a particle of radius `r` (m) can be pushed to `p` (m): its centre at least a radius
+/// inside the stage's `[0, range]` square, so the particle stays on the stage and the tip, which
+/// stays inside it, can reach behind it. Checked as the planner checks it
+/// ([`nanopush_instrument::control::route::on_stage`]: in µm, the bounds rounded inward to the nanometre, as
+/// the refusal prints them).
+pub fn on_stage(p: (f64, f64), r: f64, range: f64) -> Result<(), Refusal> {
+    if nanopush_instrument::control::route::on_stage(p, r, range) {
+        return Ok(());
+    }
+    let (lo, hi) = nanopush_instrument::control::route::centre_bounds_um(r, range);
+    Err(Refusal::new(
+        ErrorCode::OutOfRange,
+        format!(
+            "target ({:.3}, {:.3}) µm is out of range for a particle {:.3} µm in radius; allowed: [{lo:.3}, {hi:.3}] µm in x and y",
+            p.0 * 1e6,
+            p.1 * 1e6,
+            r * 1e6,
+        ),
+    ))
 }
 
 /// Checks a push's numbers; `range_um` is the stage range.
@@ -373,5 +395,23 @@ mod tests {
                 .code,
             ErrorCode::NotFinite
         );
+    }
+
+    /// Issue 27.9: the edges the refusal states are accepted, in µm as sent; a nanometre past
+    /// them is not.
+    #[test]
+    fn a_target_on_the_stated_edge_is_on_the_stage() {
+        let (r, range) = (500.0 * 1e-9, 100.0 * 1e-6);
+        for edge in [0.5, 99.5] {
+            assert_eq!(on_stage((edge * 1e-6, 30.0 * 1e-6), r, range), Ok(()), "{edge}");
+        }
+        for past in [0.499, 99.501] {
+            let e = on_stage((past * 1e-6, 30.0 * 1e-6), r, range).unwrap_err();
+            assert!(e.message.contains("allowed: [0.500, 99.500] µm"), "{}", e.message);
+        }
+        // A radius between nanometres: the bounds are rounded inward, and the stated one holds.
+        let e = on_stage((0.0, 0.0), 251.37e-9, range).unwrap_err();
+        assert!(e.message.contains("allowed: [0.252, 99.748] µm"), "{}", e.message);
+        assert_eq!(on_stage((0.252e-6, 99.748e-6), 251.37e-9, range), Ok(()));
     }
 }

@@ -10,10 +10,12 @@ use nanopush_proto::ws::{ClientMessage, ErrorCode, HapticAction, Stream as WsStr
 use super::lease::{self, require_lease};
 use super::{Client, MIN_SCAN_UM};
 use crate::app_state::AppState;
-use crate::command_checks::{Refusal, fields_apply, number, push_target, push_tolerance};
+use crate::command_checks::{Refusal, fields_apply, number, on_stage, push_target, push_tolerance};
 use crate::control_loop::{LoopCommand, StopReason};
 use crate::haptic::api::haptic_command;
-use crate::push_job::{Move, on_stage, prepare_push, run_done_failed};
+use crate::app_state::Move;
+use crate::push::launch::run_done_failed;
+use crate::push::prepare::prepare_push;
 use crate::scan_job::run_scan;
 use nanopush_instrument::control::MoveTarget;
 use nanopush_instrument::scan::ScanParams;

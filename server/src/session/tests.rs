@@ -10,38 +10,8 @@ use futures_util::SinkExt;
 use nanopush_proto::ws::Role;
 
 use super::*;
-use crate::app_state::{OPERATOR_PLACES, ServeConfig};
-use crate::control_loop::Shared;
-use nanopush_instrument::scene::Scene;
-
-/// A server's state on the default scene, with no loop running.
-pub(crate) fn test_state() -> Arc<AppState> {
-    let scene = Scene::default_scene();
-    let tick = 1e-3;
-    let base = nanopush_instrument::scan::ScanParams::from_scene(&scene);
-    let afm = nanopush_instrument::afm::Afm::from_scene(&scene, base.centre_x, base.centre_y, tick);
-    let shared = Arc::new(Shared::new(&afm));
-    let cfg = ServeConfig {
-        operator_token: "op".into(),
-        viewer_token: None,
-        allow_origins: Vec::new(),
-        max_message_bytes: 64 * 1024,
-        max_rate: 50.0,
-        max_clients: 64,
-        max_clients_per_address: 16,
-        ws_ping: Duration::from_secs(10),
-        ws_timeout: Duration::from_secs(30),
-        header_timeout: Duration::from_secs(10),
-        data_dir: std::env::temp_dir(),
-        web_dir: std::env::temp_dir(),
-        haptic: crate::haptic::HapticMode::None,
-        scan_line_hz: 100.0,
-        telemetry_hz: 60.0,
-        access: Default::default(),
-    };
-    let params = scene.strategy_params(tick);
-    Arc::new(AppState::new(cfg, scene, shared, params))
-}
+use crate::app_state::OPERATOR_PLACES;
+pub(crate) use crate::app_state::test_state;
 
 /// A connected client's handling state.
 pub(crate) fn client(id: u32, role: Role) -> Client {

@@ -18,10 +18,9 @@ use std::sync::atomic::Ordering::Relaxed;
 
 use nanopush_proto::ws::{Judged, ServerMessage};
 
-use crate::app_state::AppState;
-use crate::push_job::{Move, Pending, audit_early_end, launch, strategy_scene};
+use super::launch::{audit_early_end, launch, strategy_scene};
+use crate::app_state::{AppState, Move, Pending};
 use crate::records::{self, Recorded};
-use crate::telemetry::audit_run_done;
 use nanopush_instrument::control::{DEFAULT_ATTEMPTS, MoveError, MoveRoute, MoveTarget, Verdict, route_move};
 use nanopush_instrument::scene::Scene;
 
@@ -30,7 +29,7 @@ use nanopush_instrument::scene::Scene;
 pub(crate) fn on_pushed(st: &Arc<AppState>, run: u64, particle: u32, estimate: [f64; 2], record: Recorded) {
     let pending = st.activity.judging.lock().ok().and_then(|mut j| j.remove(&run));
     let Some(pending) = pending else {
-        // Every push the loop runs is launched with its move (`push_job::launch`).
+        // Every push the loop runs is launched with its move (`launch.rs`).
         tracing::error!("run {run}: no move to judge");
         let why = "internal error: the push's move was lost, so it was not judged".to_string();
         return end(st, run, particle, "error", Some(why), Some(estimate), record, None);
@@ -141,7 +140,7 @@ fn judge_with(st: &AppState, scene: &Scene, run: u64, p: &Pending, estimate: [f6
             match launch(st, p.mv, scene, plan, p.attempt + 1) {
                 Ok(()) => {
                     let (record, _) = amended(st, record, "corrected", Some(&why), Some(&judged));
-                    audit_run_done(st, run, id, "corrected", Some(&why), record.as_deref());
+                    st.audit.run_done(run, id, "corrected", Some(&why), record.as_deref());
                 }
                 Err((outcome, failure)) => {
                     let failure = format!(
@@ -270,7 +269,7 @@ fn end(
     judged: Option<Judged>,
 ) {
     let (record, record_error) = amended(st, record, outcome, failure.as_deref(), judged.as_ref());
-    audit_run_done(st, run, particle, outcome, failure.as_deref(), record.as_deref());
+    st.audit.run_done(run, particle, outcome, failure.as_deref(), record.as_deref());
     st.push_ended(true);
     st.shared.busy.store(false, Relaxed);
     st.broadcast_event(&ServerMessage::RunDone {
@@ -290,7 +289,7 @@ mod tests {
 
     use super::*;
     use crate::control_loop::LoopCommand;
-    use crate::session::tests::test_state;
+    use crate::app_state::test_state;
 
     /// A test server whose particle 1 the loop left `off` (m, along x) from the target, which
     /// is 1 µm along +x from where the scene puts it; the move as `launch` registers it.
