@@ -1,5 +1,5 @@
-//! The audit trail: every command that changes the instrument (the lease taken, given back or
-//! lost; push, scan, stop; haptic engage, release, re-centre and scale) and every push's end is
+//! The audit trail: every command the table of commands audits (`session/commands`: those that
+//! change the instrument), the lease lost with its holder's connection, and every push's end are
 //! appended to `audit/audit.jsonl` in the data directory, one JSON object a line: `time` (UTC,
 //! RFC 3339), `unix_ms`, `person`, `role`, `address`, `client`, `command`, its `args`, and the
 //! `outcome` (`ok`, or `refused` with the error's `code` and `message`).
@@ -24,7 +24,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering::Relaxed};
 use std::sync::{Arc, Mutex, mpsc};
 
-use nanopush_proto::ws::{ClientMessage, ErrorCode, Role};
+use nanopush_proto::ws::{ErrorCode, Role};
 use serde::Serialize;
 
 use crate::auth::Person;
@@ -106,27 +106,6 @@ struct Entry<'a> {
     code: Option<ErrorCode>,
     #[serde(skip_serializing_if = "Option::is_none")]
     message: Option<&'a str>,
-}
-
-/// A command's name and arguments, when it changes the instrument (None for `ping`,
-/// `subscribe`).
-pub fn describe(msg: &ClientMessage) -> Option<(&'static str, serde_json::Map<String, serde_json::Value>)> {
-    let name = match msg {
-        ClientMessage::Ping { .. } | ClientMessage::Subscribe { .. } => return None,
-        ClientMessage::TakeLease { .. } => "take_lease",
-        ClientMessage::ReleaseLease { .. } => "release_lease",
-        ClientMessage::Push { .. } => "push",
-        ClientMessage::Scan { .. } => "scan",
-        ClientMessage::Stop { .. } => "stop",
-        ClientMessage::Haptic { .. } => "haptic",
-    };
-    let mut args = match serde_json::to_value(msg) {
-        Ok(serde_json::Value::Object(m)) => m,
-        _ => serde_json::Map::new(),
-    };
-    args.remove("type");
-    args.retain(|_, v| !v.is_null());
-    Some((name, args))
 }
 
 impl Audit {
@@ -391,21 +370,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn commands_that_change_the_instrument_are_described_and_the_others_are_not() {
-        let push: ClientMessage =
-            serde_json::from_str(r#"{"type":"push","id":4,"particle":2,"distance_um":0.5,"direction_deg":90}"#)
-                .unwrap();
-        let (name, args) = describe(&push).unwrap();
-        assert_eq!(name, "push");
-        assert_eq!(
-            serde_json::Value::Object(args),
-            serde_json::json!({"id": 4, "particle": 2, "distance_um": 0.5, "direction_deg": 90.0})
-        );
-        let ping: ClientMessage = serde_json::from_str(r#"{"type":"ping"}"#).unwrap();
-        assert!(describe(&ping).is_none());
-    }
-
-    #[test]
     fn each_entry_is_one_whole_json_line_on_disk() {
         let dir = std::env::temp_dir().join(format!("nanopush-audit-{}", std::process::id()));
         let a = Audit::open(&dir, RunPeople::default());
@@ -414,13 +378,13 @@ mod tests {
             role: Role::Operator,
             key: "k".into(),
         };
-        let stop: ClientMessage = serde_json::from_str(r#"{"type":"stop"}"#).unwrap();
-        a.command(&alice, "10.0.0.7".parse().unwrap(), 3, describe(&stop).unwrap(), None);
+        let stop = || ("stop", serde_json::Map::new());
+        a.command(&alice, "10.0.0.7".parse().unwrap(), 3, stop(), None);
         a.command(
             &alice,
             "10.0.0.7".parse().unwrap(),
             3,
-            describe(&stop).unwrap(),
+            stop(),
             Some((ErrorCode::NoLease, "needs the lease")),
         );
         let path = log_path(&dir);

@@ -3,7 +3,7 @@
 //! error naming the field, the value and the allowed range.
 
 use nanopush_proto::push::{TOLERANCE_NM, TOLERANCE_RANGE_NM};
-use nanopush_proto::ws::{ClientMessage, ErrorCode, HapticAction};
+use nanopush_proto::ws::{ClientMessage, ErrorCode};
 
 use nanopush_instrument::control::MoveTarget;
 
@@ -135,35 +135,6 @@ impl<'de> serde::de::Visitor<'de> for UniqueKeys {
     }
 }
 
-/// Refuses a field the command carries but its kind does not use (else it would be dropped
-/// without a word): `haptic`'s `nm_per_mm` and `pull_off_at_hand_n` belong to `scale` only.
-pub fn fields_apply(msg: &ClientMessage) -> Result<(), Refusal> {
-    if let ClientMessage::Haptic {
-        action,
-        nm_per_mm,
-        pull_off_at_hand_n,
-        ..
-    } = msg
-        && *action != HapticAction::Scale
-    {
-        let given = [
-            ("nm_per_mm", nm_per_mm.is_some()),
-            ("pull_off_at_hand_n", pull_off_at_hand_n.is_some()),
-        ];
-        if let Some((field, _)) = given.iter().find(|(_, g)| *g) {
-            let name = serde_json::to_value(action)
-                .ok()
-                .and_then(|v| v.as_str().map(str::to_string))
-                .unwrap_or_default();
-            return Err(Refusal::new(
-                ErrorCode::Invalid,
-                format!("{field} goes with action \"scale\" only; action \"{name}\" takes no other field"),
-            ));
-        }
-    }
-    Ok(())
-}
-
 /// A push's tolerance (m) from its `tolerance_nm` ([`TOLERANCE_NM`] when left out),
 /// checked against [`TOLERANCE_RANGE_NM`].
 pub fn push_tolerance(tolerance_nm: Option<f64>) -> Result<f64, Refusal> {
@@ -287,23 +258,6 @@ mod tests {
             Some(2)
         );
         assert!(parse_command(r#"{"type":"subscribe","streams":["tip","scan"],"id":1}"#).is_ok());
-    }
-
-    /// Issue 27.8: `haptic`'s scales go with `scale` only.
-    #[test]
-    fn a_field_of_another_action_is_refused_naming_it() {
-        let m = parse_command(r#"{"type":"haptic","action":"recenter","nm_per_mm":-5}"#).unwrap();
-        let e = fields_apply(&m).unwrap_err();
-        assert_eq!(e.code, ErrorCode::Invalid);
-        assert!(
-            e.message.contains("nm_per_mm") && e.message.contains("\"recenter\""),
-            "{}",
-            e.message
-        );
-        let m = parse_command(r#"{"type":"haptic","action":"engage","pull_off_at_hand_n":1e300}"#).unwrap();
-        assert!(fields_apply(&m).unwrap_err().message.contains("pull_off_at_hand_n"));
-        let m = parse_command(r#"{"type":"haptic","action":"scale","nm_per_mm":5}"#).unwrap();
-        assert_eq!(fields_apply(&m), Ok(()));
     }
 
     /// The review of issue 24: `tolerance_nm: 1e-320` echoed 330 digits.

@@ -1,8 +1,8 @@
 //! One WebSocket connection: a receive loop (`receive.rs`: rate limit, size limit, one command
-//! per message, handled in `commands.rs` under the roles and the lease, `lease.rs`) and a send
-//! loop (`send.rs`: replies with back-pressure, events, telemetry and scan lines, keep-alive, the
-//! per-frame send budget). Both are generic over `Sink`/`Stream`, so a session runs over plain
-//! channels in the tests.
+//! per message, run as its entry in the table of commands says, `commands/`; the lease lost
+//! with the connection, `lease.rs`) and a send loop (`send.rs`: replies with back-pressure,
+//! events, telemetry and scan lines, keep-alive, the per-frame send budget). Both are generic
+//! over `Sink`/`Stream`, so a session runs over plain channels in the tests.
 
 mod commands;
 mod keepalive;

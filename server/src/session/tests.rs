@@ -1,5 +1,5 @@
-//! The session's tests over plain channels (no network), and the state they share with the
-//! lease's and the receive loop's tests.
+//! The session's tests over plain channels (no network), and the clients and commands they share
+//! with the tests of the lease, the receive loop and the table of commands.
 
 use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
@@ -10,8 +10,8 @@ use futures_util::SinkExt;
 use nanopush_proto::ws::Role;
 
 use super::*;
-use crate::app_state::OPERATOR_PLACES;
-pub(crate) use crate::app_state::test_state;
+use crate::app_state::{OPERATOR_PLACES, test_state};
+use crate::command_checks::Refusal;
 
 /// A connected client's handling state.
 pub(crate) fn client(id: u32, role: Role) -> Client {
@@ -24,6 +24,13 @@ pub(crate) fn client(id: u32, role: Role) -> Client {
         tokens: 50.0,
         last: Instant::now(),
     }
+}
+
+/// Runs the command `json` for client `c` as the session does (its entry in the table: its
+/// check, who may send it, its handler).
+pub(crate) fn command(st: &Arc<AppState>, c: &mut Client, json: &str) -> Result<super::commands::Accepted, Refusal> {
+    let msg = crate::command_checks::parse_command(json).expect("a command");
+    super::commands::route(&msg).run(st, c, msg)
 }
 
 /// A person of `role` (named after it).
@@ -159,41 +166,4 @@ fn the_documented_server_limits_8_places_60_s_idle_5_s_send_30_s_replies_8_mib_f
     assert_eq!(REPLY_PATIENCE, Duration::from_secs(30));
     assert_eq!(HARD_CAP, 8 * 1024 * 1024);
     assert_eq!(crate::control_loop::realtime::LOOP_PRIORITY, 50);
-}
-
-/// The haptic scales in force start at the scene's and follow each accepted `haptic scale` (a
-/// refused one changes nothing): `/api/status` shows them (issue 26).
-#[test]
-fn the_haptic_scales_in_force_follow_accepted_scale_commands() {
-    use nanopush_proto::ws::{ClientMessage, HapticAction};
-    let st = test_state();
-    let start = *st.haptic_scales.lock().unwrap();
-    assert_eq!(start.nm_per_mm, st.scene.file.haptic.nm_per_mm);
-    assert_eq!(start.pull_off_at_hand_n, st.scene.file.haptic.pull_off_at_hand_n);
-    let mut c = client(1, Role::Operator);
-    super::lease::take(&st, &c).unwrap();
-    let scale = |nm: Option<f64>, po: Option<f64>| ClientMessage::Haptic {
-        id: None,
-        action: HapticAction::Scale,
-        nm_per_mm: nm,
-        pull_off_at_hand_n: po,
-    };
-    super::commands::handle(&st, &mut c, scale(Some(20.0), None)).unwrap();
-    assert_eq!(st.haptic_scales.lock().unwrap().nm_per_mm, 20.0);
-    assert_eq!(
-        st.haptic_scales.lock().unwrap().pull_off_at_hand_n,
-        start.pull_off_at_hand_n
-    );
-    assert!(
-        super::commands::handle(&st, &mut c, scale(None, Some(50.0))).is_err(),
-        "out of range"
-    );
-    super::commands::handle(&st, &mut c, scale(None, Some(2.5))).unwrap();
-    assert_eq!(
-        *st.haptic_scales.lock().unwrap(),
-        crate::app_state::HapticScales {
-            nm_per_mm: 20.0,
-            pull_off_at_hand_n: 2.5
-        }
-    );
 }
