@@ -64,10 +64,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/records", get(records_list))
         .route("/api/records/{name}", get(record_get))
         .route("/api/runs", get(runs))
-        .route(
-            "/api/session",
-            get(sign_in::current).post(sign_in::login),
-        )
+        .route("/api/session", get(sign_in::current).post(sign_in::login))
         .route("/metrics", get(metrics))
         // Static files gzip-compressed when the browser accepts it (the minified page, three.js
         // included, is ~0.7 MB, ~0.2 MB on the wire): a remote operator's page loads in seconds.

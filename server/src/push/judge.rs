@@ -269,7 +269,8 @@ fn end(
     judged: Option<Judged>,
 ) {
     let (record, record_error) = amended(st, record, outcome, failure.as_deref(), judged.as_ref());
-    st.audit.run_done(run, particle, outcome, failure.as_deref(), record.as_deref());
+    st.audit
+        .run_done(run, particle, outcome, failure.as_deref(), record.as_deref());
     st.push_ended(true);
     st.shared.busy.store(false, Relaxed);
     st.broadcast_event(&ServerMessage::RunDone {
@@ -288,8 +289,8 @@ mod tests {
     use std::sync::atomic::Ordering::Relaxed;
 
     use super::*;
-    use crate::control_loop::LoopCommand;
     use crate::app_state::test_state;
+    use crate::control_loop::LoopCommand;
 
     /// A test server whose particle 1 the loop left `off` (m, along x) from the target, which
     /// is 1 µm along +x from where the scene puts it; the move as `launch` registers it.

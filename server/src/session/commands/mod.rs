@@ -106,7 +106,10 @@ impl Command {
 
     /// What the audit log keeps of `msg`: the command's name and its fields (the null ones left
     /// out), or nothing for a command that changes nothing.
-    pub fn audit_text(&self, msg: &ClientMessage) -> Option<(&'static str, serde_json::Map<String, serde_json::Value>)> {
+    pub fn audit_text(
+        &self,
+        msg: &ClientMessage,
+    ) -> Option<(&'static str, serde_json::Map<String, serde_json::Value>)> {
         match self.audit {
             Audit::Nothing => None,
             Audit::Fields => {

@@ -103,7 +103,10 @@ fn a_command_needs_an_operator_holding_the_lease_while_the_server_runs() {
         )
     );
     let e = command(&st, &mut viewer, r#"{"type":"take_lease"}"#).unwrap_err();
-    assert_eq!(e.message, "viewers cannot take the lease; connect with the operator token");
+    assert_eq!(
+        e.message,
+        "viewers cannot take the lease; connect with the operator token"
+    );
     let e = command(&st, &mut other, stop).unwrap_err();
     assert_eq!(
         e,
@@ -156,7 +159,12 @@ fn a_field_of_another_action_is_refused_naming_it() {
         e.message
     );
     let m = parse_command(r#"{"type":"haptic","action":"engage","pull_off_at_hand_n":1e300}"#).unwrap();
-    assert!(haptic::fields_apply(&m).unwrap_err().message.contains("pull_off_at_hand_n"));
+    assert!(
+        haptic::fields_apply(&m)
+            .unwrap_err()
+            .message
+            .contains("pull_off_at_hand_n")
+    );
     let m = parse_command(r#"{"type":"haptic","action":"scale","nm_per_mm":5}"#).unwrap();
     assert_eq!(haptic::fields_apply(&m), Ok(()));
     let st = test_state();
