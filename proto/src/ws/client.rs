@@ -1,5 +1,21 @@
 //! Client → server: the commands a client sends, each a JSON object with a `type` (and an
-//! optional `id` its reply echoes), and the streams it subscribes to.
+//! optional `id` its reply echoes), and the streams it subscribes to. The rules every command
+//! follows (unknown fields, keys given twice, units) are in `proto/README.md`; each command is
+//! here:
+//!
+//! | type | fields | needs | reply |
+//! |---|---|---|---|
+//! | `subscribe` | `streams`: subset of `["tip", "scan"]` | — | `ok` |
+//! | `take_lease` | — | operator | `ok`, or `lease_held` / `forbidden` |
+//! | `release_lease` | — | the lease | `ok` |
+//! | `push` | `particle` (id); either `distance_um` (0, stage range] with `direction_deg` [-360, 360], or `to_x_um`, `to_y_um` in [0, stage range] (the scene's `stage.range_um`, 100 µm in the shipped scenes); optional `tolerance_nm` [1, 100000], default 25 (`push::TOLERANCE_RANGE_NM`, `push::TOLERANCE_NM`): the move is `ok` only when the scan after it finds the particle that close to the target | the lease | `ok` when started; a `push_started` for each push of the move (corrections included); `run_done` at the end |
+//! | `scan` | optional `centre_x_um`, `centre_y_um`, `size_um` [0.01, stage range], `pixels` [8, 512]; the square must lie within the stage | the lease | `ok`; then `scan_start`, lines, `scan_done` |
+//! | `stop` | — | the lease | `ok`; the tip retracts |
+//! | `haptic` | `action`: `engage` (approach, park, give z to the handle), `release` (park, let the handle go), `recenter` (re-centre the handle, the tip stays), `scale` with `nm_per_mm` [0.01, 1000] and/or `pull_off_at_hand_n` [0.01, 10] | the lease; `engage`/`recenter` a live haptic link | `ok` (for `scale` with `scales`: the scales that will be in force, lowered to the device's renderable region when past it, and why — `HapticScales`), or `unavailable` (no link: `--haptic none`, or no handle samples) |
+//! | `ping` | — | — | `ok` |
+//!
+//! The server's table of commands (`server/src/session/commands`) gives each its handler and
+//! who may send it; its tests check this table's `needs` against it.
 
 use serde::{Deserialize, Serialize};
 

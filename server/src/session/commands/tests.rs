@@ -217,3 +217,30 @@ fn the_haptic_scales_in_force_follow_accepted_scale_commands() {
     let ok = command(&st, &mut c, r#"{"type":"haptic","action":"release"}"#).unwrap();
     assert_eq!(ok, Accepted::PLAIN);
 }
+
+/// The protocol's table of commands (`proto/src/ws/client.rs`) lists each command of this table
+/// once, and says who may send it as this table does.
+#[test]
+fn the_protocol_documents_each_command_and_who_may_send_it() {
+    let doc = include_str!("../../../../proto/src/ws/client.rs");
+    let mut documented = std::collections::BTreeMap::new();
+    for row in doc.lines().filter_map(|l| l.strip_prefix("//! | `")) {
+        let cells: Vec<&str> = row.split(" | ").collect();
+        let name = cells[0].trim_end_matches('`');
+        assert!(documented.insert(name, cells[2]).is_none(), "{name} twice");
+    }
+    let commands = one_of_each();
+    assert_eq!(documented.len(), commands.len(), "{documented:?}");
+    for m in commands {
+        let entry = route(&m);
+        let needs = documented
+            .get(entry.name)
+            .unwrap_or_else(|| panic!("{} documented", entry.name));
+        let says = match entry.who {
+            Who::Anyone => "—",
+            Who::Operator(_) => "operator",
+            Who::Holder | Who::Commander => "the lease",
+        };
+        assert!(needs.starts_with(says), "{}: needs {needs:?}, not {says:?}", entry.name);
+    }
+}
