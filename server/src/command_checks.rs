@@ -2,8 +2,7 @@
 //! the stage. Each refusal is a typed
 //! error naming the field, the value and the allowed range.
 
-use nanopush_proto::push::{TOLERANCE_NM, TOLERANCE_RANGE_NM};
-use nanopush_proto::ws::{ClientMessage, ErrorCode};
+use nanopush_proto::ws::{Bounds, ClientMessage, ErrorCode};
 
 use nanopush_instrument::control::MoveTarget;
 
@@ -135,15 +134,15 @@ impl<'de> serde::de::Visitor<'de> for UniqueKeys {
     }
 }
 
-/// A push's tolerance (m) from its `tolerance_nm` ([`TOLERANCE_NM`] when left out),
-/// checked against [`TOLERANCE_RANGE_NM`].
+/// A push's tolerance (m) from its `tolerance_nm`, as `welcome` states it
+/// ([`Bounds::PUSH_TOLERANCE_NM`]): its default when left out, checked against its range.
 pub fn push_tolerance(tolerance_nm: Option<f64>) -> Result<f64, Refusal> {
-    let (lo, hi) = TOLERANCE_RANGE_NM;
+    let b = Bounds::PUSH_TOLERANCE_NM;
     let t = number(
         "tolerance_nm",
-        tolerance_nm.unwrap_or(TOLERANCE_NM),
-        lo,
-        hi,
+        tolerance_nm.unwrap_or(b.default),
+        b.min,
+        b.max,
         false,
         "nm",
     )?;

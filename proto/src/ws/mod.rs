@@ -18,7 +18,9 @@ pub mod types;
 pub use client::{ClientMessage, HapticAction, Stream};
 pub use scan_line::{FrameError, SCAN_LINE_HEADER_LEN, SCAN_LINE_MAGIC, ScanLineHeader};
 pub use server::ServerMessage;
-pub use types::{ErrorCode, HapticScales, HapticTelemetry, Judged, ParticleNow, PushPath, Role, ScanNow, Telemetry};
+pub use types::{
+    Bounds, ErrorCode, HapticScales, HapticTelemetry, Judged, ParticleNow, PushPath, Role, ScanNow, Telemetry,
+};
 
 /// Protocol version, sent in `welcome`; bumped on any incompatible change.
 pub const WS_VERSION: u32 = 1;

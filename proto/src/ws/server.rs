@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{ErrorCode, HapticScales, Judged, ParticleNow, PushPath, Role, ScanNow, Telemetry};
+use super::{Bounds, ErrorCode, HapticScales, Judged, ParticleNow, PushPath, Role, ScanNow, Telemetry};
 
 /// A server → client text message.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -35,6 +35,10 @@ pub enum ServerMessage {
         instance: String,
         /// When this run of the server started (ms since the Unix epoch).
         started_unix_ms: u64,
+        /// A push's `tolerance_nm` as the server checks it: its default and allowed range
+        /// ([`Bounds::PUSH_TOLERANCE_NM`]), so that a client's form starts at the default and
+        /// refuses what the server would.
+        push_tolerance_nm: Bounds,
     },
     /// Second message on a connection, right after `welcome`: the instrument as it is now, so
     /// a client that joins late (or reloads) shows what the others see.

@@ -3,6 +3,29 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::push::{TOLERANCE_NM, TOLERANCE_RANGE_NM};
+
+/// A number a command takes, as the server checks it: its default when left out and its allowed
+/// range, `[min, max]`, in the unit its name says.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Bounds {
+    /// Taken when the field is left out.
+    pub default: f64,
+    /// The least allowed.
+    pub min: f64,
+    /// The most allowed.
+    pub max: f64,
+}
+
+impl Bounds {
+    /// A push's `tolerance_nm`: [`TOLERANCE_NM`] within [`TOLERANCE_RANGE_NM`].
+    pub const PUSH_TOLERANCE_NM: Bounds = Bounds {
+        default: TOLERANCE_NM,
+        min: TOLERANCE_RANGE_NM.0,
+        max: TOLERANCE_RANGE_NM.1,
+    };
+}
+
 /// A client's role, from its token.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

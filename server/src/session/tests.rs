@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use axum::extract::ws::Message;
 use futures_util::SinkExt;
-use nanopush_proto::ws::Role;
+use nanopush_proto::ws::{ErrorCode, Role};
 
 use super::*;
 use crate::app_state::{OPERATOR_PLACES, test_state};
@@ -107,6 +107,34 @@ async fn a_session_over_channels_welcomes_takes_the_lease_and_gives_it_back_when
         .unwrap()
         .unwrap();
     assert_eq!(st.lease_holder(), None);
+}
+
+/// The first message says a push's tolerance as the server checks it: a page's form starts at
+/// the default and refuses what the server would.
+#[tokio::test]
+async fn the_welcome_states_the_push_tolerance_the_server_checks() {
+    let st = test_state();
+    let (tx, mut rx, task) = connect(&st, Role::Viewer);
+    let welcome = next_json(&mut rx).await;
+    let said = &welcome["push_tolerance_nm"];
+    let (lo, hi) = nanopush_proto::push::TOLERANCE_RANGE_NM;
+    assert_eq!(
+        *said,
+        serde_json::json!({"default": nanopush_proto::push::TOLERANCE_NM, "min": lo, "max": hi})
+    );
+    let nm = |k: &str| said[k].as_f64().unwrap();
+    let tolerance = crate::command_checks::push_tolerance;
+    assert_eq!(tolerance(None), Ok(nm("default") * 1e-9));
+    assert_eq!(tolerance(Some(nm("min"))), Ok(nm("min") * 1e-9));
+    assert_eq!(tolerance(Some(nm("max"))), Ok(nm("max") * 1e-9));
+    for past in [nm("min").next_down(), nm("max").next_up()] {
+        assert_eq!(tolerance(Some(past)).unwrap_err().code, ErrorCode::OutOfRange, "{past}");
+    }
+    drop(tx);
+    tokio::time::timeout(Duration::from_secs(5), task)
+        .await
+        .unwrap()
+        .unwrap();
 }
 
 #[tokio::test]
