@@ -4,8 +4,7 @@
 //! failed attempts limited per address (the real client's, behind a trusted proxy) and counted
 //! in `/metrics`.
 
-use std::io::{Read, Write};
-use std::net::TcpStream;
+use std::io::Write;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -15,7 +14,7 @@ use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
-use crate::util::{Server, TOKEN, Ws, is, ok, ok_and, reply, runtime, send, start, start_args, until};
+use crate::util::{Server, TOKEN, Ws, http, is, ok, ok_and, reply, runtime, send, start, start_args, until};
 
 /// `nanopush token add NAME --role ROLE --token-file FILE`: the token it prints (its last line).
 pub(crate) fn add_token(file: &Path, name: &str, role: &str) -> String {
@@ -43,26 +42,6 @@ pub(crate) fn named_server(tag: &str, people: &[(&str, &str)], extra: &[&str]) -
         a
     });
     (srv, tokens)
-}
-
-/// One HTTP/1.1 request with `headers` (each `Name: value`): the status, the head (lower-case)
-/// and the body.
-pub(crate) fn http(addr: &str, method: &str, path: &str, headers: &[String]) -> (u16, String, String) {
-    let mut s = TcpStream::connect(addr).unwrap();
-    let mut req = format!("{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: 0\r\n");
-    for h in headers {
-        req.push_str(h);
-        req.push_str("\r\n");
-    }
-    req.push_str("\r\n");
-    s.write_all(req.as_bytes()).unwrap();
-    let mut buf = Vec::new();
-    s.read_to_end(&mut buf).unwrap();
-    let end = buf.windows(4).position(|w| w == b"\r\n\r\n").expect("an HTTP head");
-    let head = String::from_utf8_lossy(&buf[..end]).to_ascii_lowercase();
-    let (_, body) = nanopush_e2e::client::parse_response(&buf).unwrap();
-    let status = head.split_whitespace().nth(1).unwrap().parse().unwrap();
-    (status, head, String::from_utf8_lossy(&body).into_owned())
 }
 
 /// A WebSocket upgrade with `token` and `headers`: the socket and its welcome, or the HTTP

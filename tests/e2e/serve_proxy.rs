@@ -13,7 +13,7 @@ use serde_json::Value;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
 use crate::serve_access::named_server;
-use crate::util::{Ws, is, ok, runtime, until};
+use crate::util::{Ws, free_port, is, ok, runtime, until};
 
 /// nginx's binary, or None (then the test says why it is skipped; under CI it fails).
 fn nginx() -> Option<String> {
@@ -29,15 +29,6 @@ fn nginx() -> Option<String> {
         eprintln!("SKIPPED: nginx is not installed (apt-get install nginx, or make setup); the proxy test did not run");
     }
     found
-}
-
-/// A free TCP port on 127.0.0.1.
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
 }
 
 /// The server block of docs/deployment.md (plain HTTP here: TLS is the server's own test),

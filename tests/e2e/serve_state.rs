@@ -1,12 +1,9 @@
 //! `nanopush serve` for the page (issue 11): a late joiner gets the instrument's state, a push
 //! stops when its lease holder leaves, static files are compressed.
 
-use std::io::{Read, Write};
-use std::net::TcpStream;
-
 use serde_json::json;
 
-use crate::util::{TOKEN, http_get, is, ok, runtime, send, start, until, welcomed};
+use crate::util::{TOKEN, http, http_get, is, ok, runtime, send, start, until, welcomed};
 
 /// Issue 11, defects 2 and 5: a client that connects after a scan and a push gets, right after
 /// `welcome`, the instrument as it is: the moved particle, the lease, the phase, the latest scan
@@ -132,17 +129,8 @@ fn issue_11_a_push_stops_when_its_lease_holder_disconnects() {
 #[test]
 fn issue_11_static_files_are_compressed() {
     let srv = start("gzip", &[]);
-    let mut s = TcpStream::connect(&srv.addr).unwrap();
-    write!(
-        s,
-        "GET /src/session.js HTTP/1.1\r\nHost: {}\r\nAccept-Encoding: gzip\r\nConnection: close\r\n\r\n",
-        srv.addr
-    )
-    .unwrap();
-    let mut buf = Vec::new();
-    s.read_to_end(&mut buf).unwrap();
-    let head_end = buf.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
-    let head = String::from_utf8_lossy(&buf[..head_end]).to_ascii_lowercase();
+    let gzip = ["Accept-Encoding: gzip".to_string()];
+    let (_, head, _) = http(&srv.addr, "GET", "/src/session.js", &gzip);
     assert!(head.starts_with("http/1.1 200"), "{head}");
     assert!(head.contains("content-encoding: gzip"), "{head}");
     // Without Accept-Encoding: plain.

@@ -17,8 +17,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio_rustls::TlsConnector;
 use tokio_tungstenite::tungstenite::Message;
 
-use crate::serve_access::http;
-use crate::util::{TOKEN, runtime, start, tmp, until};
+use crate::util::{TOKEN, http, runtime, start, tmp, until};
 
 /// A test CA, and a leaf for 127.0.0.1 and localhost signed by it, in `dir`: the CA's PEM, the
 /// leaf's and its key's.
