@@ -7,13 +7,14 @@
 //! A thread of its own writes the lines queued since its last write with one `write` and one
 //! `fdatasync` (a group commit): a line the log holds is whole and on disk, whatever happens to
 //! the server afterwards (kill -9, power loss), and a line is queued before its command's answer
-//! is sent and on disk after one commit (one write and one sync; not timed here). The answer does not wait for the disk:
+//! is sent and on disk after one commit (one write and one sync). The answer does not wait for
+//! the disk:
 //! a command's events (a lease change, a `run_done`) must not overtake its `ok`, and a stop
 //! waits for nothing; a kill -9 before that commit can lose the line of a command whose `ok`
 //! was sent. A write that fails part way (a full disk) is cut back to the last whole line.
 //! Refused commands are logged at most [`REFUSED_IN_FLIGHT`] queued at once: a flood of refused
 //! commands (a viewer's script) cannot queue ahead of the operator's lines or grow without
-//! bound (12,000 queued refusals once kept an operator's `ok`ed commands off the disk for ~40 s);
+//! bound (12,000 queued refusals would keep an operator's `ok`ed commands off the disk for ~40 s);
 //! what it sheds is counted in a line of its own (`refusals_not_logged`) and in `/metrics`. The
 //! log is in a directory of its own, so `/api/records` neither lists nor serves it.
 

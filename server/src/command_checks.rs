@@ -217,8 +217,8 @@ pub fn push_target(
 mod tests {
     use super::*;
 
-    /// Issue 12.4: commands are JSON objects, one per message: an array (which serde would read
-    /// as the tagged enum) and several values are refused; a bad object's id is echoed.
+    /// Commands are JSON objects, one per message: an array (which serde would read as the
+    /// tagged enum) and several values are refused; a bad object's id is echoed.
     #[test]
     fn a_command_is_one_json_object() {
         assert!(matches!(
@@ -241,8 +241,8 @@ mod tests {
         assert!(why.contains("not a valid command"), "{why}");
     }
 
-    /// Issue 27.7: a key given twice is refused naming the key, at any depth (before, the last
-    /// one won: `{"type":"ping","type":"stop"}` was a stop).
+    /// A key given twice is refused naming the key, at any depth (serde would keep the last one:
+    /// `{"type":"ping","type":"stop"}` would be a stop).
     #[test]
     fn a_key_given_twice_is_refused_naming_it() {
         for (text, key) in [
@@ -259,7 +259,7 @@ mod tests {
         assert!(parse_command(r#"{"type":"subscribe","streams":["tip","scan"],"id":1}"#).is_ok());
     }
 
-    /// The review of issue 24: `tolerance_nm: 1e-320` echoed 330 digits.
+    /// A refusal does not echo `tolerance_nm: 1e-320` in 330 digits.
     #[test]
     fn a_refusal_shows_a_tiny_or_huge_number_in_scientific_notation() {
         let e = push_tolerance(Some(1e-320)).unwrap_err();
@@ -272,7 +272,7 @@ mod tests {
     }
 
     #[test]
-    fn a_push_tolerance_defaults_to_25_nm_and_is_checked() {
+    fn a_push_tolerance_has_a_default_and_is_checked() {
         assert_eq!(push_tolerance(None), Ok(25.0 * 1e-9));
         assert_eq!(push_tolerance(Some(1.0)), Ok(1.0 * 1e-9));
         let e = push_tolerance(Some(0.5)).unwrap_err();
@@ -302,8 +302,7 @@ mod tests {
     }
 
     /// The bounds the message prints are the bounds checked: a closed end is allowed, an open
-    /// one is not, and the next double past either end is refused (cargo-mutants: `> hi` as
-    /// `>= hi` survived).
+    /// one is not, and the next double past either end is refused (`> hi` is not `>= hi`).
     #[test]
     fn each_end_of_a_range_is_as_the_message_says() {
         assert_eq!(number("x", 100.0, 0.0, 100.0, false, "µm"), Ok(100.0));
@@ -329,7 +328,7 @@ mod tests {
             push_target(Some(2.0), Some(90.0), None, None, 100.0),
             Ok(MoveTarget::Distance { distance, direction }) if (distance - 2e-6).abs() < 1e-18 && direction.1 > 0.99
         ));
-        // A point in µm becomes metres (cargo-mutants: the conversion's `*` survived).
+        // A point in µm becomes metres, to the bit.
         assert!(matches!(
             push_target(None, None, Some(5.0), Some(6.0), 100.0),
             Ok(MoveTarget::Point((x, y))) if x == 5.0 * 1e-6 && y == 6.0 * 1e-6
@@ -350,8 +349,7 @@ mod tests {
         );
     }
 
-    /// Issue 27.9: the edges the refusal states are accepted, in µm as sent; a nanometre past
-    /// them is not.
+    /// The edges the refusal states are accepted, in µm as sent; a nanometre past them is not.
     #[test]
     fn a_target_on_the_stated_edge_is_on_the_stage() {
         let (r, range) = (500.0 * 1e-9, 100.0 * 1e-6);

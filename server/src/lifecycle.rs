@@ -163,7 +163,7 @@ async fn watch_token_file(st: Arc<AppState>) {
 /// Raises the soft limit of open files to the hard one (as nginx's `worker_rlimit_nofile`): the
 /// slowloris guard bounds how long a connection that sends no headers lives, not how many there
 /// are, and at Debian's default soft limit of 1024 one client holding ~1100 half-open sockets (TLS
-/// handshakes never finished) made `/api/status` time out for everyone (issue 27's review).
+/// handshakes never finished) makes `/api/status` time out for everyone.
 fn raise_open_files() {
     let mut lim = libc::rlimit {
         rlim_cur: 0,

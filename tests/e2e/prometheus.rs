@@ -27,7 +27,7 @@ impl Drop for Proc {
 /// (`nanopush serve`'s default address and port) and loads `alerts.yml`. `promtool check
 /// config` checks its syntax only.
 #[test]
-fn the_shipped_config_scrapes_127_0_0_1_8080_every_5_s_with_the_alert_rules() {
+fn the_shipped_prometheus_config_scrapes_the_default_server_with_alerts() {
     let text = std::fs::read_to_string(workspace().join("deploy/prometheus/prometheus.yml")).unwrap();
     let lines: Vec<&str> = text
         .lines()

@@ -1,4 +1,4 @@
-//! Issue 27, item 4: the audit trail. Every command that changes the instrument, with who sent
+//! The audit trail. Every command that changes the instrument, with who sent
 //! it, from where, and what became of it, is in `audit/audit.jsonl` of the data directory, and
 //! still there, whole, after the server is killed with SIGKILL; each record names who made it.
 
@@ -24,7 +24,7 @@ fn audit_lines(records: &std::path::Path) -> Vec<Value> {
 /// their code), and the push's end under Alice's name; the push and scan records name Alice.
 /// Then the server is killed with SIGKILL: every line is still there, whole.
 #[test]
-fn issue_27_every_command_is_in_the_audit_log_with_its_person_and_survives_kill_9() {
+fn every_command_is_audited_with_its_person_and_survives_sigkill() {
     let (mut srv, tokens) = named_server(
         "audit",
         &[("alice", "operator"), ("bob", "viewer")],

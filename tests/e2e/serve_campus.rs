@@ -1,5 +1,5 @@
-//! `nanopush serve` as a careless or hostile client on a lab network finds it (issue 27, items
-//! 1-11): the slowloris guard without its upgrade bypass, records streamed and listed in pages,
+//! `nanopush serve` as a careless or hostile client on a lab network finds it: the slowloris
+//! guard without an upgrade bypass, records streamed and listed in pages,
 //! a slow reader told `lagged` and kept, a data directory held by one server at a time and
 //! checked at start, duplicate and inapplicable fields refused, the stage's edge as stated,
 //! messages over 8 MiB closed with 1009, and a late joiner told that a push is being prepared.
@@ -47,9 +47,9 @@ fn closed_by_server(s: &mut TcpStream) -> bool {
     }
 }
 
-/// Item 1: a request that asks for `Upgrade: websocket` but is not upgraded (a plain route, or
-/// a refused token) leaves the connection under the guard: the next request's headers must still
-/// arrive within the header time-out (before, the guard was off for good on that connection).
+/// A request that asks for `Upgrade: websocket` but is not upgraded (a plain route, or a refused
+/// token) leaves the connection under the guard: the next request's headers must still arrive
+/// within the header time-out (the header alone does not switch the guard off).
 #[test]
 fn an_upgrade_header_that_is_not_upgraded_leaves_the_slowloris_guard_on() {
     let srv = start("upgrade-bypass", &["--header-timeout-s", "1"]);
@@ -82,9 +82,9 @@ fn rss_kb(pid: u32) -> u64 {
     nanopush_e2e::procfs::status_field(&format!("/proc/{pid}/status"), "VmRSS").unwrap()
 }
 
-/// Item 2: downloads are streamed. Twelve clients that ask for a 32 MB record and do not read it
-/// cost the server a few buffers each, not the file each (before: 12 × 32 MB resident); and a
-/// client that reads gets every byte.
+/// Downloads are streamed. Twelve clients that ask for a 32 MB record and do not read it cost
+/// the server a few buffers each, not the file each (12 × 32 MB resident); and a client that
+/// reads gets every byte.
 #[test]
 fn record_downloads_are_streamed_not_read_whole() {
     const MB: usize = 1 << 20;
@@ -123,7 +123,7 @@ fn record_downloads_are_streamed_not_read_whole() {
     drop(idle);
 }
 
-/// Item 3: `/api/records` comes in pages (newest first; `limit`, `offset`, the total in
+/// `/api/records` comes in pages (newest first; `limit`, `offset`, the total in
 /// `X-Total-Count`), so 20,000 records are not one answer of megabytes; every record is reached
 /// page by page, and bad paging values name the allowed range.
 #[test]
@@ -171,7 +171,7 @@ fn the_record_listing_comes_in_pages() {
     assert!(why.contains("limit") && why.contains("[1, 1000]"), "{why}");
 }
 
-/// Item 4: a viewer that reads 15 messages a second (telemetry at 60 Hz) is told what it missed
+/// A viewer that reads 15 messages a second (telemetry at 60 Hz) is told what it missed
 /// with `lagged` and gets recent frames, and stays connected: it answers every ping, late only
 /// by what it has not read yet. Checked by the frames' numbers: the slow reader's newest frame
 /// is within 5 s (300 frames) of a fast reader's, and every number it passed over was announced.
@@ -260,9 +260,9 @@ fn a_slow_reader_is_told_it_lagged_and_is_not_closed() {
     });
 }
 
-/// Item 5: one data directory, one server. A second server given a data directory a live server
-/// holds refuses to start and names it (before: it started, deleted the first one's unfinished
-/// trace and wrote records of the same names); the first one's records go on. Record names carry
+/// One data directory, one server. A second server given a data directory a live server holds
+/// refuses to start and names it (else it would delete the first one's unfinished trace and
+/// write records of the same names); the first one's records go on. Record names carry
 /// the server run (`welcome`'s `instance`), so two runs never write the same name.
 #[test]
 fn a_data_directory_is_held_by_one_server_and_record_names_name_the_run() {
@@ -303,8 +303,8 @@ fn a_data_directory_is_held_by_one_server_and_record_names_name_the_run() {
     });
 }
 
-/// Item 11: a data directory the server cannot write is found at start, with a clear error that
-/// names it (before: the server started and the first record failed). As root (who writes
+/// A data directory the server cannot write is found at start, with a clear error that names it
+/// (not at the first record). As root (who writes
 /// through permissions) the directory is one of `/proc`, which nobody can write.
 #[test]
 fn a_data_directory_that_cannot_be_written_stops_the_start() {
@@ -341,8 +341,8 @@ fn a_data_directory_that_cannot_be_written_stops_the_start() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Item 7: a key given twice is refused as `malformed`, naming the key, and nothing happens
-/// (before: the last one won, so `{"type":"ping","type":"stop"}` stopped a push).
+/// A key given twice is refused as `malformed`, naming the key, and nothing happens (were the
+/// last one to win, `{"type":"ping","type":"stop"}` would stop a push).
 #[test]
 fn duplicate_keys_are_refused_naming_the_key() {
     let srv = start("dupkeys", &[]);
@@ -372,8 +372,8 @@ fn duplicate_keys_are_refused_naming_the_key() {
     });
 }
 
-/// Item 8: a field that does not belong to the command is refused, naming it (before: accepted
-/// and dropped without a word); a stream is a name, not an object.
+/// A field that does not belong to the command is refused, naming it (not dropped without a
+/// word); a stream is a name, not an object.
 #[test]
 fn inapplicable_fields_are_refused_naming_the_field() {
     let srv = start("inapplicable", &[]);
@@ -411,10 +411,10 @@ fn inapplicable_fields_are_refused_naming_the_field() {
     });
 }
 
-/// Item 10: a message over 8 MiB closes the connection with 1009 (message too big), as the
+/// A message over 8 MiB closes the connection with 1009 (message too big), as the
 /// protocol says, not a bare end of stream.
 #[test]
-fn a_message_over_8_mib_is_closed_with_1009() {
+fn a_message_over_the_hard_cap_is_closed_as_too_big() {
     let srv = start("huge", &[]);
     runtime().block_on(async {
         let (ws, _) = welcomed(&srv.addr, None).await;
@@ -463,7 +463,7 @@ fn crowded(extra: usize) -> String {
     s
 }
 
-/// Also in issue 27: while a push is being prepared (a crowded sample takes seconds), a client
+/// While a push is being prepared (a crowded sample takes seconds), a client
 /// that joins is told so: its `state` says `preparing`, not `idle`.
 #[test]
 fn a_late_joiner_is_told_a_push_is_being_prepared() {
@@ -494,9 +494,9 @@ fn a_late_joiner_is_told_a_push_is_being_prepared() {
     });
 }
 
-/// Issue 27's review: the slowloris guard bounds how long a socket that sends no headers lives,
-/// not how many there are; at the soft limit of 1024 open files, one client holding ~1100
-/// half-open TLS handshakes made `/api/status` time out for everyone. Started with a soft limit
+/// The slowloris guard bounds how long a socket that sends no headers lives, not how many there
+/// are; at the soft limit of 1024 open files, one client holding ~1100 half-open TLS handshakes
+/// would make `/api/status` time out for everyone. Started with a soft limit
 /// of 1024, the server raises it to the hard limit.
 #[test]
 fn the_server_raises_its_open_files_limit_to_the_hard_limit() {
@@ -530,13 +530,11 @@ fn the_server_raises_its_open_files_limit_to_the_hard_limit() {
     assert_eq!(v[3], v[4], "{line}");
 }
 
-// The hostile review's cases (issue 27, after the merge): each failed before its fix.
-
 /// hyper accepts a request whose lines end in a bare LF, and upgrades it; the slowloris guard
 /// only recognises the end of a header block as CRLF CRLF, so the upgraded WebSocket stays
 /// under the header time-out and is cut after it, although the client is alive.
 #[test]
-fn a_websocket_upgraded_from_bare_lf_header_lines_outlives_the_header_timeout() {
+fn a_websocket_upgraded_from_bare_lf_headers_outlives_the_header_timeout() {
     let srv = start("campus-lf", &["--header-timeout-s", "1"]);
     let mut s = TcpStream::connect(&srv.addr).unwrap();
     let req = format!(
@@ -565,14 +563,13 @@ fn a_websocket_upgraded_from_bare_lf_header_lines_outlives_the_header_timeout() 
     }
 }
 
-/// The audit log was written from an unbounded queue, a line and a sync at a time: a viewer's
-/// refused commands (each one logged) queued ahead of the operator's, so an operator's command
-/// answered `ok` was not on disk for as long as the queue took to drain (30,000 lines from 60
-/// viewer sockets of one address took ~40 s), and a kill -9 then lost it. Now refusals are
-/// capped in flight and lines go in group commits: the operator's lines are on disk within 5 s
-/// of their `ok` (milliseconds, unloaded), and whole after a kill -9.
+/// A viewer's refused commands (each one logged) do not queue ahead of the operator's: refusals
+/// are capped in flight and lines go in group commits, so the operator's lines are on disk
+/// within 5 s of their `ok` (milliseconds, unloaded), and whole after a kill -9. (From an
+/// unbounded queue, a line and a sync at a time, 30,000 lines from 60 viewer sockets of one
+/// address would take ~40 s to drain, and a kill -9 meanwhile would lose the operator's.)
 #[test]
-fn an_operator_command_answered_ok_is_in_the_audit_log_despite_a_viewer_flood() {
+fn an_operators_accepted_command_is_audited_despite_a_viewer_flood() {
     use crate::util::{TOKEN, connect, ok, runtime, send, welcomed};
     use futures_util::StreamExt;
     use serde_json::json;
@@ -641,10 +638,10 @@ fn an_operator_command_answered_ok_is_in_the_audit_log_despite_a_viewer_flood() 
 }
 
 /// A push accepted (`ok`, logged) and stopped while it is still being located and planned ends
-/// in a `run_done` to everyone ("stopped before the push began"), but the audit log gets no
-/// `run_done` line: the log says the push was accepted and never how it ended. (So do the
-/// other ends before the loop runs it: a plan refused, already there, a full queue:
-/// `push_job.rs` `run_done_failed` and the already-there branch broadcast without auditing.)
+/// in a `run_done` to everyone ("stopped before the push began") and in the audit log, which
+/// says how it ended as well as that it was accepted. (So do the other ends before the loop
+/// runs it: a plan refused, already there, a full queue: `push/launch.rs` `run_done_failed` and
+/// `push/judge.rs` `already_there`.)
 #[test]
 fn a_push_stopped_before_it_began_has_its_end_in_the_audit_log() {
     use crate::util::{TOKEN, is, ok, runtime, until, welcomed};
@@ -677,11 +674,9 @@ fn a_push_stopped_before_it_began_has_its_end_in_the_audit_log() {
     }
 }
 
-/// Item 9 half fixed: a target exactly on the edge the refusal states is answered `ok`, and
-/// then refused when the push is planned, with other bounds (the located radius's: on the
-/// paper scene `to_x_um: 1` → ok, then run_done `plan` "target (1.000, 50.000) µm is out of
-/// range for a particle 1.000 µm in radius; allowed: [1.001, 98.999]"). The serve_campus test
-/// accepts either end; a person on the stated edge still gets a refusal.
+/// A target exactly on the edge the refusal states is answered `ok`, and not refused when the
+/// push is planned with other bounds (the located radius's would be a fraction of a nanometre
+/// off: `to_x_um: 1` on the paper scene, ok, then a `plan` run_done allowing [1.001, 98.999]).
 #[test]
 fn a_push_target_on_the_stated_edge_is_not_refused_when_planned() {
     use crate::util::{is, operator, reply, runtime, send, until};

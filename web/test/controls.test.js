@@ -76,7 +76,7 @@ test('texts: particles in the list, the push running, replies', () => {
   assert.equal(pushNowText(push, 9), 'Pushing #1 (you) to (45.000, 32.500) µm');
   assert.equal(pushNowText(push, 4), 'Pushing #1 (client 9) to (45.000, 32.500) µm');
   assert.equal(replyText({ id: 3, status: 'ok' }), '#3 ok');
-  // A push's ok means accepted, not done well (issue 26: a green "#3 ok" beside a push that failed to plan).
+  // A push's ok means accepted, not done well (a green "#3 ok" would stand beside a push that failed to plan).
   assert.equal(replyText({ id: 5, type: 'push', status: 'ok' }), '#5 accepted');
   assert.equal(replyText({ id: 4, status: 'error', code: 'no_lease', message: 'push needs the lease' }), '#4 no_lease: push needs the lease');
 });
@@ -85,7 +85,7 @@ test('the scan form starts at the scene\'s own scan, pixels within [8, 512]', ()
   assert.deepEqual(scanFormDefaults({ scan: { size_um: 0.2, pixels: 1024 } }), { size: '0.2', pixels: '512' });
   assert.deepEqual(scanFormDefaults({ scan: { pixels: 4 } }), { pixels: '8' });
   assert.deepEqual(scanFormDefaults({}), {});
-  // Issue 26: 50 µm at 256 px (195 nm a pixel) cannot show a 14 nm particle: the default scan
+  // 50 µm at 256 px (195 nm a pixel) cannot show a 14 nm particle: the default scan
   // is made small enough for the smallest particle to span 2 pixels (14 nm × 256 / 2 = 1.8 µm).
   assert.deepEqual(scanFormDefaults({ scan: { size_um: 50, pixels: 256 }, particles: [{ radius_nm: 7 }, { radius_nm: 50 }] }), { size: '1.8', pixels: '256' });
   assert.deepEqual(scanFormDefaults({ scan: { size_um: 16, pixels: 32 }, particles: [{ radius_nm: 500 }] }), { size: '16', pixels: '32' }, 'big enough already');

@@ -20,7 +20,7 @@
 use serde::{Deserialize, Serialize};
 
 /// The streams a client can subscribe to. Nothing is produced for a stream no client wants.
-/// Read from its name only (a derived reader also took `{"tip": null}`).
+/// Read from its name only (a derived reader would also take `{"tip": null}`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Stream {
@@ -204,8 +204,8 @@ mod tests {
         assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"fly"}"#).is_err());
     }
 
-    /// Issue 27.8: a stream is its name; `{"tip": null}` (which a derived reader took) and
-    /// unknown names are refused, naming the streams there are.
+    /// A stream is its name; `{"tip": null}` (which a derived reader would take) and unknown
+    /// names are refused, naming the streams there are.
     #[test]
     fn a_stream_is_a_name_only() {
         for bad in [r#"[{"tip":null}]"#, r#"["wind"]"#, "[1]"] {

@@ -120,8 +120,8 @@ mod tests {
     }
 
     /// Every byte of every header field is read from its own place: fields whose four bytes all
-    /// differ survive the round trip (cargo-mutants: reading byte `k - 1` for `k + 1` survived on
-    /// values with only a low byte); a line of no pixels is a 32-byte frame, not a short one.
+    /// differ survive the round trip (values with only a low byte would not tell byte `k - 1`
+    /// from `k + 1`); a line of no pixels is a 32-byte frame, not a short one.
     #[test]
     fn a_scan_line_header_round_trips_with_every_byte_set() {
         let h = ScanLineHeader {

@@ -277,10 +277,9 @@ mod tests {
     use super::web_build_problem;
 
     /// A web client not built, or built before its sources changed, is said at start with the
-    /// command that builds it (review of issue 26: after a `git pull`, the old page was served
-    /// without a word).
+    /// command that builds it (after a `git pull`, the old page would be served without a word).
     #[test]
-    fn a_web_client_missing_or_older_than_its_sources_is_named_with_the_build_command() {
+    fn a_web_client_missing_or_stale_is_named_with_its_build_command() {
         let web = std::env::temp_dir().join(format!("nanopush-webbuild-{}", std::process::id()));
         std::fs::create_dir_all(web.join("src")).unwrap();
         std::fs::create_dir_all(web.join("dist")).unwrap();

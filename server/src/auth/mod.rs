@@ -3,7 +3,7 @@
 //! rate-limited per address, and the live sessions closed when their token is revoked.
 //!
 //! Two modes. Without a token file (`make run`), one generated operator token and an optional
-//! viewer token, compared in constant time, as before; the people are named `operator`, `viewer`
+//! viewer token, compared in constant time; the people are named `operator`, `viewer`
 //! and `anonymous` (a viewer when no viewer token is set). With `--token-file`, every connection
 //! needs a token of the file ([`tokens`]): one per person, with a role; the file is re-read when
 //! it changes ([`reload`]), and the sessions of a token no longer in it (or whose role changed)

@@ -38,7 +38,7 @@ pub(crate) fn prepare_push(st: &AppState, mv: Move, target: MoveTarget) {
     // A target the particle cannot reach whole, with the tip behind it, fails now, not after a
     // push that runs into the stage's edge until its time-out.
     // Against the scene's radius, as the command's check stated the range (the located one
-    // differs by a fraction of a nanometre: a target on the stated edge was accepted, then
+    // differs by a fraction of a nanometre: a target on the stated edge would be accepted, then
     // refused here with other bounds).
     if let Err(r) = on_stage(plan.target, part.radius_nm * 1e-9, f.stage.range_um * 1e-6) {
         return run_done_failed(

@@ -72,7 +72,7 @@ async fn next_json(rx: &mut futures_channel::mpsc::UnboundedReceiver<Message>) -
 }
 
 #[tokio::test]
-async fn a_session_over_channels_welcomes_takes_the_lease_and_gives_it_back_when_the_peer_goes() {
+async fn a_session_welcomes_and_frees_the_lease_when_the_peer_goes() {
     let st = test_state();
     let (mut tx, mut rx, task) = connect(&st, Role::Operator);
     let welcome = next_json(&mut rx).await;
@@ -185,9 +185,9 @@ async fn a_shutdown_is_announced_and_the_socket_closed() {
 /// closed after 60 s, a 5 s send budget per frame, a client that reads no reply for 30 s
 /// closed, messages up to 8 MiB refused with `too_large` (above it the connection closes),
 /// SCHED_FIFO priority 50 for the loop. (The 8 places are also tested end to end:
-/// `tests/e2e/serve_hostile.rs::the_operator_token_has_8_places_and_a_ninth_is_refused`.)
+/// `tests/e2e/serve_hostile.rs::the_operator_token_has_its_own_places_and_one_more_is_refused`.)
 #[test]
-fn the_documented_server_limits_8_places_60_s_idle_5_s_send_30_s_replies_8_mib_fifo_50() {
+fn the_server_limits_are_as_documented() {
     assert_eq!(OPERATOR_PLACES, 8);
     assert_eq!(crate::IDLE_HTTP, Duration::from_secs(60));
     assert_eq!(SEND_BUDGET, Duration::from_secs(5));

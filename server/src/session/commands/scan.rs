@@ -29,9 +29,9 @@ pub(super) fn run(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Res
     let f = &st.scene.file;
     let range = f.stage.range_um;
     let base = ScanParams::from_scene(&st.scene);
-    // Checked in the protocol's units (µm), converted once: a full-range square about the
-    // default centre was refused by the rounding of a µm → m → µm round trip. The side
-    // is at least 10 nm (below that a pixel is a fraction of an atom).
+    // Checked in the protocol's units (µm), converted once: the rounding of a µm → m → µm round
+    // trip would refuse a full-range square about the default centre. The side is at least
+    // 10 nm (below that a pixel is a fraction of an atom).
     let size_um = number(
         "size_um",
         size_um.unwrap_or(base.size * 1e6),
