@@ -14,7 +14,7 @@ use tokio::sync::{broadcast, watch};
 
 use crate::control_loop::Shared;
 use crate::metrics::NetMetrics;
-use nanopush_instrument::control::StrategyParams;
+use nanopush_instrument::control::{Prepared, StrategyParams};
 use nanopush_instrument::scan::{Sphere, Surface};
 use nanopush_instrument::scene::Scene;
 
@@ -121,9 +121,7 @@ pub struct Instance {
 impl Instance {
     /// This process, now.
     pub fn now() -> Instance {
-        let started_unix_ms = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_millis() as u64);
+        let started_unix_ms = crate::clock::unix_ms();
         Instance {
             id: format!("{started_unix_ms:x}-{:x}", std::process::id()),
             started_unix_ms,
@@ -182,9 +180,38 @@ pub struct Activity {
     /// derived once from the scene's model on the first push that asks for it: the scene does
     /// not change while the server runs.
     pub plans: Mutex<std::collections::HashMap<(u32, u64), PlanOutcome>>,
-    /// The pushes the loop runs whose move is judged by the scan after them, by run number
-    /// (`push_job::Pending`).
-    pub judging: Mutex<std::collections::HashMap<u64, crate::push_job::Pending>>,
+    /// The pushes the loop runs whose move is judged by the scan after them, by run number.
+    pub judging: Mutex<std::collections::HashMap<u64, Pending>>,
+}
+
+/// A move as the operator asked for it: the particle, the tolerance it must end within, the
+/// `stop` generation it began in, and who asked.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Move {
+    /// Particle id.
+    pub particle: u32,
+    /// `ok` within this of the target, as the scan after the push measures it (m).
+    pub tolerance: f64,
+    /// [`Activity::generation`] when it was asked: a `stop` changes it.
+    pub generation: u64,
+    /// The client that asked.
+    pub by: u32,
+}
+
+/// A push the loop runs, whose move the scan after it judges (`push::judge`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pending {
+    /// The move it belongs to.
+    pub mv: Move,
+    /// The target (m).
+    pub target: (f64, f64),
+    /// The particle's radius in the scene (m): what the command's target was checked against,
+    /// and the local scans' hint.
+    pub radius: f64,
+    /// Which push of the move this is (1, then the corrections).
+    pub attempt: u32,
+    /// Its model prediction and geometry.
+    pub prepared: Prepared,
 }
 
 /// A particle's strategy plan, or why none can push it.
@@ -429,4 +456,34 @@ impl AppState {
 /// A server message as the text frame every client is sent, serialized once.
 pub(crate) fn to_text(m: &ServerMessage) -> Utf8Bytes {
     serde_json::to_string(m).unwrap_or_else(|_| "{}".into()).into()
+}
+
+/// A server's state on the default scene, with no loop running.
+#[cfg(test)]
+pub(crate) fn test_state() -> Arc<AppState> {
+    let scene = Scene::default_scene();
+    let tick = 1e-3;
+    let base = nanopush_instrument::scan::ScanParams::from_scene(&scene);
+    let afm = nanopush_instrument::afm::Afm::from_scene(&scene, base.centre_x, base.centre_y, tick);
+    let shared = Arc::new(Shared::new(&afm));
+    let cfg = ServeConfig {
+        operator_token: "op".into(),
+        viewer_token: None,
+        allow_origins: Vec::new(),
+        max_message_bytes: 64 * 1024,
+        max_rate: 50.0,
+        max_clients: 64,
+        max_clients_per_address: 16,
+        ws_ping: Duration::from_secs(10),
+        ws_timeout: Duration::from_secs(30),
+        header_timeout: Duration::from_secs(10),
+        data_dir: std::env::temp_dir(),
+        web_dir: std::env::temp_dir(),
+        haptic: crate::haptic::HapticMode::None,
+        scan_line_hz: 100.0,
+        telemetry_hz: 60.0,
+        access: Default::default(),
+    };
+    let params = scene.strategy_params(tick);
+    Arc::new(AppState::new(cfg, scene, shared, params))
 }

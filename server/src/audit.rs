@@ -1,5 +1,5 @@
-//! The audit trail: every command that changes the instrument (the lease taken, given back or
-//! lost; push, scan, stop; haptic engage, release, re-centre and scale) and every push's end is
+//! The audit trail: every command the table of commands audits (`session/commands`: those that
+//! change the instrument), the lease lost with its holder's connection, and every push's end are
 //! appended to `audit/audit.jsonl` in the data directory, one JSON object a line: `time` (UTC,
 //! RFC 3339), `unix_ms`, `person`, `role`, `address`, `client`, `command`, its `args`, and the
 //! `outcome` (`ok`, or `refused` with the error's `code` and `message`).
@@ -7,13 +7,14 @@
 //! A thread of its own writes the lines queued since its last write with one `write` and one
 //! `fdatasync` (a group commit): a line the log holds is whole and on disk, whatever happens to
 //! the server afterwards (kill -9, power loss), and a line is queued before its command's answer
-//! is sent and on disk after one commit (one write and one sync; not timed here). The answer does not wait for the disk:
+//! is sent and on disk after one commit (one write and one sync). The answer does not wait for
+//! the disk:
 //! a command's events (a lease change, a `run_done`) must not overtake its `ok`, and a stop
 //! waits for nothing; a kill -9 before that commit can lose the line of a command whose `ok`
 //! was sent. A write that fails part way (a full disk) is cut back to the last whole line.
 //! Refused commands are logged at most [`REFUSED_IN_FLIGHT`] queued at once: a flood of refused
 //! commands (a viewer's script) cannot queue ahead of the operator's lines or grow without
-//! bound (12,000 queued refusals once kept an operator's `ok`ed commands off the disk for ~40 s);
+//! bound (12,000 queued refusals would keep an operator's `ok`ed commands off the disk for ~40 s);
 //! what it sheds is counted in a line of its own (`refusals_not_logged`) and in `/metrics`. The
 //! log is in a directory of its own, so `/api/records` neither lists nor serves it.
 
@@ -23,13 +24,13 @@ use std::net::IpAddr;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering::Relaxed};
 use std::sync::{Arc, Mutex, mpsc};
-use std::time::{SystemTime, UNIX_EPOCH};
 
-use nanopush_proto::ws::{ClientMessage, ErrorCode, Role};
+use nanopush_proto::ws::{ErrorCode, Role};
 use serde::Serialize;
 
 use crate::auth::Person;
 use crate::auth::tokens::role_name;
+use crate::clock::{rfc3339, unix_ms};
 
 /// Who ran each push (by run number), for its record and its `run_done` line.
 pub type RunPeople = Arc<Mutex<HashMap<u64, String>>>;
@@ -106,56 +107,6 @@ struct Entry<'a> {
     code: Option<ErrorCode>,
     #[serde(skip_serializing_if = "Option::is_none")]
     message: Option<&'a str>,
-}
-
-/// UTC time as RFC 3339 with milliseconds, from ms since the epoch (civil-from-days, H. Hinnant).
-pub fn rfc3339(unix_ms: u64) -> String {
-    let secs = unix_ms / 1000;
-    let days = (secs / 86_400) as i64;
-    let sod = secs % 86_400;
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + i64::from(m <= 2);
-    format!(
-        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}.{:03}Z",
-        sod / 3600,
-        sod / 60 % 60,
-        sod % 60,
-        unix_ms % 1000
-    )
-}
-
-fn now_ms() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as u64)
-}
-
-/// A command's name and arguments, when it changes the instrument (None for `ping`,
-/// `subscribe`).
-pub fn describe(msg: &ClientMessage) -> Option<(&'static str, serde_json::Map<String, serde_json::Value>)> {
-    let name = match msg {
-        ClientMessage::Ping { .. } | ClientMessage::Subscribe { .. } => return None,
-        ClientMessage::TakeLease { .. } => "take_lease",
-        ClientMessage::ReleaseLease { .. } => "release_lease",
-        ClientMessage::Push { .. } => "push",
-        ClientMessage::Scan { .. } => "scan",
-        ClientMessage::Stop { .. } => "stop",
-        ClientMessage::Haptic { .. } => "haptic",
-    };
-    let mut args = match serde_json::to_value(msg) {
-        Ok(serde_json::Value::Object(m)) => m,
-        _ => serde_json::Map::new(),
-    };
-    args.remove("type");
-    args.retain(|_, v| !v.is_null());
-    Some((name, args))
 }
 
 impl Audit {
@@ -244,7 +195,7 @@ impl Audit {
         (command, args): (&str, serde_json::Map<String, serde_json::Value>),
         refused: Option<(ErrorCode, &str)>,
     ) -> Option<Durable> {
-        let unix_ms = now_ms();
+        let unix_ms = unix_ms();
         self.append(
             &Entry {
                 time: rfc3339(unix_ms),
@@ -266,7 +217,7 @@ impl Audit {
     /// Something the server did on an operator's behalf (`lease_lost` when their connection
     /// closed, `run_done` when their push ended), with its `outcome`.
     pub fn event(&self, e: Happened<'_>) {
-        let unix_ms = now_ms();
+        let unix_ms = unix_ms();
         let _ = self.append(
             &Entry {
                 time: rfc3339(unix_ms),
@@ -283,6 +234,27 @@ impl Audit {
             },
             false,
         );
+    }
+
+    /// A push's end (`run_done`), under the person who ran it ([`Audit::runs`], forgotten now),
+    /// with its record.
+    pub fn run_done(&self, run: u64, particle: u32, outcome: &str, failure: Option<&str>, record: Option<&str>) {
+        let person = self.runs.lock().ok().and_then(|mut p| p.remove(&run));
+        let mut args = serde_json::Map::new();
+        args.insert("run".into(), run.into());
+        args.insert("particle".into(), particle.into());
+        if let Some(r) = record {
+            args.insert("record".into(), r.into());
+        }
+        self.event(Happened {
+            person: person.as_deref().unwrap_or("unknown"),
+            address: None,
+            client: None,
+            command: "run_done",
+            args,
+            outcome,
+            message: failure,
+        });
     }
 
     /// The Prometheus text of the counters.
@@ -337,7 +309,7 @@ impl Writer {
             let mut text = String::new();
             let shed = self.shed.load(Relaxed);
             if shed > self.shed_logged {
-                let unix_ms = now_ms();
+                let unix_ms = unix_ms();
                 let said = serde_json::json!({
                     "time": rfc3339(unix_ms), "unix_ms": unix_ms, "person": "-", "role": "-",
                     "address": "-", "command": "refusals_not_logged", "outcome": "shed",
@@ -399,28 +371,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn times_are_utc_rfc3339_with_milliseconds() {
-        assert_eq!(rfc3339(0), "1970-01-01T00:00:00.000Z");
-        assert_eq!(rfc3339(951_782_400_123), "2000-02-29T00:00:00.123Z");
-        assert_eq!(rfc3339(1_798_761_599_999), "2026-12-31T23:59:59.999Z");
-    }
-
-    #[test]
-    fn commands_that_change_the_instrument_are_described_and_the_others_are_not() {
-        let push: ClientMessage =
-            serde_json::from_str(r#"{"type":"push","id":4,"particle":2,"distance_um":0.5,"direction_deg":90}"#)
-                .unwrap();
-        let (name, args) = describe(&push).unwrap();
-        assert_eq!(name, "push");
-        assert_eq!(
-            serde_json::Value::Object(args),
-            serde_json::json!({"id": 4, "particle": 2, "distance_um": 0.5, "direction_deg": 90.0})
-        );
-        let ping: ClientMessage = serde_json::from_str(r#"{"type":"ping"}"#).unwrap();
-        assert!(describe(&ping).is_none());
-    }
-
-    #[test]
     fn each_entry_is_one_whole_json_line_on_disk() {
         let dir = std::env::temp_dir().join(format!("nanopush-audit-{}", std::process::id()));
         let a = Audit::open(&dir, RunPeople::default());
@@ -429,13 +379,13 @@ mod tests {
             role: Role::Operator,
             key: "k".into(),
         };
-        let stop: ClientMessage = serde_json::from_str(r#"{"type":"stop"}"#).unwrap();
-        a.command(&alice, "10.0.0.7".parse().unwrap(), 3, describe(&stop).unwrap(), None);
+        let stop = || ("stop", serde_json::Map::new());
+        a.command(&alice, "10.0.0.7".parse().unwrap(), 3, stop(), None);
         a.command(
             &alice,
             "10.0.0.7".parse().unwrap(),
             3,
-            describe(&stop).unwrap(),
+            stop(),
             Some((ErrorCode::NoLease, "needs the lease")),
         );
         let path = log_path(&dir);

@@ -1,8 +1,8 @@
-//! Checks of client commands: finite numbers, ranges, known particles. Each refusal is a typed
+//! Checks of client commands: one JSON object per message, finite numbers, ranges, a target on
+//! the stage. Each refusal is a typed
 //! error naming the field, the value and the allowed range.
 
-use nanopush_proto::push::{TOLERANCE_NM, TOLERANCE_RANGE_NM};
-use nanopush_proto::ws::{ClientMessage, ErrorCode, HapticAction};
+use nanopush_proto::ws::{Bounds, ClientMessage, ErrorCode};
 
 use nanopush_instrument::control::MoveTarget;
 
@@ -134,48 +134,40 @@ impl<'de> serde::de::Visitor<'de> for UniqueKeys {
     }
 }
 
-/// Refuses a field the command carries but its kind does not use (else it would be dropped
-/// without a word): `haptic`'s `nm_per_mm` and `pull_off_at_hand_n` belong to `scale` only.
-pub fn fields_apply(msg: &ClientMessage) -> Result<(), Refusal> {
-    if let ClientMessage::Haptic {
-        action,
-        nm_per_mm,
-        pull_off_at_hand_n,
-        ..
-    } = msg
-        && *action != HapticAction::Scale
-    {
-        let given = [
-            ("nm_per_mm", nm_per_mm.is_some()),
-            ("pull_off_at_hand_n", pull_off_at_hand_n.is_some()),
-        ];
-        if let Some((field, _)) = given.iter().find(|(_, g)| *g) {
-            let name = serde_json::to_value(action)
-                .ok()
-                .and_then(|v| v.as_str().map(str::to_string))
-                .unwrap_or_default();
-            return Err(Refusal::new(
-                ErrorCode::Invalid,
-                format!("{field} goes with action \"scale\" only; action \"{name}\" takes no other field"),
-            ));
-        }
-    }
-    Ok(())
-}
-
-/// A push's tolerance (m) from its `tolerance_nm` ([`TOLERANCE_NM`] when left out),
-/// checked against [`TOLERANCE_RANGE_NM`].
+/// A push's tolerance (m) from its `tolerance_nm`, as `welcome` states it
+/// ([`Bounds::PUSH_TOLERANCE_NM`]): its default when left out, checked against its range.
 pub fn push_tolerance(tolerance_nm: Option<f64>) -> Result<f64, Refusal> {
-    let (lo, hi) = TOLERANCE_RANGE_NM;
+    let b = Bounds::PUSH_TOLERANCE_NM;
     let t = number(
         "tolerance_nm",
-        tolerance_nm.unwrap_or(TOLERANCE_NM),
-        lo,
-        hi,
+        tolerance_nm.unwrap_or(b.default),
+        b.min,
+        b.max,
         false,
         "nm",
     )?;
     Ok(t * 1e-9)
+}
+
+/// Whether a particle of radius `r` (m) can be pushed to `p` (m): its centre at least a radius
+/// inside the stage's `[0, range]` square, so the particle stays on the stage and the tip, which
+/// stays inside it, can reach behind it. Checked as the planner checks it
+/// ([`nanopush_instrument::control::route::on_stage`]: in µm, the bounds rounded inward to the nanometre, as
+/// the refusal prints them).
+pub fn on_stage(p: (f64, f64), r: f64, range: f64) -> Result<(), Refusal> {
+    if nanopush_instrument::control::route::on_stage(p, r, range) {
+        return Ok(());
+    }
+    let (lo, hi) = nanopush_instrument::control::route::centre_bounds_um(r, range);
+    Err(Refusal::new(
+        ErrorCode::OutOfRange,
+        format!(
+            "target ({:.3}, {:.3}) µm is out of range for a particle {:.3} µm in radius; allowed: [{lo:.3}, {hi:.3}] µm in x and y",
+            p.0 * 1e6,
+            p.1 * 1e6,
+            r * 1e6,
+        ),
+    ))
 }
 
 /// Checks a push's numbers; `range_um` is the stage range.
@@ -225,8 +217,8 @@ pub fn push_target(
 mod tests {
     use super::*;
 
-    /// Issue 12.4: commands are JSON objects, one per message: an array (which serde would read
-    /// as the tagged enum) and several values are refused; a bad object's id is echoed.
+    /// Commands are JSON objects, one per message: an array (which serde would read as the
+    /// tagged enum) and several values are refused; a bad object's id is echoed.
     #[test]
     fn a_command_is_one_json_object() {
         assert!(matches!(
@@ -249,8 +241,8 @@ mod tests {
         assert!(why.contains("not a valid command"), "{why}");
     }
 
-    /// Issue 27.7: a key given twice is refused naming the key, at any depth (before, the last
-    /// one won: `{"type":"ping","type":"stop"}` was a stop).
+    /// A key given twice is refused naming the key, at any depth (serde would keep the last one:
+    /// `{"type":"ping","type":"stop"}` would be a stop).
     #[test]
     fn a_key_given_twice_is_refused_naming_it() {
         for (text, key) in [
@@ -267,24 +259,7 @@ mod tests {
         assert!(parse_command(r#"{"type":"subscribe","streams":["tip","scan"],"id":1}"#).is_ok());
     }
 
-    /// Issue 27.8: `haptic`'s scales go with `scale` only.
-    #[test]
-    fn a_field_of_another_action_is_refused_naming_it() {
-        let m = parse_command(r#"{"type":"haptic","action":"recenter","nm_per_mm":-5}"#).unwrap();
-        let e = fields_apply(&m).unwrap_err();
-        assert_eq!(e.code, ErrorCode::Invalid);
-        assert!(
-            e.message.contains("nm_per_mm") && e.message.contains("\"recenter\""),
-            "{}",
-            e.message
-        );
-        let m = parse_command(r#"{"type":"haptic","action":"engage","pull_off_at_hand_n":1e300}"#).unwrap();
-        assert!(fields_apply(&m).unwrap_err().message.contains("pull_off_at_hand_n"));
-        let m = parse_command(r#"{"type":"haptic","action":"scale","nm_per_mm":5}"#).unwrap();
-        assert_eq!(fields_apply(&m), Ok(()));
-    }
-
-    /// The review of issue 24: `tolerance_nm: 1e-320` echoed 330 digits.
+    /// A refusal does not echo `tolerance_nm: 1e-320` in 330 digits.
     #[test]
     fn a_refusal_shows_a_tiny_or_huge_number_in_scientific_notation() {
         let e = push_tolerance(Some(1e-320)).unwrap_err();
@@ -297,7 +272,7 @@ mod tests {
     }
 
     #[test]
-    fn a_push_tolerance_defaults_to_25_nm_and_is_checked() {
+    fn a_push_tolerance_has_a_default_and_is_checked() {
         assert_eq!(push_tolerance(None), Ok(25.0 * 1e-9));
         assert_eq!(push_tolerance(Some(1.0)), Ok(1.0 * 1e-9));
         let e = push_tolerance(Some(0.5)).unwrap_err();
@@ -327,8 +302,7 @@ mod tests {
     }
 
     /// The bounds the message prints are the bounds checked: a closed end is allowed, an open
-    /// one is not, and the next double past either end is refused (cargo-mutants: `> hi` as
-    /// `>= hi` survived).
+    /// one is not, and the next double past either end is refused (`> hi` is not `>= hi`).
     #[test]
     fn each_end_of_a_range_is_as_the_message_says() {
         assert_eq!(number("x", 100.0, 0.0, 100.0, false, "µm"), Ok(100.0));
@@ -354,7 +328,7 @@ mod tests {
             push_target(Some(2.0), Some(90.0), None, None, 100.0),
             Ok(MoveTarget::Distance { distance, direction }) if (distance - 2e-6).abs() < 1e-18 && direction.1 > 0.99
         ));
-        // A point in µm becomes metres (cargo-mutants: the conversion's `*` survived).
+        // A point in µm becomes metres, to the bit.
         assert!(matches!(
             push_target(None, None, Some(5.0), Some(6.0), 100.0),
             Ok(MoveTarget::Point((x, y))) if x == 5.0 * 1e-6 && y == 6.0 * 1e-6
@@ -373,5 +347,22 @@ mod tests {
                 .code,
             ErrorCode::NotFinite
         );
+    }
+
+    /// The edges the refusal states are accepted, in µm as sent; a nanometre past them is not.
+    #[test]
+    fn a_target_on_the_stated_edge_is_on_the_stage() {
+        let (r, range) = (500.0 * 1e-9, 100.0 * 1e-6);
+        for edge in [0.5, 99.5] {
+            assert_eq!(on_stage((edge * 1e-6, 30.0 * 1e-6), r, range), Ok(()), "{edge}");
+        }
+        for past in [0.499, 99.501] {
+            let e = on_stage((past * 1e-6, 30.0 * 1e-6), r, range).unwrap_err();
+            assert!(e.message.contains("allowed: [0.500, 99.500] µm"), "{}", e.message);
+        }
+        // A radius between nanometres: the bounds are rounded inward, and the stated one holds.
+        let e = on_stage((0.0, 0.0), 251.37e-9, range).unwrap_err();
+        assert!(e.message.contains("allowed: [0.252, 99.748] µm"), "{}", e.message);
+        assert_eq!(on_stage((0.252e-6, 99.748e-6), 251.37e-9, range), Ok(()));
     }
 }

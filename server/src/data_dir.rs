@@ -1,8 +1,8 @@
 //! The data directory, held by one server at a time and proven writable at start.
 //!
-//! Two servers sharing a data directory lost and mixed records: the second one's start-up
-//! removed the first one's unfinished `.partial` trace, and scans of the same second got the
-//! same name. A server therefore holds its data directory for its whole run with an exclusive
+//! Two servers sharing a data directory would lose and mix records: the second one's start-up
+//! would remove the first one's unfinished `.partial` trace, and scans of the same second would
+//! get the same name. A server therefore holds its data directory for its whole run with an exclusive
 //! `flock(2)` on `DATA/.nanopush.lock` (which holds its pid); a second server given the same
 //! directory refuses to start and names the holder. The kernel drops the lock when the process
 //! ends however it ends (`kill -9` included), so a crashed server never blocks the next one, and
@@ -76,7 +76,7 @@ pub fn hold(dir: &Path) -> Result<HeldDataDir, DataDirError> {
         .create(true)
         .truncate(false)
         // Never through a symlink: the lock file is truncated and rewritten below, and a link
-        // planted there would have its target overwritten (issue 27's review).
+        // planted there would have its target overwritten.
         .custom_flags(libc::O_NOFOLLOW)
         .open(dir.join(LOCK_FILE))
         .map_err(not_writable("opening its lock file (not a symbolic link)"))?;
@@ -128,8 +128,7 @@ pub fn writable(dir: &Path) -> bool {
 mod tests {
     use super::*;
 
-    /// Issue 27.5: one holder at a time, the second named the first's pid; the lock goes with
-    /// its holder.
+    /// One holder at a time, the second told the first's pid; the lock goes with its holder.
     #[test]
     fn a_held_directory_is_refused_naming_its_holder_until_released() {
         let dir = std::env::temp_dir().join(format!("nanopush-held-{}", std::process::id()));
@@ -154,10 +153,10 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
-    /// Issue 27's review: a symbolic link planted as the lock file is refused, not followed (its
-    /// target was truncated and overwritten with the server's pid).
+    /// A symbolic link planted as the lock file is refused, not followed (its target would be
+    /// truncated and overwritten with the server's pid).
     #[test]
-    fn a_lock_file_that_is_a_symbolic_link_is_refused_and_its_target_left_alone() {
+    fn a_lock_file_that_is_a_symlink_is_refused_and_its_target_kept() {
         let dir = std::env::temp_dir().join(format!("nanopush-held-link-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
@@ -170,7 +169,7 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
-    /// Issue 27.11: a directory nobody can write (in /proc, even for root) is refused with the
+    /// A directory nobody can write (in /proc, even for root) is refused with the
     /// reason, and is not counted writable.
     #[test]
     fn a_directory_that_cannot_be_written_is_refused() {

@@ -223,7 +223,7 @@ mod tests {
     }
 
     #[tokio::test]
-    async fn an_overflow_is_reported_once_as_the_numbers_lost_and_renew_starts_afresh() {
+    async fn an_overflow_is_reported_once_as_the_numbers_lost_and_renew_resets() {
         let (lease, all, mut f) = channels(4);
         f.hold(true, &lease);
         send(&lease, &all, 1);

@@ -8,8 +8,8 @@
 //! whether that block asked for `Upgrade: websocket`. The API has no request bodies, so bytes
 //! after a header block begin the next request. Asking is not enough: the guard lets go only
 //! when the server's answer is `101 Switching Protocols`. A refused upgrade (401, 403, 429, 503)
-//! or an upgrade header on a plain route leaves the connection guarded (before, the header alone
-//! switched the time-outs off for good: a slowloris bypass).
+//! or an upgrade header on a plain route leaves the connection guarded (were the header alone to
+//! switch the time-outs off for good, it would be a slowloris bypass).
 
 use std::io;
 use std::net::SocketAddr;
@@ -252,7 +252,7 @@ mod tests {
         assert_eq!(e.kind(), io::ErrorKind::TimedOut);
     }
 
-    /// Issue 27.1: an upgrade asked for and refused (here 401) leaves the connection guarded:
+    /// An upgrade asked for and refused (here 401) leaves the connection guarded:
     /// the next request's headers are timed again.
     #[tokio::test]
     async fn an_upgrade_refused_leaves_the_guard_on() {

@@ -126,7 +126,7 @@ pub async fn run(
     };
     started(&Started { addr, url });
     let telemetry = tokio::spawn(telemetry::telemetry_task(state.clone(), ev_rx));
-    tokio::spawn(auth::watch_token_file(state.clone()));
+    tokio::spawn(watch_token_file(state.clone()));
     let threads = Threads {
         recorder,
         control_loop: loop_thread,
@@ -141,11 +141,29 @@ pub async fn run(
     })
 }
 
-/// Binds the listening socket; returns it with the address it got.
+/// Looks at the token file every [`auth::FILE_POLL`] while the server runs.
+async fn watch_token_file(st: Arc<AppState>) {
+    if !st.auth.is_named() {
+        return;
+    }
+    let mut shutdown = st.channels.shutdown.subscribe();
+    let mut tick = tokio::time::interval(auth::FILE_POLL);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tokio::select! {
+            _ = tick.tick() => {
+                let st2 = st.clone();
+                let _ = tokio::task::spawn_blocking(move || st2.auth.reload_if_changed()).await;
+            }
+            _ = shutdown.changed() => break,
+        }
+    }
+}
+
 /// Raises the soft limit of open files to the hard one (as nginx's `worker_rlimit_nofile`): the
 /// slowloris guard bounds how long a connection that sends no headers lives, not how many there
 /// are, and at Debian's default soft limit of 1024 one client holding ~1100 half-open sockets (TLS
-/// handshakes never finished) made `/api/status` time out for everyone (issue 27's review).
+/// handshakes never finished) makes `/api/status` time out for everyone.
 fn raise_open_files() {
     let mut lim = libc::rlimit {
         rlim_cur: 0,
@@ -163,6 +181,7 @@ fn raise_open_files() {
     }
 }
 
+/// Binds the listening socket; returns it with the address it got.
 async fn bind_to(bind: SocketAddr) -> Result<(tokio::net::TcpListener, SocketAddr), ServeError> {
     let listener = tokio::net::TcpListener::bind(bind)
         .await

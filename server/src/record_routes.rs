@@ -2,10 +2,10 @@
 //! from a listing reused while the directory is unchanged, and `/api/records/NAME` streamed from
 //! the file in chunks.
 //!
-//! A data directory of 50,000 records listed whole was a 4.3 MB answer built on an async worker
-//! (one of two on the lab's machine), and each download was read whole into memory (40 clients
-//! that did not read a 20 MB trace held 860 MB). Now a page holds at most [`PAGE_MAX`] records
-//! and a download holds one chunk per connection at a time.
+//! A data directory of 50,000 records listed whole would be a 4.3 MB answer built on an async
+//! worker (one of two on the lab's machine), and a download read whole into memory would let 40
+//! clients that do not read a 20 MB trace hold 860 MB. So a page holds at most [`PAGE_MAX`]
+//! records and a download holds one chunk per connection at a time.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
@@ -58,7 +58,7 @@ impl Page {
     }
 }
 
-/// One page of the records in `dir`, newest first, as JSON (an array, as before paging), with
+/// One page of the records in `dir`, newest first, as a JSON array, with
 /// the number of records in `X-Total-Count`. Listed, sorted and serialised on a blocking thread.
 pub async fn list_page(dir: PathBuf, page: Page) -> Response {
     let (offset, limit) = match page.bounds() {

@@ -5,19 +5,15 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 use serde::Serialize;
 
 use nanopush_instrument::files::partial;
 pub use nanopush_instrument::files::write_atomic;
 
+use crate::clock::{unix_now, unix_secs};
 use crate::control_loop::{LoopEvent, RecordMsg, Shared};
-
-/// Seconds since the Unix epoch.
-pub fn unix_now() -> u64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs())
-}
 
 /// One entry of `/api/records`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -62,11 +58,7 @@ pub fn list(dir: &Path) -> std::io::Result<Vec<RecordEntry>> {
         }
         let Ok(meta) = e.metadata() else { continue };
         let kind = name.split('-').next().unwrap_or("").to_string();
-        let modified = meta
-            .modified()
-            .ok()
-            .and_then(|m| m.duration_since(UNIX_EPOCH).ok())
-            .map_or(0, |d| d.as_secs());
+        let modified = meta.modified().map_or(0, unix_secs);
         out.push(RecordEntry {
             name,
             kind,

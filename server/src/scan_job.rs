@@ -8,7 +8,8 @@ use axum::extract::ws::Message;
 use nanopush_proto::ws::{ScanLineHeader, ScanNow, ServerMessage};
 
 use crate::app_state::{AppState, to_text};
-use crate::records::{self, write_atomic};
+use crate::clock::unix_now;
+use crate::records::write_atomic;
 use nanopush_instrument::scan::{HeightImage, ScanParams, Scanner, Tip, find_particles, write_gsf};
 
 /// A scan on its own thread: lines at the scan line rate to the `scan` stream, then the GSF
@@ -115,7 +116,7 @@ fn write_record(
 ) -> (Option<String>, Option<String>) {
     let (mut record, mut record_error) = (None, None);
     // The server run in the name: two runs' scans of the same second never share one.
-    let stem = format!("scan-{}-{}-{scan_id}", records::unix_now(), st.instance.id);
+    let stem = format!("scan-{}-{}-{scan_id}", unix_now(), st.instance.id);
     let mut gsf = Vec::new();
     let prepared = write_gsf(&mut gsf, img, &stem)
         .map_err(|e| e.to_string())

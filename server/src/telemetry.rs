@@ -10,7 +10,7 @@ use tokio::sync::mpsc;
 use crate::app_state::{AppState, to_text};
 use crate::control_loop::{LoopEvent, PUSHED};
 use crate::haptic::api::haptic_telemetry;
-use crate::judge;
+use crate::push::judge;
 use crate::records;
 
 /// A record's name, or the reason it is missing, as the two fields of a message.
@@ -19,33 +19,6 @@ fn split(r: records::Recorded) -> (Option<String>, Option<String>) {
         Ok(name) => (Some(name), None),
         Err(why) => (None, Some(why)),
     }
-}
-
-/// A push's end in the audit log, under the person who ran it.
-pub(crate) fn audit_run_done(
-    st: &AppState,
-    run: u64,
-    particle: u32,
-    outcome: &str,
-    failure: Option<&str>,
-    record: Option<&str>,
-) {
-    let person = st.audit.runs.lock().ok().and_then(|mut p| p.remove(&run));
-    let mut args = serde_json::Map::new();
-    args.insert("run".into(), run.into());
-    args.insert("particle".into(), particle.into());
-    if let Some(r) = record {
-        args.insert("record".into(), r.into());
-    }
-    st.audit.event(crate::audit::Happened {
-        person: person.as_deref().unwrap_or("unknown"),
-        address: None,
-        client: None,
-        command: "run_done",
-        args,
-        outcome,
-        message: failure,
-    });
 }
 
 /// Telemetry at `telemetry_hz`, produced only while someone subscribes to `tip`, to the lease
@@ -81,7 +54,7 @@ pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiv
             e = events.recv() => {
                 let Some((LoopEvent::RunDone { run, particle, outcome, failure, estimate, .. }, record)) = e else { break };
                 if outcome == PUSHED {
-                    // The legs ran: the scan after the push decides (`judge.rs`).
+                    // The legs ran: the scan after the push decides (`push/judge.rs`).
                     judge::on_pushed(&st, run, particle, estimate, record);
                     continue;
                 }
@@ -91,7 +64,7 @@ pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiv
                 st.remember(particle, estimate);
                 st.push_ended(true);
                 let (record, record_error) = split(record);
-                audit_run_done(&st, run, particle, outcome, failure.as_deref(), record.as_deref());
+                st.audit.run_done(run, particle, outcome, failure.as_deref(), record.as_deref());
                 st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record, record_error, judged: None });
             }
             _ = shutdown.changed() => {
@@ -101,7 +74,7 @@ pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiv
                         failure = Some("the server shut down before the scan after the push could judge it".into());
                     }
                     let (record, record_error) = split(record);
-                    audit_run_done(&st, run, particle, outcome, failure.as_deref(), record.as_deref());
+                    st.audit.run_done(run, particle, outcome, failure.as_deref(), record.as_deref());
                     st.broadcast_event(&ServerMessage::RunDone { particle, outcome: outcome.into(), failure, estimate: Some(estimate), record, record_error, judged: None });
                 }
                 break;

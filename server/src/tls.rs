@@ -348,11 +348,11 @@ fn percent_decoded(s: &str) -> String {
 mod tests {
     use super::*;
 
-    /// Review of issue 27: a token percent-encoded in the query (`%74ok%65n=`) was echoed in
-    /// the redirect's `Location` and body. A token in any spelling gets the 400 that says it
-    /// crossed the network in clear, and is not repeated; another query is kept.
+    /// A token in the query in any spelling (percent-encoded: `%74ok%65n=`) gets the 400 that
+    /// says it crossed the network in clear, and is not repeated in a redirect's `Location` or
+    /// body; another query is kept.
     #[test]
-    fn plain_http_never_echoes_the_query_and_a_token_in_any_spelling_is_refused() {
+    fn plain_http_echoes_no_query_and_refuses_a_token_in_any_spelling() {
         assert_eq!(percent_decoded("%74ok%65n=abc+d%2"), "token=abc d%2");
         for q in ["token=npt_x_y", "%74ok%65n=npt_x_y", "a=1&TOKEN=npt_x_y"] {
             let r = plain_http_reply(&format!("GET /?{q} HTTP/1.1\r\nHost: lab:8443\r\n\r\n"), 8443);

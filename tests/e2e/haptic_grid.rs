@@ -1,7 +1,8 @@
-//! Issue 25's grid with the real processes, a subset sized for `make test` (the full grid is the
+//! The haptic grid with the real processes, a subset sized for `make test` (the full grid is the
 //! `nanopush-haptic-grid` benchmark; every cell in one process is `instrument/tests/haptic_grid.rs`):
-//! the worst cells (10 N of pull-off at 10 and 1000 nm/mm, which chattered for a second and
-//! handed the hand millijoules), a tap there, and a hand that lets go. Each passes the issue's bounds, and a scale past the
+//! the worst cells (10 N of pull-off at 10 and 1000 nm/mm, which unlimited chatter for a second
+//! and hand the hand millijoules), a tap there, and a hand that lets go. Each passes the grid's
+//! bounds (`nanopush_e2e::haptic_grid`), and a scale past the
 //! device's region is answered with the scales in force and the reason, which `/api/status`
 //! shows too.
 
@@ -42,11 +43,11 @@ fn cell(tag: &str, operator: &str, nm_per_mm: f64, pull_off_n: f64) -> nanopush_
     run
 }
 
-/// The reported failure: the press at 10 nm/mm and 10 N. It is answered with the region's
+/// The hardest press: 10 nm/mm and 10 N. It is answered with the region's
 /// edge (the pull-off lowered from 10 N to what 2 kN/m allows, 1.38 N), shown in the status,
 /// and the press is passive, calm, and holds the tip steady.
 #[test]
-fn issue_25_the_press_at_10_nm_per_mm_and_10_n_is_limited_passive_and_calm() {
+fn a_press_at_the_strongest_scales_is_limited_passive_and_calm() {
     let run = cell("p10x10", "press", 10.0, 10.0);
     let s = &run.scales;
     assert_eq!(s["limit"], "renderable_region", "{s}");

@@ -152,7 +152,7 @@ fn wait_line_after(lines: &Mutex<Vec<String>>, skip: usize, secs: f64, text: &st
 
 /// As the lease holder: take the lease and send `haptic {action}`; the reply. When it is `ok`
 /// the holder stays connected, on a thread of its own that reads what the server sends, until
-/// the server closes: haptic z-control ends when the lease is freed (issue 27.6).
+/// the server closes: haptic z-control ends when the lease is freed.
 fn haptic(addr: &str, action: &str) -> Value {
     let (tx, rx) = std::sync::mpsc::channel();
     let (addr, action) = (addr.to_string(), action.to_string());
@@ -172,9 +172,8 @@ fn haptic(addr: &str, action: &str) -> Value {
         .expect("the lease holder's reply")
 }
 
-/// Issue 27.6: haptic z-control ends with the lease. The holder engages, then its connection
-/// drops (or it gives the lease back): z-control goes off (before: it stayed `engaged`, with no
-/// holder).
+/// Haptic z-control ends with the lease. The holder engages, then its connection drops (or it
+/// gives the lease back): z-control goes off, never `engaged` with no holder.
 #[test]
 fn haptic_engagement_ends_when_the_lease_is_freed() {
     let _one = one_at_a_time();
@@ -562,7 +561,7 @@ fn haptic_commands_are_refused_with_the_reason() {
     });
 }
 
-/// Issue 28, done when: the reference sketch's settings (1 Mbaud, 1 kHz declared) render a felt
+/// The reference sketch's settings (1 Mbaud, 1 kHz declared) render a felt
 /// press through the real server, and an unplug and re-plug in the middle of the press is
 /// logged (the bridge names the cable, the server the link), survived (the same bridge, no
 /// restart) and resumed (the link comes back, z-control engages again and the hand feels the

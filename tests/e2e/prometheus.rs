@@ -2,7 +2,6 @@
 //! `.ci/setup`) with the shipped alert rules scrapes a real `nanopush serve`, and a series and
 //! the rules are read back through Prometheus' HTTP API.
 
-use std::net::TcpListener;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -10,7 +9,7 @@ use std::time::{Duration, Instant};
 use nanopush_e2e::workspace;
 use serde_json::Value;
 
-use crate::util::{spawn_serve, tmp};
+use crate::util::{free_port, http_get, spawn_serve, tmp};
 
 /// A process stopped on drop, its log shown after it stopped if the test failed.
 struct Proc(Child, PathBuf);
@@ -24,22 +23,11 @@ impl Drop for Proc {
     }
 }
 
-/// A GET of `path` from `addr`: the status and the body as text; None while nothing answers.
-fn get(addr: &str, path: &str) -> Option<(u16, String)> {
-    let (status, body) = nanopush_e2e::client::get(addr, path).ok()?;
-    Some((status, String::from_utf8_lossy(&body).into_owned()))
-}
-
-/// A port nothing listens on now (for Prometheus' own web server).
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
-
 /// docs/server.md, "Lab monitoring: Prometheus (`deploy/prometheus/`)": the shipped `prometheus.yml` "scrapes `127.0.0.1:8080` every 5 s"
 /// (`nanopush serve`'s default address and port) and loads `alerts.yml`. `promtool check
 /// config` checks its syntax only.
 #[test]
-fn the_shipped_config_scrapes_127_0_0_1_8080_every_5_s_with_the_alert_rules() {
+fn the_shipped_prometheus_config_scrapes_the_default_server_with_alerts() {
     let text = std::fs::read_to_string(workspace().join("deploy/prometheus/prometheus.yml")).unwrap();
     let lines: Vec<&str> = text
         .lines()
@@ -92,11 +80,12 @@ fn prometheus_scrapes_the_server_and_loads_the_alert_rules() {
     // A series from the server, through Prometheus' query API.
     let deadline = Instant::now() + Duration::from_secs(60);
     let ticks = loop {
-        if let Some((200, body)) = get(
+        // Nothing answers until Prometheus is up.
+        if let Ok((200, body)) = nanopush_e2e::client::get(
             &web,
             "/api/v1/query?query=nanopush_loop_ticks_total%7Bjob%3D%22nanopush%22%7D",
         ) {
-            let v: Value = serde_json::from_str(&body).unwrap();
+            let v: Value = serde_json::from_slice(&body).unwrap();
             if let Some(x) = v["data"]["result"][0]["value"][1].as_str() {
                 break x.parse::<f64>().unwrap();
             }
@@ -108,12 +97,12 @@ fn prometheus_scrapes_the_server_and_loads_the_alert_rules() {
         std::thread::sleep(Duration::from_millis(200));
     };
     assert!(ticks > 0.0, "{ticks}");
-    let (_, up) = get(&web, "/api/v1/query?query=up%7Bjob%3D%22nanopush%22%7D").unwrap();
-    let up: Value = serde_json::from_str(&up).unwrap();
+    let (_, up) = http_get(&web, "/api/v1/query?query=up%7Bjob%3D%22nanopush%22%7D");
+    let up: Value = serde_json::from_slice(&up).unwrap();
     assert_eq!(up["data"]["result"][0]["value"][1], "1");
     // The shipped rules are loaded, and a healthy server fires none of them.
-    let (_, rules) = get(&web, "/api/v1/rules").unwrap();
-    let rules: Value = serde_json::from_str(&rules).unwrap();
+    let (_, rules) = http_get(&web, "/api/v1/rules");
+    let rules: Value = serde_json::from_slice(&rules).unwrap();
     let names: Vec<&str> = rules["data"]["groups"][0]["rules"]
         .as_array()
         .unwrap()
@@ -129,8 +118,8 @@ fn prometheus_scrapes_the_server_and_loads_the_alert_rules() {
     ] {
         assert!(names.contains(&alert), "{alert} in {names:?}");
     }
-    let (_, firing) = get(&web, "/api/v1/alerts").unwrap();
-    let firing: Value = serde_json::from_str(&firing).unwrap();
+    let (_, firing) = http_get(&web, "/api/v1/alerts");
+    let firing: Value = serde_json::from_slice(&firing).unwrap();
     assert!(
         firing["data"]["alerts"]
             .as_array()

@@ -11,7 +11,7 @@ use crate::util::{nanopush_json as json, tmp};
 /// 6 µm and, at the restart, a static-friction peak of −1.78 V against a rolling level of about
 /// −1.1 V.
 #[test]
-fn a_12_um_push_with_a_stop_ends_minus_14_3_nm_and_writes_figs_9_and_15_with_a_minus_1_78_v_peak() {
+fn a_long_push_with_a_stop_ends_as_documented_and_writes_its_figures() {
     let dir = tmp("push-fig15");
     let d = dir.to_str().unwrap();
     let r = json(&[
@@ -102,7 +102,7 @@ fn a_12_um_push_with_a_stop_ends_minus_14_3_nm_and_writes_figs_9_and_15_with_a_m
 /// 12.5 µm, each from where a local scan finds the particle, touching at step 43, ending 0.4 nm and
 /// 0.7 nm short, 0.7 nm from the target.
 #[test]
-fn a_far_target_is_two_pushes_ending_minus_0_4_and_minus_0_7_nm_and_0_7_nm_from_it() {
+fn a_far_target_is_reached_in_two_pushes_as_documented() {
     let r = json(&[
         "push",
         "--scene",
@@ -157,7 +157,7 @@ fn bad_arguments_are_refused_with_the_allowed_range() {
             vec!["push", "--distance-um", "1", "--pause-at-um", "1", "--pause-ms=-5"],
             "(0, 10000] ms",
         ),
-        // Told the range, not u32's (the review of issue 24).
+        // Told the range, not u32's.
         (
             vec!["push", "--distance-um", "1", "--attempts", "-1"],
             "--attempts -1 is out of range; allowed: [1, 10]",
@@ -181,7 +181,7 @@ fn bad_arguments_are_refused_with_the_allowed_range() {
 /// `--json` callers get the refusal as JSON on stdout (they got nothing), with the exit status 2
 /// and the error on stderr; `plan` refuses what `push` refuses.
 #[test]
-fn a_refusal_is_json_on_stdout_for_json_callers_and_plan_refuses_what_push_refuses() {
+fn a_refusal_is_json_for_json_callers_and_plan_refuses_as_push_does() {
     let dir = tmp("refusal");
     let scenes = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/");
     let scene = std::fs::read_to_string(format!("{scenes}gold-latex-500nm.toml")).unwrap();

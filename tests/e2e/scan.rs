@@ -117,7 +117,7 @@ fn summary_names_the_located_particle() {
 }
 
 #[test]
-fn bad_arguments_exit_2_naming_the_allowed_range() {
+fn bad_arguments_are_a_usage_error_naming_the_allowed_range() {
     let dir = tmp("scan-bad");
     let gsf = dir.join("bad.gsf");
     let g = gsf.to_str().unwrap();

@@ -99,8 +99,8 @@ fn bad_messages_get_typed_errors_and_the_server_lives_on() {
         malformed_and_oversized_messages_get_typed_errors(&mut op).await;
         ok(&mut op, json!({"type": "take_lease", "id": 1})).await;
         commands_out_of_range_name_the_field_and_the_range(&mut op).await;
-        // Issue 12.7: the whole stage in one scan, about its centre, is allowed (it was refused
-        // by a unit round trip's rounding).
+        // The whole stage in one scan, about its centre, is allowed (a unit round trip's rounding
+        // would refuse it).
         ok(
             &mut op,
             json!({"type": "scan", "id": 12, "centre_x_um": 50.0, "centre_y_um": 50.0, "size_um": 100.0, "pixels": 8}),
@@ -119,8 +119,8 @@ async fn malformed_and_oversized_messages_get_typed_errors(op: &mut Ws) {
     let cases: Vec<(String, &str)> = vec![
         ("{not json".into(), "malformed"),
         (r#"{"type":"fly"}"#.into(), "malformed"),
-        // Issue 12.4: an array is not a command (serde read it as a push: `no_lease`), nor
-        // are two values in one message.
+        // An array is not a command (serde would read it as a push: `no_lease`), nor are two
+        // values in one message.
         (r#"["push",13,1,0.2,0]"#.into(), "malformed"),
         (r#"{"type":"ping","id":1} {"type":"ping","id":2}"#.into(), "malformed"),
         (r#"{"type":"push","particle":1,"distance_um":NaN}"#.into(), "malformed"),
@@ -194,8 +194,8 @@ async fn commands_out_of_range_name_the_field_and_the_range(op: &mut Ws) {
             "out_of_range",
             "within the stage",
         ),
-        // Issue 12.7: a side of 5e-324 µm passed and wrote a GSF with XReal = 0; a target on
-        // the stage's edge ran ~200 s into a time-out.
+        // A side of 5e-324 µm would write a GSF with XReal = 0; a target on the stage's edge
+        // would run ~200 s into a time-out.
         (
             10,
             json!({"type": "scan", "id": 10, "size_um": 5e-324}),

@@ -1,11 +1,10 @@
-//! Issue 27, item 3: named operators and viewers. A token file made with `nanopush token add`,
+//! Named operators and viewers. A token file made with `nanopush token add`,
 //! each person's token naming them and their role; `nanopush token revoke` closes their sessions
 //! on the running server; the page's token exchanged for an HttpOnly, SameSite=Strict cookie;
 //! failed attempts limited per address (the real client's, behind a trusted proxy) and counted
 //! in `/metrics`.
 
-use std::io::{Read, Write};
-use std::net::TcpStream;
+use std::io::Write;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -15,7 +14,7 @@ use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
-use crate::util::{Server, TOKEN, Ws, is, ok, ok_and, reply, runtime, send, start, start_args, until};
+use crate::util::{Server, TOKEN, Ws, http, is, ok, ok_and, reply, runtime, send, start, start_args, until};
 
 /// `nanopush token add NAME --role ROLE --token-file FILE`: the token it prints (its last line).
 pub(crate) fn add_token(file: &Path, name: &str, role: &str) -> String {
@@ -43,26 +42,6 @@ pub(crate) fn named_server(tag: &str, people: &[(&str, &str)], extra: &[&str]) -
         a
     });
     (srv, tokens)
-}
-
-/// One HTTP/1.1 request with `headers` (each `Name: value`): the status, the head (lower-case)
-/// and the body.
-pub(crate) fn http(addr: &str, method: &str, path: &str, headers: &[String]) -> (u16, String, String) {
-    let mut s = TcpStream::connect(addr).unwrap();
-    let mut req = format!("{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: 0\r\n");
-    for h in headers {
-        req.push_str(h);
-        req.push_str("\r\n");
-    }
-    req.push_str("\r\n");
-    s.write_all(req.as_bytes()).unwrap();
-    let mut buf = Vec::new();
-    s.read_to_end(&mut buf).unwrap();
-    let end = buf.windows(4).position(|w| w == b"\r\n\r\n").expect("an HTTP head");
-    let head = String::from_utf8_lossy(&buf[..end]).to_ascii_lowercase();
-    let (_, body) = nanopush_e2e::client::parse_response(&buf).unwrap();
-    let status = head.split_whitespace().nth(1).unwrap().parse().unwrap();
-    (status, head, String::from_utf8_lossy(&body).into_owned())
 }
 
 /// A WebSocket upgrade with `token` and `headers`: the socket and its welcome, or the HTTP
@@ -103,7 +82,7 @@ pub(crate) fn metric(addr: &str, name: &str) -> f64 {
 /// their session at once (an `error` saying why, then close code 1008), frees the lease, and
 /// their token no longer opens anything.
 #[test]
-fn issue_27_named_tokens_carry_their_roles_and_a_revoked_one_is_closed_at_once() {
+fn named_tokens_carry_their_roles_and_a_revoked_one_is_closed_at_once() {
     let (srv, tokens) = named_server("named", &[("alice", "operator"), ("bob", "viewer")], &[]);
     let (alice, bob) = (&tokens[0], &tokens[1]);
     runtime().block_on(async {
@@ -200,7 +179,7 @@ fn issue_27_named_tokens_carry_their_roles_and_a_revoked_one_is_closed_at_once()
 /// HttpOnly, SameSite=Strict session cookie (not Secure over plain HTTP); the cookie alone then
 /// opens the API and the WebSocket as the same person. A revoked token's cookie stops working.
 #[test]
-fn issue_27_a_token_is_exchanged_for_an_http_only_same_site_strict_cookie() {
+fn a_token_is_exchanged_for_an_http_only_same_site_strict_cookie() {
     let (srv, tokens) = named_server("cookie", &[("carol", "operator")], &[]);
     let auth = format!("Authorization: Bearer {}", tokens[0]);
     let (code, head, body) = http(&srv.addr, "POST", "/api/session", &[auth]);
@@ -270,7 +249,7 @@ fn issue_27_a_token_is_exchanged_for_an_http_only_same_site_strict_cookie() {
 /// token, while another client behind the same proxy gets in; the failures and the refusal are
 /// counted in /metrics. Without the file, the generated token still works (`make run`).
 #[test]
-fn issue_27_failed_attempts_are_limited_per_real_client_address_and_counted() {
+fn failed_attempts_are_limited_per_real_client_address_and_counted() {
     let srv = start(
         "ratelimit",
         &["--viewer-token", "viewer-token-1", "--trusted-proxy", "127.0.0.1"],
@@ -320,15 +299,14 @@ fn issue_27_failed_attempts_are_limited_per_real_client_address_and_counted() {
     });
 }
 
-/// Review of issue 27, item 1 (27b). The failure limit was checked before the token was verified
-/// (argon2, on a blocking thread) and the failure counted after: wrong tokens sent at once from
-/// one address all passed the check.
-/// Each check with a known id (a viewer knows their own) runs argon2 (19 MiB) on a blocking
-/// thread: 200 at once took a server from 27 MB to 986 MB RSS (kept afterwards, 115 threads),
-/// and slowed everyone's telemetry (gaps of 435 ms). 60 wrong tokens at once from 127.0.0.1
-/// must still cost at most the burst of 10 checks; the rest are refused with 429 unchecked.
+/// An attempt is counted against its address before its token is verified (argon2, on a
+/// blocking thread), not after: wrong tokens sent at once from one address would otherwise all
+/// pass the check. Each check with a known id (a viewer knows their own) runs argon2 (19 MiB) on
+/// a blocking thread: 200 at once would take a server from 27 MB to 986 MB RSS (kept afterwards,
+/// 115 threads) and slow everyone's telemetry (gaps of 435 ms). 60 wrong tokens at once from
+/// 127.0.0.1 cost at most the burst of 10 checks; the rest are refused with 429 unchecked.
 #[test]
-fn issue_27_wrong_tokens_sent_at_once_from_one_address_are_held_to_the_burst() {
+fn wrong_tokens_sent_at_once_from_one_address_are_held_to_the_burst() {
     let (srv, tokens) = named_server("burst", &[("alice", "operator")], &[]);
     // Alice's id (not secret) with a wrong secret: argon2 runs for each.
     let id = tokens[0].split('_').nth(1).unwrap().to_string();
@@ -353,12 +331,12 @@ fn issue_27_wrong_tokens_sent_at_once_from_one_address_are_held_to_the_burst() {
     );
 }
 
-/// Review of issue 27, item 3 (27b). `nanopush token add|revoke` read the file, change it and write it back with no lock: run at
-/// once (a script adding a class, `xargs -P`), each says it added its person and the file keeps
-/// one of them; a `revoke` while an `add` hashes is undone by the add's write (seen: "revoked
-/// alice's token", and alice still in the file).
+/// `nanopush token add|revoke` read the file, change it and write it back under a lock: run at
+/// once (a script adding a class, `xargs -P`), each person said added is in the file (without
+/// the lock the file keeps one of them, and a `revoke` while an `add` hashes is undone by the
+/// add's write).
 #[test]
-fn issue_27_token_adds_run_at_once_all_reach_the_file() {
+fn token_adds_run_at_once_all_reach_the_file() {
     let dir = crate::util::tmp("tokens-at-once");
     let file = dir.join("tokens");
     let names: Vec<String> = (0..6).map(|i| format!("student{i}")).collect();
@@ -386,14 +364,13 @@ fn issue_27_token_adds_run_at_once_all_reach_the_file() {
     );
 }
 
-/// Review of issue 27, item 4 (27b). The token file edited in place (truncated, then written
-/// 0.4 s later: `echo >`, an editor saving over it) was read as an empty file, nobody had a
-/// token, and the operator's session was closed and her push stopped. Now a change is applied
-/// once the file has stayed the same for a second: the operator stays. A deleted file revokes
+/// The token file edited in place (truncated, then written 0.4 s later: `echo >`, an editor
+/// saving over it) is not read as an empty file that revokes everyone: a change is applied once
+/// the file has stayed the same for a second, and the operator stays. A deleted file revokes
 /// nobody either (said in the log and `/metrics`); `nanopush token revoke` still closes her
 /// session.
 #[test]
-fn issue_27_a_token_file_edited_in_place_or_deleted_keeps_everyone_and_a_revoke_still_closes() {
+fn an_edited_or_deleted_token_file_keeps_everyone_and_revokes_still_close() {
     let (srv, tokens) = named_server("inplace", &[("alice", "operator"), ("bob", "viewer")], &[]);
     let file = srv.dir.join("tokens");
     let body = std::fs::read_to_string(&file).unwrap();

@@ -1,4 +1,4 @@
-//! `nanopush serve` behaviours that had no test (issue 14): a second command while a push runs
+//! `nanopush serve` behaviours: a second command while a push runs
 //! gets `busy`, a stop during a scan cancels it (no record, and a new scan may start), and on
 //! SIGTERM every client gets `shutdown` and then a close frame (1001, "server shutting down").
 //! Each waits on conditions with a time-out, never a fixed sleep.
@@ -202,11 +202,10 @@ fn allowed_cpus(status: &str) -> Vec<usize> {
         .collect()
 }
 
-/// Issue 12's soak: the loop overran more under client load than idle. With realtime granted the
-/// control loop is pinned to the last core and every other thread of the server stays off it,
-/// the main thread too (the accept loop runs there, in `block_on`): before, the main thread and
-/// the recorder could run on the loop's core, where their socket and file work runs with
-/// preemption off.
+/// With realtime granted the control loop is pinned to the last core and every other thread of
+/// the server stays off it, the main thread too (the accept loop runs there, in `block_on`): on
+/// the loop's core their socket and file work would run with preemption off, and the loop
+/// would overrun more under client load than idle (the soak, docs/benchmarks.md).
 #[test]
 fn only_the_control_loop_runs_on_its_core() {
     let ncpu = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -273,9 +272,9 @@ fn holders(record: &str) -> Vec<u32> {
         .collect()
 }
 
-/// Issue 12's soak, traced with ftrace on the loop's core: most overruns under load were a tick
-/// whose core had halted while the loop slept and whose timer the hypervisor delivered 1-12 ms
-/// late. With realtime the server now keeps the loop's core polling while it runs (its PM QoS
+/// Traced with ftrace on the loop's core, most overruns under load are a tick whose core halted
+/// while the loop slept and whose timer the hypervisor delivered 1-12 ms late. With realtime the
+/// server keeps the loop's core polling while it runs (its PM QoS
 /// resume latency `n/a`, 0 µs), reported as `no_halt` in the status and `nanopush_loop_no_halt`
 /// in the metrics, and records itself as a holder; `--allow-cpu-halt` leaves the core alone. A
 /// holder killed with SIGKILL cannot give the core back: the next server drops it from the record
@@ -315,8 +314,8 @@ fn the_loops_core_polls_while_the_server_runs_unless_it_may_halt() {
     let h = holders(&record);
     assert!(!h.contains(&killed) && h.contains(&next.child.id()), "{h:?}");
 
-    // A server that cannot start (its port in use) never takes the core: it binds first. (It
-    // used to start its loop, record itself and exit with the core still polling.)
+    // A server that cannot start (its port in use) never takes the core: it binds first (else it
+    // would start its loop, record itself and exit with the core still polling).
     let port = next.addr.rsplit_once(':').unwrap().1;
     let data = std::env::temp_dir().join(format!("nanopush-port-in-use-{}", std::process::id()));
     let failed = std::process::Command::new(nanopush_e2e::bin("nanopush"))
@@ -390,7 +389,7 @@ async fn tally_until(ws: &mut Ws, tally: &RefCell<Tally>, pred: impl Fn(&Value) 
 /// and taken again 30 times, every message is read: the holder's and a viewer's frames come
 /// each once, in order, and none is lost without a `lagged`.
 #[test]
-fn telemetry_frames_come_once_each_in_order_as_the_lease_is_given_up_and_taken_again() {
+fn telemetry_frames_come_once_in_order_as_the_lease_changes_hands() {
     let srv = start("lease-telemetry", &[]);
     runtime().block_on(async {
         let mut op = operator(&srv.addr, "tip").await;

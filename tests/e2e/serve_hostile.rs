@@ -1,4 +1,4 @@
-//! `nanopush serve` against careless and hostile clients (issue 12): telemetry not delayed by
+//! `nanopush serve` against careless and hostile clients: telemetry not delayed by
 //! commands, records served safely, big messages refused with the connection kept, replies never
 //! lost, the operator never locked out, slow, dead and stalled connections closed.
 
@@ -13,8 +13,8 @@ use tokio_tungstenite::tungstenite::Message;
 
 use crate::util::{TOKEN, Ws, http_get, is, ok, reply, runtime, send, start, start_with, status, until, welcomed};
 
-/// Issue 12.1: a client that sends commands does not delay its own telemetry (the sockets have
-/// TCP_NODELAY). Before the fix each message held the next frames back 25-45 ms (Nagle against a
+/// A client that sends commands does not delay its own telemetry (the sockets have
+/// TCP_NODELAY; without it each message holds the next frames back 25-45 ms, Nagle against a
 /// delayed ACK). With a ping every 100 ms, the frame gap that spans each ping is judged: their
 /// median stays within 12 ms of the stream's period. A median over 40 pings, not a percentile of
 /// every gap, so that a loaded test machine's stray late frames do not decide it.
@@ -66,7 +66,7 @@ fn commands_do_not_delay_telemetry() {
     });
 }
 
-/// Issue 12.8: no symlink is served or listed out of the data directory; tokens in a query are
+/// No symlink is served or listed out of the data directory; tokens in a query are
 /// decoded; `.partial` files an earlier run left are removed at start; and a record that cannot
 /// be written is reported with the reason, not as a silent `null`.
 #[test]
@@ -121,7 +121,7 @@ fn records_are_served_safely_and_write_failures_say_why() {
     });
 }
 
-/// Issues 12.5 and 12.6: messages of 65 KiB, 200 KiB and 5 MB each get `too_large` and the
+/// Messages of 65 KiB, 200 KiB and 5 MB each get `too_large` and the
 /// connection stays (a ping sent before gets its `ok`, one sent after too); and a client that
 /// sends 300 commands before reading any reply loses none of them (its queue holds 64: it is
 /// slowed down, not answered with silence).
@@ -150,7 +150,7 @@ fn big_messages_are_refused_and_no_reply_is_lost() {
     });
 }
 
-/// Issue 12.2: viewers filling `--max-clients` never lock the operator out (the operator token
+/// Viewers filling `--max-clients` never lock the operator out (the operator token
 /// has places of its own), and one address cannot take every viewer place.
 #[test]
 fn viewers_never_lock_the_operator_out_and_one_address_has_a_limit() {
@@ -186,7 +186,7 @@ fn viewers_never_lock_the_operator_out_and_one_address_has_a_limit() {
 /// eight operator connections get in and a ninth is refused with 503; a viewer place is not an
 /// operator place (`--max-clients 1`, taken by a viewer, leaves all eight).
 #[test]
-fn the_operator_token_has_8_places_and_a_ninth_is_refused() {
+fn the_operator_token_has_its_own_places_and_one_more_is_refused() {
     let srv = start("operators", &["--max-clients", "1"]);
     runtime().block_on(async {
         let (_viewer, _) = welcomed(&srv.addr, None).await;
@@ -202,7 +202,7 @@ fn the_operator_token_has_8_places_and_a_ninth_is_refused() {
     });
 }
 
-/// Issue 12.3: a slowloris client (headers that never finish) is closed after the header
+/// A slowloris client (headers that never finish) is closed after the header
 /// time-out, fifty of them do not keep anyone else out, and a WebSocket peer that stops
 /// answering pings is closed after the dead-peer time-out while a live one stays.
 #[test]
@@ -313,7 +313,7 @@ fn stalled_subscriber(addr: &str) -> TcpStream {
     s
 }
 
-/// Issue 12.3: a reader that stops reading is dropped once one frame has waited 5 s to be sent
+/// A reader that stops reading is dropped once one frame has waited 5 s to be sent
 /// (its socket full), and the others go on meanwhile.
 #[test]
 fn a_reader_that_stops_reading_is_dropped_without_slowing_the_others() {
@@ -357,9 +357,8 @@ fn server_send_queue(server_port: u16, peer: u16) -> Option<u64> {
     })
 }
 
-/// Issue 12.6: a client whose socket is full (it reads slowly) and who sends 300 commands gets
-/// 300 replies: the replies wait for room, none is dropped. Before, the session queued 64 of
-/// them behind the blocked frame and dropped the rest without a word.
+/// A client whose socket is full (it reads slowly) and who sends 300 commands gets 300 replies:
+/// the replies wait for room behind the blocked frame, none is dropped without a word.
 #[test]
 fn a_slow_readers_replies_wait_for_room_and_none_is_lost() {
     let srv = start(

@@ -1,4 +1,4 @@
-//! Issue 24.1 in the server: a push is `ok` only when the scan after it finds the particle
+//! A push in the server is `ok` only when the scan after it finds the particle
 //! within the push's tolerance of the target, never by the controller's estimate; outside it a
 //! correction is pushed from where the scan found it, and a move still outside after its
 //! pushes is `missed`, with the distance. Checked against the true position the simulation
@@ -73,7 +73,7 @@ fn check_against_truth(addr: &str, done: &Value, tolerance: f64) {
 }
 
 #[test]
-fn a_push_is_ok_only_when_the_scan_after_it_finds_the_particle_within_the_tolerance() {
+fn a_push_is_ok_only_when_the_scan_after_it_finds_it_within_tolerance() {
     let srv = start("judge", &[]);
     runtime().block_on(async {
         let mut op = operator(&srv.addr, "tip").await;

@@ -1,4 +1,4 @@
-//! Issue 27, item 2: a real nginx in front of the server, as docs/deployment.md configures it.
+//! A real nginx in front of the server, as docs/deployment.md configures it.
 //! The server trusts `X-Forwarded-For` from the proxy (`--trusted-proxy 127.0.0.1`) and from no
 //! one else, so the per-address limit and the audit log see the real clients (here 127.0.0.2
 //! and 127.0.0.3, which connect to nginx), not the proxy, and a client cannot forge its address.
@@ -13,7 +13,7 @@ use serde_json::Value;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
 use crate::serve_access::named_server;
-use crate::util::{Ws, is, ok, runtime, until};
+use crate::util::{Ws, free_port, is, ok, runtime, until};
 
 /// nginx's binary, or None (then the test says why it is skipped; under CI it fails).
 fn nginx() -> Option<String> {
@@ -29,15 +29,6 @@ fn nginx() -> Option<String> {
         eprintln!("SKIPPED: nginx is not installed (apt-get install nginx, or make setup); the proxy test did not run");
     }
     found
-}
-
-/// A free TCP port on 127.0.0.1.
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
 }
 
 /// The server block of docs/deployment.md (plain HTTP here: TLS is the server's own test),
@@ -130,7 +121,7 @@ async fn ws_from(from: &str, proxy: &str, token: &str, headers: &[(&str, &str)])
 /// refused while 127.0.0.3 still gets in (all of them reach the server from the proxy's
 /// 127.0.0.1).
 #[test]
-fn issue_27_behind_a_real_nginx_the_limits_and_the_audit_log_see_the_real_clients() {
+fn behind_nginx_the_limits_and_the_audit_log_see_the_real_clients() {
     let Some(bin) = nginx() else { return };
     let (srv, tokens) = named_server(
         "proxy",

@@ -1,7 +1,7 @@
-//! `nanopush serve` survives a push in the campaign's hardest valid scenes (issue 13): a stage
-//! at 1 pm/s, whose prediction once sized a 41.6 GB trace and aborted the server, and a
-//! 0.01 N/m lever, which once threw the particle 4 cm. Each push ends with a `run_done` and a
-//! reason, and the server still answers: `/api/status`, telemetry, and another command.
+//! `nanopush serve` survives a push in the campaign's hardest valid scenes: a stage at 1 pm/s,
+//! whose prediction would size a 41.6 GB trace, and a 0.01 N/m lever, which would throw the
+//! particle 4 cm. Each push ends with a `run_done` and a reason, and the server still answers:
+//! `/api/status`, telemetry, and another command.
 
 use serde_json::json;
 
@@ -31,7 +31,7 @@ fn push_and_still_answer(tag: &str, edits: &[(&str, &str)], expect: &[&str]) {
 }
 
 #[test]
-fn a_push_at_one_picometre_per_second_fails_with_a_reason_and_the_server_lives() {
+fn a_push_too_slow_to_end_fails_with_a_reason_and_the_server_lives() {
     // The contact search at 1 pm/s cannot finish: it times out (phase time-out made 3 s here).
     push_and_still_answer(
         "slow-stage",
@@ -44,7 +44,7 @@ fn a_push_at_one_picometre_per_second_fails_with_a_reason_and_the_server_lives()
 }
 
 #[test]
-fn a_push_with_a_0_01_n_per_m_lever_fails_with_a_reason_and_the_server_lives() {
+fn a_push_with_a_too_soft_lever_fails_with_a_reason_and_the_server_lives() {
     push_and_still_answer(
         "soft-lever",
         &[("stiffness_n_per_m = 8.0", "stiffness_n_per_m = 0.01")],

@@ -1,18 +1,15 @@
-//! `nanopush serve` for the page (issue 11): a late joiner gets the instrument's state, a push
+//! `nanopush serve` for the page: a late joiner gets the instrument's state, a push
 //! stops when its lease holder leaves, static files are compressed.
-
-use std::io::{Read, Write};
-use std::net::TcpStream;
 
 use serde_json::json;
 
-use crate::util::{TOKEN, http_get, is, ok, runtime, send, start, until, welcomed};
+use crate::util::{TOKEN, http, http_get, is, ok, runtime, send, start, until, welcomed};
 
-/// Issue 11, defects 2 and 5: a client that connects after a scan and a push gets, right after
+/// A client that connects after a scan and a push gets, right after
 /// `welcome`, the instrument as it is: the moved particle, the lease, the phase, the latest scan
 /// (marked stale once a push ran since) and, while a push runs, its path.
 #[test]
-fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
+fn a_late_joiner_gets_the_current_state_after_welcome() {
     let srv = start("late", &["--scan-line-hz", "400"]);
     runtime().block_on(async {
         let (mut op, w) = welcomed(&srv.addr, Some(TOKEN)).await;
@@ -71,7 +68,7 @@ fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
         assert_eq!(s["scan"]["stale"], true, "a push ran since the scan: {s}");
         let (status, _) = http_get(&srv.addr, &format!("/api/records/{scan_record}"));
         assert_eq!(status, 200);
-        // The server's run (issue 26: a page tells a restart from a network blip by it) and the
+        // The server's run (a page tells a restart from a network blip by it) and the
         // run history read from the records on disk.
         let instance = w["instance"].as_str().expect("welcome names the instance");
         assert!(!instance.is_empty(), "{w}");
@@ -88,17 +85,17 @@ fn issue_11_a_late_joiner_gets_the_current_state_after_welcome() {
         assert_eq!(runs[0]["outcome"], "ok", "{runs}");
         assert_eq!(runs[0]["particle"], 1, "{runs}");
         assert_eq!(runs[0]["estimate"], run["estimate"], "{runs}");
-        // Its record names the server run and run number push_started gave (review of issue 26:
-        // a page that lost sight of a push read an earlier push of the particle as its outcome).
+        // Its record names the server run and run number push_started gave (so a page that lost
+        // sight of a push does not read an earlier push of the particle as its outcome).
         assert_eq!(runs[0]["instance"], instance, "{runs}");
         assert_eq!(runs[0]["run"], 1, "{runs}");
     });
 }
 
-/// Issue 11, defect 6: when the lease holder's connection closes during a push, the push is
+/// When the lease holder's connection closes during a push, the push is
 /// stopped (nobody watches it), recorded, and everyone is told why the lease went.
 #[test]
-fn issue_11_a_push_stops_when_its_lease_holder_disconnects() {
+fn a_push_stops_when_its_lease_holder_disconnects() {
     let srv = start("holder-gone", &[]);
     runtime().block_on(async {
         let (mut watcher, _) = welcomed(&srv.addr, None).await;
@@ -121,28 +118,19 @@ fn issue_11_a_push_stops_when_its_lease_holder_disconnects() {
         );
         let run = until(&mut watcher, 20.0, |m| is(m, "run_done")).await;
         assert_eq!(run["outcome"], "stopped", "{run}");
-        // A disconnect is not the operator's Stop (issue 26: the record said "stop requested by
-        // the operator").
+        // A disconnect is not the operator's Stop: the record does not say "stop requested by the
+        // operator".
         assert_eq!(run["failure"], "stopped: the lease holder disconnected", "{run}");
         assert!(run["record"].is_string(), "the stopped push is recorded: {run}");
     });
 }
 
-/// Issue 11, page weight: static files are gzip-compressed for a browser that accepts it.
+/// Page weight: static files are gzip-compressed for a browser that accepts it.
 #[test]
-fn issue_11_static_files_are_compressed() {
+fn static_files_are_compressed() {
     let srv = start("gzip", &[]);
-    let mut s = TcpStream::connect(&srv.addr).unwrap();
-    write!(
-        s,
-        "GET /src/session.js HTTP/1.1\r\nHost: {}\r\nAccept-Encoding: gzip\r\nConnection: close\r\n\r\n",
-        srv.addr
-    )
-    .unwrap();
-    let mut buf = Vec::new();
-    s.read_to_end(&mut buf).unwrap();
-    let head_end = buf.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
-    let head = String::from_utf8_lossy(&buf[..head_end]).to_ascii_lowercase();
+    let gzip = ["Accept-Encoding: gzip".to_string()];
+    let (_, head, _) = http(&srv.addr, "GET", "/src/session.js", &gzip);
     assert!(head.starts_with("http/1.1 200"), "{head}");
     assert!(head.contains("content-encoding: gzip"), "{head}");
     // Without Accept-Encoding: plain.

@@ -1,4 +1,4 @@
-//! Issue 27, item 2: HTTPS. The server with a certificate from a test CA serves the API and the
+//! HTTPS. The server with a certificate from a test CA serves the API and the
 //! WebSocket to a client that trusts that CA (and no other), marks its session cookies Secure,
 //! and answers plain HTTP with a redirect (or a refusal when a token came in clear); with
 //! `--tls-self-signed` it makes its certificate once, keeps it, and prints its fingerprint.
@@ -17,8 +17,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio_rustls::TlsConnector;
 use tokio_tungstenite::tungstenite::Message;
 
-use crate::serve_access::http;
-use crate::util::{TOKEN, runtime, start, tmp, until};
+use crate::util::{TOKEN, http, runtime, start, tmp, until};
 
 /// A test CA, and a leaf for 127.0.0.1 and localhost signed by it, in `dir`: the CA's PEM, the
 /// leaf's and its key's.
@@ -95,7 +94,7 @@ async fn https(
 /// is refused in the handshake; the session cookie is `Secure`; plain HTTP to the port is
 /// redirected to https (or refused when it carries a token).
 #[test]
-fn issue_27_https_with_a_test_ca_serves_the_api_and_the_websocket_and_plain_http_is_redirected() {
+fn https_serves_the_api_and_the_websocket_and_redirects_plain_http() {
     let certs = tmp("tls-ca");
     let (ca, cert, key) = test_ca(&certs);
     let other = tmp("tls-other-ca");
@@ -158,7 +157,7 @@ fn issue_27_https_with_a_test_ca_serves_the_api_and_the_websocket_and_plain_http
 /// certificate it serves (a client trusting exactly that certificate connects) and the one it
 /// kept; started again on the same data directory, it serves the same one.
 #[test]
-fn issue_27_a_self_signed_certificate_is_made_once_kept_and_its_fingerprint_printed() {
+fn a_self_signed_certificate_is_made_once_and_its_fingerprint_printed() {
     let dir = tmp("tls-self");
     let records = dir.join("records");
     let serve = || {

@@ -94,7 +94,7 @@ fn json_summary_names_the_trend_and_the_flags() {
 }
 
 #[test]
-fn bad_arguments_exit_2_naming_the_value_and_the_allowed_range() {
+fn bad_arguments_are_a_usage_error_naming_the_value_and_the_range() {
     let cases: [(&[&str], &str); 6] = [
         (
             &["--param", "gamma", "--from", "0", "--to", "1", "--steps", "2"],

@@ -3,6 +3,7 @@
 //! The crate's library (`nanopush_e2e`) has what the benchmarks share with them: the binaries,
 //! stopping processes, the raw HTTP client.
 
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -174,6 +175,34 @@ pub(crate) fn wait_exit(child: &mut Child, secs: f64) -> std::process::ExitStatu
 
 // ---------------------------------------------------------------------------------------------
 // Its HTTP API.
+
+/// A free TCP port on 127.0.0.1: nothing listens on it now.
+pub(crate) fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// One HTTP/1.1 request with `headers` (each `Name: value`): the status, the head (lower-case)
+/// and the body (de-chunked) as text.
+pub(crate) fn http(addr: &str, method: &str, path: &str, headers: &[String]) -> (u16, String, String) {
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    let mut req = format!("{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: 0\r\n");
+    for h in headers {
+        req.push_str(h);
+        req.push_str("\r\n");
+    }
+    req.push_str("\r\n");
+    s.write_all(req.as_bytes()).unwrap();
+    let mut buf = Vec::new();
+    s.read_to_end(&mut buf).unwrap();
+    let end = buf.windows(4).position(|w| w == b"\r\n\r\n").expect("an HTTP head");
+    let head = String::from_utf8_lossy(&buf[..end]).to_ascii_lowercase();
+    let (status, body) = nanopush_e2e::client::parse_response(&buf).unwrap();
+    (status, head, String::from_utf8_lossy(&body).into_owned())
+}
 
 /// A plain HTTP/1.1 GET: status and body.
 pub(crate) fn http_get(addr: &str, path: &str) -> (u16, Vec<u8>) {

@@ -1,4 +1,4 @@
-//! One cell of issue 25's grid with the real processes: `nanopush serve --haptic external` and
+//! One cell of the haptic grid with the real processes: `nanopush serve --haptic external` and
 //! `nanopush-haptic --device sim --operator OP --trace`, a `haptic` `scale` and `engage` from the
 //! lease holder as the browser sends them, the script played to its end, and the trace judged by
 //! [`nanopush_haptic::grid::judge`] (raw port energy, chatter, the hand force's limit, the tip

@@ -44,14 +44,26 @@ export function clampTarget(xUm, yUm, rangeUm) {
  * @param {'by' | 'to'} mode
  * @param {number} particle
  * @param {{distance?: number, direction?: number, toX?: number, toY?: number, tolerance?: number}} v
- *   the fields (µm, °; the tolerance in nm, the server's 25 nm when left empty)
+ *   the fields (µm, °; the tolerance in nm, the server's default when left empty)
  * @param {number} rangeUm the stage's range
+ * @param {{default: number, min: number, max: number} | null} [tolerance] the tolerance's range
+ *   as the server checks it (its `welcome`)
  */
-export function pushCommand(mode, particle, v, rangeUm) {
+export function pushCommand(mode, particle, v, rangeUm, tolerance) {
   const m = mode === 'by'
     ? commands.pushBy(particle, v.distance, v.direction)
     : commands.pushTo(particle, v.toX, v.toY, undefined, rangeUm);
-  return commands.withTolerance(m, v.tolerance);
+  return commands.withTolerance(m, v.tolerance, tolerance);
+}
+
+/**
+ * The tolerance field's attributes from the tolerance the server checks (its `welcome`): its
+ * range, and its default as the value the form starts at; all empty before the server said
+ * (or when it says none), which leaves the tolerance to the server.
+ * @param {{default: number, min: number, max: number} | null} t
+ */
+export function toleranceField(t) {
+  return t ? { min: String(t.min), max: String(t.max), value: String(t.default) } : { min: '', max: '', value: '' };
 }
 
 /**
@@ -147,6 +159,8 @@ export class Controls {
     this.selected = null; // the particle to push (id)
     this.scanCentreTouched = false; // the operator typed a scan centre: keep it
     this.scanFormTouched = false; // the operator typed a scan size or pixels: keep them
+    this.toleranceTouched = false; // the operator typed a tolerance: keep it
+    this.toleranceShown = undefined; // the server's tolerance the field was last set from
     this.stopPressed = false; // Stop went on the pointer's press: ignore the click that follows
     this.lastRunVersion = 0; // bumped by every change of the last run's line
     this.bind();
@@ -174,9 +188,21 @@ export class Controls {
     }
   }
 
+  /** The tolerance field as the server checks the tolerance, once per change of what it said. */
+  applyTolerance(t) {
+    if (t === this.toleranceShown) return;
+    this.toleranceShown = t;
+    const el = this.$('tolerance');
+    const f = toleranceField(t);
+    el.min = f.min;
+    el.max = f.max;
+    if (!this.toleranceTouched) el.value = f.value;
+  }
+
   /** Enables what the Session allows, with the reason as a tooltip. */
   render() {
     const $ = this.$;
+    this.applyTolerance(this.st.pushTolerance);
     const c = controlState(this.st);
     const focused = this.doc.activeElement;
     const set = (el, s) => {
@@ -346,7 +372,7 @@ export class Controls {
       const particle = Number($('particle').value);
       this.guarded('reply-push', () => pushCommand(this.mode(), particle,
         { distance: this.num('distance'), direction: this.num('direction'), toX: this.num('to-x'), toY: this.num('to-y'), tolerance: this.num('tolerance') },
-        this.st.stageRange * 1e6));
+        this.st.stageRange * 1e6, this.st.pushTolerance));
     });
     $('scan-form').addEventListener('submit', (e) => {
       e.preventDefault();
@@ -368,6 +394,7 @@ export class Controls {
     for (const id of ['scan-x', 'scan-y']) $(id).addEventListener('input', () => { this.scanCentreTouched = true; });
     for (const id of ['hap-nm', 'hap-po']) $(id).addEventListener('input', () => { delete $(id).dataset.fromServer; });
     for (const id of ['scan-size', 'scan-px']) $(id).addEventListener('input', () => { this.scanFormTouched = true; });
+    $('tolerance').addEventListener('input', () => { this.toleranceTouched = true; });
     doc.addEventListener('keydown', (e) => {
       if (e.key === 'Escape' && !$('stop-btn').disabled) {
         e.preventDefault();

@@ -2,7 +2,7 @@
 // binary scan lines) to a plain state object, of which the page is a view; `controlState` says
 // what the operator may do now and why not; `describeRun` puts a push's outcome in words; the
 // scene's particles and set point. Runs in browsers and in Node (tests).
-import { WS_VERSION, decodeScanLine } from './wire.js';
+import { WS_VERSION, decodeScanLine, pushTolerance } from './wire.js';
 import { formatPoint } from './format.js';
 
 /**
@@ -99,6 +99,7 @@ export function initialState({ traceSeconds = 10 } = {}) {
     role: null, // viewer | operator
     scene: null,
     tickHz: null,
+    pushTolerance: null, // a push's tolerance as the server checks it (welcome): {default, min, max} nm
     lease: null, // holder's client id
     leaseName: null, // the holder's name (their token's), when the server said
     name: null, // this connection's person, as the server named them
@@ -146,6 +147,7 @@ const handlers = {
     s.leaseName = m.lease_name ?? null;
     s.scene = m.scene;
     s.tickHz = m.tick_hz;
+    s.pushTolerance = pushTolerance(m);
     s.stateReceived = false;
     if (m.version !== WS_VERSION) {
       session.logError('version', `the server speaks protocol ${m.version}, this page ${WS_VERSION}`);

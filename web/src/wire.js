@@ -1,4 +1,4 @@
-// The wire format of the nanopush WebSocket protocol (proto/README.md, proto/src/ws.rs), no
+// The wire format of the nanopush WebSocket protocol (proto/README.md, proto/src/ws/), no
 // DOM: the binary scan-line frames (`NPSL`, decoded and, for tests and the demo, encoded) and
 // the client's JSON commands (builders that check the documented ranges, and `encodeCommand`).
 // Runs in browsers and in Node (tests).
@@ -128,14 +128,17 @@ export const commands = {
     return withId({ type: 'push', particle: particleId(particle), to_x_um: xUm, to_y_um: yUm }, id);
   },
   /**
-   * A push command `m` (from pushBy or pushTo) judged with `toleranceNm` [1, 100000] nm: `ok`
-   * only when the scan after it finds the particle that close to the target. Left out
-   * (undefined), the server's 25 nm.
+   * A push command `m` (from pushBy or pushTo) judged with `toleranceNm` (nm): `ok` only when
+   * the scan after it finds the particle that close to the target. Left out (undefined), the
+   * server's default. `bounds` is the range the server checks, as its `welcome` states it
+   * (pushTolerance); without them the server alone checks the range.
    */
-  withTolerance(m, toleranceNm) {
+  withTolerance(m, toleranceNm, bounds) {
     if (toleranceNm === undefined || toleranceNm === null) return m;
     finite('tolerance_nm', toleranceNm);
-    if (!(toleranceNm >= 1 && toleranceNm <= 100000)) throw new RangeError(`tolerance_nm must be in [1, 100000] nm, got ${toleranceNm}`);
+    if (bounds && !(toleranceNm >= bounds.min && toleranceNm <= bounds.max)) {
+      throw new RangeError(`tolerance_nm must be in [${bounds.min}, ${bounds.max}] nm, got ${toleranceNm}`);
+    }
     return { ...m, tolerance_nm: toleranceNm };
   },
   /** A scan; any of centreXUm, centreYUm, sizeUm (0, 100], pixels [8, 512] may be left out. */
@@ -183,6 +186,17 @@ export const commands = {
     return withId({ type: 'ping' }, id);
   },
 };
+
+/**
+ * A push's tolerance as the server checks it, from its `welcome` (`push_tolerance_nm`): `{default,
+ * min, max}` in nm, or null when the welcome says none (an older server, the demo) or says
+ * something that is not a range about its default.
+ */
+export function pushTolerance(welcome) {
+  const b = welcome?.push_tolerance_nm;
+  const ok = b && [b.default, b.min, b.max].every(Number.isFinite) && b.min <= b.default && b.default <= b.max;
+  return ok ? { default: b.default, min: b.min, max: b.max } : null;
+}
 
 /** The JSON text of a client message. */
 export function encodeCommand(msg) {

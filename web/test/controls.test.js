@@ -4,7 +4,10 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import {
   REPLY_OUTPUT, Replies, readNumber, replyText, particleLabel, pushNowText, clampTarget, pushCommand, pushPreview, scanFormDefaults,
+  toleranceField,
 } from '../src/controls.js';
+import { Session } from '../src/session.js';
+import { WS_VERSION } from '../src/wire.js';
 
 test('form numbers: empty is the server\'s default (undefined), junk is NaN (refused by the builders)', () => {
   assert.equal(readNumber(''), undefined);
@@ -20,12 +23,28 @@ test('the push form: by distance or to a target inside the stage', () => {
   assert.deepEqual(pushCommand('to', 2, { distance: 5, direction: 90, toX: 30, toY: 40.5 }, 100),
     { type: 'push', particle: 2, to_x_um: 30, to_y_um: 40.5 });
   assert.throws(() => pushCommand('to', 2, { toX: 60, toY: 10 }, 50), /to_x_um must be in \[0, 50\]/, 'the stage of the scene, not 100 µm');
-  // The tolerance: sent when given, the server's default when the field is empty.
-  assert.deepEqual(pushCommand('by', 2, { distance: 5, direction: 0, tolerance: 10 }, 100),
-    { type: 'push', particle: 2, distance_um: 5, direction_deg: 0, tolerance_nm: 10 });
-  assert.equal(pushCommand('by', 2, { distance: 5, direction: 0, tolerance: undefined }, 100).tolerance_nm, undefined);
-  assert.throws(() => pushCommand('by', 2, { distance: 5, direction: 0, tolerance: 0.5 }, 100), /tolerance_nm must be in \[1, 100000\] nm, got 0.5/);
-  assert.throws(() => pushCommand('by', 2, { distance: 5, direction: 0, tolerance: NaN }, 100), /tolerance_nm must be a finite number/);
+});
+
+test('the push form\'s tolerance: the range and default the server\'s welcome states', () => {
+  const session = new Session();
+  session.apply(JSON.stringify({ type: 'welcome', version: WS_VERSION, client: 1, role: 'operator', lease: null, scene: 's', tick_hz: 1000,
+    push_tolerance_nm: { default: 20, min: 2, max: 500 } }));
+  const t = session.state.pushTolerance;
+  assert.deepEqual(t, { default: 20, min: 2, max: 500 });
+  assert.deepEqual(toleranceField(t), { min: '2', max: '500', value: '20' }, 'the form starts at the default');
+  const push = (tolerance, bounds = t) => pushCommand('by', 2, { distance: 5, direction: 0, tolerance }, 100, bounds);
+  // Sent when given, the server's default when the field is empty.
+  assert.deepEqual(push(10), { type: 'push', particle: 2, distance_um: 5, direction_deg: 0, tolerance_nm: 10 });
+  assert.equal(push(undefined).tolerance_nm, undefined);
+  assert.equal(push(2).tolerance_nm, 2);
+  assert.equal(push(500).tolerance_nm, 500);
+  assert.throws(() => push(1.5), /tolerance_nm must be in \[2, 500\] nm, got 1.5/);
+  assert.throws(() => push(501), /tolerance_nm must be in \[2, 500\] nm, got 501/);
+  assert.throws(() => push(NaN), /tolerance_nm must be a finite number/);
+  // A server that states none (an older one, the demo): the page checks only that it is a
+  // number and leaves the range to the server; the field starts empty.
+  assert.equal(push(501, null).tolerance_nm, 501);
+  assert.deepEqual(toleranceField(null), { min: '', max: '', value: '' });
 });
 
 test('a target picked in the 3D view stays on the stage', () => {
@@ -57,7 +76,7 @@ test('texts: particles in the list, the push running, replies', () => {
   assert.equal(pushNowText(push, 9), 'Pushing #1 (you) to (45.000, 32.500) µm');
   assert.equal(pushNowText(push, 4), 'Pushing #1 (client 9) to (45.000, 32.500) µm');
   assert.equal(replyText({ id: 3, status: 'ok' }), '#3 ok');
-  // A push's ok means accepted, not done well (issue 26: a green "#3 ok" beside a push that failed to plan).
+  // A push's ok means accepted, not done well (a green "#3 ok" would stand beside a push that failed to plan).
   assert.equal(replyText({ id: 5, type: 'push', status: 'ok' }), '#5 accepted');
   assert.equal(replyText({ id: 4, status: 'error', code: 'no_lease', message: 'push needs the lease' }), '#4 no_lease: push needs the lease');
 });
@@ -66,7 +85,7 @@ test('the scan form starts at the scene\'s own scan, pixels within [8, 512]', ()
   assert.deepEqual(scanFormDefaults({ scan: { size_um: 0.2, pixels: 1024 } }), { size: '0.2', pixels: '512' });
   assert.deepEqual(scanFormDefaults({ scan: { pixels: 4 } }), { pixels: '8' });
   assert.deepEqual(scanFormDefaults({}), {});
-  // Issue 26: 50 µm at 256 px (195 nm a pixel) cannot show a 14 nm particle: the default scan
+  // 50 µm at 256 px (195 nm a pixel) cannot show a 14 nm particle: the default scan
   // is made small enough for the smallest particle to span 2 pixels (14 nm × 256 / 2 = 1.8 µm).
   assert.deepEqual(scanFormDefaults({ scan: { size_um: 50, pixels: 256 }, particles: [{ radius_nm: 7 }, { radius_nm: 50 }] }), { size: '1.8', pixels: '256' });
   assert.deepEqual(scanFormDefaults({ scan: { size_um: 16, pixels: 32 }, particles: [{ radius_nm: 500 }] }), { size: '16', pixels: '32' }, 'big enough already');

@@ -1,11 +1,11 @@
 // node --test: the wire format (src/wire.js) against the bytes and messages of proto/README.md.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { decodeScanLine, encodeScanLine, FrameError, commands, encodeCommand } from '../src/wire.js';
+import { decodeScanLine, encodeScanLine, FrameError, commands, encodeCommand, pushTolerance } from '../src/wire.js';
 
 // The frame `ScanLineHeader { scan: 2, line: 5, xres: 3, yres: 8, y: 1.5e-6 }.encode(&[1.0, 2.0,
 
-// 3.0])` of proto/src/ws.rs, written out byte by byte.
+// 3.0])` of proto/src/ws/scan_line.rs, written out byte by byte.
 
 function handFrame() {
   const bytes = [
@@ -109,4 +109,19 @@ test('haptic commands: the documented JSON, ranges checked before sending', () =
   assert.throws(() => commands.haptic('scale'), /nm_per_mm and\/or pull_off_at_hand_n/);
   assert.throws(() => commands.haptic('scale', { nmPerMm: 5000 }), /\[0\.01, 1000\] nm\/mm, got 5000/);
   assert.throws(() => commands.haptic('scale', { pullOffAtHandN: 0 }), /\[0\.01, 10\] N, got 0/);
+});
+
+test('a push\'s tolerance: read from the welcome, and checked against it before sending', () => {
+  const b = { default: 25, min: 1, max: 100000 };
+  assert.deepEqual(pushTolerance({ type: 'welcome', push_tolerance_nm: b }), b);
+  for (const bad of [undefined, null, {}, { default: 25, min: 1 }, { default: 0.5, min: 1, max: 10 }, { default: 5, min: 10, max: 1 }, { default: '25', min: 1, max: 100 }]) {
+    assert.equal(pushTolerance({ type: 'welcome', push_tolerance_nm: bad }), null, JSON.stringify(bad));
+  }
+  assert.equal(pushTolerance(undefined), null);
+  const push = commands.pushBy(1, 2.5, 90);
+  assert.deepEqual(commands.withTolerance(push, 10, b), { ...push, tolerance_nm: 10 });
+  assert.equal(commands.withTolerance(push, undefined, b), push, 'left out: the server\'s default');
+  assert.throws(() => commands.withTolerance(push, 0.5, b), /tolerance_nm must be in \[1, 100000\] nm, got 0.5/);
+  assert.throws(() => commands.withTolerance(push, Infinity), /tolerance_nm must be a finite number/);
+  assert.equal(commands.withTolerance(push, 0.5).tolerance_nm, 0.5, 'no range stated: the server checks it');
 });

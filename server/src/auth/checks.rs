@@ -75,7 +75,7 @@ mod tests {
     use std::sync::{Condvar, Mutex};
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-    async fn two_checks_run_at_once_thirty_two_wait_and_the_rest_are_told_busy_at_once() {
+    async fn a_few_checks_run_some_wait_and_the_rest_are_told_busy_at_once() {
         let checks = Arc::new(Checks::default());
         // Every check blocks until the gate opens: the crowd is all there before any ends.
         let gate = Arc::new((Mutex::new(false), Condvar::new()));
@@ -116,6 +116,7 @@ mod tests {
         for t in tasks {
             ran += usize::from(t.await.unwrap());
         }
+        assert_eq!((AT_ONCE, WAITING), (2, 32), "as proto/README.md says");
         assert_eq!(peak.load(Relaxed), AT_ONCE, "checks running at once");
         assert_eq!(ran, AT_ONCE + WAITING, "2 ran and 32 waited for their turn");
         assert_eq!(busy.load(Relaxed), 60 - AT_ONCE - WAITING, "the rest told busy");

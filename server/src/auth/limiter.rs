@@ -82,7 +82,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn ten_failures_block_an_address_until_the_bucket_refills_and_others_are_unaffected() {
+    fn failures_block_one_address_until_its_bucket_refills() {
         let mut l = FailureLimiter::default();
         let (a, b): (IpAddr, IpAddr) = ("10.0.0.1".parse().unwrap(), "10.0.0.2".parse().unwrap());
         let t0 = Instant::now();

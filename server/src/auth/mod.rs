@@ -3,7 +3,7 @@
 //! rate-limited per address, and the live sessions closed when their token is revoked.
 //!
 //! Two modes. Without a token file (`make run`), one generated operator token and an optional
-//! viewer token, compared in constant time, as before; the people are named `operator`, `viewer`
+//! viewer token, compared in constant time; the people are named `operator`, `viewer`
 //! and `anonymous` (a viewer when no viewer token is set). With `--token-file`, every connection
 //! needs a token of the file ([`tokens`]): one per person, with a role; the file is re-read when
 //! it changes ([`reload`]), and the sessions of a token no longer in it (or whose role changed)
@@ -34,8 +34,9 @@ use self::cookie::{Claims, CookieKey};
 use self::limiter::FailureLimiter;
 use self::reload::{FileWatch, Stamp};
 use self::tokens::TokenTable;
+use crate::clock::unix_now;
 
-pub use self::reload::{FILE_POLL, SETTLE, watch_token_file};
+pub use self::reload::{FILE_POLL, SETTLE};
 
 /// A person, as a credential names them.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -254,7 +255,7 @@ impl Auth {
     /// The person a session cookie names, or None: not signed by this server, too old, or its
     /// credential revoked (such cookies are as none).
     pub fn person_for_cookie(&self, cookie: &str) -> Option<Arc<Person>> {
-        let c = self.cookie_key.as_ref()?.open(cookie, crate::records::unix_now())?;
+        let c = self.cookie_key.as_ref()?.open(cookie, unix_now())?;
         let p = Person {
             name: c.name,
             role: c.role,
@@ -335,7 +336,7 @@ impl Auth {
                 role: person.role,
                 key: person.key.clone(),
             },
-            crate::records::unix_now(),
+            unix_now(),
         );
         self.counters.logins.fetch_add(1, Relaxed);
         Some(value)

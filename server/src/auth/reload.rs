@@ -212,22 +212,3 @@ impl Auth {
         tracing::info!("token file re-read: {} token(s)", table.entries.len());
     }
 }
-
-/// Looks at the token file every [`FILE_POLL`] while the server runs.
-pub async fn watch_token_file(st: Arc<crate::app_state::AppState>) {
-    if !st.auth.is_named() {
-        return;
-    }
-    let mut shutdown = st.channels.shutdown.subscribe();
-    let mut tick = tokio::time::interval(FILE_POLL);
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-    loop {
-        tokio::select! {
-            _ = tick.tick() => {
-                let st2 = st.clone();
-                let _ = tokio::task::spawn_blocking(move || st2.auth.reload_if_changed()).await;
-            }
-            _ = shutdown.changed() => break,
-        }
-    }
-}

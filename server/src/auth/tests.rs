@@ -8,7 +8,7 @@ fn ip(s: &str) -> IpAddr {
 }
 
 #[tokio::test]
-async fn without_a_token_file_the_generated_tokens_name_the_operator_and_the_viewer() {
+async fn without_a_token_file_the_generated_tokens_name_operator_and_viewer() {
     let open = Auth::new("op-secret-1".into(), None, None);
     let p = open
         .authenticate(ip("10.0.0.1"), Some("op-secret-1"), None)
@@ -38,7 +38,7 @@ async fn without_a_token_file_the_generated_tokens_name_the_operator_and_the_vie
 }
 
 #[tokio::test]
-async fn ten_failures_from_an_address_refuse_even_the_right_token_there_and_only_there() {
+async fn too_many_failures_refuse_even_the_right_token_from_that_address_only() {
     let auth = Auth::new("op-secret-1".into(), None, None);
     for _ in 0..10 {
         auth.authenticate(ip("10.0.0.9"), Some("guess"), None)
@@ -159,13 +159,12 @@ impl Drop for Unreadable {
     }
 }
 
-/// Review of issue 27, item 2: a revocation written into a file the server cannot read (then
-/// fixed by a `chown`, which changes neither its time, size nor inode) took effect never: the
-/// file's stamp was kept before it was read, and a failed read was not tried again. Now the
-/// failure is said once, counted and shown by `nanopush_auth_token_file_ok`, the file is tried
-/// on every poll, and the revocation takes effect once the file can be read.
+/// A revocation written into a file the server cannot read, then made readable by a `chown`
+/// (which changes neither its time, size nor inode): the failure is said once, counted and
+/// shown by `nanopush_auth_token_file_ok`, the file is tried on every poll (its stamp is kept
+/// only once it is read), and the revocation takes effect once the file can be read.
 #[test]
-fn a_revocation_in_a_file_unreadable_for_a_while_takes_effect_once_it_can_be_read() {
+fn a_revocation_in_an_unreadable_file_takes_effect_once_it_is_readable() {
     let dir = std::env::temp_dir().join(format!("nanopush-auth-perm-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("tokens");

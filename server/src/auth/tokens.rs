@@ -454,8 +454,8 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
-    /// Review of issue 27, item 2: `sudo nanopush token revoke` left a root:root 0600 file the
-    /// server's user could not read. The rewritten file keeps the old one's owner and group.
+    /// The rewritten file keeps the old one's owner and group: `sudo nanopush token revoke`
+    /// must not leave a root:root 0600 file the server's user cannot read.
     #[test]
     fn a_rewritten_file_keeps_its_owner_and_group() {
         use std::os::unix::fs::MetadataExt as _;

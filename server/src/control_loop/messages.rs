@@ -53,7 +53,7 @@ impl StopReason {
 }
 
 /// The loop's outcome for a push whose legs all ran: not yet a verdict. The scan after the push
-/// judges the move (`server/src/judge.rs`), which keeps the instrument busy until then.
+/// judges the move (`server/src/push/judge.rs`), which keeps the instrument busy until then.
 pub const PUSHED: &str = "pushed";
 
 /// What the loop reports back.

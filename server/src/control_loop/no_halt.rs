@@ -343,7 +343,7 @@ mod tests {
     }
 
     #[test]
-    fn a_setting_that_cannot_be_written_is_an_error_naming_it_and_records_nothing() {
+    fn an_unwritable_setting_is_an_error_naming_it_and_records_nothing() {
         let (setting, record) = place("missing", "0");
         let gone = setting.with_file_name("no-such-dir/pm_qos_resume_latency_us");
         let e = NoHalt::request_at(&gone, &record, 7, below_1000).unwrap_err();

@@ -58,7 +58,7 @@ fn the_start_answers_the_ready_channel_without_a_haptic_link() {
 }
 
 #[test]
-fn a_shutdown_when_idle_ends_the_loop_at_that_tick_and_the_end_marks_it_stopped() {
+fn an_idle_shutdown_ends_the_loop_at_once_and_marks_it_stopped() {
     let (mut lp, shared) = default_loop();
     let mut running = lp.start(&shared, &CFG);
     assert!(lp.tick(&shared, &mut running, Instant::now()));

@@ -217,7 +217,7 @@ mod tests {
     /// docs/haptics.md, "Faults": under `--haptic sim` the supervisor restarts the bridge "with a
     /// back-off (0.2 s doubling to 5 s)".
     #[test]
-    fn the_supervisors_back_off_is_0_2_s_doubling_to_5_s() {
+    fn the_supervisors_back_off_doubles_up_to_its_cap() {
         let mut b = BACKOFF_FIRST;
         let mut seq = vec![b];
         for _ in 0..6 {

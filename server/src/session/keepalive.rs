@@ -6,15 +6,15 @@
 //! follow from the oldest ping still unanswered, sent `u` ago:
 //!
 //! - **Dead peer**: `u` > `--ws-timeout-s` — the peer answered no ping for that long: closed.
-//!   (Before, any frame read from the peer counted, and a slow reader, whose pongs came late
-//!   behind 45 s of queued frames, was closed as dead although it answered every ping.)
+//!   Only the pongs count, not other frames read from the peer: a slow reader, whose pongs come
+//!   late behind 45 s of queued frames, answers every ping and is not dead.
 //! - **Lagging reader**: `u` > [`LAG_LIMIT`] — the client has not read what was sent half a
 //!   second ago: telemetry frames are skipped (not queued in the socket to be read tens of
 //!   seconds late), and the number skipped is told with `lagged` before the next frame sent.
 //!   This is for a client that reads, late: one that answered a ping within the last
 //!   [`READING`]. A client that has answered none for that long (or never) has stopped reading
 //!   rather than slowed down: its frames go on, its socket fills, and the send budget (a frame
-//!   that waits 5 s) drops it, as before; the others never wait for it.
+//!   that waits 5 s) drops it; the others never wait for it.
 //!
 //! While a client takes telemetry it is pinged every [`PROBE`] (so the rule sees how far it has
 //! read within a fraction of a second), otherwise every `--ws-ping-s`. A frame queued for a
@@ -160,7 +160,7 @@ mod tests {
     /// A forged pong beyond the last ping answers only the pings sent; without telemetry, pings
     /// go at the keep-alive period.
     #[test]
-    fn a_forged_pong_answers_only_what_was_sent_and_idle_clients_are_pinged_less() {
+    fn a_forged_pong_answers_nothing_and_idle_clients_are_pinged_less() {
         let t0 = Instant::now();
         let answered = Answered::default();
         let mut k = KeepAlive::new(answered.clone(), t0);

@@ -1,93 +1,21 @@
 //! The control lease: one operator at a time commands the instrument. Taken with `take_lease`,
-//! given back with `release_lease`, or lost with the connection (which also stops what the
-//! holder commanded). Haptic z-control ends whenever the lease is freed. Every change is
-//! broadcast as a `lease` event.
+//! given back with `release_lease` (their handlers: `commands/lease.rs`), or lost with the
+//! connection, which also stops what the holder commanded. Haptic z-control ends whenever the
+//! lease is freed. Every change is broadcast as a `lease` event.
 
 use std::sync::atomic::Ordering::Relaxed;
 
-use nanopush_proto::ws::{ErrorCode, Role, ServerMessage};
+use nanopush_proto::ws::ServerMessage;
 
-use super::Client;
 use crate::app_state::AppState;
-use crate::command_checks::Refusal;
 use crate::control_loop::{LoopCommand, StopReason};
 use crate::haptic::HapticCommand;
-
-/// A command that changes the instrument needs an operator holding the lease, and a server
-/// that is not shutting down.
-pub(super) fn require_lease(st: &AppState, c: &Client) -> Result<(), Refusal> {
-    if c.role != Role::Operator {
-        return Err(Refusal::new(
-            ErrorCode::Forbidden,
-            "viewers cannot command; connect with the operator token",
-        ));
-    }
-    if st.lease_holder() != Some(c.id) {
-        return Err(Refusal::new(
-            ErrorCode::NoLease,
-            "this command needs the control lease: send take_lease first",
-        ));
-    }
-    if st.activity.stopping.load(Relaxed) || *st.channels.shutdown.borrow() {
-        return Err(Refusal::new(ErrorCode::ShuttingDown, "the server is shutting down"));
-    }
-    Ok(())
-}
-
-/// `take_lease`: an operator takes a free lease (taking it again is fine); a held one is
-/// refused with its holder.
-pub(super) fn take(st: &AppState, c: &Client) -> Result<(), Refusal> {
-    if c.role != Role::Operator {
-        return Err(Refusal::new(
-            ErrorCode::Forbidden,
-            "viewers cannot take the lease; connect with the operator token",
-        ));
-    }
-    let mut lease = st.clients.lease.lock().expect("lease lock");
-    match *lease {
-        Some(h) if h == c.id => Ok(()),
-        Some(h) => Err(Refusal::new(
-            ErrorCode::LeaseHeld,
-            match st.auth.name_of(h) {
-                Some(name) => format!("{name} (client {h}) holds the lease"),
-                None => format!("client {h} holds the lease"),
-            },
-        )),
-        None => {
-            *lease = Some(c.id);
-            drop(lease);
-            st.broadcast_event(&ServerMessage::Lease {
-                holder: Some(c.id),
-                holder_name: Some(c.person.name.clone()),
-                reason: None,
-            });
-            Ok(())
-        }
-    }
-}
-
-/// `release_lease`: only its holder gives it back.
-pub(super) fn release(st: &AppState, c: &Client) -> Result<(), Refusal> {
-    let mut lease = st.clients.lease.lock().expect("lease lock");
-    if *lease != Some(c.id) {
-        return Err(Refusal::new(ErrorCode::NoLease, "this client does not hold the lease"));
-    }
-    *lease = None;
-    drop(lease);
-    release_haptic(st);
-    st.broadcast_event(&ServerMessage::Lease {
-        holder: None,
-        holder_name: None,
-        reason: None,
-    });
-    Ok(())
-}
 
 /// The lease is free: haptic z-control, which only the holder commands, ends with it (the tip
 /// parks, the handle is let go), so z-control is never `engaged` with no holder. Sent whatever
 /// the phase (an `engage` still queued is undone too); releasing when off changes nothing.
 /// `true` when z-control was on.
-fn release_haptic(st: &AppState) -> bool {
+pub(super) fn release_haptic(st: &AppState) -> bool {
     let h = &st.shared.metrics.haptic;
     if !h.enabled.load(Relaxed) {
         return false;
@@ -139,63 +67,20 @@ pub(super) fn on_disconnect(st: &AppState, id: u32) {
 
 #[cfg(test)]
 mod tests {
+    use nanopush_proto::ws::Role;
+
     use super::*;
-    use crate::session::tests::{client, test_state};
+    use crate::app_state::test_state;
+    use crate::session::tests::{client, command};
 
     fn next_event(rx: &mut tokio::sync::broadcast::Receiver<axum::extract::ws::Utf8Bytes>) -> serde_json::Value {
         serde_json::from_str(rx.try_recv().expect("an event").as_str()).unwrap()
     }
 
     #[test]
-    fn an_operator_takes_a_free_lease_and_everyone_is_told() {
-        let st = test_state();
-        let mut events = st.channels.events.subscribe();
-        take(&st, &client(1, Role::Operator)).unwrap();
-        assert_eq!(st.lease_holder(), Some(1));
-        let e = next_event(&mut events);
-        assert_eq!(e["type"], "lease");
-        assert_eq!(e["holder"], 1);
-        // Taking it again changes nothing and tells no one.
-        take(&st, &client(1, Role::Operator)).unwrap();
-        assert!(events.try_recv().is_err());
-    }
-
-    #[test]
-    fn a_held_lease_is_refused_with_its_holder_and_viewers_never_get_it() {
-        let st = test_state();
-        take(&st, &client(1, Role::Operator)).unwrap();
-        let r = take(&st, &client(2, Role::Operator)).unwrap_err();
-        assert_eq!(r.code, ErrorCode::LeaseHeld);
-        assert_eq!(r.message, "client 1 holds the lease");
-        let v = take(&st, &client(3, Role::Viewer)).unwrap_err();
-        assert_eq!(v.code, ErrorCode::Forbidden);
-        assert_eq!(st.lease_holder(), Some(1));
-    }
-
-    #[test]
-    fn only_the_holder_releases_and_commands() {
-        let st = test_state();
-        let (holder, other) = (client(1, Role::Operator), client(2, Role::Operator));
-        take(&st, &holder).unwrap();
-        assert_eq!(release(&st, &other).unwrap_err().code, ErrorCode::NoLease);
-        assert_eq!(require_lease(&st, &other).unwrap_err().code, ErrorCode::NoLease);
-        assert_eq!(
-            require_lease(&st, &client(3, Role::Viewer)).unwrap_err().code,
-            ErrorCode::Forbidden
-        );
-        require_lease(&st, &holder).unwrap();
-        st.activity.stopping.store(true, Relaxed);
-        assert_eq!(require_lease(&st, &holder).unwrap_err().code, ErrorCode::ShuttingDown);
-        let mut events = st.channels.events.subscribe();
-        release(&st, &holder).unwrap();
-        assert_eq!(st.lease_holder(), None);
-        assert!(next_event(&mut events)["holder"].is_null());
-    }
-
-    #[test]
     fn a_holder_that_disconnects_frees_the_lease_and_stops_its_push() {
         let st = test_state();
-        take(&st, &client(1, Role::Operator)).unwrap();
+        command(&st, &mut client(1, Role::Operator), r#"{"type":"take_lease"}"#).unwrap();
         st.shared.busy.store(true, Relaxed);
         let mut events = st.channels.events.subscribe();
         let generation = st.activity.generation.load(Relaxed);

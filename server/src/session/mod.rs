@@ -1,8 +1,8 @@
 //! One WebSocket connection: a receive loop (`receive.rs`: rate limit, size limit, one command
-//! per message, handled in `commands.rs` under the roles and the lease, `lease.rs`) and a send
-//! loop (`send.rs`: replies with back-pressure, events, telemetry and scan lines, keep-alive, the
-//! per-frame send budget). Both are generic over `Sink`/`Stream`, so a session runs over plain
-//! channels in the tests.
+//! per message, run as its entry in the table of commands says, `commands/`; the lease lost
+//! with the connection, `lease.rs`) and a send loop (`send.rs`: replies with back-pressure,
+//! events, telemetry and scan lines, keep-alive, the per-frame send budget). Both are generic
+//! over `Sink`/`Stream`, so a session runs over plain channels in the tests.
 
 mod commands;
 mod keepalive;
@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 
 use axum::extract::ws::{Message, Utf8Bytes, WebSocket};
 use futures_util::{Sink, Stream, StreamExt};
-use nanopush_proto::ws::{Role, ServerMessage, Stream as WsStream, WS_VERSION};
+use nanopush_proto::ws::{Bounds, Role, ServerMessage, Stream as WsStream, WS_VERSION};
 use tokio::sync::{mpsc, watch};
 
 use crate::app_state::{AppState, to_text};
@@ -91,6 +91,7 @@ where
         tick_hz: 1.0 / st.params.tick,
         instance: st.instance.id.clone(),
         started_unix_ms: st.instance.started_unix_ms,
+        push_tolerance_nm: Bounds::PUSH_TOLERANCE_NM,
     };
     let _ = reply_tx.try_send(to_text(&welcome));
     let _ = reply_tx.try_send(to_text(&st.state_message()));

@@ -1,5 +1,6 @@
 //! The receive loop of one session: each frame admitted (rate limit, binary frames, size
-//! limit), parsed as one command, handled, and answered in order (`ok` or a typed error).
+//! limit), parsed as one command, run as its entry in the table of commands says
+//! (`commands/mod.rs`), logged, and answered in order (`ok` or a typed error).
 
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -7,15 +8,14 @@ use std::time::Instant;
 
 use axum::extract::ws::{Message, Utf8Bytes};
 use futures_util::{Stream, StreamExt};
-use nanopush_proto::ws::{ClientMessage, ErrorCode, HapticAction, ServerMessage, Stream as WsStream};
+use nanopush_proto::ws::{ErrorCode, ServerMessage, Stream as WsStream};
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 
-use super::commands::handle;
+use super::commands::route;
 use super::{Client, REPLY_PATIENCE};
 use crate::app_state::{AppState, ServeConfig, to_text};
 use crate::command_checks::parse_command;
-use crate::haptic::api::scales_in_force;
 
 /// Why the receive loop ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -154,17 +154,9 @@ async fn answer(st: &Arc<AppState>, client: &mut Client, inbox: &Inbox<'_>, text
         Err((id, why)) => return reply(st, inbox.replies, id, ErrorCode::Malformed, why).await,
     };
     let cid = parsed.id();
-    let scale = match &parsed {
-        ClientMessage::Haptic {
-            action: HapticAction::Scale,
-            nm_per_mm,
-            pull_off_at_hand_n,
-            ..
-        } => Some((*nm_per_mm, *pull_off_at_hand_n)),
-        _ => None,
-    };
-    let audited = crate::audit::describe(&parsed);
-    let handled = handle(st, client, parsed);
+    let command = route(&parsed);
+    let audited = command.audit_text(&parsed);
+    let handled = command.run(st, client, parsed);
     // Queued before the answer is sent, written within one group commit (`audit.rs`). The `ok`
     // does not wait for the disk: the command's events (a lease change, a run_done) must not
     // overtake its answer, and a stop must not wait for anything.
@@ -173,12 +165,12 @@ async fn answer(st: &Arc<AppState>, client: &mut Client, inbox: &Inbox<'_>, text
         let _ = st.audit.command(&client.person, client.addr, client.id, cmd, refused);
     }
     match handled {
-        Ok(()) => {
-            let scales = scale.map(|(g, f)| {
-                let ts = st.scene.tip_sample();
-                scales_in_force(&st.shared.metrics.haptic, ts.k_c, ts.adhesion(), g, f)
-            });
-            if !deliver(inbox.replies, to_text(&ServerMessage::Ok { id: cid, scales })).await {
+        Ok(accepted) => {
+            let ok = ServerMessage::Ok {
+                id: cid,
+                scales: accepted.scales,
+            };
+            if !deliver(inbox.replies, to_text(&ok)).await {
                 return false;
             }
             // Only a changed subscription wakes the sender (it resubscribes, dropping queued
@@ -216,7 +208,8 @@ mod tests {
     use nanopush_proto::ws::Role;
 
     use super::*;
-    use crate::session::tests::{client, test_state};
+    use crate::app_state::test_state;
+    use crate::session::tests::client;
 
     #[test]
     fn data_frames_spend_the_rate_budget_and_control_frames_do_not() {

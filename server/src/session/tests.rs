@@ -1,5 +1,5 @@
-//! The session's tests over plain channels (no network), and the state they share with the
-//! lease's and the receive loop's tests.
+//! The session's tests over plain channels (no network), and the clients and commands they share
+//! with the tests of the lease, the receive loop and the table of commands.
 
 use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
@@ -7,41 +7,11 @@ use std::time::{Duration, Instant};
 
 use axum::extract::ws::Message;
 use futures_util::SinkExt;
-use nanopush_proto::ws::Role;
+use nanopush_proto::ws::{ErrorCode, Role};
 
 use super::*;
-use crate::app_state::{OPERATOR_PLACES, ServeConfig};
-use crate::control_loop::Shared;
-use nanopush_instrument::scene::Scene;
-
-/// A server's state on the default scene, with no loop running.
-pub(crate) fn test_state() -> Arc<AppState> {
-    let scene = Scene::default_scene();
-    let tick = 1e-3;
-    let base = nanopush_instrument::scan::ScanParams::from_scene(&scene);
-    let afm = nanopush_instrument::afm::Afm::from_scene(&scene, base.centre_x, base.centre_y, tick);
-    let shared = Arc::new(Shared::new(&afm));
-    let cfg = ServeConfig {
-        operator_token: "op".into(),
-        viewer_token: None,
-        allow_origins: Vec::new(),
-        max_message_bytes: 64 * 1024,
-        max_rate: 50.0,
-        max_clients: 64,
-        max_clients_per_address: 16,
-        ws_ping: Duration::from_secs(10),
-        ws_timeout: Duration::from_secs(30),
-        header_timeout: Duration::from_secs(10),
-        data_dir: std::env::temp_dir(),
-        web_dir: std::env::temp_dir(),
-        haptic: crate::haptic::HapticMode::None,
-        scan_line_hz: 100.0,
-        telemetry_hz: 60.0,
-        access: Default::default(),
-    };
-    let params = scene.strategy_params(tick);
-    Arc::new(AppState::new(cfg, scene, shared, params))
-}
+use crate::app_state::{OPERATOR_PLACES, test_state};
+use crate::command_checks::Refusal;
 
 /// A connected client's handling state.
 pub(crate) fn client(id: u32, role: Role) -> Client {
@@ -54,6 +24,13 @@ pub(crate) fn client(id: u32, role: Role) -> Client {
         tokens: 50.0,
         last: Instant::now(),
     }
+}
+
+/// Runs the command `json` for client `c` as the session does (its entry in the table: its
+/// check, who may send it, its handler).
+pub(crate) fn command(st: &Arc<AppState>, c: &mut Client, json: &str) -> Result<super::commands::Accepted, Refusal> {
+    let msg = crate::command_checks::parse_command(json).expect("a command");
+    super::commands::route(&msg).run(st, c, msg)
 }
 
 /// A person of `role` (named after it).
@@ -95,7 +72,7 @@ async fn next_json(rx: &mut futures_channel::mpsc::UnboundedReceiver<Message>) -
 }
 
 #[tokio::test]
-async fn a_session_over_channels_welcomes_takes_the_lease_and_gives_it_back_when_the_peer_goes() {
+async fn a_session_welcomes_and_frees_the_lease_when_the_peer_goes() {
     let st = test_state();
     let (mut tx, mut rx, task) = connect(&st, Role::Operator);
     let welcome = next_json(&mut rx).await;
@@ -130,6 +107,34 @@ async fn a_session_over_channels_welcomes_takes_the_lease_and_gives_it_back_when
         .unwrap()
         .unwrap();
     assert_eq!(st.lease_holder(), None);
+}
+
+/// The first message says a push's tolerance as the server checks it: a page's form starts at
+/// the default and refuses what the server would.
+#[tokio::test]
+async fn the_welcome_states_the_push_tolerance_the_server_checks() {
+    let st = test_state();
+    let (tx, mut rx, task) = connect(&st, Role::Viewer);
+    let welcome = next_json(&mut rx).await;
+    let said = &welcome["push_tolerance_nm"];
+    let (lo, hi) = nanopush_proto::push::TOLERANCE_RANGE_NM;
+    assert_eq!(
+        *said,
+        serde_json::json!({"default": nanopush_proto::push::TOLERANCE_NM, "min": lo, "max": hi})
+    );
+    let nm = |k: &str| said[k].as_f64().unwrap();
+    let tolerance = crate::command_checks::push_tolerance;
+    assert_eq!(tolerance(None), Ok(nm("default") * 1e-9));
+    assert_eq!(tolerance(Some(nm("min"))), Ok(nm("min") * 1e-9));
+    assert_eq!(tolerance(Some(nm("max"))), Ok(nm("max") * 1e-9));
+    for past in [nm("min").next_down(), nm("max").next_up()] {
+        assert_eq!(tolerance(Some(past)).unwrap_err().code, ErrorCode::OutOfRange, "{past}");
+    }
+    drop(tx);
+    tokio::time::timeout(Duration::from_secs(5), task)
+        .await
+        .unwrap()
+        .unwrap();
 }
 
 #[tokio::test]
@@ -180,50 +185,13 @@ async fn a_shutdown_is_announced_and_the_socket_closed() {
 /// closed after 60 s, a 5 s send budget per frame, a client that reads no reply for 30 s
 /// closed, messages up to 8 MiB refused with `too_large` (above it the connection closes),
 /// SCHED_FIFO priority 50 for the loop. (The 8 places are also tested end to end:
-/// `tests/e2e/serve_hostile.rs::the_operator_token_has_8_places_and_a_ninth_is_refused`.)
+/// `tests/e2e/serve_hostile.rs::the_operator_token_has_its_own_places_and_one_more_is_refused`.)
 #[test]
-fn the_documented_server_limits_8_places_60_s_idle_5_s_send_30_s_replies_8_mib_fifo_50() {
+fn the_server_limits_are_as_documented() {
     assert_eq!(OPERATOR_PLACES, 8);
     assert_eq!(crate::IDLE_HTTP, Duration::from_secs(60));
     assert_eq!(SEND_BUDGET, Duration::from_secs(5));
     assert_eq!(REPLY_PATIENCE, Duration::from_secs(30));
     assert_eq!(HARD_CAP, 8 * 1024 * 1024);
     assert_eq!(crate::control_loop::realtime::LOOP_PRIORITY, 50);
-}
-
-/// The haptic scales in force start at the scene's and follow each accepted `haptic scale` (a
-/// refused one changes nothing): `/api/status` shows them (issue 26).
-#[test]
-fn the_haptic_scales_in_force_follow_accepted_scale_commands() {
-    use nanopush_proto::ws::{ClientMessage, HapticAction};
-    let st = test_state();
-    let start = *st.haptic_scales.lock().unwrap();
-    assert_eq!(start.nm_per_mm, st.scene.file.haptic.nm_per_mm);
-    assert_eq!(start.pull_off_at_hand_n, st.scene.file.haptic.pull_off_at_hand_n);
-    let mut c = client(1, Role::Operator);
-    super::lease::take(&st, &c).unwrap();
-    let scale = |nm: Option<f64>, po: Option<f64>| ClientMessage::Haptic {
-        id: None,
-        action: HapticAction::Scale,
-        nm_per_mm: nm,
-        pull_off_at_hand_n: po,
-    };
-    super::commands::handle(&st, &mut c, scale(Some(20.0), None)).unwrap();
-    assert_eq!(st.haptic_scales.lock().unwrap().nm_per_mm, 20.0);
-    assert_eq!(
-        st.haptic_scales.lock().unwrap().pull_off_at_hand_n,
-        start.pull_off_at_hand_n
-    );
-    assert!(
-        super::commands::handle(&st, &mut c, scale(None, Some(50.0))).is_err(),
-        "out of range"
-    );
-    super::commands::handle(&st, &mut c, scale(None, Some(2.5))).unwrap();
-    assert_eq!(
-        *st.haptic_scales.lock().unwrap(),
-        crate::app_state::HapticScales {
-            nm_per_mm: 20.0,
-            pull_off_at_hand_n: 2.5
-        }
-    );
 }

@@ -1,4 +1,4 @@
-//! `nanopush-haptic-grid`: issue 25's full grid with the real processes (a benchmark that
+//! `nanopush-haptic-grid`: the full haptic grid with the real processes (a benchmark that
 //! prints, not a test: 80 cells of 5-25 s each, ~15 min). Each cell starts `nanopush serve
 //! --haptic external` and a simulated `nanopush-haptic` playing one operator, sets the scales
 //! over the WebSocket as the lease holder, engages, plays the script to its end and judges the

@@ -18,10 +18,9 @@ use std::sync::atomic::Ordering::Relaxed;
 
 use nanopush_proto::ws::{Judged, ServerMessage};
 
-use crate::app_state::AppState;
-use crate::push_job::{Move, Pending, audit_early_end, launch, strategy_scene};
+use super::launch::{audit_early_end, launch, strategy_scene};
+use crate::app_state::{AppState, Move, Pending};
 use crate::records::{self, Recorded};
-use crate::telemetry::audit_run_done;
 use nanopush_instrument::control::{DEFAULT_ATTEMPTS, MoveError, MoveRoute, MoveTarget, Verdict, route_move};
 use nanopush_instrument::scene::Scene;
 
@@ -30,7 +29,7 @@ use nanopush_instrument::scene::Scene;
 pub(crate) fn on_pushed(st: &Arc<AppState>, run: u64, particle: u32, estimate: [f64; 2], record: Recorded) {
     let pending = st.activity.judging.lock().ok().and_then(|mut j| j.remove(&run));
     let Some(pending) = pending else {
-        // Every push the loop runs is launched with its move (`push_job::launch`).
+        // Every push the loop runs is launched with its move (`launch.rs`).
         tracing::error!("run {run}: no move to judge");
         let why = "internal error: the push's move was lost, so it was not judged".to_string();
         return end(st, run, particle, "error", Some(why), Some(estimate), record, None);
@@ -141,7 +140,7 @@ fn judge_with(st: &AppState, scene: &Scene, run: u64, p: &Pending, estimate: [f6
             match launch(st, p.mv, scene, plan, p.attempt + 1) {
                 Ok(()) => {
                     let (record, _) = amended(st, record, "corrected", Some(&why), Some(&judged));
-                    audit_run_done(st, run, id, "corrected", Some(&why), record.as_deref());
+                    st.audit.run_done(run, id, "corrected", Some(&why), record.as_deref());
                 }
                 Err((outcome, failure)) => {
                     let failure = format!(
@@ -270,7 +269,8 @@ fn end(
     judged: Option<Judged>,
 ) {
     let (record, record_error) = amended(st, record, outcome, failure.as_deref(), judged.as_ref());
-    audit_run_done(st, run, particle, outcome, failure.as_deref(), record.as_deref());
+    st.audit
+        .run_done(run, particle, outcome, failure.as_deref(), record.as_deref());
     st.push_ended(true);
     st.shared.busy.store(false, Relaxed);
     st.broadcast_event(&ServerMessage::RunDone {
@@ -289,8 +289,8 @@ mod tests {
     use std::sync::atomic::Ordering::Relaxed;
 
     use super::*;
+    use crate::app_state::test_state;
     use crate::control_loop::LoopCommand;
-    use crate::session::tests::test_state;
 
     /// A test server whose particle 1 the loop left `off` (m, along x) from the target, which
     /// is 1 µm along +x from where the scene puts it; the move as `launch` registers it.
@@ -347,7 +347,7 @@ mod tests {
     /// A push the scan finds 30 nm off, at a 25 nm tolerance: a correction from where the scan
     /// found it, the instrument still busy, the first push's record saying `corrected`.
     #[test]
-    fn a_push_found_outside_the_tolerance_is_corrected_from_where_the_scan_found_it() {
+    fn a_push_outside_the_tolerance_is_corrected_from_where_it_was_found() {
         let (st, p, estimate) = left_off(30e-9, 1, 25e-9);
         let mut rx = st.channels.events.subscribe();
         let name = format!("push-judge-{}-r1-p1.json", std::process::id());
@@ -381,10 +381,9 @@ mod tests {
         assert_eq!(record["judged"]["attempts"], 1);
     }
 
-    /// A correction that cannot begin (here the loop's queue is full) ends the move with why, and
-    /// the record of the push it would have corrected says so, never `corrected` (the review of
-    /// issue 24 found `corrected` in a record after a stop that kept the correction from
-    /// starting).
+    /// A correction that cannot begin (here the loop's queue is full; a stop does the same) ends
+    /// the move with why, and the record of the push it would have corrected says so, never
+    /// `corrected`.
     #[test]
     fn a_correction_that_cannot_begin_ends_the_move_and_its_record_says_why() {
         let (st, p, estimate) = left_off(30e-9, 1, 25e-9);
@@ -457,7 +456,7 @@ mod tests {
     /// (the drag then pulled the particle back 976 nm), and a correction would be cut the
     /// same way: `missed` at once, saying why.
     #[test]
-    fn a_push_the_stages_edge_cut_short_is_missed_without_a_useless_correction() {
+    fn a_push_cut_short_by_the_stage_edge_is_missed_without_a_correction() {
         let (st, p, estimate) = left_off_at(Some((98.999e-6, 50e-6)), -976e-9, 1, 25e-9);
         let mut rx = st.channels.events.subscribe();
         judge_with(&st, &st.scene.clone(), 1, &p, estimate, Err("no trace".into()));
@@ -476,7 +475,7 @@ mod tests {
     /// A `stop` while the scan ran ends the move `stopped`; a particle the scan does not find is
     /// `not_found`, never `ok`.
     #[test]
-    fn a_stop_ends_the_move_instead_of_a_correction_and_a_lost_particle_is_not_found() {
+    fn a_stop_ends_the_move_uncorrected_and_a_lost_particle_is_not_found() {
         let (st, p, estimate) = left_off(30e-9, 1, 25e-9);
         let mut rx = st.channels.events.subscribe();
         st.activity.generation.fetch_add(1, Relaxed);

@@ -1,67 +1,15 @@
-//! A push prepared off the loop and off the async workers: a quick local scan locates the
-//! particle, the move is planned and the model predicts it; then the job goes to the loop, and
-//! the scan after it judges the move (`judge.rs`).
+//! A push handed to the control loop ([`launch`]), with what it needs: the particle's strategy
+//! plan, derived once per tolerance ([`strategy_scene`]); and a move that ends before the loop
+//! runs it ([`run_done_failed`]).
 
 use std::sync::atomic::Ordering::Relaxed;
 
-use nanopush_proto::ws::{ErrorCode, PushPath, ServerMessage};
+use nanopush_proto::ws::{PushPath, ServerMessage};
 
-use crate::app_state::AppState;
-use crate::command_checks::Refusal;
+use crate::app_state::{AppState, Move, Pending};
 use crate::control_loop::{LoopCommand, PushJob};
-use crate::judge;
 use nanopush_instrument::control::derive::{self, derive};
-use nanopush_instrument::control::{MoveRoute, MoveTarget, Prepared, route_move};
-
-/// Whether a particle of radius `r` (m) can be pushed to `p` (m): its centre at least a radius
-/// inside the stage's `[0, range]` square, so the particle stays on the stage and the tip, which
-/// stays inside it, can reach behind it. Checked as the planner checks it
-/// ([`nanopush_instrument::control::route::on_stage`]: in µm, the bounds rounded inward to the nanometre, as
-/// the refusal prints them).
-pub(crate) fn on_stage(p: (f64, f64), r: f64, range: f64) -> Result<(), Refusal> {
-    if nanopush_instrument::control::route::on_stage(p, r, range) {
-        return Ok(());
-    }
-    let (lo, hi) = nanopush_instrument::control::route::centre_bounds_um(r, range);
-    Err(Refusal::new(
-        ErrorCode::OutOfRange,
-        format!(
-            "target ({:.3}, {:.3}) µm is out of range for a particle {:.3} µm in radius; allowed: [{lo:.3}, {hi:.3}] µm in x and y",
-            p.0 * 1e6,
-            p.1 * 1e6,
-            r * 1e6,
-        ),
-    ))
-}
-
-/// A move as the operator asked for it: the particle, the tolerance it must end within, the
-/// `stop` generation it began in, and who asked.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct Move {
-    /// Particle id.
-    pub particle: u32,
-    /// `ok` within this of the target, as the scan after the push measures it (m).
-    pub tolerance: f64,
-    /// [`crate::app_state::Activity::generation`] when it was asked: a `stop` changes it.
-    pub generation: u64,
-    /// The client that asked.
-    pub by: u32,
-}
-
-/// A push the loop runs, whose move the scan after it judges (`judge.rs`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Pending {
-    pub(crate) mv: Move,
-    /// The target (m).
-    pub(crate) target: (f64, f64),
-    /// The particle's radius in the scene (m): what the command's target was checked against,
-    /// and the local scans' hint.
-    pub(crate) radius: f64,
-    /// Which push of the move this is (1, then the corrections).
-    pub(crate) attempt: u32,
-    /// Its model prediction and geometry.
-    pub(crate) prepared: Prepared,
-}
+use nanopush_instrument::control::{MoveRoute, Prepared};
 
 /// A push that ended before the loop ran it (refused by the plan, stopped, the queue full): its
 /// `run_done` to everyone, and to the audit log under the person who asked.
@@ -133,54 +81,6 @@ pub(crate) fn strategy_scene(
     let mut scene = st.scene.clone();
     plan.apply(&mut scene);
     Ok(scene)
-}
-
-/// Off the loop: locate the particle in a quick local scan, plan, predict; then hand the first
-/// push to the loop ([`launch`]). A particle already within the planner's 10 nm of the target is
-/// judged where the scan found it.
-pub(crate) fn prepare_push(st: &AppState, mv: Move, target: MoveTarget) {
-    let f = &st.scene.file;
-    let particle = mv.particle;
-    let Some(part) = f.particles.iter().find(|p| p.id == particle) else {
-        return;
-    };
-    let nominal = st
-        .activity
-        .estimates
-        .lock()
-        .ok()
-        .and_then(|e| e.get(&particle).copied())
-        .unwrap_or((part.x_um * 1e-6, part.y_um * 1e-6));
-    // The strategy for this particle: the plan's, where the scene sets none (derived once).
-    let scene = match strategy_scene(st, particle, mv.tolerance) {
-        Ok(s) => s,
-        Err(refusal) => return run_done_failed(st, mv.by, particle, "refused", refusal.to_string()),
-    };
-    let plan = match route_move(&scene, &st.surface_now(), nominal, part.radius_nm * 1e-9, target) {
-        Ok(p) => p,
-        Err(e) => return run_done_failed(st, mv.by, particle, "plan", format!("particle {particle}: {e}")),
-    };
-    // A target the particle cannot reach whole, with the tip behind it, fails now, not after a
-    // push that runs into the stage's edge until its time-out.
-    // Against the scene's radius, as the command's check stated the range (the located one
-    // differs by a fraction of a nanometre: a target on the stated edge was accepted, then
-    // refused here with other bounds).
-    if let Err(r) = on_stage(plan.target, part.radius_nm * 1e-9, f.stage.range_um * 1e-6) {
-        return run_done_failed(
-            st,
-            mv.by,
-            particle,
-            "plan",
-            format!("particle {particle}: {}", r.message),
-        );
-    }
-    if plan.legs.is_empty() {
-        // Already there (within the planner's 10 nm): judged where the scan found it, no push.
-        return judge::already_there(st, mv, &plan);
-    }
-    if let Err((outcome, failure)) = launch(st, mv, &scene, plan, 1) {
-        run_done_failed(st, mv.by, particle, outcome, failure);
-    }
 }
 
 /// Hands push `attempt` of move `mv` (the legs of `plan`, from where its local scan found the
@@ -283,27 +183,4 @@ pub(crate) fn launch(
     }
     st.broadcast_event(&ServerMessage::PushStarted(started));
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::on_stage;
-
-    /// Issue 27.9: the edges the refusal states are accepted, in µm as sent; a nanometre past
-    /// them is not.
-    #[test]
-    fn a_target_on_the_stated_edge_is_on_the_stage() {
-        let (r, range) = (500.0 * 1e-9, 100.0 * 1e-6);
-        for edge in [0.5, 99.5] {
-            assert_eq!(on_stage((edge * 1e-6, 30.0 * 1e-6), r, range), Ok(()), "{edge}");
-        }
-        for past in [0.499, 99.501] {
-            let e = on_stage((past * 1e-6, 30.0 * 1e-6), r, range).unwrap_err();
-            assert!(e.message.contains("allowed: [0.500, 99.500] µm"), "{}", e.message);
-        }
-        // A radius between nanometres: the bounds are rounded inward, and the stated one holds.
-        let e = on_stage((0.0, 0.0), 251.37e-9, range).unwrap_err();
-        assert!(e.message.contains("allowed: [0.252, 99.748] µm"), "{}", e.message);
-        assert_eq!(on_stage((0.252e-6, 99.748e-6), 251.37e-9, range), Ok(()));
-    }
 }

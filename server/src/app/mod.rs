@@ -1,6 +1,8 @@
 //! The HTTP side: the routes, the loopback-host and token guard, the JSON API, and the
 //! WebSocket upgrade (Origin, token, role, admission).
 
+mod sign_in;
+
 use std::net::SocketAddr;
 use std::sync::atomic::Ordering::Relaxed;
 use std::sync::{Arc, Mutex};
@@ -62,10 +64,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/records", get(records_list))
         .route("/api/records/{name}", get(record_get))
         .route("/api/runs", get(runs))
-        .route(
-            "/api/session",
-            get(crate::auth::http::current).post(crate::auth::http::login),
-        )
+        .route("/api/session", get(sign_in::current).post(sign_in::login))
         .route("/metrics", get(metrics))
         // Static files gzip-compressed when the browser accepts it (the minified page, three.js
         // included, is ~0.7 MB, ~0.2 MB on the wire): a remote operator's page loads in seconds.
@@ -77,7 +76,7 @@ pub fn router(state: Arc<AppState>) -> Router {
 /// Every request: when the server listens on loopback, the `Host` must name loopback (a page on
 /// another site that rebinds its DNS name to 127.0.0.1 is refused); with `--viewer-token` or a
 /// token file, the JSON API needs a credential (`?token=`, a bearer token or the session
-/// cookie; `auth::http`). `/metrics` stays open for a local
+/// cookie; `sign_in.rs`). `/metrics` stays open for a local
 /// Prometheus, as is usual.
 async fn guard(State(st): State<Arc<AppState>>, req: axum::extract::Request, next: axum::middleware::Next) -> Response {
     let addr = *st.addr.lock().expect("addr lock");
@@ -101,7 +100,7 @@ async fn guard(State(st): State<Arc<AppState>>, req: axum::extract::Request, nex
         }
     }
     let gate = if req.uri().path().starts_with("/api/") {
-        crate::auth::http::api_gate(&st, &req)
+        sign_in::api_gate(&st, &req)
     } else {
         None
     };
@@ -241,7 +240,7 @@ async fn ws_upgrade(
     }
     // The client behind a trusted proxy; its token (checked in constant time, failures
     // rate-limited per address) or its session cookie.
-    let ip = crate::auth::http::client_of(&st, peer.ip(), &headers);
+    let ip = sign_in::client_of(&st, peer.ip(), &headers);
     let cookie = crate::auth::http::cookie(&headers);
     let person = match st.auth.authenticate(ip, q.token.as_deref(), cookie.as_deref()).await {
         Ok(p) => p,
@@ -278,10 +277,9 @@ mod tests {
     use super::web_build_problem;
 
     /// A web client not built, or built before its sources changed, is said at start with the
-    /// command that builds it (review of issue 26: after a `git pull`, the old page was served
-    /// without a word).
+    /// command that builds it (after a `git pull`, the old page would be served without a word).
     #[test]
-    fn a_web_client_missing_or_older_than_its_sources_is_named_with_the_build_command() {
+    fn a_web_client_missing_or_stale_is_named_with_its_build_command() {
         let web = std::env::temp_dir().join(format!("nanopush-webbuild-{}", std::process::id()));
         std::fs::create_dir_all(web.join("src")).unwrap();
         std::fs::create_dir_all(web.join("dist")).unwrap();

@@ -1,0 +1,28 @@
+//! What the handlers that command the instrument share: whether it is free, and a command
+//! queued for the control loop.
+
+use std::sync::atomic::Ordering::Relaxed;
+
+use nanopush_proto::ws::ErrorCode;
+
+use crate::app_state::AppState;
+use crate::command_checks::Refusal;
+use crate::control_loop::LoopCommand;
+
+/// Refused `busy` while a push or a scan runs.
+pub(super) fn busy(st: &AppState) -> Result<(), Refusal> {
+    if st.shared.busy.load(Relaxed) {
+        return Err(Refusal::new(ErrorCode::Busy, "a push is running; send stop first"));
+    }
+    if st.activity.scanning.load(Relaxed) {
+        return Err(Refusal::new(ErrorCode::Busy, "a scan is running; send stop first"));
+    }
+    Ok(())
+}
+
+/// Queues a command for the control loop; a full queue is refused as `busy`.
+pub(super) fn to_loop(st: &AppState, cmd: LoopCommand) -> Result<(), Refusal> {
+    st.shared
+        .command(cmd)
+        .map_err(|_| Refusal::new(ErrorCode::Busy, "the control loop's command queue is full; try again"))
+}
