@@ -181,14 +181,15 @@ pub fn push_target(
     match (distance_um, to_x_um, to_y_um) {
         (Some(d), None, None) => {
             let d = number("distance_um", d, 0.0, range_um, true, "µm")?;
-            let deg = number(
-                "direction_deg",
-                direction_deg.unwrap_or(0.0),
-                -360.0,
-                360.0,
-                false,
-                "degrees",
-            )?;
+            // No default direction: a push along +x that the operator did not ask for moves a
+            // particle the wrong way.
+            let Some(deg) = direction_deg else {
+                return Err(Refusal::new(
+                    ErrorCode::Invalid,
+                    "distance_um goes with direction_deg (degrees from +x, in [-360, 360]): give both",
+                ));
+            };
+            let deg = number("direction_deg", deg, -360.0, 360.0, false, "degrees")?;
             let th = deg.to_radians();
             Ok(MoveTarget::Distance {
                 distance: d * 1e-6,
@@ -347,6 +348,21 @@ mod tests {
                 .code,
             ErrorCode::NotFinite
         );
+    }
+
+    /// A distance without its direction is refused naming both and the direction's range, not
+    /// pushed at 0° (the refusal text always said "distance_um (with direction_deg)").
+    #[test]
+    fn a_distance_without_its_direction_is_refused() {
+        let e = push_target(Some(1.0), None, None, None, 100.0).unwrap_err();
+        assert_eq!(
+            e,
+            Refusal::new(
+                ErrorCode::Invalid,
+                "distance_um goes with direction_deg (degrees from +x, in [-360, 360]): give both"
+            )
+        );
+        assert!(push_target(Some(1.0), Some(0.0), None, None, 100.0).is_ok());
     }
 
     /// The edges the refusal states are accepted, in µm as sent; a nanometre past them is not.
