@@ -42,7 +42,10 @@ fn a_viewer_receives_telemetry_and_cannot_command() {
         );
         for (id, cmd) in [
             (2, json!({"type": "take_lease", "id": 2})),
-            (3, json!({"type": "push", "id": 3, "particle": 1, "distance_um": 1.0})),
+            (
+                3,
+                json!({"type": "push", "id": 3, "particle": 1, "distance_um": 1.0, "direction_deg": 0.0}),
+            ),
         ] {
             send(&mut v, cmd).await;
             let r = reply(&mut v, id).await;
@@ -129,7 +132,7 @@ async fn malformed_and_oversized_messages_get_typed_errors(op: &mut Ws) {
             "too_large",
         ),
         (
-            r#"{"type":"push","id":9,"particle":1,"distance_um":1.0}"#.into(),
+            r#"{"type":"push","id":9,"particle":1,"distance_um":1.0,"direction_deg":0.0}"#.into(),
             "no_lease",
         ),
     ];
@@ -148,7 +151,7 @@ async fn commands_out_of_range_name_the_field_and_the_range(op: &mut Ws) {
     for (id, cmd, code, words) in [
         (
             2,
-            json!({"type": "push", "id": 2, "particle": 1, "distance_um": 500.0}),
+            json!({"type": "push", "id": 2, "particle": 1, "distance_um": 500.0, "direction_deg": 0}),
             "out_of_range",
             "allowed: (0, 100] µm",
         ),
@@ -166,7 +169,7 @@ async fn commands_out_of_range_name_the_field_and_the_range(op: &mut Ws) {
         ),
         (
             5,
-            json!({"type": "push", "id": 5, "particle": 77, "distance_um": 1.0}),
+            json!({"type": "push", "id": 5, "particle": 77, "distance_um": 1.0, "direction_deg": 0}),
             "unknown_particle",
             "ids: 1, 2, 3",
         ),
@@ -207,6 +210,13 @@ async fn commands_out_of_range_name_the_field_and_the_range(op: &mut Ws) {
             json!({"type": "push", "id": 11, "particle": 1, "to_x_um": 100.0, "to_y_um": 50.0}),
             "out_of_range",
             "allowed: [0.500, 99.500] µm",
+        ),
+        // A distance without its direction is not pushed along +x.
+        (
+            12,
+            json!({"type": "push", "id": 12, "particle": 1, "distance_um": 1.0}),
+            "invalid",
+            "distance_um goes with direction_deg (degrees from +x, in [-360, 360]): give both",
         ),
     ] {
         send(op, cmd).await;
@@ -273,7 +283,7 @@ fn two_operators_contend_and_exactly_one_holds_the_lease() {
         assert_eq!(reply(&mut b, 2).await["code"], "no_lease");
         send(
             &mut b,
-            json!({"type": "push", "id": 4, "particle": 1, "distance_um": 1.0}),
+            json!({"type": "push", "id": 4, "particle": 1, "distance_um": 1.0, "direction_deg": 0.0}),
         )
         .await;
         assert_eq!(reply(&mut b, 4).await["code"], "no_lease");
@@ -368,7 +378,7 @@ fn sigterm_mid_push_retracts_the_tip_and_completes_every_record() {
         let mut op = operator(&srv.addr, "tip").await;
         ok(
             &mut op,
-            json!({"type": "push", "id": 3, "particle": 1, "distance_um": 5.0}),
+            json!({"type": "push", "id": 3, "particle": 1, "distance_um": 5.0, "direction_deg": 0.0}),
         )
         .await;
         until(&mut op, 20.0, |m| is(m, "telemetry") && m["phase"] == "push").await;

@@ -22,14 +22,14 @@ fn a_command_while_a_push_runs_is_busy_and_stop_ends_the_push() {
         let mut op = operator(&srv.addr, "tip").await;
         ok(
             &mut op,
-            json!({"type": "push", "id": 3, "particle": 1, "distance_um": 5.0}),
+            json!({"type": "push", "id": 3, "particle": 1, "distance_um": 5.0, "direction_deg": 0.0}),
         )
         .await;
         until(&mut op, 20.0, |m| is(m, "telemetry") && m["phase"] != "idle").await;
         // A second push, and a scan, while it runs.
         send(
             &mut op,
-            json!({"type": "push", "id": 4, "particle": 2, "distance_um": 1.0}),
+            json!({"type": "push", "id": 4, "particle": 2, "distance_um": 1.0, "direction_deg": 0.0}),
         )
         .await;
         let e = reply(&mut op, 4).await;
@@ -51,7 +51,7 @@ fn a_command_while_a_push_runs_is_busy_and_stop_ends_the_push() {
         // No longer busy: a new command is accepted.
         ok(
             &mut op,
-            json!({"type": "push", "id": 7, "particle": 1, "distance_um": 0.5}),
+            json!({"type": "push", "id": 7, "particle": 1, "distance_um": 0.5, "direction_deg": 0.0}),
         )
         .await;
     });

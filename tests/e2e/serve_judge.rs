@@ -94,7 +94,7 @@ fn a_push_is_ok_only_when_the_scan_after_it_finds_it_within_tolerance() {
         // A tolerance out of range is refused, naming the field and the range.
         crate::util::send(
             &mut op,
-            json!({"type": "push", "id": 5, "particle": 1, "distance_um": 1.0, "tolerance_nm": 0.5}),
+            json!({"type": "push", "id": 5, "particle": 1, "distance_um": 1.0, "direction_deg": 0.0, "tolerance_nm": 0.5}),
         )
         .await;
         let r = crate::util::reply(&mut op, 5).await;
