@@ -2,12 +2,15 @@
 //!
 //! Two servers sharing a data directory would lose and mix records: the second one's start-up
 //! would remove the first one's unfinished `.partial` trace, and scans of the same second would
-//! get the same name. A server therefore holds its data directory for its whole run with an exclusive
-//! `flock(2)` on `DATA/.nanopush.lock` (which holds its pid); a second server given the same
-//! directory refuses to start and names the holder. The kernel drops the lock when the process
-//! ends however it ends (`kill -9` included), so a crashed server never blocks the next one, and
-//! the `.partial` files a new holder finds can only be a dead server's leftovers. (Record names
-//! carry the server run as well, so runs one after the other never reuse a name.)
+//! get the same name. A server therefore holds its data directory for its whole run with an
+//! exclusive `flock(2)` on the directory itself, kept open: removing a path cannot release it (a
+//! lock on a file alone is gone for the next server once someone deletes that file). It also
+//! locks `DATA/.nanopush.lock`, which holds its pid, so that a second server names the holder,
+//! and a server of an older version, which locked only that file, is kept out too. A second server
+//! given the same directory refuses to start and names the holder. The kernel drops the locks when
+//! the process ends however it ends (`kill -9` included), so a crashed server never blocks the
+//! next one, and the `.partial` files a new holder finds can only be a dead server's leftovers.
+//! (Record names carry the server run as well, so runs one after the other never reuse a name.)
 //!
 //! Writing the lock file, and then a probe of [`PROBE_BYTES`] synced to disk, proves at start
 //! that records can be written: a read-only, full or foreign-owned directory stops the start with
@@ -54,8 +57,24 @@ pub enum DataDirError {
 /// A data directory held for the life of this value.
 #[derive(Debug)]
 pub struct HeldDataDir {
-    /// Holds the `flock` (released when dropped, or when the process ends).
+    /// The directory, open: holds the `flock` that no removal of a path releases (released when
+    /// dropped, or when the process ends).
+    _dir: std::fs::File,
+    /// The lock file, open and locked too: it names this process.
     _lock: std::fs::File,
+}
+
+/// An exclusive `flock` on `f`, without waiting: Ok(false) when another holds it.
+fn try_lock(f: &std::fs::File) -> std::io::Result<bool> {
+    // SAFETY: flock(2) on a descriptor the caller owns.
+    if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+        return Ok(true);
+    }
+    let e = std::io::Error::last_os_error();
+    match e.raw_os_error() {
+        Some(libc::EWOULDBLOCK) => Ok(false),
+        _ => Err(e),
+    }
 }
 
 /// Creates `dir` if needed, takes its lock (or names the live server that holds it), writes this
@@ -70,6 +89,12 @@ pub fn hold(dir: &Path) -> Result<HeldDataDir, DataDirError> {
         }
     };
     std::fs::create_dir_all(dir).map_err(not_writable("creating it"))?;
+    let dir_handle = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_DIRECTORY)
+        .open(dir)
+        .map_err(not_writable("opening it"))?;
+    let dir_free = try_lock(&dir_handle).map_err(not_writable("locking it"))?;
     let mut lock = std::fs::OpenOptions::new()
         .read(true)
         .write(true)
@@ -80,22 +105,21 @@ pub fn hold(dir: &Path) -> Result<HeldDataDir, DataDirError> {
         .custom_flags(libc::O_NOFOLLOW)
         .open(dir.join(LOCK_FILE))
         .map_err(not_writable("opening its lock file (not a symbolic link)"))?;
-    // SAFETY: flock(2) on a descriptor this function owns.
-    if unsafe { libc::flock(lock.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
-        let e = std::io::Error::last_os_error();
-        if e.raw_os_error() == Some(libc::EWOULDBLOCK) {
-            let mut text = String::new();
-            let _ = lock.read_to_string(&mut text);
-            let holder = match text.trim() {
-                "" => "its pid not yet written".to_string(),
-                pid => format!("pid {pid}"),
-            };
-            return Err(DataDirError::Held {
-                dir: dir.to_path_buf(),
-                holder,
-            });
-        }
-        return Err(not_writable("locking it")(e));
+    let file_free = try_lock(&lock).map_err(not_writable("locking its lock file"))?;
+    if !(dir_free && file_free) {
+        let mut text = String::new();
+        let _ = lock.read_to_string(&mut text);
+        // The lock file was deleted and made again (by this process, just now): the holder's pid
+        // went with it.
+        let holder = match text.trim() {
+            "" if file_free => "its lock file was deleted, so its pid is not known".to_string(),
+            "" => "its pid not yet written".to_string(),
+            pid => format!("pid {pid}"),
+        };
+        return Err(DataDirError::Held {
+            dir: dir.to_path_buf(),
+            holder,
+        });
     }
     lock.set_len(0)
         .and_then(|()| lock.rewind())
@@ -107,7 +131,10 @@ pub fn hold(dir: &Path) -> Result<HeldDataDir, DataDirError> {
         .and_then(|mut f| f.write_all(&vec![0u8; PROBE_BYTES]).and_then(|()| f.sync_all()));
     let _ = std::fs::remove_file(&probe);
     written.map_err(not_writable("writing a 1 MiB probe"))?;
-    Ok(HeldDataDir { _lock: lock })
+    Ok(HeldDataDir {
+        _dir: dir_handle,
+        _lock: lock,
+    })
 }
 
 /// Whether records can be written in `dir` now (for `/metrics`): a directory this process may
@@ -150,6 +177,24 @@ mod tests {
         assert_eq!(names, vec![LOCK_FILE.to_string()]);
         assert!(crate::records::list(&dir).unwrap().is_empty());
         drop(again);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Deleting the lock file does not release the directory: a second holder is still refused
+    /// (the lock is on the directory itself), and told the first one's pid is not known.
+    #[test]
+    fn a_deleted_lock_file_does_not_release_the_directory() {
+        let dir = std::env::temp_dir().join(format!("nanopush-held-unlinked-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let first = hold(&dir).unwrap();
+        std::fs::remove_file(dir.join(LOCK_FILE)).unwrap();
+        let e = hold(&dir).unwrap_err().to_string();
+        assert!(
+            e.contains("another nanopush serve") && e.contains("its lock file was deleted"),
+            "{e}"
+        );
+        drop(first);
+        drop(hold(&dir).unwrap());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -303,6 +303,49 @@ fn a_data_directory_is_held_by_one_server_and_record_names_name_the_run() {
     });
 }
 
+/// The data directory stays held when its lock file is deleted (`rm DATA/.nanopush.lock`): a
+/// second server given it still refuses to start, and the first one's unfinished `.partial` trace
+/// is still there (the lock is on the directory, which a removed path cannot release).
+#[test]
+fn a_deleted_lock_file_does_not_let_a_second_server_in() {
+    let srv = start("held-unlinked", &[]);
+    let records = srv.dir.join("records");
+    let unfinished = records.join("push-1-r1-p1.csv.partial");
+    std::fs::write(&unfinished, b"leg,t_s\n").unwrap();
+    std::fs::remove_file(records.join(".nanopush.lock")).unwrap();
+    let log = srv.dir.join("second.log");
+    let mut child = std::process::Command::new(nanopush_e2e::bin("nanopush"))
+        .current_dir(nanopush_e2e::workspace())
+        .args(["serve", "--port", "0", "--haptic", "none", "--data-dir"])
+        .arg(&records)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::fs::File::create(&log).unwrap())
+        .spawn()
+        .unwrap();
+    // It refuses within seconds; one that starts removes the `.partial` at once, or runs on.
+    let deadline = Instant::now() + Duration::from_secs(15);
+    let st = loop {
+        if let Some(st) = child.try_wait().unwrap() {
+            break Some(st);
+        }
+        if Instant::now() > deadline || !unfinished.exists() {
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let err = std::fs::read_to_string(&log).unwrap();
+    if st.is_none() {
+        nanopush_e2e::stop(&mut child);
+    }
+    assert!(
+        unfinished.exists(),
+        "the second server removed the first one's .partial trace:\n{err}"
+    );
+    let st = st.unwrap_or_else(|| panic!("a second server runs on a data directory whose lock file was deleted:\n{err}"));
+    assert!(!st.success());
+    assert!(err.contains("another nanopush serve"), "{err}");
+}
+
 /// A data directory the server cannot write is found at start, with a clear error that names it
 /// (not at the first record). As root (who writes
 /// through permissions) the directory is one of `/proc`, which nobody can write.
