@@ -18,6 +18,7 @@ mod serve_hostile;
 mod serve_judge;
 mod serve_proxy;
 mod serve_scenes;
+mod serve_sign_in;
 mod serve_state;
 mod serve_tls;
 mod simulate;

@@ -238,11 +238,12 @@ async fn ws_upgrade(
             return (StatusCode::FORBIDDEN, "origin not allowed; see --allow-origin").into_response();
         }
     }
-    // The client behind a trusted proxy; its token (checked in constant time, failures
-    // rate-limited per address) or its session cookie.
+    // The client behind a trusted proxy; its token (`?token=` or `Authorization: Bearer`, as on
+    // `/api/*`; checked, failures rate-limited per address) or its session cookie.
     let ip = sign_in::client_of(&st, peer.ip(), &headers);
     let cookie = crate::auth::http::cookie(&headers);
-    let person = match st.auth.authenticate(ip, q.token.as_deref(), cookie.as_deref()).await {
+    let token = q.token.or_else(|| crate::auth::http::bearer(&headers));
+    let person = match st.auth.authenticate(ip, token.as_deref(), cookie.as_deref()).await {
         Ok(p) => p,
         Err((code, why)) => return (code, why).into_response(),
     };
