@@ -21,6 +21,7 @@ mod serve_scenes;
 mod serve_sign_in;
 mod serve_state;
 mod serve_tls;
+mod serve_token_file;
 mod simulate;
 mod sweep;
 mod util;

@@ -204,6 +204,38 @@ pub(crate) fn http(addr: &str, method: &str, path: &str, headers: &[String]) -> 
     (status, head, String::from_utf8_lossy(&body).into_owned())
 }
 
+/// One HTTP/1.1 GET of `path` with `headers` (each `Name: value`), given `secs` to connect and
+/// answer in all: the status and the body, or None when the server did not answer in time (a
+/// server that froze fails the test instead of hanging it).
+pub(crate) fn http_within(addr: &str, path: &str, headers: &[String], secs: f64) -> Option<(u16, String)> {
+    let deadline = Instant::now() + Duration::from_secs_f64(secs);
+    let left = || deadline.saturating_duration_since(Instant::now()).max(Duration::from_millis(1));
+    let mut s = std::net::TcpStream::connect_timeout(&addr.parse().unwrap(), left()).ok()?;
+    let mut req = format!("GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n");
+    for h in headers {
+        req.push_str(h);
+        req.push_str("\r\n");
+    }
+    req.push_str("\r\n");
+    s.set_write_timeout(Some(left())).ok()?;
+    s.write_all(req.as_bytes()).ok()?;
+    let mut buf = Vec::new();
+    let mut chunk = [0u8; 16 * 1024];
+    loop {
+        s.set_read_timeout(Some(left())).ok()?;
+        match s.read(&mut chunk) {
+            Ok(0) => break,
+            Ok(n) => buf.extend_from_slice(&chunk[..n]),
+            Err(_) => return None,
+        }
+        if Instant::now() >= deadline {
+            return None;
+        }
+    }
+    let (status, body) = nanopush_e2e::client::parse_response(&buf).ok()?;
+    Some((status, String::from_utf8_lossy(&body).into_owned()))
+}
+
 /// A plain HTTP/1.1 GET: status and body.
 pub(crate) fn http_get(addr: &str, path: &str) -> (u16, Vec<u8>) {
     nanopush_e2e::client::get(addr, path).unwrap_or_else(|e| panic!("GET {path} from {addr}: {e}"))

@@ -20,7 +20,7 @@ pub mod tokens;
 use std::collections::HashMap;
 use std::net::IpAddr;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::Relaxed};
 use std::sync::{Arc, Mutex};
 
 use axum::http::StatusCode;
@@ -93,7 +93,11 @@ struct Live {
 struct Named {
     path: PathBuf,
     table: Mutex<Arc<TokenTable>>,
+    /// The watcher's memory: taken by the watcher alone, never across the file's reading.
     watch: Mutex<FileWatch>,
+    /// Whether the file could be used (read and parsed) when last looked at: what `/metrics`
+    /// says, without waiting for the watcher.
+    file_ok: AtomicBool,
     /// Tokens verified against the current table, by SHA-256 (argon2 once per token, not once
     /// per connection); emptied when the file changes.
     verified: Mutex<HashMap<[u8; 32], Arc<Person>>>,
@@ -145,6 +149,7 @@ impl Auth {
             generated: (operator, viewer),
             named: file.map(|f| Named {
                 watch: Mutex::new(FileWatch::new(Stamp::at(&f.path))),
+                file_ok: AtomicBool::new(true),
                 path: f.path,
                 table: Mutex::new(Arc::new(f.table)),
                 verified: Mutex::new(HashMap::new()),
@@ -411,7 +416,7 @@ impl Auth {
             ));
         }
         if let Some(named) = &self.named {
-            let ok = named.watch.lock().is_ok_and(|w| w.ok());
+            let ok = named.file_ok.load(Relaxed);
             s.push_str(&format!(
                 "# HELP nanopush_auth_token_file_ok 1 while the token file can be read and parsed; 0: the tokens read before stay in force and revocations wait.\n# TYPE nanopush_auth_token_file_ok gauge\nnanopush_auth_token_file_ok {}\n",
                 u8::from(ok)

@@ -10,8 +10,12 @@
 //! `nanopush_auth_token_file_ok` is 0 until the file can be used again; it is looked at again on
 //! every poll meanwhile, so a fix that changes neither the file's time, size nor inode (a
 //! `chown`, a `chmod`) takes effect too.
+//!
+//! Only a regular file is read ([`super::tokens::read_text`]): a FIFO put in its place would block
+//! its reader until someone writes to it, and a device might never end. And the file is read
+//! without holding anything another task waits for: `/metrics` reads the file's state from an
+//! atomic, so a read that hangs (a network file system gone) keeps only the watcher waiting.
 
-use std::io::Read as _;
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
@@ -58,23 +62,18 @@ enum Look {
     Failed(String),
 }
 
-/// Reads `path`: the stamp of the file read (the open file's, not the path's) and its text, or
-/// why it could not be read.
+/// Reads `path` (a regular file only): the stamp of the file read (the open file's, not the
+/// path's) and its text, or why it could not be read.
 fn read(path: &Path) -> Result<(Stamp, String), String> {
-    let read = || -> std::io::Result<(Stamp, String)> {
-        let mut f = std::fs::File::open(path)?;
-        let stamp = Stamp::of(&f.metadata()?);
-        let mut text = String::new();
-        f.read_to_string(&mut text)?;
-        Ok((stamp, text))
-    };
-    read().map_err(|e| match e.kind() {
-        std::io::ErrorKind::NotFound => format!(
+    use super::tokens::{TokenFileError, read_text};
+    match read_text(path) {
+        Ok((meta, text)) => Ok((Stamp::of(&meta), text)),
+        Err(TokenFileError::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => Err(format!(
             "{} is missing (deleting it revokes nobody: `nanopush token revoke NAME` does)",
             path.display()
-        ),
-        _ => format!("{}: {e}", path.display()),
-    })
+        )),
+        Err(e) => Err(e.to_string()),
+    }
 }
 
 /// The watcher's memory.
@@ -97,11 +96,6 @@ impl FileWatch {
             failing: None,
         }
     }
-
-    /// Whether the file can be used (read and parsed) as last looked at.
-    pub(super) fn ok(&self) -> bool {
-        self.failing.is_none()
-    }
 }
 
 impl Auth {
@@ -116,12 +110,18 @@ impl Auth {
     /// table.
     pub fn reload_if_changed_at(&self, now: Instant) -> bool {
         let Some(named) = &self.named else { return false };
-        let Ok(mut w) = named.watch.lock() else { return false };
+        // Looked at and read without the watcher's lock held (only this watcher takes it).
+        let stamp = Stamp::at(&named.path);
+        let quiet = named
+            .watch
+            .lock()
+            .map_or(true, |w| w.seen.is_none() && w.failing.is_none() && stamp == w.applied.0);
         // Nothing new and nothing wrong: the file is not read.
-        if w.seen.is_none() && w.failing.is_none() && Stamp::at(&named.path) == w.applied.0 {
+        if quiet {
             return false;
         }
         let read = read(&named.path);
+        let Ok(mut w) = named.watch.lock() else { return false };
         let look = match &read {
             Ok((stamp, text)) => Look::Read {
                 stamp: *stamp,
@@ -172,6 +172,9 @@ impl Auth {
     /// The file cannot be used: said once (each new problem), counted, and the tokens read
     /// before stay in force.
     fn file_failing(&self, w: &mut FileWatch, why: String) {
+        if let Some(named) = &self.named {
+            named.file_ok.store(false, Relaxed);
+        }
         if w.failing.as_deref() != Some(why.as_str()) {
             tracing::error!(
                 "token file: {why}; the tokens read before stay in force, and revocations wait until it can be read"
@@ -183,6 +186,9 @@ impl Auth {
 
     /// The file can be used again.
     fn file_ok(&self, w: &mut FileWatch) {
+        if let Some(named) = &self.named {
+            named.file_ok.store(true, Relaxed);
+        }
         if w.failing.take().is_some() {
             tracing::info!("token file: readable again");
         }

@@ -71,6 +71,77 @@ pub enum TokenFileError {
     /// Another `nanopush token` holds the lock for longer than we wait.
     #[error("{0}: another `nanopush token` is changing the file (its lock is held); try again")]
     Locked(PathBuf),
+    /// The path is not a regular file (a FIFO, a device, a directory): reading it could block or
+    /// never end.
+    #[error("{path} is not a regular file ({kind}); a token file must be one (made by `nanopush token add`)")]
+    NotRegular {
+        /// The path.
+        path: PathBuf,
+        /// What it is.
+        kind: &'static str,
+    },
+    /// The file is larger than a token file can be.
+    #[error("{path} is {len} bytes; a token file is at most {TEXT_MAX} bytes")]
+    TooBig {
+        /// The file.
+        path: PathBuf,
+        /// Its size.
+        len: u64,
+    },
+}
+
+/// Largest token file read (bytes): tens of thousands of people's lines.
+pub const TEXT_MAX: u64 = 4 << 20;
+
+/// What a file that is not a regular one is, in words.
+fn kind_of(t: std::fs::FileType) -> &'static str {
+    use std::os::unix::fs::FileTypeExt as _;
+    if t.is_fifo() {
+        "a FIFO"
+    } else if t.is_char_device() {
+        "a character device"
+    } else if t.is_block_device() {
+        "a block device"
+    } else if t.is_socket() {
+        "a socket"
+    } else if t.is_dir() {
+        "a directory"
+    } else {
+        "not a file"
+    }
+}
+
+/// The text of the token file at `path`, and its metadata (the open file's, not the path's): a
+/// regular file of at most [`TEXT_MAX`] bytes. Opened without blocking (a FIFO's open would wait
+/// for a writer) and looked at before it is read, so a FIFO or a device put in its place is
+/// refused at once instead of blocking its reader, or filling its memory, for ever.
+pub fn read_text(path: &Path) -> Result<(std::fs::Metadata, String), TokenFileError> {
+    use std::os::unix::fs::OpenOptionsExt as _;
+    let io = |source| TokenFileError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let f = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK | libc::O_NOCTTY)
+        .open(path)
+        .map_err(io)?;
+    let meta = f.metadata().map_err(io)?;
+    if !meta.is_file() {
+        return Err(TokenFileError::NotRegular {
+            path: path.to_path_buf(),
+            kind: kind_of(meta.file_type()),
+        });
+    }
+    let mut text = String::new();
+    f.take(TEXT_MAX + 1).read_to_string(&mut text).map_err(io)?;
+    if text.len() as u64 > TEXT_MAX {
+        return Err(TokenFileError::TooBig {
+            path: path.to_path_buf(),
+            len: meta.len().max(text.len() as u64),
+        });
+    }
+    Ok((meta, text))
 }
 
 /// Longest wait for the lock of the token file.
@@ -190,15 +261,17 @@ impl TokenTable {
         Ok(TokenTable { entries })
     }
 
-    /// Reads `path`; a missing file is an empty table when `missing_ok`.
+    /// Reads `path` ([`read_text`]: a regular file only); a missing file is an empty table when
+    /// `missing_ok`.
     pub fn read(path: &Path, missing_ok: bool) -> Result<TokenTable, TokenFileError> {
-        match std::fs::read_to_string(path) {
-            Ok(text) => TokenTable::parse(&text, path),
-            Err(e) if missing_ok && e.kind() == std::io::ErrorKind::NotFound => Ok(TokenTable::default()),
-            Err(source) => Err(TokenFileError::Io {
-                path: path.to_path_buf(),
-                source,
-            }),
+        match read_text(path) {
+            Ok((_, text)) => TokenTable::parse(&text, path),
+            Err(TokenFileError::Io { source, .. })
+                if missing_ok && source.kind() == std::io::ErrorKind::NotFound =>
+            {
+                Ok(TokenTable::default())
+            }
+            Err(e) => Err(e),
         }
     }
 
@@ -416,6 +489,31 @@ mod tests {
         );
         let e = TokenTable::parse("alice viewer 0011aabb nothash\n", Path::new("tok")).unwrap_err();
         assert!(e.to_string().contains("not an argon2 PHC string"), "{e}");
+    }
+
+    /// A FIFO (whose open would wait for a writer), a device that never ends and a file over
+    /// the size limit are refused at once, naming what they are.
+    #[test]
+    fn only_a_regular_file_of_bounded_size_is_read() {
+        let dir = std::env::temp_dir().join(format!("nanopush-tokens-kind-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let fifo = dir.join("fifo");
+        let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        // SAFETY: a NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        let t0 = std::time::Instant::now();
+        let e = TokenTable::read(&fifo, false).unwrap_err().to_string();
+        assert!(e.contains("is not a regular file (a FIFO)"), "{e}");
+        assert!(t0.elapsed() < std::time::Duration::from_secs(1), "{:?}", t0.elapsed());
+        let e = read_text(Path::new("/dev/zero")).unwrap_err().to_string();
+        assert!(e.contains("not a regular file (a character device)"), "{e}");
+        let big = dir.join("big");
+        std::fs::File::create(&big).unwrap().set_len(TEXT_MAX + 1).unwrap();
+        let e = read_text(&big).unwrap_err().to_string();
+        assert!(e.ends_with(&format!("is {} bytes; a token file is at most 4194304 bytes", TEXT_MAX + 1)), "{e}");
+        assert!(TokenTable::read(&dir.join("missing"), true).unwrap().entries.is_empty());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
