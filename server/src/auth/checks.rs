@@ -3,12 +3,20 @@
 //! [`WAIT_MAX`]; beyond, the attempt is answered "busy" (HTTP 503) at once instead of queueing
 //! threads and memory without bound. The per-address limit ([`super::limiter`]) keeps one
 //! address to its burst; this keeps many addresses from starving the control loop's machine.
+//!
+//! The checks run on [`AT_ONCE`] threads of their own (`token-check-N`, started at the first
+//! check), each with one argon2 buffer ([`Scratch`]) it keeps: the memory checks cost is bounded
+//! by `AT_ONCE` buffers (2 × 19 MiB), whatever the number of checks. (On tokio's blocking pool,
+//! each check's 19 MiB was allocated on whichever thread ran it, and glibc kept it in that
+//! thread's arena: 24 failed checks one after the other took a server from 27 to 483 MiB.)
 
-use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
+use std::sync::{Arc, Mutex, OnceLock, mpsc};
 use std::time::Duration;
 
 use tokio::sync::Semaphore;
+
+use super::tokens::Scratch;
 
 /// Checks running at once (the CI and lab machines have 2 cores, one of them the loop's).
 pub const AT_ONCE: usize = 2;
@@ -19,11 +27,17 @@ pub const WAITING: usize = 32;
 /// Longest wait for a turn.
 pub const WAIT_MAX: Duration = Duration::from_secs(5);
 
-/// The checks' turns.
+/// A check, given its thread's argon2 memory.
+type Job = Box<dyn FnOnce(&mut Scratch) + Send>;
+
+/// The checks' turns and threads.
 #[derive(Debug)]
 pub struct Checks {
     turns: Arc<Semaphore>,
     waiting: AtomicUsize,
+    /// The checking threads' queue, once started; None if no thread could be started (the
+    /// checks then run on tokio's blocking pool, each with memory of its own).
+    threads: OnceLock<Option<mpsc::Sender<Job>>>,
 }
 
 impl Default for Checks {
@@ -31,6 +45,7 @@ impl Default for Checks {
         Checks {
             turns: Arc::new(Semaphore::new(AT_ONCE)),
             waiting: AtomicUsize::new(0),
+            threads: OnceLock::new(),
         }
     }
 }
@@ -44,11 +59,43 @@ impl Drop for Waiting<'_> {
     }
 }
 
+/// Starts the [`AT_ONCE`] checking threads: their queue, or None when none could be started.
+fn start_threads() -> Option<mpsc::Sender<Job>> {
+    let (tx, rx) = mpsc::channel::<Job>();
+    let rx = Arc::new(Mutex::new(rx));
+    let started = (0..AT_ONCE)
+        .filter(|i| {
+            let rx = rx.clone();
+            let spawned = std::thread::Builder::new()
+                .name(format!("token-check-{i}"))
+                .spawn(move || {
+                    let mut scratch = Scratch::default();
+                    loop {
+                        let job = match rx.lock() {
+                            Ok(rx) => rx.recv(),
+                            Err(_) => return,
+                        };
+                        let Ok(job) = job else { return };
+                        // A check that panicked drops its answer (the attempt is told busy) and
+                        // its turn; the thread goes on.
+                        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| job(&mut scratch)));
+                    }
+                });
+            if let Err(e) = &spawned {
+                tracing::error!("cannot start a token-checking thread: {e}");
+            }
+            spawned.is_ok()
+        })
+        .count();
+    (started > 0).then_some(tx)
+}
+
 impl Checks {
-    /// Runs `check` on a blocking thread when its turn comes, or None when too many wait or
-    /// the wait is over [`WAIT_MAX`]. The turn is held by the blocking task itself: a request
-    /// dropped while its check runs (the client gone) does not free a turn early.
-    pub async fn run<T: Send + 'static>(&self, check: impl FnOnce() -> T + Send + 'static) -> Option<T> {
+    /// Runs `check` on a checking thread, with that thread's argon2 memory, when its turn comes;
+    /// or None when too many wait or the wait is over [`WAIT_MAX`]. The turn is held by the check
+    /// itself: a request dropped while its check runs (the client gone) does not free a turn
+    /// early.
+    pub async fn run<T: Send + 'static>(&self, check: impl FnOnce(&mut Scratch) -> T + Send + 'static) -> Option<T> {
         if self.waiting.fetch_add(1, Relaxed) >= WAITING {
             self.waiting.fetch_sub(1, Relaxed);
             return None;
@@ -59,13 +106,19 @@ impl Checks {
             .ok()?
             .ok()?;
         drop(waiting);
-        tokio::task::spawn_blocking(move || {
-            let out = check();
+        let (done, answer) = tokio::sync::oneshot::channel();
+        let job: Job = Box::new(move |scratch| {
+            let out = check(scratch);
             drop(turn);
-            out
-        })
-        .await
-        .ok()
+            let _ = done.send(out);
+        });
+        match self.threads.get_or_init(start_threads) {
+            Some(threads) => threads.send(job).ok()?,
+            None => {
+                tokio::task::spawn_blocking(move || job(&mut Scratch::default()));
+            }
+        }
+        answer.await.ok()
     }
 }
 
@@ -90,7 +143,7 @@ mod tests {
                     (checks.clone(), gate.clone(), now.clone(), peak.clone(), busy.clone());
                 tokio::spawn(async move {
                     let ran = checks
-                        .run(move || {
+                        .run(move |_| {
                             peak.fetch_max(now.fetch_add(1, Relaxed) + 1, Relaxed);
                             let (open, cv) = &*gate;
                             let _open = cv.wait_while(open.lock().unwrap(), |o| !*o).unwrap();

@@ -5,13 +5,20 @@
 //! it: [`TokenTable::update`]), so `nanopush token` run at once loses nobody's change.
 //!
 //! A token is checked by its ID (not secret: it only finds the line) and then by argon2's
-//! verification of SECRET against the line's hash, which compares the digests in constant time.
+//! verification of SECRET against the line's hash, whose digests are compared in constant time.
+//! Every check runs argon2 once, whether the ID is in the file or not (and whether the token has
+//! the `npt_ID_SECRET` shape at all): an unknown ID takes as long to refuse as a known one with a
+//! wrong secret, so the time of an answer does not tell which IDs exist. argon2 works in memory
+//! the caller lends ([`Scratch`], 19 MiB with the default parameters), reused from one check to
+//! the next.
+
+use subtle::ConstantTimeEq as _;
 
 use std::io::{Read as _, Write as _};
 use std::path::{Path, PathBuf};
 
-use argon2::Argon2;
-use argon2::password_hash::{PasswordHash, PasswordHasher, PasswordVerifier, SaltString};
+use argon2::password_hash::{PasswordHash, PasswordHasher, SaltString};
+use argon2::{Algorithm, Argon2, Block, Params, Version};
 use nanopush_proto::ws::Role;
 
 /// The token's prefix: a token pasted into a chat or a log is recognisable.
@@ -206,6 +213,70 @@ pub fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
+/// Largest argon2 memory cost a hash in the file may ask for (KiB): each of the server's checks
+/// at a time keeps that much.
+pub const M_COST_MAX_KIB: u32 = 256 * 1024;
+
+/// argon2's working memory, lent to each check and kept for the next: a thread that checks tokens
+/// holds one buffer the size of the largest hash it checked (19 MiB with the default
+/// parameters), instead of allocating one per check (with glibc, each thread's arena then keeps
+/// 19 MiB, and a server that checked wrong tokens on many threads kept hundreds of MiB).
+#[derive(Debug, Default)]
+pub struct Scratch {
+    blocks: Vec<Block>,
+}
+
+/// The salt of the check run for a token whose id is in no line (its result is thrown away).
+const DUMMY_SALT: &[u8] = b"nanopush: no such token id";
+
+impl Scratch {
+    /// The buffer's size (bytes).
+    pub fn bytes(&self) -> usize {
+        self.blocks.len() * Block::SIZE
+    }
+
+    /// `params`' working memory, grown to it if needed.
+    fn blocks(&mut self, params: &Params) -> &mut [Block] {
+        let n = params.block_count();
+        if self.blocks.len() < n {
+            self.blocks.resize(n, Block::default());
+        }
+        &mut self.blocks[..n]
+    }
+
+    /// Whether `secret` hashes to `hash` (argon2, in this memory; the digests compared in
+    /// constant time).
+    fn verify(&mut self, secret: &str, hash: &PasswordHash<'_>) -> bool {
+        let mut check = || -> Option<bool> {
+            let algorithm = Algorithm::try_from(hash.algorithm).ok()?;
+            let version = hash.version.map(Version::try_from).transpose().ok()?.unwrap_or_default();
+            let params = Params::try_from(hash).ok()?;
+            let expected = hash.hash?;
+            let mut salt = [0u8; 64];
+            let salt = hash.salt?.decode_b64(&mut salt).ok()?;
+            let mut out = vec![0u8; expected.len()];
+            Argon2::new(algorithm, version, params.clone())
+                .hash_password_into_with_memory(secret.as_bytes(), salt, &mut out, self.blocks(&params))
+                .ok()?;
+            Some(bool::from(out.as_slice().ct_eq(expected.as_bytes())))
+        };
+        check().unwrap_or(false)
+    }
+
+    /// The cost of a check with the default parameters, for a token whose id is in no line.
+    fn run_in_vain(&mut self, secret: &str) {
+        let params = Params::default();
+        let mut out = [0u8; Params::DEFAULT_OUTPUT_LEN];
+        let _ = Argon2::new(Algorithm::default(), Version::default(), params.clone()).hash_password_into_with_memory(
+            secret.as_bytes(),
+            DUMMY_SALT,
+            &mut out,
+            self.blocks(&params),
+        );
+        std::hint::black_box(out);
+    }
+}
+
 /// A token's id and secret, or None when it is not `npt_ID_SECRET`.
 fn split_token(token: &str) -> Option<(&str, &str)> {
     let rest = token.strip_prefix(TOKEN_PREFIX)?;
@@ -247,7 +318,15 @@ impl TokenTable {
             if id.len() != 8 || !id.chars().all(|c| c.is_ascii_hexdigit()) {
                 return Err(bad(format!("id {id:?} is not 8 hex digits")));
             }
-            PasswordHash::new(hash).map_err(|e| bad(format!("hash is not an argon2 PHC string: {e}")))?;
+            let phc = PasswordHash::new(hash).map_err(|e| bad(format!("hash is not an argon2 PHC string: {e}")))?;
+            let m_cost = Params::try_from(&phc)
+                .map_err(|e| bad(format!("hash has unusable argon2 parameters: {e}")))?
+                .m_cost();
+            if m_cost > M_COST_MAX_KIB {
+                return Err(bad(format!(
+                    "hash's argon2 memory cost m={m_cost} KiB is above the {M_COST_MAX_KIB} KiB allowed"
+                )));
+            }
             if entries.iter().any(|e| e.name == name || e.id == id) {
                 return Err(bad(format!("{name} (or id {id}) appears twice")));
             }
@@ -379,15 +458,28 @@ impl TokenTable {
     }
 
     /// The line `token` belongs to, checked with argon2 (slow on purpose: call it off the async
-    /// workers), or None.
+    /// workers), or None. A one-off check: [`Self::verify_with`] reuses its memory.
     pub fn verify(&self, token: &str) -> Option<&TokenEntry> {
-        let (id, secret) = split_token(token)?;
-        let e = self.entries.iter().find(|e| e.id == id)?;
-        let hash = PasswordHash::new(&e.hash).ok()?;
-        Argon2::default()
-            .verify_password(secret.as_bytes(), &hash)
-            .is_ok()
-            .then_some(e)
+        self.verify_with(token, &mut Scratch::default())
+    }
+
+    /// [`Self::verify`] in `scratch`'s memory. argon2 runs once whatever the token: against its
+    /// line's hash, or in vain (with the default parameters) when no line has its id or it is not
+    /// a token, so that the time of a refusal says nothing of which ids exist.
+    pub fn verify_with(&self, token: &str, scratch: &mut Scratch) -> Option<&TokenEntry> {
+        let (id, secret) = split_token(token).unwrap_or(("", token));
+        let line = self
+            .entries
+            .iter()
+            .find(|e| e.id == id)
+            .and_then(|e| Some((e, PasswordHash::new(&e.hash).ok()?)));
+        match line {
+            Some((e, hash)) => scratch.verify(secret, &hash).then_some(e),
+            None => {
+                scratch.run_in_vain(secret);
+                None
+            }
+        }
     }
 }
 
@@ -473,6 +565,57 @@ mod tests {
         t.revoke("alice").unwrap();
         assert!(t.verify(&alice).is_none(), "a revoked token is refused");
         assert!(matches!(t.revoke("alice"), Err(TokenFileError::Missing(_))));
+    }
+
+    /// The median time (s) of 5 checks of `token` in `scratch`.
+    fn check_time(t: &TokenTable, token: &str, scratch: &mut Scratch) -> f64 {
+        let mut times: Vec<f64> = (0..5)
+            .map(|_| {
+                let t0 = std::time::Instant::now();
+                assert!(t.verify_with(token, scratch).is_none());
+                t0.elapsed().as_secs_f64()
+            })
+            .collect();
+        times.sort_by(f64::total_cmp);
+        times[2]
+    }
+
+    /// An unknown id, or no token at all, is refused in as long as a known id with a wrong secret
+    /// (one argon2 run each; an unknown id took 0 ms against 26 ms), and every check reuses one
+    /// buffer of 19 MiB.
+    #[test]
+    fn an_unknown_id_takes_as_long_to_refuse_as_a_wrong_secret() {
+        let mut t = TokenTable::default();
+        let alice = t.add("alice", Role::Operator).unwrap();
+        let (id, _) = split_token(&alice).unwrap();
+        let other = if id == "ffffffff" { "eeeeeeee" } else { "ffffffff" };
+        let mut scratch = Scratch::default();
+        let wrong_secret = check_time(&t, &format!("{TOKEN_PREFIX}{id}_{}", "0".repeat(32)), &mut scratch);
+        let unknown_id = check_time(&t, &format!("{TOKEN_PREFIX}{other}_{}", "0".repeat(32)), &mut scratch);
+        let not_a_token = check_time(&t, "alice", &mut scratch);
+        for (what, s) in [("an unknown id", unknown_id), ("not a token", not_a_token)] {
+            assert!(
+                s > 0.5 * wrong_secret && s < 2.0 * wrong_secret,
+                "{what}: {:.1} ms, a wrong secret: {:.1} ms",
+                s * 1e3,
+                wrong_secret * 1e3
+            );
+        }
+        assert_eq!(scratch.bytes(), 19 * 1024 * 1024);
+        assert_eq!(t.verify_with(&alice, &mut scratch).map(|e| e.name.as_str()), Some("alice"));
+        assert_eq!(scratch.bytes(), 19 * 1024 * 1024, "the same buffer");
+    }
+
+    /// A hash asking argon2 for more memory than each check may keep is refused at parse.
+    #[test]
+    fn a_hash_with_a_huge_memory_cost_is_refused_naming_it() {
+        let line = "alice operator 0011aabb $argon2id$v=19$m=1048576,t=2,p=1$c2FsdHNhbHRzYWx0$\
+                    AAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAA\n";
+        let e = TokenTable::parse(line, Path::new("tok")).unwrap_err();
+        assert!(
+            e.to_string().contains("m=1048576 KiB is above the 262144 KiB allowed"),
+            "{e}"
+        );
     }
 
     #[test]
