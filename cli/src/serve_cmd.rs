@@ -85,6 +85,11 @@ pub struct ServeArgs {
     /// Directory of the records (push traces, scans).
     #[arg(long, default_value = "records")]
     data_dir: PathBuf,
+    /// The audit log's files (DATA/audit/audit.jsonl and its older parts .1 to .3) hold at most
+    /// this many bytes in all, in [65536, 2^50]: past a quarter of it audit.jsonl is rotated, and
+    /// the oldest part deleted (1 GiB by default).
+    #[arg(long, default_value_t = nanopush_server::audit::MAX_BYTES_DEFAULT)]
+    audit_max_bytes: u64,
     /// Directory of the web client; `web/` of this workspace when absent.
     #[arg(long)]
     web_dir: Option<PathBuf>,
@@ -200,6 +205,14 @@ fn check(a: &ServeArgs) -> anyhow::Result<()> {
             a.ws_ping_s
         );
     }
+    if !(nanopush_server::audit::MAX_BYTES_MIN..=1 << 50).contains(&a.audit_max_bytes) {
+        bail!(
+            "--audit-max-bytes {} is out of range; allowed: [{}, {}] bytes",
+            a.audit_max_bytes,
+            nanopush_server::audit::MAX_BYTES_MIN,
+            1u64 << 50
+        );
+    }
     in_range("--scan-line-hz", a.scan_line_hz, 0.1, 1000.0, " Hz")?;
     in_range("--telemetry-hz", a.telemetry_hz, 1.0, 1000.0, " Hz")?;
     in_range("--haptic-timeout-ms", a.haptic_timeout_ms, 2.0, 1000.0, " ms")?;
@@ -310,6 +323,7 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         ws_timeout: std::time::Duration::from_secs_f64(a.ws_timeout_s),
         header_timeout: std::time::Duration::from_secs_f64(a.header_timeout_s),
         data_dir: a.data_dir.clone(),
+        audit_max_bytes: a.audit_max_bytes,
         web_dir,
         scan_line_hz: a.scan_line_hz,
         telemetry_hz: a.telemetry_hz,

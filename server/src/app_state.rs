@@ -43,6 +43,8 @@ pub struct ServeConfig {
     pub header_timeout: Duration,
     /// Record directory.
     pub data_dir: PathBuf,
+    /// The cap on the audit log's files in all (bytes; `audit.rs`).
+    pub audit_max_bytes: u64,
     /// Static files of the web client.
     pub web_dir: PathBuf,
     /// The haptic link.
@@ -478,6 +480,7 @@ pub(crate) fn test_state() -> Arc<AppState> {
         ws_timeout: Duration::from_secs(30),
         header_timeout: Duration::from_secs(10),
         data_dir: std::env::temp_dir(),
+        audit_max_bytes: crate::audit::MAX_BYTES_DEFAULT,
         web_dir: std::env::temp_dir(),
         haptic: crate::haptic::HapticMode::None,
         scan_line_hz: 100.0,

@@ -103,7 +103,7 @@ pub async fn run(
     };
     let mut state = AppState::new(cfg, scene, shared, params);
     state.instance = instance;
-    state.audit = audit::Audit::open(&state.cfg.data_dir, people);
+    state.audit = audit::Audit::open(&state.cfg.data_dir, people, state.cfg.audit_max_bytes);
     let auth_dir = state.cfg.data_dir.join("auth");
     if let Err(e) = state.auth.keep_cookies_in(&auth_dir) {
         tracing::error!(

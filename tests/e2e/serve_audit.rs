@@ -220,3 +220,148 @@ fn a_push_stopped_before_it_began_has_its_end_in_the_audit_log() {
         std::thread::sleep(Duration::from_millis(100));
     }
 }
+
+/// The refusals of one client in the log: the lines of `person` from `address` for `command`,
+/// refused one by one, and those a summary counts.
+fn refusals_accounted(lines: &[Value], command: &str) -> (usize, u64, Vec<Value>) {
+    let ours: Vec<&Value> = lines.iter().filter(|l| l["command"] == command && l["person"] == "anonymous").collect();
+    let single = ours.iter().filter(|l| l["outcome"] == "refused").count();
+    let summaries: Vec<Value> = ours
+        .iter()
+        .filter(|l| l["outcome"] == "refused_summary")
+        .map(|l| (*l).clone())
+        .collect();
+    let summed = summaries.iter().map(|s| s["args"]["refused"].as_u64().unwrap()).sum();
+    (single, summed, summaries)
+}
+
+/// 30 anonymous viewer connections from one address, each sending 45 `take_lease` a second for
+/// 3 s (4,050 refusals; `NANOPUSH_FLOOD_S` sets the seconds): the log grows by at most 20 lines,
+/// the first refusals one by one and then a summary ("… 4,040 refused take_lease in 3 s …"), and
+/// the lines and the summaries account for every refusal (one line each, 1.3 GB an hour, before).
+#[test]
+fn a_refusal_flood_is_logged_as_a_few_lines_and_a_summary() {
+    let secs: u64 = std::env::var("NANOPUSH_FLOOD_S").ok().and_then(|s| s.parse().ok()).unwrap_or(3);
+    let srv = start("audit-refusal-flood", &["--max-rate", "10000"]);
+    let records = srv.dir.join("records");
+    let per_viewer = 45 * secs as usize;
+    let sent = 30 * per_viewer as u64;
+    let addr = srv.addr.clone();
+    runtime().block_on(async move {
+        let mut viewers = Vec::new();
+        for _ in 0..30 {
+            viewers.push(connect(&addr, None).await);
+        }
+        let t0 = tokio::time::Instant::now();
+        let floods = viewers.into_iter().map(|ws| async move {
+            let (mut tx, mut rx) = ws.split();
+            let reader = async move {
+                let mut refused = 0;
+                while refused < per_viewer {
+                    match tokio::time::timeout(Duration::from_secs(30), rx.next()).await {
+                        Ok(Some(Ok(m))) if m.to_text().is_ok_and(|t| t.contains("forbidden")) => refused += 1,
+                        Ok(Some(Ok(_))) => {}
+                        _ => break,
+                    }
+                }
+                refused
+            };
+            let writer = async move {
+                for k in 0..per_viewer {
+                    tokio::time::sleep_until(t0 + Duration::from_secs(1) * k as u32 / 45).await;
+                    let m = json!({"type": "take_lease"}).to_string();
+                    futures_util::SinkExt::send(&mut tx, tokio_tungstenite::tungstenite::Message::Text(m.into()))
+                        .await
+                        .unwrap();
+                }
+                tx
+            };
+            let (refused, tx) = tokio::join!(reader, writer);
+            drop(tx);
+            refused
+        });
+        let refused: usize = futures_util::future::join_all(floods).await.into_iter().sum();
+        assert_eq!(refused as u64, sent, "every take_lease was refused");
+    });
+    // The summaries come once the client has been quiet for 2 s.
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let (lines, single, summed, summaries) = loop {
+        let lines = audit_lines(&records);
+        let (single, summed, summaries) = refusals_accounted(&lines, "take_lease");
+        if single as u64 + summed >= sent || Instant::now() > deadline {
+            break (lines, single, summed, summaries);
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let bytes = std::fs::metadata(records.join("audit/audit.jsonl")).map_or(0, |m| m.len());
+    eprintln!(
+        "{sent} refusals in {secs} s: {} lines, {bytes} bytes ({:.1} KB/s); {single} logged one by one, {summed} in {} summaries",
+        lines.len(),
+        bytes as f64 / 1e3 / secs as f64,
+        summaries.len()
+    );
+    assert!(
+        lines.len() <= 20 + 2 * secs as usize / 60,
+        "the flood of {sent} refusals took {} lines ({bytes} bytes) of the audit log",
+        lines.len()
+    );
+    assert_eq!(single as u64 + summed, sent, "each refusal is a line or counted in a summary");
+    let said = summaries[0]["message"].as_str().unwrap();
+    assert!(
+        said.starts_with("viewer anonymous from 127.0.0.1: ") && said.contains(" refused take_lease in "),
+        "{said}"
+    );
+    assert_eq!(summaries[0]["code"], "forbidden");
+}
+
+/// With `--audit-max-bytes 131072`, 2,000 accepted commands (about 330 KB of lines) leave the
+/// log's files (`audit.jsonl` and the older parts `.1` to `.3`) at most 131,072 bytes in all,
+/// the newest lines kept and the oldest deleted, as `/metrics` says
+/// (`nanopush_audit_rotations_total`, `nanopush_audit_deleted_bytes_total`, `nanopush_audit_log_bytes`).
+#[test]
+fn the_audit_log_rotates_within_its_cap_keeping_the_newest_lines() {
+    let srv = start("audit-cap", &["--max-rate", "10000", "--audit-max-bytes", "131072"]);
+    let records = srv.dir.join("records");
+    let addr = srv.addr.clone();
+    runtime().block_on(async move {
+        let (mut op, _) = welcomed(&addr, Some(TOKEN)).await;
+        for chunk in 0..40u32 {
+            for k in 0..50 {
+                send(&mut op, json!({"type": "take_lease", "id": 1000 + chunk * 50 + k})).await;
+            }
+            for k in 0..50 {
+                assert_eq!(reply(&mut op, 1000 + chunk * 50 + k).await["type"], "ok");
+            }
+        }
+    });
+    let dir = records.join("audit");
+    let metric = |name: &str| crate::serve_access::metric(&srv.addr, name);
+    let deadline = Instant::now() + Duration::from_secs(10);
+    // 2,000 take_lease and the lease_lost of the operator's connection, closed.
+    while metric("nanopush_audit_entries_total") < 2001.0 {
+        assert!(Instant::now() < deadline, "the lines were not written within 10 s");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let parts: Vec<(String, u64)> = ["audit.jsonl", "audit.jsonl.1", "audit.jsonl.2", "audit.jsonl.3", "audit.jsonl.4"]
+        .iter()
+        .filter_map(|n| std::fs::metadata(dir.join(n)).ok().map(|m| (n.to_string(), m.len())))
+        .collect();
+    let total: u64 = parts.iter().map(|p| p.1).sum();
+    assert!(total <= 131_072, "the log's files hold {total} bytes: {parts:?}");
+    assert_eq!(parts.len(), 4, "audit.jsonl and three older parts: {parts:?}");
+    assert_eq!(metric("nanopush_audit_log_bytes"), total as f64);
+    assert!(metric("nanopush_audit_rotations_total") >= 3.0);
+    assert!(metric("nanopush_audit_deleted_bytes_total") > 100_000.0);
+    // The newest line is the last command; the parts read oldest first are in order.
+    let mut ids = Vec::new();
+    for name in ["audit.jsonl.3", "audit.jsonl.2", "audit.jsonl.1", "audit.jsonl"] {
+        for l in std::fs::read_to_string(dir.join(name)).unwrap().lines() {
+            let v: Value = serde_json::from_str(l).unwrap();
+            if v["command"] == "take_lease" {
+                ids.push(v["args"]["id"].as_u64().unwrap());
+            }
+        }
+    }
+    assert_eq!(ids.last(), Some(&2999), "the newest line is kept");
+    assert!(ids.windows(2).all(|w| w[1] == w[0] + 1), "the kept lines are the newest, in order");
+}

@@ -4,33 +4,44 @@
 //! RFC 3339), `unix_ms`, `person`, `role`, `address`, `client`, `command`, its `args`, and the
 //! `outcome` (`ok`, or `refused` with the error's `code` and `message`).
 //!
-//! A thread of its own writes the lines queued since its last write with one `write` and one
-//! `fdatasync` (a group commit): a line the log holds is whole and on disk, whatever happens to
-//! the server afterwards (kill -9, power loss), and a line is queued before its command's answer
-//! is sent and on disk after one commit (one write and one sync). The answer does not wait for
-//! the disk:
-//! a command's events (a lease change, a `run_done`) must not overtake its `ok`, and a stop
-//! waits for nothing; a kill -9 before that commit can lose the line of a command whose `ok`
-//! was sent. A write that fails part way (a full disk) is cut back to the last whole line.
-//! Refused commands are logged at most [`REFUSED_IN_FLIGHT`] queued at once: a flood of refused
-//! commands (a viewer's script) cannot queue ahead of the operator's lines or grow without
-//! bound (12,000 queued refusals would keep an operator's `ok`ed commands off the disk for ~40 s);
-//! what it sheds is counted in a line of its own (`refusals_not_logged`) and in `/metrics`. The
-//! log is in a directory of its own, so `/api/records` neither lists nor serves it.
+//! A thread of its own (`writer.rs`) writes the lines queued since its last write with one
+//! `write` and one `fdatasync` (a group commit): a line the log holds is whole and on disk,
+//! whatever happens to the server afterwards (kill -9, power loss), and a line is queued before
+//! its command's answer is sent and on disk after one commit (one write and one sync). The answer
+//! does not wait for the disk: a command's events (a lease change, a `run_done`) must not overtake
+//! its `ok`, and a stop waits for nothing; a kill -9 before that commit can lose the line of a
+//! command whose `ok` was sent. A write that fails part way (a full disk) is cut back to the last
+//! whole line. The log is in a directory of its own, so `/api/records` neither lists nor serves it.
+//!
+//! What a hostile client can make it write is bounded twice. Refused commands are logged one by
+//! one up to a budget per client (a person at an address), and counted beyond it in summary lines
+//! (`refusals.rs`): a viewer's script asking for the lease 45 times a second on 30 sockets adds a
+//! few lines a minute. And the log's files hold at most `--audit-max-bytes` in all: `audit.jsonl`
+//! is rotated to `audit.jsonl.1` … `.3` and the oldest part deleted (`writer.rs`), counted in
+//! `/metrics`. Refused commands' lines are also queued at most [`REFUSED_IN_FLIGHT`] at once, so
+//! that many clients' refusals at once cannot queue ahead of the operator's lines (what is shed
+//! is counted in a line of its own, `refusals_not_logged`, and in `/metrics`).
+
+pub mod refusals;
+mod writer;
 
 use std::collections::HashMap;
-use std::io::Write as _;
 use std::net::IpAddr;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering::Relaxed};
+use std::sync::atomic::Ordering::Relaxed;
 use std::sync::{Arc, Mutex, mpsc};
+use std::time::Instant;
 
 use nanopush_proto::ws::{ErrorCode, Role};
 use serde::Serialize;
 
+use self::refusals::Refusals;
+use self::writer::{Job, Writer};
 use crate::auth::Person;
 use crate::auth::tokens::role_name;
 use crate::clock::{rfc3339, unix_ms};
+
+pub use self::writer::{Counters, PARTS};
 
 /// Who ran each push (by run number), for its record and its `run_done` line.
 pub type RunPeople = Arc<Mutex<HashMap<u64, String>>>;
@@ -42,15 +53,12 @@ pub fn log_path(data_dir: &Path) -> PathBuf {
 
 /// Refused commands' lines queued at most, not yet written.
 pub const REFUSED_IN_FLIGHT: usize = 256;
-/// Lines written with one write and one sync at most.
-const BATCH: usize = 1024;
 
-/// A line to write, and who waits for it to be on disk.
-struct Job {
-    line: String,
-    refused: bool,
-    done: Option<tokio::sync::oneshot::Sender<bool>>,
-}
+/// The cap on the log's files by default (bytes): 1 GiB, years of a lab's commands.
+pub const MAX_BYTES_DEFAULT: u64 = 1 << 30;
+
+/// The smallest cap allowed (bytes).
+pub const MAX_BYTES_MIN: u64 = 64 * 1024;
 
 /// A line's durability: resolves `true` once it is on disk, `false` if it could not be written.
 pub type Durable = tokio::sync::oneshot::Receiver<bool>;
@@ -58,16 +66,12 @@ pub type Durable = tokio::sync::oneshot::Receiver<bool>;
 /// The audit log.
 pub struct Audit {
     tx: Option<Mutex<mpsc::Sender<Job>>>,
-    /// Refused commands' lines queued and not yet written.
-    refused_queued: Arc<AtomicUsize>,
-    /// Refused commands' lines not logged (the queue was full).
-    pub shed: Arc<AtomicU64>,
+    /// Refusals per client, for the budget and the summaries (shared with the writer).
+    refusals: Arc<Mutex<Refusals>>,
     /// Who ran each push still running.
     pub runs: RunPeople,
-    /// Entries that could not be written (counted in `/metrics`).
-    pub failures: Arc<AtomicU64>,
-    /// Entries written.
-    pub written: Arc<AtomicU64>,
+    /// What `/metrics` shows.
+    pub counters: Arc<Counters>,
 }
 
 /// What the server did on an operator's behalf, for [`Audit::event`].
@@ -114,29 +118,24 @@ impl Audit {
     pub fn off() -> Audit {
         Audit {
             tx: None,
-            refused_queued: Arc::default(),
-            shed: Arc::default(),
+            refusals: Arc::default(),
             runs: RunPeople::default(),
-            failures: Arc::default(),
-            written: Arc::default(),
+            counters: Arc::default(),
         }
     }
 
-    /// The log in `data_dir` (created if missing), written by a thread of its own; `runs` is
-    /// shared with the recorder (which names each push's person in its record).
-    pub fn open(data_dir: &Path, runs: RunPeople) -> Audit {
-        let path = log_path(data_dir);
+    /// The log in `data_dir` (created if missing), its files at most `max_bytes` in all, written
+    /// by a thread of its own; `runs` is shared with the recorder (which names each push's person
+    /// in its record).
+    pub fn open(data_dir: &Path, runs: RunPeople, max_bytes: u64) -> Audit {
         let (tx, rx) = mpsc::channel::<Job>();
-        let failures: Arc<AtomicU64> = Arc::default();
-        let written: Arc<AtomicU64> = Arc::default();
-        let refused_queued: Arc<AtomicUsize> = Arc::default();
-        let shed: Arc<AtomicU64> = Arc::default();
+        let counters = Arc::new(Counters::default());
+        counters.max_bytes.store(max_bytes, Relaxed);
+        let refusals: Arc<Mutex<Refusals>> = Arc::default();
         let w = Writer {
-            path,
-            failures: failures.clone(),
-            written: written.clone(),
-            refused_queued: refused_queued.clone(),
-            shed: shed.clone(),
+            path: log_path(data_dir),
+            counters: counters.clone(),
+            refusals: refusals.clone(),
             shed_logged: 0,
         };
         let spawned = std::thread::Builder::new()
@@ -147,11 +146,9 @@ impl Audit {
         }
         Audit {
             tx: Some(Mutex::new(tx)),
-            refused_queued,
-            shed,
+            refusals,
             runs,
-            failures,
-            written,
+            counters,
         }
     }
 
@@ -159,13 +156,14 @@ impl Audit {
     /// shed (counted) when [`REFUSED_IN_FLIGHT`] are already queued.
     fn append(&self, e: &Entry<'_>, refused: bool) -> Option<Durable> {
         let tx = self.tx.as_ref()?;
+        let c = &self.counters;
         let Ok(line) = serde_json::to_string(e) else {
-            self.failures.fetch_add(1, Relaxed);
+            c.failures.fetch_add(1, Relaxed);
             return None;
         };
-        if refused && self.refused_queued.fetch_add(1, Relaxed) >= REFUSED_IN_FLIGHT {
-            self.refused_queued.fetch_sub(1, Relaxed);
-            self.shed.fetch_add(1, Relaxed);
+        if refused && c.refused_queued.fetch_add(1, Relaxed) >= REFUSED_IN_FLIGHT {
+            c.refused_queued.fetch_sub(1, Relaxed);
+            c.shed.fetch_add(1, Relaxed);
             return None;
         }
         let (done, durable) = if refused {
@@ -176,9 +174,9 @@ impl Audit {
         };
         let job = Job { line, refused, done };
         if tx.lock().map(|t| t.send(job)).map_or(true, |r| r.is_err()) {
-            self.failures.fetch_add(1, Relaxed);
+            c.failures.fetch_add(1, Relaxed);
             if refused {
-                self.refused_queued.fetch_sub(1, Relaxed);
+                c.refused_queued.fetch_sub(1, Relaxed);
             }
             return None;
         }
@@ -195,7 +193,18 @@ impl Audit {
         (command, args): (&str, serde_json::Map<String, serde_json::Value>),
         refused: Option<(ErrorCode, &str)>,
     ) -> Option<Durable> {
+        self.tx.as_ref()?;
         let unix_ms = unix_ms();
+        if let Some(r) = refused {
+            // Beyond its client's budget, a refusal is counted for a summary instead.
+            let one_by_one = self.refusals.lock().map_or(true, |mut all| {
+                all.refused(&person.name, person.role, address, command, r, Instant::now(), unix_ms)
+            });
+            if !one_by_one {
+                self.counters.summarised.fetch_add(1, Relaxed);
+                return None;
+            }
+        }
         self.append(
             &Entry {
                 time: rfc3339(unix_ms),
@@ -259,111 +268,65 @@ impl Audit {
 
     /// The Prometheus text of the counters.
     pub fn render_metrics(&self) -> String {
-        format!(
-            "# HELP nanopush_audit_entries_total Audit log lines written (and fsynced).\n# TYPE nanopush_audit_entries_total counter\nnanopush_audit_entries_total {}\n# HELP nanopush_audit_failures_total Audit log lines that could not be written.\n# TYPE nanopush_audit_failures_total counter\nnanopush_audit_failures_total {}\n# HELP nanopush_audit_refusals_shed_total Refused commands not logged because too many were queued (a flood).\n# TYPE nanopush_audit_refusals_shed_total counter\nnanopush_audit_refusals_shed_total {}\n",
-            self.written.load(Relaxed),
-            self.failures.load(Relaxed),
-            self.shed.load(Relaxed)
-        )
-    }
-}
-
-/// The writer thread's side.
-struct Writer {
-    path: PathBuf,
-    failures: Arc<AtomicU64>,
-    written: Arc<AtomicU64>,
-    refused_queued: Arc<AtomicUsize>,
-    shed: Arc<AtomicU64>,
-    /// Shed refusals already said in the log.
-    shed_logged: u64,
-}
-
-impl Writer {
-    fn open(&self) -> std::io::Result<std::fs::File> {
-        if let Some(dir) = self.path.parent() {
-            std::fs::create_dir_all(dir)?;
+        let c = &self.counters;
+        let mut s = String::new();
+        for (name, kind, help, v) in [
+            (
+                "nanopush_audit_entries_total",
+                "counter",
+                "Audit log lines written (and fsynced).",
+                &c.written,
+            ),
+            (
+                "nanopush_audit_failures_total",
+                "counter",
+                "Audit log lines that could not be written.",
+                &c.failures,
+            ),
+            (
+                "nanopush_audit_refusals_shed_total",
+                "counter",
+                "Refused commands not logged because too many were queued (a flood).",
+                &c.shed,
+            ),
+            (
+                "nanopush_audit_refusals_summarised_total",
+                "counter",
+                "Refused commands beyond their client's budget, counted in summary lines instead of logged one by one.",
+                &c.summarised,
+            ),
+            (
+                "nanopush_audit_log_bytes",
+                "gauge",
+                "Size of the audit log's files in all (audit.jsonl and its older parts).",
+                &c.bytes,
+            ),
+            (
+                "nanopush_audit_log_max_bytes",
+                "gauge",
+                "The cap on the audit log's files (--audit-max-bytes).",
+                &c.max_bytes,
+            ),
+            (
+                "nanopush_audit_rotations_total",
+                "counter",
+                "Times audit.jsonl was renamed to audit.jsonl.1 to stay within the cap.",
+                &c.rotations,
+            ),
+            (
+                "nanopush_audit_deleted_bytes_total",
+                "counter",
+                "Bytes of the oldest audit lines deleted to stay within the cap.",
+                &c.deleted_bytes,
+            ),
+        ] {
+            s.push_str(&format!(
+                "# HELP {name} {help}\n# TYPE {name} {kind}\n{name} {}\n",
+                v.load(Relaxed)
+            ));
         }
-        std::fs::OpenOptions::new().create(true).append(true).open(&self.path)
+        s
     }
-
-    /// Writes what is queued, a batch at a time: one write, one sync, then the waiting told.
-    fn run(mut self, rx: &mpsc::Receiver<Job>) {
-        let mut file = match self.open() {
-            Ok(f) => Some(f),
-            Err(e) => {
-                tracing::error!("audit: cannot open {}: {e}", self.path.display());
-                None
-            }
-        };
-        while let Ok(first) = rx.recv() {
-            let mut jobs = vec![first];
-            while jobs.len() < BATCH {
-                match rx.try_recv() {
-                    Ok(j) => jobs.push(j),
-                    Err(_) => break,
-                }
-            }
-            let refused = jobs.iter().filter(|j| j.refused).count();
-            self.refused_queued.fetch_sub(refused, Relaxed);
-            let mut text = String::new();
-            let shed = self.shed.load(Relaxed);
-            if shed > self.shed_logged {
-                let unix_ms = unix_ms();
-                let said = serde_json::json!({
-                    "time": rfc3339(unix_ms), "unix_ms": unix_ms, "person": "-", "role": "-",
-                    "address": "-", "command": "refusals_not_logged", "outcome": "shed",
-                    "message": format!("{} refused commands were not logged: too many queued at once", shed - self.shed_logged),
-                });
-                text.push_str(&said.to_string());
-                text.push('\n');
-            }
-            for j in &jobs {
-                text.push_str(&j.line);
-                text.push('\n');
-            }
-            if file.is_none() {
-                file = self.open().ok();
-            }
-            let ok = match file.as_mut() {
-                Some(f) => write_whole(f, text.as_bytes()),
-                None => Err(std::io::Error::other("not open")),
-            };
-            let on_disk = ok.is_ok();
-            match ok {
-                Ok(()) => {
-                    self.shed_logged = shed;
-                    self.written.fetch_add(jobs.len() as u64, Relaxed);
-                }
-                Err(e) => {
-                    self.failures.fetch_add(jobs.len() as u64, Relaxed);
-                    tracing::error!(
-                        "audit: writing {}: {e}; {} entries lost, the first: {}",
-                        self.path.display(),
-                        jobs.len(),
-                        jobs[0].line
-                    );
-                    file = None;
-                }
-            }
-            for j in jobs {
-                if let Some(done) = j.done {
-                    let _ = done.send(on_disk);
-                }
-            }
-        }
-    }
-}
-
-/// Appends `bytes` and syncs them; a write that fails part way is cut back to where it began,
-/// so the file holds whole lines only.
-fn write_whole(f: &mut std::fs::File, bytes: &[u8]) -> std::io::Result<()> {
-    let before = f.metadata()?.len();
-    let r = f.write_all(bytes).and_then(|()| f.sync_data());
-    if r.is_err() {
-        let _ = f.set_len(before).and_then(|()| f.sync_data());
-    }
-    r
 }
 
 #[cfg(test)]
@@ -373,7 +336,7 @@ mod tests {
     #[test]
     fn each_entry_is_one_whole_json_line_on_disk() {
         let dir = std::env::temp_dir().join(format!("nanopush-audit-{}", std::process::id()));
-        let a = Audit::open(&dir, RunPeople::default());
+        let a = Audit::open(&dir, RunPeople::default(), MAX_BYTES_DEFAULT);
         let alice = Person {
             name: "alice".into(),
             role: Role::Operator,
@@ -390,7 +353,7 @@ mod tests {
         );
         let path = log_path(&dir);
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
-        while a.written.load(Relaxed) < 2 && std::time::Instant::now() < deadline {
+        while a.counters.written.load(Relaxed) < 2 && std::time::Instant::now() < deadline {
             std::thread::sleep(std::time::Duration::from_millis(5));
         }
         let text = std::fs::read_to_string(&path).unwrap();
