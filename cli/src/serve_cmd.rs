@@ -72,6 +72,15 @@ pub struct ServeArgs {
     /// Most viewer connections from one remote address, in [1, 100000].
     #[arg(long, default_value_t = 64)]
     max_clients_per_address: u64,
+    /// Most TCP connections at once, counted before anything is read, in [64, 10000000]
+    /// (default: the open-files limit less 272, kept for the server's own files and the lease
+    /// holder's room). One past it is reset unread.
+    #[arg(long)]
+    max_connections: Option<u64>,
+    /// Most TCP connections at once from one address, before anything is read, in [1, 100000]
+    /// (a --trusted-proxy is not held to it; the lease holder's address has 16 more).
+    #[arg(long, default_value_t = 128)]
+    max_connections_per_address: u64,
     /// An HTTP request's headers must arrive within this long (s), in [0.1, 300].
     #[arg(long, default_value_t = 10.0)]
     header_timeout_s: f64,
@@ -191,6 +200,16 @@ fn check(a: &ServeArgs) -> anyhow::Result<()> {
     in_range(
         "--max-clients-per-address",
         a.max_clients_per_address as f64,
+        1.0,
+        100_000.0,
+        "",
+    )?;
+    if let Some(n) = a.max_connections {
+        in_range("--max-connections", n as f64, 64.0, 10_000_000.0, "")?;
+    }
+    in_range(
+        "--max-connections-per-address",
+        a.max_connections_per_address as f64,
         1.0,
         100_000.0,
         "",
@@ -319,6 +338,8 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         max_rate: a.max_rate,
         max_clients: a.max_clients,
         max_clients_per_address: a.max_clients_per_address,
+        max_connections: a.max_connections,
+        max_connections_per_address: a.max_connections_per_address,
         ws_ping: std::time::Duration::from_secs_f64(a.ws_ping_s),
         ws_timeout: std::time::Duration::from_secs_f64(a.ws_timeout_s),
         header_timeout: std::time::Duration::from_secs_f64(a.header_timeout_s),

@@ -35,6 +35,11 @@ pub struct ServeConfig {
     pub max_clients: u64,
     /// Most viewer connections from one remote address.
     pub max_clients_per_address: u64,
+    /// Most TCP connections at once, before anything is read (None: what the open-files limit
+    /// allows, `conn_limit::default_total`).
+    pub max_connections: Option<u64>,
+    /// Most TCP connections at once from one address (a trusted proxy excepted).
+    pub max_connections_per_address: u64,
     /// A WebSocket ping every this long.
     pub ws_ping: Duration,
     /// A WebSocket peer silent for longer than this (no pong, nothing) is closed.
@@ -99,6 +104,9 @@ pub struct AppState {
     pub auth: crate::auth::Auth,
     /// The audit log (off until the server opens it in its data directory).
     pub audit: crate::audit::Audit,
+    /// The connection caps, counted before anything is read; the lease holder's address has
+    /// room of its own.
+    pub conn_limits: Arc<crate::conn_limit::ConnLimits>,
 }
 
 /// The haptic scales in force, as the operator sets them.
@@ -313,6 +321,13 @@ impl AppState {
                 cfg.access.token_file.clone(),
             ),
             audit: crate::audit::Audit::off(),
+            conn_limits: crate::conn_limit::ConnLimits::new(
+                cfg.max_connections_per_address,
+                cfg.max_connections.unwrap_or_else(|| {
+                    crate::conn_limit::default_total(crate::conn_limit::open_files_limit().unwrap_or(1024))
+                }),
+                cfg.access.trusted_proxies.clone(),
+            ),
             instance: Instance::now(),
             haptic_scales: Mutex::new(HapticScales {
                 nm_per_mm: scene.file.haptic.nm_per_mm,
@@ -476,6 +491,8 @@ pub(crate) fn test_state() -> Arc<AppState> {
         max_rate: 50.0,
         max_clients: 64,
         max_clients_per_address: 16,
+        max_connections: None,
+        max_connections_per_address: 128,
         ws_ping: Duration::from_secs(10),
         ws_timeout: Duration::from_secs(30),
         header_timeout: Duration::from_secs(10),

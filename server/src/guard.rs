@@ -10,10 +10,15 @@
 //! when the server's answer is `101 Switching Protocols`. A refused upgrade (401, 403, 429, 503)
 //! or an upgrade header on a plain route leaves the connection guarded (were the header alone to
 //! switch the time-outs off for good, it would be a slowloris bypass).
+//!
+//! Before the guard, an [`Admission`] decides by the peer's address alone whether a new
+//! connection is served at all (the connection caps, `conn_limit.rs`); one refused is reset at
+//! once, unread.
 
 use std::io;
-use std::net::SocketAddr;
+use std::net::{IpAddr, SocketAddr};
 use std::pin::Pin;
+use std::sync::Arc;
 use std::task::{Context, Poll};
 use std::time::Duration;
 
@@ -24,20 +29,56 @@ use tokio::time::{Instant, Sleep};
 /// Largest header block the guard keeps to look for the upgrade (bytes); hyper refuses larger.
 const MAX_HEADER: usize = 16 * 1024;
 
-/// A TCP listener whose connections are [`Guarded`].
+/// What an admitted connection keeps while it is open (its place among the connections).
+pub type Held = Box<dyn Send + Sync>;
+
+/// Whether a new connection from an address is served, decided before anything is read from it:
+/// what it keeps while it is open, or None to refuse it.
+pub type Admission = Arc<dyn Fn(IpAddr) -> Option<Held> + Send + Sync>;
+
+/// Closes a connection refused by the [`Admission`] with a reset (no FIN handshake, no
+/// TIME_WAIT left on the server for a flood's sockets).
+pub fn reset(tcp: TcpStream) {
+    use std::os::fd::AsRawFd as _;
+    let linger = libc::linger {
+        l_onoff: 1,
+        l_linger: 0,
+    };
+    // SAFETY: setsockopt on a socket this function owns, with a linger struct of its size. A
+    // zero linger makes close() reset the connection; it never blocks.
+    unsafe {
+        libc::setsockopt(
+            tcp.as_raw_fd(),
+            libc::SOL_SOCKET,
+            libc::SO_LINGER,
+            (&linger as *const libc::linger).cast(),
+            std::mem::size_of::<libc::linger>() as libc::socklen_t,
+        );
+    }
+    drop(tcp);
+}
+
+/// A TCP listener whose connections are admitted, then [`Guarded`].
 pub struct GuardedListener {
     inner: TcpListener,
     header_timeout: Duration,
     idle_timeout: Duration,
+    admission: Admission,
 }
 
 impl GuardedListener {
-    /// Guards `inner`'s connections with these time-outs.
-    pub fn new(inner: TcpListener, header_timeout: Duration, idle_timeout: Duration) -> GuardedListener {
+    /// Guards `inner`'s connections with these time-outs, those `admission` lets in.
+    pub fn new(
+        inner: TcpListener,
+        header_timeout: Duration,
+        idle_timeout: Duration,
+        admission: Admission,
+    ) -> GuardedListener {
         GuardedListener {
             inner,
             header_timeout,
             idle_timeout,
+            admission,
         }
     }
 }
@@ -47,8 +88,18 @@ impl axum::serve::Listener for GuardedListener {
     type Addr = SocketAddr;
 
     async fn accept(&mut self) -> (Guarded, SocketAddr) {
-        let (io, addr) = axum::serve::Listener::accept(&mut self.inner).await;
-        (Guarded::new(io, self.header_timeout, self.idle_timeout), addr)
+        loop {
+            let (io, addr) = axum::serve::Listener::accept(&mut self.inner).await;
+            match (self.admission)(addr.ip()) {
+                Some(held) => {
+                    return (
+                        Guarded::new(io, self.header_timeout, self.idle_timeout).holding(held),
+                        addr,
+                    );
+                }
+                None => reset(io),
+            }
+        }
     }
 
     fn local_addr(&self) -> io::Result<SocketAddr> {
@@ -78,6 +129,8 @@ pub struct Guarded<S = TcpStream> {
     header_timeout: Duration,
     idle_timeout: Duration,
     header: Vec<u8>,
+    /// Its place among the connections, given back when it closes.
+    _held: Option<Held>,
 }
 
 impl Guarded {
@@ -97,7 +150,14 @@ impl<S> Guarded<S> {
             header_timeout,
             idle_timeout,
             header: Vec::new(),
+            _held: None,
         }
+    }
+
+    /// The connection keeping `held` while it is open.
+    pub(crate) fn holding(mut self, held: Held) -> Guarded<S> {
+        self._held = Some(held);
+        self
     }
 
     /// Follows the header blocks in `bytes`, just read.

@@ -12,7 +12,7 @@
 //! | layer | modules | what they are |
 //! |---|---|---|
 //! | 0 | `clock`, `histogram`, `client_addr`, `guard`, `data_dir`, `frames`, `command_checks` | foundations: they use no other module of the server |
-//! | 1 | `tls`, `auth`, `haptic` | HTTPS, who connects, the haptic link |
+//! | 1 | `tls`, `auth`, `haptic`, `conn_limit` | HTTPS, who connects, the haptic link, the connection caps |
 //! | 2 | `audit`, `metrics` | the audit log (names `auth`'s people), the loop's metrics (and the link's) |
 //! | 3 | `control_loop` | the 1 kHz loop and what crosses to it |
 //! | 4 | `records` | the recorder of the loop's pushes, and the data directory's records |
@@ -29,6 +29,7 @@ pub mod auth;
 pub mod client_addr;
 pub mod clock;
 pub mod command_checks;
+pub mod conn_limit;
 pub mod control_loop;
 pub mod data_dir;
 pub mod frames;

@@ -113,6 +113,15 @@ pub async fn run(
     }
     let state = Arc::new(state);
     *state.addr.lock().expect("addr lock") = Some(addr);
+    if let Some(nofile) = crate::conn_limit::open_files_limit()
+        && state.conn_limits.total() + crate::conn_limit::FILES_RESERVED > nofile
+    {
+        tracing::warn!(
+            "--max-connections {} leaves less than {} of the open-files limit ({nofile}) to the server's own files: a flood of connections could leave it none (raise LimitNOFILE, or lower --max-connections)",
+            state.conn_limits.total(),
+            crate::conn_limit::FILES_RESERVED
+        );
+    }
     // With a token file each person opens the page with their own token.
     let scheme = if state.cfg.access.tls.is_some() {
         "https"
@@ -161,9 +170,8 @@ async fn watch_token_file(st: Arc<AppState>) {
 }
 
 /// Raises the soft limit of open files to the hard one (as nginx's `worker_rlimit_nofile`): the
-/// slowloris guard bounds how long a connection that sends no headers lives, not how many there
-/// are, and at Debian's default soft limit of 1024 one client holding ~1100 half-open sockets (TLS
-/// handshakes never finished) makes `/api/status` time out for everyone.
+/// default `--max-connections` is what that limit leaves beyond the server's own files
+/// (`conn_limit.rs`), and at Debian's default soft limit of 1024 it would be a few hundred.
 fn raise_open_files() {
     let mut lim = libc::rlimit {
         rlim_cur: 0,
@@ -283,19 +291,27 @@ async fn serve_http(
     graceful: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
     let app = app::router(state.clone()).into_make_service_with_connect_info::<SocketAddr>();
+    // The connection caps, before anything is read (`conn_limit.rs`).
+    let limits = state.conn_limits.clone();
+    let admission: guard::Admission = std::sync::Arc::new(move |ip| {
+        limits
+            .admit(ip)
+            .ok()
+            .map(|permit| Box::new(permit) as guard::Held)
+    });
     // TCP_NODELAY on every connection: with Nagle's algorithm a client's message waited for the
     // ACK of the reply before the next telemetry frames went out (docs/server.md).
     // Slowloris: each request's headers within the header time-out, a plain HTTP connection
     // idle for a minute closed (WebSockets keep themselves alive with pings).
     if let Some(tls) = &state.cfg.access.tls {
         // HTTPS: the handshakes on tasks of their own, the guard over the decrypted bytes.
-        let listener = crate::tls::TlsListener::new(listener, tls, state.cfg.header_timeout, IDLE_HTTP)?;
+        let listener = crate::tls::TlsListener::new(listener, tls, state.cfg.header_timeout, IDLE_HTTP, admission)?;
         // (`tap_io`, with nothing to do: axum gives `ConnectInfo<SocketAddr>` to a tapped
         // listener; TCP_NODELAY is set before the handshake.)
         let listener = axum::serve::ListenerExt::tap_io(listener, |_: &mut crate::tls::TlsIo| {});
         return axum::serve(listener, app).with_graceful_shutdown(graceful).await;
     }
-    let guarded = guard::GuardedListener::new(listener, state.cfg.header_timeout, IDLE_HTTP);
+    let guarded = guard::GuardedListener::new(listener, state.cfg.header_timeout, IDLE_HTTP, admission);
     let listener = axum::serve::ListenerExt::tap_io(guarded, |io: &mut guard::Guarded| {
         if let Err(e) = io.tcp().set_nodelay(true) {
             tracing::debug!("TCP_NODELAY refused on a connection: {e}");

@@ -25,7 +25,7 @@ use tokio::sync::mpsc;
 use tokio_rustls::TlsAcceptor;
 use tokio_rustls::server::TlsStream;
 
-use crate::guard::Guarded;
+use crate::guard::{Admission, Guarded, reset};
 
 /// Why TLS could not be set up.
 #[derive(Debug, thiserror::Error)]
@@ -186,12 +186,14 @@ pub struct TlsListener {
 }
 
 impl TlsListener {
-    /// Starts accepting on `inner` (on a task of its own, ended when this listener is dropped).
+    /// Starts accepting on `inner` (on a task of its own, ended when this listener is dropped)
+    /// the connections `admission` lets in, before their handshake.
     pub fn new(
         inner: TcpListener,
         tls: &Tls,
         header_timeout: Duration,
         idle_timeout: Duration,
+        admission: Admission,
     ) -> io::Result<TlsListener> {
         let local = inner.local_addr()?;
         let (tx, ready) = mpsc::channel(64);
@@ -209,6 +211,10 @@ impl TlsListener {
                         }
                     },
                     _ = tx.closed() => break,
+                };
+                let Some(held) = admission(addr.ip()) else {
+                    reset(tcp);
+                    continue;
                 };
                 let (tx, acceptor) = (tx.clone(), acceptor.clone());
                 tokio::spawn(async move {
@@ -228,9 +234,8 @@ impl TlsListener {
                     };
                     match tokio::time::timeout(header_timeout, handshake).await {
                         Ok(Ok(Some(stream))) => {
-                            let _ = tx
-                                .send((Guarded::new(stream, header_timeout, idle_timeout), addr))
-                                .await;
+                            let io = Guarded::new(stream, header_timeout, idle_timeout).holding(held);
+                            let _ = tx.send((io, addr)).await;
                         }
                         Ok(Ok(None)) => {}
                         Ok(Err(e)) => tracing::debug!("TLS handshake with {addr}: {e}"),

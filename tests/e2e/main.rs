@@ -14,6 +14,7 @@ mod serve_access;
 mod serve_audit;
 mod serve_behaviour;
 mod serve_campus;
+mod serve_connections;
 mod serve_hostile;
 mod serve_judge;
 mod serve_proxy;

@@ -195,6 +195,7 @@ async fn metrics(State(st): State<Arc<AppState>>) -> Response {
     );
     text.push_str(&st.auth.render_metrics());
     text.push_str(&st.audit.render_metrics());
+    text.push_str(&st.conn_limits.render_metrics());
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text).into_response()
 }
 

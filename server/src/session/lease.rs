@@ -36,6 +36,8 @@ pub(super) fn on_disconnect(st: &AppState, id: u32) {
     }
     *lease = None;
     drop(lease);
+    // Its address keeps its room among the connections a while, for the reconnect.
+    st.conn_limits.lease_held(None);
     let pushing = st.shared.busy.load(Relaxed);
     let scanning = st.activity.scanning.load(Relaxed);
     if pushing || scanning {

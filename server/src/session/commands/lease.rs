@@ -26,6 +26,8 @@ pub(super) fn take(st: &Arc<AppState>, c: &mut Client, _: ClientMessage) -> Resu
         None => {
             *lease = Some(c.id);
             drop(lease);
+            // The holder's address gets room of its own among the connections (`conn_limit.rs`).
+            st.conn_limits.lease_held(Some(c.addr));
             st.broadcast_event(&ServerMessage::Lease {
                 holder: Some(c.id),
                 holder_name: Some(c.person.name.clone()),
@@ -49,6 +51,7 @@ pub(super) fn release(st: &Arc<AppState>, c: &mut Client, _: ClientMessage) -> R
     }
     *lease = None;
     drop(lease);
+    st.conn_limits.lease_held(None);
     release_haptic(st);
     st.broadcast_event(&ServerMessage::Lease {
         holder: None,
