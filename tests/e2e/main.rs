@@ -20,6 +20,7 @@ mod serve_judge;
 mod serve_proxy;
 mod serve_scenes;
 mod serve_sign_in;
+mod serve_slow_reader;
 mod serve_state;
 mod serve_tls;
 mod serve_token_file;

@@ -2,7 +2,7 @@
 // the JSON API), the reconnect backoff, and a Connection that owns the WebSocket: it opens it,
 // hands messages on, reconnects with backoff (0.25 s doubling to 2 s) and sends commands with
 // an id from the Session. Runs in browsers and in Node (tests, with a fake socket and timers).
-import { encodeCommand } from './wire.js';
+import { commands, encodeCommand } from './wire.js';
 
 /**
  * The WebSocket URL for a page location: same host, `/ws`, with the page's `token` query
@@ -213,6 +213,14 @@ export class Connection {
       t.clearInterval(this.countdownTimer);
       this.connect();
     }, delay);
+  }
+
+  /**
+   * Acknowledges telemetry frame `seq` as read (`ack`: no id, no reply, so not numbered by the
+   * Session); nothing when not connected.
+   */
+  ack(seq) {
+    if (this.ws?.readyState === 1) this.ws.send(encodeCommand(commands.ack(seq)));
   }
 
   /** Sends a command with the Session's next id; null (and an error logged) when not connected. */

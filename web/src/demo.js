@@ -67,6 +67,7 @@ export class DemoSocket {
     const m = JSON.parse(text);
     const ok = () => this.emit({ type: 'ok', id: m.id ?? null });
     const err = (code, message) => this.emit({ type: 'error', id: m.id ?? null, code, message });
+    if (m.type === 'ack') return; // not answered, as the server does
     if (m.type === 'subscribe' || m.type === 'ping') return ok();
     if (this.role !== 'operator') return err('forbidden', 'viewers cannot command');
     if (m.type === 'take_lease') {

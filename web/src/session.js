@@ -235,7 +235,7 @@ const handlers = {
   telemetry(session, m) {
     const s = session.state;
     const force = Number.isFinite(m.tip_force_n) ? m.tip_force_n : 0;
-    s.tip = { t: m.t, stage: m.stage, volts: m.volts, phase: m.phase, estimate: m.estimate ?? null, force, haptic: m.haptic ?? null };
+    s.tip = { t: m.t, seq: Number.isSafeInteger(m.seq) ? m.seq : null, stage: m.stage, volts: m.volts, phase: m.phase, estimate: m.estimate ?? null, force, haptic: m.haptic ?? null };
     s.phase = m.phase;
     s.telemetryCount++;
     const tr = s.trace;

@@ -185,6 +185,14 @@ export const commands = {
   ping(id) {
     return withId({ type: 'ping' }, id);
   },
+  /**
+   * The newest telemetry frame read (its `seq`, an integer ≥ 1): the server keeps no more frames
+   * in flight than the page reads in half a second. Not answered, so it carries no id.
+   */
+  ack(seq) {
+    if (!Number.isSafeInteger(seq) || seq < 1) throw new RangeError(`seq must be a telemetry frame's seq (an integer ≥ 1), got ${seq}`);
+    return { type: 'ack', seq };
+  },
 };
 
 /**

@@ -119,6 +119,18 @@ test('a connection opens, passes messages on, sends commands with ids', () => {
   assert.deepEqual(h.seen, ['change connecting', 'change connecting', 'open', 'msg {"type":"ping"}', 'send #1']);
 });
 
+test('an ack goes unnumbered and unannounced, and only on an open socket', () => {
+  const h = harness();
+  h.conn.connect();
+  h.conn.ack(5);
+  assert.deepEqual(h.sockets[0].sent, [], 'not open yet: not sent');
+  h.sockets[0].open();
+  h.conn.ack(7);
+  assert.deepEqual(h.sockets[0].sent, ['{"type":"ack","seq":7}']);
+  assert.ok(!h.seen.some((s) => s.startsWith('send')), 'not a command the replies wait for');
+  assert.equal(h.conn.send(commands.ping()).id, 1, 'the next command is still #1');
+});
+
 test('a closed connection reconnects with backoff, counting down', () => {
   const h = harness();
   h.conn.connect();

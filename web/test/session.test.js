@@ -135,6 +135,9 @@ test('session: lagged messages are counted; telemetry keeps a 10 s trace', () =>
   s.apply({ type: 'telemetry', t: 0.5, stage: [0, 0, 0], volts: 0, phase: 'idle', estimate: [1e-6, 1e-6] });
   assert.deepEqual(s.state.trace.t, [0.5]);
   assert.deepEqual(s.state.tip.estimate, [1e-6, 1e-6]);
+  assert.equal(s.state.tip.seq, null, 'a frame without seq (the demo): nothing to acknowledge');
+  s.apply({ type: 'telemetry', t: 0.6, seq: 42, stage: [0, 0, 0], volts: 0, phase: 'idle', estimate: null });
+  assert.equal(s.state.tip.seq, 42, 'the frame to acknowledge');
 });
 
 test('session: a scan assembles its binary lines into the height array', () => {

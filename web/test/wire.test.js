@@ -86,6 +86,9 @@ test('command builders make the documented JSON and refuse out-of-range values',
   assert.deepEqual(commands.scan({ pixels: 64 }), { type: 'scan', pixels: 64 });
   assert.deepEqual(commands.stop(9), { type: 'stop', id: 9 });
   assert.deepEqual(commands.ping(), { type: 'ping' });
+  assert.equal(encodeCommand(commands.ack(1234)), '{"type":"ack","seq":1234}');
+  assert.throws(() => commands.ack(0), /seq must be a telemetry frame's seq/);
+  assert.throws(() => commands.ack(1.5), /seq must be/);
 
   assert.throws(() => commands.subscribe(['tip', 'video']), /unknown stream "video"/);
   assert.throws(() => commands.pushBy(1, 0, 0), /distance_um must be in \(0, 100\]/);

@@ -13,6 +13,7 @@
 //! | `stop` | — | the lease | `ok`; the tip retracts |
 //! | `haptic` | `action`: `engage` (approach, park, give z to the handle), `release` (park, let the handle go), `recenter` (re-centre the handle, the tip stays), `scale` with `nm_per_mm` [0.01, 1000] and/or `pull_off_at_hand_n` [0.01, 10] | the lease; `engage`/`recenter` a live haptic link | `ok` (for `scale` with `scales`: the scales that will be in force, lowered to the device's renderable region when past it, and why — `HapticScales`), or `unavailable` (no link: `--haptic none`, or no handle samples) |
 //! | `ping` | — | — | `ok` |
+//! | `ack` | `seq`: the newest `telemetry` frame the client has read (its `seq`; acknowledgements are cumulative) | — | none: the one message not answered `ok` (an `error` when `seq` is not a frame sent to this client). The first `ack` bounds what is in flight to the client from then on: no more frames than it reads in half a second (2 at least), the newest sent once it has read the older. Acknowledge each frame read (up to twice the telemetry rate a second, a budget apart from `--max-rate`), or at least the newest before waiting for more: no frame comes while the window is full |
 //!
 //! The server's table of commands (`server/src/session/commands`) gives each its handler and
 //! who may send it; its tests check this table's `needs` against it.
@@ -133,6 +134,13 @@ pub enum ClientMessage {
         #[serde(default)]
         id: Option<u32>,
     },
+    /// The newest telemetry frame the client has read: the server keeps in flight to it no more
+    /// frames than it reads in half a second. Not answered (an `error` when `seq` was not sent to
+    /// this client).
+    Ack {
+        /// The frame's `seq`.
+        seq: u64,
+    },
     /// Haptic z-control from the 1-DOF handle. Needs the lease, and for `engage` a live haptic
     /// link.
     Haptic {
@@ -177,6 +185,7 @@ impl ClientMessage {
             | ClientMessage::Stop { id }
             | ClientMessage::Ping { id }
             | ClientMessage::Haptic { id, .. } => *id,
+            ClientMessage::Ack { .. } => None,
         }
     }
 }
@@ -200,6 +209,12 @@ mod tests {
                 streams: vec![Stream::Tip, Stream::Scan]
             }
         );
+        assert_eq!(
+            serde_json::from_str::<ClientMessage>(r#"{"type":"ack","seq":1234}"#).unwrap(),
+            ClientMessage::Ack { seq: 1234 }
+        );
+        assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"ack","seq":-1}"#).is_err());
+        assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"ack","seq":1,"id":2}"#).is_err());
         assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"push","particle":1,"bogus":1}"#).is_err());
         assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"fly"}"#).is_err());
     }

@@ -1,7 +1,8 @@
 //! One WebSocket connection: a receive loop (`receive.rs`: rate limit, size limit, one command
 //! per message, run as its entry in the table of commands says, `commands/`; the lease lost
 //! with the connection, `lease.rs`) and a send loop (`send.rs`: replies with back-pressure,
-//! events, telemetry and scan lines, keep-alive, the per-frame send budget). Both are generic
+//! events, telemetry and scan lines, keep-alive, the per-frame send budget, and the window of
+//! telemetry in flight to a client that acknowledges what it read, `window.rs`). Both are generic
 //! over `Sink`/`Stream`, so a session runs over plain channels in the tests.
 
 mod commands;
@@ -11,6 +12,7 @@ mod receive;
 mod send;
 #[cfg(test)]
 pub(crate) mod tests;
+mod window;
 
 use std::collections::HashSet;
 use std::net::SocketAddr;
@@ -56,6 +58,12 @@ pub(crate) struct Client {
     tokens: f64,
     /// When the bucket was last filled.
     last: Instant,
+    /// The acknowledgements' own bucket (`ack` does not spend the commands' budget), and when
+    /// it was last filled.
+    ack_tokens: f64,
+    ack_last: Instant,
+    /// What it acknowledged reading, and the newest frame sent to it (shared with the sender).
+    acks: Arc<window::Acks>,
 }
 
 /// One WebSocket connection of `person` from `peer`.
@@ -100,6 +108,7 @@ where
     // ping unanswered past the dead-peer time-out, and skips telemetry for one that lags.
     let answered = keepalive::Answered::default();
     let closing = send::Closing::default();
+    let acks = Arc::new(window::Acks::default());
     let outbox = Outbox {
         id,
         role,
@@ -108,6 +117,7 @@ where
         answered: answered.clone(),
         closing: closing.clone(),
         kicked,
+        acks: acks.clone(),
     };
     let mut send = tokio::spawn(send::send_loop(st.clone(), sink, outbox));
     let mut client = Client {
@@ -118,6 +128,9 @@ where
         streams: HashSet::new(),
         tokens: st.cfg.max_rate,
         last: Instant::now(),
+        ack_tokens: receive::ack_rate(&st.cfg),
+        ack_last: Instant::now(),
+        acks,
     };
     let inbox = Inbox {
         replies: &reply_tx,

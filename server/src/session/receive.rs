@@ -56,9 +56,25 @@ pub(super) enum Admit {
     Refuse(ErrorCode, String),
 }
 
+/// The acknowledgements a client may send a second (and in a burst): twice the telemetry rate,
+/// so that one for every frame is always within it.
+pub(super) fn ack_rate(cfg: &ServeConfig) -> f64 {
+    2.0 * cfg.telemetry_hz
+}
+
+/// The longest `ack` (bytes): `{"type":"ack","seq":18446744073709551615}` and some spaces.
+const ACK_MAX_BYTES: usize = 96;
+
+/// Whether `t` is an `ack` (a short text, read as one).
+fn is_ack(t: &str) -> bool {
+    t.len() <= ACK_MAX_BYTES
+        && t.contains("ack")
+        && matches!(parse_command(t), Ok(nanopush_proto::ws::ClientMessage::Ack { .. }))
+}
+
 /// Admits one frame at `now`: every data frame takes a token of the client's bucket
-/// (`max_rate` per second, burst `max_rate`); binary frames are not commands; a text above
-/// `max_message_bytes` is refused.
+/// (`max_rate` per second, burst `max_rate`), an `ack` one of its own bucket ([`ack_rate`]);
+/// binary frames are not commands; a text above `max_message_bytes` is refused.
 pub(super) fn admit(cfg: &ServeConfig, c: &mut Client, msg: Message, now: Instant) -> Admit {
     let text = match msg {
         Message::Close(_) => return Admit::Close,
@@ -66,6 +82,21 @@ pub(super) fn admit(cfg: &ServeConfig, c: &mut Client, msg: Message, now: Instan
         Message::Binary(b) => Err(b.len()),
         _ => return Admit::Skip,
     };
+    if let Ok(t) = &text
+        && is_ack(t)
+    {
+        let rate = ack_rate(cfg);
+        c.ack_tokens = (c.ack_tokens + now.duration_since(c.ack_last).as_secs_f64() * rate).min(rate);
+        c.ack_last = now;
+        if c.ack_tokens < 1.0 {
+            return Admit::Refuse(
+                ErrorCode::RateLimited,
+                format!("more than {rate} acks per second (twice the telemetry rate); this one was dropped"),
+            );
+        }
+        c.ack_tokens -= 1.0;
+        return Admit::Command(t.clone());
+    }
     c.tokens = (c.tokens + now.duration_since(c.last).as_secs_f64() * cfg.max_rate).min(cfg.max_rate);
     c.last = now;
     if c.tokens < 1.0 {
@@ -165,6 +196,8 @@ async fn answer(st: &Arc<AppState>, client: &mut Client, inbox: &Inbox<'_>, text
         let _ = st.audit.command(&client.person, client.addr, client.id, cmd, refused);
     }
     match handled {
+        // Not answered (an `ack`), and changes no subscription.
+        Ok(accepted) if accepted.silent => true,
         Ok(accepted) => {
             let ok = ServerMessage::Ok {
                 id: cid,
@@ -234,6 +267,28 @@ mod tests {
             admit(&st.cfg, &mut c, Message::Text("{}".into()), later),
             Admit::Command(_)
         ));
+    }
+
+    /// Acknowledgements have a budget of their own, twice the telemetry rate: one for every
+    /// frame spends nothing of the commands' budget.
+    #[test]
+    fn acks_spend_a_budget_of_their_own() {
+        let st = test_state();
+        let mut c = client(1, Role::Viewer);
+        let t0 = c.last;
+        for seq in 1..=120 {
+            let ack = Message::Text(format!(r#"{{"type":"ack","seq":{seq}}}"#).into());
+            assert!(matches!(admit(&st.cfg, &mut c, ack, t0), Admit::Command(_)), "ack {seq}");
+        }
+        match admit(&st.cfg, &mut c, Message::Text(r#"{"type":"ack","seq":121}"#.into()), t0) {
+            Admit::Refuse(ErrorCode::RateLimited, why) => assert!(why.contains("120 acks per second"), "{why}"),
+            other => panic!("{other:?}"),
+        }
+        assert!(matches!(
+            admit(&st.cfg, &mut c, Message::Text(r#"{"type":"ping"}"#.into()), t0),
+            Admit::Command(_)
+        ));
+        assert_eq!(c.tokens, 49.0, "the commands' budget is untouched by acks");
     }
 
     #[test]

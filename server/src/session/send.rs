@@ -1,8 +1,10 @@
 //! The send loop of one session: replies (with back-pressure), events, telemetry and scan lines
 //! merged onto the socket, numbered pings judged by their pongs (`keepalive.rs`: the dead-peer
 //! time-out, and telemetry skipped for a client that has not read what was sent half a second
-//! ago), and the per-frame send budget. A slow client skips telemetry and is told how many frames
-//! (`lagged`) before the next one it gets.
+//! ago), the window of telemetry in flight to a client that acknowledges what it read
+//! (`window.rs`), and the per-frame send budget. A slow client skips telemetry and is told how
+//! many frames (`lagged`) before the next one it gets; one that acknowledges is not told (the
+//! numbers passed over in `seq` are the frames skipped), so that its reading goes to frames.
 
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -16,6 +18,7 @@ use tokio::sync::{broadcast, mpsc, watch};
 
 use super::SEND_BUDGET;
 use super::keepalive::{Answered, KeepAlive, PROBE};
+use super::window::{Acks, Window};
 use crate::app_state::{AppState, to_text};
 use crate::frames::{Frames, Next};
 
@@ -36,6 +39,9 @@ pub(super) struct Outbox {
     pub closing: Closing,
     /// Changes to the reason when the person's token is revoked: the session is closed.
     pub kicked: watch::Receiver<Option<String>>,
+    /// What the client acknowledged reading (written by the receive loop), and the newest frame
+    /// sent to it (written here).
+    pub acks: Arc<Acks>,
 }
 
 /// A close code and reason, set once.
@@ -50,6 +56,7 @@ where
     let id = out.id;
     let mut ping = tokio::time::interval(st.cfg.ws_ping.min(PROBE));
     let mut keepalive = KeepAlive::new(out.answered.clone(), Instant::now());
+    let mut window = Window::new();
     // Telemetry frames skipped since the last one sent (the client lagging).
     let mut skipped = 0u64;
     ping.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -84,22 +91,30 @@ where
                 Err(broadcast::error::RecvError::Closed) => break,
             },
             r = telemetry.next(), if wants.contains(&WsStream::Tip) => match r {
-                Next::Frame(_, m) => {
-                    if keepalive.behind(Instant::now()) {
-                        // Not queued to be read seconds late: skipped, and told before the next.
+                Next::Frame(seq, m) => {
+                    let now = Instant::now();
+                    // Not queued to be read seconds late (the pongs say the socket is behind,
+                    // or the client has not read what is in flight): skipped, the next sent is
+                    // the newest.
+                    if keepalive.behind(now) || !window.open(&out.acks, now) {
                         skipped += 1;
                         st.net.dropped_frames.fetch_add(1, Relaxed);
                         continue;
                     }
-                    if skipped > 0 {
+                    if skipped > 0 && !window.on(&out.acks) {
                         let told = Message::Text(to_text(&ServerMessage::Lagged { skipped }));
-                        skipped = 0;
                         if !send_within_budget(&mut sink, told, id).await {
                             break;
                         }
                     }
+                    skipped = 0;
+                    window.sent(&out.acks, seq);
                     st.net.sent.fetch_add(1, Relaxed);
                     Message::Text(m)
+                }
+                Next::Lagged(n) if window.on(&out.acks) => {
+                    st.net.dropped_frames.fetch_add(n, Relaxed);
+                    continue;
                 }
                 Next::Lagged(n) => lagged(&st, n),
                 Next::Closed => break,

@@ -23,6 +23,9 @@ pub(crate) fn client(id: u32, role: Role) -> Client {
         streams: HashSet::new(),
         tokens: 50.0,
         last: Instant::now(),
+        ack_tokens: 120.0,
+        ack_last: Instant::now(),
+        acks: Arc::default(),
     }
 }
 

@@ -81,5 +81,6 @@ pub(super) fn run(st: &Arc<AppState>, _: &mut Client, msg: ClientMessage) -> Res
     }
     Ok(Accepted {
         scales: Some(scales_in_force(h, ts.k_c, ts.adhesion(), nm_per_mm, pull_off_at_hand_n)),
+        silent: false,
     })
 }

@@ -19,6 +19,7 @@
 //! (A command the control loop carries out in a way it does not know yet also needs its
 //! `LoopCommand`, in `control_loop`.)
 
+mod ack;
 mod haptic;
 mod instrument;
 mod lease;
@@ -51,6 +52,7 @@ pub(super) fn route(msg: &ClientMessage) -> Command {
         M::Scan { .. } => Command::new("scan", Commander, Fields, scan::run),
         M::Stop { .. } => Command::new("stop", Commander, Fields, stop::run),
         M::Haptic { .. } => Command::new("haptic", Commander, Fields, haptic::run).checked(haptic::fields_apply),
+        M::Ack { .. } => Command::new("ack", Anyone, Nothing, ack::run),
     }
 }
 
@@ -185,11 +187,22 @@ pub(super) enum Audit {
 pub(crate) struct Accepted {
     /// The haptic scales a `haptic` `scale` puts in force.
     pub scales: Option<HapticScales>,
+    /// No `ok` is sent (an `ack`).
+    pub silent: bool,
 }
 
 impl Accepted {
     /// An `ok` with nothing more to say.
-    pub const PLAIN: Accepted = Accepted { scales: None };
+    pub const PLAIN: Accepted = Accepted {
+        scales: None,
+        silent: false,
+    };
+
+    /// Accepted, and not answered.
+    pub const SILENT: Accepted = Accepted {
+        scales: None,
+        silent: true,
+    };
 }
 
 /// `ping`: answered `ok`.
@@ -253,10 +266,11 @@ mod tests {
                 nm_per_mm: None,
                 pull_off_at_hand_n: None,
             },
+            ClientMessage::Ack { seq: 1 },
         ];
         // Every command once: a command added to the protocol makes this match (and `route`'s)
         // incomplete until it is given a message here.
-        let mut seen = [false; 8];
+        let mut seen = [false; 9];
         for m in &messages {
             let k = match m {
                 ClientMessage::Ping { .. } => 0,
@@ -267,6 +281,7 @@ mod tests {
                 ClientMessage::Scan { .. } => 5,
                 ClientMessage::Stop { .. } => 6,
                 ClientMessage::Haptic { .. } => 7,
+                ClientMessage::Ack { .. } => 8,
             };
             seen[k] = true;
         }
@@ -285,8 +300,8 @@ mod tests {
     #[test]
     fn who_may_send_each_command() {
         let who = |m: &ClientMessage| route(m).who;
-        let [ping, subscribe, take, release, push, scan, stop, haptic] = one_of_each().try_into().unwrap();
-        assert_eq!((who(&ping), who(&subscribe)), (Who::Anyone, Who::Anyone));
+        let [ping, subscribe, take, release, push, scan, stop, haptic, ack] = one_of_each().try_into().unwrap();
+        assert_eq!((who(&ping), who(&subscribe), who(&ack)), (Who::Anyone, Who::Anyone, Who::Anyone));
         assert_eq!(who(&take), Who::Operator("take the lease"));
         assert_eq!(who(&release), Who::Holder);
         for m in [push, scan, stop, haptic] {
@@ -352,7 +367,10 @@ mod tests {
         );
         for m in one_of_each() {
             let audited = route(&m).audit_text(&m).is_some();
-            let changes_nothing = matches!(m, ClientMessage::Ping { .. } | ClientMessage::Subscribe { .. });
+            let changes_nothing = matches!(
+                m,
+                ClientMessage::Ping { .. } | ClientMessage::Subscribe { .. } | ClientMessage::Ack { .. }
+            );
             assert_eq!(audited, !changes_nothing, "{m:?}");
         }
     }
@@ -427,6 +445,30 @@ mod tests {
         // Another action's `ok` says no scales.
         let ok = command(&st, &mut c, r#"{"type":"haptic","action":"release"}"#).unwrap();
         assert_eq!(ok, Accepted::PLAIN);
+    }
+
+    /// An `ack` of a frame sent is taken and not answered; one of a frame never sent (or before
+    /// any) is refused naming the frames there are.
+    #[test]
+    fn an_ack_is_silent_and_must_name_a_frame_sent() {
+        let st = test_state();
+        let mut c = client(1, Role::Viewer);
+        let e = command(&st, &mut c, r#"{"type":"ack","seq":5}"#).unwrap_err();
+        assert_eq!(e.code, ErrorCode::OutOfRange);
+        assert!(e.message.contains("no telemetry frame has been sent"), "{}", e.message);
+        c.acks.newest_sent.store(40, Relaxed);
+        assert_eq!(command(&st, &mut c, r#"{"type":"ack","seq":30}"#), Ok(Accepted::SILENT));
+        assert_eq!(c.acks.acked.load(Relaxed), 30);
+        for bad in [0, 41] {
+            let e = command(&st, &mut c, &format!(r#"{{"type":"ack","seq":{bad}}}"#)).unwrap_err();
+            assert_eq!(
+                e.message,
+                format!("ack seq = {bad} is out of range; allowed: [1, 40] (the frames sent to this client)")
+            );
+        }
+        // An older one changes nothing.
+        command(&st, &mut c, r#"{"type":"ack","seq":10}"#).unwrap();
+        assert_eq!(c.acks.acked.load(Relaxed), 30);
     }
 
     /// The protocol's table of commands (`proto/src/ws/client.rs`) lists each command of this table
