@@ -140,7 +140,10 @@ impl ConnLimits {
         };
         if let Some(why) = refused {
             self.refused.fetch_add(1, Relaxed);
-            let said = c.warned.get(&ip).is_some_and(|&t| now.saturating_duration_since(t) < WARN_EVERY);
+            let said = c
+                .warned
+                .get(&ip)
+                .is_some_and(|&t| now.saturating_duration_since(t) < WARN_EVERY);
             if !said {
                 if c.warned.len() >= 1024 {
                     c.warned.clear();

@@ -293,12 +293,8 @@ async fn serve_http(
     let app = app::router(state.clone()).into_make_service_with_connect_info::<SocketAddr>();
     // The connection caps, before anything is read (`conn_limit.rs`).
     let limits = state.conn_limits.clone();
-    let admission: guard::Admission = std::sync::Arc::new(move |ip| {
-        limits
-            .admit(ip)
-            .ok()
-            .map(|permit| Box::new(permit) as guard::Held)
-    });
+    let admission: guard::Admission =
+        std::sync::Arc::new(move |ip| limits.admit(ip).ok().map(|permit| Box::new(permit) as guard::Held));
     // TCP_NODELAY on every connection: with Nagle's algorithm a client's message waited for the
     // ACK of the reply before the next telemetry frames went out (docs/server.md).
     // Slowloris: each request's headers within the header time-out, a plain HTTP connection

@@ -224,7 +224,10 @@ fn a_push_stopped_before_it_began_has_its_end_in_the_audit_log() {
 /// The refusals of one client in the log: the lines of `person` from `address` for `command`,
 /// refused one by one, and those a summary counts.
 fn refusals_accounted(lines: &[Value], command: &str) -> (usize, u64, Vec<Value>) {
-    let ours: Vec<&Value> = lines.iter().filter(|l| l["command"] == command && l["person"] == "anonymous").collect();
+    let ours: Vec<&Value> = lines
+        .iter()
+        .filter(|l| l["command"] == command && l["person"] == "anonymous")
+        .collect();
     let single = ours.iter().filter(|l| l["outcome"] == "refused").count();
     let summaries: Vec<Value> = ours
         .iter()
@@ -241,7 +244,10 @@ fn refusals_accounted(lines: &[Value], command: &str) -> (usize, u64, Vec<Value>
 /// the lines and the summaries account for every refusal (one line each, 1.3 GB an hour, before).
 #[test]
 fn a_refusal_flood_is_logged_as_a_few_lines_and_a_summary() {
-    let secs: u64 = std::env::var("NANOPUSH_FLOOD_S").ok().and_then(|s| s.parse().ok()).unwrap_or(3);
+    let secs: u64 = std::env::var("NANOPUSH_FLOOD_S")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(3);
     let srv = start("audit-refusal-flood", &["--max-rate", "10000"]);
     let records = srv.dir.join("records");
     let per_viewer = 45 * secs as usize;
@@ -305,7 +311,11 @@ fn a_refusal_flood_is_logged_as_a_few_lines_and_a_summary() {
         "the flood of {sent} refusals took {} lines ({bytes} bytes) of the audit log",
         lines.len()
     );
-    assert_eq!(single as u64 + summed, sent, "each refusal is a line or counted in a summary");
+    assert_eq!(
+        single as u64 + summed,
+        sent,
+        "each refusal is a line or counted in a summary"
+    );
     let said = summaries[0]["message"].as_str().unwrap();
     assert!(
         said.starts_with("viewer anonymous from 127.0.0.1: ") && said.contains(" refused take_lease in "),
@@ -342,10 +352,16 @@ fn the_audit_log_rotates_within_its_cap_keeping_the_newest_lines() {
         assert!(Instant::now() < deadline, "the lines were not written within 10 s");
         std::thread::sleep(Duration::from_millis(50));
     }
-    let parts: Vec<(String, u64)> = ["audit.jsonl", "audit.jsonl.1", "audit.jsonl.2", "audit.jsonl.3", "audit.jsonl.4"]
-        .iter()
-        .filter_map(|n| std::fs::metadata(dir.join(n)).ok().map(|m| (n.to_string(), m.len())))
-        .collect();
+    let parts: Vec<(String, u64)> = [
+        "audit.jsonl",
+        "audit.jsonl.1",
+        "audit.jsonl.2",
+        "audit.jsonl.3",
+        "audit.jsonl.4",
+    ]
+    .iter()
+    .filter_map(|n| std::fs::metadata(dir.join(n)).ok().map(|m| (n.to_string(), m.len())))
+    .collect();
     let total: u64 = parts.iter().map(|p| p.1).sum();
     assert!(total <= 131_072, "the log's files hold {total} bytes: {parts:?}");
     assert_eq!(parts.len(), 4, "audit.jsonl and three older parts: {parts:?}");
@@ -363,5 +379,8 @@ fn the_audit_log_rotates_within_its_cap_keeping_the_newest_lines() {
         }
     }
     assert_eq!(ids.last(), Some(&2999), "the newest line is kept");
-    assert!(ids.windows(2).all(|w| w[1] == w[0] + 1), "the kept lines are the newest, in order");
+    assert!(
+        ids.windows(2).all(|w| w[1] == w[0] + 1),
+        "the kept lines are the newest, in order"
+    );
 }

@@ -341,7 +341,8 @@ fn a_deleted_lock_file_does_not_let_a_second_server_in() {
         unfinished.exists(),
         "the second server removed the first one's .partial trace:\n{err}"
     );
-    let st = st.unwrap_or_else(|| panic!("a second server runs on a data directory whose lock file was deleted:\n{err}"));
+    let st =
+        st.unwrap_or_else(|| panic!("a second server runs on a data directory whose lock file was deleted:\n{err}"));
     assert!(!st.success());
     assert!(err.contains("another nanopush serve"), "{err}");
 }

@@ -80,12 +80,20 @@ fn silent_sockets_from_one_address_do_not_keep_the_operator_out() {
     let connector = crate::serve_tls::client(&dir.join("ca.pem"));
     let (mut child, addr) = crate::util::spawn_serve(&dir.join("server.log"), |c| {
         // Silent sockets live 30 s: longer than the test, as a slow network's would.
-        c.args(["--haptic", "none", "--operator-token", TOKEN, "--header-timeout-s", "30", "--data-dir"])
-            .arg(dir.join("records"))
-            .arg("--tls-cert")
-            .arg(&cert)
-            .arg("--tls-key")
-            .arg(&key);
+        c.args([
+            "--haptic",
+            "none",
+            "--operator-token",
+            TOKEN,
+            "--header-timeout-s",
+            "30",
+            "--data-dir",
+        ])
+        .arg(dir.join("records"))
+        .arg("--tls-cert")
+        .arg(&cert)
+        .arg("--tls-key")
+        .arg(&key);
         // SAFETY: only setrlimit, async-signal-safe, between fork and exec.
         unsafe {
             c.pre_exec(|| {
@@ -110,15 +118,17 @@ fn silent_sockets_from_one_address_do_not_keep_the_operator_out() {
                 let tcp = connect_from("127.0.0.2", &addr).await?;
                 let name = rustls::pki_types::ServerName::try_from("127.0.0.1").unwrap();
                 let mut s = connector.connect(name, tcp).await?;
-                let req = format!(
-                    "GET /api/status?token={TOKEN} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
-                );
+                let req =
+                    format!("GET /api/status?token={TOKEN} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n");
                 s.write_all(req.as_bytes()).await?;
                 let mut buf = Vec::new();
                 let _ = s.read_to_end(&mut buf).await;
                 std::io::Result::Ok(buf.starts_with(b"HTTP/1.1 200"))
             };
-            let answered = matches!(tokio::time::timeout(Duration::from_secs(5), attempt).await, Ok(Ok(true)));
+            let answered = matches!(
+                tokio::time::timeout(Duration::from_secs(5), attempt).await,
+                Ok(Ok(true))
+            );
             took.push(answered.then(|| t0.elapsed().as_secs_f64()));
             tokio::time::sleep(Duration::from_secs(1).saturating_sub(t0.elapsed())).await;
         }
@@ -146,7 +156,10 @@ fn silent_sockets_from_one_address_do_not_keep_the_operator_out() {
 #[test]
 fn the_lease_holders_address_has_room_when_every_place_is_taken() {
     raise_own_open_files();
-    let srv = start("conn-reserve", &["--max-connections", "300", "--max-connections-per-address", "128"]);
+    let srv = start(
+        "conn-reserve",
+        &["--max-connections", "300", "--max-connections-per-address", "128"],
+    );
     let addr = srv.addr.clone();
     runtime().block_on(async move {
         let ws_from = |from: &'static str| {
@@ -172,7 +185,10 @@ fn the_lease_holders_address_has_room_when_every_place_is_taken() {
         }
         // Each address's 129th, and a fourth address, are closed without a word.
         let mut more = connect_from("127.0.0.3", &addr).await.unwrap();
-        assert!(closed_at_once(&mut more, 2.0).await, "a 129th socket from 127.0.0.3 was kept");
+        assert!(
+            closed_at_once(&mut more, 2.0).await,
+            "a 129th socket from 127.0.0.3 was kept"
+        );
         let mut newcomer = connect_from("127.0.0.6", &addr).await.unwrap();
         assert!(
             closed_at_once(&mut newcomer, 2.0).await,

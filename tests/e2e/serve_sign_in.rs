@@ -26,12 +26,17 @@ fn a_bearer_token_opens_the_websocket_as_it_opens_the_api() {
             assert_eq!((w["name"].as_str(), w["role"].as_str()), (Some(name), Some(role)));
         }
         let wrong = format!("Bearer {}x", tokens[1]);
-        assert_eq!(try_ws(&srv.addr, None, &[("authorization", &wrong)]).await.err(), Some(401));
+        assert_eq!(
+            try_ws(&srv.addr, None, &[("authorization", &wrong)]).await.err(),
+            Some(401)
+        );
     });
     let srv = start("bearer-ws-generated", &["--viewer-token", "viewer-token-1"]);
     runtime().block_on(async {
         let bearer = format!("Bearer {TOKEN}");
-        let (_ws, w) = try_ws(&srv.addr, None, &[("authorization", &bearer)]).await.expect("operator");
+        let (_ws, w) = try_ws(&srv.addr, None, &[("authorization", &bearer)])
+            .await
+            .expect("operator");
         assert_eq!(w["role"], "operator");
     });
 }

@@ -76,7 +76,8 @@ async fn slow_reader(ws: Ws, library: Library, rate: f64, secs: f64, warm: f64, 
         k += 1;
         tokio::time::sleep_until(t0 + Duration::from_secs_f64(f64::from(k) / rate)).await;
         let Ok(Some(m)) = tokio::time::timeout(Duration::from_secs(5), source.next()).await else {
-            seen.errors.push(format!("no message within 5 s at {:.1} s", t0.elapsed().as_secs_f64()));
+            seen.errors
+                .push(format!("no message within 5 s at {:.1} s", t0.elapsed().as_secs_f64()));
             break;
         };
         let Message::Text(t) = m else { continue };
@@ -116,8 +117,14 @@ fn max_and_median(v: &[u64]) -> (u64, u64) {
 /// behind (2.5 s and 5.3 s, growing with the time read).
 #[test]
 fn a_slow_reader_that_acknowledges_sees_frames_within_a_second() {
-    let secs: f64 = std::env::var("NANOPUSH_SLOW_READER_S").ok().and_then(|s| s.parse().ok()).unwrap_or(8.0);
-    let srv = start("slow-ack", &["--telemetry-hz", "60", "--ws-ping-s", "0.5", "--ws-timeout-s", "10"]);
+    let secs: f64 = std::env::var("NANOPUSH_SLOW_READER_S")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(8.0);
+    let srv = start(
+        "slow-ack",
+        &["--telemetry-hz", "60", "--ws-ping-s", "0.5", "--ws-timeout-s", "10"],
+    );
     let (warm, rate) = (2.0, 15.0);
     let results = runtime().block_on(async {
         let newest = Arc::new(AtomicU64::new(0));
@@ -145,8 +152,22 @@ fn a_slow_reader_that_acknowledges_sees_frames_within_a_second() {
         });
         let on_demand = clients.remove(0);
         let queueing = clients.remove(0);
-        let a = tokio::spawn(slow_reader(on_demand, Library::ReadsOnDemand, rate, secs, warm, newest.clone()));
-        let b = tokio::spawn(slow_reader(queueing, Library::QueuesEverything, rate, secs, warm, newest.clone()));
+        let a = tokio::spawn(slow_reader(
+            on_demand,
+            Library::ReadsOnDemand,
+            rate,
+            secs,
+            warm,
+            newest.clone(),
+        ));
+        let b = tokio::spawn(slow_reader(
+            queueing,
+            Library::QueuesEverything,
+            rate,
+            secs,
+            warm,
+            newest.clone(),
+        ));
         let (a, b) = (a.await.unwrap(), b.await.unwrap());
         fast.await.unwrap();
         [(Library::ReadsOnDemand, a), (Library::QueuesEverything, b)]

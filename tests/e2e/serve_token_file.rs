@@ -18,7 +18,12 @@ use crate::util::{http_within, is, ok, runtime, until, wait_exit};
 fn mkfifo(path: &Path) {
     let c = std::ffi::CString::new(path.to_str().unwrap()).unwrap();
     // SAFETY: a NUL-terminated path.
-    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0, "mkfifo {}", path.display());
+    assert_eq!(
+        unsafe { libc::mkfifo(c.as_ptr(), 0o600) },
+        0,
+        "mkfifo {}",
+        path.display()
+    );
 }
 
 /// Telemetry frames read from `ws` in `secs`.
@@ -41,7 +46,11 @@ async fn frames_in(ws: &mut crate::util::Ws, secs: f64) -> u32 {
 /// put back without the operator's line, her session is closed (revocations apply again).
 #[test]
 fn a_token_file_replaced_by_a_fifo_freezes_nothing() {
-    let (srv, tokens) = named_server("fifo", &[("alice", "operator"), ("bob", "viewer")], &["--telemetry-hz", "60"]);
+    let (srv, tokens) = named_server(
+        "fifo",
+        &[("alice", "operator"), ("bob", "viewer")],
+        &["--telemetry-hz", "60"],
+    );
     let file = srv.dir.join("tokens");
     let body = std::fs::read_to_string(&file).unwrap();
     runtime().block_on(async {
@@ -84,11 +93,18 @@ fn a_token_file_replaced_by_a_fifo_freezes_nothing() {
 
         // Put back without alice's line: the revocation is applied.
         std::fs::remove_file(&file).unwrap();
-        let without: String = body.lines().filter(|l| !l.starts_with("alice ")).map(|l| format!("{l}\n")).collect();
+        let without: String = body
+            .lines()
+            .filter(|l| !l.starts_with("alice "))
+            .map(|l| format!("{l}\n"))
+            .collect();
         std::fs::write(&file, without).unwrap();
         let why = until(&mut a, 10.0, |m| is(m, "error") && m["id"].is_null()).await;
         assert!(
-            why["message"].as_str().unwrap().contains("the token of alice was revoked"),
+            why["message"]
+                .as_str()
+                .unwrap()
+                .contains("the token of alice was revoked"),
             "{why}"
         );
         assert_eq!(metric(&srv.addr, "nanopush_auth_token_file_ok"), 1.0);
@@ -129,7 +145,10 @@ fn a_fifo_as_the_token_file_at_start_is_refused_with_why() {
     let log = std::fs::read_to_string(dir.join("server.log")).unwrap_or_default();
     let _ = std::fs::remove_dir_all(&dir);
     let st = exited.unwrap_or_else(|| panic!("the server was still starting after 10 s:\n{log}"));
-    assert!(!st.success(), "the server started with a FIFO as its token file:\n{log}");
+    assert!(
+        !st.success(),
+        "the server started with a FIFO as its token file:\n{log}"
+    );
     assert!(
         log.contains(file.to_str().unwrap()) && log.contains("not a regular file"),
         "{log}"

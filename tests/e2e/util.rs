@@ -209,7 +209,11 @@ pub(crate) fn http(addr: &str, method: &str, path: &str, headers: &[String]) -> 
 /// server that froze fails the test instead of hanging it).
 pub(crate) fn http_within(addr: &str, path: &str, headers: &[String], secs: f64) -> Option<(u16, String)> {
     let deadline = Instant::now() + Duration::from_secs_f64(secs);
-    let left = || deadline.saturating_duration_since(Instant::now()).max(Duration::from_millis(1));
+    let left = || {
+        deadline
+            .saturating_duration_since(Instant::now())
+            .max(Duration::from_millis(1))
+    };
     let mut s = std::net::TcpStream::connect_timeout(&addr.parse().unwrap(), left()).ok()?;
     let mut req = format!("GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n");
     for h in headers {

@@ -85,7 +85,9 @@ pub struct Summary {
 impl Summary {
     /// What the line's `message` says: who, how many, what, over how long, and the last refusal.
     pub fn text(&self) -> String {
-        let secs = (self.last_unix_ms.saturating_sub(self.first_unix_ms) as f64 / 1e3).ceil().max(1.0);
+        let secs = (self.last_unix_ms.saturating_sub(self.first_unix_ms) as f64 / 1e3)
+            .ceil()
+            .max(1.0);
         format!(
             "{} {} from {}: {} refused {} in {secs:.0} s, not logged one by one (the last: {})",
             role_name(self.role),
@@ -218,7 +220,15 @@ mod tests {
         // 45 a second for 15 s, as 30 sockets of one viewer would send them.
         for k in 0..675u64 {
             let at = t0 + ms(k * 1000 / 45);
-            if r.refused("bob", Role::Viewer, bob, "take_lease", FORBIDDEN, at, 1_000_000 + k * 1000 / 45) {
+            if r.refused(
+                "bob",
+                Role::Viewer,
+                bob,
+                "take_lease",
+                FORBIDDEN,
+                at,
+                1_000_000 + k * 1000 / 45,
+            ) {
                 logged += 1;
             }
             assert!(r.due(at, false).is_empty(), "nothing due while the flood goes on");
@@ -236,7 +246,15 @@ mod tests {
         );
         assert!(r.due(end + QUIET * 10, false).is_empty(), "said once");
         // Another address, another person, another command: budgets of their own.
-        assert!(r.refused("bob", Role::Viewer, "10.4.7.31".parse().unwrap(), "take_lease", FORBIDDEN, end, 0));
+        assert!(r.refused(
+            "bob",
+            Role::Viewer,
+            "10.4.7.31".parse().unwrap(),
+            "take_lease",
+            FORBIDDEN,
+            end,
+            0
+        ));
         assert!(r.refused("eve", Role::Viewer, bob, "take_lease", FORBIDDEN, end, 0));
     }
 
@@ -249,7 +267,15 @@ mod tests {
         let mut summaries = Vec::new();
         for k in 0..1500u64 {
             let at = t0 + ms(k * 100);
-            r.refused("anonymous", Role::Viewer, a, "stop", (ErrorCode::Forbidden, "no"), at, k * 100);
+            r.refused(
+                "anonymous",
+                Role::Viewer,
+                a,
+                "stop",
+                (ErrorCode::Forbidden, "no"),
+                at,
+                k * 100,
+            );
             summaries.extend(r.due(at, false));
         }
         // 150 s: summaries at 60 s and 120 s of counting, the rest when the log closes.

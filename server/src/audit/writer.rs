@@ -167,7 +167,7 @@ impl Writer {
                 }
                 end = rest.find('\n').map_or(rest.len(), |i| i + 1);
             }
-            write_whole(f, rest[..end].as_bytes())?;
+            write_whole(f, &rest.as_bytes()[..end])?;
             rest = &rest[end..];
         }
         Ok(())

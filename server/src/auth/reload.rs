@@ -112,10 +112,9 @@ impl Auth {
         let Some(named) = &self.named else { return false };
         // Looked at and read without the watcher's lock held (only this watcher takes it).
         let stamp = Stamp::at(&named.path);
-        let quiet = named
-            .watch
-            .lock()
-            .map_or(true, |w| w.seen.is_none() && w.failing.is_none() && stamp == w.applied.0);
+        let quiet = named.watch.lock().map_or(true, |w| {
+            w.seen.is_none() && w.failing.is_none() && stamp == w.applied.0
+        });
         // Nothing new and nothing wrong: the file is not read.
         if quiet {
             return false;

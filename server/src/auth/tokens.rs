@@ -249,7 +249,12 @@ impl Scratch {
     fn verify(&mut self, secret: &str, hash: &PasswordHash<'_>) -> bool {
         let mut check = || -> Option<bool> {
             let algorithm = Algorithm::try_from(hash.algorithm).ok()?;
-            let version = hash.version.map(Version::try_from).transpose().ok()?.unwrap_or_default();
+            let version = hash
+                .version
+                .map(Version::try_from)
+                .transpose()
+                .ok()?
+                .unwrap_or_default();
             let params = Params::try_from(hash).ok()?;
             let expected = hash.hash?;
             let mut salt = [0u8; 64];
@@ -345,9 +350,7 @@ impl TokenTable {
     pub fn read(path: &Path, missing_ok: bool) -> Result<TokenTable, TokenFileError> {
         match read_text(path) {
             Ok((_, text)) => TokenTable::parse(&text, path),
-            Err(TokenFileError::Io { source, .. })
-                if missing_ok && source.kind() == std::io::ErrorKind::NotFound =>
-            {
+            Err(TokenFileError::Io { source, .. }) if missing_ok && source.kind() == std::io::ErrorKind::NotFound => {
                 Ok(TokenTable::default())
             }
             Err(e) => Err(e),
@@ -602,7 +605,10 @@ mod tests {
             );
         }
         assert_eq!(scratch.bytes(), 19 * 1024 * 1024);
-        assert_eq!(t.verify_with(&alice, &mut scratch).map(|e| e.name.as_str()), Some("alice"));
+        assert_eq!(
+            t.verify_with(&alice, &mut scratch).map(|e| e.name.as_str()),
+            Some("alice")
+        );
         assert_eq!(scratch.bytes(), 19 * 1024 * 1024, "the same buffer");
     }
 
@@ -654,7 +660,13 @@ mod tests {
         let big = dir.join("big");
         std::fs::File::create(&big).unwrap().set_len(TEXT_MAX + 1).unwrap();
         let e = read_text(&big).unwrap_err().to_string();
-        assert!(e.ends_with(&format!("is {} bytes; a token file is at most 4194304 bytes", TEXT_MAX + 1)), "{e}");
+        assert!(
+            e.ends_with(&format!(
+                "is {} bytes; a token file is at most 4194304 bytes",
+                TEXT_MAX + 1
+            )),
+            "{e}"
+        );
         assert!(TokenTable::read(&dir.join("missing"), true).unwrap().entries.is_empty());
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -278,7 +278,10 @@ mod tests {
         let t0 = c.last;
         for seq in 1..=120 {
             let ack = Message::Text(format!(r#"{{"type":"ack","seq":{seq}}}"#).into());
-            assert!(matches!(admit(&st.cfg, &mut c, ack, t0), Admit::Command(_)), "ack {seq}");
+            assert!(
+                matches!(admit(&st.cfg, &mut c, ack, t0), Admit::Command(_)),
+                "ack {seq}"
+            );
         }
         match admit(&st.cfg, &mut c, Message::Text(r#"{"type":"ack","seq":121}"#.into()), t0) {
             Admit::Refuse(ErrorCode::RateLimited, why) => assert!(why.contains("120 acks per second"), "{why}"),

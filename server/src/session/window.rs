@@ -164,7 +164,10 @@ mod tests {
             let (worst, read) = staleness(rate, 10.0);
             eprintln!("{rate} a second: at most {worst} frames behind, {read} read in 15 s");
             assert!(worst <= behind, "{rate} a second: {worst} frames behind");
-            assert!(read as f64 >= rate * 14.5, "{rate} a second: {read} frames read in 15 s");
+            assert!(
+                read as f64 >= rate * 14.5,
+                "{rate} a second: {read} frames read in 15 s"
+            );
         }
     }
 

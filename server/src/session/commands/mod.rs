@@ -301,7 +301,10 @@ mod tests {
     fn who_may_send_each_command() {
         let who = |m: &ClientMessage| route(m).who;
         let [ping, subscribe, take, release, push, scan, stop, haptic, ack] = one_of_each().try_into().unwrap();
-        assert_eq!((who(&ping), who(&subscribe), who(&ack)), (Who::Anyone, Who::Anyone, Who::Anyone));
+        assert_eq!(
+            (who(&ping), who(&subscribe), who(&ack)),
+            (Who::Anyone, Who::Anyone, Who::Anyone)
+        );
         assert_eq!(who(&take), Who::Operator("take the lease"));
         assert_eq!(who(&release), Who::Holder);
         for m in [push, scan, stop, haptic] {
