@@ -246,9 +246,7 @@ impl Pattern {
                 text_dots(text, pitch).map_err(bad)?
             }
             other => {
-                return Err(bad(format!(
-                    "unknown shape {other:?}; allowed: line, grid, ring, text"
-                )));
+                return Err(bad(format!("unknown shape {other:?}; allowed: line, grid, ring, text")));
             }
         };
         args.all_used()?;
@@ -389,14 +387,30 @@ impl Args {
         let (lo, hi) = tolerance_range();
         match self.number("tolerance_nm")? {
             None => Ok(None),
-            Some(t) => check(&format!("pattern {:?}", self.spec), "tolerance_nm".into(), t, lo, hi, "nm").map(|t| Some(t * 1e-9)),
+            Some(t) => check(
+                &format!("pattern {:?}", self.spec),
+                "tolerance_nm".into(),
+                t,
+                lo,
+                hi,
+                "nm",
+            )
+            .map(|t| Some(t * 1e-9)),
         }
     }
 
     fn radius(&self) -> Result<Option<f64>, PatternError> {
         match self.number("radius_nm")? {
             None => Ok(None),
-            Some(r) => check(&format!("pattern {:?}", self.spec), "radius_nm".into(), r, 2.0, 10_000.0, "nm").map(|r| Some(r * 1e-9)),
+            Some(r) => check(
+                &format!("pattern {:?}", self.spec),
+                "radius_nm".into(),
+                r,
+                2.0,
+                10_000.0,
+                "nm",
+            )
+            .map(|r| Some(r * 1e-9)),
         }
     }
 
