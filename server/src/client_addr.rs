@@ -4,7 +4,7 @@
 //! the client. From anyone else the header is ignored (a client could write anything in it), so
 //! per-address limits and the audit log cannot be fooled.
 
-use std::net::IpAddr;
+use std::net::{IpAddr, Ipv6Addr};
 use std::str::FromStr;
 
 use axum::http::HeaderMap;
@@ -86,6 +86,24 @@ pub fn client_ip(peer: IpAddr, headers: &HeaderMap, trusted: &[Cidr]) -> IpAddr 
     client
 }
 
+/// What a per-client limit counts `ip` under: an IPv4 address itself (an IPv4-mapped IPv6
+/// address as its IPv4 one), an IPv6 address its /64 network (a host is commonly given a whole
+/// /64: its addresses are one client's, and counted apart, a client would have 2^64 budgets).
+pub fn limit_key(ip: IpAddr) -> IpAddr {
+    match ip.to_canonical() {
+        IpAddr::V6(v6) => IpAddr::V6(Ipv6Addr::from(u128::from(v6) & !(u64::MAX as u128))),
+        v4 => v4,
+    }
+}
+
+/// A [`limit_key`] in words: `10.4.7.30`, `2001:db8:1:2::/64`.
+pub fn show_key(key: IpAddr) -> String {
+    match key {
+        IpAddr::V6(v6) => format!("{v6}/64"),
+        v4 => v4.to_string(),
+    }
+}
+
 /// Whether the request came to a trusted proxy over HTTPS (`X-Forwarded-Proto: https`).
 pub fn forwarded_https(peer: IpAddr, headers: &HeaderMap, trusted: &[Cidr]) -> bool {
     trusted.iter().any(|c| c.contains(peer))
@@ -119,6 +137,20 @@ mod tests {
         assert!(v6.contains("fd12::1".parse().unwrap()) && !v6.contains("fe80::1".parse().unwrap()));
         assert!("10.0.0.0/33".parse::<Cidr>().unwrap_err().contains("[0, 32]"));
         assert!("lab".parse::<Cidr>().unwrap_err().contains("not an address"));
+    }
+
+    /// An IPv6 client is its /64; an IPv4 one (mapped or not) its address.
+    #[test]
+    fn a_limit_counts_an_ipv6_client_by_its_64() {
+        let ip = |s: &str| s.parse::<IpAddr>().unwrap();
+        assert_eq!(
+            limit_key(ip("2001:db8:1:2:aaaa::1")),
+            limit_key(ip("2001:db8:1:2:ffff::9"))
+        );
+        assert_ne!(limit_key(ip("2001:db8:1:2::1")), limit_key(ip("2001:db8:1:3::1")));
+        assert_eq!(show_key(limit_key(ip("2001:db8:1:2:aaaa::1"))), "2001:db8:1:2::/64");
+        assert_eq!(limit_key(ip("::ffff:10.4.7.30")), ip("10.4.7.30"));
+        assert_eq!(show_key(limit_key(ip("10.4.7.30"))), "10.4.7.30");
     }
 
     #[test]

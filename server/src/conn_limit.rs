@@ -1,5 +1,5 @@
-//! Connections counted before anything is read from them: one address holds at most
-//! `--max-connections-per-address` sockets at once (a `--trusted-proxy` excepted: its clients
+//! Connections counted before anything is read from them: one address (an IPv6 client's /64)
+//! holds at most `--max-connections-per-address` sockets at once (a `--trusted-proxy` excepted: its clients
 //! are told apart only by their requests), and all addresses together at most
 //! `--max-connections`, which by default leaves [`FILES_RESERVED`] of the open-files limit to
 //! the server's own files, so that it never runs out of descriptors. (Out of them, it could
@@ -19,7 +19,7 @@ use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use crate::client_addr::Cidr;
+use crate::client_addr::{Cidr, limit_key, show_key};
 
 /// Places more for the lease holder's address, under both caps.
 pub const HOLDER_ROOM: u64 = 16;
@@ -122,7 +122,8 @@ impl ConnLimits {
 
     /// A connection from `ip` at `now`: its place, or why it has none.
     pub fn admit_at(self: &Arc<Self>, ip: IpAddr, now: Instant) -> Result<Permit, Refused> {
-        let ip = ip.to_canonical();
+        let exempt = self.exempt.iter().any(|n| n.contains(ip));
+        let ip = limit_key(ip);
         let mut c = self.counts.lock().map_err(|_| Refused::Total)?;
         let holder = match c.holder {
             Some((h, until)) if h == ip => until.is_none_or(|u| now < u),
@@ -130,7 +131,6 @@ impl ConnLimits {
         };
         let room = if holder { HOLDER_ROOM } else { 0 };
         let here = c.per_address.get(&ip).copied().unwrap_or(0);
-        let exempt = self.exempt.iter().any(|n| n.contains(ip));
         let refused = if !exempt && here >= self.per_address + room {
             Some(Refused::Address)
         } else if c.total >= self.total + room {
@@ -151,11 +151,13 @@ impl ConnLimits {
                 c.warned.insert(ip, now);
                 match why {
                     Refused::Address => tracing::warn!(
-                        "connections from {ip} closed unread: {here} open, at most {} per address (--max-connections-per-address); said once a minute",
+                        "connections from {} closed unread: {here} open, at most {} per address (--max-connections-per-address); said once a minute",
+                        show_key(ip),
                         self.per_address + room
                     ),
                     Refused::Total => tracing::warn!(
-                        "connections closed unread (one from {ip}): {} open, at most {} in all (--max-connections); said once a minute per address",
+                        "connections closed unread (one from {}): {} open, at most {} in all (--max-connections); said once a minute per address",
+                        show_key(ip),
                         c.total,
                         self.total + room
                     ),
@@ -181,7 +183,7 @@ impl ConnLimits {
     pub fn lease_held_at(&self, ip: Option<IpAddr>, now: Instant) {
         if let Ok(mut c) = self.counts.lock() {
             c.holder = match ip {
-                Some(ip) => Some((ip.to_canonical(), None)),
+                Some(ip) => Some((limit_key(ip), None)),
                 None => c.holder.map(|(h, _)| (h, Some(now + RECONNECT_GRACE))),
             };
         }
@@ -234,10 +236,15 @@ mod tests {
         let from_proxy: Vec<Permit> = (0..4).map(|_| l.admit(ip("10.0.0.9")).unwrap()).collect();
         assert_eq!(from_proxy.len(), 4, "a trusted proxy has more than 3");
         assert_eq!(l.refused.load(Relaxed), 2);
-        // An IPv4-mapped IPv6 peer is its IPv4 address.
+        // An IPv4-mapped IPv6 peer is its IPv4 address; an IPv6 one, its /64.
         drop(from_proxy);
-        let _m: Vec<Permit> = (0..3).map(|_| l.admit(ip("::ffff:10.0.0.1")).unwrap()).collect();
+        let mapped: Vec<Permit> = (0..3).map(|_| l.admit(ip("::ffff:10.0.0.1")).unwrap()).collect();
         assert_eq!(l.admit(ip("10.0.0.1")).unwrap_err(), Refused::Address);
+        drop(mapped);
+        let _v6: Vec<Permit> = (1..=3)
+            .map(|k| l.admit(ip(&format!("2001:db8::{k}"))).unwrap())
+            .collect();
+        assert_eq!(l.admit(ip("2001:db8::ffff:1")).unwrap_err(), Refused::Address);
     }
 
     /// The lease holder's address has 16 places more under both caps, while it holds the lease

@@ -14,11 +14,12 @@
 //! whole line. The log is in a directory of its own, so `/api/records` neither lists nor serves it.
 //!
 //! What a hostile client can make it write is bounded twice. Refused commands are logged one by
-//! one up to a budget per client (a person at an address), and counted beyond it in summary lines
-//! (`refusals.rs`): a viewer's script asking for the lease 45 times a second on 30 sockets adds a
-//! few lines a minute. And the log's files hold at most `--audit-max-bytes` in all: `audit.jsonl`
-//! is rotated to `audit.jsonl.1` … `.3` and the oldest part deleted (`writer.rs`), counted in
-//! `/metrics`. Refused commands' lines are also queued at most [`REFUSED_IN_FLIGHT`] at once, so
+//! one up to a budget per client (a named person, or an anonymous viewer's address), and counted
+//! beyond it in summary lines (`refusals.rs`): a viewer's script asking for the lease 45 times a
+//! second on 30 sockets adds a few lines a minute. And the log's files hold at most
+//! `--audit-max-bytes` in all: `audit.jsonl` is rotated to `audit.jsonl.1` … `.3` and the oldest
+//! part deleted (`writer.rs`), counted in `/metrics`. Refused commands' lines are also queued at
+//! most [`REFUSED_IN_FLIGHT`] at once, so
 //! that many clients' refusals at once cannot queue ahead of the operator's lines (what is shed
 //! is counted in a line of its own, `refusals_not_logged`, and in `/metrics`).
 
@@ -197,8 +198,9 @@ impl Audit {
         let unix_ms = unix_ms();
         if let Some(r) = refused {
             // Beyond its client's budget, a refusal is counted for a summary instead.
+            let who = (person.name.as_str(), person.role, person.is_anonymous());
             let one_by_one = self.refusals.lock().map_or(true, |mut all| {
-                all.refused(&person.name, person.role, address, command, r, Instant::now(), unix_ms)
+                all.refused(who, address, command, r, (Instant::now(), unix_ms))
             });
             if !one_by_one {
                 self.counters.summarised.fetch_add(1, Relaxed);

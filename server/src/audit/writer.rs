@@ -82,7 +82,7 @@ fn summary_line(s: &Summary) -> String {
     let unix_ms = unix_ms();
     serde_json::json!({
         "time": rfc3339(unix_ms), "unix_ms": unix_ms, "person": s.person, "role": role_name(s.role),
-        "address": s.address.to_string(), "command": s.command, "outcome": "refused_summary",
+        "address": s.address, "command": s.command, "outcome": "refused_summary",
         "args": {"refused": s.count, "first_unix_ms": s.first_unix_ms, "last_unix_ms": s.last_unix_ms},
         "code": s.code, "message": s.text(),
     })

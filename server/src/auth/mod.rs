@@ -50,6 +50,17 @@ pub struct Person {
     pub key: String,
 }
 
+impl Person {
+    /// Whether this is nobody in particular: a viewer without a credential (no token file and no
+    /// viewer token), told apart from others only by their address.
+    pub fn is_anonymous(&self) -> bool {
+        self.key == ANONYMOUS
+    }
+}
+
+/// The name and credential key of a viewer who came without a credential.
+const ANONYMOUS: &str = "anonymous";
+
 /// The session cookie's name.
 pub const COOKIE: &str = "nanopush_session";
 
@@ -327,9 +338,9 @@ impl Auth {
             ));
         }
         Ok(Arc::new(Person {
-            name: "anonymous".into(),
+            name: ANONYMOUS.into(),
             role: Role::Viewer,
-            key: "anonymous".into(),
+            key: ANONYMOUS.into(),
         }))
     }
 
