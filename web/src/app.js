@@ -238,8 +238,9 @@ export class App {
         this.onState(ev);
         break;
       case 'telemetry':
-        // Read: acknowledged at once, so that the server keeps no more frames in flight than
-        // this page takes in half a second (a busy page gets the newest, not a backlog).
+        // Read: acknowledged (the newest, at most every 100 ms), so that the server keeps no
+        // more frames in flight than this page takes in half a second (a busy page gets the
+        // newest, not a backlog).
         if (st.tip.seq !== null) this.conn.ack(st.tip.seq);
         this.liveFrame.mark('tip', 'charts');
         if (st.tip.phase !== this.lastPhase) {

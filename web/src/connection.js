@@ -97,6 +97,12 @@ const noop = () => {};
 export const SILENCE_MS = 5000;
 
 /**
+ * Telemetry acknowledgements go at most this often (ms): ten a second per page instead of sixty,
+ * well within the half second of frames the server keeps in flight to a page.
+ */
+export const ACK_EVERY_MS = 100;
+
+/**
  * The page's WebSocket: one at a time, reopened after it closes (the n-th attempt after
  * `backoffMs(n)`; an open resets the count). The Session hears of every change (`connecting`,
  * `opened`, `closed`) and numbers the commands sent.
@@ -131,6 +137,12 @@ export class Connection {
     this.countdownTimer = null;
     this.silenceMs = silenceMs;
     this.watchdog = null; // checks the socket's silence once a second
+    // Telemetry acknowledged: the newest sent and when, the newest read and not yet sent, and
+    // the timer that will send it.
+    this.acked = 0;
+    this.ackedAt = -Infinity;
+    this.ackDue = 0;
+    this.ackTimer = null;
   }
 
   /** Opens a socket (now: the reconnect timer, if any, is cancelled). */
@@ -156,6 +168,12 @@ export class Connection {
 
   attach(sock) {
     this.ws = sock;
+    // Another socket (maybe another run of the server, whose frames count from 1 again).
+    this.timers.clearTimeout(this.ackTimer);
+    this.ackTimer = null;
+    this.acked = 0;
+    this.ackDue = 0;
+    this.ackedAt = -Infinity;
     sock.binaryType = 'arraybuffer';
     let wasOpen = false;
     let heard = this.now();
@@ -217,10 +235,25 @@ export class Connection {
 
   /**
    * Acknowledges telemetry frame `seq` as read (`ack`: no id, no reply, so not numbered by the
-   * Session); nothing when not connected.
+   * Session): at most every ACK_EVERY_MS, the newest read going when the time comes (a trailing
+   * ack: the server sends nothing more while what it sent is unacknowledged); nothing when not
+   * connected.
    */
   ack(seq) {
-    if (this.ws?.readyState === 1) this.ws.send(encodeCommand(commands.ack(seq)));
+    if (this.ws?.readyState !== 1 || seq <= this.acked) return;
+    this.ackDue = Math.max(this.ackDue, seq);
+    if (this.ackTimer !== null) return;
+    const flush = () => {
+      this.ackTimer = null;
+      const due = this.ackDue;
+      if (due <= this.acked || this.ws?.readyState !== 1) return;
+      this.ws.send(encodeCommand(commands.ack(due)));
+      this.acked = due;
+      this.ackedAt = this.now();
+    };
+    const wait = this.ackedAt + ACK_EVERY_MS - this.now();
+    if (wait <= 0) flush();
+    else this.ackTimer = this.timers.setTimeout(flush, wait);
   }
 
   /** Sends a command with the Session's next id; null (and an error logged) when not connected. */

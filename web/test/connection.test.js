@@ -119,16 +119,34 @@ test('a connection opens, passes messages on, sends commands with ids', () => {
   assert.deepEqual(h.seen, ['change connecting', 'change connecting', 'open', 'msg {"type":"ping"}', 'send #1']);
 });
 
-test('an ack goes unnumbered and unannounced, and only on an open socket', () => {
+test('acks go unnumbered, at most every 100 ms, the newest read going last', () => {
   const h = harness();
   h.conn.connect();
   h.conn.ack(5);
   assert.deepEqual(h.sockets[0].sent, [], 'not open yet: not sent');
   h.sockets[0].open();
   h.conn.ack(7);
-  assert.deepEqual(h.sockets[0].sent, ['{"type":"ack","seq":7}']);
+  assert.deepEqual(h.sockets[0].sent, ['{"type":"ack","seq":7}'], 'the first at once');
   assert.ok(!h.seen.some((s) => s.startsWith('send')), 'not a command the replies wait for');
   assert.equal(h.conn.send(commands.ping()).id, 1, 'the next command is still #1');
+  h.sockets[0].sent.length = 0;
+  // Frames read within the 100 ms: one ack, of the newest, when they are over.
+  h.timers.run(30);
+  h.conn.ack(8);
+  h.timers.run(30);
+  h.conn.ack(9);
+  assert.deepEqual(h.sockets[0].sent, []);
+  h.timers.run(40);
+  assert.deepEqual(h.sockets[0].sent, ['{"type":"ack","seq":9}'], 'at 100 ms: the newest');
+  h.conn.ack(9);
+  h.timers.run(500);
+  assert.deepEqual(h.sockets[0].sent, ['{"type":"ack","seq":9}'], 'nothing new: nothing sent');
+  // A new socket (a restarted server counts from 1 again): acknowledged from its first frame.
+  h.sockets[0].close();
+  h.timers.run(1000);
+  h.sockets[1].open();
+  h.conn.ack(1);
+  assert.deepEqual(h.sockets[1].sent, ['{"type":"ack","seq":1}']);
 });
 
 test('a closed connection reconnects with backoff, counting down', () => {

@@ -1,6 +1,7 @@
 //! The receive loop of one session: each frame admitted (rate limit, binary frames, size
-//! limit), parsed as one command, run as its entry in the table of commands says
-//! (`commands/mod.rs`), logged, and answered in order (`ok` or a typed error).
+//! limit; an `ack`, read there, with a budget of its own), parsed as one command, run as its
+//! entry in the table of commands says (`commands/mod.rs`), logged, and answered in order (`ok`
+//! or a typed error; an `ack` only when refused).
 
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -8,7 +9,7 @@ use std::time::Instant;
 
 use axum::extract::ws::{Message, Utf8Bytes};
 use futures_util::{Stream, StreamExt};
-use nanopush_proto::ws::{ErrorCode, ServerMessage, Stream as WsStream};
+use nanopush_proto::ws::{ClientMessage, ErrorCode, ServerMessage, Stream as WsStream};
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 
@@ -48,6 +49,8 @@ fn too_big(e: &(dyn std::error::Error + 'static)) -> bool {
 pub(super) enum Admit {
     /// A command's text, to parse.
     Command(Utf8Bytes),
+    /// An `ack`, parsed already.
+    Ack(ClientMessage),
     /// Nothing to answer (a ping or pong).
     Skip,
     /// The peer closes.
@@ -65,11 +68,12 @@ pub(super) fn ack_rate(cfg: &ServeConfig) -> f64 {
 /// The longest `ack` (bytes): `{"type":"ack","seq":18446744073709551615}` and some spaces.
 const ACK_MAX_BYTES: usize = 96;
 
-/// Whether `t` is an `ack` (a short text, read as one).
-fn is_ack(t: &str) -> bool {
-    t.len() <= ACK_MAX_BYTES
-        && t.contains("ack")
-        && matches!(parse_command(t), Ok(nanopush_proto::ws::ClientMessage::Ack { .. }))
+/// `t` read as an `ack`, when it is one (a short text that names it).
+fn as_ack(t: &str) -> Option<ClientMessage> {
+    if t.len() > ACK_MAX_BYTES || !t.contains("\"ack\"") {
+        return None;
+    }
+    parse_command(t).ok().filter(|m| matches!(m, ClientMessage::Ack { .. }))
 }
 
 /// Admits one frame at `now`: every data frame takes a token of the client's bucket
@@ -82,9 +86,7 @@ pub(super) fn admit(cfg: &ServeConfig, c: &mut Client, msg: Message, now: Instan
         Message::Binary(b) => Err(b.len()),
         _ => return Admit::Skip,
     };
-    if let Ok(t) = &text
-        && is_ack(t)
-    {
+    if let Some(ack) = text.as_ref().ok().and_then(|t| as_ack(t)) {
         let rate = ack_rate(cfg);
         c.ack_tokens = (c.ack_tokens + now.duration_since(c.ack_last).as_secs_f64() * rate).min(rate);
         c.ack_last = now;
@@ -95,7 +97,7 @@ pub(super) fn admit(cfg: &ServeConfig, c: &mut Client, msg: Message, now: Instan
             );
         }
         c.ack_tokens -= 1.0;
-        return Admit::Command(t.clone());
+        return Admit::Ack(ack);
     }
     c.tokens = (c.tokens + now.duration_since(c.last).as_secs_f64() * cfg.max_rate).min(cfg.max_rate);
     c.last = now;
@@ -161,8 +163,17 @@ where
         if let Message::Pong(payload) = &msg {
             super::keepalive::pong(inbox.answered, payload);
         }
-        let text = match admit(&st.cfg, client, msg, Instant::now()) {
-            Admit::Command(t) => t,
+        let parsed = match admit(&st.cfg, client, msg, Instant::now()) {
+            Admit::Command(t) => match parse_command(t.as_str()) {
+                Ok(m) => m,
+                Err((id, why)) => {
+                    if !reply(st, inbox.replies, id, ErrorCode::Malformed, why).await {
+                        return Ended::Disconnected;
+                    }
+                    continue;
+                }
+            },
+            Admit::Ack(m) => m,
             Admit::Skip => continue,
             Admit::Close => return Ended::Disconnected,
             Admit::Refuse(code, why) => {
@@ -172,18 +183,14 @@ where
                 continue;
             }
         };
-        if !answer(st, client, &inbox, text).await {
+        if !answer(st, client, &inbox, parsed).await {
             return Ended::Disconnected;
         }
     }
 }
 
-/// Parses and handles one command and queues its answer; `false` when the client is gone.
-async fn answer(st: &Arc<AppState>, client: &mut Client, inbox: &Inbox<'_>, text: Utf8Bytes) -> bool {
-    let parsed = match parse_command(text.as_str()) {
-        Ok(m) => m,
-        Err((id, why)) => return reply(st, inbox.replies, id, ErrorCode::Malformed, why).await,
-    };
+/// Handles one command and queues its answer; `false` when the client is gone.
+async fn answer(st: &Arc<AppState>, client: &mut Client, inbox: &Inbox<'_>, parsed: ClientMessage) -> bool {
     let cid = parsed.id();
     let command = route(&parsed);
     let audited = command.audit_text(&parsed);
@@ -278,9 +285,10 @@ mod tests {
         let t0 = c.last;
         for seq in 1..=120 {
             let ack = Message::Text(format!(r#"{{"type":"ack","seq":{seq}}}"#).into());
-            assert!(
-                matches!(admit(&st.cfg, &mut c, ack, t0), Admit::Command(_)),
-                "ack {seq}"
+            assert_eq!(
+                admit(&st.cfg, &mut c, ack, t0),
+                Admit::Ack(ClientMessage::Ack { seq }),
+                "read once, here"
             );
         }
         match admit(&st.cfg, &mut c, Message::Text(r#"{"type":"ack","seq":121}"#.into()), t0) {
