@@ -19,5 +19,5 @@ mod routing;
 pub mod run;
 
 pub use pattern::{Pattern, PatternError, Site};
-pub use run::{AssemblyOptions, AssemblyRun, Event, MoveRecord, Outcome, SiteReport, assemble};
 pub use plan::{Constraints, Plan, PlanSettings, PlannedMove, Purpose, Seen, SiteState, Unfilled, plan};
+pub use run::{AssemblyOptions, AssemblyRun, Event, MoveRecord, Outcome, SiteReport, assemble};

@@ -162,15 +162,15 @@ impl Pattern {
                 .transpose()?
                 .or(default_tol);
             sites.push(Site {
-                x: x * 1e-6,
-                y: y * 1e-6,
-                tolerance: tol.map(|t| t * 1e-9),
+                x: x / 1e6,
+                y: y / 1e6,
+                tolerance: tol.map(|t| t / 1e9),
             });
         }
         Ok(Pattern {
             name: file.name.unwrap_or_else(|| origin.to_string()),
             sites,
-            radius: radius.map(|r| r * 1e-9),
+            radius: radius.map(|r| r / 1e9),
         })
     }
 
@@ -246,9 +246,7 @@ impl Pattern {
                 text_dots(text, pitch).map_err(bad)?
             }
             other => {
-                return Err(bad(format!(
-                    "unknown shape {other:?}; allowed: line, grid, ring, text"
-                )));
+                return Err(bad(format!("unknown shape {other:?}; allowed: line, grid, ring, text")));
             }
         };
         args.all_used()?;
@@ -382,21 +380,37 @@ impl Args {
                 allowed: "(0, 1000] µm".into(),
             });
         }
-        Ok(v * 1e-6)
+        Ok(v / 1e6)
     }
 
     fn tolerance(&self) -> Result<Option<f64>, PatternError> {
         let (lo, hi) = tolerance_range();
         match self.number("tolerance_nm")? {
             None => Ok(None),
-            Some(t) => check(&format!("pattern {:?}", self.spec), "tolerance_nm".into(), t, lo, hi, "nm").map(|t| Some(t * 1e-9)),
+            Some(t) => check(
+                &format!("pattern {:?}", self.spec),
+                "tolerance_nm".into(),
+                t,
+                lo,
+                hi,
+                "nm",
+            )
+            .map(|t| Some(t / 1e9)),
         }
     }
 
     fn radius(&self) -> Result<Option<f64>, PatternError> {
         match self.number("radius_nm")? {
             None => Ok(None),
-            Some(r) => check(&format!("pattern {:?}", self.spec), "radius_nm".into(), r, 2.0, 10_000.0, "nm").map(|r| Some(r * 1e-9)),
+            Some(r) => check(
+                &format!("pattern {:?}", self.spec),
+                "radius_nm".into(),
+                r,
+                2.0,
+                10_000.0,
+                "nm",
+            )
+            .map(|r| Some(r / 1e9)),
         }
     }
 

@@ -261,7 +261,12 @@ struct Planner<'a> {
 }
 
 impl<'a> Planner<'a> {
-    fn new(particles: &[Seen], pattern: &'a Pattern, settings: &'a PlanSettings, constraints: &Constraints) -> Planner<'a> {
+    fn new(
+        particles: &[Seen],
+        pattern: &'a Pattern,
+        settings: &'a PlanSettings,
+        constraints: &Constraints,
+    ) -> Planner<'a> {
         let n = particles.len();
         let fits = |p: &Seen| {
             pattern
@@ -427,7 +432,9 @@ impl<'a> Planner<'a> {
     /// A particle other than `k` within the clearance of a particle of `k`'s size at `site`.
     fn occupant(&self, site: (f64, f64), k: usize) -> Option<usize> {
         (0..self.at.len()).find(|&q| {
-            q != k && (self.at[q].0 - site.0).hypot(self.at[q].1 - site.1) < self.radius[q] + self.radius[k] + self.settings.clearance
+            q != k
+                && (self.at[q].0 - site.0).hypot(self.at[q].1 - site.1)
+                    < self.radius[q] + self.radius[k] + self.settings.clearance
         })
     }
 

@@ -4,12 +4,12 @@
 //! where the particles around the move are now.
 
 use crate::afm::Afm;
+use crate::control::moves::DONE_WITHIN;
 use crate::control::moves::locate::{MoveError, MoveRoute, MoveTarget, locate_near};
 use crate::control::moves::run::MoveRouting;
 use crate::control::route::Obstacle;
 use crate::control::strategy::StrategyParams;
 use crate::control::strategy::runner::{Prepared, RunError};
-use crate::control::moves::DONE_WITHIN;
 use crate::scan::{HeightImage, LocateError, Located, ScanParams, Tip, find_particles};
 use crate::scene::Scene;
 
@@ -38,7 +38,13 @@ impl MapRouting<'_> {
 }
 
 impl MoveRouting for MapRouting<'_> {
-    fn route(&mut self, afm: &Afm, near: (f64, f64), radius_hint: f64, target: MoveTarget) -> Result<MoveRoute, MoveError> {
+    fn route(
+        &mut self,
+        afm: &Afm,
+        near: (f64, f64),
+        radius_hint: f64,
+        target: MoveTarget,
+    ) -> Result<MoveRoute, MoveError> {
         let (local, located) = self.locate(self.scene, afm, near, radius_hint);
         let located = located.map_err(|cause| MoveError::NotFound { near, cause })?;
         let from = (located.x, located.y);
@@ -123,7 +129,13 @@ pub fn update_map(map: &mut Vec<Seen>, mover: usize, images: &[HeightImage], tip
                 .min_by(|a, b| a.1.total_cmp(&b.1));
             // The mover, placed where the move left it, may be a little off: it matches within
             // a wider reach.
-            let reach = |k: usize, r: f64| if k == mover { 3.0 * r + 2.0 * pixel } else { r.max(2.0 * pixel) };
+            let reach = |k: usize, r: f64| {
+                if k == mover {
+                    3.0 * r + 2.0 * pixel
+                } else {
+                    r.max(2.0 * pixel)
+                }
+            };
             match nearest {
                 Some((k, d, r)) if d < reach(k, r) => {
                     if k != mover {

@@ -22,8 +22,8 @@ use std::time::Instant;
 
 use crate::afm::Afm;
 use crate::control::derive::{DerivedStrategy, derive};
-use crate::control::moves::{MoveError, MoveOptions, MoveRunError, MoveTarget, Verdict};
 use crate::control::moves::run::{MoveRun, move_particle_with};
+use crate::control::moves::{MoveError, MoveOptions, MoveRunError, MoveTarget, Verdict};
 use crate::control::strategy::runner::Prepared;
 use crate::scan::{HeightImage, ScanParams, Tip, find_particles, scan};
 use crate::scene::Scene;
@@ -344,7 +344,9 @@ impl<'a> Assembly<'a> {
                             "missed after {} moves; the last: {}{}",
                             self.tries[site],
                             record.outcome,
-                            record.error.map_or(String::new(), |e| format!(", {:.1} nm from it", e * 1e9))
+                            record
+                                .error
+                                .map_or(String::new(), |e| format!(", {:.1} nm from it", e * 1e9))
                         );
                         self.constraints.closed.push((site, Unfilled::Missed(why)));
                     }
@@ -402,8 +404,19 @@ impl<'a> Assembly<'a> {
             .filter(|&(_, d, r)| d < 2.0 * r.max(p.radius))?;
         let part = self.scene.file.particles.iter().find(|q| q.id == truth.0)?.clone();
         let same = |a: &ParticleFile| {
-            (a.radius_nm, a.youngs_modulus_gpa, a.poisson_ratio, a.density_kg_per_m3, a.hamaker_zj)
-                == (part.radius_nm, part.youngs_modulus_gpa, part.poisson_ratio, part.density_kg_per_m3, part.hamaker_zj)
+            (
+                a.radius_nm,
+                a.youngs_modulus_gpa,
+                a.poisson_ratio,
+                a.density_kg_per_m3,
+                a.hamaker_zj,
+            ) == (
+                part.radius_nm,
+                part.youngs_modulus_gpa,
+                part.poisson_ratio,
+                part.density_kg_per_m3,
+                part.hamaker_zj,
+            )
         };
         if let Some(j) = self.kinds.iter().position(|kd| same(&kd.particle)) {
             return Some((truth.0, j));
@@ -520,9 +533,10 @@ impl<'a> Assembly<'a> {
     fn failed(&mut self, k: usize, why: &str) {
         self.failures[k] += 1;
         if self.failures[k] >= 2 {
-            self.constraints
-                .excluded
-                .push((k, format!("the pushes of the particle that could fill it failed twice: {why}")));
+            self.constraints.excluded.push((
+                k,
+                format!("the pushes of the particle that could fill it failed twice: {why}"),
+            ));
         }
     }
 
@@ -530,7 +544,9 @@ impl<'a> Assembly<'a> {
     /// particle pass through another, so the plan must never send one there).
     fn check_collisions(&mut self, run: &MoveRun, id: u32) {
         let others: Vec<_> = self.afm.particles().iter().filter(|p| p.id != id).copied().collect();
-        let Some(me) = self.afm.particles().iter().find(|p| p.id == id).copied() else { return };
+        let Some(me) = self.afm.particles().iter().find(|p| p.id == id).copied() else {
+            return;
+        };
         for leg in &run.legs {
             for row in leg.run.trace.iter().step_by(10) {
                 for o in &others {
@@ -593,11 +609,16 @@ impl<'a> Assembly<'a> {
                         ),
                     }
                 };
-                let near = filled.is_some() || on.is_some_and(|(_, d)| d < 4.0 * self.settings.clearance.max(tolerance));
+                let near =
+                    filled.is_some() || on.is_some_and(|(_, d)| d < 4.0 * self.settings.clearance.max(tolerance));
                 SiteReport {
                     target: (s.x, s.y),
                     tolerance,
-                    particle: if filled.is_some() { truth.map(|t| t.id) } else { self.sent[i] },
+                    particle: if filled.is_some() {
+                        truth.map(|t| t.id)
+                    } else {
+                        self.sent[i]
+                    },
                     measured: measured.filter(|_| near),
                     true_position: truth.filter(|_| near).map(|t| (t.x, t.y)),
                     error: truth.filter(|_| near).map(|t| (t.x - s.x).hypot(t.y - s.y)),
@@ -614,3 +635,6 @@ impl<'a> Assembly<'a> {
 fn local_frame_time(base: &ScanParams) -> f64 {
     crate::control::moves::locate::LOCAL_PIXELS as f64 / base.line_rate
 }
+
+#[cfg(test)]
+mod tests;

@@ -7,8 +7,8 @@
 //! time and judges the same way ([`Verdict::judge`]).
 
 use crate::afm::Afm;
-use crate::control::moves::locate::{MoveError, MoveTarget, locate_near, route_move};
 use crate::control::moves::locate::MoveRoute;
+use crate::control::moves::locate::{MoveError, MoveTarget, locate_near, route_move};
 use crate::control::strategy::StrategyParams;
 use crate::control::strategy::runner::{Prepared, RunError, StrategyRun};
 use crate::scan::{HeightImage, Located, ScanParams, Tip};
@@ -110,7 +110,13 @@ pub struct MoveRun {
 pub trait MoveRouting {
     /// The particle believed at `near` (radius about `radius_hint`) located, and its legs to
     /// `target`.
-    fn route(&mut self, afm: &Afm, near: (f64, f64), radius_hint: f64, target: MoveTarget) -> Result<MoveRoute, MoveError>;
+    fn route(
+        &mut self,
+        afm: &Afm,
+        near: (f64, f64),
+        radius_hint: f64,
+        target: MoveTarget,
+    ) -> Result<MoveRoute, MoveError>;
 
     /// The model's prediction and the contact geometry for particle `id` as located with
     /// `radius` (m).
@@ -143,7 +149,13 @@ pub trait MoveRouting {
 pub struct OverviewRouting<'a>(pub &'a Scene);
 
 impl MoveRouting for OverviewRouting<'_> {
-    fn route(&mut self, afm: &Afm, near: (f64, f64), radius_hint: f64, target: MoveTarget) -> Result<MoveRoute, MoveError> {
+    fn route(
+        &mut self,
+        afm: &Afm,
+        near: (f64, f64),
+        radius_hint: f64,
+        target: MoveTarget,
+    ) -> Result<MoveRoute, MoveError> {
         route_move(self.0, &afm.surface(), near, radius_hint, target)
     }
 }
@@ -161,7 +173,16 @@ pub fn move_particle(
     target: MoveTarget,
     options: MoveOptions,
 ) -> Result<MoveRun, MoveRunError> {
-    move_particle_with(scene, afm, id, near, radius_hint, target, options, &mut OverviewRouting(scene))
+    move_particle_with(
+        scene,
+        afm,
+        id,
+        near,
+        radius_hint,
+        target,
+        options,
+        &mut OverviewRouting(scene),
+    )
 }
 
 /// [`move_particle`] with its own routing.

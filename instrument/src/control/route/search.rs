@@ -143,3 +143,11 @@ impl Router {
         nodes
     }
 }
+
+#[cfg(test)]
+impl Router {
+    /// [`Router::straight_clear`], for the plan's replay in the assembly's tests.
+    pub(crate) fn straight_clear_for_tests(&self, a: (f64, f64), b: (f64, f64), obstacles: &[Obstacle]) -> bool {
+        self.straight_clear(a, b, obstacles)
+    }
+}
