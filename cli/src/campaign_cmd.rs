@@ -141,7 +141,7 @@ pub struct CampaignArgs {
 }
 
 /// Parses `I/N` with `I < N`.
-fn parse_shard(s: &str) -> anyhow::Result<(u64, u64)> {
+pub(crate) fn parse_shard(s: &str) -> anyhow::Result<(u64, u64)> {
     let bad = || {
         anyhow::anyhow!(
             "--shard {}: expected I/N with 0 ≤ I < N ≤ 1000, e.g. 0/4",

@@ -8,6 +8,8 @@
 //! - [`campaign`]: whole pushes over every valid scene parameter (`nanopush accuracy --campaign`);
 //! - [`random_scenes`]: random valid scenes nobody tuned, planned, pushed and judged
 //!   (`nanopush campaign --random N`);
+//! - [`random_assemblies`]: random layouts and patterns assembled and checked against the truth
+//!   (`nanopush assemble --random N`);
 //! - [`sweep`]: the parameter sweeps of Figs 10-13 (`nanopush sweep`);
 //! - [`peers`] (feature `peers`, on by default): peer solvers from crates.io (diffsol,
 //!   russell_ode) on the report's classical problems, for comparison at equal error.
@@ -24,6 +26,7 @@ pub mod campaign;
 pub mod extremes;
 #[cfg(feature = "peers")]
 pub mod peers;
+pub mod random_assemblies;
 pub mod random_scenes;
 pub mod report;
 pub mod sweep;
