@@ -29,6 +29,27 @@ pub struct RandomAssembly {
     pub pattern: Pattern,
     /// Particles dropped inside the pattern's area.
     pub inside: usize,
+    /// The pattern's centre (µm).
+    pub centre_um: (f64, f64),
+}
+
+impl RandomAssembly {
+    /// The case's scene as a file whose header says how to assemble it by hand, as the
+    /// campaign does.
+    pub fn scene_text(&self) -> Result<String, toml::ser::Error> {
+        Ok(format!(
+            "# Random assembly case {seed}: {n} particles, and the pattern {spec} centred at ({x}, {y}) µm.\n\
+             # Assemble it as `nanopush assemble --random 1 --seed {seed}` does:\n\
+             #   nanopush assemble --scene seed-{seed}.toml --pattern '{spec}' --at-um {x},{y}\n\
+             # (the campaign's tip starts at the stage's corner, as that command's does).\n\n{}",
+            toml::to_string(&self.scene.file)?,
+            seed = self.seed,
+            n = self.scene.file.particles.len(),
+            spec = self.spec,
+            x = self.centre_um.0,
+            y = self.centre_um.1,
+        ))
+    }
 }
 
 /// The case of `seed`.
@@ -128,6 +149,7 @@ pub fn random_assembly(seed: u64) -> RandomAssembly {
         spec,
         pattern,
         inside,
+        centre_um: centre,
     }
 }
 
@@ -169,7 +191,11 @@ pub struct JudgedAssembly {
 
 /// Assembles case `seed` and checks it against the truth.
 pub fn run_random_assembly(seed: u64) -> JudgedAssembly {
-    let case = random_assembly(seed);
+    run_case(&random_assembly(seed))
+}
+
+/// Assembles `case` and checks it against the truth.
+pub fn run_case(case: &RandomAssembly) -> JudgedAssembly {
     let mut afm = Afm::from_scene(&case.scene, 0.0, 0.0, 1e-3);
     let run = assemble(
         &case.scene,

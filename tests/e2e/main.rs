@@ -2,6 +2,7 @@
 //! command or concern; what they share (scratch directories, a server on a free port, its HTTP
 //! API and WebSocket) is in [`util`].
 
+mod assemble;
 mod haptic;
 mod haptic_grid;
 mod haptic_link;

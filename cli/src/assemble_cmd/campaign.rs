@@ -1,6 +1,7 @@
 //! `nanopush assemble --random N`: random assemblies nobody tuned
 //! (`nanopush_study::random_assemblies`), in parallel, each row appended to
-//! `OUT/random-assemblies.csv` as it finishes; the table says what share of the sites of the
+//! `OUT/random-assemblies.csv` as it finishes and each case's scene written to
+//! `OUT/scenes/seed-N.toml` first; the table says what share of the sites of the
 //! accepted assemblies ended truly filled, whether any site was reported filled falsely, and
 //! why the rest stayed open.
 
@@ -8,7 +9,7 @@ use std::fmt::Write as _;
 use std::io::Write as _;
 
 use anyhow::Context as _;
-use nanopush_study::random_assemblies::{JudgedAssembly, run_random_assembly};
+use nanopush_study::random_assemblies::{JudgedAssembly, random_assembly, run_case};
 use rayon::prelude::*;
 
 const HEADER: &str = "seed,outcome,particles,sites,inside,reported_filled,truly_filled,open,moves,wall_s,push_s,scan_s,violations,refusal,pattern\n";
@@ -17,6 +18,8 @@ const HEADER: &str = "seed,outcome,particles,sites,inside,reported_filled,truly_
 /// a particle through another, a refusal with no reason) makes it an error after the report.
 pub fn run(seeds: &[u64], out: &std::path::Path, json: bool) -> anyhow::Result<String> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let scenes = out.join("scenes");
+    std::fs::create_dir_all(&scenes).with_context(|| format!("creating {}", scenes.display()))?;
     let csv_path = out.join("random-assemblies.csv");
     crate::units::write_file(&csv_path, HEADER)?;
     let rows = std::sync::Mutex::new(
@@ -29,7 +32,12 @@ pub fn run(seeds: &[u64], out: &std::path::Path, json: bool) -> anyhow::Result<S
     let cases: Vec<JudgedAssembly> = seeds
         .par_iter()
         .map(|&seed| {
-            let c = run_random_assembly(seed);
+            // The case's scene first, to reproduce it while the campaign runs.
+            let case = random_assembly(seed);
+            if let Ok(text) = case.scene_text() {
+                let _ = crate::units::write_file(&scenes.join(format!("seed-{seed}.toml")), text);
+            }
+            let c = run_case(&case);
             if let Ok(mut f) = rows.lock() {
                 // A row lost here is written with the others at the end.
                 let _ = f.write_all(row(&c).as_bytes());
@@ -91,7 +99,12 @@ pub fn run(seeds: &[u64], out: &std::path::Path, json: bool) -> anyhow::Result<S
         for c in cases.iter().filter(|c| !c.violations.is_empty()) {
             writeln!(s, "  UNSOUND seed {}: {:?}", c.seed, c.violations)?;
         }
-        writeln!(s, "Wrote {}.", csv_path.display())?;
+        writeln!(
+            s,
+            "Wrote {} and each case's scene, with the command that assembles it, under {}.",
+            csv_path.display(),
+            scenes.display()
+        )?;
         s
     };
     if t.unsound > 0 {

@@ -491,6 +491,14 @@ impl<'a> Assembly<'a> {
             pushes: 0,
             push_time: self.afm.time() - t0,
         };
+        // Where the mover was during the move: the scans taken then show it there.
+        let mut path = vec![mv.from];
+        if let Ok(run) = &result {
+            path.push((run.before.1.x, run.before.1.y));
+            for leg in &run.legs {
+                path.extend([leg.from, leg.to, leg.run.summary.estimated_particle]);
+            }
+        }
         match result {
             Ok(run) => {
                 self.check_collisions(&run, id);
@@ -511,6 +519,7 @@ impl<'a> Assembly<'a> {
                     self.map[mv.particle].x = x;
                     self.map[mv.particle].y = y;
                 }
+                path.push((self.map[mv.particle].x, self.map[mv.particle].y));
                 if matches!(run.verdict, Verdict::Failed { .. } | Verdict::NotFound) {
                     self.failed(mv.particle, &record.outcome);
                 }
@@ -524,7 +533,14 @@ impl<'a> Assembly<'a> {
                 self.failed(mv.particle, &record.outcome);
             }
         }
-        update_map(&mut self.map, mv.particle, &images, &self.tip, self.base.noise_rms);
+        update_map(
+            &mut self.map,
+            mv.particle,
+            &path,
+            &images,
+            &self.tip,
+            self.base.noise_rms,
+        );
         self.failures.resize(self.map.len(), 0);
         record
     }
