@@ -205,7 +205,7 @@ pub fn run_case(case: &RandomAssembly) -> JudgedAssembly {
         &mut |_| {},
         &|| false,
     );
-    judge(&case, &run)
+    judge(case, &run)
 }
 
 fn judge(case: &RandomAssembly, run: &AssemblyRun) -> JudgedAssembly {
