@@ -1,10 +1,12 @@
 // The 3D view: the stage substrate with the scene's particles (src/particles3d.js), the latest
 // scan as a height-map surface filled line by line (src/surface3d.js), the cantilever tip as a
-// ball (src/tip3d.js) and the push's marks (src/marks3d.js). This module holds them together: the
-// renderer, the camera and its framing, the stage, the height exaggeration and picking. World
-// units: µm in x and y, µm × exaggeration in z (z up). Renders on demand (the machine may have no
-// GPU): it registers with the page's frame scheduler (src/frame.js), which draws it in an
-// animation frame after a change and, after a slow frame, waits as long as that frame took.
+// ball (src/tip3d.js) and the push's marks (src/marks3d.js). Loaded only when first opened
+// (src/view3dhost.js keeps its place and what it is to show until then). This module holds them
+// together: the renderer, the camera and its framing, the stage, the height exaggeration and
+// picking. World units: µm in x and y, µm × exaggeration in z (z up). Renders on demand (the
+// machine may have no GPU): it registers with the page's frame scheduler (src/frame.js), which
+// draws it in an animation frame after a change and, after a slow frame, waits as long as that
+// frame took.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { CSS2DRenderer } from 'three/addons/renderers/CSS2DRenderer.js';
@@ -12,6 +14,7 @@ import { ScanSurface } from './surface3d.js';
 import { ParticleSpheres } from './particles3d.js';
 import { TipMarker } from './tip3d.js';
 import { PushMarks } from './marks3d.js';
+import { softwareGl } from './view3dhost.js';
 
 /**
  * Where a camera of vertical field `fovDeg` and `aspect` stands to see the box (x0, y0, w, h) µm
@@ -35,8 +38,10 @@ export class View3D {
    * @param {HTMLElement} container
    * @param {{onPickPoint?: (xUm:number, yUm:number) => void, onPickParticle?: (id:number) => void}} handlers
    * @param {import('./frame.js').FrameScheduler} scheduler the page's animation-frame loop
+   * @param {{software?: boolean}} [opts] whether WebGL runs on a software renderer (asked when
+   *   not given)
    */
-  constructor(container, handlers, scheduler) {
+  constructor(container, handlers, scheduler, { software } = {}) {
     this.container = container;
     this.handlers = handlers ?? {};
     this.exaggeration = 1;
@@ -50,7 +55,7 @@ export class View3D {
 
     // A software renderer (SwiftShader, llvmpipe: no GPU) gets no multisampling and one pixel
     // per CSS pixel: each frame costs it a fraction.
-    this.software = softwareGl();
+    this.software = software ?? softwareGl();
     this.renderer = new THREE.WebGLRenderer({ antialias: !this.software });
     this.renderer.setPixelRatio(this.software ? 1 : Math.min(2, window.devicePixelRatio || 1));
     this.renderer.setClearColor(0x10141a);
@@ -331,18 +336,5 @@ export class View3D {
     if (surface) targets.unshift(surface);
     const hit = this.raycaster.intersectObjects(targets, false)[0];
     if (hit && this.handlers.onPickPoint) this.handlers.onPickPoint(hit.point.x, hit.point.y);
-  }
-}
-
-/** Whether WebGL runs on a software renderer (SwiftShader, llvmpipe, softpipe). */
-function softwareGl() {
-  try {
-    const gl = document.createElement('canvas').getContext('webgl2');
-    const ext = gl?.getExtension('WEBGL_debug_renderer_info');
-    const name = ext ? gl.getParameter(ext.UNMASKED_RENDERER_WEBGL) : gl?.getParameter(gl.RENDERER);
-    gl?.getExtension('WEBGL_lose_context')?.loseContext();
-    return /swiftshader|llvmpipe|softpipe|software/i.test(String(name));
-  } catch {
-    return false;
   }
 }

@@ -262,7 +262,12 @@ test('session: a push that never started is a run; it clears the push path', () 
   assert.equal(judgedText({ ...judged, attempts: 3 }), ': measured 2.5 nm from the target (tolerance 25.0 nm), after 2 corrections');
   assert.equal(judgedText(null), '');
   assert.equal(describeRun({ particle: 2, outcome: 'stopped', failure: 'stopped: stop requested by the operator', estimate: [5e-8, 6e-8], record: null, record_error: 'disk full' }),
-    'push of #2 stopped: stop requested by the operator, particle left at (50.0, 60.0) nm (no record: disk full)');
+    'push of #2 stopped: stop requested by the operator, particle left at (0.05, 0.06) µm (no record: disk full)');
+  // The line under Stop leaves the record's name to the Records list and the log; a missing
+  // record is still said.
+  assert.equal(describeRun({ particle: 2, outcome: 'ok', estimate: [5e-5, 6e-5], record: 'push-2.json', judged }, { record: false }),
+    'push of #2 ok: measured 2.5 nm from the target (tolerance 25.0 nm), after 1 correction, particle now at (50.00, 60.00) µm');
+  assert.equal(describeRun(r, { record: false }), 'push of #1 failed: plan: particle 1: target out of reach, it never started (no record)');
 });
 
 test('session: losing the lease is told from a change elsewhere, with why', () => {
