@@ -10,9 +10,9 @@
 import { commands, STREAMS } from './wire.js';
 import { Session, describeRun, runClass, setPointForceN, lostPushRun } from './session.js';
 import { Connection, wsUrl, apiUrl } from './connection.js';
-import { FrameScheduler, livePeriodMs } from './frame.js';
+import { FrameScheduler, livePeriodFor, liveSlotMs } from './frame.js';
 import { formatTip } from './format.js';
-import { View3DHost } from './view3dhost.js';
+import { View3DHost, softwareGl } from './view3dhost.js';
 import { Image2D } from './image2d.js';
 import { Charts, downloadCsv } from './charts.js';
 import { HapticPanel } from './haptic.js';
@@ -50,7 +50,10 @@ export class App {
     this.frames = frames;
     this.statusFrame = frames.register('status', () => this.status.render(this.st));
     this.legendFrame = frames.register('legend', () => this.scans.renderLegend());
-    this.liveFrame = frames.register('live', (parts) => this.drawLive(parts), { period: () => livePeriodMs(frames.frameInterval) });
+    // On a software renderer the live views change in the same frames, one a slot (liveSlotMs).
+    const software = softwareGl();
+    const slot = () => liveSlotMs(software, this.view.shown);
+    this.liveFrame = frames.register('live', (parts) => this.drawLive(parts), { period: () => livePeriodFor(frames.frameInterval, slot()), aligned: software });
     // The tip's numbers: read by people, so 5 a second (at 60 a second the text's repaint cost a
     // software renderer a third of its frames).
     this.tipTextFrame = frames.register('tiptext', () => {
@@ -61,8 +64,8 @@ export class App {
     this.view = new View3DHost($('view3d'), {
       onPickPoint: (x, y) => this.controls.pickTarget(x, y),
       onPickParticle: (id) => this.controls.selectParticle(id),
-    }, frames);
-    this.image2d = new Image2D($('image2d'), { cursorEl: $('img-cursor'), profileEl: $('profile'), profileInfoEl: $('profile-info'), onDrawn: () => this.map?.invalidate(),
+    }, frames, { software, slot });
+    this.image2d = new Image2D($('image2d'), { cursorEl: $('img-cursor'), profileEl: $('profile'), profileInfoEl: $('profile-info'), period: slot, onDrawn: () => this.map?.invalidate(),
       // The 3D view coloured as the image: one colour, one height, in both.
       onLevelled: (values, range) => {
         this.view.setColourSource(range ? { values, lo: range.lo, hi: range.hi } : null);
@@ -76,9 +79,9 @@ export class App {
       onPickPoint: (x, y) => this.controls.pickTarget(x, y),
       canTarget: () => this.session.hasLease,
       announce: (text) => this.log.announce(text),
-      // A software renderer (no GPU) pays for a whole frame whenever anything moves: the tip 20
-      // times a second there, every frame on a GPU.
-      livePeriod: () => (this.view.software ? 50 : 0),
+      // A software renderer (no GPU) pays for a whole frame whenever anything moves: the tip in
+      // the live slots there, every frame on a GPU.
+      livePeriod: slot,
     }, frames);
     this.charts = new Charts($('chart-force'), $('chart-z'), $('chart-fd'), frames);
     this.haptic = new HapticPanel({

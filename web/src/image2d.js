@@ -67,7 +67,8 @@ function el(name, attrs = {}, parent = null) {
 export class Image2D {
   /**
    * @param {HTMLElement} container
-   * @param {{cursorEl?: HTMLElement, profileEl?: HTMLElement, profileInfoEl?: HTMLElement}} opts
+   * @param {{cursorEl?: HTMLElement, profileEl?: HTMLElement, profileInfoEl?: HTMLElement, period?: number}} opts
+   *   `period`: at most one draw per slot of this many ms (0: every frame)
    * @param {import('./frame.js').FrameScheduler} scheduler the page's animation-frame loop
    */
   constructor(container, opts, scheduler) {
@@ -75,7 +76,9 @@ export class Image2D {
     this.opts = opts ?? {};
     this.scan = null;
     this.mode = 'plane';
-    this.frame = scheduler.register('image2d', () => this.draw());
+    // In the page's live slots (src/frame.js, liveSlotMs): a scan's lines and a profile's drag
+    // change the image in the same frames as the map and the plots.
+    this.frame = scheduler.register('image2d', () => this.draw(), { period: this.opts.period ?? 0, aligned: true });
     this.drawnVersion = -1;
     this.levelled = null;
     this.range = null;

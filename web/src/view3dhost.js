@@ -24,15 +24,17 @@ export class View3DHost {
    * @param {HTMLElement} container where the 3D view goes
    * @param {{onPickPoint?: (xUm:number, yUm:number) => void, onPickParticle?: (id:number) => void}} handlers
    * @param {import('./frame.js').FrameScheduler} scheduler the page's animation-frame loop
-   * @param {{load?: () => Promise<{View3D: Function}>, software?: boolean}} [opts] `load`: how the
-   *   view's module comes (tests give their own)
+   * @param {{load?: () => Promise<{View3D: Function}>, software?: boolean, slot?: () => number}} [opts]
+   *   `load`: how the view's module comes (tests give their own); `slot`: the page's live slot
+   *   (ms, src/frame.js liveSlotMs), the tip's moves drawn once in each
    */
-  constructor(container, handlers, scheduler, { load = () => import('./view3d.js'), software } = {}) {
+  constructor(container, handlers, scheduler, { load = () => import('./view3d.js'), software, slot = () => 0 } = {}) {
     this.container = container;
     this.handlers = handlers;
     this.scheduler = scheduler;
     this.load = load;
     this.software = software ?? softwareGl();
+    this.slot = slot;
     this.view = null; // the View3D, once opened
     this.loading = null; // its import, while it loads
     this.shown = false;
@@ -66,7 +68,7 @@ export class View3DHost {
   /** Builds the view and gives it everything kept. */
   build(View3D) {
     const k = this.kept;
-    const v = new View3D(this.container, this.handlers, this.scheduler, { software: this.software });
+    const v = new View3D(this.container, this.handlers, this.scheduler, { software: this.software, slot: this.slot });
     v.setStage(k.stageUm);
     v.setExaggeration(k.exaggeration);
     v.setParticles(k.particles, k.selected);

@@ -44,7 +44,8 @@ test('hidden, nothing is loaded; what it is to show is kept', async () => {
   assert.equal(loads, 1);
   const names = calls.map((c) => c[0]);
   assert.deepEqual(names, ['new', 'setStage', 'setExaggeration', 'setParticles', 'fillScan', 'setColourSource', 'setTip', 'setPushPath', 'setPreview', 'frameScan', 'setShown']);
-  assert.deepEqual(calls[0][1], { software: true });
+  assert.deepEqual(Object.keys(calls[0][1]), ['software', 'slot']);
+  assert.equal(calls[0][1].software, true);
   assert.deepEqual(calls.find((c) => c[0] === 'setStage'), ['setStage', 50]);
   assert.deepEqual(calls.find((c) => c[0] === 'setPreview'), ['setPreview', { x: 1, y: 2, z: 0 }, 90, 5]);
   assert.deepEqual(calls.find((c) => c[0] === 'fillScan'), ['fillScan', scan]);
