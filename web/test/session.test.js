@@ -195,6 +195,9 @@ test('session: the scene\'s particles in metres; run_done moves the pushed one',
   s.setScene(scene);
   assert.equal(s.state.particles.length, 2);
   assert.equal(s.state.stageRange, 80e-6);
+  assert.equal(s.state.pushSpeed, null, 'no [push] speed: no time left for a push');
+  s.setScene({ ...scene, push: { speed_um_per_s: 2 } });
+  assert.equal(s.state.pushSpeed, 2e-6, 'the push speed in m/s');
   const r = s.apply({ type: 'run_done', particle: 2, outcome: 'ok', failure: null, estimate: [12e-6, 21e-6], record: 'push-1.csv' });
   assert.equal(r.kind, 'run_done');
   assert.deepEqual([s.state.particles[1].x, s.state.particles[1].y], [12e-6, 21e-6]);
