@@ -62,7 +62,12 @@ test('kill -9 mid-push and a restart: "unknown", then the lost push told', async
   const refused = await waitText(op, '#reply-stop', /^Stop cannot reach the server/, 5000);
   assert.match(refused, /A running server stops a push whose lease holder is gone on its own/);
   await waitText(op, '#announce', /^Stop cannot reach the server/, 5000);
-  assert.deepEqual(await clippedIn(op, ['.ctl']), [], 'the outage\'s texts whole');
+  assert.deepEqual(await clippedIn(op, ['.ctl', '.map-head', '.readouts']), [], 'the outage\'s texts whole');
+  // Narrower, the title's tags wrap rather than end in an ellipsis.
+  await op.setViewportSize({ width: 1000, height: 720 });
+  assert.deepEqual(await clippedIn(op, ['.ctl', '.map-head', '.readouts']), [], 'the outage\'s texts whole at 1000 px');
+  await op.setViewportSize({ width: 1280, height: 720 });
+  assert.equal(await op.textContent('#reply-lease'), 'lease lost with the connection', 'not "lease taken"');
   // The monitor says since when the server is down, in its banner, and keeps the history.
   await waitText(mon, '#m-conn', /^server down since \d\d:\d\d:\d\d \(it cannot be reached\)/, 10000);
   const banner = await mon.$eval('#m-conn', (e) => ({ cls: e.className, size: parseFloat(getComputedStyle(e).fontSize) }));

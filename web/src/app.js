@@ -177,7 +177,11 @@ export class App {
     } catch {
       // (storage refused: not remembered)
     }
-    return this.view.setShown(on).catch((e) => this.log.log(`the 3D view could not load: ${e.message}`, 'bad'));
+    return this.view.setShown(on).catch((e) => {
+      // (The server away: its module cannot be fetched now; the button tries again.)
+      this.log.log(`the 3D view could not load (${e.message}); try again once the server is back`, 'bad');
+      this.show3d(false);
+    });
   }
 
   /** Starts the page: the frame loop, the scene, the records and the connection. */
@@ -238,6 +242,8 @@ export class App {
       this.log.log(LEASE_LOST_ON_CLOSE, 'bad');
       this.log.announce(LEASE_LOST_ON_CLOSE);
     }
+    // "lease taken" no longer holds.
+    if (hadLease && this.replies.latest('reply-lease') !== undefined) this.replies.show('reply-lease', 'unknown', 'lease lost with the connection');
     queueMicrotask(() => {
       this.replies.closed(this.st.commands);
       this.controls.renderPush();
@@ -296,6 +302,7 @@ export class App {
         log.announce(short);
         this.records.noteRun(r);
         this.view.updateParticles(st.particles, controls.selected);
+        controls.particlesMoved(); // a scan centred on the particle follows it
         controls.renderPush();
         this.scans.renderStale();
         this.records.refresh();

@@ -407,7 +407,7 @@ export class Image2D {
     const info = this.opts.profileInfoEl;
     if (!sc || !l) {
       this.profile = null;
-      if (info) info.textContent = sc ? 'Drag a line across the image to see its profile.' : '';
+      if (info) info.textContent = ''; // (the title says to drag a line)
       if (this.plot) this.plot.setData([[], []]);
       return;
     }

@@ -61,7 +61,11 @@ export class View3DHost {
       return Promise.resolve();
     }
     if (!on) return Promise.resolve();
-    this.loading ??= this.load().then(({ View3D }) => this.build(View3D));
+    // (A failed load, the server away, is tried again the next time the view is shown.)
+    this.loading ??= this.load().then(({ View3D }) => this.build(View3D), (e) => {
+      this.loading = null;
+      throw e;
+    });
     return this.loading;
   }
 

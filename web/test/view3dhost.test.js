@@ -65,3 +65,18 @@ test('once built, each call goes to the view; it loads once', async () => {
   assert.deepEqual(calls, [['setTarget', 3, 4], ['scanLine', scan, 7], ['setShown', false], ['setShown', true]]);
   assert.deepEqual(h.colourScale(), { lo: -1, hi: 1 }, 'the view\'s own scale');
 });
+
+test('a load that fails is tried again the next time the view is shown', async () => {
+  let loads = 0;
+  const calls = [];
+  const h = new View3DHost({}, {}, {}, { software: true, load: async () => {
+    loads++;
+    if (loads === 1) throw new Error('Failed to fetch dynamically imported module');
+    return fakeModule(calls);
+  } });
+  await assert.rejects(h.setShown(true), /Failed to fetch/);
+  assert.equal(h.loaded, false);
+  await h.setShown(true);
+  assert.equal(loads, 2);
+  assert.equal(h.loaded, true);
+});
