@@ -45,7 +45,7 @@ pub struct AccuracyArgs {
     #[arg(long, default_value_t = 1e-10)]
     min_rtol: f64,
     /// Run the stability grid over extreme parameters instead (see `extremes` in nanopush-study),
-    /// then the campaign of whole pushes (`campaign` in nanopush-study).
+    /// then the whole pushes (`whole_pushes` in nanopush-study).
     #[arg(long)]
     extremes: bool,
     /// With --extremes: the reduced grid (sweep end points and two corners).
@@ -65,7 +65,7 @@ fn extremes(a: &AccuracyArgs) -> anyhow::Result<String> {
     let bad = results.iter().filter(|r| !r.finite_and_bounded && !r.refused).count();
     let refused = results.iter().filter(|r| r.refused).count();
     // Then the whole pushes (A → E) over the validated ranges.
-    let (campaign_text, campaign_json) = crate::campaign_cmd::run(&scene, a.reduced, &a.out)?;
+    let (campaign_text, campaign_json) = crate::whole_pushes::run(&scene, a.reduced, &a.out)?;
     let mut out = String::new();
     if a.json {
         let rows: Vec<serde_json::Value> = results

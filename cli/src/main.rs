@@ -14,6 +14,7 @@ mod simulate_cmd;
 mod sweep_cmd;
 mod token_cmd;
 mod units;
+mod whole_pushes;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -117,7 +118,7 @@ fn main() -> ExitCode {
         Command::Sweep(args) => sweep_cmd::run(&args),
         Command::Scan(args) => scan_cmd::run(&args),
         Command::Plan(args) => plan_cmd::run(&args),
-        Command::Campaign(args) => campaign_cmd::run_random(&args),
+        Command::Campaign(args) => campaign_cmd::run(&args),
         Command::Push(args) => match push_cmd::run(&args) {
             // A push that ran but failed exits 1 after its report (docs/manipulation.md, "Outcomes
             // that say what happened").

@@ -5,7 +5,8 @@
 //! - [`accuracy`]: the work-precision report, error against run time (`nanopush accuracy`),
 //!   with [`accuracy::reduction`], the quasi-static reduction against the full model;
 //! - [`extremes`]: the stability grid on stiff and extreme cases (`nanopush accuracy --extremes`);
-//! - [`campaign`]: whole pushes over every valid scene parameter (`nanopush accuracy --campaign`);
+//! - [`whole_pushes`]: whole pushes over every valid scene parameter (`nanopush accuracy
+//!   --extremes`), each judged by [`judge`];
 //! - [`random_scenes`]: random valid scenes nobody tuned, planned, pushed and judged
 //!   (`nanopush campaign --random N`);
 //! - [`sweep`]: the parameter sweeps of Figs 10-13 (`nanopush sweep`);
@@ -20,10 +21,11 @@
 #![deny(missing_docs)]
 
 pub mod accuracy;
-pub mod campaign;
 pub mod extremes;
+pub mod judge;
 #[cfg(feature = "peers")]
 pub mod peers;
 pub mod random_scenes;
 pub mod report;
 pub mod sweep;
+pub mod whole_pushes;

@@ -2,7 +2,7 @@
 //! parameter across the scene validator's ranges (log-uniformly where a range spans decades),
 //! sets no strategy by hand, and keeps a draw only if the validator accepts it. Each scene is
 //! then planned ([`nanopush_instrument::control::derive`]) and, when the plan accepts it, pushed
-//! whole and judged as `nanopush push` judges ([`crate::campaign::push_judged`]).
+//! whole and judged as `nanopush push` judges ([`crate::judge::push_judged`]).
 
 use nanopush_instrument::scene::Scene;
 use nanopush_instrument::scene::file::{DofFile, SceneFile};
@@ -10,7 +10,7 @@ use nanopush_instrument::scene::hand_set::HandSet;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
-use crate::campaign::{Judged, push_judged};
+use crate::judge::{Judged, push_judged};
 
 /// Draws before the generator gives up on a seed (none has needed more than a few).
 const MAX_DRAWS: u32 = 1000;
