@@ -4,6 +4,7 @@
 
 mod accuracy_cmd;
 mod campaign_cmd;
+mod extremes_cmd;
 mod model_cmd;
 mod plan_cmd;
 mod plot;
