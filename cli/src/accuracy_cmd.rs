@@ -9,11 +9,9 @@ use nanopush_instrument::numerics::integrate::Method;
 use nanopush_instrument::physics::pushing::{Dof, PushModel};
 use nanopush_instrument::scene::Scene;
 use nanopush_proto::accuracy::{AccuracyPoint, AccuracyReport, EqualError, PushOutcome, QuasiStaticCost, ReductionRow};
-use nanopush_study::accuracy::reduction::{CompareOptions, Comparison, Summary, compare};
-use nanopush_study::accuracy::{
-    Point, classical_points, classical_reference, estimate_errors, push_points, push_reference,
-};
-use nanopush_study::peers::{PeerPoint, SOLVERS, peer_points};
+use nanopush_study::accuracy::reduction::{CompareOptions, Comparison, compare};
+use nanopush_study::accuracy::{classical_points, classical_reference, estimate_errors, push_points, push_reference};
+use nanopush_study::peers::{SOLVERS, peer_points};
 use plotters::prelude::*;
 
 /// Most integrator steps a run of the report may take; beyond it the run is reported as failed.
@@ -50,58 +48,6 @@ pub struct AccuracyArgs {
     /// With --extremes: the reduced grid (sweep end points and two corners).
     #[arg(long)]
     reduced: bool,
-}
-
-fn to_proto(p: &Point) -> AccuracyPoint {
-    let opt = |v: f64| v.is_finite().then_some(v);
-    AccuracyPoint {
-        problem: p.problem.clone(),
-        method: p.method.name().into(),
-        rtol: p.rtol,
-        final_error: opt(p.final_error),
-        trajectory_error: opt(p.trajectory_error),
-        estimated_error: opt(p.estimated_error),
-        estimate_rtol: opt(p.estimate_rtol),
-        wall_time: p.wall_time,
-        steps: p.steps,
-        rejected: p.rejected,
-        failure: p.failure.clone(),
-    }
-}
-
-fn outcome_to_proto(s: &Summary) -> PushOutcome {
-    PushOutcome {
-        regime: s.regime.as_str().into(),
-        jumps: s.jumps,
-        shearing_time: s.shearing_time,
-        final_phase: s.final_phase.into(),
-        settled_y: s.settled_y,
-        y_spread: s.y_spread,
-        zeta_z: s.zeta_z,
-        zeta_z_spread: s.zeta_z_spread,
-        steps: s.steps,
-        wall_time: s.wall_time,
-    }
-}
-
-fn reduction_to_proto(c: &Comparison) -> ReductionRow {
-    let fine = c.full_fine.as_ref();
-    let failure = match (&c.full, fine) {
-        (Err(e), _) => Some(format!("full model: {e}")),
-        (_, Some(Err(e))) => Some(format!("full model at rtol/100: {e}")),
-        _ => None,
-    };
-    ReductionRow {
-        rotation: c.rotation,
-        reduced: outcome_to_proto(&c.reduced),
-        full: c.full.as_ref().ok().map(outcome_to_proto),
-        full_fine: fine.and_then(|f| f.as_ref().ok()).map(outcome_to_proto),
-        failure,
-        regime_agrees: c.regime_agrees(),
-        shearing_time_error: c.shearing_time_error(),
-        settled_y_error: c.settled_y_error(),
-        zeta_z_error: c.zeta_z_error(),
-    }
 }
 
 /// The reduction table: one line per model and rotation setting, then the errors.
@@ -234,22 +180,6 @@ fn plot(path: &Path, title: &str, unit: &str, points: &[&AccuracyPoint]) -> anyh
     Ok(())
 }
 
-fn peer_to_proto(p: &PeerPoint) -> AccuracyPoint {
-    AccuracyPoint {
-        problem: p.problem.clone(),
-        method: p.solver.clone(),
-        rtol: p.rtol,
-        final_error: p.final_error.is_finite().then_some(p.final_error),
-        trajectory_error: None,
-        estimated_error: None,
-        estimate_rtol: None,
-        wall_time: p.wall_time,
-        steps: p.steps,
-        rejected: 0,
-        failure: p.failure.clone(),
-    }
-}
-
 /// Least wall time at which `method` reached `error` on `problem`.
 fn time_to(rows: &[AccuracyPoint], problem: &str, method: &str, error: f64) -> Option<f64> {
     rows.iter()
@@ -347,8 +277,8 @@ fn compute(a: &AccuracyArgs, scene: &Scene) -> anyhow::Result<Computed> {
     let mut points = push_points("push", &model, a.duration, &reference, a.reps, MAX_STEPS, a.min_rtol);
     points.extend(classical_points(a.reps, MAX_STEPS, a.min_rtol));
     estimate_errors(&mut points, classical_reference);
-    let mut rows: Vec<AccuracyPoint> = points.iter().map(to_proto).collect();
-    rows.extend(peer_points(a.reps, a.min_rtol).iter().map(peer_to_proto));
+    let mut rows: Vec<AccuracyPoint> = points.iter().map(AccuracyPoint::from).collect();
+    rows.extend(peer_points(a.reps, a.min_rtol).iter().map(AccuracyPoint::from));
     let equal = equal_error(&rows);
 
     // The quasi-static reduction against the full model (every DOF dynamic), rotation off and
@@ -364,7 +294,7 @@ fn compute(a: &AccuracyArgs, scene: &Scene) -> anyhow::Result<Computed> {
         crosscheck,
         rows,
         equal,
-        reduction: reduction.iter().map(reduction_to_proto).collect(),
+        reduction: reduction.iter().map(ReductionRow::from).collect(),
         quasi_static_cost: quasi_static_cost(&reduction, scene_rotation, a.duration),
     })
 }

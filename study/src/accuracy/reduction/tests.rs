@@ -421,3 +421,44 @@ fn with_damping_ratio_3_and_a_q_0_5_cantilever_the_full_model_still_stick_slips(
     assert_eq!(full.regime, Regime::StickSlip);
     assert!(full.jumps >= 2, "{}", full.jumps);
 }
+
+/// A comparison's row of the report: both models, the reduction's errors, and the full model's
+/// failure, at the report's tolerance or at the 100× finer one.
+#[test]
+fn a_comparisons_row_names_the_full_models_failure() {
+    let summary = |regime: Regime, settled_y: f64| Summary {
+        regime,
+        jumps: 0,
+        shearing_time: Some(1e-3),
+        final_phase: "slip",
+        settled_y,
+        y_spread: 0.0,
+        zeta_z: 0.0,
+        zeta_z_spread: 0.0,
+        steps: 10,
+        wall_time: 0.1,
+    };
+    let failed = Comparison {
+        rotation: false,
+        reduced: summary(Regime::Slides, 4e-9),
+        full: Err("step limit".into()),
+        full_fine: None,
+    };
+    let row = ReductionRow::from(&failed);
+    assert_eq!(row.failure.as_deref(), Some("full model: step limit"));
+    assert_eq!((row.full, row.regime_agrees, row.settled_y_error), (None, None, None));
+    assert_eq!(
+        (row.reduced.regime.as_str(), row.reduced.final_phase.as_str()),
+        ("slides", "slip")
+    );
+    let fine_failed = Comparison {
+        full: Ok(summary(Regime::Slides, 3e-9)),
+        full_fine: Some(Err("diverged".into())),
+        ..failed
+    };
+    let row = ReductionRow::from(&fine_failed);
+    assert_eq!(row.failure.as_deref(), Some("full model at rtol/100: diverged"));
+    assert_eq!((row.regime_agrees, row.full_fine), (Some(true), None));
+    assert!((row.settled_y_error.unwrap() - 1e-9).abs() < 1e-20);
+    assert_eq!(row.full.map(|f| f.settled_y), Some(3e-9));
+}
