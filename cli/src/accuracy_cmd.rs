@@ -11,7 +11,6 @@ use nanopush_instrument::scene::Scene;
 use nanopush_proto::accuracy::{AccuracyPoint, AccuracyReport, EqualError, PushOutcome, QuasiStaticCost, ReductionRow};
 use nanopush_study::accuracy::reduction::{CompareOptions, Comparison, compare};
 use nanopush_study::accuracy::{classical_points, classical_reference, estimate_errors, push_points, push_reference};
-use nanopush_study::peers::{SOLVERS, peer_points};
 use plotters::prelude::*;
 
 /// Most integrator steps a run of the report may take; beyond it the run is reported as failed.
@@ -180,6 +179,27 @@ fn plot(path: &Path, title: &str, unit: &str, points: &[&AccuracyPoint]) -> anyh
     Ok(())
 }
 
+/// The peer solvers built into this `nanopush` (none without its feature `peers`).
+#[cfg(feature = "peers")]
+const PEERS: &[&str] = &nanopush_study::peers::SOLVERS;
+#[cfg(not(feature = "peers"))]
+const PEERS: &[&str] = &[];
+
+/// The peer solvers' work-precision points on the classical problems.
+#[cfg(feature = "peers")]
+fn peer_rows(reps: usize, min_rtol: f64) -> Vec<AccuracyPoint> {
+    nanopush_study::peers::peer_points(reps, min_rtol)
+        .iter()
+        .map(AccuracyPoint::from)
+        .collect()
+}
+
+/// No peer solver is built in: no points.
+#[cfg(not(feature = "peers"))]
+fn peer_rows(_reps: usize, _min_rtol: f64) -> Vec<AccuracyPoint> {
+    Vec::new()
+}
+
 /// Least wall time at which `method` reached `error` on `problem`.
 fn time_to(rows: &[AccuracyPoint], problem: &str, method: &str, error: f64) -> Option<f64> {
     rows.iter()
@@ -188,13 +208,18 @@ fn time_to(rows: &[AccuracyPoint], problem: &str, method: &str, error: f64) -> O
         .min_by(|a, b| a.total_cmp(b))
 }
 
+/// The time rodas4 and the fastest peer take to reach each error on the classical problems
+/// (none without a peer built in: nothing to compare with).
 fn equal_error(rows: &[AccuracyPoint]) -> Vec<EqualError> {
     let ours = Method::Rodas4.name();
     let mut out = Vec::new();
+    if PEERS.is_empty() {
+        return out;
+    }
     for problem in ["van-der-pol", "robertson"] {
         for error in [1e-4, 1e-6, 1e-8] {
             let ours_time = time_to(rows, problem, ours, error);
-            let best = SOLVERS
+            let best = PEERS
                 .iter()
                 .filter_map(|s| time_to(rows, problem, s, error).map(|t| (s.to_string(), t)))
                 .min_by(|a, b| a.1.total_cmp(&b.1));
@@ -278,7 +303,7 @@ fn compute(a: &AccuracyArgs, scene: &Scene) -> anyhow::Result<Computed> {
     points.extend(classical_points(a.reps, MAX_STEPS, a.min_rtol));
     estimate_errors(&mut points, classical_reference);
     let mut rows: Vec<AccuracyPoint> = points.iter().map(AccuracyPoint::from).collect();
-    rows.extend(peer_points(a.reps, a.min_rtol).iter().map(AccuracyPoint::from));
+    rows.extend(peer_rows(a.reps, a.min_rtol));
     let equal = equal_error(&rows);
 
     // The quasi-static reduction against the full model (every DOF dynamic), rotation off and
@@ -369,7 +394,14 @@ fn write_files(a: &AccuracyArgs, scene_name: &str, rows: &[AccuracyPoint]) -> an
 /// The text report: the points, the equal-error times, the reduction's cost and table.
 fn write_text(out: &mut String, a: &AccuracyArgs, report: &AccuracyReport) -> anyhow::Result<()> {
     write_points(out, a, report)?;
-    write_equal_error(out, &report.equal_error)?;
+    if PEERS.is_empty() {
+        writeln!(
+            out,
+            "Peer solvers: not built in (this nanopush was built without its feature `peers`): no peer points, no time to reach an error against them."
+        )?;
+    } else {
+        write_equal_error(out, &report.equal_error)?;
+    }
     if let Some(q) = &report.quasi_static_cost {
         write_quasi_static_cost(out, q)?;
     }
@@ -487,5 +519,48 @@ mod tests {
         assert_eq!(tols, nanopush_study::accuracy::TOLERANCES);
         assert_eq!((tols[0], tols[tols.len() - 1]), (1e-2, 1e-10));
         assert_eq!(MAX_STEPS, 2_000_000);
+    }
+
+    /// With the peer solvers built in (feature `peers`) the report has their points (4 solvers,
+    /// 3 tolerances, 2 problems) and the time to reach an error against the fastest; without
+    /// them, no peer point, and the report says they are not built in.
+    #[test]
+    fn the_report_has_the_peers_only_when_they_are_built_in() {
+        let dir = std::env::temp_dir().join(format!("nanopush-accuracy-peers-{}", std::process::id()));
+        let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/minimal.toml");
+        let Command::Accuracy(a) = crate::parse(&[
+            "accuracy",
+            "--scene",
+            scene,
+            "--duration",
+            "0.002",
+            "--reps",
+            "1",
+            "--min-rtol",
+            "1e-4",
+            "--no-full-model",
+            "--out",
+            dir.to_str().unwrap(),
+        ]) else {
+            unreachable!()
+        };
+        let text = run(&a).unwrap();
+        let csv = std::fs::read_to_string(dir.join("accuracy.csv")).unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+        let peer_rows = csv
+            .lines()
+            .filter(|l| {
+                l.split(',')
+                    .nth(1)
+                    .is_some_and(|m| m.starts_with("diffsol") || m.starts_with("russell"))
+            })
+            .count();
+        let compared = text.contains("Time to reach an error, our default (rodas4) against the fastest peer:");
+        let not_built_in = text.contains("Peer solvers: not built in");
+        if cfg!(feature = "peers") {
+            assert_eq!((peer_rows, compared, not_built_in), (24, true, false), "{text}");
+        } else {
+            assert_eq!((peer_rows, compared, not_built_in), (0, false, true), "{text}");
+        }
     }
 }
