@@ -508,7 +508,7 @@ mod tests {
     /// docs/validation.md, "`nanopush accuracy`": tolerances 1e-2 … 1e-10, a 20 ms push, 3
     /// repetitions, and the 2·10⁶-step limit beyond which a run is reported as failed.
     #[test]
-    fn accuracy_defaults_are_a_20_ms_push_3_reps_down_to_1e_10_within_2e6_steps() {
+    fn accuracy_defaults_are_the_documented_ones() {
         let Command::Accuracy(a) = crate::parse(&["accuracy"]) else {
             unreachable!()
         };

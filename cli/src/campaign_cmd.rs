@@ -356,7 +356,8 @@ impl RandomTable {
 
 #[cfg(test)]
 mod tests {
-    /// The review of issue 24: `--seed 18446744073709551615 --random 2` wrapped to seed 0.
+    /// The seeds run from `--seed` to `--seed + N − 1`: a first seed so large that they would pass
+    /// the largest u64 (and wrap to 0) is refused, with the range that fits.
     #[test]
     fn seeds_past_the_largest_are_refused_not_wrapped() {
         let crate::Command::Campaign(a) =

@@ -1,4 +1,4 @@
-//! Issue 25's measures of one closed haptic cycle, computed from the rows of a trace and
+//! The measures of one closed haptic cycle, computed from the rows of a trace and
 //! independent of the program's own observers, with the grid of settings and operators they are
 //! taken over (the in-process grid test, the end-to-end grid, the `nanopush-haptic-grid`
 //! benchmark):

@@ -308,10 +308,10 @@ fn differ_beyond_rounding(a: &[f64], b: &[f64]) -> bool {
 /// the tolerance: what a user without the reference gets by tightening the tolerance until the
 /// answer stops changing.
 ///
-/// Only the next, 10× finer run was used before, and at loose tolerances on the push both runs
-/// take the same steps (one per 0.1 ms sample): their difference is exactly 0 while the error
-/// is 4e-15 m, and where it is not 0 it underestimates an error that has stopped falling with
-/// the tolerance. A finer run that agrees to rounding (the same discretisation) tells nothing
+/// Not only the next, 10× finer run: at loose tolerances on the push both runs take the same
+/// steps (one per 0.1 ms sample), so their difference is exactly 0 while the error is 4e-15 m,
+/// and where it is not 0 it underestimates an error that has stopped falling with the
+/// tolerance. A finer run that agrees to rounding (the same discretisation) tells nothing
 /// and is skipped; with no finer run that differs the estimate stays NaN (unknown), never 0.
 pub fn estimate_errors(points: &mut [Point], relative_to: impl Fn(&str) -> Option<Vec<f64>>) {
     let n = points.len();

@@ -387,7 +387,7 @@ mod tests {
     /// A wrong wrapping (transposed Jacobian, unscaled state, wrong tolerance) would show up as
     /// a failure or a large error here.
     #[test]
-    fn every_peer_solves_both_problems_at_rtol_1e_6() {
+    fn every_peer_solves_both_classical_problems() {
         let points = peer_points(1, 1e-6);
         let at = |problem: &str, solver: &str| {
             points

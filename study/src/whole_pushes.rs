@@ -274,13 +274,13 @@ pub fn peak_rss_bytes() -> Option<u64> {
 mod tests {
     use super::*;
 
-    /// The reduced campaign (each validated range's ends, every friction zero, the Eq 16
+    /// The reduced set (each validated range's ends, every friction zero, the Eq 16
     /// bound): every case a plausible outcome or a refusal with its reason, and sound;
     /// docs/validation.md's outcome counts ("Whole pushes: the campaign"): 7 `ok`, 5 refused by
     /// the plan with their reasons (the 0.01 N/m lever's deflection limit, the 500 N/m lever's dry run, the
     /// 75° tilt, the hand-set 1 mm/s, no friction), and the hand-set β = 89° `no_contact`.
     #[test]
-    fn the_reduced_campaign_is_sound_with_7_ok_5_refused_1_no_contact() {
+    fn the_reduced_cases_are_sound_with_the_documented_outcomes() {
         let scene = Scene::default_scene();
         let mut bad = Vec::new();
         let mut outcomes = std::collections::BTreeMap::new();
@@ -349,24 +349,24 @@ mod tests {
         assert!(cases(false).len() > 60);
     }
 
-    /// docs/validation.md, "Whole pushes: the campaign": the full campaign has 74 cases, 16 of them
+    /// docs/validation.md, "Whole pushes: the campaign": the full set has 74 cases, 16 of them
     /// the corners of radius × `k_c` × humidity × speed; the reduced one, a unit test, 13.
     #[test]
-    fn the_campaign_has_74_cases_16_corners_and_the_reduced_one_13() {
+    fn the_case_counts_are_the_documented_ones() {
         let full = cases(false);
         assert_eq!(full.len(), 74);
         assert_eq!(full.iter().filter(|c| c.len() == 4).count(), 16);
         assert_eq!(cases(true).len(), 13);
     }
 
-    /// docs/validation.md's ranges of the full campaign ("Whole pushes: the campaign"), one
+    /// docs/validation.md's ranges of the full set ("Whole pushes: the campaign"), one
     /// parameter at a time (their ends): particle radius 7 nm … 10 µm (and 2 nm under a 1 nm tip,
     /// 7 nm under a 5 nm tip), tip radius 1 nm … 1 µm, `k_c` 0.01 … 500 N/m, humidity 0 … 0.999,
     /// `μ_as` and `μ_ta` 0 … 2, all frictions zero, tilt 0 … 75°, β 1 … 89°, stage speed 1 pm/s …
     /// 1 mm/s, `μ_as` at 0.999, 1 and 1.001 of the Eq 9 and Eq 16 bounds; and the 16 corners of
     /// radius (50 nm, 5 µm) × `k_c` × humidity × speed (1 nm/s, 1 mm/s).
     #[test]
-    fn the_campaign_sweeps_the_documented_ranges_and_16_corners() {
+    fn the_cases_sweep_the_documented_ranges_and_corners() {
         use Edit::*;
         let full = cases(false);
         let mut ends: std::collections::BTreeMap<&str, (f64, f64)> = Default::default();
@@ -427,16 +427,16 @@ mod tests {
         }
     }
 
-    /// docs/validation.md, "Whole pushes: the campaign": a 1 nm/s corner of the full campaign (5 µm
-    /// particle, 0.01 N/m, dry) once timed out after keeping a 25 MB trace; the plan now refuses it
-    /// before any push: the soft lever bends past the readout (449 nm, still rising) before the
-    /// particle shears loose. (Its pull-off from the substrate once refused it: the strategy now
-    /// rides that out.)
+    /// docs/validation.md, "Whole pushes: the campaign": a 1 nm/s corner of the full set (5 µm
+    /// particle, 0.01 N/m, dry) is refused by the plan before any push (pushing it would time out
+    /// after keeping a 25 MB trace): the soft lever bends past the readout (449 nm, still rising)
+    /// before the particle shears loose. Its pull-off from the substrate is not the reason: the
+    /// strategy rides that out.
     #[test]
-    fn a_soft_1_nm_per_s_corner_is_refused_for_its_deflection_limit_before_any_push() {
+    fn a_slow_soft_corner_is_refused_for_its_deflection_limit() {
         use Edit::*;
         let case = [RadiusNm(5000.0), StiffnessNPerM(0.01), Humidity(0.0), SpeedUmPerS(1e-3)];
-        assert!(cases(false).contains(&case.to_vec()), "a case of the full campaign");
+        assert!(cases(false).contains(&case.to_vec()), "a case of the full set");
         let r = run_case(&Scene::default_scene(), &case);
         assert_eq!(r.outcome, "refused", "{}", r.reason);
         assert!(r.reason.contains("deflection limit is reached"), "{}", r.reason);
@@ -449,10 +449,10 @@ mod tests {
     /// park below the substrate: `Rₐ − Rₜ + (Rₐ + Rₜ) sin β ≤ 0`); the plan goes to steeper angles,
     /// where the dry run loses the particle, and refuses, naming the failure and the field.
     #[test]
-    fn a_7_nm_particle_under_a_30_nm_tip_is_refused_with_its_dry_run() {
+    fn a_particle_too_small_for_the_tip_is_refused_with_its_dry_run() {
         use Edit::*;
         let small = [RadiusNm(7.0)];
-        assert!(cases(false).contains(&small.to_vec()), "a case of the full campaign");
+        assert!(cases(false).contains(&small.to_vec()), "a case of the full set");
         let r = run_case(&Scene::default_scene(), &small);
         assert_eq!(r.outcome, "refused", "{}", r.reason);
         assert!(
@@ -463,13 +463,13 @@ mod tests {
         assert!(r.violations.is_empty(), "{:?}", r.violations);
     }
 
-    /// A contact search at 1 pm/s set by hand (a case of the full campaign) cannot finish: the plan
+    /// A contact search at 1 pm/s set by hand (a case of the full set) cannot finish: the plan
     /// warns, skips the dry run, and the push fails with a time-out after 600 s, the longest a
     /// phase may take.
     #[test]
-    fn a_1_pm_per_s_search_times_out_after_600_s() {
+    fn a_hand_set_crawling_search_times_out_at_the_phase_limit() {
         let case = [Edit::SpeedUmPerS(1e-6)];
-        assert!(cases(false).contains(&case.to_vec()), "a case of the full campaign");
+        assert!(cases(false).contains(&case.to_vec()), "a case of the full set");
         let r = run_case(&Scene::default_scene(), &case);
         assert_eq!(r.outcome, "timeout", "{}", r.reason);
         assert!(r.reason.contains("contact_search took more than 600 s"), "{}", r.reason);

@@ -93,7 +93,7 @@ mod tests {
     /// publishing at 0.6 ms past each millisecond, without jitter: the cycle settles at 0.63 ms
     /// (to the nanosecond the quarter-step nudge leaves), at 1, 2 and 4 kHz.
     #[test]
-    fn the_cycle_locks_30_us_after_the_servers_tick() {
+    fn the_cycle_settles_the_phase_lead_after_the_servers_tick() {
         assert_eq!(PHASE_LEAD_NS, 30_000);
         for step in [1_000_000u64, 500_000, 250_000] {
             let server = |k: u64| ForceFeedback {

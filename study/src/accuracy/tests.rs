@@ -52,17 +52,17 @@ fn estimate_skips_identical_runs_and_is_never_zero() {
 /// docs/validation.md, "`nanopush accuracy`": the estimate skips finer runs "that agree with it
 /// to rounding (16 ulps)": 16 ulps of the larger magnitude is rounding, 17 is not.
 #[test]
-fn runs_within_16_ulps_agree_to_rounding() {
+fn runs_a_few_ulps_apart_agree_to_rounding() {
     let ulps = |k: f64| [1.0 + k * f64::EPSILON];
     assert!(!differ_beyond_rounding(&[1.0], &ulps(16.0)));
     assert!(differ_beyond_rounding(&[1.0], &ulps(17.0)));
     assert!(!differ_beyond_rounding(&[-1.0], &[-1.0 - 16.0 * f64::EPSILON]));
 }
 
-/// Issue 13, item 5: on the paper scene's push Rodas4 takes one step per 0.1 ms sample at
-/// rtol 1e-2…1e-4 and its runs agree to the last bit; the estimate column read 0 there
-/// while the error against the reference is ~4e-15 m. Now every estimate where the error is
-/// not 0 is within a factor of 10 of it (the reference: Rodas4 at rtol 1e-12).
+/// On the paper scene's push Rodas4 takes one step per 0.1 ms sample at rtol 1e-2…1e-4 and its
+/// runs agree to the last bit, while the error against the reference is ~4e-15 m: the estimate
+/// must not read 0 there. Every estimate where the error is not 0 is within a factor of 10 of
+/// it (the reference: Rodas4 at rtol 1e-12).
 #[test]
 fn push_estimate_is_not_zero_where_the_error_is_not() {
     let model = PushModel::new(Scene::default_scene().push_params());
@@ -205,7 +205,7 @@ fn the_readmes_push_work_precision_rows() {
 /// error falls with the tolerance (TR-BDF2 on Van der Pol from 1e-3: its error at 1e-2 is
 /// below the one at 1e-3).
 #[test]
-fn estimate_over_error_is_0_89_to_1_02_on_robertson_and_1_00_to_1_56_on_van_der_pol() {
+fn the_estimate_tracks_the_error_on_the_classical_problems() {
     let (vdp, rob) = (classical_rows(&VAN_DER_POL), classical_rows(&ROBERTSON));
     let of = |pts: &[Point], m: Method| pts.iter().filter(|p| p.method == m).cloned().collect::<Vec<_>>();
     let (lo, hi) = ratio_range(of(&rob, Method::Rodas4).iter());
@@ -280,7 +280,7 @@ fn a_run_beyond_the_step_limit_is_reported_as_a_failed_point() {
 /// `cargo test --release -p nanopush-study --lib -- --ignored implicit_euler_at_1e_10`.
 #[test]
 #[ignore = "runs every method to 1e-10 on both classical problems, implicit Euler into 2e6 steps: ~2 s in release, a minute in debug"]
-fn implicit_euler_at_1e_10_is_the_only_classical_run_beyond_the_2e6_step_limit() {
+fn only_implicit_euler_at_the_finest_tolerance_passes_the_step_limit() {
     let pts = classical_points(1, 2_000_000, 1e-10);
     let failed: Vec<(&str, Method, f64)> = pts
         .iter()
@@ -305,7 +305,7 @@ fn implicit_euler_at_1e_10_is_the_only_classical_run_beyond_the_2e6_step_limit()
 /// because at 1e-13 double precision runs out on this problem: the step size falls below the
 /// minimum within the first microsecond, while the run at 1e-12 completes.
 #[test]
-fn rodas4_on_the_push_fails_at_rtol_1e_13_so_the_reference_is_1e_12() {
+fn the_reference_tolerance_is_the_finest_rodas4_reaches_on_the_push() {
     let model = PushModel::new(Scene::default_scene().push_params());
     let run = |rtol: f64| run_push(model.clone(), Method::Rodas4, Options::with_rtol(rtol), 0.02, 1e-4);
     assert!(run(1e-12).is_ok());
