@@ -1,8 +1,8 @@
-//! Random valid scenes nobody tuned: a seeded generator draws every physical
-//! parameter across the scene validator's ranges (log-uniformly where a range spans decades),
-//! sets no strategy by hand, and keeps a draw only if the validator accepts it. Each scene is
-//! then planned ([`nanopush_instrument::control::derive`]) and, when the plan accepts it, pushed
-//! whole and judged as `nanopush push` judges ([`crate::judge::push_judged`]).
+//! Random valid scenes nobody tuned (`nanopush campaign`): a seeded generator draws every physical
+//! parameter across the scene validator's ranges (log-uniformly where a range spans decades), sets
+//! no strategy by hand, and keeps a draw only if the validator accepts it. Each scene is then
+//! planned ([`nanopush_instrument::control::derive`]) and, when the plan accepts it, pushed whole
+//! and judged as `nanopush push` judges ([`crate::judge::push_judged`]).
 
 use nanopush_instrument::scene::Scene;
 use nanopush_instrument::scene::file::{DofFile, SceneFile};
