@@ -5,6 +5,7 @@
 mod accuracy_cmd;
 mod assemble_cmd;
 mod campaign_cmd;
+mod extremes_cmd;
 mod model_cmd;
 mod plan_cmd;
 mod plot;
@@ -15,6 +16,7 @@ mod simulate_cmd;
 mod sweep_cmd;
 mod token_cmd;
 mod units;
+mod whole_pushes;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -121,7 +123,7 @@ fn main() -> ExitCode {
         Command::Sweep(args) => sweep_cmd::run(&args),
         Command::Scan(args) => scan_cmd::run(&args),
         Command::Plan(args) => plan_cmd::run(&args),
-        Command::Campaign(args) => campaign_cmd::run_random(&args),
+        Command::Campaign(args) => campaign_cmd::run(&args),
         Command::Assemble(args) => match assemble_cmd::run(&args) {
             // An assembly that ran reports first, then exits 1 (a site open) or 2 (refused).
             Ok((text, code)) if code != 0 => {
