@@ -6,6 +6,7 @@ mod assemble;
 mod haptic;
 mod haptic_grid;
 mod haptic_link;
+mod layers;
 mod model;
 mod prometheus;
 mod push;
