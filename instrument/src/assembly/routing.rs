@@ -7,7 +7,7 @@ use crate::afm::Afm;
 use crate::control::moves::DONE_WITHIN;
 use crate::control::moves::locate::{MoveError, MoveRoute, MoveTarget, locate_near};
 use crate::control::moves::run::MoveRouting;
-use crate::control::route::Obstacle;
+use crate::control::route::{Leg, Obstacle, RouteError};
 use crate::control::strategy::StrategyParams;
 use crate::control::strategy::runner::{Prepared, RunError};
 use crate::scan::{HeightImage, LocateError, Located, ScanParams, Tip, find_particles};
@@ -47,26 +47,15 @@ impl MoveRouting for MapRouting<'_> {
     ) -> Result<MoveRoute, MoveError> {
         let (local, located) = self.locate(self.scene, afm, near, radius_hint);
         let located = located.map_err(|cause| MoveError::NotFound { near, cause })?;
-        let from = (located.x, located.y);
-        let to = target.point(from);
-        let legs = if (to.0 - from.0).hypot(to.1 - from.1) < DONE_WITHIN {
-            Vec::new()
-        } else {
-            let obstacles: Vec<Obstacle> = self
-                .map
-                .iter()
-                .enumerate()
-                .filter(|&(k, _)| k != self.mover)
-                .map(|(_, p)| Obstacle {
-                    x: p.x,
-                    y: p.y,
-                    radius: p.radius,
-                })
-                .collect();
-            let mut router = self.settings.router(located.radius);
-            router.edge_radius = radius_hint;
-            router.route(from, to, &obstacles)?
-        };
+        let to = target.point((located.x, located.y));
+        let legs = legs_on_map(
+            self.map,
+            self.mover,
+            &self.settings,
+            (located.x, located.y, located.radius),
+            radius_hint,
+            to,
+        )?;
         Ok(MoveRoute {
             local,
             located,
@@ -102,6 +91,35 @@ impl MoveRouting for MapRouting<'_> {
         self.images.push(img.clone());
         (img, located)
     }
+}
+
+/// The legs that take the map's particle `mover`, located at `(x, y)` with radius `r` (m), to
+/// `to`, around every other particle of the map; none when it is there already. The target keeps
+/// a particle of `radius_hint` on the stage.
+pub fn legs_on_map(
+    map: &[Seen],
+    mover: usize,
+    settings: &PlanSettings,
+    (x, y, r): (f64, f64, f64),
+    radius_hint: f64,
+    to: (f64, f64),
+) -> Result<Vec<Leg>, RouteError> {
+    if (to.0 - x).hypot(to.1 - y) < DONE_WITHIN {
+        return Ok(Vec::new());
+    }
+    let obstacles: Vec<Obstacle> = map
+        .iter()
+        .enumerate()
+        .filter(|&(k, _)| k != mover)
+        .map(|(_, p)| Obstacle {
+            x: p.x,
+            y: p.y,
+            radius: p.radius,
+        })
+        .collect();
+    let mut router = settings.router(r);
+    router.edge_radius = radius_hint;
+    router.route((x, y), to, &obstacles)
 }
 
 /// The map updated from a move's local scans: each particle found in them moves to where it
