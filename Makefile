@@ -1,7 +1,7 @@
 # nanopush: the two commands a new user needs are `make run` and `make test`.
 CARGO ?= cargo
 
-.PHONY: run web test setup build release fmt-check clippy unit web-test prometheus-check mutants clean
+.PHONY: run web test setup build release fmt-check clippy no-default-features unit web-test prometheus-check mutants clean
 
 ## make run: build (release), install the web client's packages, and start the teleoperation
 ## server on the embedded default scene; it prints the URL to open (with the operator token).
@@ -31,6 +31,13 @@ fmt-check:
 clippy:
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
 
+## The workspace without its default features (`nanopush` without the peer solvers of
+## `nanopush accuracy`): the lints, then the tests of the work-precision report's points and
+## command, the one thing the feature changes (the other tests would run the same code again).
+no-default-features:
+	$(CARGO) clippy --workspace --all-targets --no-default-features -- -D warnings
+	$(CARGO) test -p nanopush-study -p nanopush-cli --no-default-features -- accuracy::tests accuracy_cmd::
+
 ## Unit, property and end-to-end tests. The end-to-end tests run the real binaries, so they are
 ## built first.
 unit: build
@@ -47,8 +54,9 @@ prometheus-check:
 	promtool check config deploy/prometheus/prometheus.yml
 	promtool test rules deploy/prometheus/alerts_test.yml
 
-## make test: set up, then formatting, lints with -D warnings, and every test.
-test: setup fmt-check clippy prometheus-check unit web-test
+## make test: set up, then formatting, lints with -D warnings (with and without the default
+## features), and every test.
+test: setup fmt-check clippy no-default-features prometheus-check unit web-test
 
 ## make mutants: mutation testing with cargo-mutants (from crates.io, installed on first use) on
 ## the physics, the integrators, the control and the protocol's validation, against the library's

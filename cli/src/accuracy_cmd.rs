@@ -9,12 +9,8 @@ use nanopush_instrument::numerics::integrate::Method;
 use nanopush_instrument::physics::pushing::{Dof, PushModel};
 use nanopush_instrument::scene::Scene;
 use nanopush_proto::accuracy::{AccuracyPoint, AccuracyReport, EqualError, PushOutcome, QuasiStaticCost, ReductionRow};
-use nanopush_study::accuracy::reduction::{CompareOptions, Comparison, Summary, compare};
-use nanopush_study::accuracy::{
-    Point, classical_points, classical_reference, estimate_errors, push_points, push_reference,
-};
-use nanopush_study::extremes::CaseResult;
-use nanopush_study::peers::{PeerPoint, SOLVERS, peer_points};
+use nanopush_study::accuracy::reduction::{CompareOptions, Comparison, compare};
+use nanopush_study::accuracy::{classical_points, classical_reference, estimate_errors, push_points, push_reference};
 use plotters::prelude::*;
 
 /// Most integrator steps a run of the report may take; beyond it the run is reported as failed.
@@ -45,194 +41,12 @@ pub struct AccuracyArgs {
     #[arg(long, default_value_t = 1e-10)]
     min_rtol: f64,
     /// Run the stability grid over extreme parameters instead (see `extremes` in nanopush-study),
-    /// then the campaign of whole pushes (`campaign` in nanopush-study).
+    /// then the whole pushes (`whole_pushes` in nanopush-study).
     #[arg(long)]
     extremes: bool,
     /// With --extremes: the reduced grid (sweep end points and two corners).
     #[arg(long)]
     reduced: bool,
-}
-
-fn extremes(a: &AccuracyArgs) -> anyhow::Result<String> {
-    use nanopush_study::extremes::{grid, run_case};
-    let scene = crate::load_scene(a.scene.as_ref())?;
-    let cases = grid(&scene, a.reduced);
-    let start = std::time::Instant::now();
-    let results: Vec<_> = cases.iter().map(|c| run_case(&scene, c, 1e-5)).collect();
-    let total = start.elapsed().as_secs_f64();
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    crate::units::write_file(&a.out.join("extremes.csv"), extremes_csv(&results)?)?;
-    let bad = results.iter().filter(|r| !r.finite_and_bounded && !r.refused).count();
-    let refused = results.iter().filter(|r| r.refused).count();
-    // Then the whole pushes (A → E) over the validated ranges.
-    let (campaign_text, campaign_json) = crate::campaign_cmd::run(&scene, a.reduced, &a.out)?;
-    let mut out = String::new();
-    if a.json {
-        let rows: Vec<serde_json::Value> = results
-            .iter()
-            .map(|r| {
-                let c = &r.case;
-                serde_json::json!({
-                    "radius_nm": c.radius_nm, "stiffness_n_per_m": c.stiffness_n_per_m, "humidity": c.humidity, "mu_as": c.mu_as,
-                    "tilt_deg": c.tilt_deg, "contact_angle_deg": c.contact_angle_deg, "speed_um_per_s": c.speed_um_per_s,
-                    "finite_and_bounded": r.finite_and_bounded, "outcome": r.outcome, "diagnoses": r.diagnoses,
-                    "steps": r.steps, "rejected": r.rejected, "error": if r.error.is_finite() { Some(r.error) } else { None }, "wall_time": r.wall_time,
-                })
-            })
-            .collect();
-        writeln!(
-            out,
-            "{}",
-            serde_json::json!({"schema": "nanopush.extremes", "version": nanopush_proto::VERSION, "scene": scene.file.name, "cases": rows.len(), "not_finite_or_unbounded": bad, "refused": refused, "wall_time": total, "results": rows, "campaign": campaign_json})
-        )?;
-        return Ok(out);
-    }
-    writeln!(
-        out,
-        "Stability grid around scene \"{}\": {} cases, {} refused by the scene's rules, {} not finite or unbounded, {:.2} s",
-        scene.file.name,
-        results.len(),
-        refused,
-        bad,
-        total
-    )?;
-    write_worst_cases(&mut out, &results)?;
-    if bad > 0 {
-        writeln!(out, "Not finite or unbounded:")?;
-        for r in results.iter().filter(|r| !r.finite_and_bounded && !r.refused) {
-            writeln!(out, "{}", case_row(r))?;
-        }
-    }
-    writeln!(out, "Wrote {}/extremes.csv.", a.out.display())?;
-    out.push_str(&campaign_text);
-    Ok(out)
-}
-
-/// extremes.csv: a row per case of the stability grid.
-fn extremes_csv(results: &[CaseResult]) -> anyhow::Result<String> {
-    let mut csv = String::from(
-        "radius_nm,stiffness_n_per_m,humidity,mu_as,tilt_deg,contact_angle_deg,speed_um_per_s,finite_and_bounded,steps,rejected,error_m,wall_time_s,outcome,diagnoses\n",
-    );
-    for r in results {
-        let c = &r.case;
-        writeln!(
-            csv,
-            "{},{},{},{},{},{},{},{},{},{},{:e},{:e},{},{}",
-            c.radius_nm,
-            c.stiffness_n_per_m,
-            c.humidity,
-            c.mu_as,
-            c.tilt_deg,
-            c.contact_angle_deg,
-            c.speed_um_per_s,
-            r.finite_and_bounded,
-            r.steps,
-            r.rejected,
-            r.error,
-            r.wall_time,
-            r.outcome.replace(',', ";"),
-            r.diagnoses.join("; ").replace(',', ";")
-        )?;
-    }
-    Ok(csv)
-}
-
-/// The five worst cases of the grid by steps, by rejections and by error.
-fn write_worst_cases(out: &mut String, results: &[CaseResult]) -> anyhow::Result<()> {
-    let header = format!(
-        "  {:>8} {:>6} {:>5} {:>5} {:>5} {:>5} {:>8} {:>7} {:>5} {:>10}  outcome",
-        "Ra/nm", "kc", "RH", "mu", "alpha", "beta", "V/um/s", "steps", "rej", "error/m"
-    );
-    for (title, key) in [("most steps", 0), ("most rejections", 1), ("largest error", 2)] {
-        let mut sorted: Vec<_> = results.iter().collect();
-        sorted.sort_by(|x, y| match key {
-            0 => y.steps.cmp(&x.steps),
-            1 => y.rejected.cmp(&x.rejected),
-            _ => y.error.total_cmp(&x.error),
-        });
-        writeln!(out, "Worst cases, {title}:")?;
-        writeln!(out, "{header}")?;
-        for r in sorted.iter().take(5) {
-            writeln!(out, "{}", case_row(r))?;
-        }
-    }
-    Ok(())
-}
-
-/// One case of the stability grid, a line of the text report.
-fn case_row(r: &CaseResult) -> String {
-    let c = &r.case;
-    format!(
-        "  {:>8} {:>6} {:>5} {:>5} {:>5} {:>5} {:>8} {:>7} {:>5} {:>10.2e}  {}{}",
-        c.radius_nm,
-        c.stiffness_n_per_m,
-        c.humidity,
-        c.mu_as,
-        c.tilt_deg,
-        c.contact_angle_deg,
-        c.speed_um_per_s,
-        r.steps,
-        r.rejected,
-        r.error,
-        r.outcome,
-        if r.diagnoses.is_empty() {
-            String::new()
-        } else {
-            format!(" [{}]", r.diagnoses.join("; "))
-        }
-    )
-}
-
-fn to_proto(p: &Point) -> AccuracyPoint {
-    let opt = |v: f64| v.is_finite().then_some(v);
-    AccuracyPoint {
-        problem: p.problem.clone(),
-        method: p.method.name().into(),
-        rtol: p.rtol,
-        final_error: opt(p.final_error),
-        trajectory_error: opt(p.trajectory_error),
-        estimated_error: opt(p.estimated_error),
-        estimate_rtol: opt(p.estimate_rtol),
-        wall_time: p.wall_time,
-        steps: p.steps,
-        rejected: p.rejected,
-        failure: p.failure.clone(),
-    }
-}
-
-fn outcome_to_proto(s: &Summary) -> PushOutcome {
-    PushOutcome {
-        regime: s.regime.as_str().into(),
-        jumps: s.jumps,
-        shearing_time: s.shearing_time,
-        final_phase: s.final_phase.into(),
-        settled_y: s.settled_y,
-        y_spread: s.y_spread,
-        zeta_z: s.zeta_z,
-        zeta_z_spread: s.zeta_z_spread,
-        steps: s.steps,
-        wall_time: s.wall_time,
-    }
-}
-
-fn reduction_to_proto(c: &Comparison) -> ReductionRow {
-    let fine = c.full_fine.as_ref();
-    let failure = match (&c.full, fine) {
-        (Err(e), _) => Some(format!("full model: {e}")),
-        (_, Some(Err(e))) => Some(format!("full model at rtol/100: {e}")),
-        _ => None,
-    };
-    ReductionRow {
-        rotation: c.rotation,
-        reduced: outcome_to_proto(&c.reduced),
-        full: c.full.as_ref().ok().map(outcome_to_proto),
-        full_fine: fine.and_then(|f| f.as_ref().ok()).map(outcome_to_proto),
-        failure,
-        regime_agrees: c.regime_agrees(),
-        shearing_time_error: c.shearing_time_error(),
-        settled_y_error: c.settled_y_error(),
-        zeta_z_error: c.zeta_z_error(),
-    }
 }
 
 /// The reduction table: one line per model and rotation setting, then the errors.
@@ -365,20 +179,25 @@ fn plot(path: &Path, title: &str, unit: &str, points: &[&AccuracyPoint]) -> anyh
     Ok(())
 }
 
-fn peer_to_proto(p: &PeerPoint) -> AccuracyPoint {
-    AccuracyPoint {
-        problem: p.problem.clone(),
-        method: p.solver.clone(),
-        rtol: p.rtol,
-        final_error: p.final_error.is_finite().then_some(p.final_error),
-        trajectory_error: None,
-        estimated_error: None,
-        estimate_rtol: None,
-        wall_time: p.wall_time,
-        steps: p.steps,
-        rejected: 0,
-        failure: p.failure.clone(),
-    }
+/// The peer solvers built into this `nanopush` (none without its feature `peers`).
+#[cfg(feature = "peers")]
+const PEERS: &[&str] = &nanopush_study::peers::SOLVERS;
+#[cfg(not(feature = "peers"))]
+const PEERS: &[&str] = &[];
+
+/// The peer solvers' work-precision points on the classical problems.
+#[cfg(feature = "peers")]
+fn peer_rows(reps: usize, min_rtol: f64) -> Vec<AccuracyPoint> {
+    nanopush_study::peers::peer_points(reps, min_rtol)
+        .iter()
+        .map(AccuracyPoint::from)
+        .collect()
+}
+
+/// No peer solver is built in: no points.
+#[cfg(not(feature = "peers"))]
+fn peer_rows(_reps: usize, _min_rtol: f64) -> Vec<AccuracyPoint> {
+    Vec::new()
 }
 
 /// Least wall time at which `method` reached `error` on `problem`.
@@ -389,13 +208,18 @@ fn time_to(rows: &[AccuracyPoint], problem: &str, method: &str, error: f64) -> O
         .min_by(|a, b| a.total_cmp(b))
 }
 
+/// The time rodas4 and the fastest peer take to reach each error on the classical problems
+/// (none without a peer built in: nothing to compare with).
 fn equal_error(rows: &[AccuracyPoint]) -> Vec<EqualError> {
     let ours = Method::Rodas4.name();
     let mut out = Vec::new();
+    if PEERS.is_empty() {
+        return out;
+    }
     for problem in ["van-der-pol", "robertson"] {
         for error in [1e-4, 1e-6, 1e-8] {
             let ours_time = time_to(rows, problem, ours, error);
-            let best = SOLVERS
+            let best = PEERS
                 .iter()
                 .filter_map(|s| time_to(rows, problem, s, error).map(|t| (s.to_string(), t)))
                 .min_by(|a, b| a.1.total_cmp(&b.1));
@@ -429,7 +253,7 @@ struct Computed {
 /// Runs `nanopush accuracy`.
 pub fn run(a: &AccuracyArgs) -> anyhow::Result<String> {
     if a.extremes {
-        return extremes(a);
+        return crate::extremes_cmd::run(a.scene.as_ref(), a.reduced, &a.out, a.json);
     }
     check(a)?;
     let scene = crate::load_scene(a.scene.as_ref())?;
@@ -478,8 +302,8 @@ fn compute(a: &AccuracyArgs, scene: &Scene) -> anyhow::Result<Computed> {
     let mut points = push_points("push", &model, a.duration, &reference, a.reps, MAX_STEPS, a.min_rtol);
     points.extend(classical_points(a.reps, MAX_STEPS, a.min_rtol));
     estimate_errors(&mut points, classical_reference);
-    let mut rows: Vec<AccuracyPoint> = points.iter().map(to_proto).collect();
-    rows.extend(peer_points(a.reps, a.min_rtol).iter().map(peer_to_proto));
+    let mut rows: Vec<AccuracyPoint> = points.iter().map(AccuracyPoint::from).collect();
+    rows.extend(peer_rows(a.reps, a.min_rtol));
     let equal = equal_error(&rows);
 
     // The quasi-static reduction against the full model (every DOF dynamic), rotation off and
@@ -495,7 +319,7 @@ fn compute(a: &AccuracyArgs, scene: &Scene) -> anyhow::Result<Computed> {
         crosscheck,
         rows,
         equal,
-        reduction: reduction.iter().map(reduction_to_proto).collect(),
+        reduction: reduction.iter().map(ReductionRow::from).collect(),
         quasi_static_cost: quasi_static_cost(&reduction, scene_rotation, a.duration),
     })
 }
@@ -570,7 +394,14 @@ fn write_files(a: &AccuracyArgs, scene_name: &str, rows: &[AccuracyPoint]) -> an
 /// The text report: the points, the equal-error times, the reduction's cost and table.
 fn write_text(out: &mut String, a: &AccuracyArgs, report: &AccuracyReport) -> anyhow::Result<()> {
     write_points(out, a, report)?;
-    write_equal_error(out, &report.equal_error)?;
+    if PEERS.is_empty() {
+        writeln!(
+            out,
+            "Peer solvers: not built in (this nanopush was built without its feature `peers`): no peer points, no time to reach an error against them."
+        )?;
+    } else {
+        write_equal_error(out, &report.equal_error)?;
+    }
     if let Some(q) = &report.quasi_static_cost {
         write_quasi_static_cost(out, q)?;
     }
@@ -677,7 +508,7 @@ mod tests {
     /// docs/validation.md, "`nanopush accuracy`": tolerances 1e-2 … 1e-10, a 20 ms push, 3
     /// repetitions, and the 2·10⁶-step limit beyond which a run is reported as failed.
     #[test]
-    fn accuracy_defaults_are_a_20_ms_push_3_reps_down_to_1e_10_within_2e6_steps() {
+    fn accuracy_defaults_are_the_documented_ones() {
         let Command::Accuracy(a) = crate::parse(&["accuracy"]) else {
             unreachable!()
         };
@@ -688,5 +519,48 @@ mod tests {
         assert_eq!(tols, nanopush_study::accuracy::TOLERANCES);
         assert_eq!((tols[0], tols[tols.len() - 1]), (1e-2, 1e-10));
         assert_eq!(MAX_STEPS, 2_000_000);
+    }
+
+    /// With the peer solvers built in (feature `peers`) the report has their points (4 solvers,
+    /// 3 tolerances, 2 problems) and the time to reach an error against the fastest; without
+    /// them, no peer point, and the report says they are not built in.
+    #[test]
+    fn the_report_has_the_peers_only_when_they_are_built_in() {
+        let dir = std::env::temp_dir().join(format!("nanopush-accuracy-peers-{}", std::process::id()));
+        let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/minimal.toml");
+        let Command::Accuracy(a) = crate::parse(&[
+            "accuracy",
+            "--scene",
+            scene,
+            "--duration",
+            "0.002",
+            "--reps",
+            "1",
+            "--min-rtol",
+            "1e-4",
+            "--no-full-model",
+            "--out",
+            dir.to_str().unwrap(),
+        ]) else {
+            unreachable!()
+        };
+        let text = run(&a).unwrap();
+        let csv = std::fs::read_to_string(dir.join("accuracy.csv")).unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+        let peer_rows = csv
+            .lines()
+            .filter(|l| {
+                l.split(',')
+                    .nth(1)
+                    .is_some_and(|m| m.starts_with("diffsol") || m.starts_with("russell"))
+            })
+            .count();
+        let compared = text.contains("Time to reach an error, our default (rodas4) against the fastest peer:");
+        let not_built_in = text.contains("Peer solvers: not built in");
+        if cfg!(feature = "peers") {
+            assert_eq!((peer_rows, compared, not_built_in), (24, true, false), "{text}");
+        } else {
+            assert_eq!((peer_rows, compared, not_built_in), (0, false, true), "{text}");
+        }
     }
 }

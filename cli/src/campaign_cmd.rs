@@ -1,112 +1,11 @@
-//! The whole-push stability campaign of `nanopush accuracy --extremes` (see
-//! `nanopush_study::campaign`): a table, `DIR/campaign.csv`, and a JSON value.
+//! `nanopush campaign`: random valid scenes nobody tuned, planned, pushed and judged
+//! (`nanopush_study::random_scenes`), a row per scene in `OUT/random.csv`.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
-use nanopush_instrument::scene::Scene;
-use nanopush_study::campaign::{PushCase, cases, peak_rss_bytes, run_case};
+use nanopush_study::random_scenes::{RandomCase, Ranges, random_scene, run_random, scene_text, shard_seeds};
 use rayon::prelude::*;
-
-/// Runs the campaign around `scene` (in parallel, one case per thread) and reports it.
-pub fn run(scene: &Scene, reduced: bool, out: &Path) -> anyhow::Result<(String, serde_json::Value)> {
-    let cases = cases(reduced);
-    let start = std::time::Instant::now();
-    let results: Vec<PushCase> = cases.par_iter().map(|c| run_case(scene, c)).collect();
-    let total = start.elapsed().as_secs_f64();
-    let rss = peak_rss_bytes();
-    let mut csv =
-        String::from("case,outcome,distance_um,moved_um,max_volts,ticks,trace_bytes,wall_time_s,violations,reason\n");
-    for r in &results {
-        writeln!(
-            csv,
-            "{},{},{},{},{},{},{},{:e},{},{}",
-            r.case,
-            r.outcome,
-            r.distance * 1e6,
-            r.moved * 1e6,
-            r.max_volts,
-            r.ticks,
-            r.trace_bytes,
-            r.wall_time,
-            r.violations.join("; ").replace(',', ";"),
-            r.reason.replace(',', ";")
-        )?;
-    }
-    crate::units::write_file(&out.join("campaign.csv"), &csv)?;
-    let mut counts: Vec<(String, usize)> = Vec::new();
-    for r in &results {
-        match counts.iter_mut().find(|(o, _)| *o == r.outcome) {
-            Some((_, n)) => *n += 1,
-            None => counts.push((r.outcome.clone(), 1)),
-        }
-    }
-    counts.sort_by_key(|c| std::cmp::Reverse(c.1));
-    let unsound: Vec<&PushCase> = results.iter().filter(|r| !r.violations.is_empty()).collect();
-    let slowest = results.iter().max_by(|a, b| a.wall_time.total_cmp(&b.wall_time));
-    let biggest = results.iter().max_by_key(|r| r.trace_bytes);
-    let mut text = String::new();
-    writeln!(
-        text,
-        "Whole pushes (A → E, ≥ 1 µm) around scene \"{}\": {} cases in {:.1} s, {} unsound; outcomes: {}",
-        scene.file.name,
-        results.len(),
-        total,
-        unsound.len(),
-        counts
-            .iter()
-            .map(|(o, n)| format!("{o} {n}"))
-            .collect::<Vec<_>>()
-            .join(", ")
-    )?;
-    if let (Some(s), Some(b)) = (slowest, biggest) {
-        writeln!(
-            text,
-            "  slowest case {:.2} s ({}: {}); largest trace {:.1} MB ({}); peak RSS {}",
-            s.wall_time,
-            s.case,
-            s.outcome,
-            b.trace_bytes as f64 / 1e6,
-            b.case,
-            rss.map_or("unknown".into(), |v| format!("{:.0} MB", v as f64 / 1e6))
-        )?;
-    }
-    writeln!(
-        text,
-        "  {:<44} {:<17} {:>9} {:>9} {:>8}  reason",
-        "case", "outcome", "moved/µm", "|U|max/V", "wall/s"
-    )?;
-    for r in &results {
-        writeln!(
-            text,
-            "  {:<44} {:<17} {:>9.3} {:>9.3} {:>8.2}  {}{}",
-            r.case,
-            r.outcome,
-            r.moved * 1e6,
-            r.max_volts,
-            r.wall_time,
-            r.reason.chars().take(110).collect::<String>(),
-            if r.violations.is_empty() {
-                String::new()
-            } else {
-                format!(" UNSOUND: {}", r.violations.join("; "))
-            }
-        )?;
-    }
-    writeln!(text, "Wrote {}/campaign.csv.", out.display())?;
-    let json = serde_json::json!({
-        "cases": results.len(),
-        "unsound": unsound.len(),
-        "wall_time": total,
-        "peak_rss_bytes": rss,
-        "results": results.iter().map(|r| serde_json::json!({
-            "case": r.case, "outcome": r.outcome, "reason": r.reason, "distance": r.distance, "moved": r.moved,
-            "max_volts": r.max_volts, "violations": r.violations, "ticks": r.ticks, "trace_bytes": r.trace_bytes,
-            "wall_time": r.wall_time,
-        })).collect::<Vec<_>>(),
-    });
-    Ok((text, json))
-}
 
 /// Arguments of `nanopush campaign`: random valid scenes nobody tuned, planned, pushed and
 /// judged (`nanopush_study::random_scenes`).
@@ -141,7 +40,7 @@ pub struct CampaignArgs {
 }
 
 /// Parses `I/N` with `I < N`.
-fn parse_shard(s: &str) -> anyhow::Result<(u64, u64)> {
+pub(crate) fn parse_shard(s: &str) -> anyhow::Result<(u64, u64)> {
     let bad = || {
         anyhow::anyhow!(
             "--shard {}: expected I/N with 0 ≤ I < N ≤ 1000, e.g. 0/4",
@@ -161,8 +60,42 @@ fn parse_shard(s: &str) -> anyhow::Result<(u64, u64)> {
 
 /// Runs the random-scene campaign and reports it: the accepted share, `ok` within the
 /// tolerance, the refusals by reason, the worst true error of an `ok`, and the cost.
-pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
-    use nanopush_study::random_scenes::{RandomCase, Ranges, run_random, shard_seeds};
+pub fn run(a: &CampaignArgs) -> anyhow::Result<String> {
+    let ranges = check(a)?;
+    let shard = a.shard.as_deref().map(parse_shard).transpose()?.unwrap_or((0, 1));
+    let seeds = shard_seeds(a.seed, a.random, shard.0, shard.1);
+    // The output first: a bad --out is said before any work, the scenes are there to
+    // reproduce while it runs, and each finished row is appended at once, so a kill keeps what
+    // was done (the file is rewritten in seed order at the end).
+    std::fs::create_dir_all(&a.out).map_err(|e| anyhow::anyhow!("creating {}: {e}", a.out.display()))?;
+    if a.scenes {
+        write_scenes(&a.out, &seeds, ranges, a.tolerance_nm)?;
+    }
+    let (cases, wall_time) = push_all(&a.out.join("random.csv"), &seeds, ranges, a.tolerance_nm * 1e-9)?;
+    let done = Done {
+        args: a,
+        ranges,
+        shard,
+        seeds: seeds.len(),
+        table: RandomTable::of(&cases),
+        cases,
+        wall_time,
+    };
+    if a.json {
+        return json(&done);
+    }
+    let s = text(&done)?;
+    if done.table.unsound > 0 {
+        anyhow::bail!(
+            "{s}the campaign found {} unsound scene(s) (UNSOUND above)",
+            done.table.unsound
+        );
+    }
+    Ok(s)
+}
+
+/// Checks the arguments against their ranges (before any work); returns the generator's ranges.
+fn check(a: &CampaignArgs) -> anyhow::Result<Ranges> {
     let ranges = match a.ranges.as_str() {
         "lab" => Ranges::Lab,
         "validator" => Ranges::Validator,
@@ -175,7 +108,7 @@ pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
         anyhow::bail!("--random {} is out of range; allowed: [1, 100000] scenes", a.random);
     }
     crate::units::check_tolerance_nm(a.tolerance_nm)?;
-    // The seeds run from --seed to --seed + N − 1: past the largest u64 they wrapped to 0.
+    // The seeds run from --seed to --seed + N − 1: past the largest u64 they would wrap to 0.
     if a.seed.checked_add(a.random - 1).is_none() {
         anyhow::bail!(
             "--seed {} is out of range for --random {}; allowed: [0, {}] (the seeds run to --seed + N − 1)",
@@ -184,30 +117,32 @@ pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
             u64::MAX - (a.random - 1)
         );
     }
-    let (i, n) = a.shard.as_deref().map(parse_shard).transpose()?.unwrap_or((0, 1));
-    let seeds = shard_seeds(a.seed, a.random, i, n);
-    let tolerance = a.tolerance_nm * 1e-9;
-    // The output first: a bad --out is said before any work, the scenes are there to
-    // reproduce while it runs, and each finished row is appended at once, so a kill keeps what
-    // was done (the file is rewritten in seed order at the end).
-    std::fs::create_dir_all(&a.out).map_err(|e| anyhow::anyhow!("creating {}: {e}", a.out.display()))?;
-    if a.scenes {
-        use nanopush_study::random_scenes::{random_scene, scene_text};
-        let dir = a.out.join("scenes");
-        std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
-        for &seed in &seeds {
-            let text = scene_text(&random_scene(seed, ranges), ranges, a.tolerance_nm)
-                .map_err(|e| anyhow::anyhow!("writing the scene of seed {seed}: {e}"))?;
-            crate::units::write_file(&dir.join(format!("seed-{seed}.toml")), &text)?;
-        }
+    Ok(ranges)
+}
+
+/// Writes each seed's scene as `OUT/scenes/seed-N.toml`.
+fn write_scenes(out: &Path, seeds: &[u64], ranges: Ranges, tolerance_nm: f64) -> anyhow::Result<()> {
+    let dir = out.join("scenes");
+    std::fs::create_dir_all(&dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
+    for &seed in seeds {
+        let text = scene_text(&random_scene(seed, ranges), ranges, tolerance_nm)
+            .map_err(|e| anyhow::anyhow!("writing the scene of seed {seed}: {e}"))?;
+        crate::units::write_file(&dir.join(format!("seed-{seed}.toml")), &text)?;
     }
-    let csv_path = a.out.join("random.csv");
-    const HEADER: &str = "seed,outcome,refusal,true_error_nm,measured_error_nm,attempts,distance_um,simulated_s,wall_s,violations,reason,scene\n";
-    crate::units::write_file(&csv_path, HEADER)?;
+    Ok(())
+}
+
+/// The header of `random.csv`.
+const HEADER: &str = "seed,outcome,refusal,true_error_nm,measured_error_nm,attempts,distance_um,simulated_s,wall_s,violations,reason,scene\n";
+
+/// Pushes every seed's scene (in parallel), appending each row to `csv_path` as it is done,
+/// then rewrites the file in seed order. Returns the cases and the wall time of the pushes (s).
+fn push_all(csv_path: &Path, seeds: &[u64], ranges: Ranges, tolerance: f64) -> anyhow::Result<(Vec<RandomCase>, f64)> {
+    crate::units::write_file(csv_path, HEADER)?;
     let rows = std::sync::Mutex::new(
         std::fs::OpenOptions::new()
             .append(true)
-            .open(&csv_path)
+            .open(csv_path)
             .map_err(|e| anyhow::anyhow!("opening {}: {e}", csv_path.display()))?,
     );
     let start = std::time::Instant::now();
@@ -223,41 +158,83 @@ pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
             c
         })
         .collect();
-    let total = start.elapsed().as_secs_f64();
-    let t = RandomTable::of(&cases);
+    let wall_time = start.elapsed().as_secs_f64();
     let mut csv = String::from(HEADER);
     for c in &cases {
         csv.push_str(&csv_row(c));
     }
-    crate::units::write_file(&csv_path, &csv)?;
-    if a.json {
-        let v = serde_json::json!({
-            "schema": "nanopush.random_campaign", "ranges": ranges.name(), "seeds": seeds.len(), "first_seed": a.seed, "shard": [i, n],
-            "tolerance": tolerance, "accepted": t.accepted, "ok": t.ok, "refused": t.refused,
-            "outcomes": t.outcomes, "refusals": t.refusals, "unsound": t.unsound,
-            "worst_ok_true_error": t.worst_ok, "median_wall_time": t.median_wall, "max_wall_time": t.max_wall,
-            "wall_time": total,
-        });
-        return Ok(serde_json::to_string_pretty(&v)? + "\n");
-    }
+    crate::units::write_file(csv_path, &csv)?;
+    Ok((cases, wall_time))
+}
+
+/// A finished campaign, for its JSON and its text.
+struct Done<'a> {
+    args: &'a CampaignArgs,
+    ranges: Ranges,
+    /// `--shard I/N` (0/1 without it).
+    shard: (u64, u64),
+    /// Seeds run (this shard's).
+    seeds: usize,
+    table: RandomTable,
+    cases: Vec<RandomCase>,
+    /// Wall time of the pushes (s).
+    wall_time: f64,
+}
+
+/// The `--json` object.
+fn json(d: &Done) -> anyhow::Result<String> {
+    let (a, t) = (d.args, &d.table);
+    let v = serde_json::json!({
+        "schema": "nanopush.random_campaign", "ranges": d.ranges.name(), "seeds": d.seeds, "first_seed": a.seed, "shard": [d.shard.0, d.shard.1],
+        "tolerance": a.tolerance_nm * 1e-9, "accepted": t.accepted, "ok": t.ok, "refused": t.refused,
+        "outcomes": t.outcomes, "refusals": t.refusals, "unsound": t.unsound,
+        "worst_ok_true_error": t.worst_ok, "median_wall_time": t.median_wall, "max_wall_time": t.max_wall,
+        "wall_time": d.wall_time,
+    });
+    Ok(serde_json::to_string_pretty(&v)? + "\n")
+}
+
+/// The text report: the summary, the unsound scenes and the accepted ones not `ok`, and where
+/// the rows went.
+fn text(d: &Done) -> anyhow::Result<String> {
     let mut s = String::new();
+    write_summary(&mut s, d)?;
+    write_cases(&mut s, &d.cases)?;
+    let a = d.args;
+    writeln!(
+        s,
+        "Wrote {}/random.csv{}.",
+        a.out.display(),
+        if a.scenes {
+            " and a scene file per seed under scenes/"
+        } else {
+            ""
+        }
+    )?;
+    Ok(s)
+}
+
+/// The seeds, the accepted share, `ok` within the tolerance, the outcomes and refusals, the
+/// worst true error of an `ok`, and the cost.
+fn write_summary(s: &mut String, d: &Done) -> anyhow::Result<()> {
+    let (a, t, (i, n)) = (d.args, &d.table, d.shard);
     let pct = |k: usize, of: usize| if of == 0 { 0.0 } else { 100.0 * k as f64 / of as f64 };
     writeln!(
         s,
         "Random valid scenes ({} ranges), seeds {}-{} (shard {i}/{n}: {} scenes), tolerance {} nm, {:.0} s on {} threads",
-        ranges.name(),
+        d.ranges.name(),
         a.seed,
         a.seed + (a.random - 1),
-        seeds.len(),
+        d.seeds,
         a.tolerance_nm,
-        total,
+        d.wall_time,
         rayon::current_num_threads()
     )?;
     writeln!(
         s,
         "  accepted by the plan {} ({:.0} %); of those ok within the tolerance {} ({:.1} %)",
         t.accepted,
-        pct(t.accepted, seeds.len()),
+        pct(t.accepted, d.seeds),
         t.ok,
         pct(t.ok, t.accepted)
     )?;
@@ -275,6 +252,11 @@ pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
         t.median_wall,
         t.max_wall
     )?;
+    Ok(())
+}
+
+/// A line per unsound scene, then one per scene the plan accepted that did not end `ok`.
+fn write_cases(s: &mut String, cases: &[RandomCase]) -> anyhow::Result<()> {
     for c in cases.iter().filter(|c| !c.judged.violations.is_empty()) {
         writeln!(
             s,
@@ -295,24 +277,11 @@ pub fn run_random(a: &CampaignArgs) -> anyhow::Result<String> {
             c.summary
         )?;
     }
-    writeln!(
-        s,
-        "Wrote {}/random.csv{}.",
-        a.out.display(),
-        if a.scenes {
-            " and a scene file per seed under scenes/"
-        } else {
-            ""
-        }
-    )?;
-    if t.unsound > 0 {
-        anyhow::bail!("{s}the campaign found {} unsound scene(s) (UNSOUND above)", t.unsound);
-    }
-    Ok(s)
+    Ok(())
 }
 
 /// One scene's row of `random.csv`.
-fn csv_row(c: &nanopush_study::random_scenes::RandomCase) -> String {
+fn csv_row(c: &RandomCase) -> String {
     let j = &c.judged;
     format!(
         "{},{},{},{},{},{},{},{:.3},{:.3},{},{},{}\n",
@@ -352,7 +321,7 @@ struct RandomTable {
 }
 
 impl RandomTable {
-    fn of(cases: &[nanopush_study::random_scenes::RandomCase]) -> RandomTable {
+    fn of(cases: &[RandomCase]) -> RandomTable {
         let count = |keys: Vec<String>| {
             let mut v: Vec<(String, usize)> = Vec::new();
             for k in keys {
@@ -387,7 +356,8 @@ impl RandomTable {
 
 #[cfg(test)]
 mod tests {
-    /// The review of issue 24: `--seed 18446744073709551615 --random 2` wrapped to seed 0.
+    /// The seeds run from `--seed` to `--seed + N − 1`: a first seed so large that they would pass
+    /// the largest u64 (and wrap to 0) is refused, with the range that fits.
     #[test]
     fn seeds_past_the_largest_are_refused_not_wrapped() {
         let crate::Command::Campaign(a) =
@@ -395,7 +365,7 @@ mod tests {
         else {
             panic!("a campaign")
         };
-        let e = super::run_random(&a).unwrap_err().to_string();
+        let e = super::run(&a).unwrap_err().to_string();
         assert_eq!(
             e,
             "--seed 18446744073709551615 is out of range for --random 2; allowed: [0, 18446744073709551614] (the seeds run to --seed + N − 1)"

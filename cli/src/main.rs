@@ -3,7 +3,9 @@
 //! people (`token`).
 
 mod accuracy_cmd;
+mod assemble_cmd;
 mod campaign_cmd;
+mod extremes_cmd;
 mod model_cmd;
 mod plan_cmd;
 mod plot;
@@ -14,6 +16,7 @@ mod simulate_cmd;
 mod sweep_cmd;
 mod token_cmd;
 mod units;
+mod whole_pushes;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -47,6 +50,9 @@ enum Command {
     /// The push strategy derived from the scene's model, each setting with its reason (or why
     /// no strategy can push the particle, and the field to change).
     Plan(plan_cmd::PlanArgs),
+    /// Particles pushed into a pattern (a file of sites, or a line, grid, ring or text): assigned,
+    /// ordered and routed around each other, each move judged by the scan after it.
+    Assemble(assemble_cmd::AssembleArgs),
     /// Random valid scenes nobody tuned: planned, pushed and judged (the plan's acceptance, ok
     /// within the tolerance, refusals by reason, cost); `--shard I/N` splits the seeds.
     Campaign(campaign_cmd::CampaignArgs),
@@ -117,7 +123,20 @@ fn main() -> ExitCode {
         Command::Sweep(args) => sweep_cmd::run(&args),
         Command::Scan(args) => scan_cmd::run(&args),
         Command::Plan(args) => plan_cmd::run(&args),
-        Command::Campaign(args) => campaign_cmd::run_random(&args),
+        Command::Campaign(args) => campaign_cmd::run(&args),
+        Command::Assemble(args) => match assemble_cmd::run(&args) {
+            // An assembly that ran reports first, then exits 1 (a site open) or 2 (refused).
+            Ok((text, code)) if code != 0 => {
+                let printed = print_stdout(&text);
+                return if printed == ExitCode::SUCCESS {
+                    ExitCode::from(code)
+                } else {
+                    printed
+                };
+            }
+            Ok((text, _)) => Ok(text),
+            Err(e) => Err(e),
+        },
         Command::Push(args) => match push_cmd::run(&args) {
             // A push that ran but failed exits 1 after its report (docs/manipulation.md, "Outcomes
             // that say what happened").

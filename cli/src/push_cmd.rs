@@ -506,8 +506,9 @@ mod tests {
         }
     }
 
-    /// Issue 24.4: `--direction-deg -90` was taken for a flag (exit 2) while the help gives
-    /// [-360, 360].
+    /// A negative number after a flag is the flag's value, not another flag: `--direction-deg -90`
+    /// (the help gives [-360, 360]), a negative point (`--to-um -1,50`) and a negative number in
+    /// exponent form (`-1e-320`).
     #[test]
     fn a_negative_direction_is_a_number() {
         let a = args(&["push", "--distance-um", "1", "--direction-deg", "-90"]);
@@ -523,8 +524,7 @@ mod tests {
             .to_string();
         assert!(e.starts_with("--distance-um 1e308 is out of range"), "{e}");
         assert_eq!(args(&["push", "--distance-um", "1"]).tolerance_nm, 25.0);
-        // The review of issue 24: a negative point and a negative number in exponent form were
-        // taken for flags too.
+        // A negative point and a negative number in exponent form are values too.
         let a = args(&["push", "--to-um", "-1,50", "--direction-deg", "-1e-320"]);
         assert_eq!((a.to_um.as_deref(), a.direction_deg), (Some("-1,50"), -1e-320));
         let e = check(&args(&["push", "--to-um", "-1,50"]), &Scene::default_scene())

@@ -241,7 +241,7 @@ mod tests {
     /// docs/manipulation.md, "Scans": a `--locate` click looks for a particle within `--search-um`,
     /// default 2 µm.
     #[test]
-    fn search_um_defaults_to_2() {
+    fn a_locate_click_searches_within_the_documented_radius() {
         let Command::Scan(a) = crate::parse(&["scan", "--out", "x.gsf"]) else {
             unreachable!()
         };

@@ -466,7 +466,7 @@ mod tests {
     /// docs/haptics.md, "Faults": "`--haptic` needs a loop of at least 500 Hz": refused at 499 Hz
     /// with either link, accepted at 500 Hz; without a link any rate in [100, 10000] Hz is fine.
     #[test]
-    fn haptic_is_refused_below_a_500_hz_loop() {
+    fn haptic_is_refused_on_a_loop_too_slow_for_it() {
         for link in ["external", "sim"] {
             let e = check(&parse(&["--haptic", link, "--rate-hz", "499"])).unwrap_err();
             assert!(e.to_string().contains("at least 500 Hz"), "{e}");

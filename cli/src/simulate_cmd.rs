@@ -231,7 +231,7 @@ mod tests {
     /// docs/model.md, "`nanopush simulate`": the defaults its figures are of: the default scene, a
     /// 50 ms push, Rodas4 at rtol 1e-6, 0.1 ms samples (the 1 µm/s is the scene's).
     #[test]
-    fn simulate_defaults_are_the_default_scene_50_ms_rodas4_at_1e_6_0_1_ms_samples() {
+    fn simulate_defaults_are_the_documented_ones() {
         let Command::Simulate(a) = crate::parse(&["simulate"]) else {
             unreachable!()
         };

@@ -468,7 +468,7 @@ mod tests {
     /// the whole sweep as one shard: the [`PointOptions::default`] that the Figs 10-13 tests pin
     /// their figures on, with the rotation on unless `--pure-sliding`.
     #[test]
-    fn sweep_defaults_are_point_options_default_0_2_s_1_ms_samples_the_last_quarter() {
+    fn sweep_defaults_are_the_point_options_the_figures_pin() {
         let args = ["sweep", "--param", "beta", "--from", "5", "--to", "65", "--steps", "31"];
         let a = parse(&args);
         let (param, shard, opts) = check(&a).unwrap();

@@ -78,7 +78,7 @@ pub fn write_file(path: &std::path::Path, bytes: impl AsRef<[u8]>) -> anyhow::Re
 
 /// A whole-number argument: any integer is parsed (the command then checks its range and says
 /// it), and what is not an integer is told the allowed range `allowed` too, not only the
-/// parser's "invalid digit" (the review of issue 24: `--attempts 1.5`, `--random -1`).
+/// parser's "invalid digit" (`--attempts 1.5`, `--random -1`).
 fn whole<T: std::str::FromStr>(s: &str, allowed: &str) -> Result<T, String> {
     s.trim()
         .parse::<T>()

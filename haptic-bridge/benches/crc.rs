@@ -1,5 +1,5 @@
-//! CRC-16/CCITT-FALSE over the serial protocol's packets: the hand-written bitwise loop the
-//! protocol used to carry, against the `crc` crate (`CRC_16_IBM_3740`, its default 256-entry
+//! CRC-16/CCITT-FALSE over the serial protocol's packets: a hand-written bitwise loop against
+//! the `crc` crate (`CRC_16_IBM_3740`, its default 256-entry
 //! table), in the same run. The bytes are those of real packets: the CRC covers all but the last
 //! two bytes, so 10 (force, host → device, every cycle), 22 (state, device → host, every cycle)
 //! and 30 (info, once per hello).
@@ -12,8 +12,8 @@ use std::hint::black_box;
 use criterion::{Criterion, criterion_group, criterion_main};
 use nanopush_haptic::serial::{ForcePacket, InfoPacket, StatePacket};
 
-/// The hand-written CRC as it was in `serial/protocol.rs` (polynomial 0x1021, init 0xFFFF, no
-/// reflection, no final xor), bit by bit.
+/// The CRC written by hand (polynomial 0x1021, init 0xFFFF, no reflection, no final xor), bit by
+/// bit.
 fn hand_written(bytes: &[u8]) -> u16 {
     let mut crc: u16 = 0xFFFF;
     for &b in bytes {

@@ -60,8 +60,8 @@ impl Default for BridgeConfig {
 /// answer (up to the 2 ms answer wait, rounded up to the next ms) is not a pause. A shorter
 /// stall is not one either: the device still holds the force it was given, and dropping it to
 /// zero to ramp it in again would be a dip the hand feels — and an active one, the force pushing
-/// back a handle the hand pressed in meanwhile (issue 25: a virtual machine's 5-6 ms pauses in
-/// contact handed the hand up to 2 mJ). A watchdog that tripped sooner says so, and ramps too.
+/// back a handle the hand pressed in meanwhile (a virtual machine's 5-6 ms pauses in contact
+/// would hand the hand up to 2 mJ). A watchdog that tripped sooner says so, and ramps too.
 pub const RESUME_AFTER_PERIODS: u64 = 3;
 /// The least gap between two force writes that counts as a pause (ns): the serial device's
 /// watchdog period.

@@ -1,7 +1,6 @@
-//! Issue 25's measures of one closed haptic cycle, computed from the rows of a trace and
-//! independent of the program's own observers, with the grid of settings and operators they are
-//! taken over (the in-process grid test, the end-to-end grid, the `nanopush-haptic-grid`
-//! benchmark):
+//! The measures of one closed haptic cycle, computed from the rows of a trace and independent of
+//! the program's own observers, with the grid of settings and operators they are taken over (the
+//! in-process grid test, the end-to-end grid, the `nanopush-haptic-grid` benchmark):
 //!
 //! ```text
 //! E        = −Σ F[n−1]·(x[n] − x[n−1])             the raw port's energy over the cycle (J)

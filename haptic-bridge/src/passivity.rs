@@ -237,7 +237,7 @@ mod tests {
     /// docs/haptics.md, "Passivity": a deficit is dissipated "only when `E < −1 nJ`, never at
     /// `|v| < 0.1 mm/s`": just past each edge the controller acts, just short of it not.
     #[test]
-    fn damping_starts_beyond_a_1_nj_deficit_and_at_0_1_mm_per_s() {
+    fn damping_starts_past_the_deficit_floor_and_the_speed_guard() {
         assert_eq!(DEFICIT_FLOOR, 1e-9);
         let dt = 1e-3;
         // A force held over a 10 µm step along it: a deficit of force × 10 µm.

@@ -4,6 +4,8 @@
 //! `position_gain` metres). Force: `F_hand = F_tip · force_gain`, saturated at the device's
 //! peak force so a contact spike (a snap-in or a pull-off) never kicks the operator's hand.
 
+use crate::device::clamp_force;
+
 /// Why a scaling was rejected.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ScalingError {
@@ -67,13 +69,10 @@ impl Scaling {
         tip / self.position_gain
     }
 
-    /// Force rendered to the hand (N) for a tip force (N), saturated at the peak force. NaN is
-    /// rendered as no force.
+    /// Force rendered to the hand (N) for a tip force (N): scaled, then clamped to the peak
+    /// force as a device clamps it ([`clamp_force`]: NaN is rendered as no force).
     pub fn hand_force(&self, tip_force: f64) -> f64 {
-        if tip_force.is_nan() {
-            return 0.0;
-        }
-        (tip_force * self.force_gain).clamp(-self.peak_force, self.peak_force)
+        clamp_force(tip_force * self.force_gain, self.peak_force)
     }
 }
 

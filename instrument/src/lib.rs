@@ -12,12 +12,29 @@
 //! - [`scan`]: tapping-mode scans (tip dilation, raster, GSF/PNG) and particle localization
 //!   (`nanopush scan`);
 //! - [`afm`]: the simulated AFM (stage, tip, substrate, particles) behind the controller;
+//! - [`assembly`]: many particles pushed into a pattern (assignment, order, routes, re-planning);
 //! - [`control`]: the strategy of Sec 2.1, the Eq 19 estimator, multi-push planning
 //!   (`nanopush push`) and the bilateral haptic law;
 //! - [`files`]: result files written atomically (temporary name, then rename).
 //!
-//! The studies of the model (work-precision, extremes, campaign, sweeps, the model report, the
-//! peer solvers) are the `nanopush-study` crate; the command line is `nanopush-cli`.
+//! The studies of the model (work-precision, extremes, whole pushes, random scenes and
+//! assemblies, sweeps, the model report, the peer solvers) are the `nanopush-study` crate; the
+//! command line is `nanopush-cli`; the server, `nanopush-server`.
+//!
+//! # Layers
+//!
+//! Each module uses only modules of lower layers (tests aside), checked by the workspace's
+//! `tests/e2e/layers.rs` against this table:
+//!
+//! | layer | modules | what they are |
+//! |---|---|---|
+//! | 0 | `numerics`, `files`, `words` | integrators and dual numbers; result files; numbers in messages |
+//! | 1 | `physics` | the paper's Section 2 |
+//! | 2 | `scene` | the scene file, its validation, the model assembled from it |
+//! | 3 | `scan` | tapping-mode scans and localization |
+//! | 4 | `afm` | the simulated AFM |
+//! | 5 | `control` | the strategy, the estimator, routes, moves, the derived strategy, the haptic law |
+//! | 6 | `assembly` | patterns assembled from many moves |
 //!
 //! ```
 //! let scene = nanopush_instrument::scene::Scene::default_scene();
@@ -34,26 +51,6 @@ pub mod numerics;
 pub mod physics;
 pub mod scan;
 pub mod scene;
+mod words;
 
-/// A number as an error message shows it: as written when short, else in scientific notation (a
-/// 1e308 is not 309 digits, a 1e-320 not 330).
-pub fn shown(v: f64) -> String {
-    let plain = v.to_string();
-    if plain.len() <= 16 { plain } else { format!("{v:e}") }
-}
-
-/// A length (m) in nm as the user gave it, for messages: to the picometre, trailing zeros
-/// dropped (a 1.75 nm tolerance reads `1.75`, not `2`; 25e-9 reads `25`).
-pub fn nm_text(v: f64) -> String {
-    shown((v * 1e12).round() / 1e3)
-}
-
-/// The message of a caught panic's payload (`&str` or `String`), for reports that turn a
-/// panic in one case, run or push into a row with its reason.
-pub fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
-    payload
-        .downcast_ref::<&str>()
-        .map(|s| s.to_string())
-        .or_else(|| payload.downcast_ref::<String>().cloned())
-        .unwrap_or_else(|| "(no message)".into())
-}
+pub use words::{nm_text, panic_message, shown};

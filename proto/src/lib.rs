@@ -17,6 +17,7 @@
 #![deny(missing_docs)]
 
 pub mod accuracy;
+pub mod assembly;
 pub mod haptic;
 pub mod model;
 pub mod push;

@@ -186,6 +186,10 @@ pub struct Activity {
     pub push_now: Mutex<Option<PushPath>>,
     /// The latest scan (running or finished), for clients that join after it.
     pub latest_scan: Mutex<Option<ScanNow>>,
+    /// The running scan's lines so far, as sent on the `scan` stream (binary frames): a client
+    /// that subscribes mid-scan gets them first, so it shows the whole scan so far and counts
+    /// its lines as they are. Empty while no scan runs (a finished scan is its record).
+    pub scan_lines: Mutex<Vec<axum::body::Bytes>>,
     /// Each particle's strategy plan (or why none can push it) for a tolerance (its bits),
     /// derived once from the scene's model on the first push that asks for it: the scene does
     /// not change while the server runs.
@@ -370,6 +374,7 @@ impl AppState {
                 ),
                 push_now: Mutex::new(None),
                 latest_scan: Mutex::new(None),
+                scan_lines: Mutex::new(Vec::new()),
             },
             scene,
         }

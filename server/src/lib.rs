@@ -6,7 +6,7 @@
 //!
 //! Each module uses only modules of lower layers (its tests aside), so no two modules use each
 //! other, however indirectly. The state holds data and handles only; the jobs that work on it
-//! (a push, a scan, the telemetry) sit above it, and the network above them. `tests/layers.rs`
+//! (a push, a scan, the telemetry) sit above it, and the network above them. `tests/e2e/layers.rs`
 //! reads this table and checks every `crate::` path against it.
 //!
 //! | layer | modules | what they are |

@@ -41,6 +41,7 @@ pub(crate) fn run_scan(st: &AppState, params: ScanParams, person: &str) {
     if let Ok(mut s) = st.activity.latest_scan.lock() {
         *s = Some(now.clone());
     }
+    keep_lines(st, None);
     send_text(&ServerMessage::ScanStart {
         scan: scan_id,
         xres: img0.xres as u32,
@@ -61,16 +62,19 @@ pub(crate) fn run_scan(st: &AppState, params: ScanParams, person: &str) {
             cancelled = true;
             break;
         }
+        let heights: Vec<f32> = line.heights.iter().map(|&h| h as f32).collect();
+        let h = ScanLineHeader {
+            scan: scan_id,
+            line: line.index as u32,
+            xres: heights.len() as u32,
+            yres: params.pixels as u32,
+            y: line.y,
+        };
+        let frame = Bytes::from(h.encode(&heights));
+        // Kept before it is sent: a client subscribing now gets it from one or the other.
+        keep_lines(st, Some(frame.clone()));
         if st.clients.scan_subscribers.load(Relaxed) > 0 {
-            let heights: Vec<f32> = line.heights.iter().map(|&h| h as f32).collect();
-            let h = ScanLineHeader {
-                scan: scan_id,
-                line: line.index as u32,
-                xres: heights.len() as u32,
-                yres: params.pixels as u32,
-                y: line.y,
-            };
-            let _ = st.channels.scans.send(Message::Binary(Bytes::from(h.encode(&heights))));
+            let _ = st.channels.scans.send(Message::Binary(frame));
         }
         next += line_period;
         let now = Instant::now();
@@ -95,6 +99,7 @@ pub(crate) fn run_scan(st: &AppState, params: ScanParams, person: &str) {
             })
         };
     }
+    keep_lines(st, None);
     // Free before it is announced: a client that starts the next scan on hearing `scan_done`
     // must not be told the last one is still running.
     st.activity.scanning.store(false, Relaxed);
@@ -103,6 +108,17 @@ pub(crate) fn run_scan(st: &AppState, params: ScanParams, person: &str) {
         record,
         record_error,
     });
+}
+
+/// The running scan's lines for clients that subscribe mid-scan ([`crate::app_state::Activity::scan_lines`]):
+/// one more line, or `None`: none (a scan starts, or ended).
+fn keep_lines(st: &AppState, frame: Option<Bytes>) {
+    if let Ok(mut lines) = st.activity.scan_lines.lock() {
+        match frame {
+            Some(f) => lines.push(f),
+            None => lines.clear(),
+        }
+    }
 }
 
 /// Writes scan `scan_id`'s record (`scan-T-INSTANCE-N.gsf` and its `.json` summary with the particles

@@ -290,8 +290,8 @@ mod tests {
 
     #[test]
     fn frictionless_soft_lever_corner_does_not_chatter() {
-        // Regression: with μ = 0 a slip "against" its (zero) friction was switched back to stick,
-        // which a zero static limit turned into slip again, 10000 times at t = 0.
+        // With μ = 0 a slip "against" its (zero) friction must not be switched back to stick,
+        // which a zero static limit would turn into slip again, 10000 times at t = 0.
         let scene = Scene::default_scene();
         let c = Case {
             radius_nm: 5000.0,
@@ -314,7 +314,7 @@ mod tests {
     /// 5 … 80° and stage speed 1 nm/s … 100 µm/s, plus every corner of that box: the 2⁷
     /// combinations of the ends. 7·7 + 128 = 177 cases.
     #[test]
-    fn the_grid_is_7_sweeps_of_7_over_the_documented_ranges_and_their_2_7_corners() {
+    fn the_grid_sweeps_the_documented_ranges_and_their_corners() {
         let cases = grid(&Scene::default_scene(), false);
         assert_eq!(cases.len(), 7 * 7 + 128);
         type Field = (&'static str, fn(&Case) -> f64, f64, f64);
@@ -347,10 +347,10 @@ mod tests {
     /// docs/validation.md's run of the full grid (`nanopush accuracy --extremes`, which pushes each
     /// case as here; "Stability on extreme cases: `nanopush accuracy --extremes [--reduced]`"): all
     /// 177 cases finite and bounded; 65 slide after `t*`, 52 roll (the tip contact slips first), 60
-    /// never slide within 20 nm; the most expensive case took 196 steps (32 rejected); the largest
-    /// error (against a rerun at rtol/100) was 4.8e-13 m.
+    /// never slide within 20 nm; the most expensive case takes 196 steps (32 rejected); the largest
+    /// error (against a rerun at rtol/100) is 4.8e-13 m.
     #[test]
-    fn the_full_grid_slides_65_rolls_52_never_60_worst_196_steps_32_rejected_error_4_8e_13_m() {
+    fn the_full_grids_outcomes_and_worst_cases_are_as_documented() {
         let scene = Scene::default_scene();
         let results: Vec<CaseResult> = grid(&scene, false).iter().map(|c| run_case(&scene, c, 1e-5)).collect();
         assert_eq!(results.len(), 177);

@@ -5,9 +5,12 @@
 //! - [`accuracy`]: the work-precision report, error against run time (`nanopush accuracy`),
 //!   with [`accuracy::reduction`], the quasi-static reduction against the full model;
 //! - [`extremes`]: the stability grid on stiff and extreme cases (`nanopush accuracy --extremes`);
-//! - [`campaign`]: whole pushes over every valid scene parameter (`nanopush accuracy --campaign`);
+//! - [`whole_pushes`]: whole pushes over every valid scene parameter (`nanopush accuracy
+//!   --extremes`), each judged by [`judge`];
 //! - [`random_scenes`]: random valid scenes nobody tuned, planned, pushed and judged
 //!   (`nanopush campaign --random N`);
+//! - [`random_assemblies`]: random layouts and patterns assembled and checked against the truth
+//!   (`nanopush assemble --random N`);
 //! - [`sweep`]: the parameter sweeps of Figs 10-13 (`nanopush sweep`);
 //! - [`peers`] (feature `peers`, on by default): peer solvers from crates.io (diffsol,
 //!   russell_ode) on the report's classical problems, for comparison at equal error.
@@ -20,10 +23,12 @@
 #![deny(missing_docs)]
 
 pub mod accuracy;
-pub mod campaign;
 pub mod extremes;
+pub mod judge;
 #[cfg(feature = "peers")]
 pub mod peers;
+pub mod random_assemblies;
 pub mod random_scenes;
 pub mod report;
 pub mod sweep;
+pub mod whole_pushes;

@@ -36,6 +36,7 @@ use russell_sparse::{CooMatrix, Sym};
 use crate::accuracy::{max_relative_error, timed, tolerances};
 use nanopush_instrument::numerics::integrate::test_problems::{Robertson, VanDerPol};
 use nanopush_instrument::numerics::integrate::{MAX_DIM, Problem};
+use nanopush_proto::accuracy::AccuracyPoint;
 
 /// One peer solver on one problem at one tolerance.
 #[derive(Debug, Clone, PartialEq)]
@@ -54,6 +55,26 @@ pub struct PeerPoint {
     pub steps: u64,
     /// The peer's error message, or the message of a panic inside it, if the run failed.
     pub failure: Option<String>,
+}
+
+impl From<&PeerPoint> for AccuracyPoint {
+    /// The report's row: a failed run has no error; a peer reports no trajectory error, no
+    /// estimate and no rejected steps.
+    fn from(p: &PeerPoint) -> AccuracyPoint {
+        AccuracyPoint {
+            problem: p.problem.clone(),
+            method: p.solver.clone(),
+            rtol: p.rtol,
+            final_error: p.final_error.is_finite().then_some(p.final_error),
+            trajectory_error: None,
+            estimated_error: None,
+            estimate_rtol: None,
+            wall_time: p.wall_time,
+            steps: p.steps,
+            rejected: 0,
+            failure: p.failure.clone(),
+        }
+    }
 }
 
 /// The peer solvers, by the names used in [`PeerPoint::solver`].
@@ -328,10 +349,45 @@ pub fn peer_points(reps: usize, min_rtol: f64) -> Vec<PeerPoint> {
 mod tests {
     use super::*;
 
+    /// A peer's row of the report: no error for a failed run, and none of what a peer does not
+    /// report (trajectory error, estimate, rejected steps).
+    #[test]
+    fn a_peers_row_has_only_what_the_peer_reports() {
+        let failed = PeerPoint {
+            problem: "robertson".into(),
+            solver: "russell-radau5".into(),
+            rtol: 1e-6,
+            final_error: f64::NAN,
+            wall_time: 0.25,
+            steps: 0,
+            failure: Some("too many steps".into()),
+        };
+        let row = AccuracyPoint::from(&failed);
+        assert_eq!(
+            (row.method.as_str(), row.final_error, row.failure.as_deref()),
+            ("russell-radau5", None, Some("too many steps"))
+        );
+        let solved = PeerPoint {
+            final_error: 1e-8,
+            steps: 120,
+            failure: None,
+            ..failed
+        };
+        let row = AccuracyPoint::from(&solved);
+        assert_eq!(
+            (row.final_error, row.steps, row.rejected, row.failure),
+            (Some(1e-8), 120, 0, None)
+        );
+        assert_eq!(
+            (row.trajectory_error, row.estimated_error, row.estimate_rtol),
+            (None, None, None)
+        );
+    }
+
     /// A wrong wrapping (transposed Jacobian, unscaled state, wrong tolerance) would show up as
     /// a failure or a large error here.
     #[test]
-    fn every_peer_solves_both_problems_at_rtol_1e_6() {
+    fn every_peer_solves_both_classical_problems() {
         let points = peer_points(1, 1e-6);
         let at = |problem: &str, solver: &str| {
             points

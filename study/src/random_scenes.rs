@@ -1,8 +1,8 @@
-//! Random valid scenes nobody tuned (issue 24.3): a seeded generator draws every physical
-//! parameter across the scene validator's ranges (log-uniformly where a range spans decades),
-//! sets no strategy by hand, and keeps a draw only if the validator accepts it. Each scene is
-//! then planned ([`nanopush_instrument::control::derive`]) and, when the plan accepts it, pushed
-//! whole and judged as `nanopush push` judges ([`crate::campaign::push_judged`]).
+//! Random valid scenes nobody tuned (`nanopush campaign`): a seeded generator draws every physical
+//! parameter across the scene validator's ranges (log-uniformly where a range spans decades), sets
+//! no strategy by hand, and keeps a draw only if the validator accepts it. Each scene is then
+//! planned ([`nanopush_instrument::control::derive`]) and, when the plan accepts it, pushed whole
+//! and judged as `nanopush push` judges ([`crate::judge::push_judged`]).
 
 use nanopush_instrument::scene::Scene;
 use nanopush_instrument::scene::file::{DofFile, SceneFile};
@@ -10,7 +10,7 @@ use nanopush_instrument::scene::hand_set::HandSet;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
-use crate::campaign::{Judged, push_judged};
+use crate::judge::{Judged, push_judged};
 
 /// Draws before the generator gives up on a seed (none has needed more than a few).
 const MAX_DRAWS: u32 = 1000;
@@ -391,10 +391,10 @@ mod tests {
         assert_eq!(plan(&back), plan(&r.scene));
     }
 
-    /// The review of issue 24: a `deflection_limit` refusal offered a gain below what the
-    /// readout needs to see the touch (the next plan then asked for more gain), and stiffnesses
-    /// beyond the 500 N/m a scene allows. Validator seed 132 needs a stiffer lever, and a gain
-    /// cannot help; with a 296 N/m lever, neither can.
+    /// A `deflection_limit` refusal offers no gain below what the readout needs to see the touch
+    /// (the next plan would ask for more gain) and no stiffness beyond the 500 N/m a scene
+    /// allows. Validator seed 132 needs a stiffer lever, and a gain cannot help; with a 296 N/m
+    /// lever, neither can.
     #[test]
     fn a_deflection_limit_refusal_offers_only_a_way_out_the_scene_allows() {
         let tol = nanopush_instrument::control::derive::DEFAULT_TOLERANCE;
@@ -421,9 +421,8 @@ mod tests {
 
     /// `make test`'s seeded sample of docs/manipulation.md's random-scene campaign: lab scenes 11
     /// (its dry run loses the particle), 13 (the model's push fails) and 96 (the lever's
-    /// deflection limit; once refused for adhesion) are refused with their reasons and the field
-    /// to change; 7 (once refused for adhesion) and 166 are accepted and end `ok`, truly within
-    /// 25 nm of their targets; none is unsound.
+    /// deflection limit) are refused with their reasons and the field to change; 7 and 166 are
+    /// accepted and end `ok`, truly within 25 nm of their targets; none is unsound.
     #[test]
     fn a_seeded_sample_is_refused_with_reasons_or_pushed_within_tolerance() {
         let tolerance = 25e-9;
@@ -451,14 +450,14 @@ mod tests {
         }
     }
 
-    /// Issue 24: lab seed 7 (a 0.60 N/m lever read at 1.1 V/nm in 76 % RH) was refused for
-    /// adhesion: the tip's pull-off from the substrate after auto-parking bends the lever past the
-    /// readout's rail on the pull side, and any saturated reading was an emergency. The strategy
-    /// now rides that reading out while the tip rises off the substrate (within the rise its
-    /// pull-off needs): the plan accepts the scene, the reading goes to the rail during the run,
-    /// and the push ends `ok`, truly within 25 nm of its target.
+    /// Lab seed 7 (a 0.60 N/m lever read at 1.1 V/nm in 76 % RH): the tip's pull-off from the
+    /// substrate after auto-parking bends the lever past the readout's rail on the pull side. A
+    /// saturated reading is not an emergency while the tip rises off the substrate (within the
+    /// rise its pull-off needs): the strategy rides it out, the plan accepts the scene, the
+    /// reading goes to the rail during the run, and the push ends `ok`, truly within 25 nm of
+    /// its target.
     #[test]
-    fn a_scene_once_refused_for_adhesion_rides_out_its_pull_off_and_ends_ok() {
+    fn a_pull_off_past_the_rail_is_ridden_out_and_the_push_ends_ok() {
         let tolerance = 25e-9;
         let r = random_scene(7, Ranges::Lab);
         let ts = r.scene.tip_sample();
@@ -479,12 +478,12 @@ mod tests {
         assert!(e <= tolerance, "truly {:.1} nm off", e * 1e9);
     }
 
-    /// Lab seed 91 (a 2.6 µm particle, a 26 N/m lever, a 191 Hz stage) was refused because its
-    /// stage is less than 20 times stiffer than the lever's lateral stiffness. The pushing model
-    /// carries the push's load through the stage's stiffness (Eq 13), so the plan now warns
-    /// and lets the dry run judge: the push ends `ok`, truly within 25 nm.
+    /// Lab seed 91 (a 2.6 µm particle, a 26 N/m lever, a 191 Hz stage): its stage is less than 20
+    /// times stiffer than the lever's lateral stiffness. The pushing model carries the push's
+    /// load through the stage's stiffness (Eq 13), so the plan warns and lets the dry run judge,
+    /// rather than refusing: the push ends `ok`, truly within 25 nm.
     #[test]
-    fn a_scene_once_refused_for_its_stage_is_pushed_ok() {
+    fn a_stage_barely_stiffer_than_the_lever_is_pushed_ok() {
         let tolerance = 25e-9;
         let c = run_random(91, Ranges::Lab, tolerance);
         let j = &c.judged;

@@ -119,8 +119,8 @@ pub fn force_curve_report(scene: &Scene, steps: usize) -> ForceCurveReport {
 mod tests {
     use super::*;
 
-    /// Issue 13.5: with μ_as exactly at the Eq 16 bound `model` reported the push feasible and
-    /// y* = 1.5·10⁷ m, with no warning (the warning is checked in the scene's tests).
+    /// With μ_as exactly at the Eq 16 bound `model` reports the push infeasible, not feasible with
+    /// a y* of 1.5·10⁷ m (the warning is checked in the scene's tests).
     #[test]
     fn mu_at_the_eq16_bound_is_reported_infeasible() {
         let s = Scene::default_scene();
@@ -158,7 +158,7 @@ mod tests {
     /// `HRₜ/(6a₀²)` with the scene's combined Hamaker constant; it lets go at `d = a₀ + |F|/k_c`.
     /// The retraction runs out to 1.5 adhesion/k_c beyond the start.
     #[test]
-    fn the_default_force_curve_snaps_in_at_3_60_nm_and_pulls_off_at_minus_55_09_nn_at_7_05_nm() {
+    fn the_default_force_curves_snap_in_and_pull_off_are_as_documented() {
         use nanopush_instrument::physics::forces::vdw::sphere_plane_force;
         let scene = Scene::default_scene();
         let ts = scene.tip_sample();
@@ -197,7 +197,7 @@ mod tests {
     /// dynamics (Eq 17)"): `nanopush model`'s `contact_period`, the substrate contact's tangential
     /// spring `k_as* = 8RₐG*` against the particle's mass, `2π√(m_a/k_as*)` = 5.4 ns.
     #[test]
-    fn the_default_scenes_contact_period_is_5_4_ns() {
+    fn the_default_scenes_contact_period_is_as_documented() {
         let r = model_report(&Scene::default_scene());
         assert!((r.contact_period - 5.4e-9).abs() < 0.05e-9, "{:e} s", r.contact_period);
         let by_hand = 2.0 * std::f64::consts::PI * (r.particle_mass / r.k_as).sqrt();

@@ -567,7 +567,7 @@ fn haptic_commands_are_refused_with_the_reason() {
 /// restart) and resumed (the link comes back, z-control engages again and the hand feels the
 /// press again); the counters are in /api/status, where the page's haptic panel reads them.
 #[test]
-fn a_serial_board_at_the_sketchs_settings_renders_a_press_and_survives_an_unplug() {
+fn a_serial_board_renders_a_press_and_survives_an_unplug() {
     use nanopush_haptic::operator::Script;
     use nanopush_haptic::serial::fake::FakeBoard;
     let _one = one_at_a_time();

@@ -2,9 +2,11 @@
 //! command or concern; what they share (scratch directories, a server on a free port, its HTTP
 //! API and WebSocket) is in [`util`].
 
+mod assemble;
 mod haptic;
 mod haptic_grid;
 mod haptic_link;
+mod layers;
 mod model;
 mod prometheus;
 mod push;

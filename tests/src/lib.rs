@@ -8,6 +8,7 @@
 
 pub mod client;
 pub mod haptic_grid;
+pub mod layers;
 pub mod metrics;
 pub mod process;
 pub mod procfs;

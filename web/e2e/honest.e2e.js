@@ -9,7 +9,7 @@
 // neutral colour). Run by `npm run e2e`.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { startServer, launchBrowser, newPage, getJson, shot, ready, waitText, pushBy, WEB } from './support.js';
+import { startServer, launchBrowser, newPage, getJson, shot, ready, waitText, pushBy, clippedIn, WEB } from './support.js';
 
 let srv;
 let browser;
@@ -42,15 +42,37 @@ test('kill -9 mid-push and a restart: "unknown", then the lost push told', async
   await pushBy(op, 20, 180);
   await running(op);
   assert.equal(await op.isVisible('#push-now'), true);
+  assert.equal(await op.textContent('#reply-push'), 'push accepted: running');
   await srv.kill('SIGKILL');
   // While it is down: nothing the server said is shown as if it still held.
   await op.waitForFunction(() => document.body.classList.contains('offline'), null, { timeout: 10000 });
   assert.equal(await op.textContent('#st-phase'), 'unknown');
   assert.equal(await op.textContent('#st-lease'), 'unknown');
-  assert.equal(await op.isVisible('#push-now'), false, 'no "Pushing #1 (you)" while disconnected');
+  // The push is not "running", nor gone: its outcome is unknown until the server is back.
+  assert.match(await op.textContent('#push-now-text'), /^Push of #1 \(you\): outcome unknown until the server is back/);
+  assert.doesNotMatch(await op.textContent('#push-now'), /Pushing/);
+  assert.equal(await op.textContent('#reply-push'), 'push outcome unknown: disconnected', 'not "accepted"');
   assert.equal(await op.isVisible('#offline'), true);
-  // The monitor says since when the server is down, and keeps the history.
-  await waitText(mon, '#m-conn', /^server down since \d\d:\d\d:\d\d/, 10000);
+  // The page cannot tell a dead server from a lost network: it says what a running one does.
+  const log = await op.textContent('#log');
+  assert.match(log, /the connection closed while the push of #1 ran: its outcome is unknown until the server is back/);
+  assert.doesNotMatch(log, /\(the server stops a push/, 'no claim about what a dead server does');
+  // Stop (Esc) cannot reach the server, and says so and what the server does on its own.
+  await op.keyboard.press('Escape');
+  const refused = await waitText(op, '#reply-stop', /^Stop cannot reach the server/, 5000);
+  assert.match(refused, /A running server stops a push whose lease holder is gone on its own/);
+  await waitText(op, '#announce', /^Stop cannot reach the server/, 5000);
+  assert.deepEqual(await clippedIn(op, ['.ctl', '.map-head', '.readouts']), [], 'the outage\'s texts whole');
+  // Narrower, the title's tags wrap rather than end in an ellipsis.
+  await op.setViewportSize({ width: 1000, height: 720 });
+  assert.deepEqual(await clippedIn(op, ['.ctl', '.map-head', '.readouts']), [], 'the outage\'s texts whole at 1000 px');
+  await op.setViewportSize({ width: 1280, height: 720 });
+  assert.equal(await op.textContent('#reply-lease'), 'lease lost with the connection', 'not "lease taken"');
+  // The monitor says since when the server is down, in its banner, and keeps the history.
+  await waitText(mon, '#m-conn', /^server down since \d\d:\d\d:\d\d \(it cannot be reached\)/, 10000);
+  const banner = await mon.$eval('#m-conn', (e) => ({ cls: e.className, size: parseFloat(getComputedStyle(e).fontSize) }));
+  assert.equal(banner.cls, 'm-conn down');
+  assert.ok(banner.size >= 20, `the banner's type is ${banner.size} px`);
   assert.equal(await mon.evaluate(() => document.body.classList.contains('offline')), true, 'the tiles are greyed');
   await shot(op, '20-server-killed');
   await shot(mon, '21-monitor-server-down');
@@ -61,6 +83,8 @@ test('kill -9 mid-push and a restart: "unknown", then the lost push told', async
   const lost = await waitText(op, '#lastrun', /outcome unknown/, 10000);
   assert.match(lost, /push of #1: outcome unknown: the server restarted while it ran/);
   assert.equal(await op.getAttribute('#lastrun', 'class'), 'lastrun unknown');
+  assert.equal(await op.isVisible('#push-now'), false);
+  assert.equal(await op.textContent('#reply-push'), 'push outcome unknown', 'after the restart: not "accepted"');
   assert.equal(await op.evaluate(() => document.body.classList.contains('offline')), false);
   assert.notEqual(await op.textContent('#st-phase'), 'unknown');
   // The monitor after the restart: live, and the history from disk still there.

@@ -217,7 +217,7 @@ export async function timedStop(page) {
     window.stopTiming = {};
     document.querySelector('#stop-btn').addEventListener('pointerdown', (e) => { window.stopTiming.down = e.timeStamp; }, { once: true });
     new MutationObserver((_, obs) => {
-      if (/ok/.test(document.querySelector('#reply-stop').textContent)) {
+      if (/stop sent|\bok$/.test(document.querySelector('#reply-stop').textContent)) {
         obs.disconnect();
         requestAnimationFrame(() => { window.stopTiming.shown = performance.now(); });
       }
@@ -244,4 +244,36 @@ export async function pushBy(page, distanceUm, directionDeg) {
   await page.fill('#distance', String(distanceUm));
   await page.fill('#direction', String(directionDeg));
   await page.click('#push-btn');
+}
+
+/**
+ * What is cut off under the elements `sels` (each, and all inside it): text ended with an
+ * ellipsis, or a box smaller than what it holds that hides or scrolls the rest. [] when nothing
+ * is; each entry names the element, what it shows and what it holds (px) and its start.
+ */
+export function clippedIn(page, sels) {
+  return page.evaluate((selectors) => {
+    const out = [];
+    const name = (e) => `${e.tagName.toLowerCase()}${e.id ? `#${e.id}` : ''}${typeof e.className === 'string' && e.className ? `.${e.className.trim().split(/\s+/).join('.')}` : ''}`;
+    for (const sel of selectors) {
+      const root = document.querySelector(sel);
+      if (!root) continue;
+      for (const e of [root, ...root.querySelectorAll('*')]) {
+        const cs = getComputedStyle(e);
+        if (cs.display === 'none' || cs.visibility === 'hidden' || e.closest('[hidden]')) continue;
+        const text = (e.textContent ?? '').trim().slice(0, 40);
+        const wide = e.scrollWidth > e.clientWidth + 1;
+        const tall = e.scrollHeight > e.clientHeight + 1;
+        if (wide && cs.textOverflow === 'ellipsis') out.push(`${name(e)} ends with an ellipsis (${e.clientWidth} of ${e.scrollWidth} px): "${text}"`);
+        else if (wide && ['hidden', 'clip', 'auto', 'scroll'].includes(cs.overflowX)) out.push(`${name(e)} cuts its width (${e.clientWidth} of ${e.scrollWidth} px): "${text}"`);
+        if (tall && ['hidden', 'clip', 'auto', 'scroll'].includes(cs.overflowY)) out.push(`${name(e)} ${cs.overflowY === 'auto' || cs.overflowY === 'scroll' ? 'is a scroll box' : 'cuts its height'} (${e.clientHeight} of ${e.scrollHeight} px): "${text}"`);
+      }
+    }
+    return out;
+  }, sels);
+}
+
+/** The page's scripts and API requests so far: [url path]. */
+export function requested(page) {
+  return page.evaluate(() => performance.getEntriesByType('resource').map((r) => new URL(r.name).pathname));
 }

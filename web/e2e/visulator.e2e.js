@@ -8,7 +8,7 @@ import assert from 'node:assert/strict';
 import { mkdtempSync, symlinkSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
-import { startServer, launchBrowser, newPage, getJson, shot, axe, ready, timedStop, waitText, pushBy, WEB, TOKEN } from './support.js';
+import { startServer, launchBrowser, newPage, getJson, shot, axe, ready, timedStop, waitText, pushBy, clippedIn, requested, WEB, TOKEN } from './support.js';
 
 let srv;
 let browser;
@@ -26,7 +26,7 @@ after(async () => {
 
 const state = (page) => page.evaluate(() => {
   const s = window.nanopush.session.state;
-  return { particles: s.particles, lease: s.lease, client: s.client, scan: s.scan && { id: s.scan.id, lines: s.scan.lines, yres: s.scan.yres, x_real: s.scan.x_real, y_real: s.scan.y_real, done: s.scan.done, record: s.scan.record }, stale: s.scanStale, push: s.push };
+  return { particles: s.particles, lease: s.lease, client: s.client, scan: s.scan && { id: s.scan.id, lines: s.scan.lines, yres: s.scan.yres, x_offset: s.scan.x_offset, y_offset: s.scan.y_offset, x_real: s.scan.x_real, y_real: s.scan.y_real, done: s.scan.done, record: s.scan.record }, stale: s.scanStale, push: s.push };
 });
 
 test('the operator page loads with no console errors or axe violations', async () => {
@@ -34,11 +34,37 @@ test('the operator page loads with no console errors or axe violations', async (
   await op.goto(srv.url);
   await ready(op);
   // Drawn at least twice (the first frames are where a renderer error would show).
-  await op.waitForFunction(() => window.nanopush.view.frames >= 2, null, { timeout: 20000 });
+  await op.waitForFunction(() => window.nanopush.map.frame.frames >= 2 && window.nanopush.image2d.frame.frames >= 1, null, { timeout: 20000 });
   assert.deepEqual(op.errors, []);
   const v = await axe(op);
   assert.deepEqual(v, [], JSON.stringify(v, null, 1));
   await shot(op, '01-operator-loaded');
+});
+
+test('three.js waits for the 3D view; the scene and session come once', async () => {
+  await op.waitForLoadState('networkidle');
+  const urls = await requested(op);
+  assert.deepEqual(urls.filter((u) => /view3d-/.test(u)), [], 'the 3D view\'s chunk is not loaded while the view is hidden');
+  const js = urls.filter((u) => u.startsWith('/dist/') && u.endsWith('.js'));
+  assert.ok(js.length >= 2, `the page's scripts: ${js}`);
+  assert.equal(urls.filter((u) => u === '/api/scene').length, 1, `/api/scene: ${urls}`);
+  assert.equal(urls.filter((u) => u === '/api/session').length, 1, `/api/session: ${urls}`);
+  assert.equal(await op.evaluate(() => window.nanopush.app.view.loaded), false);
+});
+
+test('before any scan the particle\'s ring shows around the tip', async () => {
+  await op.waitForFunction(() => !document.querySelector('.map-dot.tip').hidden, null, { timeout: 10000 });
+  const m = await op.evaluate(() => {
+    const c = document.querySelector('.map-svg .belief circle[data-id="1"]');
+    const t = document.querySelector('.map-dot.tip').getBoundingClientRect();
+    const l = [...document.querySelectorAll('.map-svg .map-label')].find((e) => e.textContent === '#1');
+    const lr = l.getBoundingClientRect();
+    return { r: Number(c.getAttribute('r')), tipHalf: t.width / 2, label: lr.width > 0 && lr.height > 0 };
+  });
+  assert.equal(await op.evaluate(() => window.nanopush.session.state.scan), null, 'no scan yet: the whole stage');
+  // The 250 nm particle is 1.5 px at this scale: its ring is drawn 10 px, wider than the tip.
+  assert.ok(m.r >= 10 && m.r > m.tipHalf + 2, `ring ${m.r} px, tip ${m.tipHalf} px`);
+  assert.ok(m.label, 'the particle\'s id beside its ring');
 });
 
 test('the tip is on screen, drawn over everything, covered by nothing', async () => {
@@ -50,10 +76,11 @@ test('the tip is on screen, drawn over everything, covered by nothing', async ()
     return t.left >= i.left && t.right <= i.right && t.top >= i.top && t.bottom <= i.bottom && t.width > 4;
   });
   assert.ok(onMap, 'the tip is marked on the height image');
-  // The 3D view is the optional companion: shown on request.
+  // The 3D view is the optional companion: shown on request, three.js loaded then.
   assert.equal(await op.isVisible('#view3d'), false, 'the 3D view is hidden until asked for');
   await op.click('#toggle-3d');
-  await op.waitForFunction(() => window.nanopush.view.frames >= 3 && window.nanopush.view.tip.ball.visible, null, { timeout: 10000 });
+  await op.waitForFunction(() => window.nanopush.app.view.loaded && window.nanopush.view.frames >= 2 && window.nanopush.view.tip.ball.visible, null, { timeout: 20000 });
+  assert.equal((await requested(op)).filter((u) => /view3d-/.test(u)).length, 1, 'its chunk loaded once asked for');
   await op.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
   const t = await op.evaluate(() => {
     const v = window.nanopush.view;
@@ -82,12 +109,65 @@ test('the operator scans and pushes; /api/status shows the particle moved', asyn
   await op.fill('#scan-px', '32');
   await op.click('#scan-btn');
   await op.waitForFunction(() => /32 of 32 lines/.test(document.querySelector('#image2d svg')?.getAttribute('aria-label') ?? ''), null, { timeout: 30000 });
+  assert.equal(await op.textContent('#reply-lease'), 'lease taken', 'replies in words');
+  assert.equal(await op.textContent('#reply-scan'), 'scan started');
   const before = await getJson(srv.base, '/api/status');
   const p0 = before.particles.find((p) => p.id === 1);
-  await pushBy(op, 1, 0);
+  // The map previews the push before it is sent: from the particle, 1 µm towards +x (0°).
+  await op.check('input[name=mode][value=by]');
+  await op.fill('#distance', '1');
+  await op.fill('#direction', '0');
+  assert.match(await op.textContent('#direction-help'), /0° pushes towards \+x/);
+  await op.waitForFunction(() => document.querySelector('.map-svg .push-preview').style.display !== 'none', null, { timeout: 5000 });
+  const onMap = (pt) => op.evaluate(([x, y]) => {
+    const g = window.nanopush.image2d.geometry();
+    const e = window.nanopush.image2d.extent();
+    return [g.x + ((x - e.x_offset) / e.x_real) * g.w, g.y + g.h - ((y - e.y_offset) / e.y_real) * g.h];
+  }, pt);
+  const [a0, b0] = [await onMap([p0.x, p0.y]), await onMap([p0.x + 1e-6, p0.y])];
+  const previewAt = () => op.$eval('.map-svg .push-preview line', (l) => ['x1', 'y1', 'x2', 'y2'].map((a) => Number(l.getAttribute(a))));
+  try {
+    await op.waitForFunction(([b]) => Math.abs(Number(document.querySelector('.map-svg .push-preview line').getAttribute('x2')) - b[0]) < 1, [b0], { timeout: 5000 });
+  } catch {
+    assert.fail(`the preview ends at ${await previewAt()}, not ${b0}`);
+  }
+  const line = await previewAt();
+  assert.ok(Math.hypot(line[0] - a0[0], line[1] - a0[1]) < 1 && Math.hypot(line[2] - b0[0], line[3] - b0[1]) < 1, `preview ${line} vs ${a0} → ${b0}`);
+  await op.click('#push-btn');
+  await waitText(op, '#reply-push', /^push accepted: running$/, 30000);
+  // During the push the particle's ring follows the controller's estimate, not its start; the
+  // progress is against the plan's 1 µm.
+  await op.waitForFunction(() => {
+    const e = window.nanopush.session.state.tip?.estimate;
+    return window.nanopush.session.state.push && e && e[0] > window.nanopush.session.state.push.path[0][0] + 0.3e-6;
+  }, null, { timeout: 60000, polling: 20 });
+  // Read in the frame the ring was drawn in (a probe drawn after the map's live view), with the
+  // estimate it was drawn from.
+  const live = await op.evaluate(() => new Promise((res) => {
+    const f = window.nanopush.frames;
+    const moved = f.views.find((v) => v.name === 'map-live');
+    const n0 = moved.frames;
+    const probe = f.register('probe', () => {
+      if (moved.frames === n0) {
+        probe.mark();
+        return;
+      }
+      const ring = document.querySelector('.map-dot.pushed');
+      const m = /translate\(([-\d.]+)px, ([-\d.]+)px\)/.exec(ring.style.transform);
+      res({ ring: m && [Number(m[1]), Number(m[2])], hidden: ring.hidden, est: window.nanopush.session.state.tip.estimate, progress: document.querySelector('#push-progress').textContent, max: document.querySelector('#push-bar').max });
+    });
+    probe.mark();
+  }));
+  assert.equal(live.hidden, false, 'the pushed particle is drawn');
+  const want = await onMap(live.est);
+  assert.ok(Math.hypot(live.ring[0] - want[0], live.ring[1] - want[1]) < 1, `ring at ${live.ring}, estimate at ${want}`);
+  assert.ok(Math.hypot(live.ring[0] - a0[0], live.ring[1] - a0[1]) > 10, 'moved from where the push started');
+  assert.match(live.progress, /^0\.\d\d of 1\.00 µm/, live.progress);
+  assert.ok(Math.abs(live.max - 1) < 0.01, `the bar's end is the plan's 1 µm: ${live.max}`);
   const text = await waitText(op, '#lastrun', /^push of #1/, 60000);
   assert.match(text, /push of #1 ok/, text);
-  assert.match(text, /record push-/, text);
+  assert.match(await op.textContent('#log'), /push of #1 ok.*record push-/, 'the log names the record');
+  assert.equal(await op.textContent('#reply-push'), 'push ended: ok');
   const after = await getJson(srv.base, '/api/status');
   const p1 = after.particles.find((p) => p.id === 1);
   assert.ok(Math.abs(p1.x - p0.x - 1e-6) < 0.1e-6, `moved from ${p0.x} to ${p1.x}`);
@@ -123,7 +203,9 @@ test('a viewer joining after the push sees the moved particle and the scan', asy
   assert.equal(s.scan.lines, 32);
   assert.equal(s.stale, true);
   assert.equal(await v.isVisible('#img-stale'), true);
-  // Its 3D view has the particle where it is now.
+  // Its 3D view, opened now (three.js loaded then), has the particle where it is now.
+  await v.click('#toggle-3d');
+  await v.waitForFunction(() => window.nanopush.app.view.loaded, null, { timeout: 20000 });
   const mx = await v.evaluate(() => window.nanopush.view.particleCentre(1).x);
   assert.ok(Math.abs(mx - x * 1e6) < 1e-6);
   // "Centre on particle" uses the moved position (an operator page opened now).
@@ -161,14 +243,21 @@ test('a viewer cannot command; sees the operator\'s push path, not its form\'s',
   const v = await newPage(browser);
   await v.goto(srv.base + '/');
   await ready(v);
-  for (const sel of ['#push-fs', '#scan-fs', '#stop-btn', '#take-lease', '#push-btn', '#scan-btn']) {
+  for (const sel of ['#push-fs', '#scan-fs', '#take-lease', '#push-btn', '#scan-btn']) {
     assert.equal(await v.$eval(sel, (e) => e.disabled || e.closest('fieldset')?.disabled), true, `${sel} disabled for a viewer`);
   }
+  // Stop stays pressable, to say why it cannot act.
+  assert.equal(await v.getAttribute('#stop-btn', 'aria-disabled'), 'true');
+  await v.click('#stop-btn', { force: true }); // (aria-disabled: Playwright would wait for it)
+  assert.match(await v.textContent('#reply-stop'), /^Stop not sent: viewer connection/);
   // A viewer gets no forms it cannot use, only the reason.
   assert.equal(await v.isVisible('#push-form'), false);
   assert.equal(await v.isVisible('#scan-form'), false);
   assert.match(await v.textContent('#why'), /Viewer connection/);
-  // The viewer's own form would preview 5 µm along +x: it must not be drawn.
+  // The viewer's own form would preview 5 µm along +x: it must not be drawn, on the map or in 3D.
+  assert.equal(await v.$eval('.map-svg .push-preview', (e) => e.style.display), 'none');
+  await v.click('#toggle-3d');
+  await v.waitForFunction(() => window.nanopush.app.view.loaded, null, { timeout: 20000 });
   assert.equal(await v.evaluate(() => window.nanopush.view.marks.preview.visible), false);
   const from = (await getJson(srv.base, '/api/status')).particles.find((p) => p.id === 1);
   await pushBy(op, 2, 90);
@@ -196,7 +285,10 @@ test('the 2D image\'s axes, scale bar and profile hold the physical lengths', as
   const perPx = (b.m - a.m) / (b.x - a.x);
   assert.ok(Math.abs(perPx * g.w - s.x_real) / s.x_real < 0.01, `${perPx * g.w} vs ${s.x_real}`);
   assert.equal(g.unit.name, 'µm', 'a 10 µm scan is labelled in µm');
+  // The stage's frame: the labels are stage coordinates, within the scan's stage span.
   assert.equal(Number(b.label), Number((b.m * 1e6).toPrecision(6)));
+  assert.ok(a.m >= s.x_offset && b.m <= s.x_offset + s.x_real + 1e-12 && a.m > 1e-6, `ticks ${a.label}…${b.label} over a scan from ${s.x_offset}`);
+  assert.deepEqual(await op.$$eval('#image2d .axis-label', (ls) => ls.map((l) => l.textContent).slice(0, 2)), ['stage x (µm)', 'stage y (µm)']);
   const yt = await op.$$eval('#image2d text.ytick', (ts) => ts.length);
   assert.ok(yt >= 3);
   assert.match(await op.textContent('#image2d'), /height \(nm\)/);
@@ -219,9 +311,36 @@ test('the 2D image\'s axes, scale bar and profile hold the physical lengths', as
   assert.ok(Math.abs(prof.last - expected * 1e6) < 0.01 * expected * 1e6, 'the profile plot ends at the line length');
   assert.match(await op.textContent('#profile-info'), new RegExp(`profile length ${(expected * 1e6).toPrecision(4).slice(0, 3)}`));
   await op.waitForSelector('#profile canvas', { timeout: 10000 }); // the profile plot is drawn
-  // Cursor readout.
-  await op.mouse.move(...at(0.5, 0.5));
-  assert.match(await op.textContent('#img-cursor'), /^x 5\.\d{3} µm, y 5\.\d{3} µm .*height -?\d+\.\d+ nm/);
+  // One frame: the axes, the cursor readout, the tip readout and the target fields agree.
+  const axisAt = async (px, py) => op.evaluate(([qx, qy]) => {
+    const lin = (sel, attr, q) => {
+      const ts = [...document.querySelectorAll(sel)].map((t) => [Number(t.getAttribute(attr)), Number(t.textContent)]);
+      const [p0, p1] = [ts[0], ts[ts.length - 1]];
+      return p0[1] + ((q - p0[0]) / (p1[0] - p0[0])) * (p1[1] - p0[1]);
+    };
+    // (the y ticks' text sits 4 px below its tick)
+    return [lin('#image2d text.xtick', 'x', qx), lin('#image2d text.ytick', 'y', qy + 4)];
+  }, [px, py]);
+  const [fx, fy] = [0.31, 0.57];
+  await op.mouse.move(...at(fx, fy));
+  const cur = /^stage x (\d+\.\d{3}) µm, y (\d+\.\d{3}) µm, height -?\d+\.\d+ nm$/.exec(await op.textContent('#img-cursor'));
+  assert.ok(cur, await op.textContent('#img-cursor'));
+  const ax = await axisAt(g.x + fx * g.w, g.y + g.h - fy * g.h);
+  const umPerPx = (s.x_real * 1e6) / g.w;
+  assert.ok(Math.abs(Number(cur[1]) - ax[0]) < umPerPx && Math.abs(Number(cur[2]) - ax[1]) < umPerPx, `readout ${cur[1]}, ${cur[2]} vs axes ${ax}`);
+  await op.mouse.click(...at(fx, fy)); // not on a particle: the push target
+  const tx = Number(await op.inputValue('#to-x'));
+  const ty = Number(await op.inputValue('#to-y'));
+  assert.ok(Math.abs(tx - Number(cur[1])) < 0.011 && Math.abs(ty - Number(cur[2])) < 0.011, `target ${tx}, ${ty} vs readout ${cur[1]}, ${cur[2]}`);
+  await op.check('input[name=mode][value=by]');
+  const tipAt = await op.evaluate(() => {
+    const t = document.querySelector('.map-dot.tip');
+    const m = /translate\(([-\d.]+)px, ([-\d.]+)px\)/.exec(t.style.transform);
+    return [Number(m[1]), Number(m[2])];
+  });
+  const tipAx = await axisAt(...tipAt);
+  const tip = /^tip \((\d+\.\d{3}), (\d+\.\d{3})\) µm/.exec(await waitText(op, '#tipinfo', /^tip \(/, 5000));
+  assert.ok(Math.abs(Number(tip[1]) - tipAx[0]) < 2 * umPerPx && Math.abs(Number(tip[2]) - tipAx[1]) < 2 * umPerPx, `tip readout ${tip[1]}, ${tip[2]} vs drawn at axes ${tipAx}`);
   await shot(op, '06-image-profile');
 });
 
@@ -229,7 +348,8 @@ test('a viewer back mid-scan gets the whole scan; Stop ends a push at once', asy
   await op.fill('#scan-size', '16');
   await op.fill('#scan-px', '512');
   // A viewer loses its connection while the lines of a 512² scan stream and joins again
-  // mid-scan: it ends with every line, none blank, and the scan on screen for what follows.
+  // mid-scan: it gets the lines so far at once (none blank below the newest, its progress the
+  // operator's), ends with every line, and has the scan on screen for what follows.
   const late = await newPage(browser);
   await late.goto(srv.base + '/');
   await ready(late);
@@ -237,13 +357,24 @@ test('a viewer back mid-scan gets the whole scan; Stop ends a push at once', asy
   await late.waitForFunction(() => window.nanopush.session.state.scan?.xres === 512 && window.nanopush.session.state.scan.lines >= 8, null, { timeout: 60000, polling: 10 });
   await late.evaluate(() => window.nanopush.app.conn.ws.close());
   await ready(late);
-  const joined = await late.evaluate(() => { const sc = window.nanopush.session.state.scan; return { xres: sc?.xres, done: sc?.done, lines: sc?.lines }; });
+  const opLines = await op.evaluate(() => window.nanopush.session.state.scan.lines);
+  await late.waitForFunction((n) => window.nanopush.session.state.scan?.lines >= n, opLines, { timeout: 10000, polling: 10 });
+  const joined = await late.evaluate(() => {
+    const sc = window.nanopush.session.state.scan;
+    const top = sc.received.lastIndexOf(1);
+    return { xres: sc.xres, done: sc.done, lines: sc.lines, blank: sc.received.slice(0, top + 1).filter((r) => !r).length };
+  });
+  assert.equal(joined.done, false, 'joined again while the scan ran');
+  assert.equal(joined.blank, 0, `no blank rows below the newest: ${JSON.stringify(joined)}`);
+  try {
+    await late.waitForFunction((n) => Number(/line (\d+)\/512/.exec(document.querySelector('#scan-progress').textContent)?.[1]) >= n, opLines, { timeout: 5000, polling: 10 });
+  } catch {
+    assert.fail(`progress "${await late.textContent('#scan-progress')}" with the operator at line ${opLines}, ${joined.lines} lines here`);
+  }
   await op.waitForFunction(() => window.nanopush.session.state.scan?.xres === 512 && window.nanopush.session.state.scan.done, null, { timeout: 60000 });
   await late.waitForFunction(() => /512 of 512 lines/.test(document.querySelector('#image2d svg')?.getAttribute('aria-label') ?? ''), null, { timeout: 20000 });
   const got = await late.evaluate(() => { const sc = window.nanopush.session.state.scan; return { lines: sc.lines, unfilled: sc.received.filter((r) => !r).length, nan: sc.heights.filter((v) => !Number.isFinite(v)).length }; });
   assert.deepEqual(got, { lines: 512, unfilled: 0, nan: 0 }, `joined at ${JSON.stringify(joined)}`);
-  assert.equal(joined.done, false, 'joined again while the scan ran');
-  assert.match(await late.textContent('#log'), /lines were not seen here; loading the whole scan/);
   console.log(`# the viewer joined scan 512² at ${JSON.stringify(joined)}`);
   assert.deepEqual(late.errors, []);
   await late.context().close();
@@ -292,12 +423,20 @@ test('at 1280×720 and 1600×1000 the image, Stop and the lease stay in view', a
     await p.mouse.move(a.image.left + g.x + g.w * 0.5, a.image.top + g.y + g.h * 0.5);
     await p.waitForFunction(() => /height/.test(document.querySelector('#img-cursor').textContent) && !/x –/.test(document.querySelector('#img-cursor').textContent));
     assert.deepEqual(await rects(), a, `${width}×${height}: the cursor moved the layout`);
+    // The readouts and the map's help whole, the cursor on the map and the tip's numbers shown.
+    await waitText(p, '#tipinfo', /^tip \(/, 5000);
+    assert.deepEqual(await clippedIn(p, ['.map-head', '.readouts', '#map-help', '.profile-box h3', '.ctl']), [], `${width}×${height}, the cursor on the map`);
     if (width === 1280) {
       await pushBy(op, 1, 90);
       await p.waitForFunction(() => !document.querySelector('#push-now').hidden, null, { timeout: 30000 });
       assert.deepEqual(await rects(), a, 'a push starting moved the layout');
+      assert.deepEqual(await clippedIn(p, ['.ctl']), [], 'the push running, whole');
       await waitText(p, '#lastrun', /^push of #1/, 60000);
       assert.deepEqual(await rects(), a, 'a push ending moved the layout');
+      // The last run's line whole, no scroll box; axe finds nothing with the log filled.
+      assert.deepEqual(await clippedIn(p, ['.ctl', '.readouts', '#map-help']), [], 'the last run, whole');
+      const v = await axe(p);
+      assert.deepEqual(v, [], JSON.stringify(v, null, 1));
       await shot(p, '12-operator-1280x720');
     }
     assert.deepEqual(p.errors, []);
@@ -320,6 +459,8 @@ test('keyboard only: a particle and a push target picked, a profile drawn', asyn
   const n = await op.evaluate(() => window.nanopush.session.state.particles.length);
   if (n > 1) assert.notEqual(sel1, sel0, '] selects the next particle');
   assert.equal(await op.inputValue('#particle'), String(sel1));
+  // The keyboard's pick is said to a screen reader.
+  await waitText(op, '#announce', new RegExp(`^particle #${sel1} selected, at \\(\\d+\\.\\d\\d, \\d+\\.\\d\\d\\) µm$`), 5000);
   // From the particle, 5 steps right (1 % of the image each) and Enter: the target.
   const cur0 = await op.evaluate(() => window.nanopush.map.cursor);
   for (let k = 0; k < 5; k++) await op.keyboard.press('ArrowRight');
@@ -332,6 +473,7 @@ test('keyboard only: a particle and a push target picked, a profile drawn', asyn
   assert.ok(Math.abs(Number(await op.inputValue('#to-x')) - want[0]) < 0.011, `${await op.inputValue('#to-x')} vs ${want[0]}`);
   assert.ok(Math.abs(Number(await op.inputValue('#to-y')) - want[1]) < 0.011, `${await op.inputValue('#to-y')} vs ${want[1]}`);
   assert.equal(await op.isChecked('input[name=mode][value=to]'), true, 'the form switched to "to target"');
+  await waitText(op, '#announce', /^push target \(\d+\.\d\d, \d+\.\d\d\) µm$/, 5000);
   await op.waitForFunction(() => document.querySelector('.map-svg .target').style.display !== 'none', null, { timeout: 5000 }); // the target is marked on the map
   assert.equal(await op.evaluate(() => document.activeElement?.classList.contains('map-svg')), true, 'the focus stays on the map');
   // The line profile by keyboard.
@@ -366,6 +508,18 @@ test('a phone (390×844): no sideways scroll, controls after the image', async (
     });
     assert.ok(hit.ok && hit.right <= hit.inner, `${sel} reachable: ${JSON.stringify(hit)}`);
   }
+  // Nothing cut off: the controls, the readouts, the map's help, a profile's numbers, the last run.
+  await waitText(p, '#lastrun', /push of #1/, 10000);
+  await p.evaluate(() => {
+    const i = window.nanopush.image2d;
+    const e = i.extent();
+    i.profileEnd('start', e.x_offset + 0.1 * e.x_real, e.y_offset + 0.5 * e.y_real);
+    i.profileEnd('end', e.x_offset + 0.9 * e.x_real, e.y_offset + 0.5 * e.y_real);
+  });
+  await waitText(p, '#profile-info', /^profile length/, 5000);
+  assert.deepEqual(await clippedIn(p, ['.map-head', '.readouts', '#map-help', '.profile-box h3', '.ctl']), []);
+  const v = await axe(p);
+  assert.deepEqual(v, [], JSON.stringify(v, null, 1));
   await p.evaluate(() => window.scrollTo(0, 0));
   await shot(p, '08-phone');
   assert.deepEqual(p.errors, []);
@@ -418,12 +572,12 @@ test('with a haptic link the panel shows it and the lease holder can engage', as
     await waitText(p, '#hap-scales', /^10 nm\/mm, 1\.000 N pull-off/, 8000);
     await p.fill('#hap-nm', '20');
     await p.click('#hap-scale');
-    await waitText(p, '#reply-haptic', /ok/, 10000);
+    await waitText(p, '#reply-haptic', /^done$/, 10000);
     await waitText(p, '#hap-scales', /^20 nm\/mm/, 8000);
     await waitText(p, '#log', /haptic scales now 20 nm\/mm/, 5000);
     await p.click('#hap-engage');
-    await waitText(p, '#reply-haptic', /ok/, 10000);
-    await waitText(p, '#hap-phase', /approach|park|settle|ramp|engaged/, 20000);
+    await waitText(p, '#reply-haptic', /^done$/, 10000);
+    await waitText(p, '#hap-phase', /finding the surface|rising to the parking height|waiting for the force|force ramping in|engaged/, 20000);
     await shot(p, '11-haptic');
     // The link lost (the bridge frozen with SIGSTOP, so it is not restarted) and back: both in
     // the Events log, the losses counted, Engage disabled while it is down.

@@ -10,16 +10,17 @@
 import { commands, STREAMS } from './wire.js';
 import { Session, describeRun, runClass, setPointForceN, lostPushRun } from './session.js';
 import { Connection, wsUrl, apiUrl } from './connection.js';
-import { FrameScheduler, livePeriodMs } from './frame.js';
+import { FrameScheduler, livePeriodFor, liveSlotMs } from './frame.js';
 import { formatTip } from './format.js';
-import { View3D } from './view3d.js';
+import { View3DHost, softwareGl } from './view3dhost.js';
 import { Image2D } from './image2d.js';
 import { Charts, downloadCsv } from './charts.js';
 import { HapticPanel } from './haptic.js';
 import { fetchStatus } from './devicefaults.js';
 import { StatusBar } from './status.js';
-import { Controls, Replies } from './controls.js';
-import { EventLog, LEASE_LOST_ON_CLOSE, welcomeText, stateText, pushStartedText, pushWarnings, leaseNote, replyErrorText, closedText, restartText, lostPushText, hapticLinkNote, clockTime } from './eventlog.js';
+import { Controls, Replies, pushEndedText } from './controls.js';
+import { PushStatus } from './pushstatus.js';
+import { EventLog, LEASE_LOST_ON_CLOSE, lostOnCloseText, welcomeText, stateText, pushStartedText, pushWarnings, leaseNote, replyErrorText, closedText, restartText, lostPushText, hapticLinkNote, clockTime } from './eventlog.js';
 import { MapOverlay } from './mapoverlay.js';
 import { Records } from './records.js';
 import { Scans } from './scans.js';
@@ -49,18 +50,22 @@ export class App {
     this.frames = frames;
     this.statusFrame = frames.register('status', () => this.status.render(this.st));
     this.legendFrame = frames.register('legend', () => this.scans.renderLegend());
-    this.liveFrame = frames.register('live', (parts) => this.drawLive(parts), { period: () => livePeriodMs(frames.frameInterval) });
+    // On a software renderer the live views change in the same frames, one a slot (liveSlotMs).
+    const software = softwareGl();
+    const slot = () => liveSlotMs(software, this.view.shown);
+    this.liveFrame = frames.register('live', (parts) => this.drawLive(parts), { period: () => livePeriodFor(frames.frameInterval, slot()), aligned: software });
     // The tip's numbers: read by people, so 5 a second (at 60 a second the text's repaint cost a
     // software renderer a third of its frames).
     this.tipTextFrame = frames.register('tiptext', () => {
       if (this.st.tip && this.st.connection === 'open') this.$('tipinfo').textContent = formatTip(this.st.tip);
     }, { period: 200, aligned: true });
 
-    this.view = new View3D($('view3d'), {
+    // The 3D view's host: three.js is loaded when the view is first opened.
+    this.view = new View3DHost($('view3d'), {
       onPickPoint: (x, y) => this.controls.pickTarget(x, y),
       onPickParticle: (id) => this.controls.selectParticle(id),
-    }, frames);
-    this.image2d = new Image2D($('image2d'), { cursorEl: $('img-cursor'), profileEl: $('profile'), profileInfoEl: $('profile-info'), onDrawn: () => this.map?.invalidate(),
+    }, frames, { software, slot });
+    this.image2d = new Image2D($('image2d'), { cursorEl: $('img-cursor'), profileEl: $('profile'), profileInfoEl: $('profile-info'), period: slot, onDrawn: () => this.map?.invalidate(),
       // The 3D view coloured as the image: one colour, one height, in both.
       onLevelled: (values, range) => {
         this.view.setColourSource(range ? { values, lo: range.lo, hi: range.hi } : null);
@@ -73,9 +78,10 @@ export class App {
       onPickParticle: (id) => this.controls.selectParticle(id),
       onPickPoint: (x, y) => this.controls.pickTarget(x, y),
       canTarget: () => this.session.hasLease,
-      // A software renderer (no GPU) pays for a whole frame whenever anything moves: the tip 20
-      // times a second there, every frame on a GPU.
-      livePeriod: () => (this.view.software ? 50 : 0),
+      announce: (text) => this.log.announce(text),
+      // A software renderer (no GPU) pays for a whole frame whenever anything moves: the tip in
+      // the live slots there, every frame on a GPU.
+      livePeriod: slot,
     }, frames);
     this.charts = new Charts($('chart-force'), $('chart-z'), $('chart-fd'), frames);
     this.haptic = new HapticPanel({
@@ -102,6 +108,7 @@ export class App {
     this.status = new StatusBar($, { demo: this.demo });
     this.log = new EventLog($('log'), $('announce'));
     this.replies = new Replies($);
+    this.pushStatus = new PushStatus($, frames, { state: () => this.st, speed: () => this.st.pushSpeed });
     this.conn = new Connection(this.session, {
       url: wsUrl(loc),
       open: (url) => (this.demo
@@ -123,7 +130,9 @@ export class App {
       session: this.session,
       view: this.view,
       map: () => this.map,
+      status: this.pushStatus,
       replies: this.replies,
+      announce: (text) => this.log.announce(text),
       send: (m) => this.conn.send(m),
       onScanRequested: () => this.scans.requested(),
     });
@@ -154,18 +163,25 @@ export class App {
     $('rec-refresh').addEventListener('click', () => this.records.refresh());
   }
 
-  /** Shows or hides the 3D companion view (remembered); hidden, it costs nothing per frame. */
+  /**
+   * Shows or hides the 3D companion view (remembered); hidden, it costs nothing per frame, and
+   * three.js is loaded only when it is first shown. Resolves once it is shown.
+   */
   show3d(on) {
     const $ = this.$;
     $('toggle-3d').setAttribute('aria-pressed', String(on));
     $('viewport').hidden = !on;
     $('layout').classList.toggle('with3d', on);
-    this.view.setShown(on);
     try {
       localStorage.setItem('nanopush.3d', on ? '1' : '0');
     } catch {
       // (storage refused: not remembered)
     }
+    return this.view.setShown(on).catch((e) => {
+      // (The server away: its module cannot be fetched now; the button tries again.)
+      this.log.log(`the 3D view could not load (${e.message}); try again once the server is back`, 'bad');
+      this.show3d(false);
+    });
   }
 
   /** Starts the page: the frame loop, the scene, the records and the connection. */
@@ -198,11 +214,15 @@ export class App {
       this.map.tipMoved();
       this.tipTextFrame.mark();
       this.haptic.update(st.tip?.t, st.tip?.haptic);
+      this.pushStatus.progressed();
     }
     if (parts.has('charts')) this.charts.update(st.trace);
   }
 
   onClose(ev, { wasOpen = true } = {}) {
+    // (Called before the Session forgets what the server said: the lease, the push.)
+    const { client, push } = this.st;
+    const hadLease = this.session.hasLease;
     // The shutdown message was logged when it came: do not say it twice. A refused attempt to
     // reconnect is no news (the status bar counts the attempts): once every 2 s, it would push
     // everything else out of the log while the server is down.
@@ -211,15 +231,24 @@ export class App {
     this.doc.body.classList.add('offline');
     this.$('offline').hidden = false;
     this.$('tipinfo').textContent = 'tip: unknown';
-    queueMicrotask(() => {
-      this.controls.renderPush();
-      this.map.invalidate();
-    });
-    if (this.session.hasLease) {
-      // The server frees the lease of a connection that closes, and stops its push or scan.
+    if (push) {
+      // The push it saw running: its outcome is unknown until the server is back.
+      this.pushStatus.closed(client);
+      const text = lostOnCloseText(push, hadLease);
+      this.log.log(text, 'warn');
+      this.log.announce(text);
+      if (push.by === client && this.replies.latest('reply-push') !== undefined) this.replies.show('reply-push', 'unknown', 'push outcome unknown: disconnected');
+    } else if (hadLease) {
       this.log.log(LEASE_LOST_ON_CLOSE, 'bad');
       this.log.announce(LEASE_LOST_ON_CLOSE);
     }
+    // "lease taken" no longer holds.
+    if (hadLease && this.replies.latest('reply-lease') !== undefined) this.replies.show('reply-lease', 'unknown', 'lease lost with the connection');
+    queueMicrotask(() => {
+      this.replies.closed(this.st.commands);
+      this.controls.renderPush();
+      this.map.invalidate();
+    });
   }
 
   /** One server message: the Session applies it; its event goes to the parts it concerns. */
@@ -229,7 +258,9 @@ export class App {
     switch (ev.kind) {
       case 'welcome':
         this.conn.send(commands.subscribe(STREAMS));
-        this.loadScene();
+        // The scene again only from a restarted server (it may run another); the first is
+        // fetched at start.
+        if (ev.restarted || !this.sceneLoading) this.loadScene();
         log.log(welcomeText(st));
         if (ev.restarted) this.onRestart();
         if (!st.lastRun) this.showLastFromHistory();
@@ -269,11 +300,13 @@ export class App {
         const r = ev.run;
         const text = describeRun(r);
         log.log(text, runClass(r));
-        controls.showLastRun(r, text);
+        const short = describeRun(r, { record: false });
+        controls.showLastRun(r, short);
         this.map.invalidate();
-        log.announce(text);
+        log.announce(short);
         this.records.noteRun(r);
         this.view.updateParticles(st.particles, controls.selected);
+        controls.particlesMoved(); // a scan centred on the particle follows it
         controls.renderPush();
         this.scans.renderStale();
         this.records.refresh();
@@ -311,13 +344,13 @@ export class App {
    */
   async showLastFromHistory() {
     if (this.demo) return;
-    const version = this.controls.lastRunVersion; // anything shown meanwhile wins
+    const version = this.pushStatus.version; // anything shown meanwhile wins
     try {
       const r = await fetch(apiUrl('/api/runs', this.loc));
       if (!r.ok) return;
       const [run] = await r.json();
-      if (!run || this.st.lastRun || this.st.push || this.controls.lastRunVersion !== version) return;
-      this.controls.showLastRunText(`last recorded run (${clockTime(run.modified * 1000)}): ${describeRun(run)}`, runClass(run));
+      if (!run || this.st.lastRun || this.st.push || this.pushStatus.version !== version) return;
+      this.pushStatus.showRun(`last recorded run (${clockTime(run.modified * 1000)}): ${describeRun(run, { record: false })}`, runClass(run));
     } catch {
       // (no history: nothing to show)
     }
@@ -328,7 +361,7 @@ export class App {
     const text = restartText(this.st.startedUnixMs);
     this.log.log(text, 'warn');
     this.log.announce(text);
-    this.controls.clearLastRun();
+    this.pushStatus.clearRun();
     this.st.lastRun = null; // the previous server's: the history says what it recorded
     this.charts.restartFd(-Infinity);
   }
@@ -342,6 +375,7 @@ export class App {
     const lost = st.lostPush;
     st.lostPush = null;
     if (!lost || st.push) return; // (still running: the state says so)
+    this.pushStatus.showRun(`push of #${lost.particle}: reading its outcome from the run history…`, 'unknown');
     let run = null;
     try {
       const r = await fetch(apiUrl('/api/runs', this.loc));
@@ -353,7 +387,10 @@ export class App {
     const cls = run ? runClass(run) : 'unknown';
     this.log.log(text, cls === 'unknown' ? 'warn' : cls);
     this.log.announce(text);
-    this.controls.showLastRunText(text, cls);
+    this.pushStatus.showRun(text, cls);
+    if (this.replies.latest('reply-push') !== undefined && this.$('reply-push').classList.contains('unknown')) {
+      this.replies.show('reply-push', cls, run ? pushEndedText(run) : 'push outcome unknown', this.$('reply-push').title);
+    }
     this.records.refresh();
   }
 
@@ -370,7 +407,13 @@ export class App {
     this.log.log(stateText(st));
   }
 
-  async loadScene() {
+  /** Fetches the scene (once at start, again from a restarted server) and applies it. */
+  loadScene() {
+    this.sceneLoading = this.fetchScene();
+    return this.sceneLoading;
+  }
+
+  async fetchScene() {
     if (this.demo) {
       const { demoScene } = await import('./demo.js');
       this.applyScene(demoScene());
@@ -381,6 +424,7 @@ export class App {
       if (!r.ok) throw new Error(`HTTP ${r.status}`);
       this.applyScene(await r.json());
     } catch (e) {
+      this.sceneLoading = null; // (tried again with the next welcome)
       this.log.log(`could not load /api/scene: ${e.message}`, 'bad');
     }
   }
@@ -399,7 +443,8 @@ export class App {
 export function start() {
   const app = new App(document, location);
   app.start();
-  const { session, view, image2d, map, charts, haptic, frames } = app;
-  window.nanopush = { session, view, image2d, map, charts, haptic, frames, app };
+  const { session, image2d, map, charts, haptic, frames } = app;
+  // `view`: the 3D view once opened (three.js loaded), else its host.
+  window.nanopush = { session, get view() { return app.view.view ?? app.view; }, image2d, map, charts, haptic, frames, app };
   return app;
 }

@@ -5,8 +5,8 @@
 // preview, texts) is pure (Node tests); Controls binds them to the page.
 import { commands } from './wire.js';
 import { controlState, runClass } from './session.js';
-import { formatLength, formatStagePoint } from './format.js';
-import { pusher } from './eventlog.js';
+import { formatLength } from './format.js';
+import { replyWords, replyTitle } from './words.js';
 
 /** Where each command's reply shows (an `<output>` id). */
 export const REPLY_OUTPUT = Object.freeze({ take_lease: 'reply-lease', release_lease: 'reply-lease', push: 'reply-push', scan: 'reply-scan', stop: 'reply-stop', haptic: 'reply-haptic' });
@@ -17,21 +17,23 @@ export function readNumber(text) {
   return v === '' ? undefined : Number(v);
 }
 
-/** A command's reply in its output: `#3 ok` or `#3 no_lease: push needs the lease`. */
+/** A command's reply in its output, in words: `lease taken`, `refused: push needs the lease`. */
 export function replyText(c) {
-  // A push's `ok` means it was accepted: how it ended comes with `run_done`.
-  if (c.status === 'ok') return c.type === 'push' ? `#${c.id} accepted` : `#${c.id} ok`;
-  return `#${c.id} ${c.code}: ${c.message}`;
+  return replyWords(c);
+}
+
+/**
+ * The push's reply once the push ended (`run_done`): its outcome in a word or two; the last run's
+ * line says the whole story.
+ */
+export function pushEndedText(run) {
+  const o = run.outcome;
+  return o === 'ok' ? 'push ended: ok' : o === 'stopped' ? 'push ended: stopped' : o === 'missed' ? 'push ended: missed the target' : `push ended: failed (${String(o).replace(/_/g, ' ')})`;
 }
 
 /** A particle in the push form's list: `#1 gold-coated latex (r 500 nm)`. */
 export function particleLabel(p) {
   return `#${p.id}${p.material ? ` ${p.material}` : ''} (r ${formatLength(p.radius)})`;
-}
-
-/** The banner of the push running. */
-export function pushNowText(push, client) {
-  return `Pushing #${push.particle} (${pusher(push, client)}) to ${formatStagePoint(push.path[push.path.length - 1])}`;
 }
 
 /** A target picked in the 3D view (µm), kept on the stage [0, rangeUm]². */
@@ -84,6 +86,29 @@ export function pushPreview(p, { running, hasLease, mode, distance, direction, t
 }
 
 /**
+ * The preview on the map: the selected particle's path from where it is to where the push would
+ * leave it (m), or null. 0° is +x (right on the map), 90° is +y (up).
+ */
+export function previewLine(preview) {
+  if (!preview || !(preview.lengthUm > 0)) return null;
+  const a = (preview.deg * Math.PI) / 180;
+  const { x, y } = preview.from;
+  return { from: [x * 1e-6, y * 1e-6], to: [(x + preview.lengthUm * Math.cos(a)) * 1e-6, (y + preview.lengthUm * Math.sin(a)) * 1e-6] };
+}
+
+/**
+ * Why Stop cannot act now, said when it is pressed anyway (a click, Esc): without a connection
+ * it cannot reach the server, and the server acts on its own (the lease holder gone, its push
+ * stopped); else the reason the controls give.
+ */
+export function stopRefusedText(state, why) {
+  if (state.connection !== 'open') {
+    return 'Stop cannot reach the server (not connected). A running server stops a push whose lease holder is gone on its own.';
+  }
+  return `Stop not sent: ${why.charAt(0).toLowerCase()}${why.slice(1)}.`;
+}
+
+/**
  * The scan form's start from the scene's own scan, made small enough that the smallest particle
  * spans at least 2 pixels (a 14 nm particle is not seen in a 50 µm, 256 px scan).
  */
@@ -117,7 +142,7 @@ export class Replies {
     const out = REPLY_OUTPUT[m.type];
     if (out) {
       this.lastIdByOutput.set(out, m.id);
-      this.show(out, 'pending', `#${m.id} sent…`);
+      this.show(out, 'pending', replyWords({ status: 'pending' }), replyTitle(m));
     }
   }
 
@@ -125,13 +150,27 @@ export class Replies {
   replied(ev) {
     if (!ev.command) return;
     const out = REPLY_OUTPUT[ev.command.type];
-    if (out && this.lastIdByOutput.get(out) === ev.id) this.show(out, ev.command.status, replyText(ev.command));
+    if (out && this.lastIdByOutput.get(out) === ev.id) this.show(out, ev.command.status, replyText(ev.command), replyTitle(ev.command));
   }
 
-  show(id, status, text) {
+  /** The connection closed: a command still waiting for its reply will get none. */
+  closed(commandsById) {
+    for (const [out, id] of this.lastIdByOutput) {
+      const c = commandsById.get(id);
+      if (c && c.code === 'disconnected') this.show(out, 'error', replyText(c), replyTitle(c));
+    }
+  }
+
+  /** The latest command sent to output `id` (its Session record's id), or undefined. */
+  latest(id) {
+    return this.lastIdByOutput.get(id);
+  }
+
+  show(id, status, text, title = '') {
     const el = this.$(id);
     el.className = `reply ${status}`;
     el.textContent = text;
+    el.title = title;
   }
 }
 
@@ -146,7 +185,7 @@ export class Controls {
    * @param {(msg: object) => object | null} deps.send sends a command (Connection.send)
    * @param {() => void} deps.onScanRequested the operator asked for a scan
    */
-  constructor($, doc, { session, view, map = () => null, replies, send, onScanRequested }) {
+  constructor($, doc, { session, view, map = () => null, status, replies, send, onScanRequested, announce = () => {} }) {
     this.$ = $;
     this.doc = doc;
     this.session = session;
@@ -154,6 +193,8 @@ export class Controls {
     this.view = view;
     this.map = map;
     this.replies = replies;
+    this.status = status;
+    this.announce = announce;
     this.send = send;
     this.onScanRequested = onScanRequested;
     this.selected = null; // the particle to push (id)
@@ -162,7 +203,6 @@ export class Controls {
     this.toleranceTouched = false; // the operator typed a tolerance: keep it
     this.toleranceShown = undefined; // the server's tolerance the field was last set from
     this.stopPressed = false; // Stop went on the pointer's press: ignore the click that follows
-    this.lastRunVersion = 0; // bumped by every change of the last run's line
     this.bind();
   }
 
@@ -211,6 +251,7 @@ export class Controls {
     };
     // Viewers get no forms they cannot use: the reason says how to command instead.
     const viewer = this.st.role === 'viewer';
+    if (this.st.role) this.lastRole = this.st.role; // the role before a disconnection
     $('push-form').hidden = viewer;
     $('scan-form').hidden = viewer;
     $('hap-fs').hidden = viewer;
@@ -218,7 +259,11 @@ export class Controls {
     set($('release-lease'), c.releaseLease);
     set($('push-fs'), c.push);
     set($('scan-fs'), c.scan);
-    set($('stop-btn'), c.stop);
+    // Stop stays pressable (a careless press, Esc) and says why it cannot act: aria-disabled.
+    const stop = $('stop-btn');
+    stop.setAttribute('aria-disabled', String(!c.stop.enabled));
+    stop.title = c.stop.why;
+    this.stopWhy = c.stop.enabled ? null : c.stop.why;
     set($('hap-fs'), c.haptic);
     set($('hap-engage'), c.hapticEngage);
     // Buttons inside a disabled fieldset: give them the reason as a tooltip too.
@@ -231,7 +276,7 @@ export class Controls {
       const next = { 'take-lease': 'release-lease', 'release-lease': 'take-lease', 'hap-engage': 'hap-release' }[focused.id];
       const n = next && $(next);
       if (n && !n.disabled) n.focus();
-      else $('stop-btn').disabled ? this.doc.querySelector('.map-svg')?.focus() : $('stop-btn').focus();
+      else this.stopWhy ? this.doc.querySelector('.map-svg')?.focus() : $('stop-btn').focus();
     }
   }
 
@@ -239,19 +284,16 @@ export class Controls {
   renderPush() {
     const { st, view } = this;
     const p = st.push;
-    const el = this.$('push-now');
     this.map()?.invalidate();
     if (p) {
       view.setPushPath(p.path);
       view.setPreview(null);
       view.setTarget(null);
-      el.textContent = pushNowText(p, st.client);
-      el.hidden = false;
     } else {
       view.setPushPath(null);
-      el.hidden = true;
       this.updatePreview();
     }
+    this.status.render();
   }
 
   updatePreview() {
@@ -266,6 +308,7 @@ export class Controls {
     this.map()?.setTarget(target ? target.x : null, target ? target.y : null);
     if (preview) view.setPreview(preview.from, preview.deg, preview.lengthUm);
     else view.setPreview(null);
+    this.map()?.setPreview(previewLine(preview));
   }
 
   /** The scene's particles and stage in the forms (and the 3D view's particles). */
@@ -305,31 +348,22 @@ export class Controls {
     this.renderPush();
   }
 
-  /** A finished push's outcome under Stop, in its colour; the push's reply says it too. */
+  /** A finished push's outcome under Stop, in its colour; the push's reply says it in a word. */
   showLastRun(run, text) {
-    this.showLastRunText(text, runClass(run));
+    this.status.showRun(text, runClass(run));
     const out = this.$('reply-push');
-    if (out.textContent) {
-      out.className = `reply ${runClass(run)}`;
-      out.textContent = `${out.textContent.replace(/ (accepted|ok)$/, '')} ${run.outcome}`;
+    if (out.textContent) this.replies.show('reply-push', runClass(run), pushEndedText(run), out.title);
+  }
+
+  /** Stop pressed (the button, Esc): sent when it may be; else why not, said and announced. */
+  stop() {
+    if (!this.stopWhy) {
+      this.guarded('reply-stop', () => commands.stop());
+      return;
     }
-  }
-
-  /** The last run's line: `cls` good, neutral, warn, bad or unknown. */
-  showLastRunText(text, cls) {
-    this.lastRunVersion = (this.lastRunVersion ?? 0) + 1;
-    const el = this.$('lastrun');
-    el.textContent = text;
-    el.className = `lastrun ${cls}`;
-    el.hidden = false;
-  }
-
-  /** The server restarted: the last run shown was the previous server's. */
-  clearLastRun() {
-    this.lastRunVersion = (this.lastRunVersion ?? 0) + 1;
-    const el = this.$('lastrun');
-    el.textContent = '';
-    el.hidden = true;
+    const text = stopRefusedText(this.st, this.stopWhy);
+    this.replies.show('reply-stop', 'error', text);
+    this.announce(text);
   }
 
   /** A point picked in the 3D view: the push target. */
@@ -356,16 +390,16 @@ export class Controls {
     // Stop goes on the pointer's press, not its release (a click): one event sooner. The click
     // that follows is then ignored; a keyboard's Enter or Space still clicks.
     $('stop-btn').addEventListener('pointerdown', (e) => {
-      if (e.button !== 0 || $('stop-btn').disabled) return;
+      if (e.button !== 0) return;
       this.stopPressed = true;
-      this.guarded('reply-stop', () => commands.stop());
+      this.stop();
     });
     $('stop-btn').addEventListener('click', () => {
       if (this.stopPressed) {
         this.stopPressed = false;
         return;
       }
-      this.guarded('reply-stop', () => commands.stop());
+      this.stop();
     });
     $('push-form').addEventListener('submit', (e) => {
       e.preventDefault();
@@ -395,11 +429,12 @@ export class Controls {
     for (const id of ['hap-nm', 'hap-po']) $(id).addEventListener('input', () => { delete $(id).dataset.fromServer; });
     for (const id of ['scan-size', 'scan-px']) $(id).addEventListener('input', () => { this.scanFormTouched = true; });
     $('tolerance').addEventListener('input', () => { this.toleranceTouched = true; });
+    // Esc is Stop wherever the focus is; an operator page says why when Stop cannot act.
     doc.addEventListener('keydown', (e) => {
-      if (e.key === 'Escape' && !$('stop-btn').disabled) {
-        e.preventDefault();
-        $('stop-btn').click();
-      }
+      if (e.key !== 'Escape' || e.defaultPrevented) return;
+      if (this.stopWhy && (this.st.role ?? this.lastRole) !== 'operator') return;
+      e.preventDefault();
+      this.stop();
     });
   }
 }

@@ -7,8 +7,22 @@ import { holderText } from './session.js';
 /** Lines the log keeps. */
 export const LOG_LINES = 60;
 
-/** Said when the connection closes while this page holds the lease. */
-export const LEASE_LOST_ON_CLOSE = 'you lost the lease: the connection closed (the server stops a push or scan whose lease holder is gone); take it again once reconnected';
+/**
+ * Said when the connection closes while this page holds the lease and no push runs. The page
+ * cannot tell a network gone from a server gone: what a running server does is said as such.
+ */
+export const LEASE_LOST_ON_CLOSE = 'you lost the lease: the connection closed (a server still running frees it and stops the scan its holder ran); take it again once reconnected';
+
+/**
+ * Said when the connection closes while a push runs (`push`: the Session's, `hadLease`: this
+ * page held the lease): its outcome is unknown until the server is back.
+ */
+export function lostOnCloseText(push, hadLease) {
+  const head = `the connection closed while the push of #${push.particle} ran: its outcome is unknown until the server is back`;
+  return hadLease
+    ? `${head}. You lost the lease with the connection: a server still running stops a push whose lease holder is gone, and a server that stopped stopped it; take the lease again once reconnected`
+    : head;
+}
 
 export function welcomeText(st) {
   return `welcome: client ${st.client}${st.name ? ` (${st.name})` : ''}, ${st.role}, scene ${st.scene}, ${st.tickHz} Hz`;

@@ -27,10 +27,12 @@ export function formatLength(m, { digits, ref = m } = {}) {
   return `${(m * 1e6).toFixed(a < 1e-5 ? 2 : 1)} µm`;
 }
 
-/** A point (m) in the unit that suits its larger coordinate: `(50.00, 60.00) µm`, `(50.0, 60.0) nm`. */
+/**
+ * A stage point (m) in µm, as the map's axes, the forms and the tip readout have it (one frame on
+ * the whole page): `(50.00, 60.00) µm`; also near the origin, never in nm.
+ */
 export function formatPoint([x, y]) {
-  const u = lengthUnit(Math.max(Math.abs(x), Math.abs(y)));
-  return `(${(x * u.scale).toFixed(u.name === 'nm' ? 1 : 2)}, ${(y * u.scale).toFixed(u.name === 'nm' ? 1 : 2)}) ${u.name}`;
+  return `(${(x * 1e6).toFixed(2)}, ${(y * 1e6).toFixed(2)}) µm`;
 }
 
 /** A stage position (m) in µm with nm resolution: `(40.000, 31.500) µm`. */
@@ -38,11 +40,14 @@ export function formatStagePoint([x, y]) {
   return `(${(x * 1e6).toFixed(3)}, ${(y * 1e6).toFixed(3)}) µm`;
 }
 
-/** The tip readout of a telemetry sample (the Session's `tip`). */
+/**
+ * The tip readout of a telemetry sample (the Session's `tip`): where it is on the stage, its
+ * height, the force on it and the deflection signal. The phase is the status bar's, the pushed
+ * particle's estimate the push's progress line (src/pushprogress.js): the readout stays one line.
+ */
 export function formatTip(t) {
-  const [x, y, z] = t.stage;
-  return `tip x ${(x * 1e6).toFixed(3)} µm · y ${(y * 1e6).toFixed(3)} µm · z ${(z * 1e9).toFixed(1)} nm · force ${((t.force ?? 0) * 1e9).toFixed(2)} nN · ${t.volts.toFixed(3)} V · ${t.phase}` +
-    (t.estimate ? ` · particle at ${formatStagePoint(t.estimate)}` : '');
+  const [, , z] = t.stage;
+  return `tip ${formatStagePoint(t.stage)} · z ${(z * 1e9).toFixed(1)} nm · ${((t.force ?? 0) * 1e9).toFixed(2)} nN · ${t.volts.toFixed(3)} V`;
 }
 
 /** A file size: `512 B`, `2.0 KiB`, `3.5 MiB`; '' for a non-number. */

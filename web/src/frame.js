@@ -21,6 +21,30 @@ export function livePeriodMs(frameIntervalMs) {
   return f > 40 ? Math.min(1000, Math.max(250, 3 * f)) : 0;
 }
 
+/**
+ * The live views' slot (ms) on a software renderer (no GPU: SwiftShader, llvmpipe), 0 on a GPU.
+ * Such a renderer's browser composites the whole page again in its GPU process for each frame in
+ * which anything changed, however small (a 12 px dot moved: 42 ms of a 1600×1000 frame on a busy
+ * 2-core machine; 12 ms at 800×500; 62 ms with the 3D view shown, and a frame the 3D view is drawn
+ * in twice that): the number of frames that change, not what changes in them, sets its frame
+ * rate. So the live views (the tip, the pushed particle, the map, the plots, the numbers, the 3D
+ * view) change in the same frames, one a slot: 10 a second with the map alone, 5 with the 3D
+ * view shown, about half of that process's time.
+ */
+export function liveSlotMs(software, with3d = false) {
+  return software ? (with3d ? 200 : 100) : 0;
+}
+
+/**
+ * The live views' period (ms) while frames come every `frameIntervalMs`: `livePeriodMs`, and with
+ * a slot (`slotMs` > 0: a software renderer) whole slots, at least one (views aligned to them
+ * change in the same frames).
+ */
+export function livePeriodFor(frameIntervalMs, slotMs) {
+  const p = livePeriodMs(frameIntervalMs);
+  return slotMs ? Math.max(1, Math.ceil(p / slotMs)) * slotMs : p;
+}
+
 const report = globalThis.reportError?.bind(globalThis) ?? ((e) => setTimeout(() => { throw e; }));
 
 /** A draw slower than this (ms) makes its view wait as long again before the next. */
@@ -47,8 +71,8 @@ export class FrameScheduler {
 
   /**
    * Registers a view; returns its handle: `mark(...parts)` makes it dirty (the parts, any
-   * values, are handed to the next draw as a Set), `frames` counts its draws and `ms` is how long
-   * the last one took.
+   * values, are handed to the next draw as a Set), `frames` counts its draws, `ms` is how long
+   * the last one took and `totalMs` all of them.
    * @param {string} name
    * @param {(parts: Set<unknown>, now: number) => void} draw
    * @param {{period?: number | (() => number), waitAfterSlow?: boolean, aligned?: boolean}} [opts]
@@ -71,6 +95,7 @@ export class FrameScheduler {
       notBefore: 0, // after a slow draw: not before this time
       frames: 0,
       ms: 0,
+      totalMs: 0, // all its draws together (the bench's profile: where frames go)
       mark(...parts) {
         view.dirty = true;
         for (const p of parts) view.parts.add(p);
@@ -109,6 +134,7 @@ export class FrameScheduler {
       }
       const dt = this.clock() - t0;
       v.ms = dt;
+      v.totalMs += dt;
       v.frames++;
       v.notBefore = v.waitAfterSlow && dt > SLOW_DRAW_MS ? this.clock() + dt : 0;
     }

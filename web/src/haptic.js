@@ -10,6 +10,7 @@
 // tests).
 import uPlot from 'uplot';
 import { StatusPoller, deviceFaultsLine } from './devicefaults.js';
+import { hapticPhaseWords } from './words.js';
 
 const SECONDS = 10;
 /** Least time between two redraws of the plot (ms). */
@@ -24,7 +25,7 @@ export const DEVICE_FAULTS_PERIOD_MS = 2000;
 export function hapticFields(h) {
   return {
     link: { text: h.link, cls: h.link === 'up' ? 'good' : 'bad' },
-    phase: { text: h.phase },
+    phase: { text: hapticPhaseWords(h.phase) },
     engaged: { text: h.phase === 'engaged' || h.phase === 'pushing' ? 'yes' : 'no' },
     handle: { text: h.handle_m == null ? '–' : `${(h.handle_m * 1e3).toFixed(2)} mm` },
     hand: { text: h.force_n == null ? '–' : `${h.force_n.toFixed(3)} N` },

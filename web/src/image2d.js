@@ -1,6 +1,7 @@
 // The 2D height image, as an AFM user reads one (Gwyddion's views): the scan in false colour
-// with physical axes in a unit chosen for its size (nm or µm), a scale bar, a labelled colour
-// bar, plane levelling (mean plane / line by line / none: the maths in src/heightmap.js), a
+// with axes in the stage's frame (µm, as the tip readout, the forms and the messages: one frame
+// on the whole page, labelled "stage x", "stage y"), a scale bar (a length: nm or µm, chosen for
+// the scan's size), a labelled colour bar, plane levelling (mean plane / line by line / none: the maths in src/heightmap.js), a
 // cursor readout of x, y and height, and a line profile (drag a line across the image, see the
 // height along it in nm; or put its ends at the keyboard cursor of the map layer,
 // src/mapoverlay.js, which sits on top and takes the pointer). Without a scan it shows the whole stage, axes and all, so the map layer has
@@ -29,6 +30,33 @@ export function niceStep(span, n = 5) {
   return (f < 1.5 ? 1 : f < 3.5 ? 2 : f < 7.5 ? 5 : 10) * p;
 }
 
+/**
+ * The ticks of a stage axis over [lo, lo + span] (m): stage coordinates at multiples of a nice
+ * step (about `n` of them), each with its label in µm, as many decimals as the step needs:
+ * [{m, label}]. A scan from 25 to 75 µm is labelled 30, 40 … 70, not 0 … 50.
+ */
+export function stageTicks(lo, span, n = 5) {
+  const stepUm = niceStep(span * 1e6, n);
+  const decimals = Math.max(0, Math.ceil(-Math.log10(stepUm) - 1e-9));
+  const loUm = lo * 1e6;
+  const hiUm = (lo + span) * 1e6;
+  const out = [];
+  // Indices of the step, not a running sum: no drift over many steps.
+  for (let k = Math.ceil(loUm / stepUm - 1e-9); k * stepUm <= hiUm + 1e-9 * stepUm; k++) {
+    const um = k * stepUm;
+    out.push({ m: um * 1e-6, label: (Math.abs(um) < stepUm / 2 ? 0 : um).toFixed(decimals) });
+  }
+  return out;
+}
+
+/** The cursor readout at stage point (x, y) m, over a height in m (NaN: none): one frame, µm. */
+export function readoutText(x, y, h) {
+  return `stage x ${(x * 1e6).toFixed(3)} µm, y ${(y * 1e6).toFixed(3)} µm, height ${Number.isFinite(h) ? `${(h * 1e9).toFixed(2)} nm` : '–'}`;
+}
+
+/** The readout with the cursor off the image. */
+export const NO_READOUT = 'stage x –, y –, height –';
+
 function el(name, attrs = {}, parent = null) {
   const e = document.createElementNS(SVG, name);
   for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, String(v));
@@ -39,7 +67,8 @@ function el(name, attrs = {}, parent = null) {
 export class Image2D {
   /**
    * @param {HTMLElement} container
-   * @param {{cursorEl?: HTMLElement, profileEl?: HTMLElement, profileInfoEl?: HTMLElement}} opts
+   * @param {{cursorEl?: HTMLElement, profileEl?: HTMLElement, profileInfoEl?: HTMLElement, period?: number}} opts
+   *   `period`: at most one draw per slot of this many ms (0: every frame)
    * @param {import('./frame.js').FrameScheduler} scheduler the page's animation-frame loop
    */
   constructor(container, opts, scheduler) {
@@ -47,7 +76,9 @@ export class Image2D {
     this.opts = opts ?? {};
     this.scan = null;
     this.mode = 'plane';
-    this.frame = scheduler.register('image2d', () => this.draw());
+    // In the page's live slots (src/frame.js, liveSlotMs): a scan's lines and a profile's drag
+    // change the image in the same frames as the map and the plots.
+    this.frame = scheduler.register('image2d', () => this.draw(), { period: this.opts.period ?? 0, aligned: true });
     this.drawnVersion = -1;
     this.levelled = null;
     this.range = null;
@@ -206,33 +237,22 @@ export class Image2D {
 
   drawAxes(g) {
     const sc = this.extent();
-    const u = g.unit;
     const axes = el('g', { class: 'axes' }, this.svg);
     el('rect', { x: g.x, y: g.y, width: g.w, height: g.h, class: 'frame' }, axes);
-    const tick = (span, horizontal) => {
-      const step = niceStep(span * u.scale, 5) / u.scale;
-      for (let v = 0; v <= span * (1 + 1e-9); v += step) {
-        const f = v / span;
-        const label = `${Number((v * u.scale).toPrecision(6))}`;
-        if (horizontal) {
-          const x = g.x + f * g.w;
-          el('line', { x1: x, x2: x, y1: g.y + g.h, y2: g.y + g.h + 5, class: 'tick' }, axes);
-          const t = el('text', { x, y: g.y + g.h + 17, class: 'xtick', 'text-anchor': 'middle', 'data-value-m': v }, axes);
-          t.textContent = label;
-        } else {
-          const y = g.y + g.h - f * g.h;
-          el('line', { x1: g.x - 5, x2: g.x, y1: y, y2: y, class: 'tick' }, axes);
-          const t = el('text', { x: g.x - 8, y: y + 4, class: 'ytick', 'text-anchor': 'end', 'data-value-m': v }, axes);
-          t.textContent = label;
-        }
-      }
-    };
-    tick(sc.x_real, true);
-    tick(sc.y_real, false);
+    for (const t of stageTicks(sc.x_offset, sc.x_real)) {
+      const x = g.x + ((t.m - sc.x_offset) / sc.x_real) * g.w;
+      el('line', { x1: x, x2: x, y1: g.y + g.h, y2: g.y + g.h + 5, class: 'tick' }, axes);
+      el('text', { x, y: g.y + g.h + 17, class: 'xtick', 'text-anchor': 'middle', 'data-value-m': t.m }, axes).textContent = t.label;
+    }
+    for (const t of stageTicks(sc.y_offset, sc.y_real)) {
+      const y = g.y + g.h - ((t.m - sc.y_offset) / sc.y_real) * g.h;
+      el('line', { x1: g.x - 5, x2: g.x, y1: y, y2: y, class: 'tick' }, axes);
+      el('text', { x: g.x - 8, y: y + 4, class: 'ytick', 'text-anchor': 'end', 'data-value-m': t.m }, axes).textContent = t.label;
+    }
     const xl = el('text', { x: g.x + g.w / 2, y: g.y + g.h + 34, class: 'axis-label', 'text-anchor': 'middle' }, axes);
-    xl.textContent = `x (${u.name})`;
+    xl.textContent = 'stage x (µm)';
     const yl = el('text', { x: 14, y: g.y + g.h / 2, class: 'axis-label', 'text-anchor': 'middle', transform: `rotate(-90 14 ${g.y + g.h / 2})` }, axes);
-    yl.textContent = `y (${u.name})`;
+    yl.textContent = 'stage y (µm)';
   }
 
   drawScaleBar(g) {
@@ -337,7 +357,7 @@ export class Image2D {
   }
 
   pointerLeave() {
-    if (this.opts.cursorEl) this.opts.cursorEl.textContent = 'x –, y –, height –';
+    if (this.opts.cursorEl) this.opts.cursorEl.textContent = NO_READOUT;
   }
 
   /** The line profile's start or end at stage point (x, y) m (the keyboard's way to draw it). */
@@ -366,23 +386,18 @@ export class Image2D {
     this.readoutAt(e.x_offset + fx * e.x_real, e.y_offset + fy * e.y_real);
   }
 
-  /** The readout for stage point (x, y) m: position in the image, on the stage, and height. */
+  /** The readout for stage point (x, y) m: where it is on the stage, and the height there. */
   readoutAt(sx, sy) {
     const out = this.opts.cursorEl;
     if (!out) return;
-    const sc = this.extent();
-    const x = sx - sc.x_offset;
-    const y = sy - sc.y_offset;
-    const u = lengthUnit(Math.max(sc.x_real, sc.y_real));
     let v = NaN;
-    if (this.scan && this.levelled) {
-      const i = Math.min(sc.xres - 1, Math.max(0, Math.round((x / sc.x_real) * sc.xres - 0.5)));
-      const j = Math.min(sc.yres - 1, Math.max(0, Math.round((y / sc.y_real) * sc.yres - 0.5)));
+    const sc = this.scan;
+    if (sc && this.levelled) {
+      const i = Math.min(sc.xres - 1, Math.max(0, Math.round(((sx - sc.x_offset) / sc.x_real) * sc.xres - 0.5)));
+      const j = Math.min(sc.yres - 1, Math.max(0, Math.round(((sy - sc.y_offset) / sc.y_real) * sc.yres - 0.5)));
       v = this.levelled[j * sc.xres + i];
     }
-    const d = u.name === 'nm' ? 1 : 3;
-    out.textContent = `x ${(x * u.scale).toFixed(d)} ${u.name}, y ${(y * u.scale).toFixed(d)} ${u.name}` +
-      ` (stage ${(sx * 1e6).toFixed(3)}, ${(sy * 1e6).toFixed(3)} µm), height ${Number.isFinite(v) ? `${(v * 1e9).toFixed(2)} nm` : '–'}`;
+    out.textContent = readoutText(sx, sy, v);
   }
 
   /** Recomputes the profile along the drawn line and shows it. */
@@ -392,7 +407,7 @@ export class Image2D {
     const info = this.opts.profileInfoEl;
     if (!sc || !l) {
       this.profile = null;
-      if (info) info.textContent = sc ? 'Drag a line across the image to see its profile.' : '';
+      if (info) info.textContent = ''; // (the title says to drag a line)
       if (this.plot) this.plot.setData([[], []]);
       return;
     }

@@ -18,9 +18,10 @@ function bootError(e) {
 }
 
 // The token of the URL is exchanged for a session cookie first and removed from the address bar
-// (src/connection.js, `exchangeToken`); the page then connects with the cookie.
-// A server that does not know this person says so on the page (the page still starts, and
-// connects once it does).
+// (src/connection.js, `exchangeToken`); the page then connects with the cookie. A page that
+// exchanged none asks whether the server knows this person (its cookie): one that does not is
+// told so on the page (the page still starts, and connects once it does). One request to
+// /api/session either way.
 function signInNote(text) {
   const el = document.getElementById('boot-error');
   if (!text || !el) return;
@@ -30,8 +31,8 @@ function signInNote(text) {
 
 import('./connection.js')
   .then(async (c) => {
-    await c.exchangeToken(location);
-    if (!new URLSearchParams(location.search).has('demo')) signInNote(await c.signInNote());
+    const signedIn = await c.exchangeToken(location);
+    if (!signedIn && !new URLSearchParams(location.search).has('demo')) signInNote(await c.signInNote());
   })
   .then(() => (view === 'monitor' ? import('./monitor.js') : import('./app.js')))
   .then((page) => page.start())

@@ -1,18 +1,24 @@
 // The height image as the live map: an SVG layer over it (src/image2d.js) with the particles
-// where the controller believes they are (solid rings, the selected one highlighted) and where
-// the scan found them (dashed rings), the tip, the planned push path, the live push trail, the
-// push target and a keyboard cursor. Picking there: a click on a particle selects it, a click
-// elsewhere picks the push target; by keyboard, the arrows move the cursor (Shift: ten times
-// further), Enter picks what is under it, `[` / `]` go to the previous / next particle, `s` and
-// `e` put the line profile's start and end at the cursor. Drawn by the page's frame loop only
-// when something changed, at most 10 times a second; the tip and the pushed particle's estimate,
-// which move every frame, are small elements of their own moved by a CSS transform (no repaint
-// of the SVG layer: a software renderer redrew the whole layer each frame, 28 frames/s instead
-// of 60 at 1600×1000). On a software renderer the tip moves 20 times a second, in the same
-// frames as the map and the plots (the frame loop's aligned periods), so every other frame is
-// free.
-// `toPx`, `toStage`, `nearestParticle`, `stepCursor`, `foundParticles` and `TrailBuffer` are pure
-// (Node tests).
+// where the controller believes they are (solid rings labelled with their ids, the selected one
+// highlighted) and where the scan found them (dashed rings), the tip, the form's push preview
+// (the selected particle's path to where the push would leave it, an arrow and its end ring),
+// the planned push path, the live push trail, the push target and a keyboard cursor. A ring is
+// at least MIN_RING_PX in radius, wider than the tip's dot: a particle under the tip (a new page,
+// before any scan) still shows. During a push the pushed particle's ring moves with the
+// controller's live estimate, and a faint ring stays where it started. Picking there: a click
+// on a particle selects it, a click elsewhere picks the push target; by keyboard, the arrows
+// move the cursor (Shift: ten times further), Enter picks what is under it, `[` / `]` go to the
+// previous / next particle, `s` and `e` put the line profile's start and end at the cursor; a
+// pick is announced to screen readers. Drawn by the page's frame loop only when something
+// changed, at most 10 times a second; the tip and the pushed particle's ring, which move every
+// frame, are small elements of their own moved by a CSS transform (no repaint of the SVG layer:
+// a software renderer redrew the whole layer each frame, 28 frames/s instead of 60 at
+// 1600×1000). On a software renderer they move 20 times a second, in the same frames as the map
+// and the plots (the frame loop's aligned periods), so every other frame is free.
+// Everything is placed in the stage's frame (m), as the axes are labelled.
+// `toPx`, `toStage`, `nearestParticle`, `stepCursor`, `foundParticles`, `ringPx`, `arrowHead`
+// and `TrailBuffer` are pure (Node tests).
+import { formatPoint } from './format.js';
 
 const SVG = 'http://www.w3.org/2000/svg';
 
@@ -53,6 +59,30 @@ export function stepCursor(cur, key, shift, e) {
   if (!d) return null;
   const clamp = (v, lo, span) => Math.min(lo + span, Math.max(lo, v));
   return [clamp(cur[0] + d[0] * f * e.x_real, e.x_offset, e.x_real), clamp(cur[1] + d[1] * f * e.y_real, e.y_offset, e.y_real)];
+}
+
+/** The smallest ring drawn (CSS px): wider than the tip's 12 px dot with its border. */
+export const MIN_RING_PX = 10;
+
+/** A particle's ring radius (CSS px) at `k` CSS px per m: its radius, at least MIN_RING_PX. */
+export function ringPx(radiusM, k) {
+  return Math.max(MIN_RING_PX, radiusM * k);
+}
+
+/**
+ * The points (px) of an arrow head at `to`, pointing away from `from`: `len` long, `half` wide
+ * on each side; null when the two points are one.
+ */
+export function arrowHead(from, to, len = 10, half = 5) {
+  const dx = to[0] - from[0];
+  const dy = to[1] - from[1];
+  const d = Math.hypot(dx, dy);
+  if (!(d > 0)) return null;
+  const ux = dx / d;
+  const uy = dy / d;
+  const bx = to[0] - ux * len;
+  const by = to[1] - uy * len;
+  return [to, [bx - uy * half, by + ux * half], [bx + uy * half, by - ux * half]];
 }
 
 /**
@@ -110,6 +140,7 @@ export class MapOverlay {
    * @param {(id: number) => void} opts.onPickParticle
    * @param {(xUm: number, yUm: number) => void} opts.onPickPoint a push target (µm)
    * @param {() => boolean} opts.canTarget whether a target may be picked now (the lease holder)
+   * @param {(text: string) => void} [opts.announce] says a pick to screen readers
    * @param {() => number} [opts.livePeriod] ms between moves of the tip (0: every frame)
    * @param {import('./frame.js').FrameScheduler} scheduler
    */
@@ -119,6 +150,7 @@ export class MapOverlay {
     this.scanParticles = []; // where the shown scan found particles (m): {x, y, radius}
     this.trail = new TrailBuffer();
     this.target = null; // [x, y] m
+    this.preview = null; // the form's push preview {from, to} m, or null
     this.cursor = null; // the keyboard cursor [x, y] m, null until the map has focus
     this.frame = scheduler.register('map', () => this.draw(), { period: 100, aligned: true });
     this.liveFrame = scheduler.register('map-live', () => this.drawLive(), { period: opts.livePeriod ?? 0, aligned: true });
@@ -131,6 +163,11 @@ export class MapOverlay {
     const g = el('g', { 'clip-path': `url(#${this.clipId})` }, svg);
     this.gScan = el('g', { class: 'scan-particles' }, g);
     this.gBelief = el('g', { class: 'belief' }, g);
+    this.gLabels = el('g', { class: 'labels' }, g);
+    this.previewMark = el('g', { class: 'push-preview' }, g);
+    this.previewLine = el('line', {}, this.previewMark);
+    this.previewHead = el('polygon', {}, this.previewMark);
+    this.previewEnd = el('circle', {}, this.previewMark);
     this.path = el('polyline', { class: 'push-path' }, g);
     this.trailLine = el('polyline', { class: 'push-trail' }, g);
     this.targetMark = el('g', { class: 'target' }, g);
@@ -145,9 +182,13 @@ export class MapOverlay {
       d.setAttribute('aria-hidden', 'true');
       return d;
     };
-    this.estimate = dot('estimate');
+    // The pushed particle, where the controller's estimate has it now: a ring with its label.
+    this.pushed = dot('pushed');
+    this.pushedLabel = document.createElement('span');
+    this.pushed.append(this.pushedLabel);
+    this.pushedSize = -1;
     this.tip = dot('tip');
-    image.container.append(svg, this.estimate, this.tip);
+    image.container.append(svg, this.pushed, this.tip);
     this.bind();
     new ResizeObserver(() => this.frame.mark()).observe(image.container);
   }
@@ -169,6 +210,12 @@ export class MapOverlay {
     this.invalidate();
   }
 
+  /** The form's push preview ({from, to} m: src/controls.js `previewLine`), or null. */
+  setPreview(p) {
+    this.preview = p;
+    this.invalidate();
+  }
+
   /** The push target (µm), or null. */
   setTarget(xUm, yUm) {
     this.target = xUm === null || xUm === undefined ? null : [xUm * 1e-6, yUm * 1e-6];
@@ -186,7 +233,15 @@ export class MapOverlay {
     this.liveFrame.mark();
   }
 
-  /** The tip and the pushed particle's estimate: moved by a transform, every frame. */
+  /** The pushed particle during a push (the Session's), or null. */
+  pushedParticle(st) {
+    return st.push ? (st.particles ?? []).find((p) => p.id === st.push.particle) ?? null : null;
+  }
+
+  /**
+   * The tip and the pushed particle's ring, at the controller's live estimate (where the push
+   * started until the estimate comes): moved by a transform, every frame.
+   */
   drawLive() {
     const g = this.image.geometry();
     const st = this.opts.state();
@@ -201,7 +256,18 @@ export class MapOverlay {
       if (node.hidden === show) node.hidden = !show;
     };
     place(this.tip, st.tip ? st.tip.stage : null);
-    place(this.estimate, st.push && Array.isArray(st.tip?.estimate) ? st.tip.estimate : null);
+    const p = this.pushedParticle(st);
+    if (p && g) {
+      const r = Math.round(ringPx(p.radius, g.w / e.x_real));
+      if (r !== this.pushedSize) {
+        this.pushedSize = r;
+        Object.assign(this.pushed.style, { width: `${2 * r}px`, height: `${2 * r}px`, margin: `${-r}px 0 0 ${-r}px` });
+      }
+      const text = `#${p.id}`;
+      if (this.pushedLabel.textContent !== text) this.pushedLabel.textContent = text;
+    }
+    const at = p ? (Array.isArray(st.tip?.estimate) ? st.tip.estimate : st.push.path?.[0] ?? [p.x, p.y]) : null;
+    place(this.pushed, at);
   }
 
   draw() {
@@ -218,7 +284,9 @@ export class MapOverlay {
     const px = (x, y) => toPx(g, e, x, y);
     const k = g.w / e.x_real; // CSS px per m
     for (const [a, v] of Object.entries({ x: g.x, y: g.y, width: g.w, height: g.h })) setA(this.clipRect, a, r1(v));
-    const rings = (group, ps, cls, sel) => {
+    const sel = this.opts.selected();
+    const pushedId = st.push ? st.push.particle : null;
+    const rings = (group, ps, cls) => {
       while (group.childElementCount > ps.length) group.lastChild.remove();
       while (group.childElementCount < ps.length) el('circle', {}, group);
       ps.forEach((p, i) => {
@@ -226,18 +294,37 @@ export class MapOverlay {
         const [x, y] = px(p.x, p.y);
         setA(c, 'cx', r1(x));
         setA(c, 'cy', r1(y));
-        setA(c, 'r', r1(Math.max(4, p.radius * k)));
-        setA(c, 'class', `${cls}${sel !== null && p.id === sel ? ' selected' : ''}`);
+        setA(c, 'r', r1(ringPx(p.radius, k)));
+        // The pushed particle's ring moves with its estimate (drawLive): here, where it started.
+        const state = p.id === undefined ? '' : p.id === pushedId ? ' start' : p.id === sel ? ' selected' : '';
+        setA(c, 'class', `${cls}${state}`);
         if (p.id !== undefined) setA(c, 'data-id', p.id);
       });
     };
-    rings(this.gScan, this.scanParticles, 'found', null);
-    rings(this.gBelief, st.particles ?? [], 'particle', this.opts.selected());
+    const belief = st.particles ?? [];
+    rings(this.gScan, this.scanParticles, 'found');
+    rings(this.gBelief, belief, 'particle');
+    // Each particle's id beside its ring (the pushed one's moves with it).
+    const labels = this.gLabels;
+    while (labels.childElementCount > belief.length) labels.lastChild.remove();
+    while (labels.childElementCount < belief.length) el('text', { class: 'map-label' }, labels);
+    belief.forEach((p, i) => {
+      const t = labels.children[i];
+      const [x, y] = px(p.x, p.y);
+      const r = ringPx(p.radius, k);
+      setA(t, 'x', r1(x + r * 0.75 + 3));
+      setA(t, 'y', r1(y - r * 0.75 - 3));
+      setA(t, 'class', `map-label${p.id === sel ? ' selected' : ''}`);
+      setA(t, 'visibility', p.id === pushedId ? 'hidden' : 'visible');
+      const text = `#${p.id}`;
+      if (t.textContent !== text) t.textContent = text;
+    });
     const line = (poly, pts) => {
       setA(poly, 'points', pts ? pts.map(([x, y]) => px(x, y).map(r1).join(',')).join(' ') : '');
     };
     line(this.path, st.push?.path ?? null);
     line(this.trailLine, st.push || this.trail.pts.length ? this.trail.pts : null);
+    this.drawPreview(st.push ? null : this.preview, px, k);
     const place = (node, pt) => {
       const d = pt ? '' : 'none';
       if (node.style.display !== d) node.style.display = d;
@@ -249,6 +336,22 @@ export class MapOverlay {
     place(this.targetMark, st.push ? null : this.target);
     place(this.cursorMark, this.cursor);
     this.drawLive();
+  }
+
+  /** The form's preview: a dashed line from the particle, an arrow head, the ring at its end. */
+  drawPreview(pv, px, k) {
+    const d = pv ? '' : 'none';
+    if (this.previewMark.style.display !== d) this.previewMark.style.display = d;
+    if (!pv) return;
+    const a = px(...pv.from);
+    const b = px(...pv.to);
+    for (const [n, v] of [['x1', a[0]], ['y1', a[1]], ['x2', b[0]], ['y2', b[1]]]) setA(this.previewLine, n, r1(v));
+    const head = arrowHead(a, b);
+    setA(this.previewHead, 'points', head ? head.map((q) => q.map(r1).join(',')).join(' ') : '');
+    const p = (this.opts.state().particles ?? []).find((q) => q.id === this.opts.selected());
+    setA(this.previewEnd, 'cx', r1(b[0]));
+    setA(this.previewEnd, 'cy', r1(b[1]));
+    setA(this.previewEnd, 'r', r1(ringPx(p ? p.radius : 0, k)));
   }
 
   /** The stage point (m) under a client point, or null off the image. */
@@ -267,13 +370,16 @@ export class MapOverlay {
     const g = this.image.geometry();
     const e = this.image.extent();
     const st = this.opts.state();
-    const p = nearestParticle(st.particles ?? [], x, y, (8 * e.x_real) / g.w);
+    const p = nearestParticle(st.particles ?? [], x, y, (MIN_RING_PX * e.x_real) / g.w);
+    const say = this.opts.announce ?? (() => {});
     if (p) {
       this.opts.onPickParticle(p.id);
+      say(`particle #${p.id} selected, at ${formatPoint([p.x, p.y])}`);
       return { particle: p.id };
     }
     if (!this.opts.canTarget()) return null;
     this.opts.onPickPoint(x * 1e6, y * 1e6);
+    say(`push target ${formatPoint([x, y])}`);
     return { target: [x, y] };
   }
 
@@ -342,6 +448,7 @@ export class MapOverlay {
       const i = ps.findIndex((p) => p.id === this.opts.selected());
       const j = ev.key === ']' ? (i + 1) % ps.length : (i - 1 + ps.length) % ps.length;
       this.opts.onPickParticle(ps[j].id);
+      this.opts.announce?.(`particle #${ps[j].id} selected, at ${formatPoint([ps[j].x, ps[j].y])}`);
       // On the particle, or as near as the image goes (a particle outside the scan).
       this.cursor = [Math.min(e.x_offset + e.x_real, Math.max(e.x_offset, ps[j].x)), Math.min(e.y_offset + e.y_real, Math.max(e.y_offset, ps[j].y))];
     } else if (ev.key === 's' || ev.key === 'e') {

@@ -16,6 +16,7 @@ import { deviceFaultsLine } from './devicefaults.js';
 import { clockTime } from './eventlog.js';
 import { viridisTable } from './colormap.js';
 import { level } from './heightmap.js';
+import { phaseWords } from './words.js';
 
 const POLL_MS = 1000;
 const RUNS_MS = 5000;
@@ -68,10 +69,12 @@ function build() {
   document.body.replaceChildren(main);
 }
 
+/** Writes a tile (or the banner): its text, and its state class beside the classes it was built with. */
 function set(id, text, cls = '') {
   const e = document.getElementById(id);
   e.textContent = text;
-  e.className = cls;
+  e.dataset.base ??= e.className;
+  e.className = [e.dataset.base, cls].filter(Boolean).join(' ');
 }
 
 /** The alerts a lab pages on, from an /api/status document: [] when healthy. */
@@ -102,7 +105,7 @@ export function statusTiles(s) {
   const since = Number.isFinite(s.started_unix_ms) ? `${clockTime(s.started_unix_ms)} (${Math.floor(s.uptime_s / 60)} min)` : `${Math.floor(s.uptime_s / 60)} min ${Math.floor(s.uptime_s % 60)} s`;
   return [
     ['m-scene', `· ${s.scene}`, ''],
-    ['m-phase', s.phase + (s.busy ? ' (busy)' : ''), ''],
+    ['m-phase', phaseWords(s.phase) + (s.busy ? ' (busy)' : ''), ''],
     ['m-alerts', alerts.length ? alerts.join('; ') : 'none', alerts.length ? 'bad' : 'good'],
     ['m-loop', `${health}${l.realtime ? ', real-time' : ', not real-time'}`, l.overruns > 0 ? 'warn' : 'good'],
     ['m-jitter', Number.isFinite(p99) ? (p99 < 1e-3 ? `≤ ${(p99 * 1e6).toFixed(0)} µs` : `≤ ${(p99 * 1e3).toPrecision(3)} ms`) : '–', p99 > 1e-3 ? 'warn' : ''],
@@ -114,9 +117,17 @@ export function statusTiles(s) {
   ];
 }
 
+/**
+ * Why a request to the server failed, in words: the browser's "Failed to fetch" (and its
+ * cousins) mean the server cannot be reached; an HTTP status or a time-out says itself.
+ */
+export function whyDown(message) {
+  return /failed to fetch|networkerror|load failed|network request failed/i.test(String(message)) ? 'it cannot be reached' : String(message);
+}
+
 /** The banner while the server does not answer: since when (Unix ms), and the last error. */
 export function downText(sinceMs, why) {
-  return `server down since ${clockTime(sinceMs)} (${why}); what is shown below is from before`;
+  return `server down since ${clockTime(sinceMs)} (${whyDown(why)}); what is shown below is from before`;
 }
 
 /** One line of the run history (an /api/runs entry): its time, what it was, and who ran it. */
@@ -224,7 +235,7 @@ class Monitor {
     ctx.fillStyle = '#10141a';
     ctx.fillRect(0, 0, W, W);
     const cap = document.getElementById('m-thumb-cap');
-    const phase = st.phase ?? this.status?.phase ?? '–';
+    const phase = phaseWords(st.phase ?? this.status?.phase);
     if (!sc) {
       cap.textContent = `no scan yet · phase ${phase}`;
       return;

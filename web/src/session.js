@@ -8,20 +8,24 @@ import { formatPoint } from './format.js';
 /**
  * What a finished push means, in words: `ok`; `stopped` and who stopped it (a stop is not a
  * failure: the server's `failure` already starts "stopped: "); `missed` (it ended outside the
- * push's tolerance); else the failure code and reason; and the record.
+ * push's tolerance); else the failure code and reason; and the record (`record: false`: only a
+ * missing one).
  */
-export function describeRun(r) {
-  const rec = r.record ? `record ${r.record}` : r.record_error ? `no record: ${r.record_error}` : 'no record';
+export function describeRun(r, { record = true } = {}) {
+  const rec0 = r.record ? `record ${r.record}` : r.record_error ? `no record: ${r.record_error}` : 'no record';
+  // Without the record's name (the line under Stop: the Records list and the Events log name it);
+  // a missing record is still said.
+  const rec = record || !r.record ? ` (${rec0})` : '';
   if (r.outcome === 'ok') {
     const at = Array.isArray(r.estimate) ? `, particle now at ${formatPoint(r.estimate)}` : '';
-    return `push of #${r.particle} ok${judgedText(r.judged)}${at} (${rec})`;
+    return `push of #${r.particle} ok${judgedText(r.judged)}${at}${rec}`;
   }
   const never = Array.isArray(r.estimate) ? `, particle left at ${formatPoint(r.estimate)}` : ', it never started';
   if (r.outcome === 'stopped' || r.outcome === 'missed') {
     const why = String(r.failure ?? 'no reason given').replace(/^stopped: /, '');
-    return `push of #${r.particle} ${r.outcome}: ${why}${never} (${rec})`;
+    return `push of #${r.particle} ${r.outcome}: ${why}${never}${rec}`;
   }
-  return `push of #${r.particle} failed: ${r.outcome}: ${r.failure ?? 'no reason given'}${never} (${rec})`;
+  return `push of #${r.particle} failed: ${r.outcome}: ${r.failure ?? 'no reason given'}${never}${rec}`;
 }
 
 /**
@@ -123,6 +127,7 @@ export function initialState({ traceSeconds = 10 } = {}) {
     nextId: 1,
     particles: [], // from /api/scene, metres; moved by run_done estimates
     stageRange: 100e-6,
+    pushSpeed: null, // the scene's push speed (m/s), for a push's time left
     shutdown: null,
     instance: null, // the server's instance id (welcome): another one on a reconnect is a restart
     startedUnixMs: null, // when that server started
@@ -338,6 +343,8 @@ export class Session {
     }
     const r = scene?.stage?.range_um;
     if (typeof r === 'number' && r > 0) this.state.stageRange = r / 1e6;
+    const v = scene?.push?.speed_um_per_s;
+    this.state.pushSpeed = Number.isFinite(v) && v > 0 ? v / 1e6 : null;
     return this.state;
   }
 

@@ -2,6 +2,7 @@
 // the last error, from the Session's state. `statusFields` is pure (Node tests); StatusBar
 // writes it into the page.
 import { holderText } from './session.js';
+import { phaseWords } from './words.js';
 
 /**
  * What the status bar says for a Session state. `conn` is null while waiting to reconnect (the
@@ -29,7 +30,7 @@ export function statusFields(st, { demo = false } = {}) {
     role: String(st.role ?? '–'),
     client: String(st.client ?? '–'),
     lease: { text: st.lease === null ? 'free' : st.lease === st.client ? `you (${st.name ? `${st.name}, ` : ''}${st.lease})` : holderText(st), cls: mine ? 'mine' : '' },
-    phase: String(st.phase ?? '–'),
+    phase: phaseWords(st.phase),
     lagged,
     error: err,
   };

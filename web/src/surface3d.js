@@ -9,13 +9,18 @@ import { viridisTable } from './colormap.js';
 const UM = 1e6; // metres → µm
 const LUT_N = 256;
 /** Most vertices per side of the 3D surface: a 512² scan is drawn from every 4th pixel (the 2D
- * image keeps every pixel); 65k vertices is what a software renderer draws at a usable rate. */
+ * image keeps every pixel). */
 export const MAX_SIDE = 160;
 
+/** Most vertices per side on a software renderer (no GPU): a 512² scan from every 7th pixel. Its
+ * 32k triangles at 160 a side cost SwiftShader half of each frame the 3D view is drawn in (45 of
+ * 97 ms on a busy 2-core machine); 73² vertices a quarter of that. */
+export const MAX_SIDE_SOFTWARE = 80;
+
 /** The 3D surface of an `xres × yres` scan: a vertex at every `step`-th pixel, `nx × ny` of
- * them, at most `MAX_SIDE` a side. */
-export function surfaceGrid(xres, yres) {
-  const step = Math.max(1, Math.ceil(Math.max(xres, yres) / MAX_SIDE));
+ * them, at most `maxSide` a side. */
+export function surfaceGrid(xres, yres, maxSide = MAX_SIDE) {
+  const step = Math.max(1, Math.ceil(Math.max(xres, yres) / maxSide));
   return { step, nx: Math.max(2, Math.ceil(xres / step)), ny: Math.max(2, Math.ceil(yres / step)) };
 }
 
@@ -35,8 +40,13 @@ function linearViridis() {
 
 export class ScanSurface {
   /** @param {THREE.Object3D} parent the group the surface and its outline are added to */
-  constructor(parent) {
+  /**
+   * @param {THREE.Object3D} parent
+   * @param {{maxSide?: number}} [opts] most vertices a side (MAX_SIDE_SOFTWARE on a software renderer)
+   */
+  constructor(parent, { maxSide = MAX_SIDE } = {}) {
     this.parent = parent;
+    this.maxSide = maxSide;
     this.mesh = null;
     this.outline = null;
     this.scan = null; // the Session's scan state shown (heights in m, row 0 = lowest y)
@@ -90,7 +100,7 @@ export class ScanSurface {
     const wUm = scan.x_real * UM;
     const hUm = scan.y_real * UM;
     // Vertices at the centres of every `step`-th pixel (nx × ny of them).
-    const { step, nx, ny } = surfaceGrid(xres, yres);
+    const { step, nx, ny } = surfaceGrid(xres, yres, this.maxSide);
     const spanX = wUm * ((nx - 1) * step) / xres;
     const spanY = hUm * ((ny - 1) * step) / yres;
     const geom = new THREE.PlaneGeometry(spanX, spanY, nx - 1, ny - 1);

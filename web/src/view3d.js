@@ -1,17 +1,20 @@
 // The 3D view: the stage substrate with the scene's particles (src/particles3d.js), the latest
 // scan as a height-map surface filled line by line (src/surface3d.js), the cantilever tip as a
-// ball (src/tip3d.js) and the push's marks (src/marks3d.js). This module holds them together: the
-// renderer, the camera and its framing, the stage, the height exaggeration and picking. World
-// units: µm in x and y, µm × exaggeration in z (z up). Renders on demand (the machine may have no
-// GPU): it registers with the page's frame scheduler (src/frame.js), which draws it in an
-// animation frame after a change and, after a slow frame, waits as long as that frame took.
+// ball (src/tip3d.js) and the push's marks (src/marks3d.js). Loaded only when first opened
+// (src/view3dhost.js keeps its place and what it is to show until then). This module holds them
+// together: the renderer, the camera and its framing, the stage, the height exaggeration and
+// picking. World units: µm in x and y, µm × exaggeration in z (z up). Renders on demand (the
+// machine may have no GPU): it registers with the page's frame scheduler (src/frame.js), which
+// draws it in an animation frame after a change and, after a slow frame, waits as long as that
+// frame took.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { CSS2DRenderer } from 'three/addons/renderers/CSS2DRenderer.js';
-import { ScanSurface } from './surface3d.js';
+import { ScanSurface, MAX_SIDE, MAX_SIDE_SOFTWARE } from './surface3d.js';
 import { ParticleSpheres } from './particles3d.js';
 import { TipMarker } from './tip3d.js';
 import { PushMarks } from './marks3d.js';
+import { softwareGl } from './view3dhost.js';
 
 /**
  * Where a camera of vertical field `fovDeg` and `aspect` stands to see the box (x0, y0, w, h) µm
@@ -35,8 +38,11 @@ export class View3D {
    * @param {HTMLElement} container
    * @param {{onPickPoint?: (xUm:number, yUm:number) => void, onPickParticle?: (id:number) => void}} handlers
    * @param {import('./frame.js').FrameScheduler} scheduler the page's animation-frame loop
+   * @param {{software?: boolean, slot?: () => number}} [opts] whether WebGL runs on a software
+   *   renderer (asked when not given); the page's live slot (ms: src/frame.js liveSlotMs), the
+   *   tip's moves drawn once in each
    */
-  constructor(container, handlers, scheduler) {
+  constructor(container, handlers, scheduler, { software, slot = () => 0 } = {}) {
     this.container = container;
     this.handlers = handlers ?? {};
     this.exaggeration = 1;
@@ -45,12 +51,16 @@ export class View3D {
     // renderer, a big scan), wait as long as it took before the next, so at least half of the
     // main thread stays free for input (a Stop click is never queued behind frames).
     this.scheduler = scheduler;
-    this.frame = scheduler.register('view3d', () => this.render(), { waitAfterSlow: true });
+    this.frame = scheduler.register('view3d', (parts, now) => this.render(now), { waitAfterSlow: true });
     this.frame.mark();
 
-    // A software renderer (SwiftShader, llvmpipe: no GPU) gets no multisampling and one pixel
-    // per CSS pixel: each frame costs it a fraction.
-    this.software = softwareGl();
+    // A software renderer (SwiftShader, llvmpipe: no GPU) gets no multisampling, one pixel per
+    // CSS pixel and a coarser surface: each frame costs it a fraction.
+    this.software = software ?? softwareGl();
+    // The tip's moves are drawn in the page's live slots (src/frame.js, liveSlotMs), in the same
+    // frames as the map's: on a software renderer each frame that changes costs a whole frame's
+    // composite in the browser's GPU process, whatever changed in it.
+    this.tipFrame = scheduler.register('view3d-tip', (parts, now) => this.render(now), { period: slot, aligned: true });
     this.renderer = new THREE.WebGLRenderer({ antialias: !this.software });
     this.renderer.setPixelRatio(this.software ? 1 : Math.min(2, window.devicePixelRatio || 1));
     this.renderer.setClearColor(0x10141a);
@@ -80,7 +90,7 @@ export class View3D {
     this.particles = new ParticleSpheres(this.zGroup);
     this.tip = new TipMarker(this.scene, this.zGroup);
     this.marks = new PushMarks(this.scene, this.zGroup);
-    this.surface = new ScanSurface(this.zGroup);
+    this.surface = new ScanSurface(this.zGroup, { maxSide: this.software ? MAX_SIDE_SOFTWARE : MAX_SIDE });
 
     this.raycaster = new THREE.Raycaster();
     this.bindPicking();
@@ -100,9 +110,10 @@ export class View3D {
     if (on) this.resize();
   }
 
-  /** Draws the scene (called by the frame scheduler when something changed). */
-  render() {
-    if (this.shown === false) return;
+  /** Draws the scene (called by the frame scheduler when something changed), once a frame. */
+  render(now) {
+    if (this.shown === false || (now !== undefined && now === this.renderedAt)) return;
+    this.renderedAt = now;
     this.tip.scaleToScreen(this.camera, this.container.clientHeight);
     this.renderer.render(this.scene, this.camera);
     this.labels.render(this.scene, this.camera);
@@ -242,7 +253,7 @@ export class View3D {
       surfaceUnder: (x, y) => this.surface.heightUnder(x, y),
       addTrail,
     });
-    if (changed) this.requestRender();
+    if (changed) this.tipFrame.mark();
   }
 
   clearTrail() {
@@ -331,18 +342,5 @@ export class View3D {
     if (surface) targets.unshift(surface);
     const hit = this.raycaster.intersectObjects(targets, false)[0];
     if (hit && this.handlers.onPickPoint) this.handlers.onPickPoint(hit.point.x, hit.point.y);
-  }
-}
-
-/** Whether WebGL runs on a software renderer (SwiftShader, llvmpipe, softpipe). */
-function softwareGl() {
-  try {
-    const gl = document.createElement('canvas').getContext('webgl2');
-    const ext = gl?.getExtension('WEBGL_debug_renderer_info');
-    const name = ext ? gl.getParameter(ext.UNMASKED_RENDERER_WEBGL) : gl?.getParameter(gl.RENDERER);
-    gl?.getExtension('WEBGL_lose_context')?.loseContext();
-    return /swiftshader|llvmpipe|softpipe|software/i.test(String(name));
-  } catch {
-    return false;
   }
 }

@@ -3,8 +3,8 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import {
-  REPLY_OUTPUT, Replies, readNumber, replyText, particleLabel, pushNowText, clampTarget, pushCommand, pushPreview, scanFormDefaults,
-  toleranceField,
+  REPLY_OUTPUT, Replies, readNumber, replyText, pushEndedText, particleLabel, clampTarget, pushCommand, pushPreview, previewLine,
+  stopRefusedText, scanFormDefaults, toleranceField,
 } from '../src/controls.js';
 import { Session } from '../src/session.js';
 import { WS_VERSION } from '../src/wire.js';
@@ -69,16 +69,38 @@ test('the push preview: the lease holder\'s, while no push runs; by distance or 
   assert.deepEqual(pushPreview(p, { ...base, mode: 'to', toX: 43, toY: undefined }), none, 'no target yet');
 });
 
-test('texts: particles in the list, the push running, replies', () => {
+test('texts: particles in the list, replies in words', () => {
   assert.equal(particleLabel({ id: 1, material: 'gold-coated latex', radius: 500e-9 }), '#1 gold-coated latex (r 500 nm)');
   assert.equal(particleLabel({ id: 2, material: '', radius: 7e-9 }), '#2 (r 7.0 nm)');
-  const push = { particle: 1, path: [[40e-6, 30e-6], [45e-6, 30e-6], [45e-6, 32.5e-6]], by: 9 };
-  assert.equal(pushNowText(push, 9), 'Pushing #1 (you) to (45.000, 32.500) µm');
-  assert.equal(pushNowText(push, 4), 'Pushing #1 (client 9) to (45.000, 32.500) µm');
-  assert.equal(replyText({ id: 3, status: 'ok' }), '#3 ok');
-  // A push's ok means accepted, not done well (a green "#3 ok" would stand beside a push that failed to plan).
-  assert.equal(replyText({ id: 5, type: 'push', status: 'ok' }), '#5 accepted');
-  assert.equal(replyText({ id: 4, status: 'error', code: 'no_lease', message: 'push needs the lease' }), '#4 no_lease: push needs the lease');
+  assert.equal(replyText({ id: 3, type: 'take_lease', status: 'ok' }), 'lease taken');
+  // A push's ok means accepted, not done well: how it ended comes with run_done.
+  assert.equal(replyText({ id: 5, type: 'push', status: 'ok' }), 'push accepted: running');
+  assert.equal(replyText({ id: 4, type: 'push', status: 'error', code: 'no_lease', message: 'push needs the lease' }), 'refused: push needs the lease');
+  assert.equal(replyText({ id: 6, type: 'scan', status: 'error', code: 'disconnected', message: 'the connection closed before a reply' }),
+    'no answer: the connection closed before the server replied');
+});
+
+test('the push\'s reply once it ended: its outcome in a word or two', () => {
+  assert.equal(pushEndedText({ outcome: 'ok' }), 'push ended: ok');
+  assert.equal(pushEndedText({ outcome: 'stopped' }), 'push ended: stopped');
+  assert.equal(pushEndedText({ outcome: 'missed' }), 'push ended: missed the target');
+  assert.equal(pushEndedText({ outcome: 'no_contact' }), 'push ended: failed (no contact)');
+});
+
+test('the map\'s preview: 5 µm at 90° from (40, 30) µm ends at (40, 35) µm', () => {
+  const l = previewLine({ from: { x: 40, y: 30, z: 0.5 }, deg: 90, lengthUm: 5 });
+  assert.ok(Math.abs(l.from[0] - 40e-6) < 1e-15 && Math.abs(l.from[1] - 30e-6) < 1e-15, `${l.from}`);
+  assert.ok(Math.abs(l.to[0] - 40e-6) < 1e-15 && Math.abs(l.to[1] - 35e-6) < 1e-15, `${l.to}`);
+  const r = previewLine({ from: { x: 40, y: 30, z: 0.5 }, deg: 0, lengthUm: 2 });
+  assert.ok(Math.abs(r.to[0] - 42e-6) < 1e-15 && Math.abs(r.to[1] - 30e-6) < 1e-15, '0° is +x');
+  assert.equal(previewLine({ from: { x: 40, y: 30, z: 0.5 }, deg: 0, lengthUm: 0 }), null, 'nothing to show');
+  assert.equal(previewLine(null), null);
+});
+
+test('Stop that cannot act says why: no server, or the controls\' reason', () => {
+  assert.match(stopRefusedText({ connection: 'closed' }, 'Not connected to the server'),
+    /^Stop cannot reach the server \(not connected\)\. A running server stops a push whose lease holder is gone on its own\.$/);
+  assert.equal(stopRefusedText({ connection: 'open' }, 'Take the lease first'), 'Stop not sent: take the lease first.');
 });
 
 test('the scan form starts at the scene\'s own scan, pixels within [8, 512]', () => {
@@ -93,18 +115,32 @@ test('the scan form starts at the scene\'s own scan, pixels within [8, 512]', ()
 
 test('replies show in their command\'s output, only for the latest command sent there', () => {
   const els = {};
-  const $ = (id) => (els[id] ??= { className: '', textContent: '' });
+  const $ = (id) => (els[id] ??= { className: '', textContent: '', title: '' });
   const r = new Replies($);
   r.sent({ type: 'take_lease', id: 1 });
-  assert.deepEqual(els['reply-lease'], { className: 'reply pending', textContent: '#1 sent…' });
+  assert.deepEqual(els['reply-lease'], { className: 'reply pending', textContent: 'sending…', title: 'command take_lease #1' });
   r.sent({ type: 'release_lease', id: 2 }); // the same output
   r.replied({ id: 1, command: { id: 1, type: 'take_lease', status: 'ok' } });
-  assert.equal(els['reply-lease'].textContent, '#2 sent…', 'a stale reply does not overwrite');
+  assert.equal(els['reply-lease'].title, 'command release_lease #2', 'a stale reply does not overwrite');
   r.replied({ id: 2, command: { id: 2, type: 'release_lease', status: 'error', code: 'no_lease', message: 'you do not hold it' } });
-  assert.deepEqual(els['reply-lease'], { className: 'reply error', textContent: '#2 no_lease: you do not hold it' });
+  assert.deepEqual(els['reply-lease'], { className: 'reply error', textContent: 'refused: you do not hold it', title: 'command release_lease #2 (no_lease)' });
   r.sent({ type: 'subscribe', id: 3 });
   r.replied({ id: 3, command: { id: 3, type: 'subscribe', status: 'ok' } });
   r.replied({ id: 9, command: null });
   assert.deepEqual(Object.keys(els), ['reply-lease'], 'subscribe has no output');
   assert.deepEqual(new Set(Object.values(REPLY_OUTPUT)), new Set(['reply-lease', 'reply-push', 'reply-scan', 'reply-stop', 'reply-haptic']));
+});
+
+test('a command left without a reply by a closed connection says so', () => {
+  const els = {};
+  const $ = (id) => (els[id] ??= { className: '', textContent: '', title: '' });
+  const r = new Replies($);
+  const s = new Session();
+  r.sent(s.issue({ type: 'scan' }));
+  r.sent(s.issue({ type: 'take_lease' }));
+  s.state.commands.get(2).status = 'ok';
+  s.closed(1, 250);
+  r.closed(s.state.commands);
+  assert.equal(els['reply-scan'].textContent, 'no answer: the connection closed before the server replied');
+  assert.equal(els['reply-lease'].textContent, 'sending…', 'answered before the close: left as it was');
 });

@@ -2,7 +2,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import {
-  welcomeText, stateText, scanSize, scanDoneNote, pusher, pushStartedText, pushWarnings, leaseNote, replyErrorText, closedText, LEASE_LOST_ON_CLOSE,
+  welcomeText, stateText, scanSize, scanDoneNote, pusher, pushStartedText, pushWarnings, leaseNote, replyErrorText, closedText, LEASE_LOST_ON_CLOSE, lostOnCloseText,
 } from '../src/eventlog.js';
 import { Session } from '../src/session.js';
 
@@ -73,4 +73,14 @@ test('the lease holder is named where the server names them', () => {
   assert.deepEqual(leaseNote({ lost: false, reason: null }, s.state), { text: 'carol (client 7) holds the lease', cls: '', announce: null });
   s.apply({ type: 'lease', holder: null });
   assert.equal(s.state.leaseName, null);
+});
+
+test('a push lost with the connection: unknown until the server is back', () => {
+  const push = { particle: 4, path: [[0, 0], [1e-6, 0]], by: 2 };
+  assert.equal(lostOnCloseText(push, false), 'the connection closed while the push of #4 ran: its outcome is unknown until the server is back');
+  const mine = lostOnCloseText(push, true);
+  assert.match(mine, /^the connection closed while the push of #4 ran: its outcome is unknown until the server is back\. You lost the lease/);
+  // The page cannot tell a dead server from a lost network: neither is said as a fact.
+  assert.match(mine, /a server still running stops a push whose lease holder is gone, and a server that stopped stopped it/);
+  assert.match(LEASE_LOST_ON_CLOSE, /a server still running frees it/);
 });

@@ -43,12 +43,11 @@ test('formatLength with digits: significant digits in lengthUnit(ref)\'s unit', 
 
 test('points, the tip readout, sizes and times', () => {
   assert.equal(formatPoint([5e-5, 6e-5]), '(50.00, 60.00) µm');
-  assert.equal(formatPoint([5e-8, -6e-8]), '(50.0, -60.0) nm');
+  assert.equal(formatPoint([5e-8, -6e-8]), '(0.05, -0.06) µm', 'a stage point is µm near the origin too');
   assert.equal(formatStagePoint([40e-6, 31.5e-6]), '(40.000, 31.500) µm');
   const tip = { stage: [40e-6, 30.25e-6, 1.2e-6], volts: -0.2, phase: 'approach', force: 2.5e-9, estimate: null };
-  assert.equal(formatTip(tip), 'tip x 40.000 µm · y 30.250 µm · z 1200.0 nm · force 2.50 nN · -0.200 V · approach');
-  assert.equal(formatTip({ ...tip, force: undefined, estimate: [41e-6, 30e-6] }),
-    'tip x 40.000 µm · y 30.250 µm · z 1200.0 nm · force 0.00 nN · -0.200 V · approach · particle at (41.000, 30.000) µm');
+  assert.equal(formatTip(tip), 'tip (40.000, 30.250) µm · z 1200.0 nm · 2.50 nN · -0.200 V');
+  assert.equal(formatTip({ ...tip, force: undefined, estimate: [41e-6, 30e-6] }), 'tip (40.000, 30.250) µm · z 1200.0 nm · 0.00 nN · -0.200 V');
   assert.deepEqual([formatBytes(512), formatBytes(2048), formatBytes(3.5 * 1024 * 1024), formatBytes(undefined)], ['512 B', '2.0 KiB', '3.5 MiB', '']);
   assert.equal(formatTime(null), '');
   assert.equal(formatTime('not a date'), 'not a date');

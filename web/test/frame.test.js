@@ -2,7 +2,7 @@
 // requestAnimationFrame and a fake clock: what is drawn in which frame.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { FrameScheduler, livePeriodMs, SLOW_DRAW_MS } from '../src/frame.js';
+import { FrameScheduler, livePeriodMs, livePeriodFor, liveSlotMs, SLOW_DRAW_MS } from '../src/frame.js';
 
 /** A scheduler whose frames the test runs: `frame(t)` runs the pending callback at time t. */
 function fake() {
@@ -39,6 +39,33 @@ test('live views: every frame while frames are quick, else 3 frame times', () =>
   assert.equal(livePeriodMs(250), 750);
   assert.equal(livePeriodMs(400), 1000);
   assert.equal(livePeriodMs(2000), 1000, 'at most 1 s');
+});
+
+test('a software renderer\'s live views change in slots: 100 ms, 200 with 3D', () => {
+  assert.equal(liveSlotMs(true), 100);
+  assert.equal(liveSlotMs(true, true), 200, 'the 3D view shown doubles a frame\'s cost');
+  assert.equal(liveSlotMs(false, true), 0, 'a GPU: every frame');
+  assert.equal(livePeriodFor(16.7, 100), 100, 'quick frames: one slot');
+  assert.equal(livePeriodFor(100, 100), 300, '300 ms: whole slots');
+  assert.equal(livePeriodFor(41, 200), 400, '250 ms rounded up to whole slots');
+  assert.equal(livePeriodFor(16.7, 0), 0);
+  assert.equal(livePeriodFor(41, 0), 250, 'a GPU\'s slow frames as before');
+});
+
+test('views aligned to slots of 100 and 200 ms change in the same frames', () => {
+  const f = fake();
+  const frames = { tip: [], text: [] };
+  const tip = f.s.register('tip', (p, now) => frames.tip.push(now), { period: 100, aligned: true });
+  const text = f.s.register('text', (p, now) => frames.text.push(now), { period: 200, aligned: true });
+  f.s.start();
+  for (let t = 1000; t < 1600; t += 16) {
+    tip.mark();
+    text.mark();
+    f.frame(t);
+  }
+  // Frames every 16 ms: the first of each slot.
+  assert.deepEqual(frames.tip, [1000, 1112, 1208, 1304, 1400, 1512]);
+  assert.deepEqual(frames.text, [1000, 1208, 1400], 'each in a frame the tip changes in too');
 });
 
 test('one loop: a marked view is drawn once in the next frame, with its parts', () => {
@@ -157,6 +184,7 @@ test('after a slow draw a view waits as long as it took; quick ones do not', () 
   f.frame(1000); // drawn, took 30 ms: not before 1030 + 30 = 1060
   assert.equal(v3d.ms, 30);
   assert.equal(v3d.notBefore, 1060);
+  assert.equal(v3d.totalMs, 30, 'its draws\' time, summed');
   v3d.mark();
   other.mark();
   f.frame(1033);
@@ -164,6 +192,7 @@ test('after a slow draw a view waits as long as it took; quick ones do not', () 
   assert.deepEqual(drawn, [1000, 'other 1033'], 'the slow view waits; the other is drawn');
   f.frame(1066);
   assert.deepEqual(drawn, [1000, 'other 1033', 1066]);
+  assert.equal(v3d.totalMs, 60, 'two draws of 30 ms');
   // A quick draw (≤ SLOW_DRAW_MS): no wait.
   cost = SLOW_DRAW_MS;
   v3d.mark();

@@ -8,7 +8,7 @@ test('the fields of an engaged handle on a live link', () => {
   const f = hapticFields({ link: 'up', phase: 'engaged', handle_m: 0.01234, force_n: 0.5, tip_force_n: 2.5e-9, pc_active: true });
   assert.deepEqual(f, {
     link: { text: 'up', cls: 'good' },
-    phase: { text: 'engaged' },
+    phase: { text: 'engaged: the hand moves the tip' },
     engaged: { text: 'yes' },
     handle: { text: '12.34 mm' },
     hand: { text: '0.500 N' },

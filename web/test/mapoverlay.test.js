@@ -1,7 +1,7 @@
 // node --test: the map layer's geometry and picking (src/mapoverlay.js; its SVG is not built).
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { toPx, toStage, nearestParticle, stepCursor, TrailBuffer, foundParticles } from '../src/mapoverlay.js';
+import { toPx, toStage, nearestParticle, stepCursor, TrailBuffer, foundParticles, ringPx, arrowHead, MIN_RING_PX } from '../src/mapoverlay.js';
 
 const g = { x: 50, y: 10, w: 400, h: 200 };
 const e = { x_offset: 30e-6, y_offset: 20e-6, x_real: 20e-6, y_real: 10e-6 };
@@ -47,4 +47,20 @@ test('a scan record\'s particles are kept only when they are numbers', () => {
   assert.deepEqual(foundParticles([good, { x: 'a', y: 2e-6, radius: 5e-7 }, { x: 1e-6, y: null, radius: 1 }, { x: 1, y: 1, radius: -1 }, null, 7]), [good]);
   assert.deepEqual(foundParticles('particles'), []);
   assert.deepEqual(foundParticles(undefined), []);
+});
+
+test('a 250 nm particle on a 100 µm stage 600 px wide still rings 10 px', () => {
+  // 6 px per µm: its own radius would be 1.5 px, under the tip's 12 px dot.
+  assert.equal(MIN_RING_PX, 10);
+  assert.equal(ringPx(250e-9, 600 / 100e-6), 10);
+  assert.ok(Math.abs(ringPx(2e-6, 600 / 10e-6) - 120) < 1e-9, 'a big one at its own size');
+});
+
+test('the preview\'s arrow head points along the push, at its end', () => {
+  const h = arrowHead([0, 0], [100, 0], 10, 5);
+  assert.deepEqual(h, [[100, 0], [90, 5], [90, -5]]);
+  const up = arrowHead([0, 100], [0, 0], 10, 5);
+  assert.deepEqual(up[0], [0, 0]);
+  assert.deepEqual([up[1][1], up[2][1]], [10, 10], 'behind the tip, upward on screen');
+  assert.equal(arrowHead([1, 1], [1, 1]), null);
 });

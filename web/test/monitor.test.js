@@ -35,6 +35,7 @@ test('an idle instrument with no haptic link, no p99 yet and a free lease', () =
   assert.deepEqual(m.get('m-hapdev'), ['–', ''], 'no haptic link: no device faults');
   assert.deepEqual(m.get('m-lease'), ['free', '']);
   assert.equal(m.get('m-phase')[0], 'idle');
+  assert.deepEqual(statusTiles({ phase: 'contact_search', loop: {} }).find((t) => t[0] === 'm-phase'), ['m-phase', 'finding the particle\'s edge', ''], 'a phase in words');
   assert.deepEqual(statusTiles({ loop: {}, haptic: { link: 'down' } }).find((t) => t[0] === 'm-haptic'), ['m-haptic', 'down', 'bad']);
   const lost = { loop: {}, haptic: { link: 'down', rate_hz: 1000, device_faults: { bad_packets: 0, timeouts: 0, seq_gaps: 0, out_of_range: 0, watchdog_trips: 0, overruns: 0, losses: 2, reopens: 1 } } };
   assert.deepEqual(statusTiles(lost).find((t) => t[0] === 'm-hapdev'), ['m-hapdev', '1 kHz · faults: device 0 · bridge 0 · cable 2 lost, 1 reopened', 'bad']);
@@ -53,7 +54,9 @@ test('alerts: "none" when healthy, else each in words', () => {
 });
 
 test('the down banner names the time; a history line reads as the page\'s', () => {
-  assert.match(downText(Date.UTC(2026, 0, 1, 12, 0, 0), 'Failed to fetch'), /^server down since \d\d:\d\d:\d\d \(Failed to fetch\); what is shown below is from before$/);
+  // The browser's "Failed to fetch" is no word for people: the server cannot be reached.
+  assert.match(downText(Date.UTC(2026, 0, 1, 12, 0, 0), 'Failed to fetch'), /^server down since \d\d:\d\d:\d\d \(it cannot be reached\); what is shown below is from before$/);
+  assert.match(downText(Date.UTC(2026, 0, 1, 12, 0, 0), 'no answer within 3 s'), /\(no answer within 3 s\)/);
   const l = runLine({ record: 'push-1-r1-p1.json', modified: 1767268800, run: 1, particle: 1, outcome: 'stopped', failure: 'stopped: the lease holder disconnected', estimate: [1e-6, 2e-6] });
   assert.match(l, /^\d\d:\d\d:\d\d push of #1 stopped: the lease holder disconnected, particle left at \(1\.00, 2\.00\) µm \(record push-1-r1-p1\.json\)$/);
   // Who ran it, where the record says.

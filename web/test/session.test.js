@@ -198,6 +198,9 @@ test('session: the scene\'s particles in metres; run_done moves the pushed one',
   s.setScene(scene);
   assert.equal(s.state.particles.length, 2);
   assert.equal(s.state.stageRange, 80e-6);
+  assert.equal(s.state.pushSpeed, null, 'no [push] speed: no time left for a push');
+  s.setScene({ ...scene, push: { speed_um_per_s: 2 } });
+  assert.equal(s.state.pushSpeed, 2e-6, 'the push speed in m/s');
   const r = s.apply({ type: 'run_done', particle: 2, outcome: 'ok', failure: null, estimate: [12e-6, 21e-6], record: 'push-1.csv' });
   assert.equal(r.kind, 'run_done');
   assert.deepEqual([s.state.particles[1].x, s.state.particles[1].y], [12e-6, 21e-6]);
@@ -265,7 +268,12 @@ test('session: a push that never started is a run; it clears the push path', () 
   assert.equal(judgedText({ ...judged, attempts: 3 }), ': measured 2.5 nm from the target (tolerance 25.0 nm), after 2 corrections');
   assert.equal(judgedText(null), '');
   assert.equal(describeRun({ particle: 2, outcome: 'stopped', failure: 'stopped: stop requested by the operator', estimate: [5e-8, 6e-8], record: null, record_error: 'disk full' }),
-    'push of #2 stopped: stop requested by the operator, particle left at (50.0, 60.0) nm (no record: disk full)');
+    'push of #2 stopped: stop requested by the operator, particle left at (0.05, 0.06) µm (no record: disk full)');
+  // The line under Stop leaves the record's name to the Records list and the log; a missing
+  // record is still said.
+  assert.equal(describeRun({ particle: 2, outcome: 'ok', estimate: [5e-5, 6e-5], record: 'push-2.json', judged }, { record: false }),
+    'push of #2 ok: measured 2.5 nm from the target (tolerance 25.0 nm), after 1 correction, particle now at (50.00, 60.00) µm');
+  assert.equal(describeRun(r, { record: false }), 'push of #1 failed: plan: particle 1: target out of reach, it never started (no record)');
 });
 
 test('session: losing the lease is told from a change elsewhere, with why', () => {

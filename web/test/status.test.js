@@ -30,12 +30,12 @@ test('the lease (mine or another\'s), the phase, lags and the last error', () =>
   s.apply({ type: 'lease', holder: 9 });
   s.apply({ type: 'lagged', skipped: 12 });
   s.apply({ type: 'lagged', skipped: 3 });
-  s.apply({ type: 'telemetry', t: 1, stage: [0, 0, 0], volts: 0, phase: 'approach' });
+  s.apply({ type: 'telemetry', t: 1, stage: [0, 0, 0], volts: 0, phase: 'contact_search' });
   const id = s.issue({ type: 'push' }).id;
   s.apply({ type: 'error', id, code: 'no_lease', message: 'push needs the lease' });
   f = statusFields(s.state);
   assert.deepEqual(f.lease, { text: 'client 9', cls: '' });
-  assert.equal(f.phase, 'approach');
+  assert.equal(f.phase, 'finding the particle\'s edge', 'the phase in words');
   assert.equal(f.lagged, '2× (15 msgs)');
   assert.deepEqual(f.error, { text: `no_lease (#${id} push): push needs the lease`, cls: 'err' });
   s.apply('{oops');

@@ -4,7 +4,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import * as THREE from 'three';
-import { ScanSurface, surfaceGrid } from '../src/surface3d.js';
+import { ScanSurface, surfaceGrid, MAX_SIDE_SOFTWARE } from '../src/surface3d.js';
 import { Session } from '../src/session.js';
 import { encodeScanLine } from '../src/wire.js';
 
@@ -26,6 +26,14 @@ test('a 512² scan is drawn in 3D from every 4th pixel', () => {
   // Scans up to 160 pixels a side keep every pixel; 161 already takes every 2nd.
   assert.deepEqual(surfaceGrid(160, 160), { step: 1, nx: 160, ny: 160 });
   assert.deepEqual(surfaceGrid(161, 32), { step: 2, nx: 81, ny: 16 });
+});
+
+test('on a software renderer a 512² scan is drawn from every 7th pixel', () => {
+  assert.equal(MAX_SIDE_SOFTWARE, 80);
+  assert.deepEqual(surfaceGrid(512, 512, MAX_SIDE_SOFTWARE), { step: 7, nx: 74, ny: 74 });
+  const s = new ScanSurface(new THREE.Group(), { maxSide: MAX_SIDE_SOFTWARE });
+  s.start({ id: 1, xres: 512, yres: 512, x_offset: 0, y_offset: 0, x_real: 16e-6, y_real: 16e-6, heights: new Float32Array(512 * 512), received: new Uint8Array(512), lines: 0, min: 0, max: 0 });
+  assert.equal(s.mesh.geometry.getAttribute('position').count, 74 * 74);
 });
 
 test('a new scan is an empty surface with an outline; the next replaces it', () => {

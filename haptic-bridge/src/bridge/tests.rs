@@ -33,7 +33,7 @@ fn live(force: f64, now_ns: u64) -> ForceFeedback {
 /// (`m/T`)" and never applied "at `|v| < 0.1 mm/s`": the bridge's controller for the
 /// simulated handle at 1, 2 and 4 kHz.
 #[test]
-fn the_bridges_passivity_cap_is_80_percent_of_m_over_t_and_its_speed_guard_0_1_mm_per_s() {
+fn the_bridges_passivity_cap_and_speed_guard_are_as_documented() {
     for rate in [1000.0, 2000.0, 4000.0] {
         let period = 1.0 / rate;
         let cfg = BridgeConfig {
@@ -73,9 +73,9 @@ impl Device for Slow {
     }
 }
 
-/// Review of issue 28: a read that waited 2 ms for a late answer made the server's newest
-/// sample, published meanwhile, look stamped in the future: the force was zeroed and the
-/// server blamed. The server is judged after the read now.
+/// A read that waits 2 ms for a late answer does not make the server's newest sample,
+/// published meanwhile, look stamped in the future (which would zero the force and blame the
+/// server): the server is judged after the read.
 #[test]
 fn a_late_answer_neither_zeroes_the_force_nor_blames_the_server() {
     let sim = SimDevice::new(Script::Hold, 1e-3);
@@ -105,8 +105,8 @@ fn a_late_answer_neither_zeroes_the_force_nor_blames_the_server() {
     assert_eq!(b.cycle_timed(ms + 500_000, || 4 * ms + 200_000, &mut link).force, 0.5);
 }
 
-/// Review of issue 28: after the device's watchdog zeroed its force (it heard nothing valid
-/// for 10 ms while the bridge ran on), the force came back as a step. It ramps in now.
+/// After the device's watchdog zeroed its force (it heard nothing valid for 10 ms while the
+/// bridge ran on), the force ramps in again rather than coming back as a step.
 #[test]
 fn after_the_devices_watchdog_tripped_the_force_ramps_in() {
     let sim = SimDevice::new(Script::Hold, 1e-3);
@@ -126,10 +126,10 @@ fn after_the_devices_watchdog_tripped_the_force_ramps_in() {
     assert!(f > 0.0 && f < 0.05, "ramping: {f}");
 }
 
-/// Issue 28, "a stale force after a host pause": after the bridge was stopped for 50 ms, its
-/// first packet carried the force from before (505 mN) and the hand felt a kick. Now a pause
-/// of more than 3 periods and 10 ms ramps the force in from zero over 20 ms, on a device that
-/// may have dropped its force meanwhile (a watchdog: `Slow` stands for one).
+/// After the bridge was stopped for 50 ms, its first packet does not carry the force from before
+/// (a kick in the hand): a pause of more than 3 periods and 10 ms ramps the force in from zero
+/// over 20 ms, on a device that may have dropped its force meanwhile (a watchdog: `Slow` stands
+/// for one).
 #[test]
 fn after_a_pause_the_force_ramps_in_from_zero_not_at_the_old_force() {
     let sim = SimDevice::new(Script::Hold, 1e-3);
@@ -161,7 +161,7 @@ fn after_a_pause_the_force_ramps_in_from_zero_not_at_the_old_force() {
     t += 2 * ms;
     link.next = Some(live(0.5, t));
     assert_eq!(b.cycle(t, &mut link).force, 0.5);
-    // Issue 25: nor is a stall shorter than a serial device's 10 ms watchdog (the device still
+    // Nor is a stall shorter than a serial device's 10 ms watchdog (the device still
     // holds its force: dropping it would be an active dip); one of 10 ms and more is.
     t += 9_900_000;
     link.next = Some(live(0.5, t));
@@ -171,10 +171,10 @@ fn after_a_pause_the_force_ramps_in_from_zero_not_at_the_old_force() {
     assert!(b.cycle(t, &mut link).force < 0.05, "a 10.1 ms stall");
 }
 
-/// Issue 25: the simulated device holds its force through any pause (its motor holds it, its
-/// handle stands still): after 50 ms the bridge resumes at the force of the moment, without
-/// the dip and ramp that pushed a loose hand's handle back (−0.36 mJ and a 44 % tip swing
-/// after a 12.7 ms stall in the grid's loose grip at 10 nm/mm and 10 N).
+/// The simulated device holds its force through any pause (its motor holds it, its handle
+/// stands still): after 50 ms the bridge resumes at the force of the moment, without a dip and
+/// ramp, which would push a loose hand's handle back (−0.36 mJ and a 44 % tip swing after a
+/// 12.7 ms stall in the grid's loose grip at 10 nm/mm and 10 N).
 #[test]
 fn a_device_that_holds_its_force_resumes_without_a_ramp() {
     let mut b = Bridge::new(SimDevice::new(Script::Hold, 1e-3), BridgeConfig::default(), 0);
@@ -186,7 +186,7 @@ fn a_device_that_holds_its_force_resumes_without_a_ramp() {
     assert_eq!(b.cycle(51 * ms, &mut link).force, 0.5);
 }
 
-/// Issue 28: a reopened device starts with the force ramped in, its limits taken anew, and
+/// A reopened device starts with the force ramped in, its limits taken anew, and
 /// the lost device's counters kept (one reopen counted).
 #[test]
 fn a_replaced_device_ramps_in_and_the_counters_carry_over() {
@@ -346,7 +346,7 @@ fn wall(k: f64, passivity: bool, local_model: bool) -> (f64, f64) {
 /// observed energy above −1 µJ; without it the handle bounces (a limit cycle bounded by the
 /// motor's saturation) and the energy runs away negative.
 #[test]
-fn a_stiff_held_wall_buzzes_without_the_passivity_controller_and_settles_with_it() {
+fn a_stiff_held_wall_buzzes_unless_the_passivity_controller_acts() {
     // 20 kN/m against a light grip (1 N·s/m): ten times the sampled loop's limit
     // `K < 2b/T` ≈ 2 kN/m; the controller holds it up to ~40 kN/m (its damping cap, 40
     // N·s/m, is then reached).

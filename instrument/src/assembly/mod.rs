@@ -8,16 +8,19 @@
 //! - [`pattern`]: the target sites, from a file or a generator (line, grid, ring, letters);
 //! - [`assign`]: which particle fills which site (Kuhn-Munkres);
 //! - [`plan`]: the order of the moves and their routes, played out on the positions;
-//! - [`run`]: an assembly against the simulated AFM, re-planned after every move from its
-//!   local scans.
+//! - [`book`]: what an assembly knows and has done, whoever makes its moves; it plans again
+//!   after every move from the move's local scans;
+//! - [`run`]: an assembly against the simulated AFM (`nanopush assemble`).
 
 pub mod assign;
+pub mod book;
 mod letters;
 pub mod pattern;
 pub mod plan;
-mod routing;
+pub mod routing;
 pub mod run;
 
+pub use book::{AssemblyOptions, Book, MoveDone, MoveRecord, SiteReport, TrueParticle};
 pub use pattern::{Pattern, PatternError, Site};
 pub use plan::{Constraints, Plan, PlanSettings, PlannedMove, Purpose, Seen, SiteState, Unfilled, plan};
-pub use run::{AssemblyOptions, AssemblyRun, Event, MoveRecord, Outcome, SiteReport, assemble};
+pub use run::{AssemblyRun, Event, Outcome, assemble};

@@ -162,15 +162,15 @@ impl Pattern {
                 .transpose()?
                 .or(default_tol);
             sites.push(Site {
-                x: x * 1e-6,
-                y: y * 1e-6,
-                tolerance: tol.map(|t| t * 1e-9),
+                x: x / 1e6,
+                y: y / 1e6,
+                tolerance: tol.map(|t| t / 1e9),
             });
         }
         Ok(Pattern {
             name: file.name.unwrap_or_else(|| origin.to_string()),
             sites,
-            radius: radius.map(|r| r * 1e-9),
+            radius: radius.map(|r| r / 1e9),
         })
     }
 
@@ -380,7 +380,7 @@ impl Args {
                 allowed: "(0, 1000] µm".into(),
             });
         }
-        Ok(v * 1e-6)
+        Ok(v / 1e6)
     }
 
     fn tolerance(&self) -> Result<Option<f64>, PatternError> {
@@ -395,7 +395,7 @@ impl Args {
                 hi,
                 "nm",
             )
-            .map(|t| Some(t * 1e-9)),
+            .map(|t| Some(t / 1e9)),
         }
     }
 
@@ -410,7 +410,7 @@ impl Args {
                 10_000.0,
                 "nm",
             )
-            .map(|r| Some(r * 1e-9)),
+            .map(|r| Some(r / 1e9)),
         }
     }
 

@@ -75,6 +75,25 @@ impl Topography {
         z
     }
 
+    /// The tilt's plane at `(x, y)` (m): the height without the roughness.
+    pub fn plane(&self, x: f64, y: f64) -> f64 {
+        self.tilt_x * x + self.tilt_y * y
+    }
+
+    /// The most the roughness can add to the plane (m): the sum of its waves' amplitudes.
+    pub fn roughness_bound(&self) -> f64 {
+        self.waves.iter().map(|w| w.amplitude.abs()).sum()
+    }
+
+    /// An upper bound on the surface's curvature (1/m): `Σ a k²` over the waves (a plane has
+    /// none).
+    pub fn curvature_bound(&self) -> f64 {
+        self.waves
+            .iter()
+            .map(|w| w.amplitude.abs() * (w.kx * w.kx + w.ky * w.ky))
+            .sum()
+    }
+
     /// Gradient `(∂z_s/∂x, ∂z_s/∂y)`.
     pub fn gradient(&self, x: f64, y: f64) -> (f64, f64) {
         let (mut gx, mut gy) = (self.tilt_x, self.tilt_y);

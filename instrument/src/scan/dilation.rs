@@ -72,13 +72,29 @@ pub fn substrate_image(topo: &Topography, tip: &Tip, x: f64, y: f64) -> f64 {
     if z0 > best.2 {
         best = (0.0, 0.0, z0);
     }
+    // A surface curved less than the tip (`Rₜ κ < 1/2`, roughness much wider than the apex)
+    // makes `z_s(x + u) − P(u)` strictly concave over the apex: its one maximum is the fixed
+    // point, found to `(Rₜ κ)⁴` of its error, and there is nothing to search for.
+    if rt * topo.curvature_bound() < 0.5 {
+        return best.2;
+    }
     // The coarse search finds the basin of the global maximum; the pattern search climbs it.
+    // A point whose plane plus the roughness's largest excursion, less the tip's profile, is
+    // no higher than the best so far cannot beat it, and is not evaluated.
+    let rough = topo.roughness_bound();
+    let cannot_beat = |ux: f64, uy: f64, best: f64| {
+        let r = (ux * ux + uy * uy).sqrt();
+        r > r_max || topo.plane(x + ux, y + uy) + rough - tip.profile(r) <= best
+    };
     let (mut cx, mut cy, mut cz) = (0.0, 0.0, z0);
     for k in 1..=RINGS {
         let r = r_max * k as f64 / RINGS as f64;
         for d in 0..DIRECTIONS {
             let a = d as f64 * std::f64::consts::TAU / DIRECTIONS as f64;
             let (px, py) = (r * a.cos(), r * a.sin());
+            if cannot_beat(px, py, cz) {
+                continue;
+            }
             let v = value(px, py);
             if v > cz {
                 (cx, cy, cz) = (px, py, v);
@@ -88,9 +104,13 @@ pub fn substrate_image(topo: &Topography, tip: &Tip, x: f64, y: f64) -> f64 {
     let mut step = 0.5 * r_max / RINGS as f64;
     for _ in 0..REFINEMENTS {
         for (sx, sy) in [(1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)] {
-            let v = value(cx + sx * step, cy + sy * step);
+            let (px, py) = (cx + sx * step, cy + sy * step);
+            if cannot_beat(px, py, cz) {
+                continue;
+            }
+            let v = value(px, py);
             if v > cz {
-                (cx, cy, cz) = (cx + sx * step, cy + sy * step, v);
+                (cx, cy, cz) = (px, py, v);
             }
         }
         step *= 0.5;

@@ -128,6 +128,17 @@ fn median(v: &mut [f64]) -> f64 {
     }
 }
 
+/// The image with its substrate's plane taken off (the robust plane of [`find_particles`]): a
+/// tilted sample's particles stand out in a picture.
+pub fn levelled(img: &HeightImage) -> HeightImage {
+    let lv = level(img);
+    let mut out = img.clone();
+    for (k, z) in out.data.iter_mut().enumerate() {
+        *z -= lv.at((k / img.xres) as f64, (k % img.xres) as f64);
+    }
+    out
+}
+
 /// Robust plane: least squares on the pixels kept, keep those within 3σ, three times.
 fn level(img: &HeightImage) -> Level {
     let mut keep = vec![true; img.data.len()];

@@ -15,7 +15,7 @@ mod tests;
 pub use dilation::{grid_dilation, image_height, sphere_image, substrate_image, tip_map};
 pub use gsf::{GsfError, GsfFile, header as gsf_header, read_gsf, write_gsf};
 pub use image::HeightImage;
-pub use localize::{LocateError, Located, find_particles, localize};
+pub use localize::{LocateError, Located, find_particles, levelled, localize};
 pub use preview::{viridis, write_png};
 pub use raster::{ScanLine, ScanParams, Scanner, scan};
 pub use surface::{Sphere, Surface};

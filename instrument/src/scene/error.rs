@@ -22,7 +22,7 @@ pub enum SceneError {
         message: String,
     },
     /// A number that is NaN or infinite.
-    #[error("scene {origin}: {field} = {} is not a finite number; allowed: {allowed}", crate::shown(*.value))]
+    #[error("scene {origin}: {field} = {} is not a finite number; allowed: {allowed}", crate::words::shown(*.value))]
     NotFinite {
         /// File name.
         origin: String,
@@ -34,7 +34,7 @@ pub enum SceneError {
         allowed: String,
     },
     /// A number outside its allowed range.
-    #[error("scene {origin}: {field} = {} is out of range; allowed: {allowed}", crate::shown(*.value))]
+    #[error("scene {origin}: {field} = {} is out of range; allowed: {allowed}", crate::words::shown(*.value))]
     OutOfRange {
         /// File name.
         origin: String,

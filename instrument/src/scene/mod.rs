@@ -372,7 +372,7 @@ impl Scene {
         }
         let r1 = kelvin_radius(f.environment.relative_humidity);
         if f.physics.electrostatic && r1 < self.a0() {
-            let rh = crate::shown(f.environment.relative_humidity);
+            let rh = crate::words::shown(f.environment.relative_humidity);
             w.push(SceneWarning(if r1 <= 0.0 {
                 format!(
                     "physics.electrostatic is on, but at environment.relative_humidity = {rh} there is no meniscus, so the shared area S = 4πR r₁ of Eq 4 is zero and the electrostatic force vanishes"

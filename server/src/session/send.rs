@@ -1,5 +1,5 @@
 //! The send loop of one session: replies (with back-pressure), events, telemetry and scan lines
-//! merged onto the socket, numbered pings judged by their pongs (`keepalive.rs`: the dead-peer
+//! (on subscribing mid-scan, the lines so far first) merged onto the socket, numbered pings judged by their pongs (`keepalive.rs`: the dead-peer
 //! time-out, and telemetry skipped for a client that has not read what was sent half a second
 //! ago), the window of telemetry in flight to a client that acknowledges what it read
 //! (`window.rs`), and the per-frame send budget. A slow client skips telemetry and is told how
@@ -128,11 +128,22 @@ where
                 if r.is_err() {
                     break;
                 }
+                let had_scans = wants.contains(&WsStream::Scan);
                 wants = out.streams.borrow_and_update().clone();
                 // Drop what queued before the subscription.
                 telemetry.renew();
                 skipped = 0;
                 scans = scans.resubscribe();
+                // Subscribed mid-scan: the lines so far first (read after subscribing, so none
+                // falls between; a line in both comes twice, and a client keeps one).
+                if !had_scans && wants.contains(&WsStream::Scan) {
+                    let so_far = st.activity.scan_lines.lock().map(|l| l.clone()).unwrap_or_default();
+                    for frame in so_far {
+                        if !send_within_budget(&mut sink, Message::Binary(frame), id).await {
+                            return;
+                        }
+                    }
+                }
                 continue;
             }
             _ = ping.tick() => {

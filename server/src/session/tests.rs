@@ -140,6 +140,55 @@ async fn the_welcome_states_the_push_tolerance_the_server_checks() {
         .unwrap();
 }
 
+/// A viewer that subscribes to `scan` while a scan runs gets the lines so far first: it shows
+/// the whole scan so far, not the lines after it joined.
+#[tokio::test]
+async fn subscribing_mid_scan_sends_the_lines_so_far() {
+    let st = test_state();
+    let frame = |line: u32| {
+        let h = nanopush_proto::ws::ScanLineHeader {
+            scan: 4,
+            line,
+            xres: 2,
+            yres: 8,
+            y: 0.0,
+        };
+        axum::body::Bytes::from(h.encode(&[line as f32, 0.5]))
+    };
+    st.activity.scan_lines.lock().unwrap().extend((0..3).map(frame));
+    let (mut tx, mut rx, task) = connect(&st, Role::Viewer);
+    next_json(&mut rx).await;
+    next_json(&mut rx).await;
+    tx.send(Ok(Message::Text(
+        r#"{"type":"subscribe","id":1,"streams":["scan"]}"#.into(),
+    )))
+    .await
+    .unwrap();
+    let mut lines = Vec::new();
+    let mut ok = false;
+    while lines.len() < 3 || !ok {
+        match tokio::time::timeout(Duration::from_secs(5), rx.next())
+            .await
+            .expect("within 5 s")
+            .expect("open")
+        {
+            Message::Binary(b) => lines.push(b),
+            Message::Text(t) => ok |= t.as_str().contains(r#""type":"ok""#),
+            _ => {}
+        }
+    }
+    assert_eq!(
+        lines,
+        (0..3).map(frame).collect::<Vec<_>>(),
+        "lines 0, 1 and 2, in order"
+    );
+    drop(tx);
+    tokio::time::timeout(Duration::from_secs(5), task)
+        .await
+        .unwrap()
+        .unwrap();
+}
+
 #[tokio::test]
 async fn a_viewers_subscription_is_counted_and_given_back() {
     let st = test_state();

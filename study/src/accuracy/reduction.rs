@@ -38,6 +38,7 @@ use std::time::Instant;
 use nanopush_instrument::numerics::integrate::{Method, Options};
 use nanopush_instrument::physics::pushing::trace::{PushRun, TraceRow, run_push};
 use nanopush_instrument::physics::pushing::{Dof, PushModel, PushParams};
+use nanopush_proto::accuracy::{PushOutcome, ReductionRow};
 
 /// A drop of the offset `s − y` between two samples larger than this (m) is a jump of the
 /// particle (a slip or a roll burst): while it sticks the offset grows with the stage, while it
@@ -95,6 +96,24 @@ pub struct Summary {
     pub steps: u64,
     /// Wall time (s).
     pub wall_time: f64,
+}
+
+impl From<&Summary> for PushOutcome {
+    /// The report's row for one model's push.
+    fn from(s: &Summary) -> PushOutcome {
+        PushOutcome {
+            regime: s.regime.as_str().into(),
+            jumps: s.jumps,
+            shearing_time: s.shearing_time,
+            final_phase: s.final_phase.into(),
+            settled_y: s.settled_y,
+            y_spread: s.y_spread,
+            zeta_z: s.zeta_z,
+            zeta_z_spread: s.zeta_z_spread,
+            steps: s.steps,
+            wall_time: s.wall_time,
+        }
+    }
 }
 
 /// Mean and spread (max − min) of `f` over `rows`.
@@ -226,6 +245,30 @@ impl Comparison {
     /// Difference of the settled deflections (reduced − full, m).
     pub fn zeta_z_error(&self) -> Option<f64> {
         self.full.as_ref().ok().map(|f| self.reduced.zeta_z - f.zeta_z)
+    }
+}
+
+impl From<&Comparison> for ReductionRow {
+    /// The report's row: both models, the errors of the reduction, and the full model's failure
+    /// (at the report's tolerance, or at the finer one), if it failed.
+    fn from(c: &Comparison) -> ReductionRow {
+        let fine = c.full_fine.as_ref();
+        let failure = match (&c.full, fine) {
+            (Err(e), _) => Some(format!("full model: {e}")),
+            (_, Some(Err(e))) => Some(format!("full model at rtol/100: {e}")),
+            _ => None,
+        };
+        ReductionRow {
+            rotation: c.rotation,
+            reduced: PushOutcome::from(&c.reduced),
+            full: c.full.as_ref().ok().map(PushOutcome::from),
+            full_fine: fine.and_then(|f| f.as_ref().ok()).map(PushOutcome::from),
+            failure,
+            regime_agrees: c.regime_agrees(),
+            shearing_time_error: c.shearing_time_error(),
+            settled_y_error: c.settled_y_error(),
+            zeta_z_error: c.zeta_z_error(),
+        }
     }
 }
 

@@ -288,7 +288,7 @@ fn eq18_sign_change(param: Param, mut lo: f64, mut hi: f64) -> f64 {
 /// α = 18.5°, where `y` goes through infinity (above 1 µm a thousandth of a degree either side) and
 /// changes sign.
 #[test]
-fn fig10_eq18_pole_at_alpha_18_5_deg() {
+fn fig10_eq18_has_a_pole_in_alpha() {
     let pole = eq18_sign_change(Param::Alpha, 18.0, 19.0);
     assert!((pole - 18.5).abs() < 0.05, "pole at {pole}°");
     assert!(eq18_at(Param::Alpha, pole - 1e-3).unwrap().y > 1e-6);
@@ -300,7 +300,7 @@ fn fig10_eq18_pole_at_alpha_18_5_deg() {
 /// 65°), not an optimum; and no kinetic steady state from β = 67.4° on, where
 /// `cos β/(1+sin β) ≤ μ_as^k(μ_ta^k cos β + sin β)` (the particle jams under the tip).
 #[test]
-fn fig11_eq18_pole_at_beta_23_2_deg_is_the_sweeps_argmin_and_it_jams_from_67_4_deg() {
+fn fig11_eq18_pole_in_beta_is_the_sweeps_argmin_and_steep_beta_jams() {
     let pole = eq18_sign_change(Param::Beta, 22.0, 24.0);
     assert!((pole - 23.2).abs() < 0.05, "pole at {pole}°");
     assert!(eq18_at(Param::Beta, pole - 1e-3).unwrap().y < -1e-6);
@@ -330,7 +330,7 @@ fn fig11_eq18_pole_at_beta_23_2_deg_is_the_sweeps_argmin_and_it_jams_from_67_4_d
 /// `cos β/(1+sin β) = μ(μ cos β + sin β)` at β = 30° is `0.866μ² + 0.5μ = 0.577`, whose root is
 /// 1/√3 = 0.577; the model's Eq 18 has a steady state at 0.577 and none at 0.578.
 #[test]
-fn fig12_jam_at_0_577_when_one_mu_sets_both_contacts() {
+fn fig12_jams_where_one_mu_sets_both_contacts() {
     let (sb, cb) = 30f64.to_radians().sin_cos();
     let lhs = cb / (1.0 + sb);
     let root = (-sb + (sb * sb + 4.0 * cb * lhs).sqrt()) / (2.0 * cb);
@@ -373,7 +373,7 @@ fn near(got: f64, want: f64, tol: f64) -> bool {
 /// rolling, over that grid (0° to 45° in 1.5° steps), it falls from 1.20 nm at 0° to its least,
 /// 0.235 nm, at 42°, and is 0.244 nm at 45°.
 #[test]
-fn fig10_dynamic_y_sliding_9_98_4_26_9_15_nm_rolling_1_20_to_0_235_nm_at_42_deg() {
+fn fig10_dynamic_y_sliding_and_rolling_is_as_documented() {
     for (alpha, y, tol) in [(0.0, 9.98, 0.005), (12.0, 4.26, 0.005), (45.0, 9.15, 0.005)] {
         let (got, _) = settled_nm(Param::Alpha, alpha, true);
         assert!(near(got, y, tol), "sliding, α = {alpha}°: y {got} nm");
@@ -406,7 +406,7 @@ fn fig10_dynamic_y_sliding_9_98_4_26_9_15_nm_rolling_1_20_to_0_235_nm_at_42_deg(
 /// slides); at 55° sliding the tip's contact breaks at t = 0.11 s (to ±0.005 s, read from the
 /// error's `t = … s`), an error row.
 #[test]
-fn fig11_sliding_y_least_4_41_nm_at_33_deg_and_stuck_from_51_deg_rolling_56_deg_sliding() {
+fn fig11_dynamic_y_has_its_documented_least_and_stuck_angles() {
     let (y33, z33) = settled_nm(Param::Beta, 33.0, true);
     assert!(
         near(y33, 4.41, 0.005) && near(z33, -2.07, 0.005),
@@ -467,7 +467,7 @@ fn fig11_sliding_y_least_4_41_nm_at_33_deg_and_stuck_from_51_deg_rolling_56_deg_
 /// grows linearly from 1.8 nm to 18.4 nm (the middle point within 1 % of the chord); rolling, it
 /// does not depend on μ_as at all: 0.669 nm and `ζ_z` 1.259 nm at every point.
 #[test]
-fn fig12_sliding_y_1_8_to_18_4_nm_and_rolling_0_669_nm_at_any_mu() {
+fn fig12_sliding_y_grows_with_mu_and_rolling_y_does_not_depend_on_it() {
     let mus = grid(0.1, 1.5, 29);
     let sliding: Vec<f64> = mus.iter().map(|&mu| settled_nm(Param::MuAs, mu, true).0).collect();
     assert!(
@@ -494,7 +494,7 @@ fn fig12_sliding_y_1_8_to_18_4_nm_and_rolling_0_669_nm_at_any_mu() {
 /// 0.75 nm at Rₐ = 100 nm to 10.1 nm at 3 µm; rolling, nearly flat over the Fig 13 sweep's grid
 /// (100 nm to 3 µm in 100 nm steps): from 0.645 nm (100 nm) to at most 0.670 nm.
 #[test]
-fn fig13_sliding_y_0_75_to_10_1_nm_and_rolling_0_645_to_0_670_nm() {
+fn fig13_sliding_y_grows_with_the_radius_and_rolling_y_is_nearly_flat() {
     for (r, y, tol) in [(100.0, 0.75, 0.005), (3000.0, 10.1, 0.05)] {
         let (got, _) = settled_nm(Param::Radius, r, true);
         assert!(near(got, y, tol), "sliding, Rₐ = {r} nm: y {got} nm");

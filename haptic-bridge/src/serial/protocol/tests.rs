@@ -246,8 +246,8 @@ fn a_state_is_converted_to_si_and_checked_against_the_device() {
     );
 }
 
-/// Issue 28: 2100 N, a ±1 µm or ±2 km travel, an absurd stiffness, damping or rate all passed;
-/// each is now refused, naming the value and the allowed range.
+/// An implausible device is refused, naming the value and the allowed range: 2100 N, a ±1 µm or
+/// ±2 km travel, an absurd stiffness, damping or rate.
 #[test]
 fn implausible_limits_are_refused_naming_the_allowed_range() {
     let refused = |p: InfoPacket| p.spec().unwrap_err();
@@ -339,15 +339,15 @@ fn implausible_limits_are_refused_naming_the_allowed_range() {
 
 /// One range rule for every device: the travel extended by 10 % of its span, at least 5 mm.
 #[test]
-fn the_travel_margin_is_10_percent_of_the_span_and_at_least_5_mm() {
+fn the_travel_margin_is_a_share_of_the_span_with_a_floor() {
     assert!((travel_margin([-0.03, 0.03]) - 0.006).abs() < 1e-15);
     assert_eq!(travel_margin([-0.01, 0.01]), 0.005);
 }
 
-/// Issue 28: the documented 115 200 baud carried no 1 kHz. The link's limit is 80 % of
-/// baud / (36 bytes × 10 bits): 2222 Hz at the default 1 Mbaud, 256 Hz at 115 200.
+/// The link's rate limit is 80 % of baud / (36 bytes × 10 bits): 2222 Hz at the default 1 Mbaud,
+/// 256 Hz at 115 200, which cannot carry 1 kHz.
 #[test]
-fn the_link_carries_2222_hz_at_1_mbaud_and_256_hz_at_115200() {
+fn the_links_rate_limit_follows_its_baud_rate() {
     assert_eq!(DEFAULT_BAUD, 1_000_000);
     assert!((exchange_wire_time(1_000_000).as_secs_f64() - 360e-6).abs() < 1e-12);
     assert!((exchange_wire_time(115_200).as_secs_f64() - 3.125e-3).abs() < 1e-9);
@@ -396,7 +396,7 @@ proptest! {
     }
 }
 
-/// Issue 25: a serial device gets its renderable region from its info packet as the simulated
+/// A serial device gets its renderable region from its info packet as the simulated
 /// device does from its spec. The fixture's board declares 400 N/m at 1 kHz (a port damping of
 /// 0.6 N·s/m): with the loop's 1 ms round trip its edge is 400 N/m at 1 kHz and 4 kHz, 240 N/m
 /// with 2 ms (its 1.5 N·s/m carry the coupling's damper there); the same board declaring its limit

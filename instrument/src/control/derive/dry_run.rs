@@ -65,7 +65,7 @@ fn judge(moved: &crate::control::moves::run::MoveRun, plan: &DerivedStrategy) ->
             "missed: {:.1} nm from the target after {} push(es) (tolerance {} nm)",
             error * 1e9,
             moved.attempts,
-            crate::nm_text(plan.tolerance)
+            crate::words::nm_text(plan.tolerance)
         )),
         Verdict::NotFound => Err("not_found: the scan after the push did not find the particle".into()),
         Verdict::Failed { code } => Err(format!(

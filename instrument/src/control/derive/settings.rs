@@ -115,21 +115,21 @@ impl Derivation<'_> {
             self.warnings.push(format!(
                 "the model's push is stick-slip with a {:.1} nm amplitude, more than the {} nm tolerance: pushes may end outside it and be corrected",
                 p.periodic_amplitude * 1e9,
-                crate::nm_text(self.tolerance)
+                crate::words::nm_text(self.tolerance)
             ));
         }
         if pitch / 8.0 > self.tolerance {
             self.warnings.push(format!(
                 "the local scan's {:.0} nm pitch is coarse for a {} nm tolerance",
                 pitch * 1e9,
-                crate::nm_text(self.tolerance)
+                crate::words::nm_text(self.tolerance)
             ));
         }
         let least = crate::control::moves::locate::DONE_WITHIN;
         if self.tolerance < least {
             self.warnings.push(format!(
                 "the {} nm tolerance is below the {:.0} nm a push can correct: a move that ends between the two is missed without a correction",
-                crate::nm_text(self.tolerance),
+                crate::words::nm_text(self.tolerance),
                 least * 1e9
             ));
         }
@@ -266,7 +266,7 @@ fn speed(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
             } else {
                 format!(
                     "the stage rings about V/(2π f_y) at the stop, over a quarter of the {} nm tolerance",
-                    crate::nm_text(d.tolerance)
+                    crate::words::nm_text(d.tolerance)
                 )
             }
         )

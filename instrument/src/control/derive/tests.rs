@@ -270,7 +270,7 @@ fn a_dry_run_with_no_room_for_a_leg_is_said_not_passed() {
 /// over the stage's 141 µm diagonal, 0.85 µm, which the start height adds to its clearance of
 /// the particles; level, it does not.
 #[test]
-fn the_start_height_clears_the_particles_wherever_the_tilted_substrate_rises() {
+fn the_start_height_clears_particles_wherever_the_tilt_raises_them() {
     let tilted = untuned("gold-latex-500nm", &[]);
     assert_eq!(tilted.file.substrate.tilt_x_mrad, 6.0);
     let level = untuned("gold-latex-500nm", &[("tilt_x_mrad = 6.0", "tilt_x_mrad = 0.0")]);

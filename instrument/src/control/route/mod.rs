@@ -181,16 +181,29 @@ pub struct Router {
 impl Router {
     /// The first obstacle whose distance to the swept segment (extended backwards by the
     /// run-up, where the tip travels at parking height) is below the two radii plus clearance.
+    ///
+    /// A particle that starts closer than that to another (two particles left side by side)
+    /// may still move, if it never comes closer to it and the tip's run-up passes it at least
+    /// a particle's width away (the tip fits where the particle would): so it can be pushed
+    /// along or away from its neighbour, never into it.
     fn blocker(&self, from: (f64, f64), to: (f64, f64), obstacles: &[Obstacle]) -> Option<Obstacle> {
         let leg = Leg { from, to };
         let d = leg.direction();
         let start = (from.0 - d.0 * self.run_up, from.1 - d.1 * self.run_up);
         let len = leg.length() + self.run_up;
-        obstacles.iter().copied().find(|o| {
+        // Distance from `o` to the points at `[a, b]` along the extended segment.
+        let dist = |o: &Obstacle, a: f64, b: f64| {
             let (rx, ry) = (o.x - start.0, o.y - start.1);
-            let s = (rx * d.0 + ry * d.1).clamp(0.0, len);
-            let dist = (rx - s * d.0).hypot(ry - s * d.1);
-            dist < self.radius + o.radius + self.clearance
+            let s = (rx * d.0 + ry * d.1).clamp(a, b);
+            (rx - s * d.0).hypot(ry - s * d.1)
+        };
+        obstacles.iter().copied().find(|o| {
+            let keep = self.radius + o.radius + self.clearance;
+            let at_start = (o.x - from.0).hypot(o.y - from.1);
+            if at_start >= keep {
+                return dist(o, 0.0, len) < keep;
+            }
+            dist(o, self.run_up, len) < at_start - 1e-12 || dist(o, 0.0, self.run_up) < self.radius + o.radius
         })
     }
 

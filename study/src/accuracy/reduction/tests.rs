@@ -52,7 +52,7 @@ fn jumps_sampled_as_stick_are_stick_slip_not_stuck() {
 /// full model again at rtol 1e-8; a jump is a drop of the offset `s − y` by more than 0.05 nm
 /// between two samples (a 0.051 nm drop counts, a 0.049 nm drop does not).
 #[test]
-fn the_report_compares_at_rtol_1e_6_and_1e_8_10_us_samples_last_half_and_0_05_nm_jumps() {
+fn the_reports_comparison_options_are_as_documented() {
     let o = CompareOptions::report(0.02);
     assert_eq!((o.duration, o.sample, o.tail, o.rtol), (0.02, 1e-5, 0.5, 1e-6));
     assert!(o.fine_check);
@@ -151,7 +151,7 @@ fn paper_scene_reduction_against_the_full_model() {
 /// ±0.000); rotation on it rolls after 1 jump, never shears, 0.669 nm and +1.259 nm; 2005
 /// steps each.
 #[test]
-fn the_reduced_rows_slide_at_4_471_nm_and_roll_at_0_669_nm_in_2005_steps() {
+fn the_reduced_rows_settle_and_step_as_documented() {
     let p = Scene::default_scene().push_params();
     let o = CompareOptions::report(0.02);
     let readme = [
@@ -195,7 +195,7 @@ fn probe(s: &Simulation) -> nanopush_instrument::physics::pushing::Probe<f64> {
 /// particle moves farther than the reduction's jump and sticks again, and the tip slides
 /// up the particle (ζ_z changes sign in the full model only). The numbers are asserted below.
 #[test]
-fn the_full_models_first_slip_moves_2_17_nm_where_the_reduction_jumps_1_77_nm() {
+fn the_first_slip_of_each_model_moves_as_documented() {
     let p = Scene::default_scene().push_params();
     let (mu_s, mu_k) = (p.mu_as_s, p.mu_as_k);
     // The report's sampling through the shear.
@@ -292,7 +292,7 @@ fn the_full_models_first_slip_moves_2_17_nm_where_the_reduction_jumps_1_77_nm() 
 /// 1 µm/s is 1.6e-12 m at 0.1 MHz and 4.0e-14 m at 4 MHz; the cantilever
 /// (`m_c* = k_z/(4π²f_r²)`) is 2400 times heavier than the particle.
 #[test]
-fn the_spring_slider_overshoots_1_85_times_and_the_cantilever_is_2400_times_the_particle() {
+fn the_spring_sliders_closed_forms_are_as_documented() {
     let scene = Scene::default_scene();
     let zeta = scene.file.friction.contact_damping_ratio;
     assert_eq!(zeta, 0.05);
@@ -312,7 +312,7 @@ fn the_spring_slider_overshoots_1_85_times_and_the_cantilever_is_2400_times_the_
 /// one jump) and rolls steadily, the full model rolls in bursts: 7 jumps by 5.4 ms, each
 /// sampled as stick (`stick-roll`).
 #[test]
-fn with_rotation_the_full_model_rolls_in_bursts_where_the_reduction_rolls_steadily() {
+fn with_rotation_the_full_model_rolls_in_bursts_the_reduction_steadily() {
     let p = Scene::default_scene().push_params();
     let o = CompareOptions {
         duration: 5.4e-3,
@@ -368,7 +368,7 @@ fn with_rotation_the_full_model_rolls_in_bursts_where_the_reduction_rolls_steadi
 /// even every 10 µs sample reads `stick`. A 10 ms push (its tail, 8-10 ms, is after the shear),
 /// not the sweep's 0.2 s: the full model rings at up to ~6·10⁴ steps per ms after each slip.
 #[test]
-fn the_sweeps_stuck_flag_calls_the_full_model_stuck_where_the_report_sees_stick_slip() {
+fn the_sweeps_stuck_flag_misses_the_full_models_stick_slip() {
     let p = variant(&Scene::default_scene().push_params(), true, false);
     let o = CompareOptions::report(0.02);
     let opts = Options {
@@ -397,7 +397,7 @@ fn the_sweeps_stuck_flag_calls_the_full_model_stuck_where_the_report_sees_stick_
 /// 100, the full model still stick-slips where the reduction slides. The fast setting of
 /// [`full_model_stick_slips_where_the_reduction_slides`]: 1 mm/s, an ideal stage, 20 µs.
 #[test]
-fn with_damping_ratio_3_and_a_q_0_5_cantilever_the_full_model_still_stick_slips() {
+fn an_overdamped_full_model_still_stick_slips() {
     let mut p = Scene::default_scene().push_params();
     p.speed = 1e-3;
     p.dofs.stage = Dof::Off;
@@ -420,4 +420,45 @@ fn with_damping_ratio_3_and_a_q_0_5_cantilever_the_full_model_still_stick_slips(
     assert_eq!(off.reduced.regime, Regime::Slides);
     assert_eq!(full.regime, Regime::StickSlip);
     assert!(full.jumps >= 2, "{}", full.jumps);
+}
+
+/// A comparison's row of the report: both models, the reduction's errors, and the full model's
+/// failure, at the report's tolerance or at the 100× finer one.
+#[test]
+fn a_comparisons_row_names_the_full_models_failure() {
+    let summary = |regime: Regime, settled_y: f64| Summary {
+        regime,
+        jumps: 0,
+        shearing_time: Some(1e-3),
+        final_phase: "slip",
+        settled_y,
+        y_spread: 0.0,
+        zeta_z: 0.0,
+        zeta_z_spread: 0.0,
+        steps: 10,
+        wall_time: 0.1,
+    };
+    let failed = Comparison {
+        rotation: false,
+        reduced: summary(Regime::Slides, 4e-9),
+        full: Err("step limit".into()),
+        full_fine: None,
+    };
+    let row = ReductionRow::from(&failed);
+    assert_eq!(row.failure.as_deref(), Some("full model: step limit"));
+    assert_eq!((row.full, row.regime_agrees, row.settled_y_error), (None, None, None));
+    assert_eq!(
+        (row.reduced.regime.as_str(), row.reduced.final_phase.as_str()),
+        ("slides", "slip")
+    );
+    let fine_failed = Comparison {
+        full: Ok(summary(Regime::Slides, 3e-9)),
+        full_fine: Some(Err("diverged".into())),
+        ..failed
+    };
+    let row = ReductionRow::from(&fine_failed);
+    assert_eq!(row.failure.as_deref(), Some("full model at rtol/100: diverged"));
+    assert_eq!((row.regime_agrees, row.full_fine), (Some(true), None));
+    assert!((row.settled_y_error.unwrap() - 1e-9).abs() < 1e-20);
+    assert_eq!(row.full.map(|f| f.settled_y), Some(3e-9));
 }

@@ -1,13 +1,14 @@
-//! The server's modules keep to the layers its crate doc (`src/lib.rs`, "Layers") gives them:
+//! A library's modules keep to the layers its crate doc (`src/lib.rs`, "Layers") gives them:
 //! every module of the crate is in one layer, and outside tests each module uses (by a `crate::`
 //! path, or a `super::` path that leaves it) only modules of lower layers. A use from a lower
-//! layer to a higher one would be the start of a circle.
+//! layer to a higher one would be the start of a circle. `tests/e2e/layers.rs` checks the
+//! instrument and the server with [`check`].
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// The layer of each top-level module, from the crate doc's table (`//! | N | `a`, `b` | … |`).
-fn layers(lib: &str) -> BTreeMap<String, u32> {
+pub fn layers(lib: &str) -> BTreeMap<String, u32> {
     let mut out = BTreeMap::new();
     for line in lib.lines() {
         let Some(row) = line.strip_prefix("//! |") else {
@@ -29,7 +30,7 @@ fn layers(lib: &str) -> BTreeMap<String, u32> {
 }
 
 /// The top-level modules `lib.rs` declares.
-fn declared(lib: &str) -> Vec<String> {
+pub fn declared(lib: &str) -> Vec<String> {
     lib.lines()
         .filter_map(|l| {
             let l = l.trim_start_matches("pub ");
@@ -40,7 +41,7 @@ fn declared(lib: &str) -> Vec<String> {
 
 /// The source with comments, string and character literals blanked out (each replaced by a
 /// space), so that what is left is code: paths, braces, attributes.
-fn code_only(src: &str) -> String {
+pub fn code_only(src: &str) -> String {
     let c: Vec<char> = src.chars().collect();
     let mut out = String::with_capacity(src.len());
     let mut i = 0;
@@ -95,7 +96,7 @@ fn code_only(src: &str) -> String {
 }
 
 /// `code` without its `#[cfg(test)]` items (a `mod tests { … }`, a test helper, `mod tests;`).
-fn without_tests(code: &str) -> String {
+pub fn without_tests(code: &str) -> String {
     let mut out = String::new();
     let mut rest = code;
     while let Some(at) = rest.find("#[cfg(test)]") {
@@ -128,7 +129,7 @@ fn without_tests(code: &str) -> String {
 }
 
 /// The files a `#[cfg(test)] mod NAME;` of `code` (in `file`) declares.
-fn test_files(file: &Path, code: &str) -> Vec<PathBuf> {
+pub fn test_files(file: &Path, code: &str) -> Vec<PathBuf> {
     let dir = if file.file_name().is_some_and(|n| n == "mod.rs" || n == "lib.rs") {
         file.parent().unwrap().to_path_buf()
     } else {
@@ -156,7 +157,7 @@ fn test_files(file: &Path, code: &str) -> Vec<PathBuf> {
 
 /// The module path of a source file under `src` (`session/commands/mod.rs` is
 /// `["session", "commands"]`).
-fn module_of(src: &Path, file: &Path) -> Vec<String> {
+pub fn module_of(src: &Path, file: &Path) -> Vec<String> {
     let rel = file.strip_prefix(src).unwrap().with_extension("");
     let mut parts: Vec<String> = rel.iter().map(|p| p.to_string_lossy().into_owned()).collect();
     if parts.last().is_some_and(|p| p == "mod" || p == "lib") {
@@ -166,7 +167,7 @@ fn module_of(src: &Path, file: &Path) -> Vec<String> {
 }
 
 /// The top-level modules the paths of `code` (in module `module`) lead to.
-fn uses(module: &[String], code: &str) -> Vec<String> {
+pub fn uses(module: &[String], code: &str) -> Vec<String> {
     let ident = |s: &str| -> String { s.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect() };
     let mut out = Vec::new();
     for (at, _) in code.match_indices("crate::") {
@@ -200,7 +201,8 @@ fn uses(module: &[String], code: &str) -> Vec<String> {
     out
 }
 
-fn sources(dir: &Path, out: &mut Vec<PathBuf>) {
+/// Every `.rs` file under `dir`, into `out`.
+pub fn sources(dir: &Path, out: &mut Vec<PathBuf>) {
     for e in std::fs::read_dir(dir).unwrap() {
         let p = e.unwrap().path();
         if p.is_dir() {
@@ -211,21 +213,23 @@ fn sources(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
-#[test]
-fn each_module_uses_only_modules_of_lower_layers() {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+/// The modules of the library whose sources are in `src` against its crate doc's layers:
+/// `Err` lists each module outside the table or a table entry with no module, and each use
+/// against the layers (file, module, layer, used module, its layer).
+pub fn check(src: &Path) -> Result<usize, String> {
     let lib = std::fs::read_to_string(src.join("lib.rs")).unwrap();
     let layer = layers(&lib);
     let mut declared = declared(&lib);
     declared.sort();
     let placed: Vec<String> = layer.keys().cloned().collect();
-    assert_eq!(
-        declared, placed,
-        "each module of lib.rs in one layer of its doc, and no other"
-    );
+    if declared != placed {
+        return Err(format!(
+            "each module of lib.rs in one layer of its doc, and no other: declared {declared:?}, placed {placed:?}"
+        ));
+    }
 
     let mut files = Vec::new();
-    sources(&src, &mut files);
+    sources(src, &mut files);
     let mut tests = Vec::new();
     let mut code = BTreeMap::new();
     for f in &files {
@@ -236,7 +240,7 @@ fn each_module_uses_only_modules_of_lower_layers() {
     let mut wrong = Vec::new();
     let mut checked = 0;
     for (f, text) in code.iter().filter(|(f, _)| !tests.contains(f)) {
-        let module = module_of(&src, f);
+        let module = module_of(src, f);
         let Some(top) = module.first() else { continue };
         for used in uses(&module, &without_tests(text)) {
             if used == *top {
@@ -247,34 +251,14 @@ fn each_module_uses_only_modules_of_lower_layers() {
                 (Some(a), Some(b)) if b < a => {}
                 (a, b) => wrong.push(format!(
                     "{}: `{top}` (layer {a:?}) uses `{used}` (layer {b:?})",
-                    f.strip_prefix(&src).unwrap().display()
+                    f.strip_prefix(src).unwrap().display()
                 )),
             }
         }
     }
-    assert!(checked > 50, "the paths between modules were found ({checked})");
-    assert!(wrong.is_empty(), "uses against the layers:\n{}", wrong.join("\n"));
-}
-
-#[test]
-fn the_reader_finds_paths_in_code_and_not_in_comments_strings_or_tests() {
-    let src = r##"
-use crate::{app_state::AppState, records};
-// crate::lifecycle in a comment
-/* crate::app in a block comment */
-fn f() { let s = "crate::session"; let r = r#"crate::telemetry"#; let c = '{'; let q = '\''; let l: &'static str = ""; }
-fn g() -> super::super::push::X { crate::audit::x() }
-#[cfg(test)]
-fn helper() { crate::lifecycle::run(); }
-#[cfg(test)]
-mod tests { use crate::app; fn h() { {} } }
-"##;
-    let code = without_tests(&code_only(src));
-    let mut used = uses(&["session".into(), "commands".into()], &code);
-    used.sort();
-    assert_eq!(used, ["app_state", "audit", "push", "records"]);
-    assert_eq!(
-        test_files(Path::new("src/session/mod.rs"), "#[cfg(test)]\npub(crate) mod tests;").len(),
-        2
-    );
+    if wrong.is_empty() {
+        Ok(checked)
+    } else {
+        Err(format!("uses against the layers:\n{}", wrong.join("\n")))
+    }
 }

@@ -1,32 +1,30 @@
-//! The stability campaign on whole pushes: every valid scene must push whole, physically, in
-//! bounded memory. [`crate::extremes`] pushes 20 nm of the bare model; this pushes the
-//! instrument A → E (travel, park, contact search, push, hold, back-off, retract) at least 1 µm,
-//! exactly as `nanopush push` does (a local scan finds the particle, the strategy pushes it),
-//! over the validated range of every parameter, one at a time and at the corners.
+//! The whole pushes: every valid scene must push whole, physically, in bounded memory (run by
+//! `nanopush accuracy --extremes`, written to `DIR/campaign.csv`). [`crate::extremes`] pushes
+//! 20 nm of the bare model; this pushes the instrument A → E (travel, park, contact search, push,
+//! hold, back-off, retract) at least 1 µm, exactly as `nanopush push` does (a local scan finds the
+//! particle, the strategy pushes it), over the validated range of every parameter, one at a time
+//! and at the corners.
 //!
 //! Each case ends with an outcome: `ok`, a failure code of the strategy (`no_contact`,
 //! `deflection_limit`, `timeout`, `unphysical`, ...) or a refusal before the push (an invalid
 //! scene, a particle the scan cannot find, a scene too stiff to push, a prediction over its
-//! budget), each with its reason. The campaign's checks, per case: no panic; every reading and
-//! position finite; the readings inside the readout's range; the particle inside the stage; an
-//! `ok` never with the particle further than its radius plus 10 % of the push from the target;
-//! the trace's memory and the wall time.
+//! budget), each with its reason. The checks, per case ([`crate::judge`]): no panic; every
+//! reading and position finite; the readings inside the readout's range; the particle inside the
+//! stage; an `ok` truly within the tolerance, the tip retracted; the trace's memory and the wall
+//! time.
 
 use std::time::Instant;
 
-use nanopush_instrument::afm::Afm;
-use nanopush_instrument::control::derive::{self, DEFAULT_TOLERANCE};
-use nanopush_instrument::control::moves::locate::MoveTarget;
-use nanopush_instrument::control::{
-    DEFAULT_ATTEMPTS, MoveOptions, MoveRun, MoveRunError, RunError, RunRow, Verdict, move_particle,
-};
+use nanopush_instrument::control::derive::DEFAULT_TOLERANCE;
 use nanopush_instrument::physics::friction;
 use nanopush_instrument::scene::Scene;
 use nanopush_instrument::scene::hand_set::HandSet;
 
+use crate::judge::push_judged;
+
 const UM: f64 = 1e-6;
 
-/// One scene edit of the campaign: a scene field and its value (file units).
+/// One scene edit of a case: a scene field and its value (file units).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Edit {
     /// `particles[pushed].radius_nm`.
@@ -117,10 +115,10 @@ impl Edit {
 /// A case: the edits applied to the base scene.
 pub type Case = Vec<Edit>;
 
-/// The campaign's cases around a scene. One at a time over each validated range (its ends
-/// included), every friction zero, the Eq 9 and Eq 16 bounds, and (full campaign) the corners of
-/// radius (50 nm, 5 µm) × stiffness × humidity × speed. The reduced campaign (a unit test) keeps the cases a
-/// debug build runs in seconds.
+/// The cases around a scene. One at a time over each validated range (its ends included), every
+/// friction zero, the Eq 9 and Eq 16 bounds, and (the full set) the corners of radius (50 nm,
+/// 5 µm) × stiffness × humidity × speed. The reduced set (a unit test) keeps the cases a debug
+/// build runs in seconds.
 pub fn cases(reduced: bool) -> Vec<Case> {
     use Edit::*;
     let mut v: Vec<Case> = Vec::new();
@@ -264,221 +262,6 @@ fn push_whole(base: &Scene, case: &[Edit], out: &mut PushCase) {
     out.trace_bytes = j.trace_bytes;
 }
 
-/// A whole move planned, pushed and judged.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Judged {
-    /// `ok`, `missed`, `not_found`, a failure code, `refused` or `error`.
-    pub outcome: String,
-    /// Why it was refused (the plan's code, or `scene`, `locate`, `model`), when it was.
-    pub refusal: Option<String>,
-    /// The reason (empty for `ok`).
-    pub reason: String,
-    /// Distance asked for (m).
-    pub distance: f64,
-    /// The particle's true displacement along the push (m).
-    pub moved: f64,
-    /// The true distance from the target at the end (m), when pushed.
-    pub true_error: Option<f64>,
-    /// The distance from the target the scan after measured (m).
-    pub measured_error: Option<f64>,
-    /// Pushes made.
-    pub attempts: u32,
-    /// Largest |reading| (V).
-    pub max_volts: f64,
-    /// Checks that failed (empty when sound): no panic, rows finite, readings inside the
-    /// readout, the particle on the stage, and an `ok` truly within the tolerance, retracted.
-    pub violations: Vec<String>,
-    /// The tip ended retracted.
-    pub retracted: bool,
-    /// Ticks run.
-    pub ticks: usize,
-    /// Memory of the traces (bytes).
-    pub trace_bytes: usize,
-    /// Simulated time (s).
-    pub simulated: f64,
-    /// Wall time (s).
-    pub wall_time: f64,
-}
-
-impl Judged {
-    fn refused(code: &str, reason: String, distance: f64) -> Judged {
-        Judged {
-            outcome: "refused".into(),
-            refusal: Some(code.into()),
-            reason,
-            distance,
-            moved: 0.0,
-            true_error: None,
-            measured_error: None,
-            attempts: 0,
-            max_volts: 0.0,
-            violations: Vec::new(),
-            retracted: true,
-            ticks: 0,
-            trace_bytes: 0,
-            simulated: 0.0,
-            wall_time: 0.0,
-        }
-    }
-}
-
-/// Plans `scene`'s pushed particle (the plan derives what the scene does not set), moves it
-/// `distance` (m) along the unit `direction` from where a local scan finds it, and judges the
-/// move against `tolerance` (m) as `nanopush push` does; then checks it against the truth the
-/// simulation knows. Never panics on a valid scene: a panic is caught and reported as a
-/// violation.
-pub fn push_judged(scene: &Scene, distance: f64, direction: (f64, f64), tolerance: f64) -> Judged {
-    let start = Instant::now();
-    let caught = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        judge_inner(scene, distance, direction, tolerance)
-    }));
-    let mut j = caught.unwrap_or_else(|p| {
-        let mut j = Judged::refused("error", String::new(), distance);
-        j.outcome = "error".into();
-        j.refusal = None;
-        j.violations
-            .push(format!("panic: {}", nanopush_instrument::panic_message(&*p)));
-        j
-    });
-    j.wall_time = start.elapsed().as_secs_f64();
-    j
-}
-
-fn judge_inner(scene: &Scene, distance: f64, direction: (f64, f64), tolerance: f64) -> Judged {
-    let p = scene.pushed_particle();
-    let plan = match derive::derive(scene, p.id, tolerance) {
-        Ok(plan) => plan,
-        Err(e) => return Judged::refused(e.code, e.to_string(), distance),
-    };
-    let mut scene = scene.clone();
-    plan.apply(&mut scene);
-    // With the plan's start height and angle (a dynamic particle or lever is refused here).
-    if let Err(e) = scene.pushable(p.id) {
-        return Judged::refused("scene", e.to_string(), distance);
-    }
-    let (x, y, r) = (p.x_um * UM, p.y_um * UM, p.radius_nm * 1e-9);
-    let range = scene.file.stage.range_um * UM;
-    let back = scene.file.strategy.approach_distance_um * UM + r + 2.0 * UM;
-    let clamp = |v: f64| v.clamp(0.0, range);
-    let mut afm = Afm::from_scene(
-        &scene,
-        clamp(x - direction.0 * back),
-        clamp(y - direction.1 * back),
-        1e-3,
-    );
-    let options = MoveOptions {
-        tolerance,
-        attempts: DEFAULT_ATTEMPTS,
-        pause: None,
-    };
-    let target = MoveTarget::Distance { distance, direction };
-    let moved = match move_particle(&scene, &mut afm, p.id, (x, y), r, target, options) {
-        Ok(m) => m,
-        Err(MoveRunError::Locate(e)) => return Judged::refused("locate", e.to_string(), distance),
-        Err(MoveRunError::Run(RunError::Predict(e))) => {
-            return Judged::refused("model", format!("the estimator's prediction failed: {e}"), distance);
-        }
-        Err(MoveRunError::Run(RunError::NotPushable(e))) => return Judged::refused("scene", e, distance),
-        Err(MoveRunError::Run(e)) => {
-            let mut j = Judged::refused("error", e.to_string(), distance);
-            j.outcome = "error".into();
-            j.refusal = None;
-            j.violations.push(format!("the run failed: {e}"));
-            return j;
-        }
-    };
-    let truth = afm
-        .particles()
-        .iter()
-        .find(|q| q.id == p.id)
-        .copied()
-        .expect("the particle exists");
-    let true_error = (truth.x - moved.target.0).hypot(truth.y - moved.target.1);
-    let mut j = Judged {
-        outcome: moved.verdict.code().into(),
-        refusal: None,
-        reason: String::new(),
-        distance,
-        moved: (truth.x - x) * direction.0 + (truth.y - y) * direction.1,
-        true_error: Some(true_error),
-        measured_error: moved
-            .after
-            .1
-            .map(|l| (l.x - moved.target.0).hypot(l.y - moved.target.1)),
-        attempts: moved.attempts,
-        max_volts: 0.0,
-        violations: Vec::new(),
-        retracted: moved.legs.last().is_none_or(|l| l.run.retracted),
-        ticks: moved.legs.iter().map(|l| l.run.trace.len()).sum(),
-        trace_bytes: moved
-            .legs
-            .iter()
-            .map(|l| l.run.trace.capacity() * std::mem::size_of::<RunRow>())
-            .sum(),
-        simulated: afm.time(),
-        wall_time: 0.0,
-    };
-    j.reason = match &moved.verdict {
-        Verdict::Ok { .. } => String::new(),
-        Verdict::Missed { error } => format!(
-            "the scan after the last of {} push(es) finds it {:.1} nm from the target, beyond the {} nm tolerance",
-            moved.attempts,
-            error * 1e9,
-            nanopush_instrument::nm_text(tolerance)
-        ),
-        Verdict::NotFound => "the scan after the push does not find the particle".into(),
-        Verdict::Failed { .. } => moved.legs.last().and_then(|l| l.run.failure_text()).unwrap_or_default(),
-    };
-    check_traces(&scene, &moved, r, &mut j);
-    if j.outcome == "ok" && true_error > tolerance {
-        j.violations.push(format!(
-            "ok, but the particle is truly {:.2} nm from the target (tolerance {} nm)",
-            true_error * 1e9,
-            nanopush_instrument::nm_text(tolerance)
-        ));
-    }
-    // A failed push may leave a soft lever stuck to the surface by adhesion it cannot pull
-    // free within the retraction (a failure, said in the reason); an `ok` never.
-    if !j.retracted {
-        if j.outcome == "ok" {
-            j.violations.push("ok, but the tip did not end retracted".into());
-        } else {
-            j.reason.push_str("; the tip did not come free of the surface");
-        }
-    }
-    j
-}
-
-/// The soundness of every tick: finite, inside the readout, the particle on the stage.
-fn check_traces(scene: &Scene, moved: &MoveRun, r: f64, j: &mut Judged) {
-    let range = scene.file.stage.range_um * UM;
-    let full_scale = scene.file.sensor.full_scale_v;
-    for row in moved.legs.iter().flat_map(|l| l.run.trace.iter()) {
-        j.max_volts = j.max_volts.max(row.volts.abs());
-        let finite = row.volts.is_finite()
-            && row.stage.iter().all(|v| v.is_finite())
-            && row.particle.0.is_finite()
-            && row.particle.1.is_finite();
-        if !finite {
-            j.violations.push(format!("non-finite row at t = {} s: {row:?}", row.t));
-            return;
-        }
-        if row.volts.abs() > full_scale {
-            j.violations
-                .push(format!("reading {} V beyond the ±{full_scale} V readout", row.volts));
-            return;
-        }
-        let inside = |v: f64| (-r..=range + r).contains(&v);
-        if !(inside(row.particle.0) && inside(row.particle.1)) {
-            j.violations.push(format!(
-                "particle outside the stage at t = {} s: {:?}",
-                row.t, row.particle
-            ));
-            return;
-        }
-    }
-}
-
 /// The peak resident memory of this process so far (bytes), where the OS says (Linux).
 pub fn peak_rss_bytes() -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
@@ -491,13 +274,13 @@ pub fn peak_rss_bytes() -> Option<u64> {
 mod tests {
     use super::*;
 
-    /// The reduced campaign (each validated range's ends, every friction zero, the Eq 16
+    /// The reduced set (each validated range's ends, every friction zero, the Eq 16
     /// bound): every case a plausible outcome or a refusal with its reason, and sound;
     /// docs/validation.md's outcome counts ("Whole pushes: the campaign"): 7 `ok`, 5 refused by
     /// the plan with their reasons (the 0.01 N/m lever's deflection limit, the 500 N/m lever's dry run, the
     /// 75° tilt, the hand-set 1 mm/s, no friction), and the hand-set β = 89° `no_contact`.
     #[test]
-    fn the_reduced_campaign_is_sound_with_7_ok_5_refused_1_no_contact() {
+    fn the_reduced_cases_are_sound_with_the_documented_outcomes() {
         let scene = Scene::default_scene();
         let mut bad = Vec::new();
         let mut outcomes = std::collections::BTreeMap::new();
@@ -566,24 +349,24 @@ mod tests {
         assert!(cases(false).len() > 60);
     }
 
-    /// docs/validation.md, "Whole pushes: the campaign": the full campaign has 74 cases, 16 of them
+    /// docs/validation.md, "Whole pushes: the campaign": the full set has 74 cases, 16 of them
     /// the corners of radius × `k_c` × humidity × speed; the reduced one, a unit test, 13.
     #[test]
-    fn the_campaign_has_74_cases_16_corners_and_the_reduced_one_13() {
+    fn the_case_counts_are_the_documented_ones() {
         let full = cases(false);
         assert_eq!(full.len(), 74);
         assert_eq!(full.iter().filter(|c| c.len() == 4).count(), 16);
         assert_eq!(cases(true).len(), 13);
     }
 
-    /// docs/validation.md's ranges of the full campaign ("Whole pushes: the campaign"), one
+    /// docs/validation.md's ranges of the full set ("Whole pushes: the campaign"), one
     /// parameter at a time (their ends): particle radius 7 nm … 10 µm (and 2 nm under a 1 nm tip,
     /// 7 nm under a 5 nm tip), tip radius 1 nm … 1 µm, `k_c` 0.01 … 500 N/m, humidity 0 … 0.999,
     /// `μ_as` and `μ_ta` 0 … 2, all frictions zero, tilt 0 … 75°, β 1 … 89°, stage speed 1 pm/s …
     /// 1 mm/s, `μ_as` at 0.999, 1 and 1.001 of the Eq 9 and Eq 16 bounds; and the 16 corners of
     /// radius (50 nm, 5 µm) × `k_c` × humidity × speed (1 nm/s, 1 mm/s).
     #[test]
-    fn the_campaign_sweeps_the_documented_ranges_and_16_corners() {
+    fn the_cases_sweep_the_documented_ranges_and_corners() {
         use Edit::*;
         let full = cases(false);
         let mut ends: std::collections::BTreeMap<&str, (f64, f64)> = Default::default();
@@ -644,16 +427,16 @@ mod tests {
         }
     }
 
-    /// docs/validation.md, "Whole pushes: the campaign": a 1 nm/s corner of the full campaign (5 µm
-    /// particle, 0.01 N/m, dry) once timed out after keeping a 25 MB trace; the plan now refuses it
-    /// before any push: the soft lever bends past the readout (449 nm, still rising) before the
-    /// particle shears loose. (Its pull-off from the substrate once refused it: the strategy now
-    /// rides that out.)
+    /// docs/validation.md, "Whole pushes: the campaign": a 1 nm/s corner of the full set (5 µm
+    /// particle, 0.01 N/m, dry) is refused by the plan before any push (pushing it would time out
+    /// after keeping a 25 MB trace): the soft lever bends past the readout (449 nm, still rising)
+    /// before the particle shears loose. Its pull-off from the substrate is not the reason: the
+    /// strategy rides that out.
     #[test]
-    fn a_soft_1_nm_per_s_corner_is_refused_for_its_deflection_limit_before_any_push() {
+    fn a_slow_soft_corner_is_refused_for_its_deflection_limit() {
         use Edit::*;
         let case = [RadiusNm(5000.0), StiffnessNPerM(0.01), Humidity(0.0), SpeedUmPerS(1e-3)];
-        assert!(cases(false).contains(&case.to_vec()), "a case of the full campaign");
+        assert!(cases(false).contains(&case.to_vec()), "a case of the full set");
         let r = run_case(&Scene::default_scene(), &case);
         assert_eq!(r.outcome, "refused", "{}", r.reason);
         assert!(r.reason.contains("deflection limit is reached"), "{}", r.reason);
@@ -666,10 +449,10 @@ mod tests {
     /// park below the substrate: `Rₐ − Rₜ + (Rₐ + Rₜ) sin β ≤ 0`); the plan goes to steeper angles,
     /// where the dry run loses the particle, and refuses, naming the failure and the field.
     #[test]
-    fn a_7_nm_particle_under_a_30_nm_tip_is_refused_with_its_dry_run() {
+    fn a_particle_too_small_for_the_tip_is_refused_with_its_dry_run() {
         use Edit::*;
         let small = [RadiusNm(7.0)];
-        assert!(cases(false).contains(&small.to_vec()), "a case of the full campaign");
+        assert!(cases(false).contains(&small.to_vec()), "a case of the full set");
         let r = run_case(&Scene::default_scene(), &small);
         assert_eq!(r.outcome, "refused", "{}", r.reason);
         assert!(
@@ -680,13 +463,13 @@ mod tests {
         assert!(r.violations.is_empty(), "{:?}", r.violations);
     }
 
-    /// A contact search at 1 pm/s set by hand (a case of the full campaign) cannot finish: the plan
+    /// A contact search at 1 pm/s set by hand (a case of the full set) cannot finish: the plan
     /// warns, skips the dry run, and the push fails with a time-out after 600 s, the longest a
     /// phase may take.
     #[test]
-    fn a_1_pm_per_s_search_times_out_after_600_s() {
+    fn a_hand_set_crawling_search_times_out_at_the_phase_limit() {
         let case = [Edit::SpeedUmPerS(1e-6)];
-        assert!(cases(false).contains(&case.to_vec()), "a case of the full campaign");
+        assert!(cases(false).contains(&case.to_vec()), "a case of the full set");
         let r = run_case(&Scene::default_scene(), &case);
         assert_eq!(r.outcome, "timeout", "{}", r.reason);
         assert!(r.reason.contains("contact_search took more than 600 s"), "{}", r.reason);
