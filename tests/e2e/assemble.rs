@@ -185,19 +185,21 @@ fn bad_arguments_name_what_is_wrong_and_the_allowed_range() {
     assert!(text(&o).1.contains("--pattern"), "{}", text(&o).1);
 }
 
-/// A random case with particles inside its pattern (seed 13: a ring of 3 sites, 4 particles,
-/// 3 of them inside it), checked against the truth.
+/// Two random cases nobody tuned, checked against the truth: seed 13 (a ring of 3 sites, 4
+/// particles, 3 of them inside it) and seed 15 (a 2 × 2 grid, 7 particles), picked by the shard.
 #[test]
-fn a_random_case_is_assembled_and_checked_against_the_truth() {
+fn random_cases_are_assembled_and_checked_against_the_truth() {
     let dir = tmp("assemble-random");
     let o = run(
         "nanopush",
         &[
             "assemble",
             "--random",
-            "1",
+            "3",
             "--seed",
             "13",
+            "--shard",
+            "0/2",
             "--out",
             dir.to_str().unwrap(),
             "--json",
@@ -207,10 +209,15 @@ fn a_random_case_is_assembled_and_checked_against_the_truth() {
     let (stdout, stderr) = text(&o);
     assert_eq!(o.status.code(), Some(0), "{stdout}{stderr}");
     let s: Value = serde_json::from_str(&stdout).unwrap();
-    assert_eq!(s["cases"], 1);
+    assert_eq!(s["cases"], 2);
     assert_eq!(s["unsound"], 0);
-    assert_eq!(s["sites_of_accepted"], 3);
-    assert_eq!(s["truly_filled"], 3, "{s}");
+    assert_eq!(s["falsely_filled"], 0);
+    assert_eq!(s["sites_of_accepted"], 7);
+    assert_eq!(s["truly_filled"], 7, "{s}");
     let csv = std::fs::read_to_string(dir.join("random-assemblies.csv")).unwrap();
-    assert!(csv.lines().nth(1).unwrap().starts_with("13,filled,4,3,3,3,3,"), "{csv}");
+    let mut rows: Vec<&str> = csv.lines().skip(1).collect();
+    rows.sort();
+    assert!(rows[0].starts_with("13,filled,4,3,3,3,3,"), "{csv}");
+    assert!(rows[1].starts_with("15,filled,7,4,0,4,4,"), "{csv}");
+    assert!(dir.join("scenes/seed-13.toml").exists());
 }
