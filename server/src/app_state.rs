@@ -200,7 +200,7 @@ pub struct Activity {
 
 /// A move as the operator asked for it: the particle, the tolerance it must end within, the
 /// `stop` generation it began in, and who asked.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Move {
     /// Particle id.
     pub particle: u32,
@@ -210,6 +210,9 @@ pub struct Move {
     pub generation: u64,
     /// The client that asked.
     pub by: u32,
+    /// Who that client is (the audit log's `person` for the move's pushes and its end, whenever
+    /// they come: the client may be gone by then).
+    pub person: Arc<str>,
 }
 
 /// A push the loop runs, whose move the scan after it judges (`push::judge`).
