@@ -200,7 +200,7 @@ pub struct Activity {
 
 /// A move as the operator asked for it: the particle, the tolerance it must end within, the
 /// `stop` generation it began in, and who asked.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Move {
     /// Particle id.
     pub particle: u32,
@@ -210,6 +210,9 @@ pub struct Move {
     pub generation: u64,
     /// The client that asked.
     pub by: u32,
+    /// Who that client is (the audit log's `person` for the move's pushes and its end, whenever
+    /// they come: the client may be gone by then).
+    pub person: Arc<str>,
 }
 
 /// A push the loop runs, whose move the scan after it judges (`push::judge`).
@@ -251,8 +254,10 @@ pub(crate) struct Place {
 }
 
 impl Place {
-    /// Takes a place for `role` from `ip`, or says why not.
+    /// Takes a place for `role` from `ip` (counted per address as the connection caps count it:
+    /// an IPv6 client by its /64), or says why not.
     pub(crate) fn take(st: &Arc<AppState>, role: Role, ip: std::net::IpAddr) -> Result<Place, (StatusCode, String)> {
+        let ip = crate::client_addr::limit_key(ip);
         let mut p = st.clients.places.lock().expect("places lock");
         match role {
             Role::Operator => {
@@ -270,7 +275,8 @@ impl Place {
                     return Err((
                         StatusCode::TOO_MANY_REQUESTS,
                         format!(
-                            "{here} connections from {ip} already; allowed: {} per address (--max-clients-per-address)",
+                            "{here} connections from {} already; allowed: {} per address (--max-clients-per-address)",
+                            crate::client_addr::show_key(ip),
                             st.cfg.max_clients_per_address
                         ),
                     ));
@@ -511,4 +517,38 @@ pub(crate) fn test_state() -> Arc<AppState> {
     };
     let params = scene.strategy_params(tick);
     Arc::new(AppState::new(cfg, scene, shared, params))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A viewer's places are counted per address as the connection caps count them: an IPv6
+    /// client by its /64 (rotating its addresses gets it no more than one address's places), an
+    /// IPv4-mapped one as its IPv4 address.
+    #[test]
+    fn viewer_places_count_an_ipv6_client_by_its_64() {
+        let st = test_state();
+        let ip = |s: String| s.parse::<std::net::IpAddr>().unwrap();
+        let cap = st.cfg.max_clients_per_address;
+        let held: Vec<Place> = (1..=cap)
+            .map(|k| Place::take(&st, Role::Viewer, ip(format!("2001:db8:1:2::{k:x}"))).unwrap())
+            .collect();
+        let (code, why) = Place::take(&st, Role::Viewer, ip("2001:db8:1:2:ffff::1".into()))
+            .err()
+            .expect("one more address of the same /64 is refused");
+        assert_eq!(code, StatusCode::TOO_MANY_REQUESTS);
+        assert!(why.contains("2001:db8:1:2::/64"), "{why}");
+        assert!(Place::take(&st, Role::Viewer, ip("2001:db8:1:3::1".into())).is_ok());
+        drop(held);
+        let v4: Vec<Place> = (0..cap)
+            .map(|_| Place::take(&st, Role::Viewer, ip("10.0.0.1".into())).unwrap())
+            .collect();
+        assert!(Place::take(&st, Role::Viewer, ip("::ffff:10.0.0.1".into())).is_err());
+        drop(v4);
+        assert!(
+            st.clients.places.lock().unwrap().per_address.is_empty(),
+            "every place given back"
+        );
+    }
 }

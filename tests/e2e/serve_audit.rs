@@ -221,6 +221,34 @@ fn a_push_stopped_before_it_began_has_its_end_in_the_audit_log() {
     }
 }
 
+/// Alice pushes and her connection closes at once, while the push is still being located and
+/// planned: the push is stopped, and its `run_done` in the audit log still names Alice (not the
+/// number of a session that is gone).
+#[test]
+fn a_push_whose_holder_left_ends_in_the_log_under_her_name() {
+    let (srv, tokens) = named_server("audit-holder-left", &[("alice", "operator")], &[]);
+    let records = srv.dir.join("records");
+    runtime().block_on(async {
+        let (mut a, _) = try_ws(&srv.addr, Some(&tokens[0]), &[]).await.unwrap();
+        ok(&mut a, json!({"type": "take_lease", "id": 1})).await;
+        ok(
+            &mut a,
+            json!({"type": "push", "id": 2, "particle": 1, "distance_um": 1.0, "direction_deg": 0.0}),
+        )
+        .await;
+        drop(a);
+    });
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let done = loop {
+        if let Some(d) = audit_lines(&records).into_iter().find(|l| l["command"] == "run_done") {
+            break d;
+        }
+        assert!(Instant::now() < deadline, "no run_done in the audit log within 60 s");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert_eq!(done["person"], "alice", "{done}");
+}
+
 /// The refusals of one client in the log: the lines of `person` from `address` for `command`,
 /// refused one by one, and those a summary counts.
 fn refusals_accounted(lines: &[Value], command: &str) -> (usize, u64, Vec<Value>) {

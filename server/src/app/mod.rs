@@ -199,11 +199,6 @@ async fn metrics(State(st): State<Arc<AppState>>) -> Response {
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text).into_response()
 }
 
-#[derive(Debug, serde::Deserialize)]
-struct WsQuery {
-    token: Option<String>,
-}
-
 /// Whether a browser origin may connect: the server's own addresses, or one allowed by flag.
 fn origin_allowed(st: &AppState, origin: &str) -> bool {
     if st.cfg.allow_origins.iter().any(|o| o == origin) {
@@ -226,7 +221,7 @@ fn origin_allowed(st: &AppState, origin: &str) -> bool {
 async fn ws_upgrade(
     State(st): State<Arc<AppState>>,
     ConnectInfo(peer): ConnectInfo<SocketAddr>,
-    Query(q): Query<WsQuery>,
+    uri: axum::http::Uri,
     headers: HeaderMap,
     ws: WebSocketUpgrade,
 ) -> Response {
@@ -243,7 +238,7 @@ async fn ws_upgrade(
     // `/api/*`; checked, failures rate-limited per address) or its session cookie.
     let ip = sign_in::client_of(&st, peer.ip(), &headers);
     let cookie = crate::auth::http::cookie(&headers);
-    let token = q.token.or_else(|| crate::auth::http::bearer(&headers));
+    let token = crate::auth::http::token(&uri, &headers);
     let person = match st.auth.authenticate(ip, token.as_deref(), cookie.as_deref()).await {
         Ok(p) => p,
         Err((code, why)) => return (code, why).into_response(),

@@ -10,7 +10,7 @@ use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 
 use crate::app_state::AppState;
-use crate::auth::http::{bearer, cookie, query_token};
+use crate::auth::http::{bearer, cookie, token};
 use crate::auth::tokens::role_name;
 use crate::auth::{COOKIE, Person, Refused};
 use crate::client_addr::{client_ip, forwarded_https};
@@ -28,7 +28,7 @@ pub async fn request_person(
     headers: &HeaderMap,
 ) -> Result<Arc<Person>, Refused> {
     let ip = client_of(st, peer, headers);
-    let token = query_token(uri).or_else(|| bearer(headers));
+    let token = token(uri, headers);
     st.auth
         .authenticate(ip, token.as_deref(), cookie(headers).as_deref())
         .await

@@ -1,13 +1,17 @@
-//! Failed attempts per address: a token bucket of [`BURST`] attempts refilled one every
-//! [`REFILL`]. An attempt with a token takes one from its address's bucket *before* the token is
-//! checked, and gives it back when the token was right: so attempts sent at once cannot all pass
-//! an almost empty bucket while their checks run. An address whose bucket is empty is refused
-//! without its credential being checked, so guessing tokens runs at 10 a minute at most (a token
-//! has 128 random bits), however many are sent at once.
+//! Failed attempts per address (an IPv6 client's /64, `client_addr::limit_key`: a host is
+//! commonly given a whole /64, and counted by each address it would have 2^64 buckets): a token
+//! bucket of [`BURST`] attempts refilled one every [`REFILL`]. An attempt with a token takes one
+//! from its address's bucket *before* the token is checked, and gives it back when the token was
+//! right: so attempts sent at once cannot all pass an almost empty bucket while their checks run.
+//! An address whose bucket is empty is refused without its credential being checked, so guessing
+//! tokens runs at 10 a minute at most (a token has 128 random bits), however many are sent at
+//! once.
 
 use std::collections::HashMap;
 use std::net::IpAddr;
 use std::time::{Duration, Instant};
+
+use crate::client_addr::limit_key;
 
 /// Failures allowed in a row.
 pub const BURST: f64 = 10.0;
@@ -51,6 +55,7 @@ impl FailureLimiter {
     /// [`Self::refund_at`] says it was not), or refused with how long to wait when the bucket
     /// holds less than one attempt.
     pub fn reserve_at(&mut self, ip: IpAddr, now: Instant) -> Result<(), Duration> {
+        let ip = limit_key(ip);
         let level = self.level(ip, now);
         if level < 1.0 {
             return Err(REFILL.mul_f64(1.0 - level));
@@ -62,6 +67,7 @@ impl FailureLimiter {
     /// The attempt reserved for `ip` did not fail (the token was right, or it was never
     /// checked): it goes back into the bucket.
     pub fn refund_at(&mut self, ip: IpAddr, now: Instant) {
+        let ip = limit_key(ip);
         let level = (self.level(ip, now) + 1.0).min(BURST);
         self.set(ip, level, now);
     }
@@ -125,5 +131,25 @@ mod tests {
             l.reserve_at(b, t0).unwrap();
         }
         assert!(l.reserve_at(b, t0).is_err());
+    }
+
+    /// An IPv6 client is counted by its /64: a host given a whole /64 has one bucket, not one for
+    /// each of its 2^64 addresses; another /64 has its own.
+    #[test]
+    fn an_ipv6_client_has_one_bucket_for_its_64() {
+        let mut l = FailureLimiter::default();
+        let t0 = Instant::now();
+        let ip = |s: String| s.parse::<IpAddr>().unwrap();
+        for k in 1..=10 {
+            assert_eq!(l.reserve_at(ip(format!("2001:db8:1:2::{k:x}")), t0), Ok(()));
+        }
+        assert!(
+            l.reserve_at(ip("2001:db8:1:2:ffff::1".into()), t0).is_err(),
+            "an eleventh address of the same /64 is refused"
+        );
+        assert_eq!(l.reserve_at(ip("2001:db8:1:3::1".into()), t0), Ok(()));
+        // A right token from another address of the /64 gives its place back to the /64.
+        l.refund_at(ip("2001:db8:1:2::77".into()), t0);
+        assert_eq!(l.reserve_at(ip("2001:db8:1:2::78".into()), t0), Ok(()));
     }
 }

@@ -298,7 +298,8 @@ impl Auth {
                 return Err((
                     StatusCode::TOO_MANY_REQUESTS,
                     format!(
-                        "too many failed attempts from {ip}; try again in {} s",
+                        "too many failed attempts from {}; try again in {} s",
+                        crate::client_addr::show_key(crate::client_addr::limit_key(ip)),
                         wait.as_secs().max(1)
                     ),
                 ));

@@ -137,7 +137,7 @@ fn judge_with(st: &AppState, scene: &Scene, run: u64, p: &Pending, estimate: [f6
             );
             // The record says `corrected` only once the correction has begun; one that cannot
             // begin (a stop since the scan, the tip unable to get behind) ends the move here.
-            match launch(st, p.mv, scene, plan, p.attempt + 1) {
+            match launch(st, p.mv.clone(), scene, plan, p.attempt + 1) {
                 Ok(()) => {
                     let (record, _) = amended(st, record, "corrected", Some(&why), Some(&judged));
                     st.audit.run_done(run, id, "corrected", Some(&why), record.as_deref());
@@ -177,7 +177,7 @@ pub(crate) fn already_there(st: &AppState, mv: Move, plan: &MoveRoute) {
         Verdict::Ok { error } => ("ok", format!("already {} from the target: nothing to push", nm(error))),
         _ => ("missed", missed_words(id, judged.error_m, mv.tolerance, 0, true)),
     };
-    audit_early_end(st, mv.by, id, outcome, Some(&why));
+    audit_early_end(st, &mv, id, outcome, Some(&why));
     st.push_ended(false);
     st.shared.busy.store(false, Relaxed);
     st.broadcast_event(&ServerMessage::RunDone {
@@ -319,6 +319,7 @@ mod tests {
             tolerance,
             generation: st.activity.generation.load(Relaxed),
             by: 1,
+            person: "alice".into(),
         };
         let scene = st.scene.clone();
         let params = scene.strategy_params(st.params.tick);

@@ -13,8 +13,8 @@ use nanopush_instrument::control::{MoveRoute, Prepared};
 
 /// A push that ended before the loop ran it (refused by the plan, stopped, the queue full): its
 /// `run_done` to everyone, and to the audit log under the person who asked.
-pub(crate) fn run_done_failed(st: &AppState, by: u32, particle: u32, outcome: &str, failure: String) {
-    audit_early_end(st, by, particle, outcome, Some(&failure));
+pub(crate) fn run_done_failed(st: &AppState, mv: &Move, particle: u32, outcome: &str, failure: String) {
+    audit_early_end(st, mv, particle, outcome, Some(&failure));
     st.push_ended(false);
     st.shared.busy.store(false, Relaxed);
     st.broadcast_event(&ServerMessage::RunDone {
@@ -29,14 +29,13 @@ pub(crate) fn run_done_failed(st: &AppState, by: u32, particle: u32, outcome: &s
 }
 
 /// A move that ended before the loop ran it, in the audit log under the person who asked.
-pub(crate) fn audit_early_end(st: &AppState, by: u32, particle: u32, outcome: &str, failure: Option<&str>) {
-    let person = st.auth.name_of(by).unwrap_or_else(|| format!("client {by}"));
+pub(crate) fn audit_early_end(st: &AppState, mv: &Move, particle: u32, outcome: &str, failure: Option<&str>) {
     let mut args = serde_json::Map::new();
     args.insert("particle".into(), particle.into());
     st.audit.event(crate::audit::Happened {
-        person: &person,
+        person: &mv.person,
         address: None,
-        client: Some(by),
+        client: Some(mv.by),
         command: "run_done",
         args,
         outcome,
@@ -115,13 +114,10 @@ pub(crate) fn launch(
         return Err(("stopped", when));
     }
     let run = st.shared.runs.fetch_add(1, Relaxed) + 1;
-    // Who ran it, for its record and the audit log's `run_done` (the session may be gone by
-    // now: then its client number).
+    // Who ran it, for its record and the audit log's `run_done` (as the move was asked: the
+    // session may be gone by now).
     if let Ok(mut people) = st.audit.runs.lock() {
-        people.insert(
-            run,
-            st.auth.name_of(mv.by).unwrap_or_else(|| format!("client {}", mv.by)),
-        );
+        people.insert(run, mv.person.to_string());
     }
     let located = plan.located;
     let scene_radius = st

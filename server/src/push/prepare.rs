@@ -29,11 +29,11 @@ pub(crate) fn prepare_push(st: &AppState, mv: Move, target: MoveTarget) {
     // The strategy for this particle: the plan's, where the scene sets none (derived once).
     let scene = match strategy_scene(st, particle, mv.tolerance) {
         Ok(s) => s,
-        Err(refusal) => return run_done_failed(st, mv.by, particle, "refused", refusal.to_string()),
+        Err(refusal) => return run_done_failed(st, &mv, particle, "refused", refusal.to_string()),
     };
     let plan = match route_move(&scene, &st.surface_now(), nominal, part.radius_nm * 1e-9, target) {
         Ok(p) => p,
-        Err(e) => return run_done_failed(st, mv.by, particle, "plan", format!("particle {particle}: {e}")),
+        Err(e) => return run_done_failed(st, &mv, particle, "plan", format!("particle {particle}: {e}")),
     };
     // A target the particle cannot reach whole, with the tip behind it, fails now, not after a
     // push that runs into the stage's edge until its time-out.
@@ -41,19 +41,13 @@ pub(crate) fn prepare_push(st: &AppState, mv: Move, target: MoveTarget) {
     // differs by a fraction of a nanometre: a target on the stated edge would be accepted, then
     // refused here with other bounds).
     if let Err(r) = on_stage(plan.target, part.radius_nm * 1e-9, f.stage.range_um * 1e-6) {
-        return run_done_failed(
-            st,
-            mv.by,
-            particle,
-            "plan",
-            format!("particle {particle}: {}", r.message),
-        );
+        return run_done_failed(st, &mv, particle, "plan", format!("particle {particle}: {}", r.message));
     }
     if plan.legs.is_empty() {
         // Already there (within the planner's 10 nm): judged where the scan found it, no push.
         return judge::already_there(st, mv, &plan);
     }
-    if let Err((outcome, failure)) = launch(st, mv, &scene, plan, 1) {
-        run_done_failed(st, mv.by, particle, outcome, failure);
+    if let Err((outcome, failure)) = launch(st, mv.clone(), &scene, plan, 1) {
+        run_done_failed(st, &mv, particle, outcome, failure);
     }
 }

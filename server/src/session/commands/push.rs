@@ -46,19 +46,20 @@ pub(super) fn run(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Res
     busy(st)?;
     st.shared.busy.store(true, Relaxed);
     let st2 = st.clone();
-    let by = c.id;
     let mv = Move {
         particle,
         tolerance,
         generation: st.activity.generation.load(Relaxed),
-        by,
+        by: c.id,
+        person: c.person.name.as_str().into(),
     };
     tokio::task::spawn_blocking(move || {
+        let asked = mv.clone();
         let prepared = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| prepare_push(&st2, mv, target)));
         if prepared.is_err() {
             run_done_failed(
                 &st2,
-                by,
+                &asked,
                 particle,
                 "error",
                 "preparing the push failed (internal error)".into(),
