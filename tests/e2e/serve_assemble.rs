@@ -136,3 +136,156 @@ fn plan_only_sends_the_plan_and_moves_nothing() {
         let _ = reply;
     });
 }
+
+/// Starts an assembly of the two sites and waits until its first push runs (telemetry's phase
+/// is the strategy's `push`).
+async fn assembling(op: &mut Ws) {
+    ok(op, json!({"type": "assemble", "id": 3, "sites": two_sites()})).await;
+    until(op, 60.0, |m| is(m, "telemetry") && m["phase"] == "push").await;
+}
+
+/// The trace of a push record: the tip's z at its first and last rows, and the last row's phase.
+fn trace_ends(addr: &str, push_json: &str) -> (f64, f64, String) {
+    let summary = record(addr, push_json);
+    let (status, csv) = http_get(addr, &format!("/api/records/{}", summary["trace"].as_str().unwrap()));
+    assert_eq!(status, 200);
+    let csv = String::from_utf8(csv).unwrap();
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    let z = |line: &str| line.split(',').nth(5).unwrap().parse::<f64>().unwrap();
+    let phase = rows.last().unwrap().split(',').nth(2).unwrap().to_string();
+    (z(rows[0]), z(rows.last().unwrap()), phase)
+}
+
+#[test]
+fn stop_mid_assembly_retracts_the_tip_and_completes_the_record() {
+    let srv = assembly_server("assemble-stop");
+    runtime().block_on(async {
+        let mut op = operator(&srv.addr, "tip").await;
+        assembling(&mut op).await;
+        ok(&mut op, json!({"type": "stop", "id": 5})).await;
+        // A second stop changes nothing and is not refused.
+        ok(&mut op, json!({"type": "stop", "id": 6})).await;
+        let seen = until_done(&mut op, 30.0).await;
+        let done = seen.last().unwrap();
+        assert_eq!(done["outcome"], "stopped", "{done}");
+        assert_eq!(done["reason"], "stopped: stop requested by the operator");
+        let pushed = of_type(&seen, "run_done");
+        assert_eq!(pushed.len(), 1, "{seen:#?}");
+        assert_eq!(pushed[0]["outcome"], "stopped", "{}", pushed[0]);
+        // The record is complete: the summary, the final frame, the stopped push.
+        let rec = record(&srv.addr, done["record"].as_str().expect("a record"));
+        assert_eq!(rec["summary"]["outcome"], "stopped");
+        assert_eq!(rec["summary"]["sites"].as_array().unwrap().len(), 2);
+        assert!(rec["final_frame"]["record"].is_string(), "{rec:#}");
+        let last_push = rec["push_records"].as_array().unwrap().last().unwrap().as_str().unwrap();
+        // The tip ended retracted: the push's last row is back at the height it started from.
+        let (start_z, end_z, phase) = trace_ends(&srv.addr, last_push);
+        assert_eq!(phase, "done");
+        assert!((end_z - start_z).abs() < 20e-9, "start z {start_z:e}, end z {end_z:e}");
+        let m = until(&mut op, 5.0, |m| is(m, "telemetry")).await;
+        assert_eq!(m["phase"], "idle", "{m}");
+    });
+}
+
+#[test]
+fn a_late_joiner_is_told_the_running_assembly() {
+    let srv = assembly_server("assemble-late");
+    runtime().block_on(async {
+        let mut op = operator(&srv.addr, "tip").await;
+        assembling(&mut op).await;
+        let (mut late, _) = welcomed(&srv.addr, None).await;
+        let state = until(&mut late, 5.0, |m| is(m, "state")).await;
+        let a = &state["assembly"];
+        assert_eq!(a["phase"], "moving", "{state:#}");
+        assert_eq!(a["moving"][0], 1, "{a:#}");
+        assert_eq!(a["sites"].as_array().unwrap().len(), 2);
+        assert_eq!(a["plan"]["moves"].as_array().unwrap().len(), 2, "{a:#}");
+        assert_eq!(a["plan"]["map"].as_array().unwrap().len(), 2, "{a:#}");
+        assert!(state["push"].is_object(), "the move's push: {state:#}");
+        assert_eq!(state["phase"], "push");
+        ok(&mut op, json!({"type": "stop", "id": 5})).await;
+        let done = until(&mut late, 30.0, |m| is(m, "assembly_done")).await;
+        assert_eq!(done["assembly"], a["assembly"]);
+        // Once it has ended, a joiner is told none.
+        let (mut later, _) = welcomed(&srv.addr, None).await;
+        let state = until(&mut later, 5.0, |m| is(m, "state")).await;
+        assert!(state["assembly"].is_null(), "{state:#}");
+    });
+}
+
+#[test]
+fn the_lease_holder_leaving_stops_its_assembly() {
+    let srv = assembly_server("assemble-leave");
+    runtime().block_on(async {
+        let (mut viewer, _) = welcomed(&srv.addr, None).await;
+        let mut op = operator(&srv.addr, "tip").await;
+        assembling(&mut op).await;
+        drop(op);
+        let lease = until(&mut viewer, 10.0, |m| is(m, "lease") && m["holder"].is_null()).await;
+        assert!(
+            lease["reason"].as_str().unwrap().ends_with("its assembly was stopped"),
+            "{lease}"
+        );
+        let done = until(&mut viewer, 30.0, |m| is(m, "assembly_done")).await;
+        assert_eq!(done["outcome"], "stopped", "{done}");
+        assert_eq!(done["reason"], "stopped: the lease holder disconnected");
+        assert!(done["record"].is_string(), "{done}");
+    });
+}
+
+/// Sends `assemble` with the fields of `cmd` as command `id`, which must be refused: the code and
+/// the message.
+async fn refused(ws: &mut Ws, id: u32, mut cmd: Value) -> (String, String) {
+    cmd["type"] = "assemble".into();
+    cmd["id"] = id.into();
+    send(ws, cmd).await;
+    let r = reply(ws, id).await;
+    assert_eq!(r["type"], "error", "{r}");
+    (r["code"].as_str().unwrap().to_string(), r["message"].as_str().unwrap().to_string())
+}
+
+#[test]
+fn bad_assemble_commands_get_clear_errors_and_the_server_lives_on() {
+    let srv = assembly_server("assemble-bad");
+    runtime().block_on(async {
+        let (mut viewer, _) = welcomed(&srv.addr, None).await;
+        let (mut other, _) = welcomed(&srv.addr, Some(crate::util::TOKEN)).await;
+        let mut op = operator(&srv.addr, "tip").await;
+        let (code, _) = refused(&mut viewer, 10, json!({"sites": two_sites()})).await;
+        assert_eq!(code, "forbidden");
+        let (code, msg) = refused(&mut other, 11, json!({"sites": two_sites()})).await;
+        assert_eq!(code, "no_lease", "{msg}");
+        let (code, msg) = refused(&mut op, 12, json!({"sites": two_sites(), "generator": "ring:n=3,radius_um=3"})).await;
+        assert_eq!((code.as_str(), msg.as_str()), ("invalid", "assemble takes either sites or generator, not both"));
+        let (code, msg) = refused(&mut op, 13, json!({})).await;
+        assert_eq!(code, "invalid", "{msg}");
+        let (code, msg) = refused(&mut op, 14, json!({"sites": [{"x_um": 42.0, "y_um": 130.0}]})).await;
+        assert_eq!(
+            (code.as_str(), msg.as_str()),
+            ("out_of_range", "sites[0].y_um = 130 is out of range; allowed: [0, 100] µm")
+        );
+        let (code, msg) = refused(&mut op, 15, json!({"sites": []})).await;
+        assert_eq!((code.as_str(), msg.as_str()), ("out_of_range", "sites has 0 entries; allowed: 1 to 400"));
+        let (code, msg) = refused(&mut op, 16, json!({"generator": "hexagon:n=6"})).await;
+        assert_eq!(code, "invalid");
+        assert!(msg.contains("unknown shape \\\"hexagon\\\"") || msg.contains("allowed: line, grid, ring, text"), "{msg}");
+        let (code, msg) = refused(&mut op, 17, json!({"generator": "ring:n=2,radius_um=3"})).await;
+        assert_eq!(code, "invalid");
+        assert!(msg.contains("n = 2 is out of range"), "{msg}");
+        let (code, msg) = refused(&mut op, 18, json!({"sites": [{"x_um": 42.0, "y_um": 30.0, "tolerance_nm": 0.1}]})).await;
+        assert_eq!((code.as_str(), msg.as_str()), ("out_of_range", "sites[0].tolerance_nm = 0.1 is out of range; allowed: [1, 100000] nm"));
+        let (code, msg) = refused(&mut op, 19, json!({"sites": two_sites(), "at_x_um": 3.0, "at_y_um": 3.0})).await;
+        assert_eq!(code, "invalid", "{msg}");
+        let (code, msg) = refused(&mut op, 20, json!({"generator": "line:n=3,spacing_um=3", "at_x_um": 50.0})).await;
+        assert_eq!((code.as_str(), msg.as_str()), ("invalid", "at_x_um and at_y_um go together"));
+        let (code, msg) = refused(&mut op, 21, json!({"generator": "x".repeat(201)})).await;
+        assert_eq!((code.as_str(), msg.as_str()), ("out_of_range", "generator is 201 characters long; allowed: at most 200"));
+        // A pattern the stage cannot hold is refused before anything moves, saying why.
+        ok(&mut op, json!({"type": "assemble", "id": 22, "sites": [{"x_um": 0.0, "y_um": 0.0}]})).await;
+        let done = until(&mut op, 30.0, |m| is(m, "assembly_done")).await;
+        assert_eq!(done["outcome"], "refused", "{done}");
+        assert!(!done["reason"].as_str().unwrap().is_empty(), "{done}");
+        // The server lives on.
+        ok(&mut op, json!({"type": "ping", "id": 23})).await;
+    });
+}
