@@ -24,6 +24,8 @@
 mod kinds;
 mod moves;
 pub mod record;
+#[cfg(test)]
+mod tests;
 pub mod wire;
 
 use std::sync::Arc;
