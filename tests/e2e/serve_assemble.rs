@@ -8,7 +8,9 @@ use std::time::Instant;
 
 use serde_json::{Value, json};
 
-use crate::util::{Server, Ws, http_get, is, is_reply, ok, operator, reply, runtime, send, start_scene, until, welcomed};
+use crate::util::{
+    Server, Ws, http_get, is, is_reply, ok, operator, reply, runtime, send, start_scene, until, welcomed,
+};
 
 /// The quick scene with particle 2 moved beside particle 1 (at (40, 30) µm) into the full frame,
 /// which gets 64 pixels (250 nm: four across a particle).
@@ -71,7 +73,10 @@ fn an_assembly_fills_two_sites_and_writes_its_record() {
         let started = of_type(&seen, "assembly_move_started");
         let ended = of_type(&seen, "assembly_move_ended");
         assert!(started.len() >= 2 && started.len() == ended.len(), "{seen:#?}");
-        assert_eq!((started[0]["number"].as_u64(), started[0]["of"].as_u64()), (Some(1), Some(2)));
+        assert_eq!(
+            (started[0]["number"].as_u64(), started[0]["of"].as_u64()),
+            (Some(1), Some(2))
+        );
         assert_eq!(of_type(&seen, "assembly_replanned").len(), ended.len());
         let mut filled: Vec<u64> = of_type(&seen, "assembly_site_filled")
             .iter()
@@ -85,7 +90,10 @@ fn an_assembly_fills_two_sites_and_writes_its_record() {
         let summary = &done["summary"];
         for s in summary["sites"].as_array().unwrap() {
             assert_eq!(s["status"], "filled", "{summary:#}");
-            assert!(s["error"].as_f64().unwrap() <= s["tolerance"].as_f64().unwrap() + 1e-9, "truly within: {s}");
+            assert!(
+                s["error"].as_f64().unwrap() <= s["tolerance"].as_f64().unwrap() + 1e-9,
+                "truly within: {s}"
+            );
         }
         let name = done["record"].as_str().expect("a record");
         let rec = record(&srv.addr, name);
@@ -99,7 +107,10 @@ fn an_assembly_fills_two_sites_and_writes_its_record() {
         // The instrument is free again: a plain scan is taken.
         ok(&mut op, json!({"type": "scan", "id": 4, "size_um": 4.0, "pixels": 8})).await;
     });
-    eprintln!("assembly of two sites: {:.1} s of wall time", t0.elapsed().as_secs_f64());
+    eprintln!(
+        "assembly of two sites: {:.1} s of wall time",
+        t0.elapsed().as_secs_f64()
+    );
 }
 
 #[test]
@@ -109,7 +120,11 @@ fn plan_only_sends_the_plan_and_moves_nothing() {
         let mut op = operator(&srv.addr, "tip").await;
         let (_, before) = welcomed(&srv.addr, None).await;
         let _ = before;
-        ok(&mut op, json!({"type": "assemble", "id": 3, "sites": two_sites(), "plan_only": true})).await;
+        ok(
+            &mut op,
+            json!({"type": "assemble", "id": 3, "sites": two_sites(), "plan_only": true}),
+        )
+        .await;
         let seen = until_done(&mut op, 30.0).await;
         let done = seen.last().unwrap();
         assert_eq!(done["outcome"], "planned", "{seen:#?}");
@@ -127,10 +142,20 @@ fn plan_only_sends_the_plan_and_moves_nothing() {
         // Nothing moved: the particles are where the scene put them.
         let (_, st) = http_get(&srv.addr, "/api/status");
         let st: Value = serde_json::from_slice(&st).unwrap();
-        let p1 = st["particles"].as_array().unwrap().iter().find(|p| p["id"] == 1).unwrap().clone();
+        let p1 = st["particles"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["id"] == 1)
+            .unwrap()
+            .clone();
         assert!((p1["x"].as_f64().unwrap() - 40e-6).abs() < 1e-12, "{p1}");
         // And the instrument is free.
-        send(&mut op, json!({"type": "assemble", "id": 4, "sites": two_sites(), "plan_only": true})).await;
+        send(
+            &mut op,
+            json!({"type": "assemble", "id": 4, "sites": two_sites(), "plan_only": true}),
+        )
+        .await;
         let r = until(&mut op, 10.0, |m| is_reply(m, 4)).await;
         assert_eq!(r["type"], "ok", "{r}");
         let _ = reply;
@@ -177,7 +202,13 @@ fn stop_mid_assembly_retracts_the_tip_and_completes_the_record() {
         assert_eq!(rec["summary"]["outcome"], "stopped");
         assert_eq!(rec["summary"]["sites"].as_array().unwrap().len(), 2);
         assert!(rec["final_frame"]["record"].is_string(), "{rec:#}");
-        let last_push = rec["push_records"].as_array().unwrap().last().unwrap().as_str().unwrap();
+        let last_push = rec["push_records"]
+            .as_array()
+            .unwrap()
+            .last()
+            .unwrap()
+            .as_str()
+            .unwrap();
         // The tip ended retracted: the push's last row is back at the height it started from.
         let (start_z, end_z, phase) = trace_ends(&srv.addr, last_push);
         assert_eq!(phase, "done");
@@ -241,7 +272,10 @@ async fn refused(ws: &mut Ws, id: u32, mut cmd: Value) -> (String, String) {
     send(ws, cmd).await;
     let r = reply(ws, id).await;
     assert_eq!(r["type"], "error", "{r}");
-    (r["code"].as_str().unwrap().to_string(), r["message"].as_str().unwrap().to_string())
+    (
+        r["code"].as_str().unwrap().to_string(),
+        r["message"].as_str().unwrap().to_string(),
+    )
 }
 
 #[test]
@@ -255,33 +289,81 @@ fn bad_assemble_commands_get_clear_errors_and_the_server_lives_on() {
         assert_eq!(code, "forbidden");
         let (code, msg) = refused(&mut other, 11, json!({"sites": two_sites()})).await;
         assert_eq!(code, "no_lease", "{msg}");
-        let (code, msg) = refused(&mut op, 12, json!({"sites": two_sites(), "generator": "ring:n=3,radius_um=3"})).await;
-        assert_eq!((code.as_str(), msg.as_str()), ("invalid", "assemble takes either sites or generator, not both"));
+        let (code, msg) = refused(
+            &mut op,
+            12,
+            json!({"sites": two_sites(), "generator": "ring:n=3,radius_um=3"}),
+        )
+        .await;
+        assert_eq!(
+            (code.as_str(), msg.as_str()),
+            ("invalid", "assemble takes either sites or generator, not both")
+        );
         let (code, msg) = refused(&mut op, 13, json!({})).await;
         assert_eq!(code, "invalid", "{msg}");
         let (code, msg) = refused(&mut op, 14, json!({"sites": [{"x_um": 42.0, "y_um": 130.0}]})).await;
         assert_eq!(
             (code.as_str(), msg.as_str()),
-            ("out_of_range", "sites[0].y_um = 130 is out of range; allowed: [0, 100] µm")
+            (
+                "out_of_range",
+                "sites[0].y_um = 130 is out of range; allowed: [0, 100] µm"
+            )
         );
         let (code, msg) = refused(&mut op, 15, json!({"sites": []})).await;
-        assert_eq!((code.as_str(), msg.as_str()), ("out_of_range", "sites has 0 entries; allowed: 1 to 400"));
+        assert_eq!(
+            (code.as_str(), msg.as_str()),
+            ("out_of_range", "sites has 0 entries; allowed: 1 to 400")
+        );
         let (code, msg) = refused(&mut op, 16, json!({"generator": "hexagon:n=6"})).await;
         assert_eq!(code, "invalid");
-        assert!(msg.contains("unknown shape \\\"hexagon\\\"") || msg.contains("allowed: line, grid, ring, text"), "{msg}");
+        assert!(
+            msg.contains("unknown shape \\\"hexagon\\\"") || msg.contains("allowed: line, grid, ring, text"),
+            "{msg}"
+        );
         let (code, msg) = refused(&mut op, 17, json!({"generator": "ring:n=2,radius_um=3"})).await;
         assert_eq!(code, "invalid");
         assert!(msg.contains("n = 2 is out of range"), "{msg}");
-        let (code, msg) = refused(&mut op, 18, json!({"sites": [{"x_um": 42.0, "y_um": 30.0, "tolerance_nm": 0.1}]})).await;
-        assert_eq!((code.as_str(), msg.as_str()), ("out_of_range", "sites[0].tolerance_nm = 0.1 is out of range; allowed: [1, 100000] nm"));
-        let (code, msg) = refused(&mut op, 19, json!({"sites": two_sites(), "at_x_um": 3.0, "at_y_um": 3.0})).await;
+        let (code, msg) = refused(
+            &mut op,
+            18,
+            json!({"sites": [{"x_um": 42.0, "y_um": 30.0, "tolerance_nm": 0.1}]}),
+        )
+        .await;
+        assert_eq!(
+            (code.as_str(), msg.as_str()),
+            (
+                "out_of_range",
+                "sites[0].tolerance_nm = 0.1 is out of range; allowed: [1, 100000] nm"
+            )
+        );
+        let (code, msg) = refused(
+            &mut op,
+            19,
+            json!({"sites": two_sites(), "at_x_um": 3.0, "at_y_um": 3.0}),
+        )
+        .await;
         assert_eq!(code, "invalid", "{msg}");
-        let (code, msg) = refused(&mut op, 20, json!({"generator": "line:n=3,spacing_um=3", "at_x_um": 50.0})).await;
-        assert_eq!((code.as_str(), msg.as_str()), ("invalid", "at_x_um and at_y_um go together"));
+        let (code, msg) = refused(
+            &mut op,
+            20,
+            json!({"generator": "line:n=3,spacing_um=3", "at_x_um": 50.0}),
+        )
+        .await;
+        assert_eq!(
+            (code.as_str(), msg.as_str()),
+            ("invalid", "at_x_um and at_y_um go together")
+        );
         let (code, msg) = refused(&mut op, 21, json!({"generator": "x".repeat(201)})).await;
-        assert_eq!((code.as_str(), msg.as_str()), ("out_of_range", "generator is 201 characters long; allowed: at most 200"));
+        assert_eq!(
+            (code.as_str(), msg.as_str()),
+            ("out_of_range", "generator is 201 characters long; allowed: at most 200")
+        );
         // A pattern the stage cannot hold is refused before anything moves, saying why.
-        ok(&mut op, json!({"type": "assemble", "id": 22, "sites": [{"x_um": 0.0, "y_um": 0.0}]})).await;
+        ok(
+            &mut op,
+            json!({"type": "assemble", "id": 22, "sites": [{"x_um": 0.0, "y_um": 0.0}]}),
+        )
+        .await;
         let done = until(&mut op, 30.0, |m| is(m, "assembly_done")).await;
         assert_eq!(done["outcome"], "refused", "{done}");
         assert!(!done["reason"].as_str().unwrap().is_empty(), "{done}");

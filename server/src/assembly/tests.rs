@@ -60,18 +60,17 @@ fn a_stop_during_the_first_plan_ends_it_before_any_move() {
     let st = test_state();
     let mut rx = st.channels.events.subscribe();
     let p = st.scene.pushed_particle().clone();
-    let sites = Pattern::generate(
-        "line:n=2,spacing_um=4",
-        (p.x_um * 1e-6 + 3e-6, p.y_um * 1e-6),
-    )
-    .unwrap();
+    let sites = Pattern::generate("line:n=2,spacing_um=4", (p.x_um * 1e-6 + 3e-6, p.y_um * 1e-6)).unwrap();
     let j = job(&st, sites, false);
     st.activity.generation.fetch_add(1, Relaxed);
     run_assembly(&st, j);
     let (types, end) = done(&mut rx);
     assert_eq!(types, ["assembly_planned", "assembly_done"], "no move");
     assert_eq!(end["outcome"], "stopped", "{end}");
-    assert_eq!(end["reason"], "stopped: the lease holder disconnected", "nobody holds the lease here");
+    assert_eq!(
+        end["reason"], "stopped: the lease holder disconnected",
+        "nobody holds the lease here"
+    );
     let name = end["record"].as_str().expect("a record");
     let path = st.cfg.data_dir.join(name);
     let rec: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
