@@ -181,10 +181,11 @@ fn push(a: &Assembly<'_>, id: u32, tolerance: f64, kind: &Kind, route: MoveRoute
         tolerance,
         generation: a.job.generation,
         by: a.job.by,
+        person: a.job.person.as_str().into(),
     };
     st.shared.busy.store(true, Relaxed);
-    if let Err((outcome, failure)) = launch(st, mv, &kind.scene, route, 1) {
-        run_done_failed(st, a.job.by, id, outcome, failure.clone());
+    if let Err((outcome, failure)) = launch(st, mv.clone(), &kind.scene, route, 1) {
+        run_done_failed(st, &mv, id, outcome, failure.clone());
         return Ended {
             outcome: outcome.into(),
             failure: Some(failure),
