@@ -59,6 +59,10 @@ pub struct MoveDone {
     pub record: MoveRecord,
     /// Whether it failed (its push failed, or its particle was not found), as opposed to a miss.
     pub failed: bool,
+    /// Whether the scan before its first push found nothing where the map has the particle: the
+    /// map was wrong there (a particle counted twice, or one the full frame's pixels made up),
+    /// and the particle leaves the map. Sending it again would find nothing again.
+    pub absent: bool,
     /// Where the scan after found the particle, or else where the controller estimates it.
     pub ended: Option<Seen>,
     /// Where the particle was during the move: scans taken then show it there.
@@ -269,8 +273,29 @@ impl Book {
             }
         }
         self.moves.push(done.record);
+        if done.absent {
+            self.forget(mv.particle);
+        }
         self.replan();
         filled
+    }
+
+    /// Takes particle `k` off the map; the exclusions and failures of the others follow their
+    /// new indices.
+    fn forget(&mut self, k: usize) {
+        if k >= self.map.len() {
+            return;
+        }
+        self.map.remove(k);
+        if k < self.failures.len() {
+            self.failures.remove(k);
+        }
+        self.constraints.excluded.retain(|(q, _)| *q != k);
+        for (q, _) in &mut self.constraints.excluded {
+            if *q > k {
+                *q -= 1;
+            }
+        }
     }
 
     fn replan(&mut self) {
@@ -334,3 +359,6 @@ impl Book {
             .collect()
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -375,6 +375,7 @@ impl<'a> Assembly<'a> {
                 push_time: self.afm.time() - t0,
             },
             failed: false,
+            absent: false,
             ended: None,
             path: vec![mv.from],
             images,
@@ -409,6 +410,7 @@ impl<'a> Assembly<'a> {
             Err(MoveRunError::Locate(MoveError::NotFound { cause, .. })) => {
                 done.record.outcome = format!("not_found: {cause}");
                 done.failed = true;
+                done.absent = true;
             }
             Err(e) => {
                 done.record.outcome = format!("refused: {e}");

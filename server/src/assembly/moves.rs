@@ -63,6 +63,7 @@ pub(super) fn make(a: &Assembly<'_>, mv: &PlannedMove, id: u32, kind: &Kind) -> 
                 push_time: 0.0,
             },
             failed: false,
+            absent: false,
             ended: None,
             path: vec![mv.from],
             images: Vec::new(),
@@ -87,6 +88,7 @@ pub(super) fn make(a: &Assembly<'_>, mv: &PlannedMove, id: u32, kind: &Kind) -> 
                 mv.from.1 * 1e6
             );
             made.done.failed = true;
+            made.done.absent = true;
             return made;
         }
     };

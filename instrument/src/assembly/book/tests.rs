@@ -1,0 +1,114 @@
+//! The book: what a move's report does to the map and the plan.
+
+use super::*;
+use crate::assembly::pattern::Site;
+use crate::scan::Tip;
+
+const UM: f64 = 1e-6;
+
+fn book(sites: &[(f64, f64)]) -> Book {
+    let pattern = Pattern {
+        name: "test".into(),
+        sites: sites
+            .iter()
+            .map(|&(x, y)| Site {
+                x: x * UM,
+                y: y * UM,
+                tolerance: None,
+            })
+            .collect(),
+        radius: Some(0.5 * UM),
+    };
+    let settings = PlanSettings {
+        tolerance: 25e-9,
+        clearance: 0.5 * UM,
+        max_push: 20.0 * UM,
+        approach: 2.0 * UM,
+        tip_radius: 30e-9,
+        range: 100.0 * UM,
+    };
+    let tip = Tip {
+        radius: 30e-9,
+        half_angle: 0.3,
+    };
+    Book::new(&pattern, AssemblyOptions::default(), settings, tip, 0.0)
+}
+
+fn seen(x: f64, y: f64) -> Seen {
+    Seen {
+        x: x * UM,
+        y: y * UM,
+        radius: 0.5 * UM,
+    }
+}
+
+/// A particle twice the pattern's size: one the pattern does not need.
+fn big(x: f64, y: f64) -> Seen {
+    Seen {
+        radius: 1.0 * UM,
+        ..seen(x, y)
+    }
+}
+
+fn report(mv: &PlannedMove, outcome: &str, absent: bool) -> MoveDone {
+    MoveDone {
+        record: MoveRecord {
+            purpose: mv.purpose,
+            particle: Some(7),
+            from: mv.from,
+            to: mv.to,
+            outcome: outcome.into(),
+            error: None,
+            pushes: 0,
+            push_time: 0.0,
+        },
+        failed: true,
+        absent,
+        ended: None,
+        path: Vec::new(),
+        images: Vec::new(),
+    }
+}
+
+#[test]
+fn a_particle_the_scan_does_not_find_leaves_the_map() {
+    // One site with a particle the pattern does not need on it (to clear), and one to fill it.
+    let mut b = book(&[(50.0, 50.0)]);
+    b.start(vec![seen(40.0, 50.0), big(51.2, 50.0)]).unwrap();
+    let first = b.next_move().cloned().unwrap();
+    assert_eq!((first.particle, first.purpose), (1, Purpose::Clear), "{:?}", b.plan());
+    b.moved(&first, report(&first, "not_found: nothing there", true));
+    assert_eq!(b.map().len(), 1, "{:?}", b.map());
+    assert!(b.plan().moves.iter().all(|m| m.purpose == Purpose::Fill { site: 0 }), "{:?}", b.plan());
+    let next = b.next_move().unwrap();
+    assert_eq!((next.particle, next.from), (0, (40.0 * UM, 50.0 * UM)));
+}
+
+#[test]
+fn a_particle_lost_after_its_pushes_stays_on_the_map_until_excluded() {
+    let mut b = book(&[(50.0, 50.0)]);
+    b.start(vec![seen(40.0, 50.0), seen(30.0, 50.0)]).unwrap();
+    let first = b.next_move().cloned().unwrap();
+    let k = first.particle;
+    b.moved(&first, report(&first, "lost", false));
+    assert_eq!(b.map().len(), 2);
+    let again = b.next_move().cloned().unwrap();
+    assert_eq!(again.particle, k, "sent again after one failure");
+    b.moved(&again, report(&again, "lost", false));
+    assert_eq!(b.map().len(), 2);
+    let other = b.next_move().unwrap();
+    assert_ne!(other.particle, k, "excluded after two failures: {:?}", b.plan());
+}
+
+#[test]
+fn forgetting_a_particle_keeps_the_exclusions_on_the_others() {
+    let mut b = book(&[(50.0, 50.0)]);
+    b.start(vec![seen(40.0, 50.0), big(51.2, 50.0), seen(60.0, 50.0)]).unwrap();
+    b.exclude(&[2], "refused");
+    let clear = b.next_move().cloned().unwrap();
+    assert_eq!(clear.particle, 1);
+    b.moved(&clear, report(&clear, "not_found", true));
+    // The excluded particle was index 2 and is index 1 now: still not sent.
+    assert_eq!(b.map().len(), 2);
+    assert!(b.plan().moves.iter().all(|m| m.particle == 0), "{:?}", b.plan());
+}
