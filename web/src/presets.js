@@ -3,9 +3,10 @@
 // (instrument/src/assembly/pattern.rs: `line:n=5,spacing_um=4`, `grid:rows=3,cols=3,spacing_um=4`,
 // `ring:n=8,radius_um=6`, each with `angle_deg`), centred at a stage point. No DOM; a parameter
 // out of range is a RangeError naming it, its value and the allowed range. Runs in Node (tests).
+import { ASSEMBLE_MAX_SITES } from './wire.js';
 
-/** The most sites a pattern may have (pattern.rs `MAX_SITES`). */
-export const MAX_SITES = 400;
+/** The most sites a pattern may have (pattern.rs `MAX_SITES`, as an `assemble` command). */
+export const MAX_SITES = ASSEMBLE_MAX_SITES;
 
 /** Each parameter: its words for people, its unit, and its range as pattern.rs checks it. */
 export const PARAMS = Object.freeze({
