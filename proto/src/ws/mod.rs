@@ -15,11 +15,12 @@ pub mod scan_line;
 pub mod server;
 pub mod types;
 
-pub use client::{ClientMessage, HapticAction, Stream};
+pub use client::{ASSEMBLE_MAX_GENERATOR, ASSEMBLE_MAX_SITES, ClientMessage, HapticAction, SiteUm, Stream};
 pub use scan_line::{FrameError, SCAN_LINE_HEADER_LEN, SCAN_LINE_MAGIC, ScanLineHeader};
 pub use server::ServerMessage;
 pub use types::{
-    Bounds, ErrorCode, HapticScales, HapticTelemetry, Judged, ParticleNow, PushPath, Role, ScanNow, Telemetry,
+    AssemblyNow, AssemblyPlan, AssemblySite, Bounds, ErrorCode, HapticScales, HapticTelemetry, Judged, MapParticle,
+    ParticleNow, PlanMove, PlanSite, PushPath, Role, ScanNow, Telemetry,
 };
 
 /// Protocol version, sent in `welcome`; bumped on any incompatible change.

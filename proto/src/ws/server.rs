@@ -2,7 +2,11 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Bounds, ErrorCode, HapticScales, Judged, ParticleNow, PushPath, Role, ScanNow, Telemetry};
+use super::{
+    AssemblyNow, AssemblyPlan, AssemblySite, Bounds, ErrorCode, HapticScales, Judged, ParticleNow, PlanMove, PushPath,
+    Role, ScanNow, Telemetry,
+};
+use crate::assembly::{AssemblySummary, MoveSummary};
 
 /// A server → client text message.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -59,6 +63,9 @@ pub enum ServerMessage {
         push: Option<PushPath>,
         /// The latest scan (running or finished), if any.
         scan: Option<ScanNow>,
+        /// The assembly running, if any (older servers leave it out).
+        #[serde(default)]
+        assembly: Option<AssemblyNow>,
     },
     /// A push was planned and starts (to everyone): what will be pushed, along which path.
     PushStarted(PushPath),
@@ -145,6 +152,76 @@ pub enum ServerMessage {
         #[serde(default)]
         record_error: Option<String>,
     },
+    /// An assembly's first full frame was taken and its first plan made (to everyone).
+    AssemblyPlanned {
+        /// Its number (per server run).
+        assembly: u64,
+        /// The client that commanded it.
+        by: u32,
+        /// Whether it only plans (`assembly_done` follows at once, nothing moves).
+        plan_only: bool,
+        /// The pattern's name.
+        pattern: String,
+        /// The pattern's sites.
+        sites: Vec<AssemblySite>,
+        /// The plan.
+        plan: AssemblyPlan,
+    },
+    /// A move of an assembly starts (to everyone); its pushes follow as `push_started`, its end
+    /// as `run_done`.
+    AssemblyMoveStarted {
+        /// The assembly.
+        assembly: u64,
+        /// The move's number, from 1.
+        number: usize,
+        /// Moves planned in all, those made included.
+        of: usize,
+        /// The move as planned.
+        planned: PlanMove,
+        /// The particle's scene id.
+        particle_id: u32,
+    },
+    /// A move of an assembly ended, judged by the scan after it (to everyone).
+    AssemblyMoveEnded {
+        /// The assembly.
+        assembly: u64,
+        /// The move's number.
+        number: usize,
+        /// What it ended with.
+        made: MoveSummary,
+    },
+    /// A site holds its particle, as the scan after the move shows (to everyone).
+    AssemblySiteFilled {
+        /// The assembly.
+        assembly: u64,
+        /// The site (its index in the pattern).
+        site: usize,
+    },
+    /// The rest of an assembly, planned again from the map the move's scans updated (to
+    /// everyone).
+    AssemblyReplanned {
+        /// The assembly.
+        assembly: u64,
+        /// The plan.
+        plan: AssemblyPlan,
+    },
+    /// An assembly ended (to everyone).
+    AssemblyDone {
+        /// The assembly.
+        assembly: u64,
+        /// `filled`, `incomplete`, `refused` (before anything moved), `stopped`, or `planned`
+        /// (a `plan_only` one).
+        outcome: String,
+        /// Why it was refused or stopped.
+        reason: Option<String>,
+        /// The report, as `nanopush assemble` writes it (null for `planned`).
+        summary: Option<AssemblySummary>,
+        /// Its record under `/api/records` (null for `planned`, or when none could be written).
+        record: Option<String>,
+        /// Why no record was written, when one was not.
+        #[serde(default)]
+        record_error: Option<String>,
+    },
     /// The server is shutting down; the connection closes next.
     Shutdown {
         /// Why.
@@ -215,6 +292,7 @@ mod tests {
             lease_name: Some("alice".into()),
             push: Some(path),
             scan: None,
+            assembly: None,
         })
         .unwrap();
         assert_eq!(s["type"], "state");
@@ -222,6 +300,7 @@ mod tests {
         assert_eq!(s["particles"][0]["radius"], 5e-7);
         assert_eq!(s["push"]["path"][1][0], 3e-6);
         assert!(s["scan"].is_null());
+        assert!(s["assembly"].is_null());
         // A lease change by command has no reason key; one by a disconnect says why.
         let l = serde_json::to_string(&ServerMessage::Lease {
             holder: None,
@@ -238,5 +317,66 @@ mod tests {
         })
         .unwrap();
         assert_eq!(l, r#"{"type":"lease","holder":3,"holder_name":"alice"}"#);
+    }
+
+    #[test]
+    fn assembly_events_carry_their_type_and_the_plan() {
+        let plan = AssemblyPlan {
+            map: vec![crate::ws::MapParticle {
+                x: 1e-6,
+                y: 2e-6,
+                radius: 5e-7,
+            }],
+            sites: vec![crate::ws::PlanSite {
+                state: "planned".into(),
+                particle: Some(0),
+                status: None,
+                reason: None,
+            }],
+            moves: vec![PlanMove {
+                purpose: "fill".into(),
+                site: Some(0),
+                particle: 0,
+                from: [1e-6, 2e-6],
+                to: [4e-6, 2e-6],
+                path: vec![[1e-6, 2e-6], [4e-6, 2e-6]],
+            }],
+        };
+        let s = serde_json::to_value(ServerMessage::AssemblyPlanned {
+            assembly: 1,
+            by: 2,
+            plan_only: true,
+            pattern: "sites".into(),
+            sites: vec![AssemblySite {
+                target: [4e-6, 2e-6],
+                tolerance: 25e-9,
+            }],
+            plan: plan.clone(),
+        })
+        .unwrap();
+        assert_eq!(s["type"], "assembly_planned");
+        assert_eq!(s["plan"]["moves"][0]["path"][1][0], 4e-6);
+        assert_eq!(s["plan"]["sites"][0]["state"], "planned");
+        assert!(s["plan"]["sites"][0].get("reason").is_none(), "{s}");
+        let back: ServerMessage = serde_json::from_value(s).unwrap();
+        assert!(matches!(back, ServerMessage::AssemblyPlanned { plan: p, .. } if p == plan));
+        let s = serde_json::to_value(ServerMessage::AssemblyDone {
+            assembly: 1,
+            outcome: "stopped".into(),
+            reason: Some("stopped: stop requested by the operator".into()),
+            summary: None,
+            record: Some("assembly-1.json".into()),
+            record_error: None,
+        })
+        .unwrap();
+        assert_eq!(s["type"], "assembly_done");
+        assert_eq!(s["outcome"], "stopped");
+        // A state from an older server, without the key, reads as no assembly.
+        let old =
+            r#"{"type":"state","particles":[],"stage":[0,0,0],"phase":"idle","lease":null,"push":null,"scan":null}"#;
+        assert!(matches!(
+            serde_json::from_str::<ServerMessage>(old).unwrap(),
+            ServerMessage::State { assembly: None, .. }
+        ));
     }
 }

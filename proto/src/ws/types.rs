@@ -1,8 +1,10 @@
 //! The data the messages of both directions share: roles, error codes, telemetry, particles,
-//! pushes, judged moves, scans and the haptic scales (SI unless a name says otherwise).
+//! pushes, judged moves, scans, assemblies and the haptic scales (SI unless a name says
+//! otherwise).
 
 use serde::{Deserialize, Serialize};
 
+use crate::assembly::MoveSummary;
 use crate::push::{TOLERANCE_NM, TOLERANCE_RANGE_NM};
 
 /// A number a command takes, as the server checks it: its default when left out and its allowed
@@ -60,7 +62,8 @@ pub enum ErrorCode {
     UnknownParticle,
     /// Something runs already (a push or a scan); stop it first.
     Busy,
-    /// The request is inconsistent (both a distance and a target, say).
+    /// The request is inconsistent (both a distance and a target, say; both sites and a
+    /// generator; a generator that is not one).
     Invalid,
     /// The server is shutting down.
     ShuttingDown,
@@ -214,4 +217,97 @@ pub struct HapticScales {
     pub limit: String,
     /// Why, in a sentence; null when `limit` is `none`.
     pub reason: Option<String>,
+}
+
+/// One site of an assembly's pattern (SI).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct AssemblySite {
+    /// Its centre (m).
+    pub target: [f64; 2],
+    /// How close a particle's centre must come to fill it (m).
+    pub tolerance: f64,
+}
+
+/// A particle as an assembly's scans show it (SI): the plan names particles by their index in
+/// the map.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MapParticle {
+    /// Centre x (m).
+    pub x: f64,
+    /// Centre y (m).
+    pub y: f64,
+    /// Radius (m).
+    pub radius: f64,
+}
+
+/// What a plan says of one site.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlanSite {
+    /// `filled` (a particle is on it already), `planned` (a move of the plan fills it) or
+    /// `open` (it stays open: `status` and `reason` say why).
+    pub state: String,
+    /// The particle on it or sent to it (its index in the plan's `map`).
+    pub particle: Option<usize>,
+    /// For an open site: `unreachable`, `refused` or `missed`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub status: Option<String>,
+    /// For an open site: why, in words.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+}
+
+/// One move of a plan (SI).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlanMove {
+    /// `fill` (a site), `clear` (a particle the pattern does not need, out of the way) or
+    /// `park` (a particle to place later, aside for now).
+    pub purpose: String,
+    /// The site it fills.
+    pub site: Option<usize>,
+    /// The particle (its index in the plan's `map`).
+    pub particle: usize,
+    /// Where the particle is (m).
+    pub from: [f64; 2],
+    /// Where it goes (m).
+    pub to: [f64; 2],
+    /// The path of its centre: `from`, then the end of each straight push (m).
+    pub path: Vec<[f64; 2]>,
+}
+
+/// An assembly's plan as it stands (SI).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AssemblyPlan {
+    /// Every particle as the scans last showed it.
+    pub map: Vec<MapParticle>,
+    /// Each site, in the pattern's order.
+    pub sites: Vec<PlanSite>,
+    /// The moves still to make, in order.
+    pub moves: Vec<PlanMove>,
+}
+
+/// The assembly running now, for a client that joins during it (SI).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AssemblyNow {
+    /// Its number (per server run), as its events and its record say.
+    pub assembly: u64,
+    /// The client that commanded it.
+    pub by: u32,
+    /// Whether it only plans.
+    pub plan_only: bool,
+    /// The pattern's name (the generator's text, or `sites`).
+    pub pattern: String,
+    /// The pattern's sites.
+    pub sites: Vec<AssemblySite>,
+    /// `planning` (the first full frame and plan), `moving` (a move runs), `replanning` (after
+    /// a move) or `judging` (the last full frame).
+    pub phase: String,
+    /// The plan as it stands; null before the first.
+    pub plan: Option<AssemblyPlan>,
+    /// Each move made so far, in order.
+    pub moves: Vec<MoveSummary>,
+    /// The sites filled so far, as the scans after the moves showed them.
+    pub filled: Vec<usize>,
+    /// The move running: its number, from 1, and the moves planned in all (those made
+    /// included).
+    pub moving: Option<[usize; 2]>,
 }
