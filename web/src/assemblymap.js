@@ -33,14 +33,16 @@ export function assemblyView(a) {
     const { state, reason } = siteState(a, i);
     return { x: s.target[0], y: s.target[1], tol: s.tolerance, n: i + 1, state, reason, selected: false };
   });
+  // The plan stays drawn after a plan-only assembly's end: that is what it was asked for.
+  const live = !a.done || a.done.outcome === 'planned';
   const assign = [];
-  if (!a.done) {
+  if (live) {
     (a.plan?.sites ?? []).forEach((p, i) => {
       const q = map[p.particle];
       if (p.state === 'planned' && q && a.sites[i]) assign.push([[q.x, q.y], a.sites[i].target]);
     });
   }
-  const paths = a.done ? [] : (a.plan?.moves ?? []).filter((m) => Array.isArray(m.path) && m.path.length > 1).map((m) => ({ pts: m.path, purpose: m.purpose }));
+  const paths = !live ? [] : (a.plan?.moves ?? []).filter((m) => Array.isArray(m.path) && m.path.length > 1).map((m) => ({ pts: m.path, purpose: m.purpose }));
   return { sites, assign, paths, current: a.current?.path ?? null };
 }
 

@@ -46,6 +46,7 @@ export function planText(a) {
 
 /** Where the assembly stands, in one line. */
 export function progressText(a) {
+  if (a.done?.outcome === 'planned') return `${planText(a)}. Nothing moved: press Assemble to run it`;
   if (a.done) return outcomeText(a.done);
   if (a.moving) {
     const [k, n] = a.moving;

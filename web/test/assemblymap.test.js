@@ -37,6 +37,16 @@ test('a plan: each planned site tied to its particle, each move\'s path, the mov
   assert.deepEqual([v.assign, v.paths, v.current], [[], [], null], 'once done only the sites stay');
 });
 
+test('a plan-only assembly\'s end leaves its plan drawn', () => {
+  const s = new Session();
+  s.apply(planned({ plan_only: true }));
+  s.apply({ type: 'assembly_done', assembly: 1, outcome: 'planned', reason: null, summary: null, record: null });
+  const v = assemblyView(s.state.assembly);
+  assert.equal(v.paths.length, 1);
+  assert.equal(v.assign.length, 1);
+  assert.deepEqual(v.sites.map((x) => x.state), ['planned', 'filled', 'unreachable']);
+});
+
 test('a site\'s tooltip says its state and reason in words', () => {
   assert.equal(siteTitle({ n: 3, state: 'unreachable', reason: 'no clear path' }), 'site 3: cannot be reached (no clear path)');
   assert.equal(siteTitle({ n: 1, state: 'draft', reason: null }), 'site 1: in the pattern');

@@ -18,6 +18,13 @@ test('the plan at a glance: moves, sites to fill, filled already, unreachable', 
   assert.equal(progressText(a), planText(a));
 });
 
+test('a plan-only assembly\'s end says its plan and that nothing moved', () => {
+  const s = new Session();
+  s.apply(planned({ plan_only: true }));
+  s.apply({ type: 'assembly_done', assembly: 1, outcome: 'planned', reason: null, summary: null, record: null });
+  assert.equal(progressText(s.state.assembly), '1 move planned for 3 sites: 1 site to fill, 1 filled already, 1 cannot be reached. Nothing moved: press Assemble to run it');
+});
+
 test('a move running says which of how many, the particle and what it does', () => {
   const s = session();
   s.apply({ type: 'assembly_move_started', assembly: 1, number: 2, of: 5, planned: PLAN.moves[0], particle_id: 12 });
