@@ -25,6 +25,8 @@ import { MapOverlay } from './mapoverlay.js';
 import { Records } from './records.js';
 import { Scans } from './scans.js';
 import { Toolbar } from './toolbar.js';
+import { AssemblePanel } from './assemblepanel.js';
+import { assemblyLogLine } from './assemblyreport.js';
 
 export class App {
   /**
@@ -136,6 +138,13 @@ export class App {
       send: (m) => this.conn.send(m),
       onScanRequested: () => this.scans.requested(),
     });
+    this.assemble = new AssemblePanel($, doc, {
+      session: this.session,
+      map: this.map,
+      send: (m) => this.conn.send(m),
+      replies: this.replies,
+      announce: (text) => this.log.announce(text),
+    });
     this.toolbar = new Toolbar($, this.view, () => this.st.scan);
     this.scans = new Scans($, {
       session: this.session,
@@ -204,6 +213,7 @@ export class App {
   render() {
     this.status.render(this.st);
     this.controls.render();
+    this.assemble.render();
   }
 
   /** The live views: the tip (3D, readout, haptic panel) and the plots. */
@@ -316,6 +326,13 @@ export class App {
         this.replies.replied(ev);
         if (!ev.ok) log.log(replyErrorText(ev, st.lastError), 'bad');
         break;
+      case 'assembly': {
+        const line = assemblyLogLine(ev, st.client);
+        if (line) log.log(line.text, line.cls);
+        if (line && (ev.what === 'done' || ev.what === 'planned')) log.announce(line.text);
+        this.assemble.assemblyChanged();
+        break;
+      }
       case 'lagged':
         break;
       case 'lease': {
@@ -402,6 +419,7 @@ export class App {
     this.controls.particlesMoved();
     if (st.tip) this.liveFrame.mark('tip');
     this.scans.stateChanged(ev);
+    if (ev.assemblyChanged) this.assemble.assemblyChanged();
     this.controls.renderPush();
     this.scans.renderStale();
     this.log.log(stateText(st));
@@ -436,6 +454,7 @@ export class App {
     this.view.setStage(this.st.stageRange * 1e6);
     this.image2d.setStage(this.st.stageRange);
     this.controls.applyScene(scene);
+    this.assemble.applyScene();
   }
 }
 

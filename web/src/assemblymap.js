@@ -7,6 +7,7 @@
 // in an SVG group the map gives it, only when what it shows or the map's frame changed.
 import { siteState } from './assembly.js';
 import { siteWords } from './assemblyreport.js';
+import { ringPx, MIN_RING_PX } from './mapoverlay.js';
 
 const SVG = 'http://www.w3.org/2000/svg';
 
@@ -62,22 +63,36 @@ function el(name, attrs, parent) {
 const r1 = (v) => Math.round(v * 10) / 10;
 
 export class AssemblyLayer {
-  /** @param {SVGGElement} group the map's group it draws in (clipped to the image) */
-  constructor(group) {
+  /**
+   * @param {SVGGElement} group the map's group it draws in (clipped to the image)
+   * @param {() => ({view: object, key: string, radiusM: number} | null)} source what to draw
+   *   (patternView / assemblyView), a key that changes whenever it does, and the radius (m) of
+   *   the particles the sites want; null: nothing
+   */
+  constructor(group, source) {
     this.g = group;
+    this.source = source;
     this.key = null;
+    this.ringR = MIN_RING_PX;
   }
 
-  /**
-   * Draws `view` (patternView / assemblyView, or null: nothing) with `px` (stage m → CSS px)
-   * and `ringR` (a site ring's radius, px), when it or the frame changed (`frameKey`).
-   */
-  draw(view, viewKey, frameKey, px, k, ringR) {
-    const key = view ? `${viewKey}|${frameKey}|${r1(ringR)}` : null;
+  /** A site ring's radius (CSS px) as last drawn. */
+  ringPx() {
+    return this.ringR;
+  }
+
+  /** Draws, with the map's `px` (stage m → CSS px) and `k` (px per m), when anything changed. */
+  draw({ px, k, frameKey }) {
+    const src = this.source();
+    this.ringR = ringPx(src?.radiusM ?? 0, k);
+    const key = src ? `${src.key}|${frameKey}|${r1(this.ringR)}` : null;
     if (key === this.key) return;
     this.key = key;
     this.g.replaceChildren();
-    if (!view) return;
+    if (src) this.build(src.view, px, k, this.ringR);
+  }
+
+  build(view, px, k, ringR) {
     const pts = (list) => list.map(([x, y]) => px(x, y).map(r1).join(',')).join(' ');
     for (const [from, to] of view.assign) {
       const [a, b] = [px(...from), px(...to)];

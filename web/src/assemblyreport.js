@@ -115,3 +115,33 @@ export function reportRows(summary) {
     };
   });
 }
+
+/**
+ * An assembly event (the Session's `{kind: 'assembly', what, assembly}`) for the event log, in
+ * words, with its colour; null for what the log does not say (a new plan after each move: the
+ * progress line says it; an event of an assembly this page does not know).
+ */
+export function assemblyLogLine(ev, client) {
+  const a = ev.assembly;
+  if (!a) return null;
+  const who = a.by === null ? '' : a.by === client ? ' (yours)' : ` (client ${a.by})`;
+  switch (ev.what) {
+    case 'planned':
+      return { text: `assembly ${a.id}${who} ${a.planOnly ? 'planned, to look at' : 'planned'}: ${planText(a)}`, cls: 'neutral' };
+    case 'move_started':
+      return { text: `assembly ${a.id}: ${progressText(a).replace(/^Move/, 'move')}`, cls: 'neutral' };
+    case 'move_ended': {
+      const m = a.made[a.made.length - 1];
+      if (!m) return null;
+      const how = m.outcome === 'ok' ? 'on target' : m.outcome === 'missed' ? 'missed its target' : String(m.outcome).replace(/_/g, ' ');
+      const err = Number.isFinite(m.error) ? `, ${nm(m.error)} from it` : '';
+      return { text: `assembly ${a.id}: move ${a.made.length} ended ${how}${err}`, cls: m.outcome === 'ok' ? 'good' : 'warn' };
+    }
+    case 'site_filled':
+      return { text: `assembly ${a.id}: site ${a.filled[a.filled.length - 1] + 1} filled`, cls: 'good' };
+    case 'done':
+      return { text: `assembly ${a.id}: ${progressText(a)}`, cls: outcomeClass(a.done) };
+    default:
+      return null;
+  }
+}
