@@ -175,7 +175,8 @@ export class AssemblePanel {
     const prog = $('asm-progress');
     prog.textContent = a ? progressText(a) : '';
     prog.className = `lastrun ${a?.done ? outcomeClass(a.done) : 'neutral'}`;
-    prog.hidden = !a;
+    // Once the report is there it says the outcome: the line would say it twice.
+    prog.hidden = !a || !!a.done?.summary;
     this.renderReport(a);
     if (this.listed !== this.pattern.version) this.renderList();
   }
