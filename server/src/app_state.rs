@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use axum::extract::ws::{Message, Utf8Bytes};
 use axum::http::StatusCode;
-use nanopush_proto::ws::{ParticleNow, PushPath, Role, ScanNow, ServerMessage};
+use nanopush_proto::ws::{AssemblyNow, ParticleNow, PushPath, Role, ScanNow, ServerMessage};
 use tokio::sync::{broadcast, watch};
 
 use crate::control_loop::Shared;
@@ -196,6 +196,12 @@ pub struct Activity {
     pub plans: Mutex<std::collections::HashMap<(u32, u64), PlanOutcome>>,
     /// The pushes the loop runs whose move is judged by the scan after them, by run number.
     pub judging: Mutex<std::collections::HashMap<u64, Pending>>,
+    /// An assembly runs (from its command's `ok` to its `assembly_done`): the instrument is
+    /// busy all along, between its moves too.
+    pub assembling: AtomicBool,
+    /// The assembly running, as a client that joins during it is told.
+    pub assembly_now: Mutex<Option<AssemblyNow>>,
+    pub(crate) next_assembly: AtomicU64,
 }
 
 /// A move as the operator asked for it: the particle, the tolerance it must end within, the
@@ -362,6 +368,9 @@ impl AppState {
                 next_scan: AtomicU32::new(1),
                 plans: Mutex::new(std::collections::HashMap::new()),
                 judging: Mutex::new(std::collections::HashMap::new()),
+                assembling: AtomicBool::new(false),
+                assembly_now: Mutex::new(None),
+                next_assembly: AtomicU64::new(1),
                 stopping: AtomicBool::new(false),
                 generation: AtomicU64::new(0),
                 estimates: Mutex::new(
@@ -434,6 +443,7 @@ impl AppState {
         // crowded sample) and while a scan runs on its own thread: said as such.
         let phase = match phase {
             "idle" if self.activity.scanning.load(Relaxed) => "scanning",
+            "idle" if self.activity.assembling.load(Relaxed) => "assembling",
             "idle" if self.shared.busy.load(Relaxed) => "preparing",
             other => other,
         };
@@ -445,6 +455,7 @@ impl AppState {
             lease_name: self.lease_name(),
             push: self.activity.push_now.lock().ok().and_then(|p| p.clone()),
             scan: self.activity.latest_scan.lock().ok().and_then(|s| s.clone()),
+            assembly: self.activity.assembly_now.lock().ok().and_then(|a| a.clone()),
         }
     }
 

@@ -18,12 +18,14 @@
 //! | 4 | `records` | the recorder of the loop's pushes, and the data directory's records |
 //! | 5 | `app_state` | the state every task shares: settings, clients, lease, broadcasts, what the instrument is doing |
 //! | 6 | `push`, `scan_job` | the instrument's jobs beside the loop: a push (launch, judge, prepare), a scan |
-//! | 7 | `telemetry`, `session`, `record_routes` | the loop's events and telemetry to the clients; one WebSocket connection and its table of commands; the records over HTTP |
-//! | 8 | `app` | the HTTP side: the routes, the guard, sign-in, the WebSocket upgrade |
-//! | 9 | `lifecycle` | the server's life: starts the threads and tasks, serves, shuts down in order |
+//! | 7 | `assembly` | an assembly: a pattern's moves, each a push through the loop, planned again after each |
+//! | 8 | `telemetry`, `session`, `record_routes` | the loop's events and telemetry to the clients; one WebSocket connection and its table of commands; the records over HTTP |
+//! | 9 | `app` | the HTTP side: the routes, the guard, sign-in, the WebSocket upgrade |
+//! | 10 | `lifecycle` | the server's life: starts the threads and tasks, serves, shuts down in order |
 
 pub mod app;
 pub mod app_state;
+pub mod assembly;
 pub mod audit;
 pub mod auth;
 pub mod client_addr;

@@ -259,8 +259,9 @@ async fn graceful_shutdown(st: Arc<AppState>, shutdown: impl std::future::Future
         tokio::time::sleep(Duration::from_millis(5)).await;
     }
     st.activity.scan_cancel.store(true, Relaxed);
-    // A scan being written finishes its record (rename) before the process ends.
-    while st.activity.scanning.load(Relaxed) && Instant::now() < deadline {
+    // A scan being written finishes its record (rename) before the process ends, and so does an
+    // assembly (its last frame and its record).
+    while (st.activity.scanning.load(Relaxed) || st.activity.assembling.load(Relaxed)) && Instant::now() < deadline {
         tokio::time::sleep(Duration::from_millis(5)).await;
     }
     let _ = tokio::task::spawn_blocking(move || {

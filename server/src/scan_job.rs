@@ -110,6 +110,30 @@ pub(crate) fn run_scan(st: &AppState, params: ScanParams, person: &str) {
     });
 }
 
+/// A frame taken at once (an assembly's full frames), not streamed: its scan record written, and
+/// it made the latest scan, so that a client that joins later is shown it. Returns its record's
+/// name, or why there is none.
+pub(crate) fn record_frame(st: &AppState, img: &HeightImage, person: &str) -> Result<String, String> {
+    let scan_id = st.activity.next_scan.fetch_add(1, Relaxed);
+    let tip = Tip::from_scene(&st.scene);
+    let (record, record_error) = write_record(st, scan_id, img, &tip, person);
+    if let Ok(mut s) = st.activity.latest_scan.lock() {
+        *s = Some(ScanNow {
+            scan: scan_id,
+            xres: img.xres as u32,
+            yres: img.yres as u32,
+            x_offset: img.x_offset,
+            y_offset: img.y_offset,
+            x_real: img.x_real,
+            y_real: img.y_real,
+            done: true,
+            record: record.clone(),
+            stale: false,
+        });
+    }
+    record.ok_or_else(|| record_error.unwrap_or_else(|| "no record was written".into()))
+}
+
 /// The running scan's lines for clients that subscribe mid-scan ([`crate::app_state::Activity::scan_lines`]):
 /// one more line, or `None`: none (a scan starts, or ended).
 fn keep_lines(st: &AppState, frame: Option<Bytes>) {

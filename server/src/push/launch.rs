@@ -45,7 +45,7 @@ pub(crate) fn audit_early_end(st: &AppState, by: u32, particle: u32, outcome: &s
 }
 
 /// Strategy plans kept at most (particle and tolerance pairs).
-const PLANS_KEPT: usize = 64;
+pub(crate) const PLANS_KEPT: usize = 64;
 
 /// The scene with particle `particle`'s strategy plan for `tolerance` applied (hand-set values
 /// win), the plan derived on the first push that asks for it and kept; or why no strategy can

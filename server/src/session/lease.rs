@@ -27,8 +27,9 @@ pub(super) fn release_haptic(st: &AppState) -> bool {
 }
 
 /// Client `id` disconnected: the lease goes with it, and so does what it commanded. Nobody
-/// watches a push or scan whose operator is gone, so it is stopped (the tip retracts); the push
-/// ends in a `run_done` with outcome `stopped`, recorded like any other.
+/// watches a push, scan or assembly whose operator is gone, so it is stopped (the tip
+/// retracts); the push ends in a `run_done` with outcome `stopped`, recorded like any other, an
+/// assembly in an `assembly_done` `stopped`, recorded.
 pub(super) fn on_disconnect(st: &AppState, id: u32) {
     let mut lease = st.clients.lease.lock().expect("lease lock");
     if *lease != Some(id) {
@@ -40,7 +41,8 @@ pub(super) fn on_disconnect(st: &AppState, id: u32) {
     st.conn_limits.lease_held(None);
     let pushing = st.shared.busy.load(Relaxed);
     let scanning = st.activity.scanning.load(Relaxed);
-    if pushing || scanning {
+    let assembling = st.activity.assembling.load(Relaxed);
+    if pushing || scanning || assembling {
         st.activity.scan_cancel.store(true, Relaxed);
         st.activity.generation.fetch_add(1, Relaxed);
         if pushing {
@@ -53,9 +55,10 @@ pub(super) fn on_disconnect(st: &AppState, id: u32) {
     } else {
         ""
     };
-    let what = match (pushing, scanning) {
-        (true, _) => "; its push was stopped",
-        (_, true) => "; its scan was stopped",
+    let what = match (assembling, pushing, scanning) {
+        (true, _, _) => "; its assembly was stopped",
+        (_, true, _) => "; its push was stopped",
+        (_, _, true) => "; its scan was stopped",
         _ => "",
     };
     let what = format!("{what}{haptic}");

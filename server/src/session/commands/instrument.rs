@@ -9,8 +9,11 @@ use crate::app_state::AppState;
 use crate::command_checks::Refusal;
 use crate::control_loop::LoopCommand;
 
-/// Refused `busy` while a push or a scan runs.
+/// Refused `busy` while an assembly, a push or a scan runs.
 pub(super) fn busy(st: &AppState) -> Result<(), Refusal> {
+    if st.activity.assembling.load(Relaxed) {
+        return Err(Refusal::new(ErrorCode::Busy, "an assembly is running; send stop first"));
+    }
     if st.shared.busy.load(Relaxed) {
         return Err(Refusal::new(ErrorCode::Busy, "a push is running; send stop first"));
     }

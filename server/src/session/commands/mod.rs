@@ -20,6 +20,7 @@
 //! `LoopCommand`, in `control_loop`.)
 
 mod ack;
+mod assemble;
 mod haptic;
 mod instrument;
 mod lease;
@@ -50,6 +51,9 @@ pub(super) fn route(msg: &ClientMessage) -> Command {
         M::ReleaseLease { .. } => Command::new("release_lease", Holder, Fields, lease::release),
         M::Push { .. } => Command::new("push", Commander, Fields, push::run),
         M::Scan { .. } => Command::new("scan", Commander, Fields, scan::run),
+        M::Assemble { .. } => {
+            Command::new("assemble", Commander, Fields, assemble::run).checked(assemble::fields_agree)
+        }
         M::Stop { .. } => Command::new("stop", Commander, Fields, stop::run),
         M::Haptic { .. } => Command::new("haptic", Commander, Fields, haptic::run).checked(haptic::fields_apply),
         M::Ack { .. } => Command::new("ack", Anyone, Nothing, ack::run),
@@ -260,6 +264,15 @@ mod tests {
                 pixels: None,
             },
             ClientMessage::Stop { id: None },
+            ClientMessage::Assemble {
+                id: None,
+                sites: None,
+                generator: Some("ring:n=3,radius_um=2".into()),
+                at_x_um: None,
+                at_y_um: None,
+                tolerance_nm: None,
+                plan_only: true,
+            },
             ClientMessage::Haptic {
                 id: None,
                 action: HapticAction::Release,
@@ -270,7 +283,7 @@ mod tests {
         ];
         // Every command once: a command added to the protocol makes this match (and `route`'s)
         // incomplete until it is given a message here.
-        let mut seen = [false; 9];
+        let mut seen = [false; 10];
         for m in &messages {
             let k = match m {
                 ClientMessage::Ping { .. } => 0,
@@ -282,6 +295,7 @@ mod tests {
                 ClientMessage::Stop { .. } => 6,
                 ClientMessage::Haptic { .. } => 7,
                 ClientMessage::Ack { .. } => 8,
+                ClientMessage::Assemble { .. } => 9,
             };
             seen[k] = true;
         }
@@ -300,14 +314,15 @@ mod tests {
     #[test]
     fn who_may_send_each_command() {
         let who = |m: &ClientMessage| route(m).who;
-        let [ping, subscribe, take, release, push, scan, stop, haptic, ack] = one_of_each().try_into().unwrap();
+        let [ping, subscribe, take, release, push, scan, stop, assemble, haptic, ack] =
+            one_of_each().try_into().unwrap();
         assert_eq!(
             (who(&ping), who(&subscribe), who(&ack)),
             (Who::Anyone, Who::Anyone, Who::Anyone)
         );
         assert_eq!(who(&take), Who::Operator("take the lease"));
         assert_eq!(who(&release), Who::Holder);
-        for m in [push, scan, stop, haptic] {
+        for m in [push, scan, stop, assemble, haptic] {
             assert_eq!(who(&m), Who::Commander, "{m:?}");
         }
     }
