@@ -163,7 +163,7 @@ export class App {
     $('toggle-3d').addEventListener('click', () => this.show3d($('toggle-3d').getAttribute('aria-pressed') !== 'true'));
     // Leaving mid-push stops it (the server stops what a departed lease holder commanded): ask.
     loc && globalThis.addEventListener?.('beforeunload', (e) => {
-      if (this.session.hasLease && (this.st.push || this.st.phase === 'scanning')) {
+      if (this.session.hasLease && (this.st.push || this.st.phase === 'scanning' || (this.st.assembly && !this.st.assembly.done))) {
         e.preventDefault();
         e.returnValue = '';
       }
@@ -330,7 +330,7 @@ export class App {
         const line = assemblyLogLine(ev, st.client);
         if (line) log.log(line.text, line.cls);
         if (line && (ev.what === 'done' || ev.what === 'planned')) log.announce(line.text);
-        this.assemble.assemblyChanged();
+        this.assemble.assemblyChanged(ev);
         break;
       }
       case 'lagged':

@@ -148,9 +148,17 @@ export class AssemblePanel {
     this.announce(on ? 'placing sites: click the map to add one, drag one to move it' : 'placing sites off: the map picks particles and targets again');
   }
 
-  /** An assembly event of the Session (or a state that changed it). */
-  assemblyChanged() {
+  /**
+   * An assembly event of the Session (or a state that changed it): redrawn; at its end, the
+   * reply of this page's Plan or Assemble says how it ended.
+   */
+  assemblyChanged(ev) {
     this.assemblyVersion++;
+    const a = this.st.assembly;
+    if (ev?.what === 'done' && a?.by === this.st.client && this.replies.latest('reply-assemble') !== undefined) {
+      const out = this.$('reply-assemble');
+      this.replies.show('reply-assemble', outcomeClass(a.done), a.done.outcome === 'planned' ? 'planned' : `ended: ${outcomeText(a.done).split(/[:(]/)[0].trim().toLowerCase()}`, out.title);
+    }
     this.map.invalidate();
     this.render();
   }
@@ -173,7 +181,9 @@ export class AssemblePanel {
     $('asm-fs').disabled = running;
     if (running && this.map.editor) this.setPlacing(false);
     const prog = $('asm-progress');
-    prog.textContent = a ? progressText(a) : '';
+    // While disconnected the line is what was last known, and says so.
+    const away = st.connection !== 'open' && a && !a.done;
+    prog.textContent = a ? `${away ? 'Last known, while disconnected: ' : ''}${progressText(a)}` : '';
     prog.className = `lastrun ${a?.done ? outcomeClass(a.done) : 'neutral'}`;
     // Once the report is there it says the outcome: the line would say it twice.
     prog.hidden = !a || !!a.done?.summary;
