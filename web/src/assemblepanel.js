@@ -195,7 +195,9 @@ export class AssemblePanel {
     const { $ } = this;
     const sum = a?.done?.summary;
     $('asm-report').hidden = !sum;
-    if (!sum) return;
+    // Built once per assembly event: the page renders on every message.
+    if (!sum || this.reported === this.assemblyVersion) return;
+    this.reported = this.assemblyVersion;
     const d = a.done;
     $('asm-outcome').textContent = `${outcomeText(d)}${d.record ? ` · record ${d.record}` : d.record_error ? ` · no record: ${d.record_error}` : ''}`;
     $('asm-outcome').className = `lastrun ${outcomeClass(d)}`;
