@@ -13,7 +13,9 @@ let browser;
 let op;
 
 before(async () => {
-  srv = await startServer({ webDir: process.env.E2E_WEB_DIR || WEB });
+  // The full frame an assembly starts from (the scene's scan) holds the three particles, each
+  // four pixels across.
+  srv = await startServer({ webDir: process.env.E2E_WEB_DIR || WEB, scan: { centre_x_um: 55, centre_y_um: 46, size_um: 40, pixels: 160 } });
   browser = await launchBrowser();
 });
 
