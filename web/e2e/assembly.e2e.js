@@ -80,7 +80,7 @@ test('the pattern is drawn on the map: click, preset, drag, keys, refusals in wo
   await op.focus('.map-svg');
   await op.keyboard.press('Delete');
   assert.equal((await sites(op)).length, 4);
-  assert.match(await op.textContent('#announce'), /site 2 removed; 4 left/);
+  await waitText(op, '#announce', /site 2 removed; 4 left/, 5000);
   // Out of range: the preset's field named with its allowed range; nothing added.
   await op.fill('#asm-n', '1');
   await op.selectOption('#asm-kind', 'line');
