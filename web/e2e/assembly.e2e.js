@@ -125,6 +125,8 @@ test('Assemble moves it: move 1 of 1, the site turns solid, the report in words'
   assert.equal(row[0][2], 'filled');
   assert.match(row[0][4], /^\d+\.\d nm/, 'its error in nm');
   assert.match(await op.textContent('#asm-times'), /^Took .* for .* of the instrument's time/);
+  // The report lengthens the side column, which scrolls: the page does not.
+  assert.ok(await op.evaluate(() => document.documentElement.scrollHeight <= window.innerHeight), 'the page scrolls');
   // No protocol words in what people read.
   const words = await op.textContent('#asm-panel');
   assert.doesNotMatch(words, /plan_only|assembly_|incomplete|unreachable|\bfill\b/);
