@@ -33,7 +33,7 @@ const clientAt = (page, xUm, yUm) => page.evaluate(([x, y]) => {
 }, [xUm, yUm]);
 
 /** The pattern's sites (µm), as the panel holds them. */
-const sites = (page) => page.evaluate(() => window.nanopush.app.assemble.pattern.sites.map((s) => [Number(s.x_um.toFixed(2)), Number(s.y_um.toFixed(2))]));
+const sites = (page) => page.evaluate(() => window.nanopush.app.assemble.panel.pattern.sites.map((s) => [Number(s.x_um.toFixed(2)), Number(s.y_um.toFixed(2))]));
 
 /** Waits until the map has drawn `n` elements matching `sel` (at least). */
 const drawn = (page, sel, n = 1, timeout = 10000) => page.waitForFunction(([s, k]) => document.querySelectorAll(s).length >= k, [sel, n], { timeout });
@@ -47,6 +47,12 @@ test('the pattern is drawn on the map: click, preset, drag, keys, refusals in wo
   await ready(op);
   await op.click('#take-lease');
   await op.waitForFunction(() => window.nanopush.session.hasLease);
+  // The panel's code comes when it is first opened.
+  const chunks = async () => (await op.evaluate(() => performance.getEntriesByType('resource').map((r) => new URL(r.name).pathname))).filter((u) => /assemblepanel-/.test(u));
+  assert.deepEqual(await chunks(), [], 'not loaded while the panel is closed');
+  await op.click('#asm-open');
+  await op.waitForFunction(() => window.nanopush.app.assemble.panel !== null);
+  assert.equal((await chunks()).length, 1);
   assert.match(await op.textContent('#asm-why'), /Place at least one site/);
   assert.equal(await op.isDisabled('#asm-plan'), true);
   // A click with "Place sites" off picks a push target, not a site.
@@ -148,6 +154,8 @@ test('a viewer joining mid-assembly sees it; Stop ends it and the report says so
   await v.goto(`${srv.base}/`);
   await ready(v);
   await v.waitForFunction(() => window.nanopush.session.state.assembly?.moving, null, { timeout: 20000 });
+  // Anyone's assembly opens the panel, to show it.
+  await v.waitForFunction(() => !document.querySelector('#asm-body').hidden, null, { timeout: 10000 });
   await drawn(v, '.map-svg .asm-site', 2);
   assert.match(await v.textContent('#asm-progress'), /^Move \d+ of \d+/);
   assert.equal(await v.isVisible('#asm-fs'), false, 'no editor for a viewer');

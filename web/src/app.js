@@ -25,7 +25,7 @@ import { MapOverlay } from './mapoverlay.js';
 import { Records } from './records.js';
 import { Scans } from './scans.js';
 import { Toolbar } from './toolbar.js';
-import { AssemblePanel } from './assemblepanel.js';
+import { AssembleHost } from './assemblehost.js';
 import { assemblyLogLine } from './assemblyreport.js';
 
 export class App {
@@ -138,13 +138,14 @@ export class App {
       send: (m) => this.conn.send(m),
       onScanRequested: () => this.scans.requested(),
     });
-    this.assemble = new AssemblePanel($, doc, {
+    // The Assemble panel: its code is loaded when it is first opened or an assembly is seen.
+    this.assemble = new AssembleHost($, [$, doc, {
       session: this.session,
       map: this.map,
       send: (m) => this.conn.send(m),
       replies: this.replies,
       announce: (text) => this.log.announce(text),
-    });
+    }], (e) => this.log.log(`the Assemble panel could not load (${e.message}); open it again once the server is back`, 'bad'));
     this.toolbar = new Toolbar($, this.view, () => this.st.scan);
     this.scans = new Scans($, {
       session: this.session,
