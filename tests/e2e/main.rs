@@ -13,6 +13,7 @@ mod push;
 mod scan;
 mod serve;
 mod serve_access;
+mod serve_assemble;
 mod serve_audit;
 mod serve_behaviour;
 mod serve_campus;

@@ -24,6 +24,8 @@
 mod kinds;
 mod moves;
 pub mod record;
+#[cfg(test)]
+mod tests;
 pub mod wire;
 
 use std::sync::Arc;
@@ -233,13 +235,10 @@ impl<'a> Assembly<'a> {
         let st = self.st;
         let n = self.job.number;
         let mut number = 0;
-        loop {
+        while let Some(mv) = self.book.next_move().cloned() {
             if let Some(why) = self.stopped() {
                 return Some(why);
             }
-            let Some(mv) = self.book.next_move().cloned() else {
-                return None;
-            };
             let truth = self.truth();
             let p = self.book.map()[mv.particle];
             let Some(id) = nearest_true(&truth, (p.x, p.y)).map(|t| t.id) else {
@@ -297,6 +296,7 @@ impl<'a> Assembly<'a> {
             self.show(|a| a.plan = Some(plan.clone()));
             st.broadcast_event(&ServerMessage::AssemblyReplanned { assembly: n, plan });
         }
+        None
     }
 
     /// The tolerance the strategy is derived for: the least a site asks.

@@ -162,3 +162,71 @@ fn from_sites(sites: &[SiteUm], range_um: f64) -> Result<Pattern, Refusal> {
         radius: None,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::atomic::Ordering::Relaxed;
+
+    use nanopush_proto::ws::{ErrorCode, Role};
+
+    use crate::app_state::test_state;
+    use crate::session::tests::{client, command};
+
+    const TWO: &str = r#"{"type":"assemble","sites":[{"x_um":42,"y_um":30},{"x_um":44,"y_um":32}]}"#;
+
+    /// An assembly needs the instrument to itself: refused while a push, a scan or another
+    /// assembly runs, naming which.
+    #[test]
+    fn an_assembly_is_refused_while_anything_else_runs() {
+        let st = test_state();
+        let mut op = client(1, Role::Operator);
+        command(&st, &mut op, r#"{"type":"take_lease"}"#).unwrap();
+        for (flag, what) in [
+            (&st.shared.busy, "a push is running"),
+            (&st.activity.scanning, "a scan is running"),
+            (&st.activity.assembling, "an assembly is running"),
+        ] {
+            flag.store(true, Relaxed);
+            let e = command(&st, &mut op, TWO).unwrap_err();
+            assert_eq!(e.code, ErrorCode::Busy);
+            assert!(e.message.starts_with(what), "{}", e.message);
+            flag.store(false, Relaxed);
+        }
+        // And while one runs, neither a push nor a scan starts.
+        st.activity.assembling.store(true, Relaxed);
+        for other in [
+            r#"{"type":"push","particle":1,"distance_um":1,"direction_deg":0}"#,
+            r#"{"type":"scan"}"#,
+        ] {
+            let e = command(&st, &mut op, other).unwrap_err();
+            assert_eq!(e.message, "an assembly is running; send stop first");
+        }
+    }
+
+    /// A generator's text too long or a site list too long is refused before anything else,
+    /// even to a viewer; a site off the stage names the field and the range.
+    #[test]
+    fn sizes_and_ranges_are_refused_naming_the_field() {
+        let st = test_state();
+        let sites: Vec<String> = (0..401).map(|_| r#"{"x_um":1,"y_um":1}"#.to_string()).collect();
+        let many = format!(r#"{{"type":"assemble","sites":[{}]}}"#, sites.join(","));
+        let e = command(&st, &mut client(2, Role::Viewer), &many).unwrap_err();
+        assert_eq!(
+            (e.code, e.message.as_str()),
+            (ErrorCode::OutOfRange, "sites has 401 entries; allowed: 1 to 400")
+        );
+        let mut op = client(1, Role::Operator);
+        command(&st, &mut op, r#"{"type":"take_lease"}"#).unwrap();
+        let e = command(&st, &mut op, r#"{"type":"assemble","sites":[{"x_um":-1,"y_um":1}]}"#).unwrap_err();
+        assert_eq!(e.message, "sites[0].x_um = -1 is out of range; allowed: [0, 100] µm");
+        let e = command(
+            &st,
+            &mut op,
+            r#"{"type":"assemble","generator":"ring:n=3,radius_um=2","at_x_um":50,"at_y_um":1e300}"#,
+        )
+        .unwrap_err();
+        assert_eq!(e.code, ErrorCode::OutOfRange);
+        assert!(e.message.starts_with("at_y_um = "), "{}", e.message);
+        assert!(!st.activity.assembling.load(Relaxed), "nothing started");
+    }
+}
