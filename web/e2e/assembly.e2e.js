@@ -124,6 +124,8 @@ test('Assemble moves it: move 1 of 1, the site turns solid, the report in words'
   await drawn(op, '.map-svg .asm-path.current');
   await op.waitForFunction(() => window.nanopush.session.state.assembly?.done?.summary, null, { timeout: 180000 });
   await drawn(op, '.map-svg .asm-site.filled');
+  // The map shows the last full frame the sites were judged by (the assembly's record names it).
+  await waitText(op, '#img-title', /scan-/, 20000);
   const outcome = await op.textContent('#asm-outcome');
   assert.match(outcome, /^Assembled: every site holds a particle within its tolerance · record assembly-/, outcome);
   const row = await op.$$eval('#asm-rows tr', (rs) => rs.map((r) => [...r.cells].map((c) => c.textContent)));

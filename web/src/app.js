@@ -332,6 +332,10 @@ export class App {
         if (line) log.log(line.text, line.cls);
         if (line && (ev.what === 'done' || ev.what === 'planned')) log.announce(line.text);
         this.assemble.assemblyChanged(ev);
+        if (ev.what === 'done' && ev.assembly.done.record) {
+          this.scans.openAssemblyFrame(ev.assembly.done.record);
+          this.records.refresh();
+        }
         break;
       }
       case 'lagged':
