@@ -81,19 +81,29 @@ test('the pattern is drawn on the map: click, preset, drag, keys, refusals in wo
   await op.mouse.up();
   const moved = await sites(op);
   assert.ok(Math.abs(moved[1][0] - 58) < 0.3 && Math.abs(moved[3][0] - 52) < 0.3, `the ring moved whole: ${JSON.stringify(moved)}`);
-  assert.match(await op.textContent('#asm-count'), /^5 sites$/);
-  // By keys on the map: Delete removes the selected site (the ring's first), said to screen readers.
+  assert.equal(await op.textContent('#asm-count'), '5 sites');
+  // By keys on the map (its cursor starts on the selected particle, #1 at (40, 30)): Enter adds
+  // a site there, `m` brings the selected site to the cursor, Delete removes it; each is said.
   await op.focus('.map-svg');
+  await op.keyboard.press('Enter');
+  await waitText(op, '#announce', /^site 6 added at \(40\.00, 30\.00\) µm$/, 5000);
+  await op.keyboard.press('Shift+ArrowUp');
+  await op.keyboard.press('m');
+  await waitText(op, '#announce', /^site 6 moved: site 6 now at \(40\.00, 40\.00\) µm$/, 5000);
+  assert.deepEqual((await sites(op))[5], [40, 40]);
   await op.keyboard.press('Delete');
+  await waitText(op, '#announce', /^site 6 removed; 5 left$/, 5000);
+  // The list's Remove button, by keyboard too.
+  await op.focus('#asm-sites tr:nth-child(1) button');
+  await op.keyboard.press('Enter');
+  await waitText(op, '#announce', /^site 1 removed; 4 left$/, 5000);
   assert.equal((await sites(op)).length, 4);
-  await waitText(op, '#announce', /site 2 removed; 4 left/, 5000);
   // Out of range: the preset's field named with its allowed range; nothing added.
   await op.fill('#asm-n', '1');
   await op.selectOption('#asm-kind', 'line');
   await op.click('#asm-drop');
   assert.equal(await op.textContent('#asm-error'), 'line sites: 1 is out of range; allowed: a whole number in [2, 400]');
   assert.equal((await sites(op)).length, 4);
-  // Remove buttons in the list; Clear.
   await op.click('#asm-clear');
   assert.deepEqual(await sites(op), []);
   assert.deepEqual(await serious(op), []);
