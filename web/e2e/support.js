@@ -29,11 +29,15 @@ export function chromiumPath() {
   return p;
 }
 
+/** The quick scene's default scan: 16 µm around particle 1, 32 pixels. */
+export const FAST_SCAN = Object.freeze({ centre_x_um: 40.0, centre_y_um: 32.0, size_um: 16.0, pixels: 32 });
+
 /**
  * The gold-latex scene made quick, as the Rust e2e tests make it (tests/e2e/util.rs): a level
- * substrate, a low start height, fast approaches and travel, a 16 µm default scan.
+ * substrate, a low start height, fast approaches and travel, a 16 µm default scan (`scan`: another
+ * `[scan]`, e.g. the full frame an assembly starts from).
  */
-export function fastScene(dir) {
+export function fastScene(dir, scan = FAST_SCAN) {
   let text = readFileSync(join(ROOT, 'scenes/gold-latex-500nm.toml'), 'utf8');
   text = text.replace('tilt_x_mrad = 6.0', 'tilt_x_mrad = 0.0').replace('roughness_rms_nm = 0.5', 'roughness_rms_nm = 0.0');
   // The scene writes its [strategy] out (the paper's search): these values replace its own.
@@ -43,7 +47,7 @@ export function fastScene(dir) {
     if (!re.test(text)) throw new Error(`the gold-latex scene has no ${k} in its [strategy]`);
     text = text.replace(re, `${k} = ${v}`);
   }
-  text += '\n[scan]\ncentre_x_um = 40.0\ncentre_y_um = 32.0\nsize_um = 16.0\npixels = 32\n';
+  text += `\n[scan]\n${Object.entries(scan).map(([k, v]) => `${k} = ${Number.isInteger(v) && k !== 'pixels' ? v.toFixed(1) : v}`).join('\n')}\n`;
   const path = join(dir, 'fast.toml');
   writeFileSync(path, text);
   return path;
@@ -55,17 +59,17 @@ export function fastScene(dir) {
  * `haptic` the link (`none`, `sim`); `port` and `dir`: a server started again where another
  * ran (its records kept: `stop({ keep: true })` leaves the directory). `tokenFile`: named people
  * (`--token-file`, instead of the operator token); `tls`: the server's `--tls-cert`/`--tls-key`
- * ({cert, key}): then `base` is `https://…`.
+ * ({cert, key}): then `base` is `https://…`. `scan`: the scene's `[scan]` (fastScene).
  * @returns {Promise<{url:string, addr:string, base:string, dir:string, pid:number, log:()=>string, kill:(sig:string)=>Promise<void>, stop:(o?:{keep?:boolean})=>Promise<void>}>}
  */
-export async function startServer({ extra = [], webDir = WEB, haptic = 'none', port = 0, dir = null, tokenFile = null, tls = null } = {}) {
+export async function startServer({ extra = [], webDir = WEB, haptic = 'none', port = 0, dir = null, tokenFile = null, tls = null, scan = FAST_SCAN } = {}) {
   dir = dir ?? mkdtempSync(join(tmpdir(), 'nanopush-browser-'));
   const records = join(dir, 'records');
   mkdirSync(records, { recursive: true });
   const who = tokenFile ? ['--token-file', tokenFile] : ['--operator-token', TOKEN];
   const https = tls ? ['--tls-cert', tls.cert, '--tls-key', tls.key] : [];
   const args = ['serve', '--port', String(port), '--haptic', haptic, '--no-realtime', ...who, ...https,
-    '--scene', fastScene(dir), '--data-dir', records, '--web-dir', webDir, '--scan-line-hz', '400', ...extra];
+    '--scene', fastScene(dir, scan), '--data-dir', records, '--web-dir', webDir, '--scan-line-hz', '400', ...extra];
   // A haptic link of its own (iceoryx2 services apart from any other server on this machine).
   const env = { ...process.env, NANOPUSH_HAPTIC_NAMESPACE: `browser${process.pid}` };
   const child = spawn(serverBin(), args, { cwd: ROOT, env, stdio: ['ignore', 'pipe', 'pipe'] });

@@ -25,6 +25,8 @@ import { MapOverlay } from './mapoverlay.js';
 import { Records } from './records.js';
 import { Scans } from './scans.js';
 import { Toolbar } from './toolbar.js';
+import { AssembleHost } from './assemblehost.js';
+import { assemblyLogLine } from './assemblyreport.js';
 
 export class App {
   /**
@@ -136,6 +138,14 @@ export class App {
       send: (m) => this.conn.send(m),
       onScanRequested: () => this.scans.requested(),
     });
+    // The Assemble panel: its code is loaded when it is first opened or an assembly is seen.
+    this.assemble = new AssembleHost($, [$, doc, {
+      session: this.session,
+      map: this.map,
+      send: (m) => this.conn.send(m),
+      replies: this.replies,
+      announce: (text) => this.log.announce(text),
+    }], (e) => this.log.log(`the Assemble panel could not load (${e.message}); open it again once the server is back`, 'bad'));
     this.toolbar = new Toolbar($, this.view, () => this.st.scan);
     this.scans = new Scans($, {
       session: this.session,
@@ -154,7 +164,7 @@ export class App {
     $('toggle-3d').addEventListener('click', () => this.show3d($('toggle-3d').getAttribute('aria-pressed') !== 'true'));
     // Leaving mid-push stops it (the server stops what a departed lease holder commanded): ask.
     loc && globalThis.addEventListener?.('beforeunload', (e) => {
-      if (this.session.hasLease && (this.st.push || this.st.phase === 'scanning')) {
+      if (this.session.hasLease && (this.st.push || this.st.phase === 'scanning' || (this.st.assembly && !this.st.assembly.done))) {
         e.preventDefault();
         e.returnValue = '';
       }
@@ -204,6 +214,7 @@ export class App {
   render() {
     this.status.render(this.st);
     this.controls.render();
+    this.assemble.render();
   }
 
   /** The live views: the tip (3D, readout, haptic panel) and the plots. */
@@ -316,6 +327,17 @@ export class App {
         this.replies.replied(ev);
         if (!ev.ok) log.log(replyErrorText(ev, st.lastError), 'bad');
         break;
+      case 'assembly': {
+        const line = assemblyLogLine(ev, st.client);
+        if (line) log.log(line.text, line.cls);
+        if (line && (ev.what === 'done' || ev.what === 'planned')) log.announce(line.text);
+        this.assemble.assemblyChanged(ev);
+        if (ev.what === 'done' && ev.assembly.done.record) {
+          this.scans.openAssemblyFrame(ev.assembly.done.record);
+          this.records.refresh();
+        }
+        break;
+      }
       case 'lagged':
         break;
       case 'lease': {
@@ -402,6 +424,7 @@ export class App {
     this.controls.particlesMoved();
     if (st.tip) this.liveFrame.mark('tip');
     this.scans.stateChanged(ev);
+    if (ev.assemblyChanged) this.assemble.assemblyChanged();
     this.controls.renderPush();
     this.scans.renderStale();
     this.log.log(stateText(st));
@@ -436,6 +459,7 @@ export class App {
     this.view.setStage(this.st.stageRange * 1e6);
     this.image2d.setStage(this.st.stageRange);
     this.controls.applyScene(scene);
+    this.assemble.applyScene();
   }
 }
 

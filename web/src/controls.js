@@ -9,7 +9,7 @@ import { formatLength } from './format.js';
 import { replyWords, replyTitle } from './words.js';
 
 /** Where each command's reply shows (an `<output>` id). */
-export const REPLY_OUTPUT = Object.freeze({ take_lease: 'reply-lease', release_lease: 'reply-lease', push: 'reply-push', scan: 'reply-scan', stop: 'reply-stop', haptic: 'reply-haptic' });
+export const REPLY_OUTPUT = Object.freeze({ take_lease: 'reply-lease', release_lease: 'reply-lease', push: 'reply-push', scan: 'reply-scan', assemble: 'reply-assemble', stop: 'reply-stop', haptic: 'reply-haptic' });
 
 /** A form field's number: undefined when empty (the server's default), else Number (NaN for junk). */
 export function readNumber(text) {

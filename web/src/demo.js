@@ -1,7 +1,8 @@
 // `?demo`: a stand-in for the server's WebSocket that speaks the same protocol (JSON messages
 // and binary scan-line frames made by encodeScanLine), so the page can be shown and tried with
 // no server. A toy: particles are spheres on a slightly tilted plane, pushes move them in a
-// straight line. Not a simulation of anything in the paper.
+// straight line, an assembly sends each site the nearest particle left. Not a simulation of
+// anything in the paper.
 import { encodeScanLine } from './wire.js';
 
 export function demoScene() {
@@ -86,6 +87,7 @@ export class DemoSocket {
       if (this.job?.kind === 'push') this.finishPush('stopped', 'stopped by the operator');
       this.job = null;
       this.phase = 'idle';
+      if (this.asm) this.endAssembly('stopped', 'stopped: stop requested by the operator');
       return;
     }
     if (this.job) return err('busy', `a ${this.job.kind} runs; stop it first`);
@@ -101,6 +103,11 @@ export class DemoSocket {
       this.phase = 'scanning';
       this.emit({ type: 'scan_start', scan: s.id, xres: n, yres: n, x_offset: s.x0, y_offset: s.y0, x_real: size, y_real: size });
       return;
+    }
+    if (m.type === 'assemble') {
+      if (this.asm) return err('busy', 'an assembly runs; stop it first');
+      ok();
+      return this.startAssembly(m);
     }
     if (m.type === 'push') {
       const p = this.particles.find((q) => q.id === m.particle);
@@ -127,6 +134,74 @@ export class DemoSocket {
     const p = this.job.p;
     this.emit({ type: 'run_done', particle: p.id, outcome, failure, estimate: [p.x, p.y], record: null });
     this.estimate = null;
+    if (this.asm && outcome === 'ok') setTimeout(() => this.nextMove(), 300);
+  }
+
+  /**
+   * An `assemble` as the toy does it: each site takes the nearest particle left, pushed in a
+   * straight line; no scans, no routing around the others, no re-planning worth the name.
+   */
+  startAssembly(m) {
+    const tol = (m.tolerance_nm ?? 25) * 1e-9;
+    const sites = m.sites.map((q) => ({ target: [q.x_um * 1e-6, q.y_um * 1e-6], tolerance: tol }));
+    const map = this.particles.map((p) => ({ x: p.x, y: p.y, radius: p.r }));
+    const free = new Set(map.keys());
+    const plan = { map, sites: [], moves: [] };
+    for (const [i, s] of sites.entries()) {
+      let best = null;
+      for (const k of free) if (best === null || Math.hypot(map[k].x - s.target[0], map[k].y - s.target[1]) < Math.hypot(map[best].x - s.target[0], map[best].y - s.target[1])) best = k;
+      if (best === null) {
+        plan.sites.push({ state: 'open', particle: null, status: 'unreachable', reason: 'no particle is left for it' });
+        continue;
+      }
+      free.delete(best);
+      plan.sites.push({ state: 'planned', particle: best });
+      const from = [map[best].x, map[best].y];
+      plan.moves.push({ purpose: 'fill', site: i, particle: best, from, to: s.target, path: [from, s.target] });
+    }
+    this.asm = { id: (this.asm?.id ?? 0) + 1, sites, plan, made: [], filled: [], t0: performance.now(), pushTime: 0 };
+    this.emit({ type: 'assembly_planned', assembly: this.asm.id, by: this.client, plan_only: !!m.plan_only, pattern: 'sites', sites, plan });
+    if (m.plan_only) return this.endAssembly('planned', null);
+    this.nextMove();
+  }
+
+  nextMove() {
+    const a = this.asm;
+    if (!a) return;
+    const last = a.current;
+    if (last) {
+      const p = this.particles[last.particle];
+      const error = Math.hypot(p.x - last.to[0], p.y - last.to[1]);
+      a.made.push({ purpose: 'fill', site: last.site, particle: p.id, from: last.from, to: last.to, outcome: 'ok', error, pushes: 1, push_time: Math.hypot(last.to[0] - last.from[0], last.to[1] - last.from[1]) / 2e-6 });
+      this.emit({ type: 'assembly_move_ended', assembly: a.id, number: a.made.length, made: a.made[a.made.length - 1] });
+      a.filled.push(last.site);
+      this.emit({ type: 'assembly_site_filled', assembly: a.id, site: last.site });
+      a.plan.moves.shift();
+      this.emit({ type: 'assembly_replanned', assembly: a.id, plan: a.plan });
+    }
+    a.current = a.plan.moves[0] ?? null;
+    if (!a.current) return this.endAssembly(a.plan.sites.every((s) => s.state === 'planned') ? 'filled' : 'incomplete', null);
+    const p = this.particles[a.current.particle];
+    this.emit({ type: 'assembly_move_started', assembly: a.id, number: a.made.length + 1, of: a.made.length + a.plan.moves.length, planned: a.current, particle_id: p.id });
+    this.emit({ type: 'push_started', particle: p.id, path: a.current.path, by: this.client });
+    this.job = { kind: 'push', p, tx: a.current.to[0], ty: a.current.to[1], t: 0 };
+    this.phase = 'approach';
+  }
+
+  endAssembly(outcome, reason) {
+    const a = this.asm;
+    this.asm = null;
+    const summary = outcome === 'planned' ? null : {
+      schema: 'nanopush.assembly', outcome, refusal: null, pattern: 'sites', moves: a.made, violations: [],
+      wall_time: (performance.now() - a.t0) / 1000, push_time: a.made.reduce((t, m) => t + m.push_time, 0), scan_time: 0,
+      sites: a.sites.map((s, i) => {
+        const k = a.plan.sites[i].particle;
+        const p = k === null ? null : this.particles[k];
+        const filled = a.filled.includes(i);
+        return { target: s.target, tolerance: s.tolerance, particle: p?.id ?? null, measured: p ? [p.x, p.y] : null, true_position: p ? [p.x, p.y] : null, error: p ? Math.hypot(p.x - s.target[0], p.y - s.target[1]) : null, status: filled ? 'filled' : k === null ? 'unreachable' : 'missed', reason: filled ? null : a.plan.sites[i].reason ?? 'stopped before its move' };
+      }),
+    };
+    this.emit({ type: 'assembly_done', assembly: a.id, outcome, reason, summary, record: null });
   }
 
   tick() {

@@ -152,6 +152,10 @@ export class MapOverlay {
     this.target = null; // [x, y] m
     this.preview = null; // the form's push preview {from, to} m, or null
     this.cursor = null; // the keyboard cursor [x, y] m, null until the map has focus
+    // The pattern's editor (src/siteeditor.js) while "Place sites" is on: it takes the map's
+    // clicks, drags and keys before the picking and the line profile do. Null: off.
+    this.editor = null;
+    this.layer = null; // {draw(ctx)}: the assembly's layer, drawn with the map
     this.frame = scheduler.register('map', () => this.draw(), { period: 100, aligned: true });
     this.liveFrame = scheduler.register('map-live', () => this.drawLive(), { period: opts.livePeriod ?? 0, aligned: true });
     const svg = el('svg', { class: 'map-svg', tabindex: 0, role: 'application', 'aria-roledescription': 'map', 'aria-describedby': 'map-help' });
@@ -161,6 +165,8 @@ export class MapOverlay {
     this.clipId = `mapclip-${Math.random().toString(36).slice(2, 8)}`;
     this.clipRect = el('rect', {}, el('clipPath', { id: this.clipId }, defs));
     const g = el('g', { 'clip-path': `url(#${this.clipId})` }, svg);
+    // The assembly's sites, plan and paths (src/assemblymap.js), under the particles.
+    this.gAssembly = el('g', { class: 'assembly' }, g);
     this.gScan = el('g', { class: 'scan-particles' }, g);
     this.gBelief = el('g', { class: 'belief' }, g);
     this.gLabels = el('g', { class: 'labels' }, g);
@@ -325,6 +331,7 @@ export class MapOverlay {
     line(this.path, st.push?.path ?? null);
     line(this.trailLine, st.push || this.trail.pts.length ? this.trail.pts : null);
     this.drawPreview(st.push ? null : this.preview, px, k);
+    this.layer?.draw({ group: this.gAssembly, px, k, frameKey: `${r1(g.x)},${r1(g.y)},${r1(g.w)},${r1(g.h)}|${e.x_offset},${e.y_offset},${e.x_real},${e.y_real}` });
     const place = (node, pt) => {
       const d = pt ? '' : 'none';
       if (node.style.display !== d) node.style.display = d;
@@ -387,14 +394,41 @@ export class MapOverlay {
     const svg = this.svg;
     // A press and release without a drag is a pick; a drag draws the line profile (Image2D).
     let down = null;
+    // With the editor on, a press on a site drags it (not a line profile); a click adds a site.
+    const um = (pt) => (pt ? [pt[0] * 1e6, pt[1] * 1e6] : [null, null]);
+    let dragging = false;
     svg.addEventListener('pointerdown', (ev) => {
       if (ev.button !== 0) return;
       down = { x: ev.clientX, y: ev.clientY };
+      const s = this.editor && this.stageAt(ev.clientX, ev.clientY);
+      if (s && this.editor.down(...um(s), this.hitUm())) {
+        dragging = true;
+        svg.setPointerCapture?.(ev.pointerId);
+        this.invalidate();
+        return;
+      }
       this.image.pointerDown(ev);
     });
-    svg.addEventListener('pointermove', (ev) => this.image.pointerMove(ev));
+    svg.addEventListener('pointermove', (ev) => {
+      if (dragging) {
+        const s = this.stageAt(ev.clientX, ev.clientY);
+        if (s && this.editor?.move(...um(s))) this.invalidate();
+        return;
+      }
+      this.image.pointerMove(ev);
+    });
     svg.addEventListener('pointerup', (ev) => {
       const moved = down ? Math.hypot(ev.clientX - down.x, ev.clientY - down.y) : Infinity;
+      if (this.editor) {
+        const was = dragging;
+        dragging = false;
+        down = null;
+        if (this.editor.up(...um(this.stageAt(ev.clientX, ev.clientY)), moved < 4)) {
+          this.invalidate();
+          return;
+        }
+        if (was) return;
+      }
       this.image.pointerUp(ev, moved < 4);
       if (moved < 4) {
         const s = this.stageAt(ev.clientX, ev.clientY);
@@ -404,6 +438,8 @@ export class MapOverlay {
     });
     svg.addEventListener('pointercancel', (ev) => {
       down = null;
+      if (dragging) this.editor?.up(null, null, false);
+      dragging = false;
       this.image.pointerUp(ev, true);
     });
     svg.addEventListener('pointerleave', () => this.image.pointerLeave());
@@ -416,6 +452,13 @@ export class MapOverlay {
       this.invalidate();
     });
     svg.addEventListener('keydown', (ev) => this.key(ev));
+  }
+
+  /** A site ring's radius on screen, in stage µm (what a press on a site must fall within). */
+  hitUm() {
+    const g = this.image.geometry();
+    const e = this.image.extent();
+    return g ? ((this.layer?.ringPx?.() ?? MIN_RING_PX) * e.x_real * 1e6) / g.w : 0;
   }
 
   /** Where the keyboard cursor starts: the selected particle, else the middle of the image. */
@@ -442,6 +485,8 @@ export class MapOverlay {
     const ps = [...(st.particles ?? [])].sort((a, b) => a.id - b.id);
     if (next) {
       this.cursor = next;
+    } else if (this.editor && !ev.shiftKey && this.editor.key(ev.key, [this.cursor[0] * 1e6, this.cursor[1] * 1e6], this.hitUm())) {
+      this.invalidate();
     } else if (ev.key === 'Enter' || ev.key === ' ') {
       this.pick(this.cursor[0], this.cursor[1]);
     } else if ((ev.key === ']' || ev.key === '[') && ps.length) {

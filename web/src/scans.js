@@ -189,6 +189,22 @@ export class Scans {
     }
   }
 
+  /**
+   * An assembly's end: the last full frame it judged its sites by (its record names it), shown
+   * as an opened record. The server takes that frame without streaming it, so a page that
+   * watched the assembly would otherwise keep the scan from before it.
+   */
+  async openAssemblyFrame(assemblyRecord) {
+    try {
+      const r = await fetch(apiUrl(`/api/records/${encodeURIComponent(assemblyRecord)}`, this.loc));
+      if (!r.ok) throw new Error(`HTTP ${r.status}`);
+      const name = (await r.json())?.final_frame?.record;
+      if (typeof name === 'string' && name) await this.openRecord(name);
+    } catch (e) {
+      this.log.log(`could not load the assembly's last full frame from ${assemblyRecord}: ${e.message}`, 'bad');
+    }
+  }
+
   /** The "stale: a push ran since this scan" marks (the live scan only). */
   renderStale() {
     const st = this.st;

@@ -4,6 +4,7 @@
 // scene's particles and set point. Runs in browsers and in Node (tests).
 import { WS_VERSION, decodeScanLine, pushTolerance } from './wire.js';
 import { formatPoint } from './format.js';
+import * as assembly from './assembly.js';
 
 /**
  * What a finished push means, in words: `ok`; `stopped` and who stopped it (a stop is not a
@@ -133,6 +134,7 @@ export function initialState({ traceSeconds = 10 } = {}) {
     startedUnixMs: null, // when that server started
     restarted: false, // the last welcome came from another instance than the one before
     lostPush: null, // the push that ran when the connection closed: its end was not seen
+    assembly: null, // the assembly running or last seen (src/assembly.js)
   };
 }
 
@@ -207,7 +209,8 @@ const handlers = {
       scanFinished = true;
     }
     s.scanStale = sc ? !!sc.stale : !!s.scan?.previousRun;
-    return { kind: 'state', scan: sc, scanChanged, scanFinished };
+    const assemblyChanged = assembly.fromState(s, m.assembly ?? null);
+    return { kind: 'state', scan: sc, scanChanged, scanFinished, assemblyChanged };
   },
 
   push_started(session, m) {
@@ -303,6 +306,13 @@ const handlers = {
     }
     return { kind: 'run_done', run: m };
   },
+
+  assembly_planned: (session, m) => assembly.planned(session.state, m),
+  assembly_move_started: (session, m) => assembly.moveStarted(session.state, m),
+  assembly_move_ended: (session, m) => assembly.moveEnded(session.state, m),
+  assembly_site_filled: (session, m) => assembly.siteFilled(session.state, m),
+  assembly_replanned: (session, m) => assembly.replanned(session.state, m),
+  assembly_done: (session, m) => assembly.done(session.state, m),
 
   scan_start(session, m) {
     if (!session.startScan(m)) return { kind: 'error' };
@@ -550,6 +560,7 @@ export function controlState(state) {
     releaseLease: base ? no(base) : mine ? yes : no('You do not hold the lease'),
     push: needLease,
     scan: needLease,
+    assemble: needLease,
     haptic: needLease,
     stop: needLease,
   };

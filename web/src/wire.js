@@ -11,6 +11,8 @@ export const SCAN_LINE_MAGIC = 'NPSL';
 export const SCAN_LINE_HEADER_LEN = 32;
 /** Streams a client can subscribe to. */
 export const STREAMS = Object.freeze(['tip', 'scan']);
+/** The most sites an `assemble` command may give (proto `ws::ASSEMBLE_MAX_SITES`). */
+export const ASSEMBLE_MAX_SITES = 400;
 
 /** A binary frame that is not a valid scan line. `reason` is `short`, `magic` or `version`. */
 export class FrameError extends Error {
@@ -159,6 +161,26 @@ export const commands = {
   },
   stop(id) {
     return withId({ type: 'stop' }, id);
+  },
+  /**
+   * Assembles particles into `sites` ({x_um, y_um}, 1 to 400, on the stage [0, rangeUm]²), each
+   * judged with `toleranceNm` (left out: the server's default; checked against `tolerance`, the
+   * range the server's `welcome` states, when given). `planOnly`: the server plans and says so,
+   * and nothing moves.
+   */
+  assemble({ sites, toleranceNm, planOnly = false }, id, { rangeUm = 100, tolerance = null } = {}) {
+    if (!Array.isArray(sites) || sites.length < 1 || sites.length > ASSEMBLE_MAX_SITES) {
+      throw new RangeError(`an assembly needs 1 to ${ASSEMBLE_MAX_SITES} sites, got ${Array.isArray(sites) ? sites.length : 'none'}`);
+    }
+    const out = sites.map((site, k) => {
+      for (const key of ['x_um', 'y_um']) {
+        const v = site[key];
+        if (!(typeof v === 'number' && v >= 0 && v <= rangeUm)) throw new RangeError(`site ${k + 1}: ${key} must be in [0, ${rangeUm}] µm, got ${v}`);
+      }
+      return { x_um: site.x_um, y_um: site.y_um };
+    });
+    const m = commands.withTolerance({ type: 'assemble', sites: out, plan_only: !!planOnly }, toleranceNm, tolerance);
+    return withId(m, id);
   },
   /**
    * A haptic z-control command: `engage`, `release`, `recenter`, or `scale` with `nmPerMm`

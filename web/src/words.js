@@ -55,6 +55,7 @@ const DONE = Object.freeze({
   release_lease: 'lease released',
   push: 'push accepted: running',
   scan: 'scan started',
+  assemble: 'accepted: a full frame, then the plan',
   stop: 'stop sent: the instrument stops',
   haptic: 'done',
   subscribe: 'subscribed',

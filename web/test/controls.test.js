@@ -128,7 +128,7 @@ test('replies show in their command\'s output, only for the latest command sent 
   r.replied({ id: 3, command: { id: 3, type: 'subscribe', status: 'ok' } });
   r.replied({ id: 9, command: null });
   assert.deepEqual(Object.keys(els), ['reply-lease'], 'subscribe has no output');
-  assert.deepEqual(new Set(Object.values(REPLY_OUTPUT)), new Set(['reply-lease', 'reply-push', 'reply-scan', 'reply-stop', 'reply-haptic']));
+  assert.deepEqual(new Set(Object.values(REPLY_OUTPUT)), new Set(['reply-lease', 'reply-push', 'reply-scan', 'reply-stop', 'reply-haptic', 'reply-assemble']));
 });
 
 test('a command left without a reply by a closed connection says so', () => {

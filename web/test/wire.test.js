@@ -128,3 +128,16 @@ test('a push\'s tolerance: read from the welcome, and checked against it before 
   assert.throws(() => commands.withTolerance(push, Infinity), /tolerance_nm must be a finite number/);
   assert.equal(commands.withTolerance(push, 0.5).tolerance_nm, 0.5, 'no range stated: the server checks it');
 });
+
+test('assemble: the sites on the stage, the tolerance in its range, plan only or not', () => {
+  const sites = [{ x_um: 40, y_um: 41.5 }, { x_um: 44, y_um: 41.5, id: 9 }];
+  assert.deepEqual(commands.assemble({ sites, planOnly: true }, 3), { type: 'assemble', sites: [{ x_um: 40, y_um: 41.5 }, { x_um: 44, y_um: 41.5 }], plan_only: true, id: 3 }, 'only the documented fields');
+  const m = commands.assemble({ sites, toleranceNm: 50 }, 4, { rangeUm: 100, tolerance: { default: 25, min: 1, max: 100000 } });
+  assert.equal(m.tolerance_nm, 50);
+  assert.equal(m.plan_only, false);
+  assert.throws(() => commands.assemble({ sites: [{ x_um: 101, y_um: 1 }] }), { message: 'site 1: x_um must be in [0, 100] µm, got 101' });
+  assert.throws(() => commands.assemble({ sites: [{ x_um: 5, y_um: 5 }, { x_um: 1, y_um: Number.NaN }] }, 1, { rangeUm: 50 }), /site 2: y_um must be in \[0, 50\] µm, got NaN/);
+  assert.throws(() => commands.assemble({ sites: [] }), { message: 'an assembly needs 1 to 400 sites, got 0' });
+  assert.throws(() => commands.assemble({ sites: Array.from({ length: 401 }, () => ({ x_um: 1, y_um: 1 })) }), /got 401/);
+  assert.throws(() => commands.assemble({ sites, toleranceNm: 0.5 }, 1, { tolerance: { default: 25, min: 1, max: 100000 } }), /tolerance_nm must be in \[1, 100000\] nm/);
+});

@@ -1,0 +1,28 @@
+// node --test: when the Assemble panel's Plan and Assemble may go, and why not in words
+// (src/assemblepanel.js; the panel itself is tried in the browser: e2e/assembly.e2e.js).
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { Session } from '../src/session.js';
+import { Pattern } from '../src/pattern.js';
+import { assembleWhy } from '../src/assemblepanel.js';
+import { planned } from './fixtures/assembly.js';
+
+test('Plan and Assemble need the lease, nothing running and a site; each reason in words', () => {
+  const s = new Session();
+  const p = new Pattern(100);
+  assert.equal(assembleWhy(s.state, p), 'Not connected to the server');
+  s.opened();
+  s.apply({ type: 'welcome', version: 1, client: 4, role: 'operator', lease: null, scene: 'x', tick_hz: 1000 });
+  assert.equal(assembleWhy(s.state, p), 'Take the lease first');
+  s.apply({ type: 'lease', holder: 4 });
+  assert.match(assembleWhy(s.state, p), /^Place at least one site/);
+  p.add(10, 10);
+  assert.equal(assembleWhy(s.state, p), '');
+  s.apply({ type: 'push_started', particle: 1, path: [[0, 0], [1e-6, 0]], by: 4 });
+  assert.match(assembleWhy(s.state, p), /^The instrument is busy/);
+  s.apply({ type: 'run_done', particle: 1, outcome: 'ok', estimate: [1e-6, 0] });
+  s.apply(planned());
+  assert.equal(assembleWhy(s.state, p), 'An assembly runs: Stop ends it');
+  s.apply({ type: 'assembly_done', assembly: 1, outcome: 'stopped', reason: 'stopped: by the operator', summary: null });
+  assert.equal(assembleWhy(s.state, p), '', 'after its end, another may go');
+});
