@@ -358,6 +358,16 @@ fn bad_assemble_commands_get_clear_errors_and_the_server_lives_on() {
             (code.as_str(), msg.as_str()),
             ("out_of_range", "generator is 201 characters long; allowed: at most 200")
         );
+        // A pattern of the page's largest size with its long decimals fits in a message: the
+        // count is what is refused, not the message's size.
+        let many: Vec<Value> = (0..401)
+            .map(|k| json!({"x_um": 10.123456 + f64::from(k % 20) * 4.0, "y_um": 10.654321 + f64::from(k / 20) * 4.0, "tolerance_nm": 25.0}))
+            .collect();
+        let (code, msg) = refused(&mut op, 24, json!({"sites": many})).await;
+        assert_eq!(
+            (code.as_str(), msg.as_str()),
+            ("out_of_range", "sites has 401 entries; allowed: 1 to 400")
+        );
         // A pattern the stage cannot hold is refused before anything moves, saying why.
         ok(
             &mut op,

@@ -79,7 +79,11 @@ fn a_particle_the_scan_does_not_find_leaves_the_map() {
     assert_eq!((first.particle, first.purpose), (1, Purpose::Clear), "{:?}", b.plan());
     b.moved(&first, report(&first, "not_found: nothing there", true));
     assert_eq!(b.map().len(), 1, "{:?}", b.map());
-    assert!(b.plan().moves.iter().all(|m| m.purpose == Purpose::Fill { site: 0 }), "{:?}", b.plan());
+    assert!(
+        b.plan().moves.iter().all(|m| m.purpose == Purpose::Fill { site: 0 }),
+        "{:?}",
+        b.plan()
+    );
     let next = b.next_move().unwrap();
     assert_eq!((next.particle, next.from), (0, (40.0 * UM, 50.0 * UM)));
 }
@@ -103,7 +107,8 @@ fn a_particle_lost_after_its_pushes_stays_on_the_map_until_excluded() {
 #[test]
 fn forgetting_a_particle_keeps_the_exclusions_on_the_others() {
     let mut b = book(&[(50.0, 50.0)]);
-    b.start(vec![seen(40.0, 50.0), big(51.2, 50.0), seen(60.0, 50.0)]).unwrap();
+    b.start(vec![seen(40.0, 50.0), big(51.2, 50.0), seen(60.0, 50.0)])
+        .unwrap();
     b.exclude(&[2], "refused");
     let clear = b.next_move().cloned().unwrap();
     assert_eq!(clear.particle, 1);
