@@ -151,11 +151,23 @@ impl Book {
         self.map = map;
         self.failures = vec![0; self.map.len()];
         self.budget = 4 * (self.map.len() + self.pattern.sites.len()) + 10;
-        self.replan();
-        if self.map.is_empty() {
-            return Err("the full frame shows no particle".into());
+        // A pattern that does not fit is not planned: its sites may lie anywhere, and a plan
+        // of them would name moves and blockers that can never be.
+        let unfit = if self.map.is_empty() {
+            Some("the full frame shows no particle".to_string())
+        } else {
+            check_fit(&self.pattern, site_radius(&self.pattern, &self.map), &self.settings)
+                .err()
+                .map(|e| e.0)
+        };
+        if let Some(why) = unfit {
+            self.plan = Plan {
+                sites: vec![SiteState::Open(Unfilled::Refused(why.clone())); self.pattern.sites.len()],
+                moves: Vec::new(),
+            };
+            return Err(why);
         }
-        check_fit(&self.pattern, site_radius(&self.pattern, &self.map), &self.settings).map_err(|e| e.0)?;
+        self.replan();
         if self.plan.fillable() == 0 {
             let reasons: Vec<String> = self
                 .plan

@@ -117,3 +117,26 @@ fn forgetting_a_particle_keeps_the_exclusions_on_the_others() {
     assert_eq!(b.map().len(), 2);
     assert!(b.plan().moves.iter().all(|m| m.particle == 0), "{:?}", b.plan());
 }
+
+#[test]
+fn a_site_far_off_the_stage_is_refused_without_planning() {
+    let mut b = book(&[(1e308, 50.0), (1e308, 54.0)]);
+    let why = b.start(vec![seen(40.0, 50.0)]).unwrap_err();
+    assert!(why.contains("off the stage"), "{why}");
+    assert!(b.plan().moves.is_empty(), "{:?}", b.plan());
+}
+
+#[test]
+fn a_refused_pattern_marks_every_site_refused_with_the_reason() {
+    // Two sites on top of each other: refused before anything moves, and no site is said to
+    // be missed or blocked by a particle the plan only imagined there.
+    let mut b = book(&[(50.0, 50.0), (50.0, 50.0)]);
+    let why = b.start(vec![seen(40.0, 50.0), seen(30.0, 50.0)]).unwrap_err();
+    assert!(why.contains("sites 0 and 1 are 0.000 µm apart"), "{why}");
+    assert!(b.plan().moves.is_empty(), "{:?}", b.plan());
+    let report = b.judge(&[seen(40.0, 50.0), seen(30.0, 50.0)], &|_| None);
+    for r in &report {
+        assert_eq!(r.status, "refused", "{r:?}");
+        assert_eq!(r.reason.as_deref(), Some(why.as_str()));
+    }
+}
