@@ -271,7 +271,19 @@ impl Book {
                 filled = Some(site);
             } else {
                 self.tries[site] += 1;
-                if self.tries[site] >= self.options.tries_per_site {
+                // A miss without a push: the particle lies nearer its site than a push can
+                // correct, and sending it again would only scan it again.
+                let unpushable = done.record.pushes == 0 && done.record.outcome == "missed";
+                if unpushable {
+                    let why = format!(
+                        "missed: the particle lies {} from it, nearer than a push can correct, outside its {:.1} nm tolerance",
+                        done.record
+                            .error
+                            .map_or("too near".to_string(), |e| format!("{:.1} nm", e * 1e9)),
+                        self.tolerance_of(mv.purpose) * 1e9
+                    );
+                    self.constraints.closed.push((site, Unfilled::Missed(why)));
+                } else if self.tries[site] >= self.options.tries_per_site {
                     let why = format!(
                         "missed after {} moves; the last: {}{}",
                         self.tries[site],

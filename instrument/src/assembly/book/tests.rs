@@ -140,3 +140,25 @@ fn a_refused_pattern_marks_every_site_refused_with_the_reason() {
         assert_eq!(r.reason.as_deref(), Some(why.as_str()));
     }
 }
+
+#[test]
+fn a_miss_without_a_push_gives_the_site_up_at_once() {
+    // The particle ended 2.7 nm from its site, with a 1 nm tolerance: the move made no push
+    // (no push corrects that little), so sending it again would make no push either.
+    let mut b = book(&[(50.0, 50.0)]);
+    b.pattern.sites[0].tolerance = Some(1e-9);
+    b.start(vec![seen(40.0, 50.0)]).unwrap();
+    let first = b.next_move().cloned().unwrap();
+    let mut done = report(&first, "missed", false);
+    done.failed = false;
+    done.record.error = Some(2.7e-9);
+    b.moved(&first, done);
+    assert!(b.next_move().is_none(), "{:?}", b.plan());
+    match &b.plan().sites[0] {
+        SiteState::Open(Unfilled::Missed(why)) => {
+            assert!(why.contains("2.7 nm from it, nearer than a push can correct"), "{why}");
+            assert!(why.contains("outside its 1.0 nm tolerance"), "{why}");
+        }
+        other => panic!("{other:?}"),
+    }
+}
