@@ -70,7 +70,10 @@ fn pattern(a: &AssembleArgs, spec: &str, range: f64) -> anyhow::Result<Pattern> 
         .transpose()?
         .map(|(x, y)| (x * 1e-6, y * 1e-6));
     let path = std::path::Path::new(spec);
-    if spec.ends_with(".toml") || path.is_file() {
+    // A generator always has a `:`; without one, a path (`dir/sites`, `/tmp`) is a file to
+    // read, so a missing one is named as missing rather than as an unknown shape.
+    let names_a_file = !spec.contains(':') && (spec.contains('/') || spec.contains(std::path::MAIN_SEPARATOR));
+    if spec.ends_with(".toml") || path.is_file() || names_a_file {
         let p = Pattern::from_path(path)?;
         Ok(match at {
             Some(to) => {

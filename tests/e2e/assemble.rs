@@ -144,7 +144,7 @@ fn a_pattern_off_the_stage_is_refused_before_anything_moves() {
 fn bad_arguments_name_what_is_wrong_and_the_allowed_range() {
     let dir = tmp("assemble-bad");
     let d = dir.to_str().unwrap();
-    let cases: [(&[&str], &str); 8] = [
+    let cases: [(&[&str], &str); 9] = [
         (
             &["--pattern", "star:n=3"],
             "unknown shape \"star\"; allowed: line, grid, ring, text",
@@ -163,6 +163,10 @@ fn bad_arguments_name_what_is_wrong_and_the_allowed_range() {
         ),
         (&["--pattern", "line:n=3,spacing_um=3", "--at-um", "x,1"], "--at-um"),
         (&["--pattern", "no-such-file.toml"], "no-such-file.toml"),
+        (
+            &["--pattern", "no/such/sites"],
+            "no/such/sites: No such file or directory",
+        ),
         (
             &["--random", "0"],
             "--random 0 is out of range; allowed: [1, 100000] cases",

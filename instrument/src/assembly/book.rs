@@ -151,11 +151,23 @@ impl Book {
         self.map = map;
         self.failures = vec![0; self.map.len()];
         self.budget = 4 * (self.map.len() + self.pattern.sites.len()) + 10;
-        self.replan();
-        if self.map.is_empty() {
-            return Err("the full frame shows no particle".into());
+        // A pattern that does not fit is not planned: its sites may lie anywhere, and a plan
+        // of them would name moves and blockers that can never be.
+        let unfit = if self.map.is_empty() {
+            Some("the full frame shows no particle".to_string())
+        } else {
+            check_fit(&self.pattern, site_radius(&self.pattern, &self.map), &self.settings)
+                .err()
+                .map(|e| e.0)
+        };
+        if let Some(why) = unfit {
+            self.plan = Plan {
+                sites: vec![SiteState::Open(Unfilled::Refused(why.clone())); self.pattern.sites.len()],
+                moves: Vec::new(),
+            };
+            return Err(why);
         }
-        check_fit(&self.pattern, site_radius(&self.pattern, &self.map), &self.settings).map_err(|e| e.0)?;
+        self.replan();
         if self.plan.fillable() == 0 {
             let reasons: Vec<String> = self
                 .plan
@@ -259,7 +271,19 @@ impl Book {
                 filled = Some(site);
             } else {
                 self.tries[site] += 1;
-                if self.tries[site] >= self.options.tries_per_site {
+                // A miss without a push: the particle lies nearer its site than a push can
+                // correct, and sending it again would only scan it again.
+                let unpushable = done.record.pushes == 0 && done.record.outcome == "missed";
+                if unpushable {
+                    let why = format!(
+                        "missed: the particle lies {} from it, nearer than a push can correct, outside its {:.1} nm tolerance",
+                        done.record
+                            .error
+                            .map_or("too near".to_string(), |e| format!("{:.1} nm", e * 1e9)),
+                        self.tolerance_of(mv.purpose) * 1e9
+                    );
+                    self.constraints.closed.push((site, Unfilled::Missed(why)));
+                } else if self.tries[site] >= self.options.tries_per_site {
                     let why = format!(
                         "missed after {} moves; the last: {}{}",
                         self.tries[site],

@@ -308,6 +308,22 @@ impl<'a> Planner<'a> {
                 p.sites[*s] = SiteState::Open(why.clone());
             }
         }
+        // A site given up after its misses keeps the particle that missed it (the nearest one
+        // within the clearance): it is the best that site will get, and neither sent elsewhere
+        // nor cleared off it.
+        for (s, why) in &constraints.closed {
+            let (Some(site), Unfilled::Missed(_)) = (pattern.sites.get(*s), why) else {
+                continue;
+            };
+            let on = (0..n)
+                .filter(|&k| p.usable[k] && !p.placed[k])
+                .map(|k| (k, (p.at[k].0 - site.x).hypot(p.at[k].1 - site.y)))
+                .filter(|&(k, d)| d < p.radius[k] + site_r + settings.clearance)
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some((k, _)) = on {
+                p.placed[k] = true;
+            }
+        }
         // Sites filled already keep their particle (the nearest one within the tolerance).
         for (s, site) in pattern.sites.iter().enumerate() {
             if closed[s] {
@@ -534,7 +550,7 @@ impl<'a> Planner<'a> {
             })
             .collect();
         for q in 0..self.at.len() {
-            if filling.contains(&q) {
+            if filling.contains(&q) || self.placed[q] {
                 continue;
             }
             let near = self.pattern.sites.iter().any(|s| {

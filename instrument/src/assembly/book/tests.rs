@@ -117,3 +117,48 @@ fn forgetting_a_particle_keeps_the_exclusions_on_the_others() {
     assert_eq!(b.map().len(), 2);
     assert!(b.plan().moves.iter().all(|m| m.particle == 0), "{:?}", b.plan());
 }
+
+#[test]
+fn a_site_far_off_the_stage_is_refused_without_planning() {
+    let mut b = book(&[(1e308, 50.0), (1e308, 54.0)]);
+    let why = b.start(vec![seen(40.0, 50.0)]).unwrap_err();
+    assert!(why.contains("off the stage"), "{why}");
+    assert!(b.plan().moves.is_empty(), "{:?}", b.plan());
+}
+
+#[test]
+fn a_refused_pattern_marks_every_site_refused_with_the_reason() {
+    // Two sites on top of each other: refused before anything moves, and no site is said to
+    // be missed or blocked by a particle the plan only imagined there.
+    let mut b = book(&[(50.0, 50.0), (50.0, 50.0)]);
+    let why = b.start(vec![seen(40.0, 50.0), seen(30.0, 50.0)]).unwrap_err();
+    assert!(why.contains("sites 0 and 1 are 0.000 µm apart"), "{why}");
+    assert!(b.plan().moves.is_empty(), "{:?}", b.plan());
+    let report = b.judge(&[seen(40.0, 50.0), seen(30.0, 50.0)], &|_| None);
+    for r in &report {
+        assert_eq!(r.status, "refused", "{r:?}");
+        assert_eq!(r.reason.as_deref(), Some(why.as_str()));
+    }
+}
+
+#[test]
+fn a_miss_without_a_push_gives_the_site_up_at_once() {
+    // The particle ended 2.7 nm from its site, with a 1 nm tolerance: the move made no push
+    // (no push corrects that little), so sending it again would make no push either.
+    let mut b = book(&[(50.0, 50.0)]);
+    b.pattern.sites[0].tolerance = Some(1e-9);
+    b.start(vec![seen(40.0, 50.0)]).unwrap();
+    let first = b.next_move().cloned().unwrap();
+    let mut done = report(&first, "missed", false);
+    done.failed = false;
+    done.record.error = Some(2.7e-9);
+    b.moved(&first, done);
+    assert!(b.next_move().is_none(), "{:?}", b.plan());
+    match &b.plan().sites[0] {
+        SiteState::Open(Unfilled::Missed(why)) => {
+            assert!(why.contains("2.7 nm from it, nearer than a push can correct"), "{why}");
+            assert!(why.contains("outside its 1.0 nm tolerance"), "{why}");
+        }
+        other => panic!("{other:?}"),
+    }
+}

@@ -293,3 +293,25 @@ proptest::proptest! {
         proptest::prop_assert!(p.fillable() <= particles.len());
     }
 }
+
+#[test]
+fn a_particle_that_missed_its_site_stays_on_it() {
+    // Site 0 was given up: its particle lies 3 nm off it, outside a 1 nm tolerance. It is the
+    // best the site will get, so it is neither sent to site 1 nor cleared off site 0.
+    let particles = seen(&[(50.003, 50.0)]);
+    let mut p = pattern(&[(50.0, 50.0), (54.0, 50.0)]);
+    for s in &mut p.sites {
+        s.tolerance = Some(1e-9);
+    }
+    let constraints = Constraints {
+        closed: vec![(0, Unfilled::Missed("missed after 3 moves".into()))],
+        ..Constraints::default()
+    };
+    let plan = plan(&particles, &p, &settings(), &constraints);
+    assert!(plan.moves.is_empty(), "{:?}", plan.moves);
+    assert_eq!(
+        plan.sites[0],
+        SiteState::Open(Unfilled::Missed("missed after 3 moves".into()))
+    );
+    assert_eq!(plan.sites[1], SiteState::Open(Unfilled::NoParticle));
+}
