@@ -60,8 +60,9 @@ pub struct MoveDone {
     /// Whether it failed (its push failed, or its particle was not found), as opposed to a miss.
     pub failed: bool,
     /// Whether the scan before its first push found nothing where the map has the particle: the
-    /// map was wrong there (a particle counted twice, or one the full frame's pixels made up),
-    /// and the particle leaves the map. Sending it again would find nothing again.
+    /// map may be wrong there (a particle counted twice, or one the full frame's pixels made up),
+    /// or the scan may have missed it; either way sending it again would find nothing again, so
+    /// it is not sent again, and routes still keep clear of it.
     pub absent: bool,
     /// Where the scan after found the particle, or else where the controller estimates it.
     pub ended: Option<Seen>,
@@ -297,29 +298,11 @@ impl Book {
             }
         }
         self.moves.push(done.record);
-        if done.absent {
-            self.forget(mv.particle);
+        if done.absent && !self.constraints.unfound.contains(&mv.particle) {
+            self.constraints.unfound.push(mv.particle);
         }
         self.replan();
         filled
-    }
-
-    /// Takes particle `k` off the map; the exclusions and failures of the others follow their
-    /// new indices.
-    fn forget(&mut self, k: usize) {
-        if k >= self.map.len() {
-            return;
-        }
-        self.map.remove(k);
-        if k < self.failures.len() {
-            self.failures.remove(k);
-        }
-        self.constraints.excluded.retain(|(q, _)| *q != k);
-        for (q, _) in &mut self.constraints.excluded {
-            if *q > k {
-                *q -= 1;
-            }
-        }
     }
 
     fn replan(&mut self) {

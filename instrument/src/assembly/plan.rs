@@ -181,6 +181,10 @@ pub struct Constraints {
     pub excluded: Vec<(usize, String)>,
     /// Sites given up, and why.
     pub closed: Vec<(usize, Unfilled)>,
+    /// Particles the scan before their move did not find where the map has them: never sent
+    /// again (to a site or aside), and still kept clear of, since a scan can miss a particle
+    /// that is there (a window crowded with particles levels above them).
+    pub unfound: Vec<usize>,
 }
 
 /// A pattern the scene cannot hold: a site off the stage, or two sites closer than two particles
@@ -279,6 +283,13 @@ impl<'a> Planner<'a> {
                 usable[*k] = false;
             }
         }
+        let mut moved_aside = vec![false; n];
+        for &k in &constraints.unfound {
+            if k < n {
+                usable[k] = false;
+                moved_aside[k] = true;
+            }
+        }
         let site_r = site_radius(pattern, particles);
         let centre = pattern.centre();
         let reach = pattern
@@ -293,7 +304,7 @@ impl<'a> Planner<'a> {
             radius: particles.iter().map(|p| p.radius).collect(),
             usable,
             placed: vec![false; n],
-            moved_aside: vec![false; n],
+            moved_aside,
             sites: vec![SiteState::Open(Unfilled::NoParticle); pattern.sites.len()],
             pending: Vec::new(),
             moves: Vec::new(),

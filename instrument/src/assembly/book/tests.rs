@@ -71,21 +71,15 @@ fn report(mv: &PlannedMove, outcome: &str, absent: bool) -> MoveDone {
 }
 
 #[test]
-fn a_particle_the_scan_does_not_find_leaves_the_map() {
+fn a_particle_the_scan_does_not_find_is_not_sent_again() {
     // One site with a particle the pattern does not need on it (to clear), and one to fill it.
     let mut b = book(&[(50.0, 50.0)]);
     b.start(vec![seen(40.0, 50.0), big(51.2, 50.0)]).unwrap();
     let first = b.next_move().cloned().unwrap();
     assert_eq!((first.particle, first.purpose), (1, Purpose::Clear), "{:?}", b.plan());
     b.moved(&first, report(&first, "not_found: nothing there", true));
-    assert_eq!(b.map().len(), 1, "{:?}", b.map());
-    assert!(
-        b.plan().moves.iter().all(|m| m.purpose == Purpose::Fill { site: 0 }),
-        "{:?}",
-        b.plan()
-    );
-    let next = b.next_move().unwrap();
-    assert_eq!((next.particle, next.from), (0, (40.0 * UM, 50.0 * UM)));
+    assert_eq!(b.map().len(), 2, "kept on the map: {:?}", b.map());
+    assert!(b.plan().moves.iter().all(|m| m.particle != 1), "{:?}", b.plan());
 }
 
 #[test]
@@ -105,17 +99,23 @@ fn a_particle_lost_after_its_pushes_stays_on_the_map_until_excluded() {
 }
 
 #[test]
-fn forgetting_a_particle_keeps_the_exclusions_on_the_others() {
+fn a_particle_the_scan_does_not_find_is_still_kept_clear_of() {
+    // A particle across the fill's straight line, reported not found where the map has it: the
+    // fill still goes around it (a scan in a crowded window can miss a particle that is there).
     let mut b = book(&[(50.0, 50.0)]);
-    b.start(vec![seen(40.0, 50.0), big(51.2, 50.0), seen(60.0, 50.0)])
-        .unwrap();
-    b.exclude(&[2], "refused");
-    let clear = b.next_move().cloned().unwrap();
-    assert_eq!(clear.particle, 1);
-    b.moved(&clear, report(&clear, "not_found", true));
-    // The excluded particle was index 2 and is index 1 now: still not sent.
-    assert_eq!(b.map().len(), 2);
-    assert!(b.plan().moves.iter().all(|m| m.particle == 0), "{:?}", b.plan());
+    b.start(vec![seen(40.0, 50.0), big(45.0, 50.0)]).unwrap();
+    let unfound = PlannedMove {
+        particle: 1,
+        from: (45.0 * UM, 50.0 * UM),
+        to: (45.0 * UM, 60.0 * UM),
+        purpose: Purpose::Clear,
+        legs: Vec::new(),
+    };
+    b.moved(&unfound, report(&unfound, "not_found", true));
+    let fill = b.next_move().unwrap();
+    assert_eq!((fill.particle, fill.purpose), (0, Purpose::Fill { site: 0 }));
+    assert!(fill.legs.len() > 1, "a detour around it: {fill:?}");
+    assert!(b.plan().moves.iter().all(|m| m.particle != 1), "{:?}", b.plan());
 }
 
 #[test]

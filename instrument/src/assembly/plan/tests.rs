@@ -243,7 +243,7 @@ fn excluded_particles_are_not_sent_and_their_sites_say_why() {
     let particles = seen(&[(20.0, 20.0), (30.0, 30.0)]);
     let c = Constraints {
         excluded: vec![(0, "its pushes failed".into())],
-        closed: vec![],
+        ..Constraints::default()
     };
     let p = plan(&particles, &pattern(&[(60.0, 60.0), (70.0, 70.0)]), &settings(), &c);
     assert!(p.moves.iter().all(|m| m.particle == 1));
