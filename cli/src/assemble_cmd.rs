@@ -10,11 +10,12 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use nanopush_instrument::afm::Afm;
+use nanopush_instrument::assembly::summary::Totals;
 use nanopush_instrument::assembly::{
     AssemblyOptions, AssemblyRun, Event, MoveRecord, Outcome, Pattern, Purpose, assemble,
 };
 use nanopush_instrument::scan::{write_gsf, write_png};
-use nanopush_proto::assembly::{AssemblySummary, MoveSummary, SiteSummary};
+use nanopush_proto::assembly::AssemblySummary;
 
 /// Exit status of an assembly that ran and left a site open (or was stopped).
 pub const EXIT_INCOMPLETE: u8 = 1;
@@ -194,55 +195,19 @@ fn record_words(r: &MoveRecord) -> String {
 
 /// The report as the proto document.
 fn summary(pattern: &Pattern, run: &AssemblyRun) -> AssemblySummary {
-    let xy = |p: (f64, f64)| [p.0, p.1];
-    AssemblySummary {
-        schema: "nanopush.assembly".into(),
-        version: nanopush_proto::VERSION,
-        outcome: run.outcome.code().into(),
-        refusal: run.refusal.clone(),
-        pattern: pattern.name.clone(),
-        sites: run
-            .sites
-            .iter()
-            .map(|s| SiteSummary {
-                target: xy(s.target),
-                tolerance: s.tolerance,
-                particle: s.particle,
-                measured: s.measured.map(xy),
-                true_position: s.true_position.map(xy),
-                error: s.error,
-                status: s.status.into(),
-                reason: s.reason.clone(),
-            })
-            .collect(),
-        moves: run
-            .moves
-            .iter()
-            .map(|m| MoveSummary {
-                purpose: match m.purpose {
-                    Purpose::Fill { .. } => "fill",
-                    Purpose::Clear => "clear",
-                    Purpose::Park => "park",
-                }
-                .into(),
-                site: match m.purpose {
-                    Purpose::Fill { site } => Some(site),
-                    _ => None,
-                },
-                particle: m.particle,
-                from: xy(m.from),
-                to: xy(m.to),
-                outcome: m.outcome.clone(),
-                error: m.error,
-                pushes: m.pushes,
-                push_time: m.push_time,
-            })
-            .collect(),
-        wall_time: run.wall_time,
-        push_time: run.push_time,
-        scan_time: run.scan_time,
-        violations: run.violations.clone(),
-    }
+    nanopush_instrument::assembly::summary::summary(
+        pattern,
+        run.outcome.code(),
+        run.refusal.clone(),
+        &run.sites,
+        &run.moves,
+        Totals {
+            wall_time: run.wall_time,
+            push_time: run.push_time,
+            scan_time: run.scan_time,
+            violations: run.violations.clone(),
+        },
+    )
 }
 
 /// `summary.json`, `plan.png`, `final.gsf` and `final.png` in `--out`.

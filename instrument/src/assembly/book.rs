@@ -72,6 +72,30 @@ pub struct MoveDone {
     pub images: Vec<HeightImage>,
 }
 
+impl MoveDone {
+    /// The report of move `mv` of the instrument's particle `particle` before anything is done:
+    /// no outcome yet, the particle where the plan has it.
+    pub fn begun(mv: &PlannedMove, particle: u32) -> MoveDone {
+        MoveDone {
+            record: MoveRecord {
+                purpose: mv.purpose,
+                particle: Some(particle),
+                from: mv.from,
+                to: mv.to,
+                outcome: String::new(),
+                error: None,
+                pushes: 0,
+                push_time: 0.0,
+            },
+            failed: false,
+            absent: false,
+            ended: None,
+            path: vec![mv.from],
+            images: Vec::new(),
+        }
+    }
+}
+
 /// One site at the end.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SiteReport {

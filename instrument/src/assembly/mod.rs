@@ -19,6 +19,7 @@ pub mod pattern;
 pub mod plan;
 pub mod routing;
 pub mod run;
+pub mod summary;
 
 pub use book::{AssemblyOptions, Book, MoveDone, MoveRecord, SiteReport, TrueParticle};
 pub use pattern::{Pattern, PatternError, Site};

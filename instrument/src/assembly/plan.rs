@@ -34,6 +34,20 @@ pub struct Seen {
     pub radius: f64,
 }
 
+impl Seen {
+    /// The particles a scan shows, as `find_particles` finds them.
+    pub fn found_in(img: &crate::scan::HeightImage, tip: &crate::scan::Tip) -> Vec<Seen> {
+        crate::scan::find_particles(img, tip)
+            .iter()
+            .map(|l| Seen {
+                x: l.x,
+                y: l.y,
+                radius: l.radius,
+            })
+            .collect()
+    }
+}
+
 /// What the plan routes with (m), from the scene's strategy.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlanSettings {

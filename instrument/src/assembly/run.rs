@@ -25,7 +25,7 @@ use crate::control::derive::{DerivedStrategy, derive};
 use crate::control::moves::run::{MoveRun, move_particle_with};
 use crate::control::moves::{MoveError, MoveOptions, MoveRunError, MoveTarget, Verdict};
 use crate::control::strategy::runner::Prepared;
-use crate::scan::{HeightImage, ScanParams, Tip, find_particles, scan};
+use crate::scan::{HeightImage, ScanParams, Tip, scan};
 use crate::scene::Scene;
 use crate::scene::file::ParticleFile;
 
@@ -179,14 +179,7 @@ impl<'a> Assembly<'a> {
     fn full_frame(&mut self) -> (HeightImage, Vec<Seen>) {
         let img = scan(&self.afm.surface(), self.tip, self.base);
         self.scan_time += self.base.frame_time();
-        let seen = find_particles(&img, &self.tip)
-            .iter()
-            .map(|l| Seen {
-                x: l.x,
-                y: l.y,
-                radius: l.radius,
-            })
-            .collect();
+        let seen = Seen::found_in(&img, &self.tip);
         (img, seen)
     }
 
@@ -364,22 +357,10 @@ impl<'a> Assembly<'a> {
         };
         self.scan_time += images.len() as f64 * local_frame_time(&self.base);
         let mut done = MoveDone {
-            record: MoveRecord {
-                purpose: mv.purpose,
-                particle: Some(id),
-                from: mv.from,
-                to: mv.to,
-                outcome: String::new(),
-                error: None,
-                pushes: 0,
-                push_time: self.afm.time() - t0,
-            },
-            failed: false,
-            absent: false,
-            ended: None,
-            path: vec![mv.from],
             images,
+            ..MoveDone::begun(mv, id)
         };
+        done.record.push_time = self.afm.time() - t0;
         match result {
             Ok(run) => {
                 self.check_collisions(&run, id);

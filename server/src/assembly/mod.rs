@@ -32,8 +32,8 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
 use std::time::Instant;
 
-use nanopush_instrument::assembly::{AssemblyOptions, Book, Pattern, PlanSettings, Seen, TrueParticle};
-use nanopush_instrument::scan::{HeightImage, ScanParams, Tip, find_particles, scan};
+use nanopush_instrument::assembly::{AssemblyOptions, Book, Pattern, PlanSettings, Seen, TrueParticle, summary};
+use nanopush_instrument::scan::{HeightImage, ScanParams, Tip, scan};
 use nanopush_proto::ws::{AssemblyNow, ServerMessage};
 
 use crate::app_state::AppState;
@@ -134,14 +134,7 @@ impl<'a> Assembly<'a> {
     fn full_frame(&mut self) -> (HeightImage, Vec<Seen>) {
         let img = scan(&self.st.surface_now(), self.tip, self.base);
         self.scan_time += self.base.frame_time();
-        let seen = find_particles(&img, &self.tip)
-            .iter()
-            .map(|l| Seen {
-                x: l.x,
-                y: l.y,
-                radius: l.radius,
-            })
-            .collect();
+        let seen = Seen::found_in(&img, &self.tip);
         (img, seen)
     }
 
@@ -278,7 +271,7 @@ impl<'a> Assembly<'a> {
             self.push_time += made.done.record.push_time;
             self.runs.extend(&made.runs);
             self.push_records.extend(made.record.clone());
-            let summary = wire::made(&made.done.record);
+            let summary = summary::made(&made.done.record);
             st.broadcast_event(&ServerMessage::AssemblyMoveEnded {
                 assembly: n,
                 number,
@@ -322,16 +315,19 @@ impl<'a> Assembly<'a> {
         refusal: Option<String>,
         sites: &[nanopush_instrument::assembly::SiteReport],
     ) -> nanopush_proto::assembly::AssemblySummary {
-        wire::summary(
+        summary::summary(
             &self.job.pattern,
             outcome,
             refusal,
             sites,
             self.book.moves(),
-            wire::Totals {
+            summary::Totals {
                 wall_time: self.started.elapsed().as_secs_f64(),
                 push_time: self.push_time,
                 scan_time: self.scan_time,
+                // The server's loop does not check the truth's overlaps as the command line's
+                // run does.
+                violations: Vec::new(),
             },
         )
     }

@@ -8,7 +8,7 @@ use std::sync::atomic::Ordering::Relaxed;
 use std::time::Duration;
 
 use nanopush_instrument::assembly::routing::legs_on_map;
-use nanopush_instrument::assembly::{MoveDone, MoveRecord, PlannedMove, Seen};
+use nanopush_instrument::assembly::{MoveDone, PlannedMove, Seen};
 use nanopush_instrument::control::moves::locate::locate_near;
 use nanopush_instrument::control::{MoveRoute, Verdict};
 use nanopush_proto::ws::{Judged, ServerMessage};
@@ -51,23 +51,7 @@ pub(super) fn make(a: &Assembly<'_>, mv: &PlannedMove, id: u32, kind: &Kind) -> 
     let radius = a.book.map()[mv.particle].radius;
     let tolerance = a.book.tolerance_of(mv.purpose);
     let mut made = Made {
-        done: MoveDone {
-            record: MoveRecord {
-                purpose: mv.purpose,
-                particle: Some(id),
-                from: mv.from,
-                to: mv.to,
-                outcome: String::new(),
-                error: None,
-                pushes: 0,
-                push_time: 0.0,
-            },
-            failed: false,
-            absent: false,
-            ended: None,
-            path: vec![mv.from],
-            images: Vec::new(),
-        },
+        done: MoveDone::begun(mv, id),
         scans: 0,
         runs: Vec::new(),
         record: None,

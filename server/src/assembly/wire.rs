@@ -1,21 +1,12 @@
 //! An assembly as the protocol says it: the instrument's plan, moves and site reports in the
 //! wire's types (`nanopush_proto::ws`, `nanopush_proto::assembly`), SI throughout.
 
-use nanopush_instrument::assembly::{MoveRecord, Pattern, Plan, Purpose, Seen, SiteReport, SiteState};
-use nanopush_proto::assembly::{AssemblySummary, MoveSummary, SiteSummary};
+use nanopush_instrument::assembly::summary::purpose_words as purpose;
+use nanopush_instrument::assembly::{Pattern, Plan, Seen, SiteState};
 use nanopush_proto::ws::{AssemblyPlan, AssemblySite, MapParticle, PlanMove, PlanSite};
 
 fn xy(p: (f64, f64)) -> [f64; 2] {
     [p.0, p.1]
-}
-
-/// `fill`, `clear` or `park`, and the site a fill is for.
-fn purpose(p: Purpose) -> (&'static str, Option<usize>) {
-    match p {
-        Purpose::Fill { site } => ("fill", Some(site)),
-        Purpose::Clear => ("clear", None),
-        Purpose::Park => ("park", None),
-    }
 }
 
 /// The pattern's sites, each with its tolerance (the pattern's, else `tolerance`).
@@ -84,75 +75,10 @@ pub(crate) fn plan(plan: &Plan, map: &[Seen]) -> AssemblyPlan {
     }
 }
 
-/// A move as it was made.
-pub(crate) fn made(m: &MoveRecord) -> MoveSummary {
-    let (purpose, site) = purpose(m.purpose);
-    MoveSummary {
-        purpose: purpose.into(),
-        site,
-        particle: m.particle,
-        from: xy(m.from),
-        to: xy(m.to),
-        outcome: m.outcome.clone(),
-        error: m.error,
-        pushes: m.pushes,
-        push_time: m.push_time,
-    }
-}
-
-/// A site at the end.
-pub(crate) fn site(s: &SiteReport) -> SiteSummary {
-    SiteSummary {
-        target: xy(s.target),
-        tolerance: s.tolerance,
-        particle: s.particle,
-        measured: s.measured.map(xy),
-        true_position: s.true_position.map(xy),
-        error: s.error,
-        status: s.status.into(),
-        reason: s.reason.clone(),
-    }
-}
-
-/// What an assembly ended with, in numbers.
-pub(crate) struct Totals {
-    /// Wall time (s).
-    pub wall_time: f64,
-    /// Simulated time of the pushes (s).
-    pub push_time: f64,
-    /// Simulated time of the scans at the scene's line rate (s).
-    pub scan_time: f64,
-}
-
-/// The whole report, as `nanopush assemble` writes it.
-pub(crate) fn summary(
-    pattern: &Pattern,
-    outcome: &str,
-    refusal: Option<String>,
-    sites: &[SiteReport],
-    moves: &[MoveRecord],
-    totals: Totals,
-) -> AssemblySummary {
-    AssemblySummary {
-        schema: "nanopush.assembly".into(),
-        version: nanopush_proto::VERSION,
-        outcome: outcome.into(),
-        refusal,
-        pattern: pattern.name.clone(),
-        sites: sites.iter().map(site).collect(),
-        moves: moves.iter().map(made).collect(),
-        wall_time: totals.wall_time,
-        push_time: totals.push_time,
-        scan_time: totals.scan_time,
-        // The server's loop does not check the truth's overlaps as the command line's run does.
-        violations: Vec::new(),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nanopush_instrument::assembly::{PlannedMove, Unfilled};
+    use nanopush_instrument::assembly::{PlannedMove, Purpose, Unfilled};
     use nanopush_instrument::control::Leg;
 
     #[test]
