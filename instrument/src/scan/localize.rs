@@ -53,7 +53,8 @@ pub enum LocateError {
     },
     /// Nothing stands above the substrate near the click.
     #[error(
-        "no particle within {searched:e} m of ({x:e}, {y:e}) m: no pixel there is more than {threshold:e} m above the substrate"
+        "no particle within {:.3} µm of ({:.3}, {:.3}) µm: no pixel there is more than {:.1} nm above the substrate",
+        .searched * 1e6, .x * 1e6, .y * 1e6, .threshold * 1e9
     )]
     NoBlob {
         /// Click x (m).

@@ -410,7 +410,10 @@ fn no_blob_near_the_click_is_a_typed_error_naming_the_distance() {
     let img = scan(&one_sphere(100.0 * NM), t, quiet(4.0 * UM, 64));
     let e = localize(&img, &t, 3.5 * UM, 3.5 * UM, 0.5 * UM).unwrap_err();
     assert!(matches!(e, LocateError::NoBlob { searched, .. } if searched == 0.5 * UM));
-    assert!(e.to_string().contains("within 5e-7 m"), "{e}");
+    assert_eq!(
+        e.to_string(),
+        "no particle within 0.500 µm of (3.500, 3.500) µm: no pixel there is more than 0.5 nm above the substrate"
+    );
     let e = localize(&img, &t, 20.0 * UM, 5.0 * UM, 0.5 * UM).unwrap_err();
     assert!(matches!(e, LocateError::OutsideImage { .. }), "{e}");
     // The same click with a search radius that reaches the particle finds it.
