@@ -360,6 +360,11 @@ impl Book {
                 } else {
                     match self.plan.sites.get(i) {
                         Some(SiteState::Open(u)) => (u.status(), Some(u.reason())),
+                        // Planned, but the assembly ended (a stop) before a particle was sent.
+                        _ if self.sent[i].is_none() => (
+                            "missed",
+                            Some("never tried: the assembly ended before its move".to_string()),
+                        ),
                         _ => (
                             "missed",
                             Some(format!(

@@ -162,3 +162,19 @@ fn a_miss_without_a_push_gives_the_site_up_at_once() {
         other => panic!("{other:?}"),
     }
 }
+
+#[test]
+fn a_site_never_tried_says_so_at_the_end() {
+    let mut b = book(&[(50.0, 50.0), (54.0, 50.0)]);
+    b.start(vec![seen(40.0, 50.0), seen(60.0, 50.0)]).unwrap();
+    // Stopped before any move: the last frame shows the particles where they were.
+    let last = b.map().to_vec();
+    let sites = b.judge(&last, &|_| None);
+    for s in &sites {
+        assert_eq!(s.status, "missed");
+        assert_eq!(
+            s.reason.as_deref(),
+            Some("never tried: the assembly ended before its move")
+        );
+    }
+}
