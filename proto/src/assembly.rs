@@ -11,7 +11,8 @@ pub struct AssemblySummary {
     /// [`crate::VERSION`].
     pub version: u32,
     /// `filled` (every site within its tolerance by the last full frame), `incomplete`,
-    /// `refused` (before anything moved) or `stopped`.
+    /// `refused` (before anything moved) or `stopped`; in the server's record while the
+    /// assembly runs, `running` (and so left by a server killed in the middle).
     pub outcome: String,
     /// Why it was refused.
     pub refusal: Option<String>,

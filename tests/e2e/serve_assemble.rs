@@ -218,6 +218,31 @@ fn stop_mid_assembly_retracts_the_tip_and_completes_the_record() {
     });
 }
 
+/// A server killed with SIGKILL after an assembly's first move leaves its record, `running`,
+/// with the move made and the first frame's record.
+#[test]
+fn a_killed_server_leaves_the_assembly_record_running() {
+    let mut srv = assembly_server("assemble-kill");
+    let records = srv.dir.join("records");
+    runtime().block_on(async {
+        let mut op = operator(&srv.addr, "tip").await;
+        ok(&mut op, json!({"type": "assemble", "id": 3, "sites": two_sites()})).await;
+        until(&mut op, 120.0, |m| is(m, "assembly_replanned")).await;
+    });
+    srv.child.kill().unwrap();
+    srv.child.wait().unwrap();
+    let name = std::fs::read_dir(&records)
+        .unwrap()
+        .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
+        .find(|n| n.starts_with("assembly-") && n.ends_with(".json"))
+        .expect("an assembly record");
+    let rec: Value = serde_json::from_slice(&std::fs::read(records.join(&name)).unwrap()).unwrap();
+    assert_eq!(rec["summary"]["outcome"], "running", "{rec:#}");
+    assert!(!rec["summary"]["moves"].as_array().unwrap().is_empty(), "{rec:#}");
+    assert!(rec["first_frame"]["record"].is_string(), "{rec:#}");
+    assert!(!rec["push_records"].as_array().unwrap().is_empty(), "{rec:#}");
+}
+
 #[test]
 fn a_late_joiner_is_told_the_running_assembly() {
     let srv = assembly_server("assemble-late");

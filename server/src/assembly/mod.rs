@@ -34,9 +34,11 @@ use std::time::Instant;
 
 use nanopush_instrument::assembly::{AssemblyOptions, Book, Pattern, PlanSettings, Seen, TrueParticle, summary};
 use nanopush_instrument::scan::{HeightImage, ScanParams, Tip, scan};
+use nanopush_proto::assembly::AssemblySummary;
 use nanopush_proto::ws::{AssemblyNow, ServerMessage};
 
 use crate::app_state::AppState;
+use crate::records::Recorded;
 use kinds::Kinds;
 use record::Ending;
 
@@ -93,6 +95,8 @@ struct Assembly<'a> {
     /// The runs of its pushes, and the records of its moves' last pushes.
     runs: Vec<u64>,
     push_records: Vec<String>,
+    /// Its record from the first plan on.
+    opened: Option<record::Opened>,
 }
 
 impl<'a> Assembly<'a> {
@@ -113,7 +117,26 @@ impl<'a> Assembly<'a> {
             push_time: 0.0,
             runs: Vec::new(),
             push_records: Vec::new(),
+            opened: None,
         }
+    }
+
+    /// Writes the record as it stands, with `summary` and the last full frame's record.
+    fn write_record(&self, summary: &AssemblySummary, last_frame: &Option<Recorded>) -> Option<Recorded> {
+        let opened = self.opened.as_ref()?;
+        Some(record::write(
+            self.st,
+            self.job,
+            opened,
+            summary,
+            last_frame,
+            (&self.runs, &self.push_records),
+        ))
+    }
+
+    /// The record, `running`, with the moves made so far.
+    fn write_running(&self) {
+        self.write_record(&self.summary("running", None, &[]), &None);
     }
 
     /// Why the assembly must stop now, in the words of a stopped push, or `None`.
@@ -144,10 +167,15 @@ impl<'a> Assembly<'a> {
         let (first_img, map) = self.full_frame();
         let refusal = self.book.start(map).err();
         let first_plan = wire::plan(self.book.plan(), self.book.map());
-        let first_record = (!self.job.plan_only).then(|| record::frame(st, &first_img, &self.job.person));
+        let first_frame = (!self.job.plan_only).then(|| record::frame(st, &first_img, &self.job.person));
+        self.opened = Some(record::Opened {
+            name: record::name(st, self.job),
+            first_plan: first_plan.clone(),
+            first_frame,
+        });
         if let Some(why) = refusal {
             let summary = self.summary("refused", Some(why.clone()), &[]);
-            let rec = record::write(st, self.job, &first_plan, &summary, &first_record, &None, &[], &[]);
+            let rec = self.write_record(&summary, &None);
             return record::finish(
                 st,
                 self.job,
@@ -155,7 +183,7 @@ impl<'a> Assembly<'a> {
                     outcome: "refused",
                     reason: Some(why),
                     summary: Some(summary),
-                    record: Some(rec),
+                    record: rec,
                 },
             );
         }
@@ -183,6 +211,7 @@ impl<'a> Assembly<'a> {
                 },
             );
         }
+        self.write_running();
         let stopped = self.moves();
         self.show(|a| {
             a.phase = "judging".into();
@@ -200,16 +229,7 @@ impl<'a> Assembly<'a> {
         };
         let reason = stopped.map(|why| format!("stopped: {why}"));
         let summary = self.summary(outcome, None, &sites);
-        let rec = record::write(
-            st,
-            self.job,
-            &first_plan,
-            &summary,
-            &first_record,
-            &last_record,
-            &self.runs,
-            &self.push_records,
-        );
+        let rec = self.write_record(&summary, &last_record);
         record::finish(
             st,
             self.job,
@@ -217,7 +237,7 @@ impl<'a> Assembly<'a> {
                 outcome,
                 reason,
                 summary: Some(summary),
-                record: Some(rec),
+                record: rec,
             },
         );
     }
@@ -285,6 +305,8 @@ impl<'a> Assembly<'a> {
                 self.show(|a| a.filled.push(site));
                 st.broadcast_event(&ServerMessage::AssemblySiteFilled { assembly: n, site });
             }
+            // The record first: a client told of the new plan finds the move in it.
+            self.write_running();
             let plan = wire::plan(self.book.plan(), self.book.map());
             self.show(|a| a.plan = Some(plan.clone()));
             st.broadcast_event(&ServerMessage::AssemblyReplanned { assembly: n, plan });

@@ -31,19 +31,38 @@ pub(crate) fn frame(st: &AppState, img: &HeightImage, person: &str) -> Recorded 
     crate::scan_job::record_frame(st, img, person)
 }
 
-/// The assembly's JSON summary, written whole (a `.partial` renamed): its name, or why not.
-#[allow(clippy::too_many_arguments)]
+/// What an assembly's record holds from its first plan on, and its name.
+pub(crate) struct Opened {
+    /// `assembly-<time>-<instance>-a<n>.json`.
+    pub name: String,
+    /// The first plan.
+    pub first_plan: AssemblyPlan,
+    /// The first full frame's scan record (none for `plan_only`).
+    pub first_frame: Option<Recorded>,
+}
+
+/// The name of assembly `job`'s record, fixed when it opens.
+pub(crate) fn name(st: &AppState, job: &AssemblyJob) -> String {
+    format!("assembly-{}-{}-a{}.json", unix_now(), st.instance.id, job.number)
+}
+
+/// The assembly's JSON summary as it stands, written whole under its name (a `.partial`
+/// renamed, so a reader never sees half of it): at the first plan and after every move with the
+/// summary's outcome `running`, at the end with its outcome. A server killed in the middle
+/// leaves it `running`, with the moves made. Its name, or why it could not be written.
 pub(crate) fn write(
     st: &AppState,
     job: &AssemblyJob,
-    first_plan: &AssemblyPlan,
+    opened: &Opened,
     summary: &AssemblySummary,
-    first_frame: &Option<Recorded>,
     last_frame: &Option<Recorded>,
-    runs: &[u64],
-    push_records: &[String],
+    (runs, push_records): (&[u64], &[String]),
 ) -> Recorded {
-    let name = format!("assembly-{}-{}-a{}.json", unix_now(), st.instance.id, job.number);
+    let Opened {
+        name,
+        first_plan,
+        first_frame,
+    } = opened;
     let frame = |r: &Option<Recorded>| match r {
         Some(Ok(name)) => serde_json::json!({ "record": name }),
         Some(Err(why)) => serde_json::json!({ "record": null, "record_error": why }),
@@ -65,9 +84,9 @@ pub(crate) fn write(
     });
     let written = serde_json::to_vec_pretty(&doc)
         .map_err(|e| e.to_string())
-        .and_then(|bytes| write_atomic(&st.cfg.data_dir.join(&name), &bytes).map_err(|e| e.to_string()));
+        .and_then(|bytes| write_atomic(&st.cfg.data_dir.join(name), &bytes).map_err(|e| e.to_string()));
     match written {
-        Ok(()) => Ok(name),
+        Ok(()) => Ok(name.clone()),
         Err(e) => {
             tracing::error!("records: assembly {}: {e}", job.number);
             st.shared.metrics.record_failures.fetch_add(1, Relaxed);
