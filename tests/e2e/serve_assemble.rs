@@ -69,6 +69,9 @@ fn an_assembly_fills_two_sites_and_writes_its_record() {
         let planned = of_type(&seen, "assembly_planned");
         assert_eq!(planned.len(), 1, "{seen:#?}");
         assert_eq!(planned[0]["plan"]["sites"][0]["state"], "planned");
+        // The full frame it was planned on, as a scan record the page opens.
+        let frame = planned[0]["frame"].as_str().expect("the first frame's record");
+        assert!(frame.starts_with("scan-") && frame.ends_with(".gsf"), "{frame}");
         assert_eq!(planned[0]["plan"]["moves"].as_array().unwrap().len(), 2);
         let started = of_type(&seen, "assembly_move_started");
         let ended = of_type(&seen, "assembly_move_ended");

@@ -332,6 +332,8 @@ export class App {
         if (line) log.log(line.text, line.cls);
         if (line && (ev.what === 'done' || ev.what === 'planned')) log.announce(line.text);
         this.assemble.assemblyChanged(ev);
+        // The frame it was planned on: the map shows what the plan is drawn over.
+        if (ev.what === 'planned' && ev.assembly.frame) this.scans.openRecord(ev.assembly.frame);
         if (ev.what === 'done' && ev.assembly.done.record) {
           this.scans.openAssemblyFrame(ev.assembly.done.record);
           this.records.refresh();

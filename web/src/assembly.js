@@ -14,6 +14,7 @@ function fresh(m) {
     sites: Array.isArray(m.sites) ? m.sites : [],
     phase: 'planning',
     plan: m.plan ?? null,
+    frame: typeof m.frame === 'string' && m.frame ? m.frame : null, // the full frame it was planned on
     made: [], // each move made: proto's MoveSummary
     filled: [], // the sites the scans after the moves showed filled
     moving: null, // [the move running, from 1, the moves planned in all]

@@ -24,6 +24,14 @@ test('a plan shows each site as planned, filled already or unreachable with its 
   assert.match(siteState(a, 2).reason, /no particle of the pattern's size/);
 });
 
+test('a plan names the full frame it was planned on, when the server recorded one', () => {
+  const s = connected();
+  s.apply(planned({ frame: 'scan-1-a-1.gsf' }));
+  assert.equal(s.state.assembly.frame, 'scan-1-a-1.gsf');
+  s.apply(planned({ assembly: 2, plan_only: true }));
+  assert.equal(s.state.assembly.frame, null);
+});
+
 test('a move starts and ends, its site fills, the rest is planned again, then the end', () => {
   const s = connected();
   s.apply(planned());

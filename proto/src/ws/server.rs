@@ -166,6 +166,10 @@ pub enum ServerMessage {
         sites: Vec<AssemblySite>,
         /// The plan.
         plan: AssemblyPlan,
+        /// The scan record of the full frame it was planned on (none for `plan_only`, or when it
+        /// could not be written): the server takes it without streaming it.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        frame: Option<String>,
     },
     /// A move of an assembly starts (to everyone); its pushes follow as `push_started`, its end
     /// as `run_done`.
@@ -352,9 +356,11 @@ mod tests {
                 tolerance: 25e-9,
             }],
             plan: plan.clone(),
+            frame: None,
         })
         .unwrap();
         assert_eq!(s["type"], "assembly_planned");
+        assert!(s.get("frame").is_none(), "{s}");
         assert_eq!(s["plan"]["moves"][0]["path"][1][0], 4e-6);
         assert_eq!(s["plan"]["sites"][0]["state"], "planned");
         assert!(s["plan"]["sites"][0].get("reason").is_none(), "{s}");

@@ -198,6 +198,11 @@ impl<'a> Assembly<'a> {
             pattern: self.job.pattern.name.clone(),
             sites: wire::sites(&self.job.pattern, self.job.options.tolerance),
             plan: first_plan.clone(),
+            frame: self
+                .opened
+                .as_ref()
+                .and_then(|o| o.first_frame.as_ref())
+                .and_then(|r| r.as_ref().ok().cloned()),
         });
         if self.job.plan_only {
             return record::finish(
