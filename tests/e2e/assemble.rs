@@ -225,3 +225,34 @@ fn random_cases_are_assembled_and_checked_against_the_truth() {
     assert!(rows[1].starts_with("15,filled,7,4,0,4,4,"), "{csv}");
     assert!(dir.join("scenes/seed-13.toml").exists());
 }
+
+/// Random seed 7: a 2 × 2 grid with three of its eleven particles inside it. Filled most central
+/// first, one of them was walled in by the sites around it (unreachable); those inside go first.
+#[test]
+fn particles_inside_the_pattern_are_not_walled_in() {
+    let dir = tmp("assemble-inside");
+    let o = run(
+        "nanopush",
+        &[
+            "assemble",
+            "--random",
+            "1",
+            "--seed",
+            "7",
+            "--out",
+            dir.to_str().unwrap(),
+            "--json",
+        ],
+        None,
+    );
+    let (stdout, stderr) = text(&o);
+    assert_eq!(o.status.code(), Some(0), "{stdout}{stderr}");
+    let s: Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(
+        (s["sites_of_accepted"].as_u64(), s["truly_filled"].as_u64()),
+        (Some(4), Some(4)),
+        "{s}"
+    );
+    let csv = std::fs::read_to_string(dir.join("random-assemblies.csv")).unwrap();
+    assert!(csv.lines().nth(1).unwrap().starts_with("7,filled,11,4,3,4,4,"), "{csv}");
+}

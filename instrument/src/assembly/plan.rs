@@ -418,14 +418,21 @@ impl<'a> Planner<'a> {
 
     /// One move of the plan; false when none can be made.
     fn step(&mut self) -> bool {
-        // The fills whose sites are free, most central first.
+        // The fills whose sites are free: those whose particle is still inside the pattern's
+        // circle first (filled later, they can be walled in by the sites around them), then the
+        // most central.
         let mut order: Vec<usize> = (0..self.pending.len()).collect();
+        let inside = |i: usize| {
+            let k = self.pending[i].0;
+            let (x, y) = self.at[k];
+            (x - self.centre.0).hypot(y - self.centre.1) < self.keep_out
+        };
         order.sort_by(|&a, &b| {
             let d = |i: usize| {
                 let s = self.pattern.sites[self.pending[i].1];
                 (s.x - self.centre.0).hypot(s.y - self.centre.1)
             };
-            d(a).total_cmp(&d(b))
+            inside(b).cmp(&inside(a)).then(d(a).total_cmp(&d(b)))
         });
         let mut blocked_by: Vec<usize> = Vec::new();
         for &i in &order {
