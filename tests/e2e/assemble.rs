@@ -189,30 +189,24 @@ fn bad_arguments_name_what_is_wrong_and_the_allowed_range() {
     assert!(text(&o).1.contains("--pattern"), "{}", text(&o).1);
 }
 
+/// `nanopush assemble ARGS --out DIR --json` for random cases: its directory and its JSON report,
+/// the run having exited 0.
+fn random_cases(tag: &str, args: &[&str]) -> (std::path::PathBuf, Value) {
+    let dir = tmp(tag);
+    let mut all = vec!["assemble"];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--out", dir.to_str().unwrap(), "--json"]);
+    let o = run("nanopush", &all, None);
+    let (stdout, stderr) = text(&o);
+    assert_eq!(o.status.code(), Some(0), "{stdout}{stderr}");
+    (dir, serde_json::from_str(&stdout).unwrap())
+}
+
 /// Two random cases nobody tuned, checked against the truth: seed 13 (a ring of 3 sites, 4
 /// particles, 3 of them inside it) and seed 15 (a 2 × 2 grid, 7 particles), picked by the shard.
 #[test]
 fn random_cases_are_assembled_and_checked_against_the_truth() {
-    let dir = tmp("assemble-random");
-    let o = run(
-        "nanopush",
-        &[
-            "assemble",
-            "--random",
-            "3",
-            "--seed",
-            "13",
-            "--shard",
-            "0/2",
-            "--out",
-            dir.to_str().unwrap(),
-            "--json",
-        ],
-        None,
-    );
-    let (stdout, stderr) = text(&o);
-    assert_eq!(o.status.code(), Some(0), "{stdout}{stderr}");
-    let s: Value = serde_json::from_str(&stdout).unwrap();
+    let (dir, s) = random_cases("assemble-random", &["--random", "3", "--seed", "13", "--shard", "0/2"]);
     assert_eq!(s["cases"], 2);
     assert_eq!(s["unsound"], 0);
     assert_eq!(s["falsely_filled"], 0);
@@ -230,24 +224,7 @@ fn random_cases_are_assembled_and_checked_against_the_truth() {
 /// first, one of them was walled in by the sites around it (unreachable); those inside go first.
 #[test]
 fn particles_inside_the_pattern_are_not_walled_in() {
-    let dir = tmp("assemble-inside");
-    let o = run(
-        "nanopush",
-        &[
-            "assemble",
-            "--random",
-            "1",
-            "--seed",
-            "7",
-            "--out",
-            dir.to_str().unwrap(),
-            "--json",
-        ],
-        None,
-    );
-    let (stdout, stderr) = text(&o);
-    assert_eq!(o.status.code(), Some(0), "{stdout}{stderr}");
-    let s: Value = serde_json::from_str(&stdout).unwrap();
+    let (dir, s) = random_cases("assemble-inside", &["--random", "1", "--seed", "7"]);
     assert_eq!(
         (s["sites_of_accepted"].as_u64(), s["truly_filled"].as_u64()),
         (Some(4), Some(4)),
