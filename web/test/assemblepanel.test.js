@@ -7,7 +7,7 @@ import { Pattern } from '../src/pattern.js';
 import { assembleWhy } from '../src/assemblepanel.js';
 import { planned } from './fixtures/assembly.js';
 
-test('Plan and Assemble need the lease, nothing running and a site; each reason in words', () => {
+test('Plan and Assemble need the lease, an idle instrument and a site, said in words', () => {
   const s = new Session();
   const p = new Pattern(100);
   assert.equal(assembleWhy(s.state, p), 'Not connected to the server');

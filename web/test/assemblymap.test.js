@@ -7,7 +7,7 @@ import { Pattern } from '../src/pattern.js';
 import { patternView, assemblyView, siteTitle } from '../src/assemblymap.js';
 import { planned, PLAN } from './fixtures/assembly.js';
 
-test('the pattern being drawn: its sites in metres with its tolerance, the selected one marked', () => {
+test('the pattern being drawn: sites in metres, its tolerance, the selected one marked', () => {
   const p = new Pattern(100);
   p.add(10, 20);
   const b = p.add(30, 40);

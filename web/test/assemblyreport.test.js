@@ -47,7 +47,7 @@ test('each outcome in words and colour, the reason without "stopped: " twice', (
   }
 });
 
-test('the report: per site its state, its measured error in nm (and the true one), the reason', () => {
+test('the report: per site its state, error in nm and reason', () => {
   const rows = reportRows({
     sites: [
       { target: [40e-6, 40e-6], tolerance: 25e-9, particle: 3, measured: [40e-6 + 12e-9, 40e-6], error: 14e-9, status: 'filled', reason: null },

@@ -45,7 +45,7 @@ test('a preset that would leave the stage, or overfill the pattern, adds nothing
   assert.throws(() => p.drop('line', { n: 0, spacing_um: 1 }, [50, 50]), /line sites: 0 is out of range; allowed: a whole number in \[2, 400\]/);
 });
 
-test('delete takes a site out and selects the next; a preset short of a site is no longer named by it', () => {
+test('delete removes a site, selects the next, and unnames a short preset', () => {
   const p = new Pattern(100);
   const ring = p.drop('ring', { n: 3, radius_um: 5 }, [50, 50]);
   assert.equal(p.name(), 'ring:n=3,radius_um=5');

@@ -25,7 +25,7 @@ test('a click on an empty spot adds a site; off the stage it is refused in words
   assert.equal(p.sites.length, 1);
 });
 
-test('a site dragged stays under the pointer where it was grabbed; a preset moves whole', () => {
+test('a dragged site stays under the pointer; a preset moves whole', () => {
   const { p, ed, said } = setup();
   const ring = p.drop('ring', { n: 4, radius_um: 5 }, [50, 50]);
   assert.equal(ed.down(55.3, 50.2, 1), true, 'grabbed 0.3 µm right of site 1');
@@ -50,7 +50,7 @@ test('a press and release on a site without moving selects it and adds nothing',
   assert.equal(said.at(-1), 'site 1 selected, at (20.00, 20.00) µm');
 });
 
-test('by keyboard: Enter adds or selects at the cursor, m moves the selected site there, Delete removes it', () => {
+test('by keyboard: Enter adds or selects, m moves, Delete removes', () => {
   const { p, ed, said } = setup();
   assert.equal(ed.key('Enter', [10, 10], 0.5), true);
   assert.equal(ed.key(' ', [20, 10], 0.5), true);
