@@ -20,6 +20,7 @@ pub mod accuracy;
 pub mod assembly;
 pub mod haptic;
 pub mod model;
+pub mod nanonis;
 pub mod push;
 pub mod scan;
 pub mod simulate;

@@ -1,7 +1,12 @@
-//! The simulated instrument (stage, cantilever, substrate, particles) behind the controller.
+//! The simulated instrument (stage, cantilever, substrate, particles) behind the controller, and
+//! the instrument interface ([`Microscope`]) it shares with a real controller.
 
+mod microscope;
+mod sim_microscope;
 mod simulated;
 
+pub use microscope::{Capabilities, Limits, Microscope, MicroscopeError, Sample, ScanFrame};
+pub use sim_microscope::SimulatedMicroscope;
 pub use simulated::{Afm, AfmError, Particle, RELEASE_GAP, Reading, Truth, Unphysical};
 
 use crate::scan::{Sphere, Surface};

@@ -235,6 +235,11 @@ impl Afm {
         &self.topography
     }
 
+    /// The stage's travel: `[0, range]` in x and y (m).
+    pub fn range(&self) -> f64 {
+        self.range
+    }
+
     /// The tick (s).
     pub fn tick(&self) -> f64 {
         self.tick
