@@ -5,17 +5,21 @@
 //! - [`route`]: the legs of a path of straight pushes around the other particles;
 //! - [`moves`]: a whole move (locate, route, push, judge by the scan after);
 //! - [`derive`](mod@derive): the strategy's settings derived from the scene's model, and its dry run;
-//! - [`bilateral`]: the haptic z-control law.
+//! - [`bilateral`]: the haptic z-control law;
+//! - [`held_push`](mod@held_push): a push on a controller that holds the force itself (a real
+//!   microscope's Z feedback), through the instrument interface.
 
 pub mod bilateral;
 pub mod derive;
 pub mod estimator;
+pub mod held_push;
 pub mod moves;
 pub mod route;
 pub mod strategy;
 
 pub use bilateral::{Bilateral, BilateralParams};
 pub use estimator::{Hxy, PeakDetector, PushPrediction, RetractPlan, predict};
+pub use held_push::{HeldError, HeldOutcome, HeldPhase, HeldPush, HeldReport, held_push};
 pub use moves::{
     DEFAULT_ATTEMPTS, MoveError, MoveOptions, MoveRoute, MoveRun, MoveRunError, MoveTarget, PushedLeg, Verdict,
 };

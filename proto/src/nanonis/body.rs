@@ -104,7 +104,8 @@ impl<'a> BodyReader<'a> {
         Ok(bytes.try_into().expect("took N bytes"))
     }
 
-    fn bytes(&mut self, field: &'static str, n: usize) -> Result<&'a [u8], FrameError> {
+    /// `n` raw bytes.
+    pub fn bytes(&mut self, field: &'static str, n: usize) -> Result<&'a [u8], FrameError> {
         if self.remaining() < n {
             return Err(FrameError::Short {
                 field,

@@ -6,8 +6,9 @@ use super::{BodyReader, BodyWriter, FrameError};
 
 /// Bytes of a logger frame's header.
 pub const LOGGER_HEADER_LEN: usize = 4 + 4 + 8 + 2;
-/// The most channels a frame may carry (the logger records at most 24 signals).
-pub const MAX_LOGGER_CHANNELS: usize = 24;
+/// The most channels a frame may carry (the controller has 128 signals; more means the stream is
+/// out of step).
+pub const MAX_LOGGER_CHANNELS: usize = 128;
 
 /// One frame of the logger stream.
 #[derive(Debug, Clone, PartialEq)]

@@ -1,0 +1,401 @@
+//! A push on a controller that holds the normal force itself (its own Z feedback): the
+//! strategy's phases of Sec 2.1 with the force loop left where it runs fastest.
+//!
+//! 1. **Withdraw**: the tip away from the surface before any travel.
+//! 2. **Travel** to the approach point, `approach_gap` behind the particle's edge on the line of
+//!    the push, at the travel speed.
+//! 3. **Land**: the controller's Z feedback brings the tip onto the substrate and holds the normal
+//!    deflection at the set point; landed when `settle_samples` readings in a row lie within
+//!    `land_tolerance` of it.
+//! 4. **Push** along the line at the push speed, the tip's centre ending `R + r_tip` behind the
+//!    target so that the particle's centre ends on it. The lateral deflection over its value at
+//!    landing marks the contact (`lateral_contact`); after a contact, three readings in a row
+//!    below half of it mean the particle was lost (the tip passed it), and the push stops. A
+//!    normal deflection more than `normal_limit` from the set point stops it too (the tip climbing
+//!    the particle, or a crash).
+//! 5. **Retract**: withdraw — after the push, and after any error or stop on the way.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use crate::afm::{Microscope, MicroscopeError, Sample};
+
+/// What a held push is asked to do (SI; deflections in V).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeldPush {
+    /// The particle's centre where it was located (m).
+    pub from: [f64; 2],
+    /// Where its centre should end (m).
+    pub to: [f64; 2],
+    /// Its radius (m).
+    pub radius: f64,
+    /// The tip's radius (m).
+    pub tip_radius: f64,
+    /// Gap between the tip and the particle's edge where the tip lands (m).
+    pub approach_gap: f64,
+    /// Speed of travel with the tip withdrawn (m/s).
+    pub travel_speed: f64,
+    /// Speed of the push (m/s).
+    pub push_speed: f64,
+    /// Normal deflection the controller holds (V).
+    pub setpoint: f64,
+    /// Landed when within this of the set point (V).
+    pub land_tolerance: f64,
+    /// Readings in a row within the tolerance to call it landed.
+    pub settle_samples: u32,
+    /// A lateral deflection this far over its landing value is a contact (V).
+    pub lateral_contact: f64,
+    /// The push stops when the normal deflection leaves the set point by more than this (V).
+    pub normal_limit: f64,
+    /// Longest wait for a phase, in readings of the backend (at its feed rate).
+    pub max_samples: u64,
+}
+
+/// The phases, in order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HeldPhase {
+    /// The tip taken away from the surface.
+    Withdraw,
+    /// Travel to the approach point.
+    Travel,
+    /// The controller's feedback lands the tip.
+    Land,
+    /// The push.
+    Push,
+    /// The tip withdrawn at the end.
+    Retract,
+}
+
+impl HeldPhase {
+    /// Its name in reports.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            HeldPhase::Withdraw => "withdraw",
+            HeldPhase::Travel => "travel",
+            HeldPhase::Land => "land",
+            HeldPhase::Push => "push",
+            HeldPhase::Retract => "retract",
+        }
+    }
+}
+
+/// How the push phase ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HeldOutcome {
+    /// The tip reached the end of the push with the particle in contact (or, without a lateral
+    /// signal, reached it unwatched).
+    Pushed,
+    /// The contact was seen, then lost: the particle stayed behind or slipped aside.
+    Lost,
+    /// The tip reached the end without ever touching the particle.
+    NoContact,
+    /// The operator stopped it.
+    Stopped,
+}
+
+impl HeldOutcome {
+    /// Its name in reports.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            HeldOutcome::Pushed => "pushed",
+            HeldOutcome::Lost => "lost",
+            HeldOutcome::NoContact => "no_contact",
+            HeldOutcome::Stopped => "stopped",
+        }
+    }
+}
+
+/// What a held push did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HeldReport {
+    /// Phases entered, in order, with the backend's time at their start (s).
+    pub phases: Vec<(HeldPhase, f64)>,
+    /// How the push phase ended.
+    pub outcome: HeldOutcome,
+    /// Where the tip met the particle (m).
+    pub contact_at: Option<[f64; 2]>,
+    /// Where the contact was lost (m).
+    pub lost_at: Option<[f64; 2]>,
+    /// Every reading of the push phase.
+    pub samples: Vec<Sample>,
+    /// Whether the backend reports a lateral deflection (contact watched).
+    pub watched: bool,
+}
+
+/// Why a held push ended early.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum HeldError {
+    /// A setting out of range.
+    #[error("{0}")]
+    Setting(String),
+    /// The backend cannot hold the force itself.
+    #[error("{0} does not hold the force with its own Z feedback; push with the strategy instead")]
+    NoLocalZ(String),
+    /// The backend failed during a phase; the tip was then withdrawn (or the message says it could
+    /// not be).
+    #[error("{phase}: {source}; {withdrawn}")]
+    Backend {
+        /// The phase.
+        phase: &'static str,
+        /// What failed.
+        source: MicroscopeError,
+        /// What became of the tip.
+        withdrawn: String,
+    },
+    /// A safety limit tripped; the tip was withdrawn.
+    #[error("{phase}: {what}; {withdrawn}")]
+    Safety {
+        /// The phase.
+        phase: &'static str,
+        /// What tripped.
+        what: String,
+        /// What became of the tip.
+        withdrawn: String,
+    },
+}
+
+impl HeldPush {
+    fn check(&self) -> Result<(), HeldError> {
+        let pos = |name: &str, v: f64| -> Result<(), HeldError> {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(HeldError::Setting(format!("{name} = {v} must be finite and > 0")))
+            }
+        };
+        pos("radius", self.radius)?;
+        pos("tip radius", self.tip_radius)?;
+        pos("approach gap", self.approach_gap)?;
+        pos("travel speed", self.travel_speed)?;
+        pos("push speed", self.push_speed)?;
+        pos("land tolerance", self.land_tolerance)?;
+        pos("lateral contact", self.lateral_contact)?;
+        pos("normal limit", self.normal_limit)?;
+        if !(self.from.iter().chain(&self.to).all(|v| v.is_finite()) && self.setpoint.is_finite()) {
+            return Err(HeldError::Setting(
+                "the particle, the target and the set point must be finite".into(),
+            ));
+        }
+        let d = (self.to[0] - self.from[0]).hypot(self.to[1] - self.from[1]);
+        if d < 1e-10 {
+            return Err(HeldError::Setting(format!(
+                "the target is {:.3} nm from the particle: nothing to push",
+                d * 1e9
+            )));
+        }
+        Ok(())
+    }
+
+    /// Unit vector of the push.
+    fn direction(&self) -> [f64; 2] {
+        let (dx, dy) = (self.to[0] - self.from[0], self.to[1] - self.from[1]);
+        let d = dx.hypot(dy);
+        [dx / d, dy / d]
+    }
+
+    /// Where the tip lands: behind the particle on the line of the push (m).
+    pub fn approach_point(&self) -> [f64; 2] {
+        let u = self.direction();
+        let back = self.radius + self.tip_radius + self.approach_gap;
+        [self.from[0] - u[0] * back, self.from[1] - u[1] * back]
+    }
+
+    /// Where the tip's centre ends (m).
+    pub fn end_point(&self) -> [f64; 2] {
+        let u = self.direction();
+        let back = self.radius + self.tip_radius;
+        [self.to[0] - u[0] * back, self.to[1] - u[1] * back]
+    }
+}
+
+/// Runs a held push on `m`; `stop` ends the push early (the tip is withdrawn).
+pub fn held_push(m: &mut dyn Microscope, p: &HeldPush, stop: &AtomicBool) -> Result<HeldReport, HeldError> {
+    p.check()?;
+    let caps = m.capabilities();
+    if !caps.z_closed_locally {
+        return Err(HeldError::NoLocalZ(caps.backend));
+    }
+    let mut report = HeldReport {
+        phases: Vec::new(),
+        outcome: HeldOutcome::Pushed,
+        contact_at: None,
+        lost_at: None,
+        samples: Vec::new(),
+        watched: false,
+    };
+    let result = phases(m, p, stop, &mut report);
+    let t = report.samples.last().map_or(0.0, |s| s.t);
+    report.phases.push((HeldPhase::Retract, t));
+    let retract = m.withdraw();
+    match (result, retract) {
+        (Ok(()), Ok(())) => Ok(report),
+        (Ok(()), Err(e)) => Err(HeldError::Backend {
+            phase: "retract",
+            source: e,
+            withdrawn: "the tip may still be on the surface: withdraw it at the controller".into(),
+        }),
+        (Err(e), retract) => Err(with_retract(e, retract)),
+    }
+}
+
+fn with_retract(e: HeldError, retract: Result<(), MicroscopeError>) -> HeldError {
+    let withdrawn = match retract {
+        Ok(()) => "the tip was withdrawn".to_string(),
+        Err(r) => format!("the tip could not be withdrawn ({r}): withdraw it at the controller"),
+    };
+    match e {
+        HeldError::Backend { phase, source, .. } => HeldError::Backend {
+            phase,
+            source,
+            withdrawn,
+        },
+        HeldError::Safety { phase, what, .. } => HeldError::Safety { phase, what, withdrawn },
+        other => other,
+    }
+}
+
+fn backend(phase: HeldPhase) -> impl Fn(MicroscopeError) -> HeldError {
+    move |source| HeldError::Backend {
+        phase: phase.as_str(),
+        source,
+        withdrawn: String::new(),
+    }
+}
+
+fn phases(m: &mut dyn Microscope, p: &HeldPush, stop: &AtomicBool, r: &mut HeldReport) -> Result<(), HeldError> {
+    // 1. Withdraw.
+    r.phases.push((HeldPhase::Withdraw, 0.0));
+    m.withdraw().map_err(backend(HeldPhase::Withdraw))?;
+
+    // 2. Travel.
+    let a = p.approach_point();
+    let (s, _) = m.poll().map_err(backend(HeldPhase::Travel))?;
+    r.phases.push((HeldPhase::Travel, s.t));
+    m.start_move(a[0], a[1], p.travel_speed)
+        .map_err(backend(HeldPhase::Travel))?;
+    follow(m, p, stop, HeldPhase::Travel, |_| Ok(false))?;
+    if stop.load(Ordering::Relaxed) {
+        r.outcome = HeldOutcome::Stopped;
+        return Ok(());
+    }
+
+    // 3. Land.
+    let (s, _) = m.poll().map_err(backend(HeldPhase::Land))?;
+    r.phases.push((HeldPhase::Land, s.t));
+    m.hold_force(p.setpoint).map_err(backend(HeldPhase::Land))?;
+    let mut settled = 0;
+    let mut landed: Option<Sample> = None;
+    for _ in 0..p.max_samples {
+        if stop.load(Ordering::Relaxed) {
+            r.outcome = HeldOutcome::Stopped;
+            return Ok(());
+        }
+        let (s, _) = m.poll().map_err(backend(HeldPhase::Land))?;
+        settled = if (s.normal - p.setpoint).abs() <= p.land_tolerance {
+            settled + 1
+        } else {
+            0
+        };
+        if settled >= p.settle_samples {
+            landed = Some(s);
+            break;
+        }
+    }
+    let Some(landed) = landed else {
+        return Err(HeldError::Safety {
+            phase: "land",
+            what: format!(
+                "the normal deflection did not settle within {} V of the set point {} V in {} readings",
+                p.land_tolerance, p.setpoint, p.max_samples
+            ),
+            withdrawn: String::new(),
+        });
+    };
+
+    // 4. Push.
+    r.phases.push((HeldPhase::Push, landed.t));
+    r.watched = landed.lateral.is_some();
+    let baseline = landed.lateral.unwrap_or(0.0);
+    let e = p.end_point();
+    m.start_move(e[0], e[1], p.push_speed)
+        .map_err(backend(HeldPhase::Push))?;
+    let mut below = 0;
+    let mut samples = Vec::new();
+    let outcome = {
+        let contact_at = &mut r.contact_at;
+        let lost_at = &mut r.lost_at;
+        follow(m, p, stop, HeldPhase::Push, |s| {
+            samples.push(*s);
+            if (s.normal - p.setpoint).abs() > p.normal_limit {
+                return Err(HeldError::Safety {
+                    phase: "push",
+                    what: format!(
+                        "the normal deflection {:.4} V left the set point {} V by more than {} V at ({:.4}, {:.4}) µm",
+                        s.normal,
+                        p.setpoint,
+                        p.normal_limit,
+                        s.tip[0] * 1e6,
+                        s.tip[1] * 1e6
+                    ),
+                    withdrawn: String::new(),
+                });
+            }
+            let Some(lat) = s.lateral else { return Ok(false) };
+            let over = lat - baseline;
+            if contact_at.is_none() {
+                if over > p.lateral_contact {
+                    *contact_at = Some([s.tip[0], s.tip[1]]);
+                }
+                return Ok(false);
+            }
+            below = if over < 0.5 * p.lateral_contact { below + 1 } else { 0 };
+            if below >= 3 {
+                *lost_at = Some([s.tip[0], s.tip[1]]);
+                return Ok(true);
+            }
+            Ok(false)
+        })
+    };
+    r.samples = samples;
+    let ended_early = outcome?;
+    r.outcome = if stop.load(Ordering::Relaxed) {
+        HeldOutcome::Stopped
+    } else if ended_early {
+        m.stop_move().map_err(backend(HeldPhase::Push))?;
+        HeldOutcome::Lost
+    } else if r.watched && r.contact_at.is_none() {
+        HeldOutcome::NoContact
+    } else {
+        HeldOutcome::Pushed
+    };
+    Ok(())
+}
+
+/// Polls until the motion arrives, `check` says to end (true), or `stop` is set; fails after
+/// `max_samples` readings.
+fn follow(
+    m: &mut dyn Microscope,
+    p: &HeldPush,
+    stop: &AtomicBool,
+    phase: HeldPhase,
+    mut check: impl FnMut(&Sample) -> Result<bool, HeldError>,
+) -> Result<bool, HeldError> {
+    for _ in 0..p.max_samples {
+        if stop.load(Ordering::Relaxed) {
+            m.stop_move().map_err(backend(phase))?;
+            return Ok(true);
+        }
+        let (s, arrived) = m.poll().map_err(backend(phase))?;
+        if check(&s)? {
+            return Ok(true);
+        }
+        if arrived {
+            return Ok(false);
+        }
+    }
+    m.stop_move().map_err(backend(phase))?;
+    Err(HeldError::Safety {
+        phase: phase.as_str(),
+        what: format!("the motion did not arrive within {} readings", p.max_samples),
+        withdrawn: String::new(),
+    })
+}

@@ -1,0 +1,582 @@
+//! A Nanonis controller as a [`Microscope`]: XY through Follow Me, the normal force held by the
+//! controller's own Z feedback, signals from the TCP Logger stream (or polled reads when there is
+//! no logger port), images from its scan engine.
+//!
+//! Safety, as this backend keeps it:
+//! - Every call has a time-out; a slow controller shows as an error naming the command.
+//! - Moves and frames are checked against the limits before anything is sent: the controller's
+//!   Z range (`ZCtrl.LimitsGet`), XY inside the scan frame the controller had when nanopush
+//!   connected (the region the operator has imaged), and the user's own speed limit.
+//! - When the connection fails during a move or a scan it is reopened (a bounded number of
+//!   tries); the first command on the new connection is `ZCtrl.Withdraw`, and the move or scan
+//!   then ends with the error.
+//! - Read-only: nothing that moves the tip or changes Z is sent — no Follow Me, no Z controller
+//!   command, no scan start or frame change; a scan grabs the frame the controller last recorded.
+
+use std::net::SocketAddr;
+use std::time::{Duration, Instant};
+
+use nanopush_instrument::afm::{Capabilities, Limits, Microscope, MicroscopeError, Sample, ScanFrame};
+use nanopush_instrument::scan::HeightImage;
+
+use crate::client::Connection;
+use crate::commands::{self as cmd, Buffer, Frame};
+use crate::logger::LoggerStream;
+
+/// How nanopush talks to the controller.
+#[derive(Debug, Clone)]
+pub struct NanonisOptions {
+    /// The command port (`HOST:PORT`).
+    pub addr: SocketAddr,
+    /// The TCP Logger's stream port, when the logger is used.
+    pub logger_port: Option<u16>,
+    /// Time-out of every call.
+    pub timeout: Duration,
+    /// Send nothing that moves the tip or changes Z.
+    pub read_only: bool,
+    /// The signal that reads the normal deflection (a name or its start, e.g. `Normal deflection`).
+    pub deflection_signal: String,
+    /// The signal that reads the lateral deflection, if any.
+    pub lateral_signal: Option<String>,
+    /// The signal the scan engine records the height in.
+    pub height_signal: String,
+    /// The fastest XY speed nanopush asks for (m/s).
+    pub max_speed: f64,
+    /// Reopen a lost connection this many times before giving up.
+    pub reconnect_tries: u32,
+    /// The longest a scan may take (s).
+    pub scan_timeout: Duration,
+    /// The acquisition period polled reads are averaged over (s).
+    pub acquisition_period: f64,
+}
+
+impl NanonisOptions {
+    /// Defaults for a controller at `addr`.
+    pub fn new(addr: SocketAddr) -> NanonisOptions {
+        NanonisOptions {
+            addr,
+            logger_port: None,
+            timeout: Duration::from_secs(5),
+            read_only: false,
+            deflection_signal: "Normal deflection".into(),
+            lateral_signal: Some("Lateral deflection".into()),
+            height_signal: "Z".into(),
+            max_speed: 20e-6,
+            reconnect_tries: 3,
+            scan_timeout: Duration::from_secs(600),
+            acquisition_period: 0.02,
+        }
+    }
+}
+
+/// Signal indexes nanopush reads.
+#[derive(Debug, Clone, Copy)]
+struct Indexes {
+    x: Option<usize>,
+    y: Option<usize>,
+    z: usize,
+    normal: usize,
+    lateral: Option<usize>,
+}
+
+/// A Nanonis controller behind the instrument interface.
+#[derive(Debug)]
+pub struct NanonisMicroscope {
+    opts: NanonisOptions,
+    conn: Option<Connection>,
+    names: Vec<String>,
+    idx: Indexes,
+    limits: Limits,
+    logger: Option<LoggerStream>,
+    /// Logger frames seen so far; the logger's columns: x, y, z, normal, lateral.
+    seen: u64,
+    columns: Vec<usize>,
+    target: Option<[f64; 2]>,
+    feed_rate_hz: f64,
+    started: Instant,
+    /// Commands sent, in order (for the report and the tests).
+    pub sent: Vec<String>,
+}
+
+/// Finds the signal whose name is `want` or starts with it (case-insensitive).
+pub fn find_signal(names: &[String], want: &str) -> Result<usize, String> {
+    let w = want.trim().to_lowercase();
+    if let Some(i) = names.iter().position(|n| n.to_lowercase() == w) {
+        return Ok(i);
+    }
+    let hits: Vec<usize> = (0..names.len())
+        .filter(|&i| names[i].to_lowercase().starts_with(&w))
+        .collect();
+    match hits.as_slice() {
+        [i] => Ok(*i),
+        [] => Err(format!(
+            "no signal named {want:?}; the controller has: {}",
+            names
+                .iter()
+                .filter(|n| !n.is_empty())
+                .cloned()
+                .collect::<Vec<_>>()
+                .join(", ")
+        )),
+        many => Err(format!(
+            "{want:?} names several signals: {}; give the whole name",
+            many.iter().map(|&i| names[i].clone()).collect::<Vec<_>>().join(", ")
+        )),
+    }
+}
+
+fn setup(command: &str, message: String) -> MicroscopeError {
+    MicroscopeError::Controller {
+        command: command.into(),
+        message,
+    }
+}
+
+impl NanonisMicroscope {
+    /// Connects, reads the signal names, the limits and the scan frame, and starts the logger.
+    pub fn connect(opts: NanonisOptions) -> Result<NanonisMicroscope, MicroscopeError> {
+        let mut conn = Connection::open(opts.addr, opts.timeout)?;
+        let names = cmd::signal_names(&mut conn)?;
+        let find = |want: &str| find_signal(&names, want).map_err(|m| setup("Signals.NamesGet", m));
+        let idx = Indexes {
+            x: find("X").ok(),
+            y: find("Y").ok(),
+            z: find(&opts.height_signal)?,
+            normal: find(&opts.deflection_signal)?,
+            lateral: match &opts.lateral_signal {
+                Some(l) => Some(find(l)?),
+                None => None,
+            },
+        };
+        let z = cmd::z_limits(&mut conn)?;
+        let frame = cmd::frame_get(&mut conn)?;
+        let limits = Limits {
+            x: [frame.centre_x - 0.5 * frame.width, frame.centre_x + 0.5 * frame.width],
+            y: [frame.centre_y - 0.5 * frame.height, frame.centre_y + 0.5 * frame.height],
+            z,
+            max_speed: opts.max_speed,
+        };
+        let mut m = NanonisMicroscope {
+            opts,
+            conn: Some(conn),
+            names,
+            idx,
+            limits,
+            logger: None,
+            seen: 0,
+            columns: Vec::new(),
+            target: None,
+            feed_rate_hz: 0.0,
+            started: Instant::now(),
+            sent: Vec::new(),
+        };
+        m.sent
+            .extend(["Signals.NamesGet", "ZCtrl.LimitsGet", "Scan.FrameGet"].map(String::from));
+        m.feed_rate_hz = 1.0 / m.opts.acquisition_period;
+        if let Some(port) = m.opts.logger_port {
+            m.start_logger(port)?;
+        } else if !m.opts.read_only {
+            let period = m.opts.acquisition_period;
+            m.call("Util.AcqPeriodSet", |c| cmd::acq_period_set(c, period))?;
+        }
+        Ok(m)
+    }
+
+    fn start_logger(&mut self, port: u16) -> Result<(), MicroscopeError> {
+        let mut cols = vec![self.idx.z, self.idx.normal];
+        cols.extend(self.idx.x);
+        cols.extend(self.idx.y);
+        cols.extend(self.idx.lateral);
+        self.columns = cols.clone();
+        self.call("TCPLog.ChsSet", |c| cmd::log_channels_set(c, &cols))?;
+        self.call("TCPLog.Start", cmd::log_start)?;
+        let addr = SocketAddr::new(self.opts.addr.ip(), port);
+        let logger = LoggerStream::open(addr, self.opts.timeout).map_err(|m| MicroscopeError::Link {
+            command: "TCP Logger stream".into(),
+            message: m,
+        })?;
+        // The rate the stream really gives: frames over a short window.
+        let start = Instant::now();
+        let mut seen = 0;
+        while start.elapsed() < Duration::from_millis(300) {
+            let (_, n) = logger
+                .next_after(seen, self.opts.timeout)
+                .map_err(|m| MicroscopeError::Link {
+                    command: "TCP Logger stream".into(),
+                    message: m,
+                })?;
+            seen = n;
+        }
+        self.feed_rate_hz = logger.rate_hz().unwrap_or(1.0 / self.opts.acquisition_period);
+        self.seen = seen;
+        self.logger = Some(logger);
+        Ok(())
+    }
+
+    /// The signal names the controller reported.
+    pub fn signal_names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// One call on the connection, reopening it first when it was lost.
+    fn call<T>(
+        &mut self,
+        name: &str,
+        f: impl FnOnce(&mut Connection) -> Result<T, MicroscopeError>,
+    ) -> Result<T, MicroscopeError> {
+        self.sent.push(name.to_string());
+        if self.conn.is_none() {
+            self.conn = Some(Connection::open(self.opts.addr, self.opts.timeout)?);
+        }
+        let conn = self.conn.as_mut().expect("opened above");
+        let result = f(conn);
+        if matches!(
+            result,
+            Err(MicroscopeError::Link { .. }) | Err(MicroscopeError::Controller { .. })
+        ) {
+            // A failed or mismatched reply leaves the connection's framing unknown.
+            self.conn = None;
+        }
+        result
+    }
+
+    fn refuse_if_read_only(&self, what: &str) -> Result<(), MicroscopeError> {
+        if self.opts.read_only {
+            return Err(MicroscopeError::ReadOnly { what: what.into() });
+        }
+        Ok(())
+    }
+
+    /// After an error during a move or a scan: reopen the link (a few tries) and withdraw on it
+    /// before anything else, then return the error with what was done.
+    pub fn recover(&mut self, error: MicroscopeError) -> MicroscopeError {
+        self.target = None;
+        if self.opts.read_only {
+            return error;
+        }
+        let mut last = String::new();
+        for attempt in 0..self.opts.reconnect_tries.max(1) {
+            if attempt > 0 {
+                std::thread::sleep(Duration::from_millis(200 * u64::from(attempt)));
+            }
+            self.conn = None;
+            match self.withdraw() {
+                Ok(()) => {
+                    return annotate(error, "the tip was withdrawn");
+                }
+                Err(e) => last = e.to_string(),
+            }
+        }
+        annotate(
+            error,
+            &format!(
+                "the tip could NOT be withdrawn after {} tries ({last}): withdraw it at the controller",
+                self.opts.reconnect_tries.max(1)
+            ),
+        )
+    }
+
+    fn check_xy(&self, what: &str, x: f64, y: f64) -> Result<(), MicroscopeError> {
+        let l = &self.limits;
+        if !(x.is_finite() && y.is_finite() && l.contains_xy(x, y)) {
+            return Err(MicroscopeError::OutOfLimits {
+                what: format!("{what} ({:.4}, {:.4}) µm", x * 1e6, y * 1e6),
+                allowed: format!(
+                    "x in [{:.4}, {:.4}] µm, y in [{:.4}, {:.4}] µm (the controller's scan frame)",
+                    l.x[0] * 1e6,
+                    l.x[1] * 1e6,
+                    l.y[0] * 1e6,
+                    l.y[1] * 1e6
+                ),
+            });
+        }
+        Ok(())
+    }
+
+    fn polled_sample(&mut self) -> Result<Sample, MicroscopeError> {
+        let mut want = vec![self.idx.z, self.idx.normal];
+        want.extend(self.idx.lateral);
+        let (x, y) = self.call("FolMe.XYPosGet", cmd::xy_pos_get)?;
+        let v = self.call("Signals.ValsGet", |c| cmd::signal_values(c, &want))?;
+        std::thread::sleep(Duration::from_secs_f64(self.opts.acquisition_period));
+        Ok(Sample {
+            t: self.started.elapsed().as_secs_f64(),
+            tip: [x, y, v[0]],
+            normal: v[1],
+            lateral: v.get(2).copied(),
+        })
+    }
+
+    fn logged_sample(&mut self) -> Result<Sample, MicroscopeError> {
+        let logger = self.logger.as_ref().expect("logger running");
+        let wait = self.opts.timeout;
+        let (frame, n) = logger.next_after(self.seen, wait).map_err(|m| MicroscopeError::Link {
+            command: "TCP Logger stream".into(),
+            message: m,
+        })?;
+        self.seen = n;
+        let cols = self.columns.clone();
+        if frame.values.len() != cols.len() {
+            return Err(MicroscopeError::Controller {
+                command: "TCP Logger stream".into(),
+                message: format!(
+                    "{} values in a frame; {} channels were set",
+                    frame.values.len(),
+                    cols.len()
+                ),
+            });
+        }
+        let at = |i: usize| cols.iter().position(|&c| c == i).map(|k| f64::from(frame.values[k]));
+        let (x, y) = match (self.idx.x.and_then(at), self.idx.y.and_then(at)) {
+            (Some(x), Some(y)) => (x, y),
+            _ => self.call("FolMe.XYPosGet", cmd::xy_pos_get)?,
+        };
+        Ok(Sample {
+            t: self.started.elapsed().as_secs_f64(),
+            tip: [x, y, at(self.idx.z).unwrap_or(f64::NAN)],
+            normal: at(self.idx.normal).unwrap_or(f64::NAN),
+            lateral: self.idx.lateral.and_then(at),
+        })
+    }
+
+    fn frame_to_scan(f: &Frame, b: &Buffer) -> ScanFrame {
+        ScanFrame {
+            centre_x: f.centre_x,
+            centre_y: f.centre_y,
+            width: f.width,
+            height: f.height,
+            pixels: b.pixels,
+            lines: b.lines,
+        }
+    }
+
+    fn scan_inner(&mut self, frame: Option<&ScanFrame>) -> Result<HeightImage, MicroscopeError> {
+        let mut buffer = self.call("Scan.BufferGet", cmd::buffer_get)?;
+        let mut f = self.call("Scan.FrameGet", cmd::frame_get)?;
+        if let Some(want) = frame {
+            self.refuse_if_read_only("Scan.FrameSet")?;
+            f = Frame {
+                centre_x: want.centre_x,
+                centre_y: want.centre_y,
+                width: want.width,
+                height: want.height,
+                angle_deg: 0.0,
+            };
+            self.call("Scan.FrameSet", |c| cmd::frame_set(c, &f))?;
+            buffer.pixels = want.pixels;
+            buffer.lines = want.lines;
+        }
+        if f.angle_deg.abs() > 1e-6 {
+            return Err(MicroscopeError::Unsupported {
+                backend: "nanopush".into(),
+                what: format!(
+                    "image a frame rotated by {:.2}°: set the angle to 0 at the controller, or give a frame",
+                    f.angle_deg
+                ),
+            });
+        }
+        if !buffer.channels.contains(&(self.idx.z as i32)) {
+            self.refuse_if_read_only("Scan.BufferSet")?;
+            buffer.channels.push(self.idx.z as i32);
+        }
+        if frame.is_some() || !self.opts.read_only {
+            let b = buffer.clone();
+            self.call("Scan.BufferSet", |c| cmd::buffer_set(c, &b))?;
+        }
+        if !self.opts.read_only {
+            self.call("Scan.Action", |c| cmd::scan_action(c, 0, true))?;
+            let timeout = self.opts.scan_timeout;
+            let ended = self.call("Scan.WaitEndOfScan", |c| cmd::wait_end_of_scan(c, timeout))?;
+            if !ended {
+                let _ = self.call("Scan.Action", |c| cmd::scan_action(c, 1, true));
+                return Err(MicroscopeError::Link {
+                    command: "Scan.WaitEndOfScan".into(),
+                    message: format!(
+                        "the scan did not end within {:.0} s; it was stopped",
+                        timeout.as_secs_f64()
+                    ),
+                });
+            }
+        }
+        let z = self.idx.z;
+        let grab = self.call("Scan.FrameDataGrab", |c| cmd::frame_data_grab(c, z))?;
+        let sf = Self::frame_to_scan(&f, &buffer);
+        if grab.rows == 0 || grab.cols == 0 {
+            return Err(MicroscopeError::Controller {
+                command: "Scan.FrameDataGrab".into(),
+                message: format!(
+                    "an empty image of {} × {} (has the controller scanned yet?)",
+                    grab.cols, grab.rows
+                ),
+            });
+        }
+        if grab.data.iter().any(|v| !v.is_finite()) {
+            let missing = grab.data.iter().filter(|v| !v.is_finite()).count();
+            return Err(MicroscopeError::Controller {
+                command: "Scan.FrameDataGrab".into(),
+                message: format!(
+                    "{missing} of {} pixels are not numbers (an unfinished scan?)",
+                    grab.data.len()
+                ),
+            });
+        }
+        // Row 0 is the bottom line (lowest y) of a scan that went up; the image keeps rows in y.
+        let mut data: Vec<f64> = Vec::with_capacity(grab.data.len());
+        for row in 0..grab.rows {
+            let r = if grab.up { row } else { grab.rows - 1 - row };
+            data.extend(
+                grab.data[r * grab.cols..(r + 1) * grab.cols]
+                    .iter()
+                    .map(|&v| f64::from(v)),
+            );
+        }
+        Ok(HeightImage {
+            xres: grab.cols,
+            yres: grab.rows,
+            x_real: sf.width,
+            y_real: sf.height,
+            x_offset: sf.centre_x - 0.5 * sf.width,
+            y_offset: sf.centre_y - 0.5 * sf.height,
+            data,
+        })
+    }
+}
+
+fn annotate(error: MicroscopeError, note: &str) -> MicroscopeError {
+    match error {
+        MicroscopeError::Link { command, message } => MicroscopeError::Link {
+            command,
+            message: format!("{message}; {note}"),
+        },
+        MicroscopeError::Controller { command, message } => MicroscopeError::Controller {
+            command,
+            message: format!("{message}; {note}"),
+        },
+        other => MicroscopeError::Simulation(format!("{other}; {note}")),
+    }
+}
+
+impl Microscope for NanonisMicroscope {
+    fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            backend: format!("Nanonis {}", self.opts.addr),
+            feed_rate_hz: self.feed_rate_hz,
+            z_closed_locally: true,
+            scan_engine: true,
+            read_only: self.opts.read_only,
+        }
+    }
+
+    fn limits(&mut self) -> Result<Limits, MicroscopeError> {
+        Ok(self.limits)
+    }
+
+    fn start_move(&mut self, x: f64, y: f64, speed: f64) -> Result<(), MicroscopeError> {
+        self.refuse_if_read_only("FolMe.XYPosSet")?;
+        self.check_xy("move to", x, y)?;
+        if !(speed.is_finite() && speed > 0.0 && speed <= self.limits.max_speed * (1.0 + 1e-9)) {
+            return Err(MicroscopeError::OutOfLimits {
+                what: format!("speed {:.3} µm/s", speed * 1e6),
+                allowed: format!("(0, {:.3}] µm/s (--max-speed-um-per-s)", self.limits.max_speed * 1e6),
+            });
+        }
+        let result = self
+            .call("FolMe.SpeedSet", |c| cmd::speed_set(c, speed))
+            .and_then(|()| self.call("FolMe.XYPosSet", |c| cmd::xy_pos_set(c, x, y, false)));
+        match result {
+            Ok(()) => {
+                self.target = Some([x, y]);
+                Ok(())
+            }
+            Err(e) => Err(self.recover(e)),
+        }
+    }
+
+    fn stop_move(&mut self) -> Result<(), MicroscopeError> {
+        self.target = None;
+        if self.opts.read_only {
+            return Ok(());
+        }
+        self.call("FolMe.Stop", cmd::folme_stop)
+    }
+
+    fn poll(&mut self) -> Result<(Sample, bool), MicroscopeError> {
+        let sample = if self.logger.is_some() {
+            self.logged_sample()
+        } else {
+            self.polled_sample()
+        };
+        let sample = match sample {
+            Ok(s) => s,
+            Err(e) if self.target.is_some() => return Err(self.recover(e)),
+            Err(e) => return Err(e),
+        };
+        let arrived = match self.target {
+            None => true,
+            Some([x, y]) => {
+                let close = (sample.tip[0] - x).hypot(sample.tip[1] - y) <= 1e-10;
+                if close {
+                    self.target = None;
+                }
+                close
+            }
+        };
+        Ok((sample, arrived))
+    }
+
+    fn hold_force(&mut self, setpoint: f64) -> Result<(), MicroscopeError> {
+        self.refuse_if_read_only("ZCtrl.SetpntSet")?;
+        if !setpoint.is_finite() {
+            return Err(MicroscopeError::OutOfLimits {
+                what: format!("set point {setpoint} V"),
+                allowed: "a finite deflection (V)".into(),
+            });
+        }
+        let result = self
+            .call("ZCtrl.SetpntSet", |c| cmd::setpoint_set(c, setpoint))
+            .and_then(|()| self.call("ZCtrl.OnOffSet", |c| cmd::z_on_off_set(c, true)));
+        result.map_err(|e| self.recover(e))
+    }
+
+    fn scan(&mut self, frame: Option<&ScanFrame>) -> Result<HeightImage, MicroscopeError> {
+        if let Some(f) = frame {
+            self.check_xy("frame corner", f.centre_x - 0.5 * f.width, f.centre_y - 0.5 * f.height)?;
+            self.check_xy("frame corner", f.centre_x + 0.5 * f.width, f.centre_y + 0.5 * f.height)?;
+            if !(16..=crate::commands::MAX_PIXELS).contains(&f.pixels)
+                || !(1..=crate::commands::MAX_PIXELS).contains(&f.lines)
+            {
+                return Err(MicroscopeError::OutOfLimits {
+                    what: format!("{} × {} pixels", f.pixels, f.lines),
+                    allowed: format!("16-{} pixels per line, 1-{} lines", cmd::MAX_PIXELS, cmd::MAX_PIXELS),
+                });
+            }
+        }
+        match self.scan_inner(frame) {
+            Ok(img) => Ok(img),
+            Err(
+                e @ (MicroscopeError::ReadOnly { .. }
+                | MicroscopeError::OutOfLimits { .. }
+                | MicroscopeError::Unsupported { .. }),
+            ) => Err(e),
+            Err(e) if self.opts.read_only => Err(e),
+            Err(e) => {
+                // Stop the scan engine if the link still answers; the withdraw follows either way.
+                let _ = self.call("Scan.Action", |c| cmd::scan_action(c, 1, true));
+                Err(self.recover(e))
+            }
+        }
+    }
+
+    fn current_frame(&mut self) -> Result<ScanFrame, MicroscopeError> {
+        let f = self.call("Scan.FrameGet", cmd::frame_get)?;
+        let b = self.call("Scan.BufferGet", cmd::buffer_get)?;
+        Ok(Self::frame_to_scan(&f, &b))
+    }
+
+    fn withdraw(&mut self) -> Result<(), MicroscopeError> {
+        self.target = None;
+        self.refuse_if_read_only("ZCtrl.Withdraw")?;
+        let t = self.opts.timeout;
+        self.call("ZCtrl.Withdraw", |c| cmd::withdraw(c, t))
+    }
+}
