@@ -6,6 +6,7 @@ mod accuracy_cmd;
 mod assemble_cmd;
 mod campaign_cmd;
 mod extremes_cmd;
+mod instrument_cmd;
 mod model_cmd;
 mod plan_cmd;
 mod plot;

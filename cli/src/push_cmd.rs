@@ -66,10 +66,57 @@ pub struct PushArgs {
     /// Print one JSON object (SI units) instead of a summary.
     #[arg(long)]
     pub json: bool,
+    #[command(flatten)]
+    instrument: crate::instrument_cmd::InstrumentArgs,
+    #[command(flatten)]
+    held: crate::instrument_cmd::HeldPushArgs,
 }
 
 const UM: f64 = 1e-6;
 const TICK: f64 = 1e-3;
+
+/// Where a particle located at a point is to go (m).
+type Destination = dyn Fn((f64, f64)) -> (f64, f64);
+
+/// A push on a real controller: the target from `--to-um` or `--distance-um`/`--direction-deg`.
+fn run_held(a: &PushArgs, spec: &str) -> anyhow::Result<(String, bool)> {
+    if a.scene.is_some()
+        || a.particle.is_some()
+        || a.control.is_some()
+        || a.derive_all
+        || a.pause_at_um.is_some()
+        || a.json
+    {
+        bail!(
+            "--scene, --particle, --control, --derive-all, --pause-at-um and --json are for the simulated AFM; with --instrument give --at-um and the target"
+        );
+    }
+    let target: Box<Destination> = match (a.distance_um, &a.to_um) {
+        (Some(_), Some(_)) => bail!("give either --distance-um or --to-um, not both"),
+        (None, None) => bail!("give --distance-um D (with --direction-deg) or --to-um X_UM,Y_UM"),
+        (Some(d), None) => {
+            if !(d.is_finite() && d > 0.0 && d <= 100.0) {
+                bail!(
+                    "--distance-um {} is out of range; allowed: (0, 100] µm",
+                    crate::units::num(d)
+                );
+            }
+            if !(a.direction_deg.is_finite() && (-360.0..=360.0).contains(&a.direction_deg)) {
+                bail!(
+                    "--direction-deg {} is out of range; allowed: [-360, 360] degrees",
+                    crate::units::num(a.direction_deg)
+                );
+            }
+            let th = a.direction_deg.to_radians();
+            Box::new(move |(x, y)| (x + d * UM * th.cos(), y + d * UM * th.sin()))
+        }
+        (None, Some(s)) => {
+            let (x, y) = crate::units::parse_point_um("--to-um", s, "60,45")?;
+            Box::new(move |_| (x * UM, y * UM))
+        }
+    };
+    crate::instrument_cmd::push(&a.instrument, &a.held, spec, target, a.out.as_deref())
+}
 
 /// What the operator asked for, checked.
 struct Request {
@@ -202,6 +249,12 @@ pub const EXIT_FAILED_PUSH: u8 = 1;
 /// Runs the command: the report, and whether the move ended `ok` (within the tolerance, as the
 /// scan after it measured).
 pub fn run(a: &PushArgs) -> anyhow::Result<(String, bool)> {
+    if let Some(spec) = &a.instrument.instrument {
+        return run_held(a, spec);
+    }
+    if a.held.at_um.is_some() {
+        bail!("--at-um is for a real controller (with --instrument); on the simulated AFM give --particle");
+    }
     let scene = crate::load_scene(a.scene.as_ref())?;
     let req = check(a, &scene)?;
     let wall = std::time::Instant::now();

@@ -36,6 +36,8 @@ pub struct ScanArgs {
     /// Print one JSON object (SI units) instead of a summary.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    instrument: crate::instrument_cmd::InstrumentArgs,
 }
 
 const UM: f64 = 1e-6;
@@ -65,6 +67,14 @@ pub fn run(a: &ScanArgs) -> anyhow::Result<String> {
             "--out {}: the file name must end in .gsf (the PNG preview is written next to it)",
             a.out.display()
         );
+    }
+    if let Some(spec) = &a.instrument.instrument {
+        if a.scene.is_some() || a.locate.is_some() || a.json {
+            bail!(
+                "--scene, --locate and --json are for the simulated AFM; with --instrument the sample is the controller's"
+            );
+        }
+        return crate::instrument_cmd::scan(&a.instrument, spec, a.size, &a.out);
     }
     let point = a
         .locate

@@ -383,6 +383,13 @@ impl NanonisMicroscope {
             let b = buffer.clone();
             self.call("Scan.BufferSet", |c| cmd::buffer_set(c, &b))?;
         }
+        // A scan needs the Z feedback on: with the tip withdrawn, the controller's own set point
+        // lands it, and the tip is withdrawn again after the image.
+        let mut landed_here = false;
+        if !self.opts.read_only && self.call("ZCtrl.StatusGet", cmd::z_status)? == cmd::ZStatus::Off {
+            self.call("ZCtrl.OnOffSet", |c| cmd::z_on_off_set(c, true))?;
+            landed_here = true;
+        }
         if !self.opts.read_only {
             self.call("Scan.Action", |c| cmd::scan_action(c, 0, true))?;
             let timeout = self.opts.scan_timeout;
@@ -400,6 +407,9 @@ impl NanonisMicroscope {
         }
         let z = self.idx.z;
         let grab = self.call("Scan.FrameDataGrab", |c| cmd::frame_data_grab(c, z))?;
+        if landed_here {
+            self.withdraw()?;
+        }
         let sf = Self::frame_to_scan(&f, &buffer);
         if grab.rows == 0 || grab.cols == 0 {
             return Err(MicroscopeError::Controller {

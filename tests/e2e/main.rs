@@ -8,6 +8,7 @@ mod haptic_grid;
 mod haptic_link;
 mod layers;
 mod model;
+mod nanonis;
 mod prometheus;
 mod push;
 mod scan;
