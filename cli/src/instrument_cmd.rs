@@ -219,6 +219,7 @@ pub fn push(
     h: &HeldPushArgs,
     spec: &str,
     target: impl Fn((f64, f64)) -> (f64, f64),
+    tolerance: f64,
     out: Option<&Path>,
 ) -> anyhow::Result<(String, bool)> {
     if a.instrument_read_only {
@@ -305,7 +306,7 @@ pub fn push(
             r.outcome == HeldOutcome::Pushed
         }
         None => {
-            writeln!(s, "  after: no particle found within 2 µm of the target")?;
+            writeln!(s, "  after: no particle found within 2 µm of the target: missed")?;
             false
         }
     };

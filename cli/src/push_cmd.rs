@@ -115,7 +115,21 @@ fn run_held(a: &PushArgs, spec: &str) -> anyhow::Result<(String, bool)> {
             Box::new(move |_| (x * UM, y * UM))
         }
     };
-    crate::instrument_cmd::push(&a.instrument, &a.held, spec, target, a.out.as_deref())
+    let (lo, hi) = nanopush_proto::push::TOLERANCE_RANGE_NM;
+    if !(a.tolerance_nm.is_finite() && (lo..=hi).contains(&a.tolerance_nm)) {
+        bail!(
+            "--tolerance-nm {} is out of range; allowed: [{lo}, {hi}] nm",
+            crate::units::num(a.tolerance_nm)
+        );
+    }
+    crate::instrument_cmd::push(
+        &a.instrument,
+        &a.held,
+        spec,
+        target,
+        a.tolerance_nm * 1e-9,
+        a.out.as_deref(),
+    )
 }
 
 /// What the operator asked for, checked.
