@@ -296,14 +296,17 @@ pub fn push(
     let ok = match &ended {
         Some(e) => {
             let miss = (e.x - to.0).hypot(e.y - to.1);
+            let ok = r.outcome == HeldOutcome::Pushed && miss <= tolerance;
             writeln!(
                 s,
-                "  after: particle at ({:.4}, {:.4}) µm, {} from the target",
+                "  after: particle at ({:.4}, {:.4}) µm, {} from the target: {} (tolerance {})",
                 e.x / UM,
                 e.y / UM,
-                eng(miss, "m")
+                eng(miss, "m"),
+                if ok { "ok" } else { "missed" },
+                eng(tolerance, "m")
             )?;
-            r.outcome == HeldOutcome::Pushed
+            ok
         }
         None => {
             writeln!(s, "  after: no particle found within 2 µm of the target: missed")?;

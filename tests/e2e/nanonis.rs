@@ -164,6 +164,7 @@ fn a_push_runs_its_phases_moves_the_particle_and_ends_withdrawn() {
         out.contains("signals at") && out.contains("the tip is withdrawn"),
         "{out}"
     );
+    assert!(out.contains("from the target: ok (tolerance 25.0000 nm)"), "{out}");
     let w = f.world();
     let s = w.surface.spheres[0];
     let miss = (s.x - 52e-6).hypot(s.y - 50e-6);
