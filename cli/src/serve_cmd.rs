@@ -131,6 +131,8 @@ pub struct ServeArgs {
     /// handle sample (ms), in [2, 1000].
     #[arg(long, default_value_t = 5.0)]
     haptic_timeout_ms: f64,
+    #[command(flatten)]
+    instrument: crate::instrument_cmd::InstrumentArgs,
 }
 
 fn in_range(name: &str, v: f64, lo: f64, hi: f64, unit: &str) -> anyhow::Result<()> {
@@ -302,6 +304,22 @@ fn access(a: &ServeArgs) -> anyhow::Result<AccessConfig> {
     })
 }
 
+/// A real controller for the server: telemetry at its feed rate, Stop and shutdown withdraw the
+/// tip; pushes, scans, assemblies and the haptic force loop stay on the simulated AFM.
+fn connect_instrument(a: &ServeArgs, spec: &str) -> anyhow::Result<nanopush_server::instrument_loop::RealInstrument> {
+    if a.haptic != "none" {
+        bail!(
+            "--haptic {} with --instrument: the haptic force loop needs the force every millisecond from the simulated AFM's 1 kHz loop; on a real controller it is not offered",
+            a.haptic
+        );
+    }
+    if a.instrument.frame_um.is_some() {
+        bail!("--frame-um is for nanopush scan and push; the server does not scan a real controller");
+    }
+    let m = crate::instrument_cmd::connect(&a.instrument, spec, 20e-6)?;
+    Ok(nanopush_server::instrument_loop::RealInstrument::new(Box::new(m)))
+}
+
 /// Runs the server until SIGINT or SIGTERM.
 pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
     check(a)?;
@@ -331,7 +349,20 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
             t.fingerprint
         )
     });
+    let instrument = match &a.instrument.instrument {
+        None => None,
+        Some(spec) => Some(std::sync::Arc::new(connect_instrument(a, spec)?)),
+    };
+    if let Some(real) = &instrument {
+        println!(
+            "instrument: {}, signals at {:.0} Hz{}",
+            real.caps.backend,
+            real.caps.feed_rate_hz,
+            if real.caps.read_only { ", read-only" } else { "" }
+        );
+    }
     let cfg = ServeConfig {
+        instrument,
         operator_token,
         viewer_token: a.viewer_token.clone(),
         allow_origins: a.allow_origin.clone(),

@@ -60,6 +60,8 @@ pub struct ServeConfig {
     pub telemetry_hz: f64,
     /// Who may connect: the token file, the trusted proxies, TLS.
     pub access: AccessConfig,
+    /// A real controller instead of the simulated AFM.
+    pub instrument: Option<Arc<crate::instrument_loop::RealInstrument>>,
 }
 
 /// Access settings beyond the generated tokens.
@@ -419,6 +421,17 @@ impl AppState {
         self.lease_holder().and_then(|id| self.auth.name_of(id))
     }
 
+    /// The instrument behind the server, as the page is told of it.
+    pub fn instrument_info(&self) -> nanopush_proto::ws::InstrumentInfo {
+        match &self.cfg.instrument {
+            Some(real) => real.info(),
+            None => nanopush_proto::ws::InstrumentInfo {
+                feed_rate_hz: 1.0 / self.params.tick,
+                ..Default::default()
+            },
+        }
+    }
+
     /// The instrument as it is now, for a client that has just connected: the particles where
     /// the controller believes they are, the tip, the phase, the lease, the push running and
     /// the latest scan.
@@ -429,6 +442,9 @@ impl AppState {
             .file
             .particles
             .iter()
+            // A real controller's sample is not the scene's: no particle is known until it is
+            // scanned.
+            .filter(|_| self.cfg.instrument.is_none())
             .map(|p| {
                 let (x, y) = estimates.get(&p.id).copied().unwrap_or((p.x_um * 1e-6, p.y_um * 1e-6));
                 ParticleNow {
@@ -525,6 +541,7 @@ pub(crate) fn test_state() -> Arc<AppState> {
         scan_line_hz: 100.0,
         telemetry_hz: 60.0,
         access: Default::default(),
+        instrument: None,
     };
     let params = scene.strategy_params(tick);
     Arc::new(AppState::new(cfg, scene, shared, params))

@@ -15,7 +15,7 @@
 //! | 1 | `tls`, `auth`, `haptic`, `conn_limit` | HTTPS, who connects, the haptic link, the connection caps |
 //! | 2 | `audit`, `metrics` | the audit log (names `auth`'s people), the loop's metrics (and the link's) |
 //! | 3 | `control_loop` | the 1 kHz loop and what crosses to it |
-//! | 4 | `records` | the recorder of the loop's pushes, and the data directory's records |
+//! | 4 | `records`, `instrument_loop` | the recorder of the loop's pushes, and the data directory's records; the loop over a real controller |
 //! | 5 | `app_state` | the state every task shares: settings, clients, lease, broadcasts, what the instrument is doing |
 //! | 6 | `push`, `scan_job` | the instrument's jobs beside the loop: a push (launch, judge, prepare), a scan |
 //! | 7 | `assembly` | an assembly: a pattern's moves, each a push through the loop, planned again after each |
@@ -38,6 +38,7 @@ pub mod frames;
 pub mod guard;
 pub mod haptic;
 pub mod histogram;
+pub mod instrument_loop;
 mod lifecycle;
 pub mod metrics;
 pub mod push;

@@ -71,7 +71,7 @@ pub async fn run(
     }
     let tick = 1.0 / loop_cfg.rate_hz;
     let params = scene.strategy_params(tick);
-    let (shared, loop_thread) = start_loop(&scene, loop_cfg)?;
+    let (shared, loop_thread) = start_loop(&scene, loop_cfg, cfg.instrument.as_deref())?;
     let (ev_tx, ev_rx) = tokio::sync::mpsc::unbounded_channel();
     let rec_shared = shared.clone();
     let dir = cfg.data_dir.clone();
@@ -207,11 +207,27 @@ async fn bind_to(bind: SocketAddr) -> Result<(tokio::net::TcpListener, SocketAdd
 /// Starts the control loop's thread on the scene's instrument and waits for its answer: a
 /// haptic link that cannot be opened (another server holds it) stops the start, since a clear
 /// refusal is better than a server that says its link is down.
-fn start_loop(scene: &Scene, loop_cfg: LoopConfig) -> Result<(Arc<Shared>, std::thread::JoinHandle<()>), ServeError> {
+fn start_loop(
+    scene: &Scene,
+    loop_cfg: LoopConfig,
+    real: Option<&crate::instrument_loop::RealInstrument>,
+) -> Result<(Arc<Shared>, std::thread::JoinHandle<()>), ServeError> {
     let tick = 1.0 / loop_cfg.rate_hz;
     let base = nanopush_instrument::scan::ScanParams::from_scene(scene);
     let afm = Afm::from_scene(scene, base.centre_x, base.centre_y, tick);
     let shared = Arc::new(Shared::new(&afm));
+    if let Some(real) = real {
+        // A real controller: its loop instead of the simulation's; the scene's particles are
+        // not the sample's.
+        if let Ok(mut s) = shared.snapshot.lock() {
+            s.particles.clear();
+        }
+        let thread = crate::instrument_loop::start(real, shared.clone()).map_err(|source| ServeError::Io {
+            context: "starting the instrument loop thread".into(),
+            source,
+        })?;
+        return Ok((shared, thread));
+    }
     let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel(1);
     let control = ControlLoop::new(afm, scene.bilateral_params(tick)).with_ready(ready_tx);
     let loop_shared = shared.clone();

@@ -3,8 +3,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::{
-    AssemblyNow, AssemblyPlan, AssemblySite, Bounds, ErrorCode, HapticScales, Judged, ParticleNow, PlanMove, PushPath,
-    Role, ScanNow, Telemetry,
+    AssemblyNow, AssemblyPlan, AssemblySite, Bounds, ErrorCode, HapticScales, InstrumentInfo, Judged, ParticleNow,
+    PlanMove, PushPath, Role, ScanNow, Telemetry,
 };
 use crate::assembly::{AssemblySummary, MoveSummary};
 
@@ -34,6 +34,9 @@ pub enum ServerMessage {
         scene: String,
         /// Control loop rate (Hz).
         tick_hz: f64,
+        /// The instrument behind the server and what it offers.
+        #[serde(default)]
+        instrument: InstrumentInfo,
         /// This run of the server: a client that reconnects and finds another knows the
         /// server restarted (a push it saw running ended unrecorded, or in a record).
         instance: String,

@@ -71,6 +71,34 @@ pub enum ErrorCode {
     Unavailable,
 }
 
+/// The instrument the server drives, as its backend reports it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InstrumentInfo {
+    /// Which backend, for people: `simulated AFM`, or `Nanonis HOST:PORT`.
+    pub backend: String,
+    /// How often it delivers a new reading (Hz): the rate telemetry's values really change at.
+    pub feed_rate_hz: f64,
+    /// The controller holds the normal force with its own Z feedback.
+    pub z_closed_locally: bool,
+    /// Nothing that moves the tip or changes Z is sent.
+    pub read_only: bool,
+    /// What the page can do with it: `push`, `scan`, `assemble`, `haptic`.
+    pub offers: Vec<String>,
+}
+
+impl Default for InstrumentInfo {
+    /// The simulated AFM at the paper's 1 kHz, offering everything.
+    fn default() -> InstrumentInfo {
+        InstrumentInfo {
+            backend: "simulated AFM".into(),
+            feed_rate_hz: 1000.0,
+            z_closed_locally: false,
+            read_only: false,
+            offers: ["push", "scan", "assemble", "haptic"].map(String::from).to_vec(),
+        }
+    }
+}
+
 /// Tip telemetry (SI).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Telemetry {

@@ -120,6 +120,7 @@ async fn status(State(st): State<Arc<AppState>>) -> Response {
     let m = &st.shared.metrics;
     let body = serde_json::json!({
         "scene": st.scene.file.name,
+        "instrument": st.instrument_info(),
         "instance": st.instance.id,
         "started_unix_ms": st.instance.started_unix_ms,
         "uptime_s": st.shared.start.elapsed().as_secs_f64(),

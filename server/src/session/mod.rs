@@ -97,6 +97,7 @@ where
         name: person.name.clone(),
         scene: st.scene.file.name.clone(),
         tick_hz: 1.0 / st.params.tick,
+        instrument: st.instrument_info(),
         instance: st.instance.id.clone(),
         started_unix_ms: st.instance.started_unix_ms,
         push_tolerance_nm: Bounds::PUSH_TOLERANCE_NM,

@@ -68,6 +68,7 @@ pub(super) fn fields_agree(msg: &ClientMessage) -> Result<(), Refusal> {
 
 /// `assemble`, from the lease holder: the pattern made and checked, then the assembly started.
 pub(super) fn run(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<Accepted, Refusal> {
+    super::instrument::simulated(st, "assemble")?;
     let ClientMessage::Assemble {
         sites,
         generator,

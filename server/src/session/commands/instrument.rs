@@ -29,3 +29,18 @@ pub(super) fn to_loop(st: &AppState, cmd: LoopCommand) -> Result<(), Refusal> {
         .command(cmd)
         .map_err(|_| Refusal::new(ErrorCode::Busy, "the control loop's command queue is full; try again"))
 }
+
+/// Refused `unavailable` when the server drives a real controller: pushes, scans and assemblies
+/// from the server run on the simulated AFM only (`what` names the command).
+pub(super) fn simulated(st: &AppState, what: &str) -> Result<(), Refusal> {
+    match &st.cfg.instrument {
+        Some(real) => Err(Refusal::new(
+            ErrorCode::Unavailable,
+            format!(
+                "{what} from the server is not offered on a real controller ({}) yet; use nanopush {what} --instrument",
+                real.caps.backend
+            ),
+        )),
+        None => Ok(()),
+    }
+}

@@ -17,6 +17,7 @@ use nanopush_instrument::control::MoveTarget;
 
 /// `push`: the move checked, then prepared on a blocking task; its end comes as `run_done`.
 pub(super) fn run(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<Accepted, Refusal> {
+    super::instrument::simulated(st, "push")?;
     let ClientMessage::Push {
         particle,
         distance_um,

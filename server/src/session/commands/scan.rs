@@ -16,6 +16,7 @@ use nanopush_instrument::scan::ScanParams;
 
 /// `scan`: the scene's scan where a field is left out.
 pub(super) fn run(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<Accepted, Refusal> {
+    super::instrument::simulated(st, "scan")?;
     let ClientMessage::Scan {
         centre_x_um,
         centre_y_um,

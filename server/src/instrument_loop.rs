@@ -1,0 +1,132 @@
+//! The loop over a real controller: a thread that owns the backend, follows its readings at the
+//! rate it feeds them (the TCP Logger's, or polled reads'), publishes each as the telemetry
+//! snapshot, and withdraws the tip on Stop and at shutdown. It stands where the 1 kHz control loop
+//! stands for the simulated AFM; the force is held by the controller's own Z feedback, so there is
+//! no force loop here to close.
+
+use std::sync::atomic::Ordering::{Relaxed, Release};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use nanopush_instrument::afm::{Capabilities, Microscope};
+use nanopush_proto::ws::InstrumentInfo;
+
+use crate::control_loop::{LoopCommand, LoopEvent, Shared};
+
+/// A real controller behind the server.
+pub struct RealInstrument {
+    /// What it can do, as it said when it connected.
+    pub caps: Capabilities,
+    /// The backend, taken by the loop's thread when it starts.
+    pub backend: Mutex<Option<Box<dyn Microscope + Send>>>,
+}
+
+impl std::fmt::Debug for RealInstrument {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "RealInstrument({})", self.caps.backend)
+    }
+}
+
+impl RealInstrument {
+    /// A connected backend.
+    pub fn new(backend: Box<dyn Microscope + Send>) -> RealInstrument {
+        RealInstrument {
+            caps: backend.capabilities(),
+            backend: Mutex::new(Some(backend)),
+        }
+    }
+
+    /// What the page is told of it. Pushes, scans and assemblies from the server, and the
+    /// haptic force loop, run on the simulated AFM only: on a real controller the command line
+    /// pushes and scans (`nanopush push|scan --instrument`).
+    pub fn info(&self) -> InstrumentInfo {
+        InstrumentInfo {
+            backend: self.caps.backend.clone(),
+            feed_rate_hz: self.caps.feed_rate_hz,
+            z_closed_locally: self.caps.z_closed_locally,
+            read_only: self.caps.read_only,
+            offers: Vec::new(),
+        }
+    }
+}
+
+/// Why the push the loop was handed cannot run here.
+const NO_PUSH: &str = "pushes from the server are not offered on a real controller yet; use nanopush push --instrument";
+
+/// Starts the loop's thread on `real`'s backend.
+pub fn start(real: &RealInstrument, shared: Arc<Shared>) -> std::io::Result<std::thread::JoinHandle<()>> {
+    let backend = real
+        .backend
+        .lock()
+        .ok()
+        .and_then(|mut b| b.take())
+        .ok_or_else(|| std::io::Error::other("the instrument's backend was already taken"))?;
+    std::thread::Builder::new()
+        .name("instrument-loop".into())
+        .spawn(move || run(backend, &shared))
+}
+
+fn withdraw(m: &mut dyn Microscope, why: &str) {
+    if m.capabilities().read_only {
+        return;
+    }
+    let _ = m.stop_move();
+    match m.withdraw() {
+        Ok(()) => tracing::info!("instrument: tip withdrawn ({why})"),
+        Err(e) => tracing::error!("instrument: the tip could NOT be withdrawn ({why}): {e}; withdraw it at the controller"),
+    }
+}
+
+fn run(mut m: Box<dyn Microscope + Send>, shared: &Shared) {
+    let started = Instant::now();
+    let mut failing_since: Option<Instant> = None;
+    let mut last_warned = Instant::now() - Duration::from_secs(60);
+    loop {
+        while let Some(cmd) = shared.commands.pop() {
+            match cmd {
+                LoopCommand::Shutdown => {
+                    withdraw(m.as_mut(), "server shutting down");
+                    shared.finished.store(true, Release);
+                    return;
+                }
+                LoopCommand::Stop(why) => withdraw(m.as_mut(), why.words()),
+                LoopCommand::Push(job) => {
+                    let _ = shared.events.push(LoopEvent::RunDone {
+                        run: job.run,
+                        particle: job.particle,
+                        outcome: "refused",
+                        failure: Some(NO_PUSH.into()),
+                        estimate: job.legs.first().map_or([f64::NAN; 2], |l| [l.from.0, l.from.1]),
+                        truth: [f64::NAN; 2],
+                        legs: 0,
+                    });
+                    shared.busy.store(false, Relaxed);
+                }
+                LoopCommand::Haptic(_) => {}
+            }
+        }
+        match m.poll() {
+            Ok((sample, _)) => {
+                failing_since = None;
+                if let Ok(mut s) = shared.snapshot.lock() {
+                    s.t = started.elapsed().as_secs_f64();
+                    s.stage = sample.tip;
+                    s.volts = sample.normal;
+                    s.tick += 1;
+                }
+                shared.metrics.ticks.fetch_add(1, Relaxed);
+            }
+            Err(e) => {
+                let since = *failing_since.get_or_insert_with(Instant::now);
+                if last_warned.elapsed() >= Duration::from_secs(10) {
+                    tracing::warn!(
+                        "instrument: no reading for {:.1} s: {e}",
+                        since.elapsed().as_secs_f64()
+                    );
+                    last_warned = Instant::now();
+                }
+                std::thread::sleep(Duration::from_millis(100));
+            }
+        }
+    }
+}
