@@ -353,14 +353,14 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
         None => None,
         Some(spec) => Some(std::sync::Arc::new(connect_instrument(a, spec)?)),
     };
-    if let Some(real) = &instrument {
-        println!(
+    let instrument_note = instrument.as_ref().map(|real| {
+        format!(
             "instrument: {}, signals at {:.0} Hz{}",
             real.caps.backend,
             real.caps.feed_rate_hz,
             if real.caps.read_only { ", read-only" } else { "" }
-        );
-    }
+        )
+    });
     let cfg = ServeConfig {
         instrument,
         operator_token,
@@ -441,6 +441,9 @@ pub fn run(a: &ServeArgs) -> anyhow::Result<String> {
                 let _ = writeln!(out, "nanopush serve: listening on {}", s.addr);
                 let _ = writeln!(out, "open {}", s.url);
                 if let Some(note) = &tls_note {
+                    let _ = writeln!(out, "{note}");
+                }
+                if let Some(note) = &instrument_note {
                     let _ = writeln!(out, "{note}");
                 }
                 let _ = out.flush();

@@ -73,7 +73,9 @@ fn withdraw(m: &mut dyn Microscope, why: &str) {
     let _ = m.stop_move();
     match m.withdraw() {
         Ok(()) => tracing::info!("instrument: tip withdrawn ({why})"),
-        Err(e) => tracing::error!("instrument: the tip could NOT be withdrawn ({why}): {e}; withdraw it at the controller"),
+        Err(e) => {
+            tracing::error!("instrument: the tip could NOT be withdrawn ({why}): {e}; withdraw it at the controller")
+        }
     }
 }
 
@@ -119,10 +121,7 @@ fn run(mut m: Box<dyn Microscope + Send>, shared: &Shared) {
             Err(e) => {
                 let since = *failing_since.get_or_insert_with(Instant::now);
                 if last_warned.elapsed() >= Duration::from_secs(10) {
-                    tracing::warn!(
-                        "instrument: no reading for {:.1} s: {e}",
-                        since.elapsed().as_secs_f64()
-                    );
+                    tracing::warn!("instrument: no reading for {:.1} s: {e}", since.elapsed().as_secs_f64());
                     last_warned = Instant::now();
                 }
                 std::thread::sleep(Duration::from_millis(100));

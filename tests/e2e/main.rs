@@ -21,6 +21,7 @@ mod serve_campus;
 mod serve_connections;
 mod serve_hostile;
 mod serve_judge;
+mod serve_nanonis;
 mod serve_proxy;
 mod serve_scenes;
 mod serve_sign_in;
