@@ -1,8 +1,9 @@
 // The operator's controls: the lease, push (by distance or to a target picked in the 3D view,
 // with a preview), scan, Stop (on the pointer's press; Esc too) and the haptic handle; each
-// enabled only when the Session allows it, with the reason as a tooltip; the replies shown by
-// command id; the running push (everyone's view of it). What the forms mean (commands, the
-// preview, texts) is pure (Node tests); Controls binds them to the page.
+// enabled only when the Session allows it (the lease, the instrument's offers), with the reason
+// as a tooltip; the replies shown by command id; the running push (everyone's view of it). What
+// the forms mean (commands, the preview, texts) is pure (Node tests); Controls binds them to the
+// page.
 import { commands } from './wire.js';
 import { controlState, runClass } from './session.js';
 import { formatLength } from './format.js';
@@ -94,6 +95,14 @@ export function previewLine(preview) {
   const a = (preview.deg * Math.PI) / 180;
   const { x, y } = preview.from;
   return { from: [x * 1e-6, y * 1e-6], to: [(x + preview.lengthUm * Math.cos(a)) * 1e-6, (y + preview.lengthUm * Math.sin(a)) * 1e-6] };
+}
+
+/**
+ * The note under Stop: why Push and Scan cannot go now, each reason once (the lease's is both's;
+ * a real controller's differ); '' when both can.
+ */
+export function whyText(c) {
+  return [...new Set([c.push, c.scan].filter((s) => !s.enabled).map((s) => s.why))].join('. ');
 }
 
 /**
@@ -269,7 +278,7 @@ export class Controls {
     // Buttons inside a disabled fieldset: give them the reason as a tooltip too.
     $('push-btn').title = c.push.why;
     $('scan-btn').title = c.scan.why;
-    $('why').textContent = c.push.enabled ? '' : c.push.why;
+    $('why').textContent = whyText(c);
     // A button that took the focus and is now disabled (Take lease, once taken) would drop it to
     // the page: hand it to its counterpart.
     if (focused && focused.disabled && focused !== this.doc.body) {

@@ -3,6 +3,7 @@
 // events are pure functions of the event and the Session's state (Node tests).
 import { formatLength, formatStagePoint } from './format.js';
 import { holderText } from './session.js';
+import { instrumentText } from './words.js';
 
 /** Lines the log keeps. */
 export const LOG_LINES = 60;
@@ -24,8 +25,9 @@ export function lostOnCloseText(push, hadLease) {
     : head;
 }
 
+/** The server's `welcome`: who this page is, the scene, the instrument (backend and rate). */
 export function welcomeText(st) {
-  return `welcome: client ${st.client}${st.name ? ` (${st.name})` : ''}, ${st.role}, scene ${st.scene}, ${st.tickHz} Hz`;
+  return `welcome: client ${st.client}${st.name ? ` (${st.name})` : ''}, ${st.role}, scene ${st.scene}, ${instrumentText(st.instrument, { capital: false })}`;
 }
 
 /** The server's `state` after a (re)connect, in one line. */

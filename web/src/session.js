@@ -1,9 +1,11 @@
 // The client's view of the server, no DOM: a Session applies the server's messages (JSON and
 // binary scan lines) to a plain state object, of which the page is a view; `controlState` says
 // what the operator may do now and why not; `describeRun` puts a push's outcome in words; the
-// scene's particles and set point. Runs in browsers and in Node (tests).
+// scene's particles and set point; the instrument behind the server. Runs in browsers and in
+// Node (tests).
 import { WS_VERSION, decodeScanLine, pushTolerance } from './wire.js';
 import { formatPoint } from './format.js';
+import { notOfferedWhy } from './words.js';
 import * as assembly from './assembly.js';
 
 /**
@@ -87,6 +89,28 @@ export function sceneParticles(scene) {
   }));
 }
 
+/** What the page can do with the simulated AFM: everything (`welcome`'s `instrument.offers`). */
+export const OFFERS = Object.freeze(['push', 'scan', 'assemble', 'haptic']);
+
+/**
+ * The instrument behind the server, from its `welcome`: {backend, feed_rate_hz, z_closed_locally,
+ * read_only, offers}. A server older than `instrument` runs the simulated AFM at its tick rate
+ * and offers everything; a real controller offers only what it lists.
+ */
+export function welcomeInstrument(m) {
+  const i = m.instrument;
+  if (!i || typeof i !== 'object') {
+    return { backend: 'simulated AFM', feed_rate_hz: Number.isFinite(m.tick_hz) ? m.tick_hz : null, z_closed_locally: false, read_only: false, offers: [...OFFERS] };
+  }
+  return {
+    backend: typeof i.backend === 'string' && i.backend ? i.backend : 'unnamed instrument',
+    feed_rate_hz: Number.isFinite(i.feed_rate_hz) && i.feed_rate_hz > 0 ? i.feed_rate_hz : null,
+    z_closed_locally: !!i.z_closed_locally,
+    read_only: !!i.read_only,
+    offers: Array.isArray(i.offers) ? i.offers.filter((o) => typeof o === 'string') : [],
+  };
+}
+
 // ---------------------------------------------------------------------------------------------
 // Session: the client's view of the server.
 
@@ -104,6 +128,7 @@ export function initialState({ traceSeconds = 10 } = {}) {
     role: null, // viewer | operator
     scene: null,
     tickHz: null,
+    instrument: null, // the instrument behind the server (welcome: welcomeInstrument), kept while disconnected
     pushTolerance: null, // a push's tolerance as the server checks it (welcome): {default, min, max} nm
     lease: null, // holder's client id
     leaseName: null, // the holder's name (their token's), when the server said
@@ -154,6 +179,7 @@ const handlers = {
     s.leaseName = m.lease_name ?? null;
     s.scene = m.scene;
     s.tickHz = m.tick_hz;
+    s.instrument = welcomeInstrument(m);
     s.pushTolerance = pushTolerance(m);
     s.stateReceived = false;
     if (m.version !== WS_VERSION) {
@@ -538,8 +564,9 @@ export function holderText(state) {
 }
 
 /**
- * What each operator control may do now, and why not: {enabled, why} per control. Viewers,
- * a closed connection, and commands that need the lease are explained in words (tooltips).
+ * What each operator control may do now, and why not: {enabled, why} per control. Viewers, a
+ * closed connection, what the instrument does not offer, then commands that need the lease are
+ * explained in words (tooltips): the lease would not help what the instrument does not offer.
  */
 export function controlState(state) {
   const open = state.connection === 'open' && state.client !== null;
@@ -553,15 +580,19 @@ export function controlState(state) {
   if (!open) base = 'Not connected to the server';
   else if (!operator) base = 'Viewer connection: open the page with the operator token (?token=…) to command';
   const needLease = base ? no(base) : mine ? yes : state.lease === null ? no('Take the lease first') : no(`${holder} holds the lease`);
+  const offered = (what, s) => {
+    const why = base ? '' : notOfferedWhy(state.instrument, what);
+    return why ? no(why) : s;
+  };
   const link = state.tip?.haptic?.link ?? null;
   return {
-    hapticEngage: !needLease.enabled ? needLease : link === 'up' ? yes : no(`The haptic link is ${link ?? 'not reported'}: engage once it is up`),
+    hapticEngage: offered('haptic', !needLease.enabled ? needLease : link === 'up' ? yes : no(`The haptic link is ${link ?? 'not reported'}: engage once it is up`)),
     takeLease: base ? no(base) : mine ? no('You hold the lease') : state.lease !== null ? no(`${holder} holds the lease`) : yes,
     releaseLease: base ? no(base) : mine ? yes : no('You do not hold the lease'),
-    push: needLease,
-    scan: needLease,
-    assemble: needLease,
-    haptic: needLease,
+    push: offered('push', needLease),
+    scan: offered('scan', needLease),
+    assemble: offered('assemble', needLease),
+    haptic: offered('haptic', needLease),
     stop: needLease,
   };
 }

@@ -1,8 +1,8 @@
-// The status bar at the top of the page: link, role, client, lease, phase, lagged messages and
-// the last error, from the Session's state. `statusFields` is pure (Node tests); StatusBar
-// writes it into the page.
+// The status bar at the top of the page: link, the instrument (its backend and rate), role,
+// client, lease, phase, lagged messages and the last error, from the Session's state.
+// `statusFields` is pure (Node tests); StatusBar writes it into the page.
 import { holderText } from './session.js';
-import { phaseWords } from './words.js';
+import { phaseWords, instrumentText, instrumentTitle } from './words.js';
 
 /**
  * What the status bar says for a Session state. `conn` is null while waiting to reconnect (the
@@ -23,10 +23,17 @@ export function statusFields(st, { demo = false } = {}) {
     cls: e ? 'err' : '',
   };
   const lagged = st.lagged.events ? `${st.lagged.events}× (${st.lagged.skipped} msgs)` : '0';
+  // The instrument stays named while disconnected, as the last known (a restart may bring another).
+  const instrument = {
+    text: instrumentText(st.instrument),
+    title: `${unknown && st.instrument ? 'Last known, while disconnected. ' : ''}${instrumentTitle(st.instrument)}`,
+    cls: unknown ? 'unknown' : '',
+  };
   // Disconnected after having been connected: what the server said no longer holds.
-  if (unknown) return { conn, role: 'unknown', client: 'unknown', lease: { text: 'unknown', cls: 'unknown' }, phase: 'unknown', lagged, error: err };
+  if (unknown) return { conn, instrument, role: 'unknown', client: 'unknown', lease: { text: 'unknown', cls: 'unknown' }, phase: 'unknown', lagged, error: err };
   return {
     conn,
+    instrument,
     role: String(st.role ?? '–'),
     client: String(st.client ?? '–'),
     lease: { text: st.lease === null ? 'free' : st.lease === st.client ? `you (${st.name ? `${st.name}, ` : ''}${st.lease})` : holderText(st), cls: mine ? 'mine' : '' },
@@ -41,7 +48,7 @@ export class StatusBar {
   constructor($, { demo = false } = {}) {
     this.demo = demo;
     this.el = {
-      conn: $('st-conn'), role: $('st-role'), client: $('st-client'), lease: $('st-lease'),
+      conn: $('st-conn'), instrument: $('instrument-status'), role: $('st-role'), client: $('st-client'), lease: $('st-lease'),
       phase: $('st-phase'), lagged: $('st-lagged'), error: $('st-error'),
     };
   }
@@ -57,6 +64,9 @@ export class StatusBar {
     const f = statusFields(st, { demo: this.demo });
     const el = this.el;
     if (f.conn) this.setConn(f.conn.kind, f.conn.text);
+    el.instrument.textContent = f.instrument.text;
+    el.instrument.title = f.instrument.title;
+    el.instrument.className = f.instrument.cls;
     el.role.textContent = f.role;
     el.client.textContent = f.client;
     el.lease.textContent = f.lease.text;

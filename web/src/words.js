@@ -2,6 +2,9 @@
 // `state`'s `phase`: idle, scanning, preparing and the push strategy's phases of Fig 2), the
 // haptic z-control's phases, and what a command's reply means. The page and the monitor show
 // these; the protocol's own names stay in the tooltips and the CSV, for whoever reads the logs.
+// And the instrument behind the server (`welcome`'s `instrument`): its backend and rate, and why
+// a control it does not offer is off.
+import { rateText } from './devicefaults.js';
 
 /** The instrument's phases (server/src/app_state.rs, the strategy's `Phase::name`). */
 const PHASES = Object.freeze({
@@ -76,4 +79,57 @@ export function replyWords(c) {
 /** The reply's tooltip: the command and its number, the code of a refusal, for the logs. */
 export function replyTitle(c) {
   return `command ${c.type} #${c.id}${c.status === 'error' && c.code ? ` (${c.code})` : ''}`;
+}
+
+/** Whether the instrument is the server's simulated AFM (else a real controller). */
+export function isSimulated(inst) {
+  return /^simulated\b/i.test(inst?.backend ?? '');
+}
+
+/**
+ * The instrument in a line (the Session's `instrument`): "Simulated AFM · 1 kHz loop", "Nanonis
+ * 127.0.0.1:6501 · signals at 1 kHz · force held by the controller · read-only"; '–' before the
+ * server said. `capital: false` keeps the backend as the server writes it (the Events log).
+ */
+export function instrumentText(inst, { capital = true } = {}) {
+  if (!inst) return '–';
+  const name = capital ? inst.backend.charAt(0).toUpperCase() + inst.backend.slice(1) : inst.backend;
+  const rate = rateText(inst.feed_rate_hz);
+  const parts = [name];
+  if (rate) parts.push(isSimulated(inst) ? `${rate} loop` : `signals at ${rate}`);
+  if (inst.z_closed_locally) parts.push('force held by the controller');
+  if (inst.read_only) parts.push('read-only');
+  return parts.join(' · ');
+}
+
+/** The controls by `offers` name, as people call them. */
+const OFFER_NAMES = Object.freeze({ push: 'push', scan: 'scan', assemble: 'assemble', haptic: 'haptic handle' });
+
+/** The instrument line's tooltip: what the page shows of it, what it does not offer, and why. */
+export function instrumentTitle(inst) {
+  if (!inst) return 'The server has not said which instrument it drives yet';
+  const rate = rateText(inst.feed_rate_hz) ?? 'an unknown rate';
+  const head = isSimulated(inst)
+    ? `The simulated AFM: the server's control loop runs it at ${rate}, and the page shows its tip.`
+    : `A real controller (${inst.backend}): the page shows its tip position and normal deflection, new readings at ${rate}.`;
+  const parts = [head];
+  if (inst.z_closed_locally) parts.push('Its own Z feedback holds the force on the tip.');
+  if (inst.read_only) parts.push('Read-only: nothing that moves the tip or changes Z is sent to it.');
+  const missing = Object.keys(OFFER_NAMES).filter((k) => !inst.offers.includes(k));
+  if (missing.length) parts.push(`Not offered from the page: ${missing.map((k) => OFFER_NAMES[k]).join(', ')}; push and scan it with nanopush push --instrument and nanopush scan --instrument.`);
+  return parts.join(' ');
+}
+
+/** Why a control the instrument does not offer is off (`what`: an `offers` name), in words. */
+const NOT_OFFERED = Object.freeze({
+  push: 'Pushes from the page run on the simulated AFM; on this controller use nanopush push --instrument',
+  scan: 'Scans from the page run on the simulated AFM; on this controller use nanopush scan --instrument',
+  assemble: 'Assemblies from the page run on the simulated AFM; on this controller push each particle with nanopush push --instrument',
+  haptic: 'The haptic handle runs on the simulated AFM; on this controller it is off',
+});
+
+/** '' when the instrument offers `what` (or the server has not said), else why not. */
+export function notOfferedWhy(inst, what) {
+  if (!inst || inst.offers.includes(what)) return '';
+  return NOT_OFFERED[what] ?? `${spaced(what)} is not offered on this instrument`;
 }

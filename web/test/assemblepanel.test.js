@@ -26,3 +26,18 @@ test('Plan and Assemble need the lease, an idle instrument and a site, said in w
   s.apply({ type: 'assembly_done', assembly: 1, outcome: 'stopped', reason: 'stopped: by the operator', summary: null });
   assert.equal(assembleWhy(s.state, p), '', 'after its end, another may go');
 });
+
+test('a real controller offers no assembly from the page: said before the lease', () => {
+  const s = new Session();
+  const p = new Pattern(100);
+  p.add(10, 10);
+  s.opened();
+  s.apply({
+    type: 'welcome', version: 1, client: 4, role: 'operator', lease: null, scene: 'x', tick_hz: 1000,
+    instrument: { backend: 'Nanonis 127.0.0.1:6501', feed_rate_hz: 1000, z_closed_locally: true, read_only: false, offers: [] },
+  });
+  const why = 'Assemblies from the page run on the simulated AFM; on this controller push each particle with nanopush push --instrument';
+  assert.equal(assembleWhy(s.state, p), why, 'the lease would not help');
+  s.apply({ type: 'lease', holder: 4 });
+  assert.equal(assembleWhy(s.state, p), why);
+});

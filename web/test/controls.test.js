@@ -4,9 +4,9 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import {
   REPLY_OUTPUT, Replies, readNumber, replyText, pushEndedText, particleLabel, clampTarget, pushCommand, pushPreview, previewLine,
-  stopRefusedText, scanFormDefaults, toleranceField,
+  stopRefusedText, scanFormDefaults, toleranceField, whyText,
 } from '../src/controls.js';
-import { Session } from '../src/session.js';
+import { Session, controlState } from '../src/session.js';
 import { WS_VERSION } from '../src/wire.js';
 
 test('form numbers: empty is the server\'s default (undefined), junk is NaN (refused by the builders)', () => {
@@ -143,4 +143,19 @@ test('a command left without a reply by a closed connection says so', () => {
   r.closed(s.state.commands);
   assert.equal(els['reply-scan'].textContent, 'no answer: the connection closed before the server replied');
   assert.equal(els['reply-lease'].textContent, 'sending…', 'answered before the close: left as it was');
+});
+
+test('the note under Stop: each reason once (the lease\'s for both, a real controller\'s for each)', () => {
+  const s = new Session();
+  s.opened();
+  s.apply({ type: 'welcome', version: WS_VERSION, client: 4, role: 'operator', lease: null, scene: 'g', tick_hz: 1000 });
+  assert.equal(whyText(controlState(s.state)), 'Take the lease first');
+  s.apply({ type: 'lease', holder: 4 });
+  assert.equal(whyText(controlState(s.state)), '');
+  s.apply({
+    type: 'welcome', version: WS_VERSION, client: 4, role: 'operator', lease: 4, scene: 'g', tick_hz: 1000,
+    instrument: { backend: 'Nanonis 127.0.0.1:6501', feed_rate_hz: 1000, z_closed_locally: true, read_only: false, offers: [] },
+  });
+  assert.equal(whyText(controlState(s.state)),
+    'Pushes from the page run on the simulated AFM; on this controller use nanopush push --instrument. Scans from the page run on the simulated AFM; on this controller use nanopush scan --instrument');
 });

@@ -9,7 +9,7 @@ import { Session } from '../src/session.js';
 test('welcome and state', () => {
   const s = new Session();
   s.apply({ type: 'welcome', version: 1, client: 4, role: 'operator', lease: null, scene: 'gold', tick_hz: 1000 });
-  assert.equal(welcomeText(s.state), 'welcome: client 4, operator, scene gold, 1000 Hz');
+  assert.equal(welcomeText(s.state), 'welcome: client 4, operator, scene gold, simulated AFM · 1 kHz loop', 'an older server: the simulated AFM at its tick rate');
   s.apply({ type: 'state', particles: [], phase: 'idle', lease: null });
   assert.equal(stateText(s.state), 'state: phase idle, lease free');
   s.apply({
@@ -57,6 +57,18 @@ test('the lease: taken, lost (said aloud), changed elsewhere, with reasons', () 
   assert.deepEqual(leaseNote(ev, s.state), { text: 'you lost the lease: client 7 holds the lease', cls: 'bad', announce: 'you lost the lease: client 7 holds the lease' });
 });
 
+test('the welcome names the backend: the simulated AFM, or a real controller', () => {
+  const s = new Session();
+  const inst = { backend: 'simulated AFM', feed_rate_hz: 500, z_closed_locally: false, read_only: false, offers: ['push', 'scan', 'assemble', 'haptic'] };
+  s.apply({ type: 'welcome', version: 1, client: 4, role: 'operator', lease: null, scene: 'gold', tick_hz: 500, instrument: inst });
+  assert.equal(welcomeText(s.state), 'welcome: client 4, operator, scene gold, simulated AFM · 500 Hz loop');
+  s.apply({
+    type: 'welcome', version: 1, client: 5, role: 'operator', lease: null, scene: 'gold', tick_hz: 1000,
+    instrument: { backend: 'Nanonis 127.0.0.1:6501', feed_rate_hz: 1000, z_closed_locally: true, read_only: false, offers: [] },
+  });
+  assert.equal(welcomeText(s.state), 'welcome: client 5, operator, scene gold, Nanonis 127.0.0.1:6501 · signals at 1 kHz · force held by the controller');
+});
+
 test('errors and a closed connection', () => {
   assert.equal(replyErrorText({ id: 3 }, { code: 'no_lease', message: 'push needs the lease' }), 'error #3 no_lease: push needs the lease');
   assert.equal(replyErrorText({ id: null }, { code: 'malformed', message: 'not JSON' }), 'error malformed: not JSON');
@@ -68,7 +80,7 @@ test('errors and a closed connection', () => {
 test('the lease holder is named where the server names them', () => {
   const s = new Session();
   s.apply({ type: 'welcome', version: 1, client: 2, role: 'viewer', name: 'bob', lease: 5, lease_name: 'alice', scene: 'x', tick_hz: 1000 });
-  assert.equal(welcomeText(s.state), 'welcome: client 2 (bob), viewer, scene x, 1000 Hz');
+  assert.equal(welcomeText(s.state), 'welcome: client 2 (bob), viewer, scene x, simulated AFM · 1 kHz loop');
   s.apply({ type: 'lease', holder: 7, holder_name: 'carol' });
   assert.deepEqual(leaseNote({ lost: false, reason: null }, s.state), { text: 'carol (client 7) holds the lease', cls: '', announce: null });
   s.apply({ type: 'lease', holder: null });

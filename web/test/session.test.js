@@ -1,7 +1,7 @@
 // node --test: the Session (src/session.js) over sequences of the server's messages.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { Session, controlState, sceneParticles, setPointForceN, describeRun, judgedText, runClass, lostPushRun } from '../src/session.js';
+import { Session, controlState, sceneParticles, setPointForceN, describeRun, judgedText, runClass, lostPushRun, welcomeInstrument, OFFERS } from '../src/session.js';
 import { WS_VERSION, encodeScanLine, commands } from '../src/wire.js';
 
 test('session: welcome, lease changes and who may command', () => {
@@ -406,4 +406,51 @@ test('a lost push is matched to its own record, never to an earlier push', () =>
   const own = { record: 'push-8-r2-p1.json', modified: Math.floor(now), instance: 'a-1', run: 2, particle: 1, outcome: 'stopped', failure: 'stopped: the lease holder disconnected' };
   assert.equal(lostPushRun([runs[0], own, runs[1]], lost), own, 'server run a-1, run 2, particle 1');
   assert.equal(lostPushRun(null, lost), null);
+});
+
+const NANONIS = { backend: 'Nanonis 127.0.0.1:6501', feed_rate_hz: 1000, z_closed_locally: true, read_only: false, offers: [] };
+
+test('the instrument from the welcome: an older server\'s is the simulated AFM offering everything', () => {
+  const s = openSession(4);
+  assert.deepEqual(s.state.instrument, { backend: 'simulated AFM', feed_rate_hz: 1000, z_closed_locally: false, read_only: false, offers: [...OFFERS] });
+  s.apply({ type: 'welcome', version: 1, client: 4, role: 'operator', lease: null, scene: 'g', tick_hz: 1000, instrument: { ...NANONIS, read_only: true } });
+  assert.deepEqual(s.state.instrument, { ...NANONIS, read_only: true });
+  s.closed(1, 250);
+  assert.deepEqual(s.state.instrument, { ...NANONIS, read_only: true }, 'kept while disconnected: the last known');
+  assert.equal(new Session().state.instrument, null, 'none before a welcome');
+  // What a server may leave out: no offers is none offered; a rate that is no rate is unknown.
+  assert.deepEqual(welcomeInstrument({ tick_hz: 1000, instrument: { backend: '', feed_rate_hz: 'fast' } }),
+    { backend: 'unnamed instrument', feed_rate_hz: null, z_closed_locally: false, read_only: false, offers: [] });
+});
+
+test('a real controller: push, scan, assemble and the haptic handle off and why, before the lease; Stop and the lease as ever', () => {
+  const s = openSession(4);
+  s.apply({ type: 'welcome', version: 1, client: 4, role: 'operator', lease: null, scene: 'g', tick_hz: 1000, instrument: NANONIS });
+  let c = controlState(s.state);
+  assert.equal(c.push.enabled, false);
+  assert.equal(c.push.why, 'Pushes from the page run on the simulated AFM; on this controller use nanopush push --instrument', 'not "Take the lease first"');
+  assert.match(c.scan.why, /^Scans from the page run on the simulated AFM; on this controller use nanopush scan --instrument$/);
+  assert.match(c.assemble.why, /^Assemblies from the page/);
+  assert.match(c.haptic.why, /^The haptic handle runs on the simulated AFM/);
+  assert.equal(c.takeLease.enabled, true);
+  assert.equal(c.stop.why, 'Take the lease first');
+  s.apply({ type: 'lease', holder: 4 });
+  s.apply({ type: 'telemetry', t: 1, stage: [0, 0, 1e-6], volts: 0.2, phase: 'idle', estimate: null });
+  c = controlState(s.state);
+  for (const k of ['push', 'scan', 'assemble', 'haptic', 'hapticEngage']) assert.equal(c[k].enabled, false, k);
+  assert.equal(c.hapticEngage.why, c.haptic.why);
+  assert.equal(c.stop.enabled, true, 'Stop withdraws the tip on a real controller too');
+  assert.equal(c.releaseLease.enabled, true);
+  // Offers one by one: only what is missing is off.
+  s.apply({ type: 'welcome', version: 1, client: 4, role: 'operator', lease: 4, scene: 'g', tick_hz: 1000, instrument: { ...NANONIS, offers: ['scan'] } });
+  c = controlState(s.state);
+  assert.equal(c.scan.enabled, true);
+  assert.equal(c.push.enabled, false);
+  // The connection and the role come first.
+  s.closed(1, 250);
+  assert.equal(controlState(s.state).push.why, 'Not connected to the server');
+  const v = new Session();
+  v.opened();
+  v.apply({ type: 'welcome', version: 1, client: 5, role: 'viewer', lease: null, scene: 'g', tick_hz: 1000, instrument: NANONIS });
+  assert.match(controlState(v.state).push.why, /^Viewer connection/);
 });

@@ -45,7 +45,7 @@ test('the lease (mine or another\'s), the phase, lags and the last error', () =>
 test('StatusBar writes the fields into the page', () => {
   const el = (extra = {}) => ({ textContent: '', className: '', title: '', ...extra });
   const txt = el();
-  const els = { 'st-conn': el({ querySelector: () => txt }), 'st-role': el(), 'st-client': el(), 'st-lease': el(), 'st-phase': el(), 'st-lagged': el(), 'st-error': el() };
+  const els = { 'st-conn': el({ querySelector: () => txt }), 'instrument-status': el(), 'st-role': el(), 'st-client': el(), 'st-lease': el(), 'st-phase': el(), 'st-lagged': el(), 'st-error': el() };
   const bar = new StatusBar((id) => els[id]);
   const s = new Session();
   s.opened();
@@ -55,6 +55,9 @@ test('StatusBar writes the fields into the page', () => {
   assert.equal(els['st-conn'].className, 'conn-open');
   assert.equal(txt.textContent, 'connected');
   assert.equal(els['st-role'].textContent, 'viewer');
+  assert.equal(els['instrument-status'].textContent, 'Simulated AFM · 1 kHz loop');
+  assert.match(els['instrument-status'].title, /^The simulated AFM: the server's control loop runs it at 1 kHz/);
+  assert.equal(els['instrument-status'].className, '');
   assert.equal(els['st-lease'].className, 'mine');
   assert.equal(els['st-error'].title, 'client_socket: not connected');
   assert.equal(els['st-error'].className, 'err');
@@ -72,4 +75,34 @@ test('while disconnected, what the server said is "unknown", not stale', () => {
   const f = statusFields(s.state);
   assert.deepEqual([f.role, f.client, f.lease.text, f.lease.cls, f.phase], ['unknown', 'unknown', 'unknown', 'unknown', 'unknown'],
     'not the last seen: operator, client 4, holding the lease, approach');
+});
+
+test('the instrument: the simulated AFM (an older server too), a real controller, read-only', () => {
+  const s = new Session();
+  assert.deepEqual(statusFields(s.state).instrument, { text: '–', title: 'The server has not said which instrument it drives yet', cls: '' }, 'before the welcome');
+  s.opened();
+  // An older server says nothing of its instrument: the simulated AFM at its tick rate.
+  s.apply({ type: 'welcome', version: 1, client: 4, role: 'operator', lease: null, scene: 'g', tick_hz: 1000 });
+  assert.equal(statusFields(s.state).instrument.text, 'Simulated AFM · 1 kHz loop');
+  s.apply({
+    type: 'welcome', version: 1, client: 4, role: 'operator', lease: null, scene: 'g', tick_hz: 1000,
+    instrument: { backend: 'Nanonis 127.0.0.1:6501', feed_rate_hz: 1000, z_closed_locally: true, read_only: false, offers: [] },
+  });
+  let f = statusFields(s.state).instrument;
+  assert.equal(f.text, 'Nanonis 127.0.0.1:6501 · signals at 1 kHz · force held by the controller');
+  assert.match(f.title, /^A real controller \(Nanonis 127\.0\.0\.1:6501\): the page shows its tip position and normal deflection, new readings at 1 kHz\./);
+  assert.match(f.title, /Not offered from the page: push, scan, assemble, haptic handle; push and scan it with nanopush push --instrument and nanopush scan --instrument\.$/);
+  s.apply({
+    type: 'welcome', version: 1, client: 4, role: 'operator', lease: null, scene: 'g', tick_hz: 1000,
+    instrument: { backend: 'Nanonis 10.0.0.7:6501', feed_rate_hz: 2500, z_closed_locally: true, read_only: true, offers: [] },
+  });
+  f = statusFields(s.state).instrument;
+  assert.equal(f.text, 'Nanonis 10.0.0.7:6501 · signals at 2.5 kHz · force held by the controller · read-only');
+  assert.match(f.title, /Read-only: nothing that moves the tip or changes Z is sent to it\./);
+  // While disconnected: the last known, said so.
+  s.closed(1, 250);
+  f = statusFields(s.state).instrument;
+  assert.equal(f.text, 'Nanonis 10.0.0.7:6501 · signals at 2.5 kHz · force held by the controller · read-only');
+  assert.equal(f.cls, 'unknown');
+  assert.match(f.title, /^Last known, while disconnected\. A real controller/);
 });
