@@ -5,7 +5,7 @@
 // Node (tests).
 import { WS_VERSION, decodeScanLine, pushTolerance } from './wire.js';
 import { formatPoint } from './format.js';
-import { notOfferedWhy } from './words.js';
+import { isSimulated, notOfferedWhy } from './words.js';
 import * as assembly from './assembly.js';
 
 /**
@@ -180,6 +180,8 @@ const handlers = {
     s.scene = m.scene;
     s.tickHz = m.tick_hz;
     s.instrument = welcomeInstrument(m);
+    // A real controller's sample is not the scene's: no particle is drawn until one is found.
+    if (!isSimulated(s.instrument)) s.particles = [];
     s.pushTolerance = pushTolerance(m);
     s.stateReceived = false;
     if (m.version !== WS_VERSION) {
@@ -367,7 +369,8 @@ export class Session {
 
   /** Loads an /api/scene document: the particles and the stage range. */
   setScene(scene) {
-    this.state.particles = sceneParticles(scene);
+    const inst = this.state.instrument;
+    this.state.particles = inst && !isSimulated(inst) ? [] : sceneParticles(scene);
     // The server's word (state, then run_done) beats the scene file's positions, whichever
     // arrived first.
     for (const q of this.state.serverParticles ?? []) {

@@ -454,3 +454,21 @@ test('a real controller: push, scan, assemble and the haptic handle off and why,
   v.apply({ type: 'welcome', version: 1, client: 5, role: 'viewer', lease: null, scene: 'g', tick_hz: 1000, instrument: NANONIS });
   assert.match(controlState(v.state).push.why, /^Viewer connection/);
 });
+
+test('on a real controller the scene\'s particles are not drawn, whichever comes first', () => {
+  const scene = { particles: [{ id: 1, x_um: 40, y_um: 30, radius_nm: 500 }], stage: { range_um: 100 } };
+  const welcome = { type: 'welcome', version: 1, client: 4, role: 'operator', lease: null, scene: 'g', tick_hz: 1000, instrument: NANONIS };
+  const first = new Session();
+  first.setScene(scene);
+  assert.equal(first.state.particles.length, 1);
+  first.apply(welcome);
+  assert.deepEqual(first.state.particles, [], 'the welcome after the scene clears them');
+  const second = new Session();
+  second.apply(welcome);
+  second.setScene(scene);
+  assert.deepEqual(second.state.particles, [], 'the scene after the welcome adds none');
+  const sim = new Session();
+  sim.apply({ ...welcome, instrument: undefined });
+  sim.setScene(scene);
+  assert.equal(sim.state.particles.length, 1, 'the simulated AFM draws the scene');
+});
