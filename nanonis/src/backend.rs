@@ -96,6 +96,8 @@ pub struct NanonisMicroscope {
     started: Instant,
     /// Commands sent, in order (for the report and the tests).
     pub sent: Vec<String>,
+    /// Set to end a scan early.
+    cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
 }
 
 /// Finds the signal whose name is `want` or starts with it (case-insensitive).
@@ -169,6 +171,7 @@ impl NanonisMicroscope {
             feed_rate_hz: 0.0,
             started: Instant::now(),
             sent: Vec::new(),
+            cancel: None,
         };
         m.sent
             .extend(["Signals.NamesGet", "ZCtrl.LimitsGet", "Scan.FrameGet"].map(String::from));
@@ -392,17 +395,31 @@ impl NanonisMicroscope {
         }
         if !self.opts.read_only {
             self.call("Scan.Action", |c| cmd::scan_action(c, 0, true))?;
-            let timeout = self.opts.scan_timeout;
-            let ended = self.call("Scan.WaitEndOfScan", |c| cmd::wait_end_of_scan(c, timeout))?;
-            if !ended {
-                let _ = self.call("Scan.Action", |c| cmd::scan_action(c, 1, true));
-                return Err(MicroscopeError::Link {
-                    command: "Scan.WaitEndOfScan".into(),
-                    message: format!(
-                        "the scan did not end within {:.0} s; it was stopped",
-                        timeout.as_secs_f64()
-                    ),
-                });
+            // Waited for in slices, so that a stop is heard within one.
+            let (timeout, began) = (self.opts.scan_timeout, Instant::now());
+            let slice = Duration::from_millis(500).min(timeout);
+            loop {
+                if self
+                    .cancel
+                    .as_ref()
+                    .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed))
+                {
+                    let _ = self.call("Scan.Action", |c| cmd::scan_action(c, 1, true));
+                    return Err(MicroscopeError::Cancelled("the scan".into()));
+                }
+                if self.call("Scan.WaitEndOfScan", |c| cmd::wait_end_of_scan(c, slice))? {
+                    break;
+                }
+                if began.elapsed() >= timeout {
+                    let _ = self.call("Scan.Action", |c| cmd::scan_action(c, 1, true));
+                    return Err(MicroscopeError::Link {
+                        command: "Scan.WaitEndOfScan".into(),
+                        message: format!(
+                            "the scan did not end within {:.0} s; it was stopped",
+                            timeout.as_secs_f64()
+                        ),
+                    });
+                }
             }
         }
         let z = self.idx.z;
@@ -569,6 +586,11 @@ impl Microscope for NanonisMicroscope {
                 | MicroscopeError::Unsupported { .. }),
             ) => Err(e),
             Err(e) if self.opts.read_only => Err(e),
+            Err(e @ MicroscopeError::Cancelled(_)) => {
+                // A stop: the engine was stopped; the tip goes away as after any stop.
+                let _ = self.withdraw();
+                Err(e)
+            }
             Err(e) => {
                 // Stop the scan engine if the link still answers; the withdraw follows either way.
                 let _ = self.call("Scan.Action", |c| cmd::scan_action(c, 1, true));
@@ -581,6 +603,10 @@ impl Microscope for NanonisMicroscope {
         let f = self.call("Scan.FrameGet", cmd::frame_get)?;
         let b = self.call("Scan.BufferGet", cmd::buffer_get)?;
         Ok(Self::frame_to_scan(&f, &b))
+    }
+
+    fn set_cancel(&mut self, cancel: std::sync::Arc<std::sync::atomic::AtomicBool>) {
+        self.cancel = Some(cancel);
     }
 
     fn withdraw(&mut self) -> Result<(), MicroscopeError> {

@@ -4,14 +4,28 @@
 //! stands for the simulated AFM; the force is held by the controller's own Z feedback, so there is
 //! no force loop here to close.
 
+use std::sync::atomic::AtomicBool;
 use std::sync::atomic::Ordering::{Relaxed, Release};
+use std::sync::mpsc::{Receiver, Sender, SyncSender};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use nanopush_instrument::afm::{Capabilities, Microscope};
+use nanopush_instrument::afm::{Capabilities, Microscope, ScanFrame};
+use nanopush_instrument::scan::HeightImage;
 use nanopush_proto::ws::InstrumentInfo;
 
 use crate::control_loop::{LoopCommand, LoopEvent, Shared};
+
+/// What the server's jobs ask of the loop's thread, with where to answer.
+pub enum Request {
+    /// A scan: the frame given, or the controller's own.
+    Scan {
+        /// The frame, or None for the controller's.
+        frame: Option<ScanFrame>,
+        /// The image, or why there is none.
+        reply: SyncSender<Result<HeightImage, String>>,
+    },
+}
 
 /// A real controller behind the server.
 pub struct RealInstrument {
@@ -19,6 +33,12 @@ pub struct RealInstrument {
     pub caps: Capabilities,
     /// The backend, taken by the loop's thread when it starts.
     pub backend: Mutex<Option<Box<dyn Microscope + Send>>>,
+    /// Requests to the loop's thread.
+    requests: Mutex<Sender<Request>>,
+    /// Their receiving end, taken by the loop's thread.
+    receiver: Mutex<Option<Receiver<Request>>>,
+    /// Set by a stop: a scan in progress ends early.
+    pub cancel: Arc<AtomicBool>,
 }
 
 impl std::fmt::Debug for RealInstrument {
@@ -29,23 +49,43 @@ impl std::fmt::Debug for RealInstrument {
 
 impl RealInstrument {
     /// A connected backend.
-    pub fn new(backend: Box<dyn Microscope + Send>) -> RealInstrument {
+    pub fn new(mut backend: Box<dyn Microscope + Send>) -> RealInstrument {
+        let cancel = Arc::new(AtomicBool::new(false));
+        backend.set_cancel(cancel.clone());
+        let (tx, rx) = std::sync::mpsc::channel();
         RealInstrument {
             caps: backend.capabilities(),
             backend: Mutex::new(Some(backend)),
+            requests: Mutex::new(tx),
+            receiver: Mutex::new(Some(rx)),
+            cancel,
         }
     }
 
-    /// What the page is told of it. Pushes, scans and assemblies from the server, and the
-    /// haptic force loop, run on the simulated AFM only: on a real controller the command line
-    /// pushes and scans (`nanopush push|scan --instrument`).
+    /// Scans on the loop's thread (telemetry pauses meanwhile) and waits for the image.
+    pub fn scan(&self, frame: Option<ScanFrame>) -> Result<HeightImage, String> {
+        self.cancel.store(false, Relaxed);
+        let (reply, answer) = std::sync::mpsc::sync_channel(1);
+        self.requests
+            .lock()
+            .map_err(|_| "the instrument's request queue is poisoned".to_string())?
+            .send(Request::Scan { frame, reply })
+            .map_err(|_| "the instrument loop has ended".to_string())?;
+        answer
+            .recv()
+            .map_err(|_| "the instrument loop ended during the scan".to_string())?
+    }
+
+    /// What the page is told of it: it offers scans (through the controller's scan engine).
+    /// Pushes and assemblies from the server, and the haptic force loop, run on the simulated
+    /// AFM only: on a real controller the command line pushes (`nanopush push --instrument`).
     pub fn info(&self) -> InstrumentInfo {
         InstrumentInfo {
             backend: self.caps.backend.clone(),
             feed_rate_hz: self.caps.feed_rate_hz,
             z_closed_locally: self.caps.z_closed_locally,
             read_only: self.caps.read_only,
-            offers: Vec::new(),
+            offers: vec!["scan".into()],
         }
     }
 }
@@ -61,9 +101,15 @@ pub fn start(real: &RealInstrument, shared: Arc<Shared>) -> std::io::Result<std:
         .ok()
         .and_then(|mut b| b.take())
         .ok_or_else(|| std::io::Error::other("the instrument's backend was already taken"))?;
+    let requests = real
+        .receiver
+        .lock()
+        .ok()
+        .and_then(|mut r| r.take())
+        .ok_or_else(|| std::io::Error::other("the instrument's requests were already taken"))?;
     std::thread::Builder::new()
         .name("instrument-loop".into())
-        .spawn(move || run(backend, &shared))
+        .spawn(move || run(backend, &requests, &shared))
 }
 
 fn withdraw(m: &mut dyn Microscope, why: &str) {
@@ -79,7 +125,7 @@ fn withdraw(m: &mut dyn Microscope, why: &str) {
     }
 }
 
-fn run(mut m: Box<dyn Microscope + Send>, shared: &Shared) {
+fn run(mut m: Box<dyn Microscope + Send>, requests: &Receiver<Request>, shared: &Shared) {
     let started = Instant::now();
     let mut failing_since: Option<Instant> = None;
     let mut last_warned = Instant::now() - Duration::from_secs(60);
@@ -106,6 +152,13 @@ fn run(mut m: Box<dyn Microscope + Send>, shared: &Shared) {
                 }
                 LoopCommand::Haptic(_) => {}
             }
+        }
+        while let Ok(Request::Scan { frame, reply }) = requests.try_recv() {
+            let image = m.scan(frame.as_ref()).map_err(|e| e.to_string());
+            if let Err(e) = &image {
+                tracing::warn!("instrument: scan failed: {e}");
+            }
+            let _ = reply.send(image);
         }
         match m.poll() {
             Ok((sample, _)) => {

@@ -267,6 +267,10 @@ async fn graceful_shutdown(st: Arc<AppState>, shutdown: impl std::future::Future
     tracing::info!("shutting down: stopping the loop and retracting the tip");
     // From now on commands are refused and a push still being prepared is dropped.
     st.activity.stopping.store(true, Relaxed);
+    // A real controller's scan ends now, so that its loop hears the shutdown and withdraws.
+    if let Some(real) = &st.cfg.instrument {
+        real.cancel.store(true, Relaxed);
+    }
     let deadline = Instant::now() + Duration::from_secs(20);
     while st.shared.commands.push(LoopCommand::Shutdown).is_err() && Instant::now() < deadline {
         tokio::time::sleep(Duration::from_millis(1)).await;

@@ -113,6 +113,90 @@ pub(crate) fn run_scan(st: &AppState, params: ScanParams, person: &str) {
 /// A frame taken at once (an assembly's full frames), not streamed: its scan record written, and
 /// it made the latest scan, so that a client that joins later is shown it. Returns its record's
 /// name, or why there is none.
+/// A scan on a real controller: the image from its scan engine (through the instrument loop's
+/// thread), then sent and recorded as a simulated scan's is, its lines at once.
+pub(crate) fn run_real_scan(
+    st: &AppState,
+    real: &crate::instrument_loop::RealInstrument,
+    frame: Option<nanopush_instrument::afm::ScanFrame>,
+    person: &str,
+) {
+    let scan_id = st.activity.next_scan.fetch_add(1, Relaxed);
+    let send_text = |m: &ServerMessage| {
+        if st.clients.scan_subscribers.load(Relaxed) > 0 {
+            let _ = st.channels.scans.send(Message::Text(to_text(m)));
+        }
+    };
+    let img = match real.scan(frame) {
+        Ok(img) => img,
+        Err(e) => {
+            st.activity.scanning.store(false, Relaxed);
+            let cancelled = st.activity.scan_cancel.load(Relaxed);
+            send_text(&ServerMessage::ScanDone {
+                scan: scan_id,
+                record: None,
+                record_error: (!cancelled).then(|| format!("the controller's scan failed: {e}")),
+            });
+            return;
+        }
+    };
+    let now = ScanNow {
+        scan: scan_id,
+        xres: img.xres as u32,
+        yres: img.yres as u32,
+        x_offset: img.x_offset,
+        y_offset: img.y_offset,
+        x_real: img.x_real,
+        y_real: img.y_real,
+        done: false,
+        record: None,
+        stale: false,
+    };
+    keep_lines(st, None);
+    send_text(&ServerMessage::ScanStart {
+        scan: scan_id,
+        xres: now.xres,
+        yres: now.yres,
+        x_offset: img.x_offset,
+        y_offset: img.y_offset,
+        x_real: img.x_real,
+        y_real: img.y_real,
+    });
+    let dy = img.dy();
+    for (row, heights) in img.data.chunks(img.xres).enumerate() {
+        let heights: Vec<f32> = heights.iter().map(|&h| h as f32).collect();
+        let h = ScanLineHeader {
+            scan: scan_id,
+            line: row as u32,
+            xres: img.xres as u32,
+            yres: img.yres as u32,
+            y: img.y_offset + (row as f64 + 0.5) * dy,
+        };
+        let frame = Bytes::from(h.encode(&heights));
+        keep_lines(st, Some(frame.clone()));
+        if st.clients.scan_subscribers.load(Relaxed) > 0 {
+            let _ = st.channels.scans.send(Message::Binary(frame));
+        }
+    }
+    // The heights are recorded with no tip model of the controller's: the scene's stands in.
+    let tip = Tip::from_scene(&st.scene);
+    let (record, record_error) = write_record(st, scan_id, &img, &tip, person);
+    if let Ok(mut s) = st.activity.latest_scan.lock() {
+        *s = Some(ScanNow {
+            done: true,
+            record: record.clone(),
+            ..now
+        });
+    }
+    keep_lines(st, None);
+    st.activity.scanning.store(false, Relaxed);
+    send_text(&ServerMessage::ScanDone {
+        scan: scan_id,
+        record,
+        record_error,
+    });
+}
+
 pub(crate) fn record_frame(st: &AppState, img: &HeightImage, person: &str) -> Result<String, String> {
     let scan_id = st.activity.next_scan.fetch_add(1, Relaxed);
     let tip = Tip::from_scene(&st.scene);

@@ -35,7 +35,7 @@ fn the_page_is_told_the_backend_and_telemetry_follows_the_controller() {
             "the fake's logger runs at 1 kHz: {rate} Hz"
         );
         assert_eq!(i["z_closed_locally"], true);
-        assert_eq!(i["offers"], json!([]));
+        assert_eq!(i["offers"], json!(["scan"]));
 
         // The controller's deflection, changed by another client, reaches the page.
         let mut op = operator(&s.addr, "tip").await;
@@ -57,7 +57,7 @@ fn the_page_is_told_the_backend_and_telemetry_follows_the_controller() {
         let per_s = (ticks(&status(&s.addr)) - a) as f64 / t0.elapsed().as_secs_f64();
         assert!(per_s > 300.0, "{per_s:.0} readings per second from a 1 kHz logger");
 
-        // Pushes, scans and assemblies are the command line's on a real controller.
+        // Pushes and assemblies are the command line's on a real controller.
         send(
             &mut op,
             json!({"type": "push", "id": 5, "particle": 1, "distance_um": 1.0, "direction_deg": 0.0}),
@@ -69,10 +69,44 @@ fn the_page_is_told_the_backend_and_telemetry_follows_the_controller() {
             r["message"].as_str().unwrap().contains("nanopush push --instrument"),
             "{r}"
         );
-        send(&mut op, json!({"type": "scan", "id": 6})).await;
-        assert_eq!(reply(&mut op, 6).await["code"], "unavailable");
+        // A part of a square is refused; none of it scans the controller's own frame.
+        send(&mut op, json!({"type": "scan", "id": 6, "size_um": 5.0})).await;
+        assert_eq!(reply(&mut op, 6).await["code"], "invalid");
+        assert!(!f.world().withdrawn, "landed by the other client");
+        drop(other);
+        send(
+            &mut op,
+            json!({"type": "subscribe", "id": 8, "streams": ["tip", "scan"]}),
+        )
+        .await;
+        ok(&mut op, json!({"type": "scan", "id": 9})).await;
+        let done = until(&mut op, 20.0, |m| is(m, "scan_done")).await;
+        let record = done["record"].as_str().unwrap_or_else(|| panic!("{done}")).to_string();
+        let gsf = s.dir.join("records").join(&record);
+        let bytes = std::fs::read(&gsf).unwrap_or_else(|e| panic!("{}: {e}", gsf.display()));
+        assert!(bytes.starts_with(b"Gwyddion Simple Field 1.0\n"));
+        let truth = f.world().image.clone().unwrap();
+        let nul = bytes.iter().position(|&c| c == 0).unwrap();
+        let data: Vec<f64> = bytes[nul + (4 - nul % 4)..]
+            .chunks_exact(4)
+            .map(|c| f64::from(f32::from_le_bytes([c[0], c[1], c[2], c[3]])))
+            .collect();
+        assert_eq!(data.len(), truth.data.len());
+        let worst = data
+            .iter()
+            .zip(&truth.data)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            worst < 1e-12,
+            "the record holds the controller's image: worst pixel off by {worst} m"
+        );
 
         // Stop withdraws the tip.
+        NanonisMicroscope::connect(NanonisOptions::new(f.addr()))
+            .unwrap()
+            .hold_force(0.1)
+            .unwrap();
         assert!(!f.world().withdrawn);
         ok(&mut op, json!({"type": "stop", "id": 7})).await;
         let deadline = Instant::now() + Duration::from_secs(5);
@@ -120,4 +154,36 @@ fn a_haptic_link_or_a_frame_with_a_real_controller_is_refused_at_start() {
         assert!(!o.status.success(), "{err}");
         assert!(err.contains(says), "{says}: {err}");
     }
+}
+
+#[test]
+fn stop_ends_a_controllers_scan_and_withdraws() {
+    let f = FakeController::start(FakeOptions {
+        line_rate: 8.0,
+        ..FakeOptions::default()
+    })
+    .unwrap();
+    let s = start("nanonis-scan-stop", &["--instrument", &spec(&f)]);
+    runtime().block_on(async {
+        let mut op = operator(&s.addr, "scan").await;
+        ok(&mut op, json!({"type": "scan", "id": 5})).await;
+        // 64 lines at 8 lines/s: eight seconds of scanning, stopped after one.
+        tokio::time::sleep(Duration::from_millis(1000)).await;
+        assert!(f.world().scanning(), "the controller scans");
+        let asked = Instant::now();
+        ok(&mut op, json!({"type": "stop", "id": 6})).await;
+        let done = until(&mut op, 5.0, |m| is(m, "scan_done")).await;
+        assert!(
+            asked.elapsed() < Duration::from_secs(3),
+            "the stop was heard within a slice of the wait"
+        );
+        assert_eq!(done["record"], serde_json::Value::Null, "{done}");
+        assert_eq!(
+            done["record_error"],
+            serde_json::Value::Null,
+            "a stopped scan is no failure: {done}"
+        );
+        assert!(!f.world().scanning(), "the scan engine was stopped");
+        assert!(f.world().withdrawn, "and the tip withdrawn");
+    });
 }

@@ -1,7 +1,7 @@
 // The Nano Visulator on a real controller, in a real browser: `nanopush serve --instrument`
 // against the fake Nanonis controller (`nanopush-fake-nanonis`, started here on free ports). The
-// page names the backend and the rate its readings come at, follows the controller's tip, and
-// disables what the server does not run there, saying why. Run by `npm run e2e`.
+// page names the backend and the rate its readings come at, follows the controller's tip, shows a
+// scan of the controller's own frame, and disables what the server does not run there, saying why. Run by `npm run e2e`.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { spawn } from 'node:child_process';
@@ -39,7 +39,7 @@ after(async () => {
   fake?.child.kill('SIGTERM');
 });
 
-test('the page names the controller and its rate, follows its tip, and disables what it does not offer', async () => {
+test('the page names the controller and its rate, follows its tip, scans its frame, disables the rest', async () => {
   const page = await newPage(browser, { width: 1280, height: 800 });
   await page.goto(srv.url);
   await ready(page);
@@ -58,6 +58,15 @@ test('the page names the controller and its rate, follows its tip, and disables 
   const note = await page.textContent('body');
   assert.match(why + note, /nanopush push --instrument/);
   assert.equal(await page.getAttribute('#stop-btn', 'aria-disabled'), 'false', 'Stop stays: it withdraws the tip');
+  // Scans run through the controller's scan engine, on its own frame: the square's fields are off.
+  assert.equal(await page.isDisabled('#scan-btn'), false, 'Scan is offered');
+  assert.equal(await page.isDisabled('#scan-size'), true, 'the controller\'s own frame');
+  await page.click('#scan-btn');
+  await page.waitForFunction(() => window.nanopush.session.state.scan?.done, null, { timeout: 30000 });
+  const scan = await page.evaluate(() => window.nanopush.session.state.scan);
+  assert.equal(scan.xres, 64, 'the fake\'s buffer: 64 × 64');
+  assert.ok(Math.abs(scan.x_offset - 25e-6) < 1e-9 && Math.abs(scan.x_real - 50e-6) < 1e-9, JSON.stringify(scan));
+  await page.waitForFunction(() => /64 of 64 lines/.test(document.querySelector('#image2d svg')?.getAttribute('aria-label') ?? ''), null, { timeout: 10000 });
   assert.deepEqual(page.errors, []);
   await shot(page, 'nanonis');
 });

@@ -7,7 +7,7 @@
 import { commands } from './wire.js';
 import { controlState, runClass } from './session.js';
 import { formatLength } from './format.js';
-import { replyWords, replyTitle } from './words.js';
+import { isSimulated, replyWords, replyTitle } from './words.js';
 
 /** Where each command's reply shows (an `<output>` id). */
 export const REPLY_OUTPUT = Object.freeze({ take_lease: 'reply-lease', release_lease: 'reply-lease', push: 'reply-push', scan: 'reply-scan', assemble: 'reply-assemble', stop: 'reply-stop', haptic: 'reply-haptic' });
@@ -115,6 +115,11 @@ export function stopRefusedText(state, why) {
     return 'Stop cannot reach the server (not connected). A running server stops a push whose lease holder is gone on its own.';
   }
   return `Stop not sent: ${why.charAt(0).toLowerCase()}${why.slice(1)}.`;
+}
+
+/** Whether the server drives a real controller (its scans take the controller's frame). */
+export function realController(st) {
+  return Boolean(st.instrument) && !isSimulated(st.instrument);
 }
 
 /**
@@ -268,6 +273,13 @@ export class Controls {
     set($('release-lease'), c.releaseLease);
     set($('push-fs'), c.push);
     set($('scan-fs'), c.scan);
+    // A real controller scans its own frame and pixels (what its software shows): the square's
+    // fields are the simulated AFM's.
+    const real = realController(this.st);
+    for (const id of ['scan-x', 'scan-y', 'scan-size', 'scan-px', 'scan-centre']) {
+      $(id).disabled = real;
+      $(id).title = real ? 'On a real controller a scan takes the controller\'s own frame and pixels' : '';
+    }
     // Stop stays pressable (a careless press, Esc) and says why it cannot act: aria-disabled.
     const stop = $('stop-btn');
     stop.setAttribute('aria-disabled', String(!c.stop.enabled));
@@ -420,7 +432,9 @@ export class Controls {
     $('scan-form').addEventListener('submit', (e) => {
       e.preventDefault();
       this.onScanRequested();
-      this.guarded('reply-scan', () => commands.scan({ centreXUm: this.num('scan-x'), centreYUm: this.num('scan-y'), sizeUm: this.num('scan-size'), pixels: this.num('scan-px') }));
+      this.guarded('reply-scan', () => (realController(this.st)
+        ? commands.scan({})
+        : commands.scan({ centreXUm: this.num('scan-x'), centreYUm: this.num('scan-y'), sizeUm: this.num('scan-size'), pixels: this.num('scan-px') })));
     });
     $('scan-centre').addEventListener('click', () => {
       this.scanCentreTouched = false;

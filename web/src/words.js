@@ -116,7 +116,10 @@ export function instrumentTitle(inst) {
   if (inst.z_closed_locally) parts.push('Its own Z feedback holds the force on the tip.');
   if (inst.read_only) parts.push('Read-only: nothing that moves the tip or changes Z is sent to it.');
   const missing = Object.keys(OFFER_NAMES).filter((k) => !inst.offers.includes(k));
-  if (missing.length) parts.push(`Not offered from the page: ${missing.map((k) => OFFER_NAMES[k]).join(', ')}; push and scan it with nanopush push --instrument and nanopush scan --instrument.`);
+  if (missing.length) {
+    const cli = ['push', 'scan'].filter((k) => missing.includes(k)).map((k) => `${k} with nanopush ${k} --instrument`);
+    parts.push(`Not offered from the page: ${missing.map((k) => OFFER_NAMES[k]).join(', ')}${cli.length ? `; ${cli.join(', ')}` : ''}.`);
+  }
   return parts.join(' ');
 }
 

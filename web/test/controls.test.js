@@ -4,7 +4,7 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import {
   REPLY_OUTPUT, Replies, readNumber, replyText, pushEndedText, particleLabel, clampTarget, pushCommand, pushPreview, previewLine,
-  stopRefusedText, scanFormDefaults, toleranceField, whyText,
+  stopRefusedText, scanFormDefaults, toleranceField, whyText, realController,
 } from '../src/controls.js';
 import { Session, controlState } from '../src/session.js';
 import { WS_VERSION } from '../src/wire.js';
@@ -158,4 +158,10 @@ test('the note under Stop: each reason once (the lease\'s for both, a real contr
   });
   assert.equal(whyText(controlState(s.state)),
     'Pushes from the page run on the simulated AFM; on this controller use nanopush push --instrument. Scans from the page run on the simulated AFM; on this controller use nanopush scan --instrument');
+});
+
+test('a real controller is told apart from the simulated AFM and from an unknown one', () => {
+  assert.equal(realController({ instrument: null }), false, 'before a welcome: nothing known');
+  assert.equal(realController({ instrument: { backend: 'simulated AFM' } }), false);
+  assert.equal(realController({ instrument: { backend: 'Nanonis 127.0.0.1:6501' } }), true);
 });

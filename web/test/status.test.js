@@ -91,7 +91,7 @@ test('the instrument: the simulated AFM (an older server too), a real controller
   let f = statusFields(s.state).instrument;
   assert.equal(f.text, 'Nanonis 127.0.0.1:6501 · signals at 1 kHz · force held by the controller');
   assert.match(f.title, /^A real controller \(Nanonis 127\.0\.0\.1:6501\): the page shows its tip position and normal deflection, new readings at 1 kHz\./);
-  assert.match(f.title, /Not offered from the page: push, scan, assemble, haptic handle; push and scan it with nanopush push --instrument and nanopush scan --instrument\.$/);
+  assert.match(f.title, /Not offered from the page: push, scan, assemble, haptic handle; push with nanopush push --instrument, scan with nanopush scan --instrument\.$/);
   s.apply({
     type: 'welcome', version: 1, client: 4, role: 'operator', lease: null, scene: 'g', tick_hz: 1000,
     instrument: { backend: 'Nanonis 10.0.0.7:6501', feed_rate_hz: 2500, z_closed_locally: true, read_only: true, offers: [] },

@@ -60,7 +60,7 @@ test('the instrument\'s tooltip says what the page shows and what it does not of
   assert.equal(instrumentTitle({ ...NANONIS, read_only: true }),
     'A real controller (Nanonis 127.0.0.1:6501): the page shows its tip position and normal deflection, new readings at 1 kHz. '
     + 'Its own Z feedback holds the force on the tip. Read-only: nothing that moves the tip or changes Z is sent to it. '
-    + 'Not offered from the page: push, scan, assemble, haptic handle; push and scan it with nanopush push --instrument and nanopush scan --instrument.');
+    + 'Not offered from the page: push, scan, assemble, haptic handle; push with nanopush push --instrument, scan with nanopush scan --instrument.');
   assert.match(instrumentTitle(null), /has not said/);
 });
 
@@ -74,4 +74,9 @@ test('a control the instrument does not offer: why, in words, with the command t
   assert.match(notOfferedWhy(NANONIS, 'assemble'), /^Assemblies from the page run on the simulated AFM; on this controller push each particle with nanopush push --instrument$/);
   assert.equal(notOfferedWhy(NANONIS, 'haptic'), 'The haptic handle runs on the simulated AFM; on this controller it is off');
   assert.equal(notOfferedWhy({ ...SIM, offers: ['push'] }, 'scan'), 'Scans from the page run on the simulated AFM; on this controller use nanopush scan --instrument', 'each offer on its own');
+});
+
+test('a controller that offers scans names only the push for the command line', () => {
+  const t = instrumentTitle({ backend: 'Nanonis 127.0.0.1:6501', feed_rate_hz: 1000, z_closed_locally: true, read_only: false, offers: ['scan'] });
+  assert.match(t, /Not offered from the page: push, assemble, haptic handle; push with nanopush push --instrument\.$/);
 });

@@ -119,6 +119,9 @@ pub enum MicroscopeError {
     /// The simulated instrument could not go on.
     #[error("{0}")]
     Simulation(String),
+    /// Stopped on request.
+    #[error("{0}: stopped")]
+    Cancelled(String),
 }
 
 /// A microscope behind the instrument interface.
@@ -154,4 +157,8 @@ pub trait Microscope {
 
     /// Takes the tip away from the surface (feedback off, Z to its safe end).
     fn withdraw(&mut self) -> Result<(), MicroscopeError>;
+
+    /// A flag that, once set, ends a scan in progress early (with
+    /// [`MicroscopeError::Cancelled`]); a backend whose scans are instant may ignore it.
+    fn set_cancel(&mut self, _cancel: std::sync::Arc<std::sync::atomic::AtomicBool>) {}
 }

@@ -10,13 +10,46 @@ use super::instrument::busy;
 use super::{Accepted, Client, misrouted};
 use crate::app_state::AppState;
 use crate::command_checks::{Refusal, number};
-use crate::scan_job::run_scan;
+use crate::scan_job::{run_real_scan, run_scan};
 use crate::session::MIN_SCAN_UM;
+use nanopush_instrument::afm::ScanFrame;
 use nanopush_instrument::scan::ScanParams;
+
+/// A real controller's frame: none of the square's fields for the controller's own frame and
+/// pixels, or all three (the pixels optional, 256 by default); the controller checks it against
+/// its range.
+fn real_frame(
+    centre_x_um: Option<f64>,
+    centre_y_um: Option<f64>,
+    size_um: Option<f64>,
+    pixels: Option<u32>,
+) -> Result<Option<ScanFrame>, Refusal> {
+    let (cx, cy, size) = match (centre_x_um, centre_y_um, size_um) {
+        (None, None, None) if pixels.is_none() => return Ok(None),
+        (Some(cx), Some(cy), Some(size)) => (cx, cy, size),
+        _ => {
+            return Err(Refusal::new(
+                ErrorCode::Invalid,
+                "on a real controller give centre_x_um, centre_y_um and size_um together (pixels with them), or none for the controller's own frame",
+            ));
+        }
+    };
+    let size = number("size_um", size, MIN_SCAN_UM, 1000.0, false, "µm")?;
+    let cx = number("centre_x_um", cx, -1000.0, 1000.0, false, "µm")?;
+    let cy = number("centre_y_um", cy, -1000.0, 1000.0, false, "µm")?;
+    let px = number("pixels", pixels.map_or(256.0, f64::from), 16.0, 512.0, false, "")? as usize;
+    Ok(Some(ScanFrame {
+        centre_x: cx * 1e-6,
+        centre_y: cy * 1e-6,
+        width: size * 1e-6,
+        height: size * 1e-6,
+        pixels: px,
+        lines: px,
+    }))
+}
 
 /// `scan`: the scene's scan where a field is left out.
 pub(super) fn run(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Result<Accepted, Refusal> {
-    super::instrument::simulated(st, "scan")?;
     let ClientMessage::Scan {
         centre_x_um,
         centre_y_um,
@@ -27,6 +60,21 @@ pub(super) fn run(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Res
     else {
         return Err(misrouted(&msg));
     };
+    if let Some(real) = &st.cfg.instrument {
+        let frame = real_frame(centre_x_um, centre_y_um, size_um, pixels)?;
+        busy(st)?;
+        st.activity.scanning.store(true, Relaxed);
+        st.activity.scan_cancel.store(false, Relaxed);
+        let (st2, real, by) = (st.clone(), real.clone(), c.person.name.clone());
+        std::thread::spawn(move || {
+            let scan = || run_real_scan(&st2, &real, frame, &by);
+            if std::panic::catch_unwind(std::panic::AssertUnwindSafe(scan)).is_err() {
+                tracing::error!("scan failed (internal error)");
+                st2.activity.scanning.store(false, Relaxed);
+            }
+        });
+        return Ok(Accepted::PLAIN);
+    }
     let f = &st.scene.file;
     let range = f.stage.range_um;
     let base = ScanParams::from_scene(&st.scene);

@@ -15,6 +15,9 @@ use crate::control_loop::{LoopCommand, StopReason};
 /// `stop`, from the lease holder.
 pub(super) fn run(st: &Arc<AppState>, _: &mut Client, _: ClientMessage) -> Result<Accepted, Refusal> {
     st.activity.scan_cancel.store(true, Relaxed);
+    if let Some(real) = &st.cfg.instrument {
+        real.cancel.store(true, Relaxed);
+    }
     st.activity.generation.fetch_add(1, Relaxed);
     to_loop(st, LoopCommand::Stop(StopReason::Operator))?;
     Ok(Accepted::PLAIN)
