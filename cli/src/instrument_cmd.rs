@@ -44,6 +44,10 @@ pub struct InstrumentArgs {
     /// Time-out of every call to the controller (s), in [0.1, 600].
     #[arg(long, default_value_t = 5.0, value_name = "S")]
     pub instrument_timeout_s: f64,
+    /// Your own XY limits within the controller's scan frame (µm): `XMIN,YMIN,XMAX,YMAX`; no
+    /// move or frame outside them is sent.
+    #[arg(long, value_name = "XMIN,YMIN,XMAX,YMAX", allow_hyphen_values = true)]
+    pub xy_limits_um: Option<String>,
     /// Scan this frame instead of the controller's: centre and side (µm), e.g. `20,20,5`.
     #[arg(long, value_name = "CX,CY,SIDE", allow_hyphen_values = true)]
     pub frame_um: Option<String>,
@@ -102,6 +106,22 @@ pub fn connect(a: &InstrumentArgs, spec: &str, max_speed: f64) -> anyhow::Result
     o.lateral_signal = (a.lateral_signal != "none").then(|| a.lateral_signal.clone());
     o.height_signal = a.height_signal.clone();
     o.max_speed = max_speed;
+    if let Some(spec) = &a.xy_limits_um {
+        let usage =
+            "expected four numbers XMIN,YMIN,XMAX,YMAX in µm with XMIN < XMAX and YMIN < YMAX, e.g. 40,40,60,60";
+        let v: Vec<f64> = spec
+            .split(',')
+            .map(|s| s.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| anyhow::anyhow!("--xy-limits-um {spec:?}: {usage}"))?;
+        let [x0, y0, x1, y1] = v[..] else {
+            bail!("--xy-limits-um {spec:?}: {usage}");
+        };
+        if !(v.iter().all(|x| x.is_finite()) && x0 < x1 && y0 < y1) {
+            bail!("--xy-limits-um {spec:?}: {usage}");
+        }
+        o.xy_limits = Some([[x0 * UM, x1 * UM], [y0 * UM, y1 * UM]]);
+    }
     NanonisMicroscope::connect(o).with_context(|| format!("connecting to the controller at {addr}"))
 }
 

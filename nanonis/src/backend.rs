@@ -48,6 +48,8 @@ pub struct NanonisOptions {
     pub scan_timeout: Duration,
     /// The acquisition period polled reads are averaged over (s).
     pub acquisition_period: f64,
+    /// The user's own XY limits `[[x_min, x_max], [y_min, y_max]]` (m), within the controller's.
+    pub xy_limits: Option<[[f64; 2]; 2]>,
 }
 
 impl NanonisOptions {
@@ -65,6 +67,7 @@ impl NanonisOptions {
             reconnect_tries: 3,
             scan_timeout: Duration::from_secs(600),
             acquisition_period: 0.02,
+            xy_limits: None,
         }
     }
 }
@@ -152,12 +155,38 @@ impl NanonisMicroscope {
         };
         let z = cmd::z_limits(&mut conn)?;
         let frame = cmd::frame_get(&mut conn)?;
-        let limits = Limits {
+        let mut limits = Limits {
             x: [frame.centre_x - 0.5 * frame.width, frame.centre_x + 0.5 * frame.width],
             y: [frame.centre_y - 0.5 * frame.height, frame.centre_y + 0.5 * frame.height],
             z,
             max_speed: opts.max_speed,
         };
+        if let Some([ux, uy]) = opts.xy_limits {
+            let (x, y) = (
+                [limits.x[0].max(ux[0]), limits.x[1].min(ux[1])],
+                [limits.y[0].max(uy[0]), limits.y[1].min(uy[1])],
+            );
+            if !(x[0] <= x[1] && y[0] <= y[1]) {
+                return Err(MicroscopeError::OutOfLimits {
+                    what: format!(
+                        "the XY limits x [{:.4}, {:.4}] µm, y [{:.4}, {:.4}] µm",
+                        ux[0] * 1e6,
+                        ux[1] * 1e6,
+                        uy[0] * 1e6,
+                        uy[1] * 1e6
+                    ),
+                    allowed: format!(
+                        "a region overlapping the controller's scan frame, x [{:.4}, {:.4}] µm, y [{:.4}, {:.4}] µm",
+                        limits.x[0] * 1e6,
+                        limits.x[1] * 1e6,
+                        limits.y[0] * 1e6,
+                        limits.y[1] * 1e6
+                    ),
+                });
+            }
+            limits.x = x;
+            limits.y = y;
+        }
         let mut m = NanonisMicroscope {
             opts,
             conn: Some(conn),
@@ -285,7 +314,7 @@ impl NanonisMicroscope {
             return Err(MicroscopeError::OutOfLimits {
                 what: format!("{what} ({:.4}, {:.4}) µm", x * 1e6, y * 1e6),
                 allowed: format!(
-                    "x in [{:.4}, {:.4}] µm, y in [{:.4}, {:.4}] µm (the controller's scan frame)",
+                    "x in [{:.4}, {:.4}] µm, y in [{:.4}, {:.4}] µm (the controller's scan frame and --xy-limits-um)",
                     l.x[0] * 1e6,
                     l.x[1] * 1e6,
                     l.y[0] * 1e6,

@@ -320,3 +320,21 @@ fn a_frame_outside_the_controllers_is_refused() {
     let e = m.scan(Some(&frame)).unwrap_err().to_string();
     assert!(e.contains("frame corner"), "{e}");
 }
+
+#[test]
+fn the_users_xy_limits_narrow_the_controllers_and_are_checked_before_sending() {
+    let f = fake();
+    let mut o = options(&f, true);
+    o.xy_limits = Some([[45e-6, 55e-6], [45e-6, 55e-6]]);
+    let mut m = NanonisMicroscope::connect(o).unwrap();
+    let l = m.limits().unwrap();
+    assert_eq!((l.x, l.y), ([45e-6, 55e-6], [45e-6, 55e-6]));
+    let before = f.commands().len();
+    let e = m.start_move(60e-6, 50e-6, 1e-6).unwrap_err().to_string();
+    assert!(e.contains("--xy-limits-um") && e.contains("[45.0000, 55.0000]"), "{e}");
+    assert_eq!(f.commands().len(), before, "nothing sent");
+    let mut o = options(&f, false);
+    o.xy_limits = Some([[90e-6, 95e-6], [0.0, 1e-6]]);
+    let e = NanonisMicroscope::connect(o).unwrap_err().to_string();
+    assert!(e.contains("overlapping the controller's scan frame"), "{e}");
+}
