@@ -187,3 +187,29 @@ fn stop_ends_a_controllers_scan_and_withdraws() {
         assert!(f.world().withdrawn, "and the tip withdrawn");
     });
 }
+
+#[test]
+fn a_controller_that_vanishes_leaves_the_server_up_and_its_shutdown_bounded() {
+    let f = fake();
+    let addr = f.addr();
+    let mut s = start("nanonis-vanish", &["--instrument", &spec(&f)]);
+    let ticks = |v: &serde_json::Value| v["loop"]["ticks"].as_u64().unwrap();
+    assert!(ticks(&status(&s.addr)) > 0);
+    drop(f);
+    std::thread::sleep(Duration::from_millis(500));
+    let a = ticks(&status(&s.addr));
+    std::thread::sleep(Duration::from_millis(500));
+    assert_eq!(ticks(&status(&s.addr)), a, "no readings from a controller that is gone");
+    let asked = Instant::now();
+    nanopush_e2e::stop(&mut s.child);
+    assert!(
+        asked.elapsed() < Duration::from_secs(15),
+        "shut down in {:?}",
+        asked.elapsed()
+    );
+    let log = std::fs::read_to_string(s.dir.join("server.log")).unwrap();
+    assert!(
+        log.contains("the tip could NOT be withdrawn") && log.contains(&addr.to_string()),
+        "the log says the tip may still be down:\n{log}"
+    );
+}
