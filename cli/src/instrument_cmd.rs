@@ -271,6 +271,12 @@ pub fn push(
     let located = localize(&before, &tip, ax * UM, ay * UM, search)
         .with_context(|| format!("--at-um {ax},{ay}: no particle located within 2 µm in the scan before the push"))?;
     let to = target((located.x, located.y));
+    // Each phase's budget in readings: twice its longest motion at its speed, plus 30 s.
+    let l = m.limits()?;
+    let diagonal = (l.x[1] - l.x[0]).hypot(l.y[1] - l.y[0]);
+    let push_length = (to.0 - located.x).hypot(to.1 - located.y);
+    let longest = (diagonal / (h.travel_speed_um_per_s * UM)).max(push_length / (h.push_speed_um_per_s * UM));
+    let max_samples = (m.capabilities().feed_rate_hz * (2.0 * longest + 30.0)).ceil() as u64;
     let p = HeldPush {
         from: [located.x, located.y],
         to: [to.0, to.1],
@@ -284,7 +290,7 @@ pub fn push(
         settle_samples: 5,
         lateral_contact: h.lateral_contact_v,
         normal_limit: h.normal_limit_v,
-        max_samples: 2_000_000,
+        max_samples,
     };
     let r = held_push(&mut m, &p, &AtomicBool::new(false))?;
     // The scan after needs the tip on the surface: the controller's feedback lands it.
