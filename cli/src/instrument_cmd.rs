@@ -80,6 +80,10 @@ pub struct HeldPushArgs {
     /// Travel speed with the tip withdrawn (µm/s), in (0, max speed].
     #[arg(long, default_value_t = 5.0, value_name = "UM_PER_S")]
     pub travel_speed_um_per_s: f64,
+    /// Longest the controller's feedback may take to land the tip at the set point (s), in
+    /// [0.1, 600].
+    #[arg(long, default_value_t = 10.0, value_name = "S")]
+    pub land_timeout_s: f64,
     /// The fastest XY speed nanopush may ask the controller for (µm/s), in (0, 100].
     #[arg(long, default_value_t = 20.0, value_name = "UM_PER_S")]
     pub max_speed_um_per_s: f64,
@@ -89,10 +93,45 @@ fn in_range(flag: &str, v: f64, lo: f64, hi: f64, open_lo: bool, unit: &str) -> 
     let ok = v.is_finite() && (if open_lo { v > lo } else { v >= lo }) && v <= hi;
     if !ok {
         let l = if open_lo { "(" } else { "[" };
-        bail!("{flag} {v} is out of range; allowed: {l}{lo}, {hi}] {unit}");
+        bail!(
+            "{flag} {} is out of range; allowed: {l}{lo}, {hi}] {unit}",
+            crate::units::num(v)
+        );
     }
     Ok(())
 }
+
+static INTERRUPTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+extern "C" fn on_interrupt(_: libc::c_int) {
+    // Async-signal-safe: one atomic store.
+    INTERRUPTED.store(true, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// SIGINT, SIGTERM and SIGHUP no longer end the process: they set the returned flag, which the
+/// backend's scans and the held push watch, so that the tip is withdrawn before nanopush exits.
+fn catch_interrupts() -> std::sync::Arc<AtomicBool> {
+    let handler = on_interrupt as extern "C" fn(libc::c_int) as libc::sighandler_t;
+    // SAFETY: installs a handler that only stores to an atomic.
+    unsafe {
+        for sig in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+            libc::signal(sig, handler);
+        }
+    }
+    let flag = std::sync::Arc::new(AtomicBool::new(false));
+    let f = flag.clone();
+    std::thread::spawn(move || {
+        while !INTERRUPTED.load(std::sync::atomic::Ordering::Relaxed) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        f.store(true, std::sync::atomic::Ordering::Relaxed);
+    });
+    flag
+}
+
+/// The slowest speed a push or a travel may ask for (µm/s): slower would take days, and rounds
+/// to nothing in the controller's f32.
+const MIN_SPEED_UM_PER_S: f64 = 1e-3;
 
 /// Connects to the controller the arguments name.
 pub fn connect(a: &InstrumentArgs, spec: &str, max_speed: f64) -> anyhow::Result<NanonisMicroscope> {
@@ -159,7 +198,7 @@ fn frame(a: &InstrumentArgs, pixels: Option<u64>, m: &mut NanonisMicroscope) -> 
     let [cx, cy, side] = parts[..] else {
         bail!("--frame-um {spec:?}: expected three numbers CX,CY,SIDE in µm, e.g. 20,20,5");
     };
-    in_range("--frame-um side", side, 0.0, 1000.0, true, "µm")?;
+    in_range("--frame-um side", side, 0.01, 1000.0, false, "µm")?;
     if !(cx.is_finite() && cy.is_finite()) {
         bail!("--frame-um {spec:?}: the centre must be finite");
     }
@@ -188,7 +227,13 @@ fn write_image(out: &Path, img: &HeightImage, title: &str) -> anyhow::Result<Pat
 /// `nanopush scan --instrument ...`.
 pub fn scan(a: &InstrumentArgs, spec: &str, pixels: Option<u64>, out: &Path) -> anyhow::Result<String> {
     let tip = tip(a)?;
+    if let Some(n) = pixels
+        && !(16..=4096).contains(&n)
+    {
+        bail!("--size {n} pixels is out of range for a controller's scan buffer; allowed: [16, 4096] pixels");
+    }
     let mut m = connect(a, spec, 20e-6)?;
+    m.set_cancel(catch_interrupts());
     let frame = frame(a, pixels, &mut m)?;
     let img = m.scan(frame.as_ref())?;
     let caps = m.capabilities();
@@ -252,31 +297,55 @@ pub fn push(
     in_range("--setpoint-v", h.setpoint_v, -10.0, 10.0, false, "V")?;
     in_range("--lateral-contact-v", h.lateral_contact_v, 0.0, 10.0, true, "V")?;
     in_range("--normal-limit-v", h.normal_limit_v, 0.0, 10.0, true, "V")?;
-    in_range("--max-speed-um-per-s", h.max_speed_um_per_s, 0.0, 100.0, true, "µm/s")?;
+    in_range(
+        "--max-speed-um-per-s",
+        h.max_speed_um_per_s,
+        MIN_SPEED_UM_PER_S,
+        100.0,
+        false,
+        "µm/s",
+    )?;
     let max = h.max_speed_um_per_s;
-    in_range("--push-speed-um-per-s", h.push_speed_um_per_s, 0.0, max, true, "µm/s")?;
+    let min = MIN_SPEED_UM_PER_S;
+    in_range("--push-speed-um-per-s", h.push_speed_um_per_s, min, max, false, "µm/s")?;
     in_range(
         "--travel-speed-um-per-s",
         h.travel_speed_um_per_s,
-        0.0,
+        min,
         max,
-        true,
+        false,
         "µm/s",
     )?;
+    in_range("--land-timeout-s", h.land_timeout_s, 0.1, 600.0, false, "s")?;
+    // The place for the results first: a push whose summary cannot be written is not started.
+    if let Some(dir) = out {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
     let tip = tip(a)?;
     let mut m = connect(a, spec, max * UM)?;
+    let stop = catch_interrupts();
+    m.set_cancel(stop.clone());
     let frame = frame(a, None, &mut m)?;
+    // A target outside the limits (the particle taken as where --at-um says) is refused before
+    // anything moves; the held push checks the exact points again before it sends any.
+    let rough = target((ax * UM, ay * UM));
+    let l = m.limits()?;
+    if !l.contains_xy(rough.0, rough.1) {
+        bail!(
+            "the target ({:.4}, {:.4}) µm is outside the limits, x in [{:.4}, {:.4}] µm, y in [{:.4}, {:.4}] µm (the controller's scan frame and --xy-limits-um); nothing was sent",
+            rough.0 / UM,
+            rough.1 / UM,
+            l.x[0] / UM,
+            l.x[1] / UM,
+            l.y[0] / UM,
+            l.y[1] / UM
+        );
+    }
     let search = 2.0 * UM;
     let before = m.scan(frame.as_ref())?;
     let located = localize(&before, &tip, ax * UM, ay * UM, search)
         .with_context(|| format!("--at-um {ax},{ay}: no particle located within 2 µm in the scan before the push"))?;
     let to = target((located.x, located.y));
-    // Each phase's budget in readings: twice its longest motion at its speed, plus 30 s.
-    let l = m.limits()?;
-    let diagonal = (l.x[1] - l.x[0]).hypot(l.y[1] - l.y[0]);
-    let push_length = (to.0 - located.x).hypot(to.1 - located.y);
-    let longest = (diagonal / (h.travel_speed_um_per_s * UM)).max(push_length / (h.push_speed_um_per_s * UM));
-    let max_samples = (m.capabilities().feed_rate_hz * (2.0 * longest + 30.0)).ceil() as u64;
     let p = HeldPush {
         from: [located.x, located.y],
         to: [to.0, to.1],
@@ -290,9 +359,15 @@ pub fn push(
         settle_samples: 5,
         lateral_contact: h.lateral_contact_v,
         normal_limit: h.normal_limit_v,
-        max_samples,
+        land_timeout: h.land_timeout_s,
     };
-    let r = held_push(&mut m, &p, &AtomicBool::new(false))?;
+    let r = held_push(&mut m, &p, &stop)?;
+    if r.outcome == HeldOutcome::Stopped {
+        bail!(
+            "interrupted during the push ({}): the tip was withdrawn",
+            r.phases.iter().rev().nth(1).map_or("", |(p, _)| p.as_str())
+        );
+    }
     // The scan after needs the tip on the surface: the controller's feedback lands it.
     m.hold_force(h.setpoint_v)?;
     let after = m.scan(frame.as_ref());

@@ -20,8 +20,10 @@ use nanopush_instrument::afm::{Capabilities, Limits, Microscope, MicroscopeError
 use nanopush_instrument::scan::HeightImage;
 
 use crate::client::Connection;
-use crate::commands::{self as cmd, Buffer, Frame};
+use crate::commands as cmd;
 use crate::logger::LoggerStream;
+
+mod scan;
 
 /// How nanopush talks to the controller.
 #[derive(Debug, Clone)]
@@ -154,7 +156,32 @@ impl NanonisMicroscope {
             },
         };
         let z = cmd::z_limits(&mut conn)?;
+        if !(z[0].is_finite() && z[1].is_finite() && z[0] < z[1]) {
+            return Err(setup(
+                "ZCtrl.LimitsGet",
+                format!(
+                    "the Z range [{}, {}] m is not a range (low below high, both finite)",
+                    z[0], z[1]
+                ),
+            ));
+        }
         let frame = cmd::frame_get(&mut conn)?;
+        let sane = [
+            frame.centre_x,
+            frame.centre_y,
+            frame.width,
+            frame.height,
+            frame.angle_deg,
+        ];
+        if !(sane.iter().all(|v| v.is_finite()) && frame.width > 0.0 && frame.height > 0.0) {
+            return Err(setup(
+                "Scan.FrameGet",
+                format!(
+                    "the scan frame (centre ({}, {}) m, {} × {} m, {}°) is not a frame: finite, with a positive width and height",
+                    frame.centre_x, frame.centre_y, frame.width, frame.height, frame.angle_deg
+                ),
+            ));
+        }
         let mut limits = Limits {
             x: [frame.centre_x - 0.5 * frame.width, frame.centre_x + 0.5 * frame.width],
             y: [frame.centre_y - 0.5 * frame.height, frame.centre_y + 0.5 * frame.height],
@@ -205,7 +232,8 @@ impl NanonisMicroscope {
         m.sent
             .extend(["Signals.NamesGet", "ZCtrl.LimitsGet", "Scan.FrameGet"].map(String::from));
         m.feed_rate_hz = 1.0 / m.opts.acquisition_period;
-        if let Some(port) = m.opts.logger_port {
+        // Read-only starts no logger either: TCPLog.ChsSet changes the controller's settings.
+        if let Some(port) = m.opts.logger_port.filter(|_| !m.opts.read_only) {
             m.start_logger(port)?;
         } else if !m.opts.read_only {
             let period = m.opts.acquisition_period;
@@ -368,132 +396,6 @@ impl NanonisMicroscope {
             tip: [x, y, at(self.idx.z).unwrap_or(f64::NAN)],
             normal: at(self.idx.normal).unwrap_or(f64::NAN),
             lateral: self.idx.lateral.and_then(at),
-        })
-    }
-
-    fn frame_to_scan(f: &Frame, b: &Buffer) -> ScanFrame {
-        ScanFrame {
-            centre_x: f.centre_x,
-            centre_y: f.centre_y,
-            width: f.width,
-            height: f.height,
-            pixels: b.pixels,
-            lines: b.lines,
-        }
-    }
-
-    fn scan_inner(&mut self, frame: Option<&ScanFrame>) -> Result<HeightImage, MicroscopeError> {
-        let mut buffer = self.call("Scan.BufferGet", cmd::buffer_get)?;
-        let mut f = self.call("Scan.FrameGet", cmd::frame_get)?;
-        if let Some(want) = frame {
-            self.refuse_if_read_only("Scan.FrameSet")?;
-            f = Frame {
-                centre_x: want.centre_x,
-                centre_y: want.centre_y,
-                width: want.width,
-                height: want.height,
-                angle_deg: 0.0,
-            };
-            self.call("Scan.FrameSet", |c| cmd::frame_set(c, &f))?;
-            buffer.pixels = want.pixels;
-            buffer.lines = want.lines;
-        }
-        if f.angle_deg.abs() > 1e-6 {
-            return Err(MicroscopeError::Unsupported {
-                backend: "nanopush".into(),
-                what: format!(
-                    "image a frame rotated by {:.2}°: set the angle to 0 at the controller, or give a frame",
-                    f.angle_deg
-                ),
-            });
-        }
-        if !buffer.channels.contains(&(self.idx.z as i32)) {
-            self.refuse_if_read_only("Scan.BufferSet")?;
-            buffer.channels.push(self.idx.z as i32);
-        }
-        if frame.is_some() || !self.opts.read_only {
-            let b = buffer.clone();
-            self.call("Scan.BufferSet", |c| cmd::buffer_set(c, &b))?;
-        }
-        // A scan needs the Z feedback on: with the tip withdrawn, the controller's own set point
-        // lands it, and the tip is withdrawn again after the image.
-        let mut landed_here = false;
-        if !self.opts.read_only && self.call("ZCtrl.StatusGet", cmd::z_status)? == cmd::ZStatus::Off {
-            self.call("ZCtrl.OnOffSet", |c| cmd::z_on_off_set(c, true))?;
-            landed_here = true;
-        }
-        if !self.opts.read_only {
-            self.call("Scan.Action", |c| cmd::scan_action(c, 0, true))?;
-            // Waited for in slices, so that a stop is heard within one.
-            let (timeout, began) = (self.opts.scan_timeout, Instant::now());
-            let slice = Duration::from_millis(500).min(timeout);
-            loop {
-                if self
-                    .cancel
-                    .as_ref()
-                    .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed))
-                {
-                    let _ = self.call("Scan.Action", |c| cmd::scan_action(c, 1, true));
-                    return Err(MicroscopeError::Cancelled("the scan".into()));
-                }
-                if self.call("Scan.WaitEndOfScan", |c| cmd::wait_end_of_scan(c, slice))? {
-                    break;
-                }
-                if began.elapsed() >= timeout {
-                    let _ = self.call("Scan.Action", |c| cmd::scan_action(c, 1, true));
-                    return Err(MicroscopeError::Link {
-                        command: "Scan.WaitEndOfScan".into(),
-                        message: format!(
-                            "the scan did not end within {:.0} s; it was stopped",
-                            timeout.as_secs_f64()
-                        ),
-                    });
-                }
-            }
-        }
-        let z = self.idx.z;
-        let grab = self.call("Scan.FrameDataGrab", |c| cmd::frame_data_grab(c, z))?;
-        if landed_here {
-            self.withdraw()?;
-        }
-        let sf = Self::frame_to_scan(&f, &buffer);
-        if grab.rows == 0 || grab.cols == 0 {
-            return Err(MicroscopeError::Controller {
-                command: "Scan.FrameDataGrab".into(),
-                message: format!(
-                    "an empty image of {} × {} (has the controller scanned yet?)",
-                    grab.cols, grab.rows
-                ),
-            });
-        }
-        if grab.data.iter().any(|v| !v.is_finite()) {
-            let missing = grab.data.iter().filter(|v| !v.is_finite()).count();
-            return Err(MicroscopeError::Controller {
-                command: "Scan.FrameDataGrab".into(),
-                message: format!(
-                    "{missing} of {} pixels are not numbers (an unfinished scan?)",
-                    grab.data.len()
-                ),
-            });
-        }
-        // Row 0 is the bottom line (lowest y) of a scan that went up; the image keeps rows in y.
-        let mut data: Vec<f64> = Vec::with_capacity(grab.data.len());
-        for row in 0..grab.rows {
-            let r = if grab.up { row } else { grab.rows - 1 - row };
-            data.extend(
-                grab.data[r * grab.cols..(r + 1) * grab.cols]
-                    .iter()
-                    .map(|&v| f64::from(v)),
-            );
-        }
-        Ok(HeightImage {
-            xres: grab.cols,
-            yres: grab.rows,
-            x_real: sf.width,
-            y_real: sf.height,
-            x_offset: sf.centre_x - 0.5 * sf.width,
-            y_offset: sf.centre_y - 0.5 * sf.height,
-            data,
         })
     }
 }

@@ -4,7 +4,7 @@
 
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream, ToSocketAddrs};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use nanopush_instrument::afm::MicroscopeError;
 use nanopush_proto::nanonis::{BodyReader, ErrorBlock, FrameError, HEADER_LEN, decode_response_header, encode_request};
@@ -60,7 +60,9 @@ impl Connection {
     }
 
     /// Sends `name` with `body` and returns the response's body (its error block included).
-    /// `patience` replaces the time-out for this one reply (a scan's wait), when given.
+    /// The whole reply, header and body, must arrive within the time-out (or `patience`, which
+    /// replaces it for this one call: a scan's wait): a controller that trickles its bytes is as
+    /// late as one that says nothing.
     pub fn call_raw(
         &mut self,
         name: &str,
@@ -71,36 +73,49 @@ impl Connection {
         self.stream
             .write_all(&request)
             .map_err(|e| link(name, io_words(&e, self.timeout)))?;
-        if let Some(p) = patience {
-            self.stream.set_read_timeout(Some(p)).map_err(|e| link(name, e))?;
-        }
-        let result = self.read_reply(name, patience.unwrap_or(self.timeout));
-        if patience.is_some() {
-            self.stream
-                .set_read_timeout(Some(self.timeout))
-                .map_err(|e| link(name, e))?;
-        }
-        result
-    }
-
-    fn read_reply(&mut self, name: &str, waited: Duration) -> Result<Vec<u8>, MicroscopeError> {
+        let waited = patience.unwrap_or(self.timeout);
+        let deadline = Instant::now() + waited;
         let mut header = [0u8; HEADER_LEN];
-        self.stream
-            .read_exact(&mut header)
+        self.read_by(&mut header, deadline)
             .map_err(|e| link(name, io_words(&e, waited)))?;
         let h = decode_response_header(&header)
             .map_err(|e| reply(name, format!("the reply is not the protocol's: {e}")))?;
         if h.name != name {
             return Err(reply(name, format!("the controller answered {:?} instead", h.name)));
         }
-        let mut body = vec![0u8; h.body_size];
-        self.stream.read_exact(&mut body).map_err(|e| {
-            link(
-                name,
-                format!("the reply's body of {} bytes: {}", h.body_size, io_words(&e, waited)),
-            )
-        })?;
+        // Filled as it arrives, so a size that lies costs no more memory than the bytes sent.
+        let mut body = Vec::with_capacity(h.body_size.min(1 << 20));
+        let mut chunk = [0u8; 64 * 1024];
+        while body.len() < h.body_size {
+            let want = (h.body_size - body.len()).min(chunk.len());
+            self.read_by(&mut chunk[..want], deadline).map_err(|e| {
+                link(
+                    name,
+                    format!("the reply's body of {} bytes: {}", h.body_size, io_words(&e, waited)),
+                )
+            })?;
+            body.extend_from_slice(&chunk[..want]);
+        }
         Ok(body)
+    }
+
+    /// Fills `buf` before `deadline`.
+    fn read_by(&mut self, buf: &mut [u8], deadline: Instant) -> std::io::Result<()> {
+        let mut got = 0;
+        while got < buf.len() {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Err(std::io::ErrorKind::TimedOut.into());
+            }
+            self.stream.set_read_timeout(Some(left))?;
+            match self.stream.read(&mut buf[got..]) {
+                Ok(0) => return Err(std::io::ErrorKind::UnexpectedEof.into()),
+                Ok(n) => got += n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
     }
 
     /// Sends `name` with `body` and reads the response with `parse`, then its error block. An

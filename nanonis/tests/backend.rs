@@ -41,7 +41,7 @@ fn push_of(f: &FakeController) -> HeldPush {
         settle_samples: 5,
         lateral_contact: 0.1,
         normal_limit: 0.5,
-        max_samples: 20_000,
+        land_timeout: 10.0,
     }
 }
 
@@ -337,4 +337,111 @@ fn the_users_xy_limits_narrow_the_controllers_and_are_checked_before_sending() {
     o.xy_limits = Some([[90e-6, 95e-6], [0.0, 1e-6]]);
     let e = NanonisMicroscope::connect(o).unwrap_err().to_string();
     assert!(e.contains("overlapping the controller's scan frame"), "{e}");
+}
+
+#[test]
+fn a_reply_trickled_a_byte_at_a_time_is_as_late_as_silence() {
+    use std::io::{Read, Write};
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap();
+    std::thread::spawn(move || {
+        let (mut s, _) = listener.accept().unwrap();
+        let mut req = [0u8; 40];
+        let _ = s.read_exact(&mut req);
+        // A well-formed header, one byte every 300 ms.
+        let reply = nanopush_proto::nanonis::encode_response("Signals.NamesGet", &[0; 16]).unwrap();
+        for b in reply {
+            if s.write_all(&[b]).is_err() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(300));
+        }
+    });
+    let mut o = NanonisOptions::new(addr);
+    o.timeout = Duration::from_secs(1);
+    let asked = std::time::Instant::now();
+    let e = NanonisMicroscope::connect(o).unwrap_err().to_string();
+    assert!(e.contains("Signals.NamesGet: no answer within 1.0 s"), "{e}");
+    assert!(asked.elapsed() < Duration::from_secs(3), "{:?}", asked.elapsed());
+}
+
+#[test]
+fn a_frame_that_is_not_a_frame_is_refused_at_connect() {
+    let f = fake();
+    f.world().frame = [f64::NAN, 50e-6, 50e-6, 50e-6, 0.0];
+    let e = NanonisMicroscope::connect(options(&f, false)).unwrap_err().to_string();
+    assert!(
+        e.starts_with("Scan.FrameGet: the scan frame") && e.contains("not a frame"),
+        "{e}"
+    );
+    f.world().frame = [50e-6, 50e-6, -1e-6, 50e-6, 0.0];
+    assert!(NanonisMicroscope::connect(options(&f, false)).is_err());
+    f.world().frame = [50e-6, 50e-6, 50e-6, 50e-6, f64::NAN];
+    assert!(NanonisMicroscope::connect(options(&f, false)).is_err(), "a NaN angle");
+}
+
+#[test]
+fn an_image_that_is_not_the_buffers_is_refused() {
+    let f = fake();
+    let mut o = options(&f, false);
+    o.read_only = true;
+    let mut m = NanonisMicroscope::connect(o).unwrap();
+    {
+        let mut w = f.world();
+        let img = w.image.as_mut().unwrap();
+        img.xres = 1;
+        img.yres = 1;
+        img.data.truncate(1);
+    }
+    let e = m.scan(None).unwrap_err().to_string();
+    assert!(
+        e.contains("an image of 1 × 1 pixels; the scan buffer is 64 × 64"),
+        "{e}"
+    );
+    {
+        let mut w = f.world();
+        let img = w.image.as_mut().unwrap();
+        img.xres = 64;
+        img.yres = 64;
+        img.data = vec![1.0; 64 * 64];
+    }
+    let e = m.scan(None).unwrap_err().to_string();
+    assert!(
+        e.contains("4096 of 4096 pixels are not heights inside the Z range"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_scan_of_a_given_frame_gives_the_operator_their_frame_back() {
+    let f = fake();
+    let mut m = connect(&f);
+    let frame0 = f.world().frame;
+    let buffer0 = f.world().buffer.clone();
+    let frame = ScanFrame {
+        centre_x: 50e-6,
+        centre_y: 50e-6,
+        width: 2e-6,
+        height: 2e-6,
+        pixels: 32,
+        lines: 32,
+    };
+    let img = m.scan(Some(&frame)).unwrap();
+    assert_eq!(img.xres, 32);
+    assert_eq!(f.world().frame, frame0.map(|v| f64::from(v as f32)));
+    assert_eq!(f.world().buffer, buffer0);
+}
+
+#[test]
+fn read_only_starts_no_logger() {
+    let f = fake();
+    let mut o = options(&f, true);
+    o.read_only = true;
+    let m = NanonisMicroscope::connect(o).unwrap();
+    assert!(
+        !f.commands().iter().any(|c| c.starts_with("TCPLog.")),
+        "{:?}",
+        f.commands()
+    );
+    assert_eq!(m.capabilities().feed_rate_hz, 50.0, "polled");
 }

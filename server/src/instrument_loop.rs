@@ -161,6 +161,17 @@ fn run(mut m: Box<dyn Microscope + Send>, requests: &Receiver<Request>, shared: 
             let _ = reply.send(image);
         }
         match m.poll() {
+            Ok((sample, _)) if !(sample.tip.iter().all(|v| v.is_finite()) && sample.normal.is_finite()) => {
+                // Not published: telemetry shows the last reading that was a number.
+                if last_warned.elapsed() >= Duration::from_secs(10) {
+                    tracing::warn!(
+                        "instrument: a reading that is not a number: tip {:?} m, normal {} V",
+                        sample.tip,
+                        sample.normal
+                    );
+                    last_warned = Instant::now();
+                }
+            }
             Ok((sample, _)) => {
                 failing_since = None;
                 if let Ok(mut s) = shared.snapshot.lock() {

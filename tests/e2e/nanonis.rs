@@ -255,3 +255,108 @@ fn a_bad_instrument_is_named_with_what_is_expected() {
     assert!(!o.status.success() && err.contains(&addr.to_string()), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn an_interrupt_during_a_push_withdraws_the_tip_before_exiting() {
+    use std::process::{Command, Stdio};
+    let f = fake();
+    let child = Command::new(nanopush_e2e::bin("nanopush"))
+        .args([
+            "push",
+            "--instrument",
+            &spec(&f),
+            "--at-um",
+            "50,50",
+            "--to-um",
+            "52,50",
+            "--push-speed-um-per-s",
+            "0.2",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Landed and pushing: the Z feedback on and the tip moving.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    while !(f.world().z_on && f.commands().iter().filter(|c| *c == "FolMe.XYPosSet").count() >= 2) {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the push never started: {:?}",
+            f.commands()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    // SAFETY: a signal to our own child.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let asked = std::time::Instant::now();
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        asked.elapsed() < std::time::Duration::from_secs(5),
+        "{:?}",
+        asked.elapsed()
+    );
+    assert!(!o.status.success());
+    assert!(
+        err.contains("interrupted during the push (push): the tip was withdrawn"),
+        "{err}"
+    );
+    let w = f.world();
+    assert!(w.withdrawn && !w.z_on, "the tip is withdrawn");
+}
+
+#[test]
+fn a_target_outside_the_frame_or_too_few_pixels_are_refused_before_anything_moves() {
+    let f = fake();
+    let dir = tmp("nanonis-refused");
+    let o = run(
+        "nanopush",
+        &[
+            "push",
+            "--instrument",
+            &spec(&f),
+            "--at-um",
+            "50,50",
+            "--to-um",
+            "80,50",
+        ],
+        None,
+    );
+    let err = text(&o).1;
+    assert!(
+        err.contains("the target (80.0000, 50.0000) µm is outside the limits") && err.contains("nothing was sent"),
+        "{err}"
+    );
+    let gsf = dir.join("s.gsf");
+    let o = run(
+        "nanopush",
+        &[
+            "scan",
+            "--instrument",
+            &spec(&f),
+            "--size",
+            "8",
+            "--out",
+            gsf.to_str().unwrap(),
+        ],
+        None,
+    );
+    let err = text(&o).1;
+    assert!(
+        err.contains("--size 8 pixels is out of range for a controller's scan buffer; allowed: [16, 4096]"),
+        "{err}"
+    );
+    let moving = [
+        "FolMe.",
+        "ZCtrl.OnOff",
+        "ZCtrl.Setpnt",
+        "ZCtrl.Withdraw",
+        "Scan.Action",
+        "Scan.FrameSet",
+        "Scan.BufferSet",
+    ];
+    for c in f.commands() {
+        assert!(!moving.iter().any(|m| c.starts_with(m)), "sent {c}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

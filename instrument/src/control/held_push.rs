@@ -46,9 +46,12 @@ pub struct HeldPush {
     pub lateral_contact: f64,
     /// The push stops when the normal deflection leaves the set point by more than this (V).
     pub normal_limit: f64,
-    /// Longest wait for a phase, in readings of the backend (at its feed rate).
-    pub max_samples: u64,
+    /// Longest the landing may take (s, the backend's clock).
+    pub land_timeout: f64,
 }
+
+/// A motion may take twice its length at its speed, and this much more (s).
+pub const MOTION_SLACK: f64 = 10.0;
 
 /// The phases, in order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -132,17 +135,17 @@ pub enum HeldError {
     NoLocalZ(String),
     /// The backend failed during a phase; the tip was then withdrawn (or the message says it could
     /// not be).
-    #[error("{phase}: {source}; {withdrawn}")]
+    #[error("{phase}: {cause}{withdrawn}")]
     Backend {
         /// The phase.
         phase: &'static str,
-        /// What failed.
-        source: MicroscopeError,
-        /// What became of the tip.
+        /// What failed (in the message, not a `source`: printed once).
+        cause: MicroscopeError,
+        /// What became of the tip: empty, or `; the tip was withdrawn` and the like.
         withdrawn: String,
     },
     /// A safety limit tripped; the tip was withdrawn.
-    #[error("{phase}: {what}; {withdrawn}")]
+    #[error("{phase}: {what}{withdrawn}")]
     Safety {
         /// The phase.
         phase: &'static str,
@@ -170,6 +173,7 @@ impl HeldPush {
         pos("land tolerance", self.land_tolerance)?;
         pos("lateral contact", self.lateral_contact)?;
         pos("normal limit", self.normal_limit)?;
+        pos("land time-out", self.land_timeout)?;
         if !(self.from.iter().chain(&self.to).all(|v| v.is_finite()) && self.setpoint.is_finite()) {
             return Err(HeldError::Setting(
                 "the particle, the target and the set point must be finite".into(),
@@ -222,6 +226,8 @@ pub fn held_push(m: &mut dyn Microscope, p: &HeldPush, stop: &AtomicBool) -> Res
         samples: Vec::new(),
         watched: false,
     };
+    // Nothing is sent for a push that would leave the limits.
+    check_limits(m, p)?;
     let result = phases(m, p, stop, &mut report);
     let t = report.samples.last().map_or(0.0, |s| s.t);
     report.phases.push((HeldPhase::Retract, t));
@@ -230,8 +236,8 @@ pub fn held_push(m: &mut dyn Microscope, p: &HeldPush, stop: &AtomicBool) -> Res
         (Ok(()), Ok(())) => Ok(report),
         (Ok(()), Err(e)) => Err(HeldError::Backend {
             phase: "retract",
-            source: e,
-            withdrawn: "the tip may still be on the surface: withdraw it at the controller".into(),
+            cause: e,
+            withdrawn: "; the tip may still be on the surface: withdraw it at the controller".into(),
         }),
         (Err(e), retract) => Err(with_retract(e, retract)),
     }
@@ -239,13 +245,20 @@ pub fn held_push(m: &mut dyn Microscope, p: &HeldPush, stop: &AtomicBool) -> Res
 
 fn with_retract(e: HeldError, retract: Result<(), MicroscopeError>) -> HeldError {
     let withdrawn = match retract {
-        Ok(()) => "the tip was withdrawn".to_string(),
-        Err(r) => format!("the tip could not be withdrawn ({r}): withdraw it at the controller"),
+        Ok(()) => "; the tip was withdrawn".to_string(),
+        Err(r) => format!("; the tip could not be withdrawn ({r}): withdraw it at the controller"),
     };
     match e {
-        HeldError::Backend { phase, source, .. } => HeldError::Backend {
+        // The backend said what became of the tip after its own failure; the retract after it
+        // changes nothing it said.
+        HeldError::Backend { phase, cause, .. } if cause.to_string().contains("withdrawn") => HeldError::Backend {
             phase,
-            source,
+            cause,
+            withdrawn: String::new(),
+        },
+        HeldError::Backend { phase, cause, .. } => HeldError::Backend {
+            phase,
+            cause,
             withdrawn,
         },
         HeldError::Safety { phase, what, .. } => HeldError::Safety { phase, what, withdrawn },
@@ -254,11 +267,61 @@ fn with_retract(e: HeldError, retract: Result<(), MicroscopeError>) -> HeldError
 }
 
 fn backend(phase: HeldPhase) -> impl Fn(MicroscopeError) -> HeldError {
-    move |source| HeldError::Backend {
+    move |cause| HeldError::Backend {
         phase: phase.as_str(),
-        source,
+        cause,
         withdrawn: String::new(),
     }
+}
+
+/// A reading, refused when any of its values is not a number: a push is not watched blind.
+fn poll(m: &mut dyn Microscope, phase: HeldPhase) -> Result<(Sample, bool), HeldError> {
+    let (s, arrived) = m.poll().map_err(backend(phase))?;
+    let finite = s.tip[0].is_finite() && s.tip[1].is_finite() && s.normal.is_finite() && s.t.is_finite();
+    if !finite || s.lateral.is_some_and(|l| !l.is_finite()) {
+        return Err(HeldError::Safety {
+            phase: phase.as_str(),
+            what: format!(
+                "a reading that is not a number (tip ({}, {}) m, normal {} V, lateral {:?} V)",
+                s.tip[0], s.tip[1], s.normal, s.lateral
+            ),
+            withdrawn: String::new(),
+        });
+    }
+    Ok((s, arrived))
+}
+
+/// Checks that every point the push will send lies inside the backend's limits, and its speeds
+/// under its fastest, before anything is sent.
+fn check_limits(m: &mut dyn Microscope, p: &HeldPush) -> Result<(), HeldError> {
+    let l = m.limits().map_err(backend(HeldPhase::Withdraw))?;
+    let um = |v: [f64; 2]| format!("({:.4}, {:.4}) µm", v[0] * 1e6, v[1] * 1e6);
+    for (what, at) in [
+        ("the approach point", p.approach_point()),
+        ("the tip's end point", p.end_point()),
+        ("the target", p.to),
+    ] {
+        if !l.contains_xy(at[0], at[1]) {
+            return Err(HeldError::Setting(format!(
+                "{what} {} lies outside the limits, x in [{:.4}, {:.4}] µm, y in [{:.4}, {:.4}] µm; nothing was sent",
+                um(at),
+                l.x[0] * 1e6,
+                l.x[1] * 1e6,
+                l.y[0] * 1e6,
+                l.y[1] * 1e6
+            )));
+        }
+    }
+    for (what, v) in [("travel speed", p.travel_speed), ("push speed", p.push_speed)] {
+        if v > l.max_speed * (1.0 + 1e-9) {
+            return Err(HeldError::Setting(format!(
+                "the {what} {:.3} µm/s is over the fastest allowed, {:.3} µm/s; nothing was sent",
+                v * 1e6,
+                l.max_speed * 1e6
+            )));
+        }
+    }
+    Ok(())
 }
 
 fn phases(m: &mut dyn Microscope, p: &HeldPush, stop: &AtomicBool, r: &mut HeldReport) -> Result<(), HeldError> {
@@ -268,47 +331,53 @@ fn phases(m: &mut dyn Microscope, p: &HeldPush, stop: &AtomicBool, r: &mut HeldR
 
     // 2. Travel.
     let a = p.approach_point();
-    let (s, _) = m.poll().map_err(backend(HeldPhase::Travel))?;
+    let (s, _) = poll(m, HeldPhase::Travel)?;
     r.phases.push((HeldPhase::Travel, s.t));
     m.start_move(a[0], a[1], p.travel_speed)
         .map_err(backend(HeldPhase::Travel))?;
-    follow(m, p, stop, HeldPhase::Travel, |_| Ok(false))?;
+    let length = (a[0] - s.tip[0]).hypot(a[1] - s.tip[1]);
+    follow(
+        m,
+        stop,
+        HeldPhase::Travel,
+        (s.t, 2.0 * length / p.travel_speed + MOTION_SLACK),
+        |_| Ok(false),
+    )?;
     if stop.load(Ordering::Relaxed) {
         r.outcome = HeldOutcome::Stopped;
         return Ok(());
     }
 
     // 3. Land.
-    let (s, _) = m.poll().map_err(backend(HeldPhase::Land))?;
+    let (s, _) = poll(m, HeldPhase::Land)?;
     r.phases.push((HeldPhase::Land, s.t));
     m.hold_force(p.setpoint).map_err(backend(HeldPhase::Land))?;
+    let deadline = s.t + p.land_timeout;
     let mut settled = 0;
-    let mut landed: Option<Sample> = None;
-    for _ in 0..p.max_samples {
+    let landed = loop {
         if stop.load(Ordering::Relaxed) {
             r.outcome = HeldOutcome::Stopped;
             return Ok(());
         }
-        let (s, _) = m.poll().map_err(backend(HeldPhase::Land))?;
+        let (s, _) = poll(m, HeldPhase::Land)?;
         settled = if (s.normal - p.setpoint).abs() <= p.land_tolerance {
             settled + 1
         } else {
             0
         };
         if settled >= p.settle_samples {
-            landed = Some(s);
-            break;
+            break s;
         }
-    }
-    let Some(landed) = landed else {
-        return Err(HeldError::Safety {
-            phase: "land",
-            what: format!(
-                "the normal deflection did not settle within {} V of the set point {} V in {} readings",
-                p.land_tolerance, p.setpoint, p.max_samples
-            ),
-            withdrawn: String::new(),
-        });
+        if s.t > deadline {
+            return Err(HeldError::Safety {
+                phase: "land",
+                what: format!(
+                    "the normal deflection did not settle within {} V of the set point {} V in {} s (last {:.4} V)",
+                    p.land_tolerance, p.setpoint, p.land_timeout, s.normal
+                ),
+                withdrawn: String::new(),
+            });
+        }
     };
 
     // 4. Push.
@@ -318,12 +387,14 @@ fn phases(m: &mut dyn Microscope, p: &HeldPush, stop: &AtomicBool, r: &mut HeldR
     let e = p.end_point();
     m.start_move(e[0], e[1], p.push_speed)
         .map_err(backend(HeldPhase::Push))?;
+    let length = (e[0] - landed.tip[0]).hypot(e[1] - landed.tip[1]);
     let mut below = 0;
     let mut samples = Vec::new();
     let outcome = {
         let contact_at = &mut r.contact_at;
         let lost_at = &mut r.lost_at;
-        follow(m, p, stop, HeldPhase::Push, |s| {
+        let budget = 2.0 * length / p.push_speed + MOTION_SLACK;
+        follow(m, stop, HeldPhase::Push, (landed.t, budget), |s| {
             samples.push(*s);
             if (s.normal - p.setpoint).abs() > p.normal_limit {
                 return Err(HeldError::Safety {
@@ -370,32 +441,42 @@ fn phases(m: &mut dyn Microscope, p: &HeldPush, stop: &AtomicBool, r: &mut HeldR
     Ok(())
 }
 
-/// Polls until the motion arrives, `check` says to end (true), or `stop` is set; fails after
-/// `max_samples` readings.
+/// Polls until the motion arrives, `check` says to end (true), or `stop` is set; fails when the
+/// backend's clock passes `budget` (s) after `start` first.
 fn follow(
     m: &mut dyn Microscope,
-    p: &HeldPush,
     stop: &AtomicBool,
     phase: HeldPhase,
+    (start, budget): (f64, f64),
     mut check: impl FnMut(&Sample) -> Result<bool, HeldError>,
 ) -> Result<bool, HeldError> {
-    for _ in 0..p.max_samples {
+    loop {
         if stop.load(Ordering::Relaxed) {
             m.stop_move().map_err(backend(phase))?;
             return Ok(true);
         }
-        let (s, arrived) = m.poll().map_err(backend(phase))?;
+        let (s, arrived) = poll(m, phase)?;
         if check(&s)? {
             return Ok(true);
         }
         if arrived {
             return Ok(false);
         }
+        if s.t > start + budget {
+            m.stop_move().map_err(backend(phase))?;
+            return Err(HeldError::Safety {
+                phase: phase.as_str(),
+                what: format!(
+                    "the motion did not arrive within {:.1} s (twice its length at its speed, and {MOTION_SLACK} s); the tip is at ({:.4}, {:.4}) µm",
+                    budget,
+                    s.tip[0] * 1e6,
+                    s.tip[1] * 1e6
+                ),
+                withdrawn: String::new(),
+            });
+        }
     }
-    m.stop_move().map_err(backend(phase))?;
-    Err(HeldError::Safety {
-        phase: phase.as_str(),
-        what: format!("the motion did not arrive within {} readings", p.max_samples),
-        withdrawn: String::new(),
-    })
 }
+
+#[cfg(test)]
+mod tests;

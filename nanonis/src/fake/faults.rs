@@ -50,7 +50,12 @@ impl std::str::FromStr for Fault {
     fn from_str(s: &str) -> Result<Fault, String> {
         let usage =
             "KIND:COMMAND[:MS][*TIMES] with KIND one of slow, error, drop, wrong-name, short, or logger-drop:MS";
-        let (spec, times) = match s.split_once('*') {
+        // `*TIMES` is the last `*` when what follows it is a count, `always` or nothing, and
+        // it does not stand where a command does (`error:*` is every command, once).
+        let suffix = s.rsplit_once('*').filter(|(spec, n)| {
+            !spec.ends_with(':') && (n.is_empty() || *n == "always" || n.chars().all(|c| c.is_ascii_digit()))
+        });
+        let (spec, times) = match suffix {
             Some((spec, "")) | Some((spec, "always")) => (spec, u32::MAX),
             Some((spec, n)) => (
                 spec,
@@ -106,6 +111,15 @@ mod tests {
         assert_eq!(f.times, 2);
         let f: Fault = "drop:FolMe.XYPosSet*".parse().unwrap();
         assert_eq!(f.times, u32::MAX);
+        let f: Fault = "error:*".parse().unwrap();
+        assert_eq!((f.command.as_str(), f.times), ("*", 1));
+        let f: Fault = "slow:*:700*".parse().unwrap();
+        assert_eq!(
+            (f.kind, f.command.as_str(), f.times),
+            (FaultKind::Slow(700), "*", u32::MAX)
+        );
+        let f: Fault = "drop:**3".parse().unwrap();
+        assert_eq!((f.command.as_str(), f.times), ("*", 3));
         let e = "melt:Scan.Action".parse::<Fault>().unwrap_err();
         assert!(e.contains("KIND:COMMAND"), "{e}");
         assert!("slow:X:fast".parse::<Fault>().is_err());
