@@ -44,6 +44,10 @@ pub struct InstrumentArgs {
     /// Time-out of every call to the controller (s), in [0.1, 600].
     #[arg(long, default_value_t = 5.0, value_name = "S")]
     pub instrument_timeout_s: f64,
+    /// The longest a scan may take before it is stopped and the tip withdrawn (s), in
+    /// [1, 86400].
+    #[arg(long, default_value_t = 3600.0, value_name = "S")]
+    pub scan_timeout_s: f64,
     /// Your own XY limits within the controller's scan frame (µm): `XMIN,YMIN,XMAX,YMAX`; no
     /// move or frame outside them is sent.
     #[arg(long, value_name = "XMIN,YMIN,XMAX,YMAX", allow_hyphen_values = true)]
@@ -145,6 +149,8 @@ pub fn connect(a: &InstrumentArgs, spec: &str, max_speed: f64) -> anyhow::Result
     o.lateral_signal = (a.lateral_signal != "none").then(|| a.lateral_signal.clone());
     o.height_signal = a.height_signal.clone();
     o.max_speed = max_speed;
+    in_range("--scan-timeout-s", a.scan_timeout_s, 1.0, 86_400.0, false, "s")?;
+    o.scan_timeout = Duration::from_secs_f64(a.scan_timeout_s);
     if let Some(spec) = &a.xy_limits_um {
         let usage =
             "expected four numbers XMIN,YMIN,XMAX,YMAX in µm with XMIN < XMAX and YMIN < YMAX, e.g. 40,40,60,60";
@@ -164,7 +170,8 @@ pub fn connect(a: &InstrumentArgs, spec: &str, max_speed: f64) -> anyhow::Result
     NanonisMicroscope::connect(o).with_context(|| format!("connecting to the controller at {addr}"))
 }
 
-fn tip(a: &InstrumentArgs) -> anyhow::Result<Tip> {
+/// The tip for locating particles, its values checked.
+pub fn tip(a: &InstrumentArgs) -> anyhow::Result<Tip> {
     in_range("--tip-radius-nm", a.tip_radius_nm, 1.0, 1000.0, false, "nm")?;
     in_range(
         "--tip-half-angle-deg",

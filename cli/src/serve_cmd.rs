@@ -314,8 +314,12 @@ fn connect_instrument(a: &ServeArgs, spec: &str) -> anyhow::Result<nanopush_serv
         );
     }
     if a.instrument.frame_um.is_some() {
-        bail!("--frame-um is for nanopush scan and push; the server does not scan a real controller");
+        bail!(
+            "--frame-um is for nanopush scan and push; the server scans the controller's own frame, or the square a client's scan command gives"
+        );
     }
+    // Checked though the server locates nothing with them: a value out of range is a mistake.
+    crate::instrument_cmd::tip(&a.instrument)?;
     let m = crate::instrument_cmd::connect(&a.instrument, spec, 20e-6)?;
     Ok(nanopush_server::instrument_loop::RealInstrument::new(Box::new(m)))
 }

@@ -67,7 +67,7 @@ impl NanonisOptions {
             height_signal: "Z".into(),
             max_speed: 20e-6,
             reconnect_tries: 3,
-            scan_timeout: Duration::from_secs(600),
+            scan_timeout: Duration::from_secs(3600),
             acquisition_period: 0.02,
             xy_limits: None,
         }
@@ -103,7 +103,12 @@ pub struct NanonisMicroscope {
     pub sent: Vec<String>,
     /// Set to end a scan early.
     cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+    /// When to try the logger stream again after it failed.
+    logger_retry: Option<Instant>,
 }
+
+/// How long after a logger stream fails it is started again (polled reads meanwhile).
+const LOGGER_RETRY: Duration = Duration::from_secs(2);
 
 /// Finds the signal whose name is `want` or starts with it (case-insensitive).
 pub fn find_signal(names: &[String], want: &str) -> Result<usize, String> {
@@ -228,6 +233,7 @@ impl NanonisMicroscope {
             started: Instant::now(),
             sent: Vec::new(),
             cancel: None,
+            logger_retry: None,
         };
         m.sent
             .extend(["Signals.NamesGet", "ZCtrl.LimitsGet", "Scan.FrameGet"].map(String::from));
@@ -273,6 +279,21 @@ impl NanonisMicroscope {
         Ok(())
     }
 
+    /// Starts the logger stream again once its retry time has come (a controller that
+    /// restarted, a stream that dropped); until then, and when that fails, readings are polled.
+    fn revive_logger(&mut self) {
+        let (Some(port), Some(at)) = (self.opts.logger_port, self.logger_retry) else {
+            return;
+        };
+        if self.logger.is_some() || Instant::now() < at || self.opts.read_only {
+            return;
+        }
+        match self.start_logger(port) {
+            Ok(()) => self.logger_retry = None,
+            Err(_) => self.logger_retry = Some(Instant::now() + LOGGER_RETRY),
+        }
+    }
+
     /// The signal names the controller reported.
     pub fn signal_names(&self) -> &[String] {
         &self.names
@@ -282,7 +303,21 @@ impl NanonisMicroscope {
     fn call<T>(
         &mut self,
         name: &str,
-        f: impl FnOnce(&mut Connection) -> Result<T, MicroscopeError>,
+        f: impl Fn(&mut Connection) -> Result<T, MicroscopeError>,
+    ) -> Result<T, MicroscopeError> {
+        let result = self.call_once(name, &f);
+        // A connection left idle (the logger carries the readings) may have died with a
+        // controller that restarted: a call that only reads is tried once more on a new one.
+        match result {
+            Err(MicroscopeError::Link { .. }) if name.ends_with("Get") => self.call_once(name, &f),
+            other => other,
+        }
+    }
+
+    fn call_once<T>(
+        &mut self,
+        name: &str,
+        f: &impl Fn(&mut Connection) -> Result<T, MicroscopeError>,
     ) -> Result<T, MicroscopeError> {
         self.sent.push(name.to_string());
         if self.conn.is_none() {
@@ -315,10 +350,16 @@ impl NanonisMicroscope {
             return error;
         }
         let mut last = String::new();
+        let mut tries = 0;
         for attempt in 0..self.opts.reconnect_tries.max(1) {
+            // A stop or a shutdown waits for one try, not three.
+            if attempt > 0 && self.cancelled() {
+                break;
+            }
             if attempt > 0 {
                 std::thread::sleep(Duration::from_millis(200 * u64::from(attempt)));
             }
+            tries += 1;
             self.conn = None;
             match self.withdraw() {
                 Ok(()) => {
@@ -329,11 +370,15 @@ impl NanonisMicroscope {
         }
         annotate(
             error,
-            &format!(
-                "the tip could NOT be withdrawn after {} tries ({last}): withdraw it at the controller",
-                self.opts.reconnect_tries.max(1)
-            ),
+            &format!("the tip could NOT be withdrawn after {tries} tries ({last}): withdraw it at the controller"),
         )
+    }
+
+    /// Whether a stop or a shutdown asked to end what runs.
+    pub(crate) fn cancelled(&self) -> bool {
+        self.cancel
+            .as_ref()
+            .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed))
     }
 
     fn check_xy(&self, what: &str, x: f64, y: f64) -> Result<(), MicroscopeError> {
@@ -459,8 +504,17 @@ impl Microscope for NanonisMicroscope {
     }
 
     fn poll(&mut self) -> Result<(Sample, bool), MicroscopeError> {
+        self.revive_logger();
         let sample = if self.logger.is_some() {
-            self.logged_sample()
+            match self.logged_sample() {
+                // A stream that failed is dropped: polled reads stand in until it is back.
+                Err(MicroscopeError::Link { command, message }) if command == "TCP Logger stream" => {
+                    self.logger = None;
+                    self.logger_retry = Some(Instant::now() + LOGGER_RETRY);
+                    Err(MicroscopeError::Link { command, message })
+                }
+                other => other,
+            }
         } else {
             self.polled_sample()
         };
@@ -509,7 +563,8 @@ impl Microscope for NanonisMicroscope {
                 });
             }
         }
-        match self.scan_inner(frame) {
+        let (result, restore) = self.scan_inner(frame);
+        let result = match result {
             Ok(img) => Ok(img),
             Err(
                 e @ (MicroscopeError::ReadOnly { .. }
@@ -523,11 +578,18 @@ impl Microscope for NanonisMicroscope {
                 Err(e)
             }
             Err(e) => {
-                // Stop the scan engine if the link still answers; the withdraw follows either way.
-                let _ = self.call("Scan.Action", |c| cmd::scan_action(c, 1, true));
+                // Stop the scan engine if the link still answers, withdraw: then the rest.
+                let _ = self.call_once("Scan.Action", &|c: &mut Connection| cmd::scan_action(c, 1, true));
                 Err(self.recover(e))
             }
+        };
+        // The operator's own frame and buffer back, as their software had them: after the tip
+        // is safe.
+        if let Some((frame0, buffer0)) = restore.filter(|_| self.conn.is_some()) {
+            let _ = self.call_once("Scan.FrameSet", &|c: &mut Connection| cmd::frame_set(c, &frame0));
+            let _ = self.call_once("Scan.BufferSet", &|c: &mut Connection| cmd::buffer_set(c, &buffer0));
         }
+        result
     }
 
     fn current_frame(&mut self) -> Result<ScanFrame, MicroscopeError> {

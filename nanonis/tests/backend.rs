@@ -445,3 +445,47 @@ fn read_only_starts_no_logger() {
     );
     assert_eq!(m.capabilities().feed_rate_hz, 50.0, "polled");
 }
+
+#[test]
+fn a_scan_cancelled_before_it_starts_never_lands_the_tip() {
+    let f = fake();
+    let mut m = connect(&f);
+    let cancel = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+    m.set_cancel(cancel);
+    let before = f.commands().len();
+    let e = m.scan(None).unwrap_err();
+    assert!(matches!(e, MicroscopeError::Cancelled(_)), "{e}");
+    let sent = &f.commands()[before..];
+    assert!(
+        !sent.iter().any(|c| c == "ZCtrl.OnOffSet" || c == "Scan.Action"),
+        "nothing lands or starts: {sent:?}"
+    );
+    assert!(f.world().withdrawn);
+}
+
+#[test]
+fn a_failed_scan_withdraws_before_it_gives_the_frame_back() {
+    let f = fake();
+    let mut m = connect(&f);
+    f.add_fault("error:Scan.FrameDataGrab".parse().unwrap());
+    let mut frame = m.current_frame().unwrap();
+    frame.width /= 2.0;
+    frame.height /= 2.0;
+    let before = f.commands().len();
+    let e = m.scan(Some(&frame)).unwrap_err().to_string();
+    assert!(e.contains("Scan.FrameDataGrab") && e.contains("withdrawn"), "{e}");
+    let sent = f.commands()[before..].to_vec();
+    let at = |c: &str| {
+        sent.iter()
+            .rposition(|s| s == c)
+            .unwrap_or_else(|| panic!("{c} in {sent:?}"))
+    };
+    assert!(
+        at("ZCtrl.Withdraw") < at("Scan.FrameSet"),
+        "withdrawn first, the frame after: {sent:?}"
+    );
+    assert!(
+        at("Scan.Action") < at("ZCtrl.Withdraw"),
+        "the engine stopped first: {sent:?}"
+    );
+}

@@ -421,6 +421,19 @@ impl AppState {
         self.lease_holder().and_then(|id| self.auth.name_of(id))
     }
 
+    /// The phase now: the loop's, or, while it is idle, what runs beside it. The loop is idle
+    /// while a push is prepared off it (a local scan, the plan: seconds on a crowded sample) and
+    /// while a scan runs on its own thread: said as such.
+    pub fn phase_now(&self) -> &'static str {
+        let phase = self.shared.snapshot.lock().map(|s| s.phase).unwrap_or("idle");
+        match phase {
+            "idle" if self.activity.scanning.load(Relaxed) => "scanning",
+            "idle" if self.activity.assembling.load(Relaxed) => "assembling",
+            "idle" if self.shared.busy.load(Relaxed) => "preparing",
+            other => other,
+        }
+    }
+
     /// The instrument behind the server, as the page is told of it.
     pub fn instrument_info(&self) -> nanopush_proto::ws::InstrumentInfo {
         match &self.cfg.instrument {
@@ -455,20 +468,8 @@ impl AppState {
                 }
             })
             .collect();
-        let (stage, phase) = self
-            .shared
-            .snapshot
-            .lock()
-            .map(|s| (s.stage, s.phase))
-            .unwrap_or(([0.0; 3], "idle"));
-        // The loop is idle while a push is prepared off it (a local scan, the plan: seconds on a
-        // crowded sample) and while a scan runs on its own thread: said as such.
-        let phase = match phase {
-            "idle" if self.activity.scanning.load(Relaxed) => "scanning",
-            "idle" if self.activity.assembling.load(Relaxed) => "assembling",
-            "idle" if self.shared.busy.load(Relaxed) => "preparing",
-            other => other,
-        };
+        let stage = self.shared.snapshot.lock().map(|s| s.stage).unwrap_or([0.0; 3]);
+        let phase = self.phase_now();
         ServerMessage::State {
             particles,
             stage,

@@ -4,13 +4,13 @@
 //! stands for the simulated AFM; the force is held by the controller's own Z feedback, so there is
 //! no force loop here to close.
 
-use std::sync::atomic::AtomicBool;
 use std::sync::atomic::Ordering::{Relaxed, Release};
+use std::sync::atomic::{AtomicBool, AtomicU64};
 use std::sync::mpsc::{Receiver, Sender, SyncSender};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use nanopush_instrument::afm::{Capabilities, Microscope, ScanFrame};
+use nanopush_instrument::afm::{Capabilities, Limits, Microscope, ScanFrame};
 use nanopush_instrument::scan::HeightImage;
 use nanopush_proto::ws::InstrumentInfo;
 
@@ -39,6 +39,14 @@ pub struct RealInstrument {
     receiver: Mutex<Option<Receiver<Request>>>,
     /// Set by a stop: a scan in progress ends early.
     pub cancel: Arc<AtomicBool>,
+    /// The XY travel the backend allows (a scan's square is checked against it on arrival).
+    pub limits: Option<Limits>,
+    /// A withdraw that failed, in words, for the clients (taken by the telemetry task).
+    pub fault: Arc<Mutex<Option<String>>>,
+    /// When the last reading came (ns since the loop started; 0: none yet).
+    pub last_reading_ns: Arc<AtomicU64>,
+    /// When the loop started.
+    pub started: Instant,
 }
 
 impl std::fmt::Debug for RealInstrument {
@@ -55,16 +63,33 @@ impl RealInstrument {
         let (tx, rx) = std::sync::mpsc::channel();
         RealInstrument {
             caps: backend.capabilities(),
+            limits: backend.limits().ok(),
             backend: Mutex::new(Some(backend)),
             requests: Mutex::new(tx),
             receiver: Mutex::new(Some(rx)),
             cancel,
+            fault: Arc::new(Mutex::new(None)),
+            last_reading_ns: Arc::new(AtomicU64::new(0)),
+            started: Instant::now(),
         }
     }
 
-    /// Scans on the loop's thread (telemetry pauses meanwhile) and waits for the image.
+    /// Seconds since the last reading (None before the first).
+    pub fn reading_age_s(&self) -> Option<f64> {
+        match self.last_reading_ns.load(Relaxed) {
+            0 => None,
+            ns => Some(self.started.elapsed().as_secs_f64() - ns as f64 * 1e-9),
+        }
+    }
+
+    /// The failed withdraw not yet told, if any.
+    pub fn take_fault(&self) -> Option<String> {
+        self.fault.lock().ok().and_then(|mut f| f.take())
+    }
+
+    /// Scans on the loop's thread (telemetry pauses meanwhile) and waits for the image. (The
+    /// command that asks for it clears `cancel` before it is accepted, so a stop after it ends it.)
     pub fn scan(&self, frame: Option<ScanFrame>) -> Result<HeightImage, String> {
-        self.cancel.store(false, Relaxed);
         let (reply, answer) = std::sync::mpsc::sync_channel(1);
         self.requests
             .lock()
@@ -107,37 +132,60 @@ pub fn start(real: &RealInstrument, shared: Arc<Shared>) -> std::io::Result<std:
         .ok()
         .and_then(|mut r| r.take())
         .ok_or_else(|| std::io::Error::other("the instrument's requests were already taken"))?;
+    let ctx = Context {
+        fault: real.fault.clone(),
+        last_reading_ns: real.last_reading_ns.clone(),
+        started: real.started,
+    };
     std::thread::Builder::new()
         .name("instrument-loop".into())
-        .spawn(move || run(backend, &requests, &shared))
+        .spawn(move || run(backend, &requests, &shared, &ctx))
 }
 
-fn withdraw(m: &mut dyn Microscope, why: &str) {
+/// What the loop's thread reports back beside the snapshot.
+struct Context {
+    fault: Arc<Mutex<Option<String>>>,
+    last_reading_ns: Arc<AtomicU64>,
+    started: Instant,
+}
+
+/// Withdraws first (on a dead link the motion's stop would only spend a time-out before it),
+/// then stops any motion; a withdraw that fails is logged and told to the clients.
+fn withdraw(m: &mut dyn Microscope, why: &str, ctx: &Context) {
     if m.capabilities().read_only {
         return;
     }
-    let _ = m.stop_move();
     match m.withdraw() {
-        Ok(()) => tracing::info!("instrument: tip withdrawn ({why})"),
+        Ok(()) => {
+            tracing::info!("instrument: tip withdrawn ({why})");
+            let _ = m.stop_move();
+        }
         Err(e) => {
-            tracing::error!("instrument: the tip could NOT be withdrawn ({why}): {e}; withdraw it at the controller")
+            let words = format!("the tip could NOT be withdrawn ({why}): {e}; withdraw it at the controller");
+            tracing::error!("instrument: {words}");
+            if let Ok(mut f) = ctx.fault.lock() {
+                *f = Some(words);
+            }
         }
     }
 }
 
-fn run(mut m: Box<dyn Microscope + Send>, requests: &Receiver<Request>, shared: &Shared) {
+fn run(mut m: Box<dyn Microscope + Send>, requests: &Receiver<Request>, shared: &Shared, ctx: &Context) {
     let started = Instant::now();
     let mut failing_since: Option<Instant> = None;
     let mut last_warned = Instant::now() - Duration::from_secs(60);
     loop {
+        // Every command waiting, taken at once: a shutdown goes first, and any number of stops
+        // is one withdraw.
+        let mut stop: Option<&'static str> = None;
         while let Some(cmd) = shared.commands.pop() {
             match cmd {
                 LoopCommand::Shutdown => {
-                    withdraw(m.as_mut(), "server shutting down");
+                    withdraw(m.as_mut(), "server shutting down", ctx);
                     shared.finished.store(true, Release);
                     return;
                 }
-                LoopCommand::Stop(why) => withdraw(m.as_mut(), why.words()),
+                LoopCommand::Stop(why) => stop = Some(why.words()),
                 LoopCommand::Push(job) => {
                     let _ = shared.events.push(LoopEvent::RunDone {
                         run: job.run,
@@ -152,6 +200,9 @@ fn run(mut m: Box<dyn Microscope + Send>, requests: &Receiver<Request>, shared: 
                 }
                 LoopCommand::Haptic(_) => {}
             }
+        }
+        if let Some(why) = stop {
+            withdraw(m.as_mut(), why, ctx);
         }
         while let Ok(Request::Scan { frame, reply }) = requests.try_recv() {
             let image = m.scan(frame.as_ref()).map_err(|e| e.to_string());
@@ -174,6 +225,8 @@ fn run(mut m: Box<dyn Microscope + Send>, requests: &Receiver<Request>, shared: 
             }
             Ok((sample, _)) => {
                 failing_since = None;
+                ctx.last_reading_ns
+                    .store(ctx.started.elapsed().as_nanos().max(1) as u64, Relaxed);
                 if let Ok(mut s) = shared.snapshot.lock() {
                     s.t = started.elapsed().as_secs_f64();
                     s.stage = sample.tip;

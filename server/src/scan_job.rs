@@ -131,7 +131,10 @@ pub(crate) fn run_real_scan(
         Ok(img) => img,
         Err(e) => {
             st.activity.scanning.store(false, Relaxed);
-            let cancelled = st.activity.scan_cancel.load(Relaxed);
+            // A stop, or a shutdown, ended it: no failure.
+            let cancelled = st.activity.scan_cancel.load(Relaxed)
+                || st.activity.stopping.load(Relaxed)
+                || real.cancel.load(Relaxed);
             send_text(&ServerMessage::ScanDone {
                 scan: scan_id,
                 record: None,

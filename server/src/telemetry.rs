@@ -32,6 +32,10 @@ pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiv
     loop {
         tokio::select! {
             _ = tick.tick() => {
+                // A real controller's tip that could not be withdrawn: everyone is told.
+                if let Some(words) = st.cfg.instrument.as_ref().and_then(|r| r.take_fault()) {
+                    st.broadcast_event(&ServerMessage::Error { id: None, code: nanopush_proto::ws::ErrorCode::Unavailable, message: words });
+                }
                 if st.clients.tip_subscribers.load(Relaxed) == 0 {
                     continue;
                 }

@@ -133,7 +133,12 @@ fn shutdown_withdraws_the_tip_and_the_state_names_no_scene_particles() {
     assert!(!f.world().withdrawn);
     nanopush_e2e::stop(&mut s.child);
     assert!(f.world().withdrawn, "the server withdrew the tip as it shut down");
-    assert_eq!(f.commands().last().map(String::as_str), Some("ZCtrl.Withdraw"));
+    let sent = f.commands();
+    let last = |c: &str| sent.iter().rposition(|s| s == c);
+    assert!(
+        last("ZCtrl.Withdraw") > last("ZCtrl.OnOffSet"),
+        "withdrawn after the landing: {sent:?}"
+    );
 }
 
 #[test]
@@ -212,4 +217,88 @@ fn a_controller_that_vanishes_leaves_the_server_up_and_its_shutdown_bounded() {
         log.contains("the tip could NOT be withdrawn") && log.contains(&addr.to_string()),
         "the log says the tip may still be down:\n{log}"
     );
+}
+
+#[test]
+fn a_stop_sent_right_after_a_scan_ends_it_and_a_storm_of_stops_is_one_withdraw() {
+    let f = FakeController::start(FakeOptions {
+        line_rate: 20.0,
+        ..FakeOptions::default()
+    })
+    .unwrap();
+    let s = start("nanonis-race", &["--instrument", &spec(&f), "--max-rate", "200"]);
+    runtime().block_on(async {
+        let mut op = operator(&s.addr, "scan").await;
+        for round in 0..5u32 {
+            let id = 10 + 2 * round;
+            send(&mut op, json!({"type": "scan", "id": id})).await;
+            send(&mut op, json!({"type": "stop", "id": id + 1})).await;
+            let done = until(&mut op, 10.0, |m| is(m, "scan_done")).await;
+            assert_eq!(
+                done["record"],
+                serde_json::Value::Null,
+                "round {round}: the stop ended the scan: {done}"
+            );
+            // The next scan waits until this one is over.
+            tokio::time::sleep(Duration::from_millis(300)).await;
+        }
+        let withdraws = || f.commands().iter().filter(|c| *c == "ZCtrl.Withdraw").count();
+        let before = withdraws();
+        for id in 100..120 {
+            send(&mut op, json!({"type": "stop", "id": id})).await;
+        }
+        reply(&mut op, 119).await;
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        let sent = withdraws() - before;
+        assert!((1..=4).contains(&sent), "20 stops in a burst: {sent} withdraws");
+    });
+}
+
+#[test]
+fn the_logger_comes_back_after_the_controller_restarts_and_a_lost_withdraw_is_told() {
+    let f = fake();
+    let (port, logger_port) = (f.addr().port(), f.logger_port());
+    let s = start(
+        "nanonis-restart",
+        &["--instrument", &spec(&f), "--instrument-timeout-s", "1"],
+    );
+    let ticks = |v: &serde_json::Value| v["loop"]["ticks"].as_u64().unwrap();
+    runtime().block_on(async {
+        let mut op = operator(&s.addr, "tip").await;
+        drop(f);
+        tokio::time::sleep(Duration::from_millis(1500)).await;
+        let st = status(&s.addr);
+        assert!(st["instrument_reading_age_s"].as_f64().unwrap() > 1.0, "{st}");
+        // A stop with the controller gone: the withdraw fails, and everyone is told.
+        ok(&mut op, json!({"type": "stop", "id": 5})).await;
+        let told = until(&mut op, 10.0, |m| is(m, "error") && m["id"].is_null()).await;
+        assert!(
+            told["message"].as_str().unwrap().contains("could NOT be withdrawn"),
+            "{told}"
+        );
+        let again = FakeController::start(FakeOptions {
+            port,
+            logger_port,
+            ..FakeOptions::default()
+        })
+        .unwrap();
+        let a = ticks(&status(&s.addr));
+        let deadline = Instant::now() + Duration::from_secs(15);
+        while ticks(&status(&s.addr)) < a + 500 {
+            assert!(Instant::now() < deadline, "readings never came back");
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+        assert!(
+            again.commands().contains(&"TCPLog.Start".to_string()),
+            "the logger was started again"
+        );
+        send(
+            &mut op,
+            json!({"type": "scan", "id": 6, "centre_x_um": 74.0, "centre_y_um": 50.0, "size_um": 5.0}),
+        )
+        .await;
+        let r = reply(&mut op, 6).await;
+        assert_eq!(r["code"], "out_of_range", "{r}");
+        assert!(r["message"].as_str().unwrap().contains("controller's frame"), "{r}");
+    });
 }

@@ -22,12 +22,26 @@ impl NanonisMicroscope {
         }
     }
 
-    pub(super) fn scan_inner(&mut self, frame: Option<&ScanFrame>) -> Result<HeightImage, MicroscopeError> {
-        let buffer0 = self.call("Scan.BufferGet", cmd::buffer_get)?;
-        let frame0 = self.call("Scan.FrameGet", cmd::frame_get)?;
+    /// The scan, and the operator's frame and buffer to give back when they were changed (the
+    /// caller gives them back once the tip is safe).
+    #[allow(clippy::type_complexity)]
+    pub(super) fn scan_inner(
+        &mut self,
+        frame: Option<&ScanFrame>,
+    ) -> (Result<HeightImage, MicroscopeError>, Option<(Frame, Buffer)>) {
+        let buffer0 = match self.call("Scan.BufferGet", cmd::buffer_get) {
+            Ok(b) => b,
+            Err(e) => return (Err(e), None),
+        };
+        let frame0 = match self.call("Scan.FrameGet", cmd::frame_get) {
+            Ok(f) => f,
+            Err(e) => return (Err(e), None),
+        };
         let (mut buffer, mut f) = (buffer0.clone(), frame0);
         if let Some(want) = frame {
-            self.refuse_if_read_only("Scan.FrameSet")?;
+            if let Err(e) = self.refuse_if_read_only("Scan.FrameSet") {
+                return (Err(e), None);
+            }
             f = Frame {
                 centre_x: want.centre_x,
                 centre_y: want.centre_y,
@@ -39,33 +53,45 @@ impl NanonisMicroscope {
             buffer.lines = want.lines;
         }
         if f.angle_deg.is_nan() || f.angle_deg.abs() > 1e-6 {
-            return Err(MicroscopeError::Unsupported {
+            let e = MicroscopeError::Unsupported {
                 backend: "nanopush".into(),
                 what: format!(
                     "image a frame rotated by {:.2}°: set the angle to 0 at the controller, or give a frame",
                     f.angle_deg
                 ),
-            });
+            };
+            return (Err(e), None);
         }
         if !buffer.channels.contains(&(self.idx.z as i32)) {
-            self.refuse_if_read_only("Scan.BufferSet")?;
+            if let Err(e) = self.refuse_if_read_only("Scan.BufferSet") {
+                return (Err(e), None);
+            }
             buffer.channels.push(self.idx.z as i32);
         }
-        let changed = frame.is_some() || buffer != buffer0;
-        let result = self.scan_engine(frame.map(|_| &f), &buffer);
-        // The operator's own frame and buffer back, as their software had them.
-        if changed && !self.opts.read_only {
-            let _ = self.call("Scan.FrameSet", |c| cmd::frame_set(c, &frame0));
-            let _ = self.call("Scan.BufferSet", |c| cmd::buffer_set(c, &buffer0));
+        let changed = (frame.is_some() || buffer != buffer0) && !self.opts.read_only;
+        let restore = changed.then_some((frame0, buffer0));
+        let result = self.scan_engine(frame.map(|_| &f), &buffer).and_then(|grab| {
+            let sf = Self::frame_to_scan(&f, &buffer);
+            self.image_of(grab, &sf, &buffer)
+        });
+        (result, restore)
+    }
+
+    /// Ends the scan early when a stop or a shutdown asked: checked before each step.
+    fn unless_cancelled(&mut self, started: bool) -> Result<(), MicroscopeError> {
+        if !self.cancelled() {
+            return Ok(());
         }
-        let grab = result?;
-        let sf = Self::frame_to_scan(&f, &buffer);
-        self.image_of(grab, &sf, &buffer)
+        if started {
+            let _ = self.call("Scan.Action", |c| cmd::scan_action(c, 1, true));
+        }
+        Err(MicroscopeError::Cancelled("the scan".into()))
     }
 
     /// Sets the frame (when given) and the buffer, lands the tip if it is withdrawn, scans and
     /// waits, and grabs the height channel; or, read-only, grabs what the controller has.
     fn scan_engine(&mut self, frame: Option<&Frame>, buffer: &Buffer) -> Result<cmd::Grab, MicroscopeError> {
+        self.unless_cancelled(false)?;
         if !self.opts.read_only {
             if let Some(f) = frame {
                 self.call("Scan.FrameSet", |c| cmd::frame_set(c, f))?;
@@ -76,11 +102,14 @@ impl NanonisMicroscope {
         // A scan needs the Z feedback on: with the tip withdrawn, the controller's own set point
         // lands it, and the tip is withdrawn again after the image.
         let mut landed_here = false;
+        self.unless_cancelled(false)?;
         if !self.opts.read_only && self.call("ZCtrl.StatusGet", cmd::z_status)? == cmd::ZStatus::Off {
+            self.unless_cancelled(false)?;
             self.call("ZCtrl.OnOffSet", |c| cmd::z_on_off_set(c, true))?;
             landed_here = true;
         }
         if !self.opts.read_only {
+            self.unless_cancelled(false)?;
             self.call("Scan.Action", |c| cmd::scan_action(c, 0, true))?;
             // Waited for in slices, so that a stop is heard within one.
             let (timeout, began) = (self.opts.scan_timeout, Instant::now());

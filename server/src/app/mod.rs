@@ -121,13 +121,16 @@ async fn status(State(st): State<Arc<AppState>>) -> Response {
     let body = serde_json::json!({
         "scene": st.scene.file.name,
         "instrument": st.instrument_info(),
+        // Seconds since the real controller's last reading (null on the simulated AFM, or
+        // before the first): telemetry that is not changing says why here.
+        "instrument_reading_age_s": st.cfg.instrument.as_ref().and_then(|r| r.reading_age_s()),
         "instance": st.instance.id,
         "started_unix_ms": st.instance.started_unix_ms,
         "uptime_s": st.shared.start.elapsed().as_secs_f64(),
         "clients": st.net.clients.load(Relaxed),
         "lease": st.lease_holder(),
         "lease_name": st.lease_name(),
-        "phase": s.phase,
+        "phase": st.phase_now(),
         "stage": s.stage,
         "volts": s.volts,
         "busy": st.shared.busy.load(Relaxed) || st.activity.scanning.load(Relaxed),

@@ -37,7 +37,7 @@ fn real_frame(
     let size = number("size_um", size, MIN_SCAN_UM, 1000.0, false, "µm")?;
     let cx = number("centre_x_um", cx, -1000.0, 1000.0, false, "µm")?;
     let cy = number("centre_y_um", cy, -1000.0, 1000.0, false, "µm")?;
-    let px = number("pixels", pixels.map_or(256.0, f64::from), 16.0, 512.0, false, "")? as usize;
+    let px = number("pixels", pixels.map_or(256.0, f64::from), 16.0, 512.0, false, "pixels")? as usize;
     Ok(Some(ScanFrame {
         centre_x: cx * 1e-6,
         centre_y: cy * 1e-6,
@@ -62,9 +62,27 @@ pub(super) fn run(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Res
     };
     if let Some(real) = &st.cfg.instrument {
         let frame = real_frame(centre_x_um, centre_y_um, size_um, pixels)?;
+        if let (Some(f), Some(l)) = (&frame, &real.limits) {
+            let (x0, x1) = (f.centre_x - 0.5 * f.width, f.centre_x + 0.5 * f.width);
+            let (y0, y1) = (f.centre_y - 0.5 * f.height, f.centre_y + 0.5 * f.height);
+            if !(l.contains_xy(x0, y0) && l.contains_xy(x1, y1)) {
+                return Err(Refusal::new(
+                    ErrorCode::OutOfRange,
+                    format!(
+                        "the scan square must lie within the controller's frame, x in [{:.4}, {:.4}] µm, y in [{:.4}, {:.4}] µm",
+                        l.x[0] * 1e6,
+                        l.x[1] * 1e6,
+                        l.y[0] * 1e6,
+                        l.y[1] * 1e6
+                    ),
+                ));
+            }
+        }
         busy(st)?;
         st.activity.scanning.store(true, Relaxed);
         st.activity.scan_cancel.store(false, Relaxed);
+        // Cleared here, before the reply: a stop this client sends after it ends this scan.
+        real.cancel.store(false, Relaxed);
         let (st2, real, by) = (st.clone(), real.clone(), c.person.name.clone());
         std::thread::spawn(move || {
             let scan = || run_real_scan(&st2, &real, frame, &by);
