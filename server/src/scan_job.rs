@@ -87,27 +87,43 @@ pub(crate) fn run_scan(st: &AppState, params: ScanParams, person: &str) {
     } else {
         write_record(st, scan_id, &img, &tip, person)
     };
+    // A cancelled scan is not the latest picture of the sample: the one before stays.
+    let latest = if cancelled {
+        previous
+    } else {
+        Some(ScanNow {
+            done: true,
+            record: record.clone(),
+            ..now
+        })
+    };
+    finish_scan(st, scan_id, latest, record, record_error);
+}
+
+/// The end of a scan: `latest` the picture of the sample now, the lines kept for late
+/// subscribers dropped, the instrument free, then `scan_done`. Free before it is announced: a
+/// client that starts the next scan on hearing `scan_done` must not be told the last one is
+/// still running.
+fn finish_scan(
+    st: &AppState,
+    scan_id: u32,
+    latest: Option<ScanNow>,
+    record: Option<String>,
+    record_error: Option<String>,
+) {
     if let Ok(mut s) = st.activity.latest_scan.lock() {
-        // A cancelled scan is not the latest picture of the sample: the one before stays.
-        *s = if cancelled {
-            previous
-        } else {
-            Some(ScanNow {
-                done: true,
-                record: record.clone(),
-                ..now
-            })
-        };
+        *s = latest;
     }
     keep_lines(st, None);
-    // Free before it is announced: a client that starts the next scan on hearing `scan_done`
-    // must not be told the last one is still running.
     st.activity.scanning.store(false, Relaxed);
-    send_text(&ServerMessage::ScanDone {
-        scan: scan_id,
-        record,
-        record_error,
-    });
+    if st.clients.scan_subscribers.load(Relaxed) > 0 {
+        let m = ServerMessage::ScanDone {
+            scan: scan_id,
+            record,
+            record_error,
+        };
+        let _ = st.channels.scans.send(Message::Text(to_text(&m)));
+    }
 }
 
 /// A frame taken at once (an assembly's full frames), not streamed: its scan record written, and
@@ -184,20 +200,12 @@ pub(crate) fn run_real_scan(
     // The heights are recorded with no tip model of the controller's: the scene's stands in.
     let tip = Tip::from_scene(&st.scene);
     let (record, record_error) = write_record(st, scan_id, &img, &tip, person);
-    if let Ok(mut s) = st.activity.latest_scan.lock() {
-        *s = Some(ScanNow {
-            done: true,
-            record: record.clone(),
-            ..now
-        });
-    }
-    keep_lines(st, None);
-    st.activity.scanning.store(false, Relaxed);
-    send_text(&ServerMessage::ScanDone {
-        scan: scan_id,
-        record,
-        record_error,
+    let latest = Some(ScanNow {
+        done: true,
+        record: record.clone(),
+        ..now
     });
+    finish_scan(st, scan_id, latest, record, record_error);
 }
 
 pub(crate) fn record_frame(st: &AppState, img: &HeightImage, person: &str) -> Result<String, String> {
