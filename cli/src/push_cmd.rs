@@ -75,6 +75,42 @@ pub struct PushArgs {
 const UM: f64 = 1e-6;
 const TICK: f64 = 1e-3;
 
+/// The target asked for: a distance (m) along a direction, or a point (µm, as given: checked in
+/// the units it was given in).
+enum Asked {
+    Distance(f64, (f64, f64)),
+    Point(f64, f64),
+}
+
+/// `--distance-um` with `--direction-deg`, or `--to-um`, checked: a distance in (0, `max_um`]
+/// (`max_words` says what the bound is).
+fn asked_target(a: &PushArgs, max_um: f64, max_words: &str) -> anyhow::Result<Asked> {
+    match (a.distance_um, &a.to_um) {
+        (Some(_), Some(_)) => bail!("give either --distance-um or --to-um, not both"),
+        (None, None) => bail!("give --distance-um D (with --direction-deg) or --to-um X_UM,Y_UM"),
+        (Some(d), None) => {
+            if !(d.is_finite() && d > 0.0 && d <= max_um) {
+                bail!(
+                    "--distance-um {} is out of range; allowed: (0, {max_um}] µm{max_words}",
+                    crate::units::num(d)
+                );
+            }
+            if !(a.direction_deg.is_finite() && (-360.0..=360.0).contains(&a.direction_deg)) {
+                bail!(
+                    "--direction-deg {} is out of range; allowed: [-360, 360] degrees",
+                    crate::units::num(a.direction_deg)
+                );
+            }
+            let th = a.direction_deg.to_radians();
+            Ok(Asked::Distance(d * UM, (th.cos(), th.sin())))
+        }
+        (None, Some(s)) => {
+            let (x, y) = crate::units::parse_point_um("--to-um", s, "60,45")?;
+            Ok(Asked::Point(x, y))
+        }
+    }
+}
+
 /// Where a particle located at a point is to go (m).
 type Destination = dyn Fn((f64, f64)) -> (f64, f64);
 
@@ -91,29 +127,9 @@ fn run_held(a: &PushArgs, spec: &str) -> anyhow::Result<(String, bool)> {
             "--scene, --particle, --control, --derive-all, --pause-at-um and --json are for the simulated AFM; with --instrument give --at-um and the target"
         );
     }
-    let target: Box<Destination> = match (a.distance_um, &a.to_um) {
-        (Some(_), Some(_)) => bail!("give either --distance-um or --to-um, not both"),
-        (None, None) => bail!("give --distance-um D (with --direction-deg) or --to-um X_UM,Y_UM"),
-        (Some(d), None) => {
-            if !(d.is_finite() && d > 0.0 && d <= 100.0) {
-                bail!(
-                    "--distance-um {} is out of range; allowed: (0, 100] µm",
-                    crate::units::num(d)
-                );
-            }
-            if !(a.direction_deg.is_finite() && (-360.0..=360.0).contains(&a.direction_deg)) {
-                bail!(
-                    "--direction-deg {} is out of range; allowed: [-360, 360] degrees",
-                    crate::units::num(a.direction_deg)
-                );
-            }
-            let th = a.direction_deg.to_radians();
-            Box::new(move |(x, y)| (x + d * UM * th.cos(), y + d * UM * th.sin()))
-        }
-        (None, Some(s)) => {
-            let (x, y) = crate::units::parse_point_um("--to-um", s, "60,45")?;
-            Box::new(move |_| (x * UM, y * UM))
-        }
+    let target: Box<Destination> = match asked_target(a, 100.0, "")? {
+        Asked::Distance(d, (c, sn)) => Box::new(move |(x, y)| (x + d * c, y + d * sn)),
+        Asked::Point(x, y) => Box::new(move |_| (x * UM, y * UM)),
     };
     let (lo, hi) = nanopush_proto::push::TOLERANCE_RANGE_NM;
     if !(a.tolerance_nm.is_finite() && (lo..=hi).contains(&a.tolerance_nm)) {
@@ -153,30 +169,9 @@ fn check(a: &PushArgs, scene: &Scene) -> anyhow::Result<Request> {
         );
     }
     let range = f.stage.range_um;
-    let target = match (a.distance_um, &a.to_um) {
-        (Some(_), Some(_)) => bail!("give either --distance-um or --to-um, not both"),
-        (None, None) => bail!("give --distance-um D (with --direction-deg) or --to-um X_UM,Y_UM"),
-        (Some(d), None) => {
-            if !(d.is_finite() && d > 0.0 && d <= range) {
-                bail!(
-                    "--distance-um {} is out of range; allowed: (0, {range}] µm (the stage range)",
-                    crate::units::num(d)
-                );
-            }
-            if !(a.direction_deg.is_finite() && (-360.0..=360.0).contains(&a.direction_deg)) {
-                bail!(
-                    "--direction-deg {} is out of range; allowed: [-360, 360] degrees",
-                    crate::units::num(a.direction_deg)
-                );
-            }
-            let th = a.direction_deg.to_radians();
-            MoveTarget::Distance {
-                distance: d * UM,
-                direction: (th.cos(), th.sin()),
-            }
-        }
-        (None, Some(s)) => {
-            let (x, y) = crate::units::parse_point_um("--to-um", s, "60,45")?;
+    let target = match asked_target(a, range, " (the stage range)")? {
+        Asked::Distance(distance, direction) => MoveTarget::Distance { distance, direction },
+        Asked::Point(x, y) => {
             if !((0.0..=range).contains(&x) && (0.0..=range).contains(&y)) {
                 bail!(
                     "--to-um {},{} is outside the stage; allowed: [0, {range}] µm in x and y",
