@@ -97,6 +97,9 @@ struct Assembly<'a> {
     push_records: Vec<String>,
     /// Its record from the first plan on.
     opened: Option<record::Opened>,
+    /// Hidden: particles the simulation has overlapping after a move (each pair once).
+    violations: Vec<String>,
+    overlapping: std::collections::BTreeSet<(u32, u32)>,
 }
 
 impl<'a> Assembly<'a> {
@@ -118,6 +121,8 @@ impl<'a> Assembly<'a> {
             runs: Vec::new(),
             push_records: Vec::new(),
             opened: None,
+            violations: Vec::new(),
+            overlapping: Default::default(),
         }
     }
 
@@ -292,6 +297,7 @@ impl<'a> Assembly<'a> {
                 particle_id: id,
             });
             let made = moves::make(self, &mv, id, &kind);
+            self.check_overlaps(number);
             self.scan_time += made.scans as f64 * local_frame_time(&self.base);
             self.push_time += made.done.record.push_time;
             self.runs.extend(&made.runs);
@@ -317,6 +323,28 @@ impl<'a> Assembly<'a> {
             st.broadcast_event(&ServerMessage::AssemblyReplanned { assembly: n, plan });
         }
         None
+    }
+
+    /// Hidden: after move `number`, any two particles the simulation has overlapping (the
+    /// simulated instrument lets a particle pass into another, so a plan must never send one
+    /// there), each pair reported once.
+    fn check_overlaps(&mut self, number: usize) {
+        let truth = truth_now(self.st);
+        for (i, (a, ra)) in truth.iter().enumerate() {
+            for (b, rb) in &truth[i + 1..] {
+                let gap = (a.at.0 - b.at.0).hypot(a.at.1 - b.at.1) - (ra + rb);
+                if gap < -1e-9 && self.overlapping.insert((a.id.min(b.id), a.id.max(b.id))) {
+                    self.violations.push(format!(
+                        "after move {number}, particles {} and {} overlap ({:.0} nm deep) at ({:.3}, {:.3}) µm",
+                        a.id,
+                        b.id,
+                        -gap * 1e9,
+                        a.at.0 * 1e6,
+                        a.at.1 * 1e6
+                    ));
+                }
+            }
+        }
     }
 
     /// The tolerance the strategy is derived for: the least a site asks.
@@ -352,9 +380,9 @@ impl<'a> Assembly<'a> {
                 wall_time: self.started.elapsed().as_secs_f64(),
                 push_time: self.push_time,
                 scan_time: self.scan_time,
-                // The server's loop does not check the truth's overlaps as the command line's
-                // run does.
-                violations: Vec::new(),
+                // The server's loop keeps no trace here to follow a push through: the
+                // simulation's particles are checked for overlaps after each move instead.
+                violations: self.violations.clone(),
             },
         )
     }

@@ -82,3 +82,29 @@ fn a_stop_during_the_first_plan_ends_it_before_any_move() {
     }
     std::fs::remove_file(path).unwrap();
 }
+
+/// Particles the simulation has overlapping after a move are reported, each pair once.
+#[test]
+fn overlapping_particles_after_a_move_are_violations_once() {
+    let st = test_state();
+    let grid = Pattern::generate("grid:rows=1,cols=2,spacing_um=4", (50e-6, 50e-6)).unwrap();
+    let j = job(&st, grid, true);
+    let mut a = Assembly::new(&st, &j);
+    {
+        let mut s = st.shared.snapshot.lock().unwrap();
+        s.particles = vec![
+            (1, 10e-6, 10e-6, 0.5e-6),
+            (2, 10.8e-6, 10e-6, 0.5e-6),
+            (3, 20e-6, 10e-6, 0.5e-6),
+        ];
+    }
+    a.check_overlaps(1);
+    a.check_overlaps(2);
+    assert_eq!(
+        a.violations,
+        ["after move 1, particles 1 and 2 overlap (200 nm deep) at (10.000, 10.000) µm"]
+    );
+    st.shared.snapshot.lock().unwrap().particles[1].1 = 11.2e-6;
+    a.check_overlaps(3);
+    assert_eq!(a.violations.len(), 1, "apart again: nothing new");
+}
