@@ -63,6 +63,33 @@ pub(super) struct Writer {
     pub shed_logged: u64,
 }
 
+/// How often a failing log says so in the server's log: a full disk fails every batch.
+const ERROR_EVERY: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// Failures said at most once a period: each report counts the entries lost since the last.
+#[derive(Debug, Default)]
+struct Throttle {
+    last: Option<Instant>,
+    lost: u64,
+}
+
+impl Throttle {
+    /// `lost` more entries lost at `now`: the count to report now, if a report is due.
+    fn failed(&mut self, lost: u64, now: Instant) -> Option<u64> {
+        self.lost += lost;
+        if self.last.is_some_and(|t| now.duration_since(t) < ERROR_EVERY) {
+            return None;
+        }
+        self.last = Some(now);
+        Some(std::mem::take(&mut self.lost))
+    }
+
+    /// A write succeeded: the entries lost and not yet reported, if the log was failing.
+    fn recovered(&mut self) -> Option<u64> {
+        self.last.take().map(|_| std::mem::take(&mut self.lost))
+    }
+}
+
 /// `path` with `.N` after its name (`audit.jsonl.1`); `path` itself for 0.
 fn part(path: &Path, n: u64) -> PathBuf {
     if n == 0 {
@@ -184,6 +211,7 @@ impl Writer {
             }
         };
         self.counters.bytes.store(self.total(), Relaxed);
+        let mut errors = Throttle::default();
         loop {
             let (jobs, closing) = match rx.recv_timeout(SUMMARY_POLL) {
                 Ok(first) => {
@@ -234,14 +262,23 @@ impl Writer {
                     Ok(()) => {
                         self.shed_logged = shed;
                         self.counters.written.fetch_add(lines as u64, Relaxed);
+                        if let Some(lost) = errors.recovered() {
+                            tracing::warn!(
+                                "audit: writing {} again; {lost} more entries were lost before",
+                                self.path.display()
+                            );
+                        }
                     }
                     Err(e) => {
                         self.counters.failures.fetch_add(lines as u64, Relaxed);
-                        tracing::error!(
-                            "audit: writing {}: {e}; {lines} entries lost (some may be on disk), the first: {}",
-                            self.path.display(),
-                            text.lines().next().unwrap_or("")
-                        );
+                        if let Some(lost) = errors.failed(lines as u64, Instant::now()) {
+                            tracing::error!(
+                                "audit: writing {}: {e}; {lost} entries lost since the last report (some may be on disk; said at most every {} s), the latest: {}",
+                                self.path.display(),
+                                ERROR_EVERY.as_secs(),
+                                text.lines().next().unwrap_or("")
+                            );
+                        }
                         file = None;
                     }
                 }
@@ -272,6 +309,25 @@ fn write_whole(f: &mut std::fs::File, bytes: &[u8]) -> std::io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A log that fails on every batch says so once per period, with the count lost between.
+    #[test]
+    fn failures_are_reported_at_most_every_ten_seconds_with_their_count() {
+        let t0 = Instant::now();
+        let mut t = Throttle::default();
+        assert_eq!(t.failed(3, t0), Some(3));
+        assert_eq!(t.failed(5, t0 + std::time::Duration::from_secs(1)), None);
+        assert_eq!(t.failed(7, t0 + std::time::Duration::from_secs(9)), None);
+        assert_eq!(t.failed(1, t0 + std::time::Duration::from_secs(10)), Some(13));
+        assert_eq!(t.failed(2, t0 + std::time::Duration::from_secs(11)), None);
+        assert_eq!(t.recovered(), Some(2));
+        assert_eq!(t.recovered(), None, "said once");
+        assert_eq!(
+            t.failed(4, t0 + std::time::Duration::from_secs(12)),
+            Some(4),
+            "a new failure is said at once"
+        );
+    }
 
     fn writer(dir: &Path, max: u64) -> Writer {
         let counters = Arc::new(Counters::default());
