@@ -378,7 +378,8 @@ pub fn push(
     // The scan after needs the tip on the surface: the controller's feedback lands it.
     m.hold_force(h.setpoint_v)?;
     let after = m.scan(frame.as_ref());
-    let _ = m.withdraw();
+    m.withdraw()
+        .context("withdrawing after the scan that followed the push: the tip may still be on the surface; withdraw it at the controller")?;
     let after = after?;
     let ended = localize(&after, &tip, to.0, to.1, search).ok();
     let caps = m.capabilities();

@@ -23,6 +23,7 @@ use crate::client::Connection;
 use crate::commands as cmd;
 use crate::logger::LoggerStream;
 
+mod link;
 mod scan;
 
 /// How nanopush talks to the controller.
@@ -105,6 +106,8 @@ pub struct NanonisMicroscope {
     cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
     /// When to try the logger stream again after it failed.
     logger_retry: Option<Instant>,
+    /// A scan is in progress (its calls are not retried on a new link).
+    scanning: bool,
 }
 
 /// How long after a logger stream fails it is started again (polled reads meanwhile).
@@ -187,6 +190,15 @@ impl NanonisMicroscope {
                 ),
             ));
         }
+        if frame.angle_deg.abs() > 1e-6 && opts.xy_limits.is_none() {
+            return Err(setup(
+                "Scan.FrameGet",
+                format!(
+                    "the scan frame is rotated by {:.2}°: nanopush keeps moves inside an unrotated frame; set the angle to 0 at the controller, or give --xy-limits-um",
+                    frame.angle_deg
+                ),
+            ));
+        }
         let mut limits = Limits {
             x: [frame.centre_x - 0.5 * frame.width, frame.centre_x + 0.5 * frame.width],
             y: [frame.centre_y - 0.5 * frame.height, frame.centre_y + 0.5 * frame.height],
@@ -234,6 +246,7 @@ impl NanonisMicroscope {
             sent: Vec::new(),
             cancel: None,
             logger_retry: None,
+            scanning: false,
         };
         m.sent
             .extend(["Signals.NamesGet", "ZCtrl.LimitsGet", "Scan.FrameGet"].map(String::from));
@@ -299,86 +312,11 @@ impl NanonisMicroscope {
         &self.names
     }
 
-    /// One call on the connection, reopening it first when it was lost.
-    fn call<T>(
-        &mut self,
-        name: &str,
-        f: impl Fn(&mut Connection) -> Result<T, MicroscopeError>,
-    ) -> Result<T, MicroscopeError> {
-        let result = self.call_once(name, &f);
-        // A connection left idle (the logger carries the readings) may have died with a
-        // controller that restarted: a call that only reads is tried once more on a new one.
-        match result {
-            Err(MicroscopeError::Link { .. }) if name.ends_with("Get") => self.call_once(name, &f),
-            other => other,
-        }
-    }
-
-    fn call_once<T>(
-        &mut self,
-        name: &str,
-        f: &impl Fn(&mut Connection) -> Result<T, MicroscopeError>,
-    ) -> Result<T, MicroscopeError> {
-        self.sent.push(name.to_string());
-        if self.conn.is_none() {
-            self.conn = Some(Connection::open(self.opts.addr, self.opts.timeout)?);
-        }
-        let conn = self.conn.as_mut().expect("opened above");
-        let result = f(conn);
-        if matches!(
-            result,
-            Err(MicroscopeError::Link { .. }) | Err(MicroscopeError::Controller { .. })
-        ) {
-            // A failed or mismatched reply leaves the connection's framing unknown.
-            self.conn = None;
-        }
-        result
-    }
-
     fn refuse_if_read_only(&self, what: &str) -> Result<(), MicroscopeError> {
         if self.opts.read_only {
             return Err(MicroscopeError::ReadOnly { what: what.into() });
         }
         Ok(())
-    }
-
-    /// After an error during a move or a scan: reopen the link (a few tries) and withdraw on it
-    /// before anything else, then return the error with what was done.
-    pub fn recover(&mut self, error: MicroscopeError) -> MicroscopeError {
-        self.target = None;
-        if self.opts.read_only {
-            return error;
-        }
-        let mut last = String::new();
-        let mut tries = 0;
-        for attempt in 0..self.opts.reconnect_tries.max(1) {
-            // A stop or a shutdown waits for one try, not three.
-            if attempt > 0 && self.cancelled() {
-                break;
-            }
-            if attempt > 0 {
-                std::thread::sleep(Duration::from_millis(200 * u64::from(attempt)));
-            }
-            tries += 1;
-            self.conn = None;
-            match self.withdraw() {
-                Ok(()) => {
-                    return annotate(error, "the tip was withdrawn");
-                }
-                Err(e) => last = e.to_string(),
-            }
-        }
-        annotate(
-            error,
-            &format!("the tip could NOT be withdrawn after {tries} tries ({last}): withdraw it at the controller"),
-        )
-    }
-
-    /// Whether a stop or a shutdown asked to end what runs.
-    pub(crate) fn cancelled(&self) -> bool {
-        self.cancel
-            .as_ref()
-            .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed))
     }
 
     fn check_xy(&self, what: &str, x: f64, y: f64) -> Result<(), MicroscopeError> {
@@ -442,20 +380,6 @@ impl NanonisMicroscope {
             normal: at(self.idx.normal).unwrap_or(f64::NAN),
             lateral: self.idx.lateral.and_then(at),
         })
-    }
-}
-
-fn annotate(error: MicroscopeError, note: &str) -> MicroscopeError {
-    match error {
-        MicroscopeError::Link { command, message } => MicroscopeError::Link {
-            command,
-            message: format!("{message}; {note}"),
-        },
-        MicroscopeError::Controller { command, message } => MicroscopeError::Controller {
-            command,
-            message: format!("{message}; {note}"),
-        },
-        other => MicroscopeError::Simulation(format!("{other}; {note}")),
     }
 }
 
@@ -563,7 +487,9 @@ impl Microscope for NanonisMicroscope {
                 });
             }
         }
+        self.scanning = true;
         let (result, restore) = self.scan_inner(frame);
+        self.scanning = false;
         let result = match result {
             Ok(img) => Ok(img),
             Err(
@@ -572,14 +498,20 @@ impl Microscope for NanonisMicroscope {
                 | MicroscopeError::Unsupported { .. }),
             ) => Err(e),
             Err(e) if self.opts.read_only => Err(e),
-            Err(e @ MicroscopeError::Cancelled(_)) => {
+            Err(MicroscopeError::Cancelled(what)) => {
                 // A stop: the engine was stopped; the tip goes away as after any stop.
-                let _ = self.withdraw();
-                Err(e)
+                let words = match self.withdraw() {
+                    Ok(()) => "the tip was withdrawn".to_string(),
+                    Err(w) => format!("the tip could NOT be withdrawn ({w}): withdraw it at the controller"),
+                };
+                Err(MicroscopeError::Cancelled(format!("{what}; {words}")))
             }
             Err(e) => {
                 // Stop the scan engine if the link still answers, withdraw: then the rest.
-                let _ = self.call_once("Scan.Action", &|c: &mut Connection| cmd::scan_action(c, 1, true));
+                // (Only on the link still open: on a new one the withdraw goes first.)
+                if self.conn.is_some() {
+                    let _ = self.call_once("Scan.Action", &|c: &mut Connection| cmd::scan_action(c, 1, true));
+                }
                 Err(self.recover(e))
             }
         };

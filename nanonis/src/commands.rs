@@ -249,6 +249,11 @@ pub fn scan_action(c: &mut Connection, action: u16, up: bool) -> Result<(), Micr
     c.call("Scan.Action", &b, None, none)
 }
 
+/// `Scan.StatusGet`: whether the scan engine is scanning.
+pub fn scan_running(c: &mut Connection) -> Result<bool, MicroscopeError> {
+    c.call("Scan.StatusGet", &[], None, |r| Ok(r.u32("scan running")? == 1))
+}
+
 /// `Scan.WaitEndOfScan`: whether the scan ended within `timeout`.
 pub fn wait_end_of_scan(c: &mut Connection, timeout: Duration) -> Result<bool, MicroscopeError> {
     let ms = timeout.as_millis().min(i32::MAX as u128) as i32;

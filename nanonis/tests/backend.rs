@@ -455,6 +455,7 @@ fn a_scan_cancelled_before_it_starts_never_lands_the_tip() {
     let before = f.commands().len();
     let e = m.scan(None).unwrap_err();
     assert!(matches!(e, MicroscopeError::Cancelled(_)), "{e}");
+    assert_eq!(e.to_string(), "the scan; the tip was withdrawn: stopped");
     let sent = &f.commands()[before..];
     assert!(
         !sent.iter().any(|c| c == "ZCtrl.OnOffSet" || c == "Scan.Action"),
@@ -488,4 +489,15 @@ fn a_failed_scan_withdraws_before_it_gives_the_frame_back() {
         at("Scan.Action") < at("ZCtrl.Withdraw"),
         "the engine stopped first: {sent:?}"
     );
+}
+
+#[test]
+fn a_rotated_frame_is_refused_at_connect_unless_the_user_gives_limits() {
+    let f = fake();
+    f.world().frame[4] = 30.0;
+    let e = NanonisMicroscope::connect(options(&f, false)).unwrap_err().to_string();
+    assert!(e.contains("rotated by 30.00°") && e.contains("--xy-limits-um"), "{e}");
+    let mut o = options(&f, false);
+    o.xy_limits = Some([[45e-6, 55e-6], [45e-6, 55e-6]]);
+    assert!(NanonisMicroscope::connect(o).is_ok());
 }

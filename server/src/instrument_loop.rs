@@ -137,9 +137,21 @@ pub fn start(real: &RealInstrument, shared: Arc<Shared>) -> std::io::Result<std:
         last_reading_ns: real.last_reading_ns.clone(),
         started: real.started,
     };
-    std::thread::Builder::new()
-        .name("instrument-loop".into())
-        .spawn(move || run(backend, &requests, &shared, &ctx))
+    std::thread::Builder::new().name("instrument-loop".into()).spawn(move || {
+        let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(backend, &requests, &shared, &ctx)));
+        if let Err(p) = ran {
+            // The backend went with the panic: nothing can withdraw the tip from here.
+            let words = format!(
+                "the instrument loop failed ({}); the tip may still be on the surface: withdraw it at the controller",
+                nanopush_instrument::panic_message(&p)
+            );
+            tracing::error!("instrument: {words}");
+            if let Ok(mut f) = ctx.fault.lock() {
+                *f = Some(words);
+            }
+            shared.finished.store(true, Release);
+        }
+    })
 }
 
 /// What the loop's thread reports back beside the snapshot.
@@ -202,6 +214,8 @@ fn run(mut m: Box<dyn Microscope + Send>, requests: &Receiver<Request>, shared: 
             }
         }
         if let Some(why) = stop {
+            // (`cancel` stays set: a scan asked before this stop and not yet begun is ended by
+            // it too; the next scan command clears it before it is accepted.)
             withdraw(m.as_mut(), why, ctx);
         }
         while let Ok(Request::Scan { frame, reply }) = requests.try_recv() {

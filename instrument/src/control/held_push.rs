@@ -232,6 +232,8 @@ pub fn held_push(m: &mut dyn Microscope, p: &HeldPush, stop: &AtomicBool) -> Res
     let t = report.samples.last().map_or(0.0, |s| s.t);
     report.phases.push((HeldPhase::Retract, t));
     let retract = m.withdraw();
+    // A motion an error or a limit cut short would run on to its end point, withdrawn: stopped.
+    let _ = m.stop_move();
     match (result, retract) {
         (Ok(()), Ok(())) => Ok(report),
         (Ok(()), Err(e)) => Err(HeldError::Backend {

@@ -115,14 +115,7 @@ impl NanonisMicroscope {
             let (timeout, began) = (self.opts.scan_timeout, Instant::now());
             let slice = Duration::from_millis(500).min(timeout);
             loop {
-                if self
-                    .cancel
-                    .as_ref()
-                    .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed))
-                {
-                    let _ = self.call("Scan.Action", |c| cmd::scan_action(c, 1, true));
-                    return Err(MicroscopeError::Cancelled("the scan".into()));
-                }
+                self.unless_cancelled(true)?;
                 let asked = Instant::now();
                 if self.call("Scan.WaitEndOfScan", |c| cmd::wait_end_of_scan(c, slice))? {
                     break;
@@ -132,6 +125,11 @@ impl NanonisMicroscope {
                         command: "Scan.WaitEndOfScan".into(),
                         message: format!("the scan did not end within {:.0} s", timeout.as_secs_f64()),
                     });
+                }
+                // `WaitEndOfScan` waits for the next end: a scan that ended between two slices is
+                // seen by the engine's status instead.
+                if !self.call("Scan.StatusGet", cmd::scan_running)? {
+                    break;
                 }
                 // A controller that says "timed out" at once is not asked again at once.
                 std::thread::sleep(slice.saturating_sub(asked.elapsed()));

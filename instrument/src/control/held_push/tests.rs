@@ -153,6 +153,11 @@ fn a_reading_that_is_not_a_number_ends_the_push_and_withdraws() {
     assert!(e.starts_with("travel: a reading that is not a number"), "{e}");
     assert!(e.ends_with("; the tip was withdrawn"), "{e}");
     assert!(m.withdrawn);
+    assert_eq!(
+        m.sent[m.sent.len() - 2..],
+        ["withdraw", "stop"],
+        "the motion cut short is stopped after the withdraw"
+    );
     let mut m = Scripted::new(|n, on| if on && n > 23 { f64::NAN } else { held(n, on) });
     let e = held_push(&mut m, &push(), &AtomicBool::new(false))
         .unwrap_err()

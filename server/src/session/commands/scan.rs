@@ -15,6 +15,16 @@ use crate::session::MIN_SCAN_UM;
 use nanopush_instrument::afm::ScanFrame;
 use nanopush_instrument::scan::ScanParams;
 
+/// Takes the scanner for this scan: refused `busy` when another command took it since `busy`
+/// looked.
+fn claim(st: &AppState) -> Result<(), Refusal> {
+    st.activity
+        .scanning
+        .compare_exchange(false, true, Relaxed, Relaxed)
+        .map(|_| ())
+        .map_err(|_| Refusal::new(ErrorCode::Busy, "a scan is running; send stop first"))
+}
+
 /// A real controller's frame: none of the square's fields for the controller's own frame and
 /// pixels, or all three (the pixels optional, 256 by default); the controller checks it against
 /// its range.
@@ -79,7 +89,7 @@ pub(super) fn run(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Res
             }
         }
         busy(st)?;
-        st.activity.scanning.store(true, Relaxed);
+        claim(st)?;
         st.activity.scan_cancel.store(false, Relaxed);
         // Cleared here, before the reply: a stop this client sends after it ends this scan.
         real.cancel.store(false, Relaxed);
@@ -143,7 +153,7 @@ pub(super) fn run(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Res
     }
     let (size, cx, cy) = (size_um * 1e-6, cx_um * 1e-6, cy_um * 1e-6);
     busy(st)?;
-    st.activity.scanning.store(true, Relaxed);
+    claim(st)?;
     st.activity.scan_cancel.store(false, Relaxed);
     let params = ScanParams {
         centre_x: cx,
