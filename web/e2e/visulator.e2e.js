@@ -403,9 +403,11 @@ test('at 1280×720 and 1600×1000 the image, Stop and the lease stay in view', a
     const p = await newPage(browser, { width, height });
     await p.goto(srv.url);
     await ready(p);
-    await p.waitForFunction(() => window.nanopush.session.state.scan?.done && document.querySelector('#image2d text.xtick'), null, { timeout: 20000 });
+    // Every element measured below drawn first (the image's parts come with its next frame).
+    await p.waitForFunction(() => window.nanopush.session.state.scan?.done
+      && ['#image2d text.xtick', '#image2d .axis-label', '#image2d g.scalebar', '.profile-box'].every((q) => document.querySelector(q)), null, { timeout: 20000 });
     const rects = () => p.evaluate(() => {
-      const r = (s) => { const b = document.querySelector(s).getBoundingClientRect(); return { top: Math.round(b.top), bottom: Math.round(b.bottom), left: Math.round(b.left), right: Math.round(b.right) }; };
+      const r = (s) => { const e = document.querySelector(s); if (!e) throw new Error(`${s} is not on the page`); const b = e.getBoundingClientRect(); return { top: Math.round(b.top), bottom: Math.round(b.bottom), left: Math.round(b.left), right: Math.round(b.right) }; };
       return {
         image: r('#image2d'), xlabel: r('#image2d .axis-label'), scalebar: r('#image2d g.scalebar'), profile: r('.profile-box'),
         stop: r('#stop-btn'), take: r('#take-lease'), release: r('#release-lease'), push: r('#push-fs'),
