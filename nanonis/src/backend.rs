@@ -253,7 +253,8 @@ impl NanonisMicroscope {
         m.feed_rate_hz = 1.0 / m.opts.acquisition_period;
         // Read-only starts no logger either: TCPLog.ChsSet changes the controller's settings.
         if let Some(port) = m.opts.logger_port.filter(|_| !m.opts.read_only) {
-            m.start_logger(port)?;
+            let patience = m.opts.timeout;
+            m.start_logger(port, patience)?;
         } else if !m.opts.read_only {
             let period = m.opts.acquisition_period;
             m.call("Util.AcqPeriodSet", |c| cmd::acq_period_set(c, period))?;
@@ -261,7 +262,8 @@ impl NanonisMicroscope {
         Ok(m)
     }
 
-    fn start_logger(&mut self, port: u16) -> Result<(), MicroscopeError> {
+    /// Sets the logger's channels, starts it and opens its stream, each wait at most `patience`.
+    fn start_logger(&mut self, port: u16, patience: Duration) -> Result<(), MicroscopeError> {
         let mut cols = vec![self.idx.z, self.idx.normal];
         cols.extend(self.idx.x);
         cols.extend(self.idx.y);
@@ -270,7 +272,7 @@ impl NanonisMicroscope {
         self.call("TCPLog.ChsSet", |c| cmd::log_channels_set(c, &cols))?;
         self.call("TCPLog.Start", cmd::log_start)?;
         let addr = SocketAddr::new(self.opts.addr.ip(), port);
-        let logger = LoggerStream::open(addr, self.opts.timeout).map_err(|m| MicroscopeError::Link {
+        let logger = LoggerStream::open(addr, patience).map_err(|m| MicroscopeError::Link {
             command: "TCP Logger stream".into(),
             message: m,
         })?;
@@ -278,12 +280,10 @@ impl NanonisMicroscope {
         let start = Instant::now();
         let mut seen = 0;
         while start.elapsed() < Duration::from_millis(300) {
-            let (_, n) = logger
-                .next_after(seen, self.opts.timeout)
-                .map_err(|m| MicroscopeError::Link {
-                    command: "TCP Logger stream".into(),
-                    message: m,
-                })?;
+            let (_, n) = logger.next_after(seen, patience).map_err(|m| MicroscopeError::Link {
+                command: "TCP Logger stream".into(),
+                message: m,
+            })?;
             seen = n;
         }
         self.feed_rate_hz = logger.rate_hz().unwrap_or(1.0 / self.opts.acquisition_period);
@@ -301,7 +301,8 @@ impl NanonisMicroscope {
         if self.logger.is_some() || Instant::now() < at || self.opts.read_only {
             return;
         }
-        match self.start_logger(port) {
+        // Briefly: the loop that polls waits behind this, and a stop with it.
+        match self.start_logger(port, self.opts.timeout.min(Duration::from_secs(1))) {
             Ok(()) => self.logger_retry = None,
             Err(_) => self.logger_retry = Some(Instant::now() + LOGGER_RETRY),
         }
