@@ -131,13 +131,7 @@ fn run_held(a: &PushArgs, spec: &str) -> anyhow::Result<(String, bool)> {
         Asked::Distance(d, (c, sn)) => Box::new(move |(x, y)| (x + d * c, y + d * sn)),
         Asked::Point(x, y) => Box::new(move |_| (x * UM, y * UM)),
     };
-    let (lo, hi) = nanopush_proto::push::TOLERANCE_RANGE_NM;
-    if !(a.tolerance_nm.is_finite() && (lo..=hi).contains(&a.tolerance_nm)) {
-        bail!(
-            "--tolerance-nm {} is out of range; allowed: [{lo}, {hi}] nm",
-            crate::units::num(a.tolerance_nm)
-        );
-    }
+    crate::units::check_tolerance_nm(a.tolerance_nm)?;
     crate::instrument_cmd::push(
         &a.instrument,
         &a.held,
