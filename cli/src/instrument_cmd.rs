@@ -339,13 +339,10 @@ pub fn push(
     let l = m.limits()?;
     if !l.contains_xy(rough.0, rough.1) {
         bail!(
-            "the target ({:.4}, {:.4}) µm is outside the limits, x in [{:.4}, {:.4}] µm, y in [{:.4}, {:.4}] µm (the controller's scan frame and --xy-limits-um); nothing was sent",
+            "the target ({:.4}, {:.4}) µm is outside the limits, {} (the controller's scan frame and --xy-limits-um); nothing was sent",
             rough.0 / UM,
             rough.1 / UM,
-            l.x[0] / UM,
-            l.x[1] / UM,
-            l.y[0] / UM,
-            l.y[1] / UM
+            l.xy_text()
         );
     }
     let search = 2.0 * UM;

@@ -212,20 +212,8 @@ impl NanonisMicroscope {
             );
             if !(x[0] <= x[1] && y[0] <= y[1]) {
                 return Err(MicroscopeError::OutOfLimits {
-                    what: format!(
-                        "the XY limits x [{:.4}, {:.4}] µm, y [{:.4}, {:.4}] µm",
-                        ux[0] * 1e6,
-                        ux[1] * 1e6,
-                        uy[0] * 1e6,
-                        uy[1] * 1e6
-                    ),
-                    allowed: format!(
-                        "a region overlapping the controller's scan frame, x [{:.4}, {:.4}] µm, y [{:.4}, {:.4}] µm",
-                        limits.x[0] * 1e6,
-                        limits.x[1] * 1e6,
-                        limits.y[0] * 1e6,
-                        limits.y[1] * 1e6
-                    ),
+                    what: format!("the XY limits {}", Limits { x: ux, y: uy, ..limits }.xy_text()),
+                    allowed: format!("a region overlapping the controller's scan frame, {}", limits.xy_text()),
                 });
             }
             limits.x = x;
@@ -325,13 +313,7 @@ impl NanonisMicroscope {
         if !(x.is_finite() && y.is_finite() && l.contains_xy(x, y)) {
             return Err(MicroscopeError::OutOfLimits {
                 what: format!("{what} ({:.4}, {:.4}) µm", x * 1e6, y * 1e6),
-                allowed: format!(
-                    "x in [{:.4}, {:.4}] µm, y in [{:.4}, {:.4}] µm (the controller's scan frame and --xy-limits-um)",
-                    l.x[0] * 1e6,
-                    l.x[1] * 1e6,
-                    l.y[0] * 1e6,
-                    l.y[1] * 1e6
-                ),
+                allowed: format!("{} (the controller's scan frame and --xy-limits-um)", l.xy_text()),
             });
         }
         Ok(())

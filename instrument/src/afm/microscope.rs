@@ -60,6 +60,17 @@ impl Limits {
     pub fn contains_xy(&self, x: f64, y: f64) -> bool {
         x >= self.x[0] && x <= self.x[1] && y >= self.y[0] && y <= self.y[1]
     }
+
+    /// The XY travel in words, for messages: `x in [a, b] µm, y in [c, d] µm`.
+    pub fn xy_text(&self) -> String {
+        format!(
+            "x in [{:.4}, {:.4}] µm, y in [{:.4}, {:.4}] µm",
+            self.x[0] * 1e6,
+            self.x[1] * 1e6,
+            self.y[0] * 1e6,
+            self.y[1] * 1e6
+        )
+    }
 }
 
 /// One reading, as fresh as the backend gives it.

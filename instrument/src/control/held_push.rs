@@ -305,12 +305,9 @@ fn check_limits(m: &mut dyn Microscope, p: &HeldPush) -> Result<(), HeldError> {
     ] {
         if !l.contains_xy(at[0], at[1]) {
             return Err(HeldError::Setting(format!(
-                "{what} {} lies outside the limits, x in [{:.4}, {:.4}] µm, y in [{:.4}, {:.4}] µm; nothing was sent",
+                "{what} {} lies outside the limits, {}; nothing was sent",
                 um(at),
-                l.x[0] * 1e6,
-                l.x[1] * 1e6,
-                l.y[0] * 1e6,
-                l.y[1] * 1e6
+                l.xy_text()
             )));
         }
     }

@@ -79,11 +79,8 @@ pub(super) fn run(st: &Arc<AppState>, c: &mut Client, msg: ClientMessage) -> Res
                 return Err(Refusal::new(
                     ErrorCode::OutOfRange,
                     format!(
-                        "the scan square must lie within the controller's frame, x in [{:.4}, {:.4}] µm, y in [{:.4}, {:.4}] µm",
-                        l.x[0] * 1e6,
-                        l.x[1] * 1e6,
-                        l.y[0] * 1e6,
-                        l.y[1] * 1e6
+                        "the scan square must lie within the controller's frame, {}",
+                        l.xy_text()
                     ),
                 ));
             }
