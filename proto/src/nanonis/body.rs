@@ -184,23 +184,17 @@ impl<'a> BodyReader<'a> {
 
     /// `n` `f32` values.
     pub fn f32s(&mut self, field: &'static str, n: usize) -> Result<Vec<f32>, FrameError> {
-        let need = n
-            .checked_mul(4)
-            .filter(|&b| b <= MAX_BODY_BYTES)
-            .ok_or(FrameError::BadSize {
-                field,
-                value: n as i64,
-                max: MAX_BODY_BYTES / 4,
-            })?;
-        let bytes = self.bytes(field, need)?;
-        Ok(bytes
-            .chunks_exact(4)
-            .map(|c| f32::from_be_bytes([c[0], c[1], c[2], c[3]]))
-            .collect())
+        self.words(field, n, f32::from_be_bytes)
     }
 
     /// `n` `i32` values.
     pub fn i32s(&mut self, field: &'static str, n: usize) -> Result<Vec<i32>, FrameError> {
+        self.words(field, n, i32::from_be_bytes)
+    }
+
+    /// `n` four-byte values, each read with `from`; a count whose bytes could not fit a body is
+    /// refused before anything is allocated.
+    fn words<T>(&mut self, field: &'static str, n: usize, from: fn([u8; 4]) -> T) -> Result<Vec<T>, FrameError> {
         let need = n
             .checked_mul(4)
             .filter(|&b| b <= MAX_BODY_BYTES)
@@ -210,10 +204,7 @@ impl<'a> BodyReader<'a> {
                 max: MAX_BODY_BYTES / 4,
             })?;
         let bytes = self.bytes(field, need)?;
-        Ok(bytes
-            .chunks_exact(4)
-            .map(|c| i32::from_be_bytes([c[0], c[1], c[2], c[3]]))
-            .collect())
+        Ok(bytes.chunks_exact(4).map(|c| from([c[0], c[1], c[2], c[3]])).collect())
     }
 
     /// Fails when bytes are left.
