@@ -26,31 +26,12 @@ pub(crate) fn run_scan(st: &AppState, params: ScanParams, person: &str) {
         }
     };
     let previous = st.activity.latest_scan.lock().ok().and_then(|s| s.clone());
-    let now = ScanNow {
-        scan: scan_id,
-        xres: img0.xres as u32,
-        yres: img0.yres as u32,
-        x_offset: img0.x_offset,
-        y_offset: img0.y_offset,
-        x_real: img0.x_real,
-        y_real: img0.y_real,
-        done: false,
-        record: None,
-        stale: false,
-    };
+    let now = scan_now(scan_id, &img0);
     if let Ok(mut s) = st.activity.latest_scan.lock() {
         *s = Some(now.clone());
     }
     keep_lines(st, None);
-    send_text(&ServerMessage::ScanStart {
-        scan: scan_id,
-        xres: img0.xres as u32,
-        yres: img0.yres as u32,
-        x_offset: img0.x_offset,
-        y_offset: img0.y_offset,
-        x_real: img0.x_real,
-        y_real: img0.y_real,
-    });
+    send_text(&scan_start(&now));
     let mut img = img0;
     let mut scanner = Scanner::new(&surface, tip, params);
     let line_period = Duration::from_secs_f64(1.0 / params.line_rate);
@@ -62,20 +43,7 @@ pub(crate) fn run_scan(st: &AppState, params: ScanParams, person: &str) {
             cancelled = true;
             break;
         }
-        let heights: Vec<f32> = line.heights.iter().map(|&h| h as f32).collect();
-        let h = ScanLineHeader {
-            scan: scan_id,
-            line: line.index as u32,
-            xres: heights.len() as u32,
-            yres: params.pixels as u32,
-            y: line.y,
-        };
-        let frame = Bytes::from(h.encode(&heights));
-        // Kept before it is sent: a client subscribing now gets it from one or the other.
-        keep_lines(st, Some(frame.clone()));
-        if st.clients.scan_subscribers.load(Relaxed) > 0 {
-            let _ = st.channels.scans.send(Message::Binary(frame));
-        }
+        send_line(st, scan_id, line.index, params.pixels, line.y, &line.heights);
         next += line_period;
         let now = Instant::now();
         if next > now {
@@ -98,6 +66,53 @@ pub(crate) fn run_scan(st: &AppState, params: ScanParams, person: &str) {
         })
     };
     finish_scan(st, scan_id, latest, record, record_error);
+}
+
+/// Scan `scan_id` of `img`'s geometry, running, with no record yet.
+fn scan_now(scan_id: u32, img: &HeightImage) -> ScanNow {
+    ScanNow {
+        scan: scan_id,
+        xres: img.xres as u32,
+        yres: img.yres as u32,
+        x_offset: img.x_offset,
+        y_offset: img.y_offset,
+        x_real: img.x_real,
+        y_real: img.y_real,
+        done: false,
+        record: None,
+        stale: false,
+    }
+}
+
+/// The `scan_start` of scan `now`.
+fn scan_start(now: &ScanNow) -> ServerMessage {
+    ServerMessage::ScanStart {
+        scan: now.scan,
+        xres: now.xres,
+        yres: now.yres,
+        x_offset: now.x_offset,
+        y_offset: now.y_offset,
+        x_real: now.x_real,
+        y_real: now.y_real,
+    }
+}
+
+/// Line `line` of scan `scan_id` (of `lines` lines, at `y`, m) as its binary frame: kept before
+/// it is sent, so a client subscribing now gets it from one or the other.
+fn send_line(st: &AppState, scan_id: u32, line: usize, lines: usize, y: f64, heights: &[f64]) {
+    let heights: Vec<f32> = heights.iter().map(|&h| h as f32).collect();
+    let h = ScanLineHeader {
+        scan: scan_id,
+        line: line as u32,
+        xres: heights.len() as u32,
+        yres: lines as u32,
+        y,
+    };
+    let frame = Bytes::from(h.encode(&heights));
+    keep_lines(st, Some(frame.clone()));
+    if st.clients.scan_subscribers.load(Relaxed) > 0 {
+        let _ = st.channels.scans.send(Message::Binary(frame));
+    }
 }
 
 /// The end of a scan: `latest` the picture of the sample now, the lines kept for late
@@ -159,43 +174,12 @@ pub(crate) fn run_real_scan(
             return;
         }
     };
-    let now = ScanNow {
-        scan: scan_id,
-        xres: img.xres as u32,
-        yres: img.yres as u32,
-        x_offset: img.x_offset,
-        y_offset: img.y_offset,
-        x_real: img.x_real,
-        y_real: img.y_real,
-        done: false,
-        record: None,
-        stale: false,
-    };
+    let now = scan_now(scan_id, &img);
     keep_lines(st, None);
-    send_text(&ServerMessage::ScanStart {
-        scan: scan_id,
-        xres: now.xres,
-        yres: now.yres,
-        x_offset: img.x_offset,
-        y_offset: img.y_offset,
-        x_real: img.x_real,
-        y_real: img.y_real,
-    });
-    let dy = img.dy();
+    send_text(&scan_start(&now));
     for (row, heights) in img.data.chunks(img.xres).enumerate() {
-        let heights: Vec<f32> = heights.iter().map(|&h| h as f32).collect();
-        let h = ScanLineHeader {
-            scan: scan_id,
-            line: row as u32,
-            xres: img.xres as u32,
-            yres: img.yres as u32,
-            y: img.y_offset + (row as f64 + 0.5) * dy,
-        };
-        let frame = Bytes::from(h.encode(&heights));
-        keep_lines(st, Some(frame.clone()));
-        if st.clients.scan_subscribers.load(Relaxed) > 0 {
-            let _ = st.channels.scans.send(Message::Binary(frame));
-        }
+        let y = img.y_offset + (row as f64 + 0.5) * img.dy();
+        send_line(st, scan_id, row, img.yres, y, heights);
     }
     // The heights are recorded with no tip model of the controller's: the scene's stands in.
     let tip = Tip::from_scene(&st.scene);
@@ -214,16 +198,9 @@ pub(crate) fn record_frame(st: &AppState, img: &HeightImage, person: &str) -> Re
     let (record, record_error) = write_record(st, scan_id, img, &tip, person);
     if let Ok(mut s) = st.activity.latest_scan.lock() {
         *s = Some(ScanNow {
-            scan: scan_id,
-            xres: img.xres as u32,
-            yres: img.yres as u32,
-            x_offset: img.x_offset,
-            y_offset: img.y_offset,
-            x_real: img.x_real,
-            y_real: img.y_real,
             done: true,
             record: record.clone(),
-            stale: false,
+            ..scan_now(scan_id, img)
         });
     }
     record.ok_or_else(|| record_error.unwrap_or_else(|| "no record was written".into()))
