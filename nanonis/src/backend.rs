@@ -100,8 +100,6 @@ pub struct NanonisMicroscope {
     target: Option<[f64; 2]>,
     feed_rate_hz: f64,
     started: Instant,
-    /// Commands sent, in order (for the report and the tests).
-    pub sent: Vec<String>,
     /// Set to end a scan early.
     cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
     /// When to try the logger stream again after it failed.
@@ -231,13 +229,10 @@ impl NanonisMicroscope {
             target: None,
             feed_rate_hz: 0.0,
             started: Instant::now(),
-            sent: Vec::new(),
             cancel: None,
             logger_retry: None,
             scanning: false,
         };
-        m.sent
-            .extend(["Signals.NamesGet", "ZCtrl.LimitsGet", "Scan.FrameGet"].map(String::from));
         m.feed_rate_hz = 1.0 / m.opts.acquisition_period;
         // Read-only starts no logger either: TCPLog.ChsSet changes the controller's settings.
         if let Some(port) = m.opts.logger_port.filter(|_| !m.opts.read_only) {
@@ -493,7 +488,7 @@ impl Microscope for NanonisMicroscope {
                 // Stop the scan engine if the link still answers, withdraw: then the rest.
                 // (Only on the link still open: on a new one the withdraw goes first.)
                 if self.conn.is_some() {
-                    let _ = self.call_once("Scan.Action", &|c: &mut Connection| cmd::scan_action(c, 1, true));
+                    let _ = self.call("Scan.Action", |c| cmd::scan_action(c, 1, true));
                 }
                 Err(self.recover(e))
             }
@@ -501,8 +496,8 @@ impl Microscope for NanonisMicroscope {
         // The operator's own frame and buffer back, as their software had them: after the tip
         // is safe.
         if let Some((frame0, buffer0)) = restore.filter(|_| self.conn.is_some()) {
-            let _ = self.call_once("Scan.FrameSet", &|c: &mut Connection| cmd::frame_set(c, &frame0));
-            let _ = self.call_once("Scan.BufferSet", &|c: &mut Connection| cmd::buffer_set(c, &buffer0));
+            let _ = self.call("Scan.FrameSet", |c| cmd::frame_set(c, &frame0));
+            let _ = self.call("Scan.BufferSet", |c| cmd::buffer_set(c, &buffer0));
         }
         result
     }

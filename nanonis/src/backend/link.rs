@@ -17,24 +17,22 @@ impl NanonisMicroscope {
         name: &str,
         f: impl Fn(&mut Connection) -> Result<T, MicroscopeError>,
     ) -> Result<T, MicroscopeError> {
-        let result = self.call_once(name, &f);
+        let result = self.call_once(&f);
         // A connection left idle (the logger carries the readings) may have died with a
         // controller that restarted: a call that only reads is tried once more on a new one.
         // Never while the tip moves or scans: then the first command on a new link is the
         // withdraw.
         let busy = self.target.is_some() || self.scanning;
         match result {
-            Err(MicroscopeError::Link { .. }) if name.ends_with("Get") && !busy => self.call_once(name, &f),
+            Err(MicroscopeError::Link { .. }) if name.ends_with("Get") && !busy => self.call_once(&f),
             other => other,
         }
     }
 
-    pub(super) fn call_once<T>(
+    fn call_once<T>(
         &mut self,
-        name: &str,
         f: &impl Fn(&mut Connection) -> Result<T, MicroscopeError>,
     ) -> Result<T, MicroscopeError> {
-        self.sent.push(name.to_string());
         if self.conn.is_none() {
             self.conn = Some(Connection::open(self.opts.addr, self.opts.timeout)?);
         }
