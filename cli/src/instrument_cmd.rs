@@ -105,16 +105,19 @@ fn in_range(flag: &str, v: f64, lo: f64, hi: f64, open_lo: bool, unit: &str) -> 
     Ok(())
 }
 
-static INTERRUPTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+/// Set by SIGINT, SIGTERM or SIGHUP; made before the handler is installed.
+static INTERRUPTED: std::sync::LazyLock<std::sync::Arc<AtomicBool>> = std::sync::LazyLock::new(Default::default);
 
 extern "C" fn on_interrupt(_: libc::c_int) {
-    // Async-signal-safe: one atomic store.
+    // Async-signal-safe: the flag exists already (forced before the handler is installed), so
+    // this is one atomic store.
     INTERRUPTED.store(true, std::sync::atomic::Ordering::Relaxed);
 }
 
 /// SIGINT, SIGTERM and SIGHUP no longer end the process: they set the returned flag, which the
 /// backend's scans and the held push watch, so that the tip is withdrawn before nanopush exits.
 fn catch_interrupts() -> std::sync::Arc<AtomicBool> {
+    let flag = std::sync::Arc::clone(&INTERRUPTED);
     let handler = on_interrupt as extern "C" fn(libc::c_int) as libc::sighandler_t;
     // SAFETY: installs a handler that only stores to an atomic.
     unsafe {
@@ -122,14 +125,6 @@ fn catch_interrupts() -> std::sync::Arc<AtomicBool> {
             libc::signal(sig, handler);
         }
     }
-    let flag = std::sync::Arc::new(AtomicBool::new(false));
-    let f = flag.clone();
-    std::thread::spawn(move || {
-        while !INTERRUPTED.load(std::sync::atomic::Ordering::Relaxed) {
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        f.store(true, std::sync::atomic::Ordering::Relaxed);
-    });
     flag
 }
 

@@ -183,7 +183,6 @@ fn withdraw(m: &mut dyn Microscope, why: &str, ctx: &Context) {
 }
 
 fn run(mut m: Box<dyn Microscope + Send>, requests: &Receiver<Request>, shared: &Shared, ctx: &Context) {
-    let started = Instant::now();
     let mut failing_since: Option<Instant> = None;
     let mut last_warned = Instant::now() - Duration::from_secs(60);
     loop {
@@ -242,7 +241,7 @@ fn run(mut m: Box<dyn Microscope + Send>, requests: &Receiver<Request>, shared: 
                 ctx.last_reading_ns
                     .store(ctx.started.elapsed().as_nanos().max(1) as u64, Relaxed);
                 if let Ok(mut s) = shared.snapshot.lock() {
-                    s.t = started.elapsed().as_secs_f64();
+                    s.t = ctx.started.elapsed().as_secs_f64();
                     s.stage = sample.tip;
                     s.volts = sample.normal;
                     s.tick += 1;
