@@ -17,26 +17,18 @@ pub struct SimulatedMicroscope {
     withdraw_height: f64,
     /// The motion in progress: target (x, y) and speed (m/s).
     motion: Option<([f64; 2], f64)>,
-    max_speed: f64,
 }
 
 impl SimulatedMicroscope {
     /// The scene's instrument, the tip withdrawn over `(x, y)` (m).
     pub fn from_scene(scene: &Scene, x: f64, y: f64, tick: f64) -> SimulatedMicroscope {
         let f = &scene.file;
-        let max_speed = f
-            .push
-            .speed_um_per_s
-            .max(f.strategy.travel_speed_um_per_s)
-            .max(f.strategy.approach_speed_um_per_s)
-            * 1e-6;
         SimulatedMicroscope {
             afm: Afm::from_scene(scene, x, y, tick),
             scan: ScanParams::from_scene(scene),
             tip: Tip::from_scene(scene),
             withdraw_height: f.strategy.start_height_um * 1e-6,
             motion: None,
-            max_speed,
         }
     }
 
@@ -77,7 +69,8 @@ impl Microscope for SimulatedMicroscope {
             x: [0.0, range],
             y: [0.0, range],
             z: [f64::NEG_INFINITY, f64::INFINITY],
-            max_speed: self.max_speed,
+            // The fastest the scene ever moves the stage, as the instrument's guard bounds it.
+            max_speed: self.afm.speed_bound(),
         })
     }
 

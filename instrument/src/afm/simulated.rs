@@ -261,6 +261,11 @@ impl Afm {
         self.speed_bound = speed;
     }
 
+    /// The fastest the stage is ever commanded to move (m/s), as set.
+    pub fn speed_bound(&self) -> f64 {
+        self.speed_bound
+    }
+
     /// The guard that tripped since the last call, if any (see [`Unphysical`]): the caller
     /// ends the push with it.
     pub fn take_fault(&mut self) -> Option<Unphysical> {
