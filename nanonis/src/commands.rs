@@ -69,11 +69,6 @@ pub fn setpoint_set(c: &mut Connection, setpoint: f64) -> Result<(), MicroscopeE
     c.call("ZCtrl.SetpntSet", &b, None, none)
 }
 
-/// `ZCtrl.ZPosGet`: the Z position (m).
-pub fn z_pos_get(c: &mut Connection) -> Result<f64, MicroscopeError> {
-    c.call("ZCtrl.ZPosGet", &[], None, |r| Ok(f64::from(r.f32("Z (m)")?)))
-}
-
 /// `ZCtrl.Withdraw`: switches the Z controller off and retracts the tip, waiting up to
 /// `timeout` for it to finish.
 pub fn withdraw(c: &mut Connection, timeout: Duration) -> Result<(), MicroscopeError> {
@@ -135,14 +130,6 @@ pub fn signal_names(c: &mut Connection) -> Result<Vec<String>, MicroscopeError> 
         let n = r.count("signal names count", MAX_SIGNALS)?;
         r.strings("signal name", n)
     })
-}
-
-/// `Signals.ValGet`: one signal's value now (its physical unit).
-pub fn signal_value(c: &mut Connection, index: usize) -> Result<f64, MicroscopeError> {
-    let b = body(|w| {
-        w.i32(index as i32).u32(0);
-    });
-    c.call("Signals.ValGet", &b, None, |r| Ok(f64::from(r.f32("signal value")?)))
 }
 
 /// `Signals.ValsGet`: several signals' values now.
@@ -313,13 +300,6 @@ pub fn acq_period_set(c: &mut Connection, period: f64) -> Result<(), MicroscopeE
     c.call("Util.AcqPeriodSet", &b, None, none)
 }
 
-/// `Util.RTFreqGet`: the real-time engine's rate (Hz).
-pub fn rt_freq(c: &mut Connection) -> Result<f64, MicroscopeError> {
-    c.call("Util.RTFreqGet", &[], None, |r| {
-        Ok(f64::from(r.f32("RT frequency (Hz)")?))
-    })
-}
-
 /// `TCPLog.ChsSet`: the signals the logger streams, in order (with their count, as the manual
 /// lays it out).
 pub fn log_channels_set(c: &mut Connection, indexes: &[usize]) -> Result<(), MicroscopeError> {
@@ -330,20 +310,7 @@ pub fn log_channels_set(c: &mut Connection, indexes: &[usize]) -> Result<(), Mic
     c.call("TCPLog.ChsSet", &b, None, none)
 }
 
-/// `TCPLog.OversamplSet`: samples averaged into each logged value, 0-1000.
-pub fn log_oversampling_set(c: &mut Connection, n: i32) -> Result<(), MicroscopeError> {
-    let b = body(|w| {
-        w.i32(n);
-    });
-    c.call("TCPLog.OversamplSet", &b, None, none)
-}
-
 /// `TCPLog.Start`.
 pub fn log_start(c: &mut Connection) -> Result<(), MicroscopeError> {
     c.call("TCPLog.Start", &[], None, none)
-}
-
-/// `TCPLog.Stop`.
-pub fn log_stop(c: &mut Connection) -> Result<(), MicroscopeError> {
-    c.call("TCPLog.Stop", &[], None, none)
 }
