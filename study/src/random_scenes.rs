@@ -492,4 +492,50 @@ mod tests {
         let e = j.true_error.expect("pushed");
         assert!(e <= tolerance, "truly {:.1} nm off", e * 1e9);
     }
+
+    /// Lab seed 4 (a 3.7 µm particle, a lever tilted so that the push bends it away from the push
+    /// side at every contact angle) is read on the pull side: the set point and the safety limit
+    /// lie on the other side of the baseline from the gain's, the model's peak on that side is
+    /// positive, and the push ends `ok`, truly within 25 nm.
+    #[test]
+    fn a_push_that_bends_the_lever_to_the_pull_side_is_read_there() {
+        use nanopush_instrument::control::estimator::ContactSide;
+        let tolerance = 25e-9;
+        let r = random_scene(4, Ranges::Lab);
+        let id = r.scene.pushed_particle().id;
+        let plan = nanopush_instrument::control::derive::derive(&r.scene, id, tolerance).expect("a plan");
+        assert_eq!(plan.prediction.side, ContactSide::Pull);
+        assert!(plan.prediction.peak_deflection > 0.0);
+        let sensor = &r.scene.file.sensor;
+        let side_of = |v: f64| (v - sensor.baseline_v) * sensor.gain_v_per_nm.signum();
+        assert!(side_of(plan.strategy.set_point_v) < 0.0, "{}", plan.explain());
+        assert!(side_of(plan.strategy.safety_limit_v) < side_of(plan.strategy.set_point_v));
+        assert!(plan.explain().contains("on the pull side"), "{}", plan.explain());
+        let c = run_random(4, Ranges::Lab, tolerance);
+        assert_eq!(c.judged.outcome, "ok", "{} [{}]", c.judged.reason, c.summary);
+        assert!(c.judged.true_error.expect("pushed") <= tolerance);
+    }
+
+    /// Lab seed 44: the pull-side reading drifts off the contact as a long push goes on, and the
+    /// dry run of a 1 µm push lost the particle after 0.53 µm, well past t*. The plan halves the
+    /// longest push (each push re-parks at a fresh set point), says why, and the push ends `ok`.
+    #[test]
+    fn a_reading_that_drifts_off_a_long_push_is_pushed_in_shorter_legs() {
+        let tolerance = 25e-9;
+        let r = random_scene(44, Ranges::Lab);
+        let id = r.scene.pushed_particle().id;
+        let plan = nanopush_instrument::control::derive::derive(&r.scene, id, tolerance).expect("a plan");
+        let max_push = plan.strategy.max_push_um;
+        assert!((0.1..0.3).contains(&max_push), "{max_push} µm");
+        let why = &plan
+            .choices
+            .iter()
+            .find(|c| c.key == "strategy.max_push_um")
+            .unwrap()
+            .why;
+        assert!(why.contains("lost the particle after"), "{why}");
+        let c = run_random(44, Ranges::Lab, tolerance);
+        assert_eq!(c.judged.outcome, "ok", "{} [{}]", c.judged.reason, c.summary);
+        assert!(c.judged.true_error.expect("pushed") <= tolerance);
+    }
 }

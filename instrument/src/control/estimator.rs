@@ -45,6 +45,54 @@ pub struct PushPrediction {
     /// `None` when it still held the particle at the end of the strategy's lift
     /// ([`RetractPlan::lift`]).
     pub release_lift: Option<f64>,
+    /// The side of the lever the deflections above are read on: `ζ_z` itself on the push side,
+    /// `−ζ_z` on the pull side.
+    pub side: ContactSide,
+}
+
+/// Which way the contact bends the lever, and so which side of the baseline the strategy reads
+/// the contact on: the set point, the safety limit, the peak at `t*` and the lost threshold are
+/// all taken as distances from the baseline on this side.
+///
+/// A push normally bends the lever toward the push side (`ζ_z > 0`: the contact's vertical load
+/// lifts the tip). On a tilted lever with a low contact angle and little tip-particle friction,
+/// the lateral load's moment about the lever's base outweighs it and the push bends the lever
+/// the other way, toward the side the substrate's adhesion pulls it; such a push is read on the
+/// pull side.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ContactSide {
+    /// `ζ_z > 0`: the reading moves with the gain's sign.
+    Push,
+    /// `ζ_z < 0`: the reading moves against it.
+    Pull,
+}
+
+impl ContactSide {
+    /// `+1` on the push side, `−1` on the pull side: the factor that turns `ζ_z` (or a
+    /// push-side signal) into a distance from the baseline on this side.
+    pub fn sign(self) -> f64 {
+        match self {
+            ContactSide::Push => 1.0,
+            ContactSide::Pull => -1.0,
+        }
+    }
+
+    /// The side a signed `ζ_z` (or push-side signal) lies on (zero: the push side).
+    pub fn of(deflection: f64) -> ContactSide {
+        if deflection < 0.0 {
+            ContactSide::Pull
+        } else {
+            ContactSide::Push
+        }
+    }
+
+    /// `push` or `pull`, for the plan's words.
+    pub fn name(self) -> &'static str {
+        match self {
+            ContactSide::Push => "push",
+            ContactSide::Pull => "pull",
+        }
+    }
 }
 
 /// Samples of the model push the estimator reads its constants from, whatever the push's
@@ -165,16 +213,19 @@ pub fn predict(
     deflection: f64,
     retract: RetractPlan,
 ) -> Result<PushPrediction, SimulationError> {
-    predict_with(params, duration, retract, |_| deflection)
+    let side = ContactSide::of(deflection);
+    predict_with(params, duration, retract, side, |_| deflection * side.sign())
 }
 
 /// [`predict`] with the set point's `ζ_z` given as a function of the push's own stick-phase peak
 /// (`deflection_of(ζ_peak)`), so one model push serves a plan that sets its set point from the
-/// peak (it was run twice, the second time only to read the travel to the set point).
+/// peak (it was run twice, the second time only to read the travel to the set point). Every
+/// deflection is read on `side`.
 fn predict_with(
     params: PushParams,
     duration: f64,
     retract: RetractPlan,
+    side: ContactSide,
     deflection_of: impl Fn(f64) -> f64,
 ) -> Result<PushPrediction, SimulationError> {
     let model = PushModel::new(params);
@@ -195,16 +246,16 @@ fn predict_with(
         .iter()
         .map(lag)
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
-    let highest = run
-        .trace
+    // The trace as the reading on `side` sees it: (ζ_z on that side, tip travel).
+    let on_side: Vec<(f64, f64)> = run.trace.iter().map(|r| (side.sign() * r.zeta_z, r.stage_y)).collect();
+    let highest = *on_side
         .iter()
-        .max_by(|a, b| a.zeta_z.total_cmp(&b.zeta_z))
+        .max_by(|a, b| a.0.total_cmp(&b.0))
         .expect("a push trace has rows");
-    let peak_row = first_peak(&run.trace, highest.zeta_z).unwrap_or(highest);
-    let (peak, travel_to_peak) = (peak_row.zeta_z, peak_row.stage_y);
+    let (peak, travel_to_peak) = first_peak(&on_side, highest.0).unwrap_or(highest);
     let deflection = deflection_of(peak);
-    let travel_to_deflection = run.trace.iter().find(|r| r.zeta_z >= deflection).map(|r| r.stage_y);
-    let settled = tail.iter().map(|r| r.zeta_z).sum::<f64>() / tail.len() as f64;
+    let travel_to_deflection = on_side.iter().find(|r| r.0 >= deflection).map(|r| r.1);
+    let settled = side.sign() * tail.iter().map(|r| r.zeta_z).sum::<f64>() / tail.len() as f64;
     Ok(PushPrediction {
         retract_shift: retraction.shift,
         release_lift: retraction.release_lift,
@@ -216,22 +267,20 @@ fn predict_with(
         settled_deflection: settled,
         phase: run.final_phase,
         travel: duration * params.speed,
+        side,
     })
 }
 
-/// The stick-phase peak of a model push: the running maximum of `ζ_z` where `ζ_z` first falls
-/// below it by a tenth of the push's highest `ζ_z` (the first slip, `t*`). A stick-slip push
-/// rises again, sometimes higher; the search and the `t*` detector meet the first peak. `None`
-/// when the push never drops that much.
-fn first_peak(
-    trace: &[crate::physics::pushing::trace::TraceRow],
-    highest: f64,
-) -> Option<&crate::physics::pushing::trace::TraceRow> {
-    let mut best = trace.first()?;
-    for r in trace {
-        if r.zeta_z > best.zeta_z {
+/// The stick-phase peak of a model push, from its `(ζ_z, travel)` samples on the side it is read
+/// on: the running maximum of `ζ_z` where `ζ_z` first falls below it by a tenth of the push's
+/// highest `ζ_z` (the first slip, `t*`). A stick-slip push rises again, sometimes higher; the
+/// search and the `t*` detector meet the first peak. `None` when the push never drops that much.
+fn first_peak(trace: &[(f64, f64)], highest: f64) -> Option<(f64, f64)> {
+    let mut best = *trace.first()?;
+    for &r in trace {
+        if r.0 > best.0 {
             best = r;
-        } else if best.zeta_z - r.zeta_z > 0.1 * highest {
+        } else if best.0 - r.0 > 0.1 * highest {
             return Some(best);
         }
     }
@@ -254,18 +303,20 @@ pub fn predict_past_separation(
     deflection: f64,
     retract: RetractPlan,
 ) -> Result<PushPrediction, SimulationError> {
-    past_separation(params, retract, |_| deflection)
+    let side = ContactSide::of(deflection);
+    past_separation(params, retract, side, |_| deflection * side.sign())
 }
 
 /// [`predict_past_separation`] with the set point at `fraction` of the push's stick-phase peak
-/// (none when the peak is not on the push's side): what the strategy's plan derives its set
-/// point from, in the same model pushes.
+/// (none when the peak is not on the side it is read on), every deflection read on `side`: what
+/// the strategy's plan derives its set point from, in the same model pushes.
 pub fn predict_with_set_fraction(
     params: PushParams,
+    side: ContactSide,
     fraction: f64,
     retract: RetractPlan,
 ) -> Result<PushPrediction, SimulationError> {
-    past_separation(params, retract, |peak| {
+    past_separation(params, retract, side, |peak| {
         if peak > 0.0 { fraction * peak } else { f64::INFINITY }
     })
 }
@@ -273,12 +324,13 @@ pub fn predict_with_set_fraction(
 fn past_separation(
     params: PushParams,
     retract: RetractPlan,
+    side: ContactSide,
     deflection_of: impl Fn(f64) -> f64 + Copy,
 ) -> Result<PushPrediction, SimulationError> {
     let mut travel = PREDICTED_TRAVEL;
     loop {
         let duration = (travel / params.speed).max(0.02);
-        let p = predict_with(params, duration, retract, deflection_of)?;
+        let p = predict_with(params, duration, retract, side, deflection_of)?;
         if p.travel_to_peak <= 0.75 * p.travel || travel >= MAX_PREDICTED_TRAVEL {
             return Ok(p);
         }
@@ -495,23 +547,9 @@ mod tests {
     /// less than that below its maximum has none (the maximum is taken).
     #[test]
     fn the_stick_phase_peak_is_the_first_slip_not_the_highest() {
-        let row = |i: usize, z: f64| crate::physics::pushing::trace::TraceRow {
-            t: i as f64,
-            stage_y: i as f64 * 1e-9,
-            particle_y: 0.0,
-            particle_z: 0.0,
-            theta: 0.0,
-            zeta_y: 0.0,
-            zeta_z: z,
-            normal_ta: 0.0,
-            friction_ta: 0.0,
-            load_as: 0.0,
-            friction_as: 0.0,
-            phase: "stick",
-        };
-        let trace = |z: &[f64]| z.iter().enumerate().map(|(i, &z)| row(i, z)).collect::<Vec<_>>();
+        let trace = |z: &[f64]| z.iter().enumerate().map(|(i, &z)| (z, i as f64)).collect::<Vec<_>>();
         let slip = trace(&[0.0, 1.0, 2.0, 3.0, 2.5, 4.0, 2.0]);
-        assert_eq!(super::first_peak(&slip, 4.0).map(|r| r.t), Some(3.0));
+        assert_eq!(super::first_peak(&slip, 4.0).map(|r| r.1), Some(3.0));
         let steady = trace(&[0.0, 1.0, 2.0, 1.95, 1.9, 1.9]);
         assert_eq!(super::first_peak(&steady, 2.0), None);
     }
@@ -530,6 +568,7 @@ mod tests {
             retract_shift: 0.0,
             release_lift: Some(0.0),
             travel: 40e-9,
+            side: super::ContactSide::Push,
         }
     }
 

@@ -1,9 +1,11 @@
 //! The contact angle β: the hand-set one, or the first of [`BETAS_DEG`] whose parking height
-//! is above the snap-in and whose predicted push passes the model's checks.
+//! is above the snap-in and whose predicted push passes the model's checks, read on the push
+//! side; failing that, the first whose push the push side cannot read but the pull side can
+//! ([`ContactSide`]).
 
 use super::adhesion_field;
 use super::{BACK_OFF, BETAS_DEG, Candidate, Derivation, Fails, MAX_START, Refusal, SET_FRACTION, TICK};
-use crate::control::estimator::{RetractPlan, predict_with_set_fraction};
+use crate::control::estimator::{ContactSide, RetractPlan, predict_with_set_fraction};
 use crate::control::strategy::HOLD;
 
 impl Derivation<'_> {
@@ -32,6 +34,9 @@ impl Derivation<'_> {
         }
         let mut first_failure: Option<Fails> = None;
         let mut tried = Vec::new();
+        // Angles whose push the push side cannot read: tried on the pull side once no angle
+        // works on the push side (the paper's reading; a scene it reads keeps its plan).
+        let mut unread: Vec<(f64, f64, Fails)> = Vec::new();
         // Auto-parking detects the substrate where the tip snaps in (the meniscus, the
         // attraction), this high above it; the tip rises from there to the parking height, and
         // a parking height below it would drive the tip down into the meniscus while the
@@ -78,7 +83,7 @@ impl Derivation<'_> {
                     field: format!("{field}{steeper}"),
                 })
             } else {
-                self.predict_at(beta, parking, v, approach_speed)
+                self.predict_at(beta, parking, v, approach_speed, ContactSide::Push)
                     .and_then(|c| self.check(&c).map(|()| c))
             };
             tried.push(beta_deg);
@@ -91,7 +96,7 @@ impl Derivation<'_> {
                         "push.contact_angle_deg = {beta_deg} (hand-set): {}; change {}",
                         f.reason, f.field
                     );
-                    if let Ok(c) = self.predict_at(beta, parking, v, approach_speed)
+                    if let Ok(c) = self.predict_at(beta, parking, v, approach_speed, ContactSide::Push)
                         && c.prediction.peak_deflection > 0.0
                     {
                         self.warnings.push(warning);
@@ -100,20 +105,56 @@ impl Derivation<'_> {
                     return Err(self.refuse(f));
                 }
                 Err(f) => {
+                    if matches!(f.code, "unreadable" | "no_resistance") {
+                        unread.push((beta, parking, f.clone()));
+                    }
                     if first_failure.is_none() {
                         first_failure = Some(f);
                     }
                 }
             }
         }
-        let f = first_failure.expect("at least one angle tried");
+        let mut pull_failure: Option<Fails> = None;
+        for (beta, parking, push_failure) in unread {
+            let pull = self
+                .predict_at(beta, parking, v, approach_speed, ContactSide::Pull)
+                .and_then(|c| self.check(&c).map(|()| c));
+            match pull {
+                Ok(c) => return Ok(c),
+                Err(g) if pull_failure.is_none() => {
+                    // A push bent only to the pull side is told by its pull-side failure.
+                    pull_failure = Some(if push_failure.reason.contains("bends the lever away") {
+                        g
+                    } else {
+                        Fails {
+                            reason: format!("{}; read on the pull side: {}", push_failure.reason, g.reason),
+                            ..push_failure
+                        }
+                    });
+                }
+                Err(_) => {}
+            }
+        }
+        let first = first_failure.expect("at least one angle tried");
+        // The first angle's failure, or its pull side's when that is where it was unreadable.
+        let f = match pull_failure {
+            Some(g) if matches!(first.code, "unreadable" | "no_resistance") => g,
+            _ => first,
+        };
         Err(self.refuse(Fails {
             reason: format!("{} (and at every other contact angle tried: {tried:?}°)", f.reason),
             ..f
         }))
     }
 
-    fn predict_at(&self, beta: f64, parking: f64, v: f64, approach_speed: f64) -> Result<Candidate, Fails> {
+    fn predict_at(
+        &self,
+        beta: f64,
+        parking: f64,
+        v: f64,
+        approach_speed: f64,
+        side: ContactSide,
+    ) -> Result<Candidate, Fails> {
         let mut params = self.scene.push_params_for(self.part);
         params.beta = beta;
         params.speed = v;
@@ -125,7 +166,7 @@ impl Derivation<'_> {
         };
         // The set point at SET_FRACTION of the push's own peak, and the travel to it, from one
         // model push.
-        let prediction = predict_with_set_fraction(params, SET_FRACTION, retract).map_err(|e| Fails {
+        let prediction = predict_with_set_fraction(params, side, SET_FRACTION, retract).map_err(|e| Fails {
             code: "model",
             reason: format!("the model's push at β = {:.0}° failed: {e}", beta.to_degrees()),
             field: crate::physics::pushing::MODEL_REFUSAL_FIELD.into(),

@@ -2,7 +2,7 @@
 //! the model's checks gets its settings and a dry run, until one ends `ok`.
 
 use super::readout::Readout;
-use super::{Choice, DerivedStrategy, Fails, MAX_DRY_RUN, PAPER_SPEED, Refusal, dry_run, short};
+use super::{BETAS_DEG, Choice, DerivedStrategy, Fails, MAX_DRY_RUN, MIN_PUSH, PAPER_SPEED, Refusal, dry_run, short};
 use crate::scene::Scene;
 use crate::scene::file::{ParticleFile, StrategyFile};
 
@@ -15,6 +15,9 @@ pub(super) struct Derivation<'a> {
     pub(super) file: StrategyFile,
     pub(super) choices: Vec<Choice>,
     pub(super) warnings: Vec<String>,
+    /// The longest push a dry run showed the particle is kept for (m), with the travel at which
+    /// a longer one lost it: the settings' longest push is held under it.
+    pub(super) push_cap: Option<(f64, f64)>,
 }
 
 impl<'a> Derivation<'a> {
@@ -38,6 +41,7 @@ impl<'a> Derivation<'a> {
             file: scene.file.strategy.clone(),
             choices: Vec::new(),
             warnings: Vec::new(),
+            push_cap: None,
         })
     }
 
@@ -104,8 +108,15 @@ impl<'a> Derivation<'a> {
         // model; the first that ends `ok` is the plan.
         let (base_choices, base_warnings) = (self.choices.clone(), self.warnings.clone());
         let mut rejected: Vec<(f64, String, Vec<String>)> = Vec::new();
+        let mut retry: Option<f64> = None;
         loop {
-            let skip: Vec<f64> = rejected.iter().map(|r| r.0).collect();
+            // A retry with shorter pushes keeps its angle: the others come first otherwise.
+            let skip: Vec<f64> = rejected
+                .iter()
+                .map(|r| r.0)
+                .chain(BETAS_DEG.iter().copied().filter(|b| retry.is_some_and(|r| r != *b)))
+                .collect();
+            retry = None;
             let cand = match self.contact_angle(r_a, r_t, v0, approach_speed, &skip) {
                 Ok(c) => c,
                 Err(refusal) if rejected.is_empty() => return Err(refusal),
@@ -138,7 +149,7 @@ impl<'a> Derivation<'a> {
                 ));
                 return Ok(plan);
             }
-            match dry_run::dry_run(self.scene, &plan) {
+            match dry_run::dry_run(self.scene, &plan, self.push_cap.map(|c| c.0)) {
                 Ok(0) => {
                     plan.warnings.push(
                         "no dry run: neither leg of it (up and down the slope, 0.3-1 µm) stays on the stage from this particle"
@@ -147,18 +158,42 @@ impl<'a> Derivation<'a> {
                     return Ok(plan);
                 }
                 Ok(_) => return Ok(plan),
+                // A reading that drifts off the contact over a long push (the substrate's slope
+                // or the particle's turn changing the contact) trips the lost-particle test
+                // well after t*: shorter pushes, each re-parked at a fresh set point, keep it.
+                // Tried at half the travel it was lost at, while that is at least MIN_PUSH.
+                Err(why) if let Some(cap) = self.shorter_push(why.lost_after, plan.strategy.max_push_um * 1e-6) => {
+                    self.push_cap = Some((cap, why.lost_after.unwrap_or(cap)));
+                    self.choices = base_choices.clone();
+                    self.warnings = base_warnings.clone();
+                    rejected.retain(|r| r.0 != cand.beta_deg);
+                    retry = Some(cand.beta_deg);
+                }
                 Err(why) if self.hand("push.contact_angle_deg") => {
                     plan.warnings
                         .push(format!("the plan's dry run on the model fails: {why}"));
                     return Ok(plan);
                 }
                 Err(why) => {
-                    rejected.push((cand.beta_deg, why, plan.warnings.clone()));
+                    rejected.push((cand.beta_deg, why.text, plan.warnings.clone()));
+                    self.push_cap = None;
                     self.choices = base_choices.clone();
                     self.warnings = base_warnings.clone();
                 }
             }
         }
+    }
+
+    /// The longest push to try after a dry run lost the particle `lost_after` into a push of a
+    /// plan whose longest push is `max_push` (m): half that travel, when the longest push is not
+    /// hand-set, the loss came after t* had passed (past [`MIN_PUSH`]) and the halved push is
+    /// still at least [`MIN_PUSH`] and shorter than the one tried.
+    fn shorter_push(&self, lost_after: Option<f64>, max_push: f64) -> Option<f64> {
+        let lost = lost_after?;
+        let tried = self.push_cap.map_or(max_push.clamp(0.3e-6, 1e-6), |c| c.0);
+        // Whole hundredths of a µm, as the plan writes it.
+        let cap = (0.5 * lost.min(tried) * 1e8).floor() / 1e8;
+        (!self.hand("strategy.max_push_um") && cap >= MIN_PUSH && cap < 0.9 * tried).then_some(cap)
     }
 
     /// A model no push can run (dynamic degrees of freedom) is refused before anything is

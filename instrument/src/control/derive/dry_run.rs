@@ -5,6 +5,7 @@ use super::DerivedStrategy;
 use crate::afm::Afm;
 use crate::control::moves::locate::MoveTarget;
 use crate::control::moves::run::{DEFAULT_ATTEMPTS, MoveOptions, Verdict, move_particle};
+use crate::control::strategy::Failure;
 use crate::scene::Scene;
 
 /// Runs `plan` on a copy of `scene` with other seeds for the readout's noise and the
@@ -12,22 +13,24 @@ use crate::scene::Scene;
 /// the longest leg the plan allows (within [0.3, 1] µm) up the substrate's slope, and one down it
 /// (the contact angle falls on the way up, rises on the way down), each from where a local scan
 /// finds the particle and judged with the plan's tolerance; a leg that would leave the stage is
-/// not run. The legs run, or `Err` saying how one failed.
-pub fn dry_run(scene: &Scene, plan: &DerivedStrategy) -> Result<usize, String> {
+/// not run; with `push_cap` the legs are that long instead (the plan's shorter pushes). The legs
+/// run, or how one failed.
+pub fn dry_run(scene: &Scene, plan: &DerivedStrategy, push_cap: Option<f64>) -> Result<usize, DryRunFailure> {
     let mut s = scene.clone();
     plan.apply(&mut s);
     s.file.sensor.noise_seed = s.file.sensor.noise_seed.wrapping_add(0x9e37_79b9_7f4a_7c15);
     s.file.substrate.roughness_seed = s.file.substrate.roughness_seed.wrapping_add(0x2545_f491_4f6c_dd1d);
-    s.pushable(plan.particle).map_err(|e| e.to_string())?;
+    s.pushable(plan.particle)
+        .map_err(|e| DryRunFailure::said(e.to_string()))?;
     let part = s
         .file
         .particles
         .iter()
         .find(|p| p.id == plan.particle)
-        .ok_or_else(|| format!("no particle {}", plan.particle))?;
+        .ok_or_else(|| DryRunFailure::said(format!("no particle {}", plan.particle)))?;
     let (x, y, r) = (part.x_um * 1e-6, part.y_um * 1e-6, part.radius_nm * 1e-9);
     let range = s.file.stage.range_um * 1e-6;
-    let distance = (s.file.strategy.max_push_um * 1e-6).clamp(0.3e-6, 1e-6);
+    let distance = push_cap.unwrap_or((s.file.strategy.max_push_um * 1e-6).clamp(0.3e-6, 1e-6));
     let (tx, ty) = (s.file.substrate.tilt_x_mrad, s.file.substrate.tilt_y_mrad);
     let tilt = tx.hypot(ty);
     let up = if tilt > 0.0 { (tx / tilt, ty / tilt) } else { (1.0, 0.0) };
@@ -49,13 +52,42 @@ pub fn dry_run(scene: &Scene, plan: &DerivedStrategy) -> Result<usize, String> {
             pause: None,
         };
         let target = MoveTarget::Distance { distance, direction };
-        let moved = move_particle(&s, &mut afm, plan.particle, at, r, target, options).map_err(|e| e.to_string())?;
-        judge(&moved, plan)?;
+        let moved = move_particle(&s, &mut afm, plan.particle, at, r, target, options)
+            .map_err(|e| DryRunFailure::said(e.to_string()))?;
+        judge(&moved, plan).map_err(|text| DryRunFailure {
+            text,
+            lost_after: moved.legs.iter().find_map(|l| match l.run.summary.failure {
+                Some(Failure::ParticleLost { travel_um }) => Some(travel_um * 1e-6),
+                _ => None,
+            }),
+        })?;
         if let Some(found) = moved.after.1 {
             at = (found.x, found.y);
         }
     }
     Ok(legs)
+}
+
+/// How a dry run failed: in words (`code: text`), and the push's travel when a leg lost the
+/// particle.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DryRunFailure {
+    /// `code: what happened`.
+    pub text: String,
+    /// The push travel (m) at which a leg lost the particle.
+    pub lost_after: Option<f64>,
+}
+
+impl DryRunFailure {
+    fn said(text: String) -> DryRunFailure {
+        DryRunFailure { text, lost_after: None }
+    }
+}
+
+impl std::fmt::Display for DryRunFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.text)
+    }
 }
 
 fn judge(moved: &crate::control::moves::run::MoveRun, plan: &DerivedStrategy) -> Result<(), String> {

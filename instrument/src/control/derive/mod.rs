@@ -90,6 +90,10 @@ pub const SET_FRACTION: f64 = 0.6;
 /// Contact angles tried, in order (degrees): the paper's 30° first.
 pub const BETAS_DEG: [f64; 8] = [30.0, 45.0, 20.0, 60.0, 15.0, 70.0, 10.0, 80.0];
 
+/// The shortest push the plan splits a move into when a longer one loses the particle in its
+/// dry run (m).
+pub const MIN_PUSH: f64 = 0.1e-6;
+
 /// Below this many times the lever's stiffness the stage's yield under the push is warned about.
 pub const STAGE_STIFFNESS_RATIO: f64 = 20.0;
 
@@ -128,6 +132,7 @@ struct Candidate {
 }
 
 /// Why a candidate fails, before it is a [`Refusal`].
+#[derive(Clone)]
 struct Fails {
     code: &'static str,
     reason: String,

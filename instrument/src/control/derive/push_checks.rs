@@ -12,6 +12,7 @@ impl Derivation<'_> {
     pub(super) fn check(&self, c: &Candidate) -> Result<(), Fails> {
         let ro = self.readout;
         let p = &c.prediction;
+        let room = ro.room_on(p.side);
         let k = self.scene.file.cantilever.stiffness_n_per_m;
         let gain_nm = ro.gain * 1e-9;
         if p.peak_deflection.abs() < 1e-13 && p.settled_deflection.abs() < 1e-13 {
@@ -28,8 +29,9 @@ impl Derivation<'_> {
             return Err(Fails {
                 code: "unreadable",
                 reason: format!(
-                    "at β = {}° the push bends the lever away from the set point's side (peak ζ_z = {:.3} nm)",
+                    "at β = {}° the push bends the lever away from the {} side (peak ζ_z on that side {:.3} nm)",
                     c.beta_deg,
+                    p.side.name(),
                     p.peak_deflection * 1e9
                 ),
                 field: "push.contact_angle_deg (steeper) or cantilever.tilt_deg".into(),
@@ -39,12 +41,12 @@ impl Derivation<'_> {
         // cannot push, whether or not the particle would shear loose later.
         let separates = p.travel_to_peak <= 0.75 * p.travel;
         let peak_v = p.peak_deflection * ro.gain;
-        if PEAK_SPARE * peak_v > 0.9 * ro.room {
-            let need_k = k * PEAK_SPARE * peak_v / (0.9 * ro.room);
+        if PEAK_SPARE * peak_v > 0.9 * room {
+            let need_k = k * PEAK_SPARE * peak_v / (0.9 * room);
             return Err(Fails {
                 code: "deflection_limit",
                 reason: format!(
-                    "at β = {}° the lever's deflection limit is reached before the particle shears: the stick-phase peak {}{:.2} nm reads {:.2} V, and twice that is beyond 90 % of the readout's {:.2} V",
+                    "at β = {}° the lever's deflection limit is reached before the particle shears: the stick-phase peak {}{:.2} nm reads {:.2} V, and twice that is beyond 90 % of the readout's {:.2} V on the {} side",
                     c.beta_deg,
                     if separates {
                         ""
@@ -53,7 +55,8 @@ impl Derivation<'_> {
                     },
                     p.peak_deflection * 1e9,
                     peak_v,
-                    ro.room
+                    room,
+                    p.side.name()
                 ),
                 // Still rising: the figures scale a peak the model has not reached, so they
                 // are needed but not known to be enough (1.1 × the figure, applied, can ask for 20
@@ -166,7 +169,7 @@ impl Derivation<'_> {
         let k_helps = need_k <= MAX_STIFFNESS;
         let stiffer = format!("cantilever.stiffness_n_per_m: k_c {ge} {} N/m needed", short(need_k));
         let k_no = format!("{stiffer}, beyond the {} N/m a scene allows", short(MAX_STIFFNESS));
-        let gain_max = gain_nm * 0.9 * ro.room / (PEAK_SPARE * peak_v);
+        let gain_max = gain_nm * 0.9 * ro.room_on(p.side) / (PEAK_SPARE * peak_v);
         let threshold = self
             .choices
             .iter()

@@ -1,5 +1,6 @@
 //! The readout as the derivation sees it: gain, baseline, noise and the room to its rail.
 
+use crate::control::estimator::ContactSide;
 use crate::scene::Scene;
 
 /// The readout as the plan sees it (V).
@@ -33,8 +34,16 @@ impl Readout {
         }
     }
 
-    /// The reading of a deflection (V).
+    /// The reading of a deflection `ζ_z` (V).
     pub(super) fn volts(&self, deflection: f64) -> f64 {
         self.baseline + self.sign * self.gain * deflection
+    }
+
+    /// From the baseline to the rail on `side` (V): [`Readout::room`] on the push side.
+    pub(super) fn room_on(&self, side: ContactSide) -> f64 {
+        match side {
+            ContactSide::Push => self.room,
+            ContactSide::Pull => self.room + 2.0 * self.sign * self.baseline,
+        }
     }
 }

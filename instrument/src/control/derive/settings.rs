@@ -6,7 +6,7 @@ use super::{
     BACK_OFF, Candidate, Derivation, Fails, MAX_START, MAX_TIMEOUT, PAPER_SPEED, PEAK_SPARE, SET_FRACTION, TICK,
 };
 use super::{BETAS_DEG, Choice, DerivedStrategy, Refusal, short};
-use crate::control::estimator::PushPrediction;
+use crate::control::estimator::{ContactSide, PushPrediction};
 use crate::control::moves::locate::{LOCAL_PIXELS, local_scan_size};
 use crate::control::strategy::pull_off::pull_off_rise;
 use crate::scene::Scene;
@@ -140,13 +140,17 @@ impl Derivation<'_> {
 fn contact_angle(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
     let beta_hand = d.hand("push.contact_angle_deg");
     let why = format!(
-        "{}: the parking height {:.1} nm keeps the apex above the substrate, the push bends the lever up to a stick-phase peak of {:.3} nm before t*, and every check below passes",
+        "{}: the parking height {:.1} nm keeps the apex above the substrate, the push bends the lever {} to a stick-phase peak of {:.3} nm before t*, and every check below passes",
         if beta_hand {
             "given by the scene".to_string()
         } else {
             format!("the first of {BETAS_DEG:?}° that works")
         },
         s.cand.parking * 1e9,
+        match s.cand.prediction.side {
+            ContactSide::Push => "up (the push side)",
+            ContactSide::Pull => "down (the pull side)",
+        },
         s.cand.prediction.peak_deflection * 1e9
     );
     d.choices.push(Choice {
@@ -162,7 +166,8 @@ fn contact_angle(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
 fn set_point(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
     let (f, ro, pred) = (&d.scene.file, d.readout, s.cand.prediction);
     let peak_v = pred.peak_deflection * ro.gain;
-    let hand_signal = (f.strategy.set_point_v - ro.baseline) * ro.sign;
+    let side = pred.side.sign();
+    let hand_signal = (f.strategy.set_point_v - ro.baseline) * ro.sign * side;
     let check = if hand_signal >= 0.95 * peak_v {
         Some(format!(
             "{:.3} V from the baseline, at or beyond the predicted peak {:.3} V: the search pushes the particle without reaching it",
@@ -178,12 +183,18 @@ fn set_point(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
     d.choose(
         "strategy.set_point_v",
         f.strategy.set_point_v,
-        ro.volts(SET_FRACTION * pred.peak_deflection),
+        ro.volts(side * SET_FRACTION * pred.peak_deflection),
         format!(
-            "{:.0} % of the stick-phase peak deflection {:.3} nm ({:.3} V from the baseline): reached before the particle moves, {:.0} × the noise",
+            "{:.0} % of the stick-phase peak deflection {:.3} nm ({:.3} V from the baseline{}): reached before the particle moves, {:.0} × the noise",
             SET_FRACTION * 100.0,
             pred.peak_deflection * 1e9,
             peak_v,
+            match pred.side {
+                ContactSide::Push => "",
+                ContactSide::Pull => {
+                    ", on the pull side: at this angle the push bends the lever the way the substrate's adhesion does"
+                }
+            },
             SET_FRACTION * peak_v / (ro.sigma + ro.pert).max(1e-6)
         ),
         check,
@@ -192,15 +203,17 @@ fn set_point(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
 }
 
 /// **Safety limit**: `max(2.5 ζ_peak g, ζ_peak g + 10σ)` from the baseline, within 90 % of
-/// the readout's room on the push side, at least twice the peak.
+/// the readout's room on the side the contact is read on, at least twice the peak.
 fn safety_limit(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
     let (f, ro) = (&d.scene.file, d.readout);
+    let side = s.cand.prediction.side;
+    let room = ro.room_on(side);
     let peak_v = s.cand.prediction.peak_deflection * ro.gain;
     let safety = (2.5 * peak_v)
         .max(peak_v + 10.0 * ro.sigma)
-        .min(0.9 * ro.room)
+        .min(0.9 * room)
         .max(PEAK_SPARE * peak_v);
-    let hand = (f.strategy.safety_limit_v - ro.baseline) * ro.sign;
+    let hand = (f.strategy.safety_limit_v - ro.baseline) * ro.sign * side.sign();
     let check = (hand < 1.1 * peak_v).then(|| {
         format!(
             "{hand:.3} V from the baseline, within 10 % of the predicted peak {peak_v:.3} V: an ordinary push trips it"
@@ -209,10 +222,11 @@ fn safety_limit(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
     d.choose(
         "strategy.safety_limit_v",
         f.strategy.safety_limit_v,
-        ro.baseline + ro.sign * safety,
+        ro.baseline + ro.sign * side.sign() * safety,
         format!(
-            "2.5 × the peak reading {peak_v:.3} V (or the peak plus 10σ; the instrument's peak exceeds the model's where the snap-in lifts the detected substrate), within 90 % of the readout's {:.2} V on the push side",
-            ro.room
+            "2.5 × the peak reading {peak_v:.3} V (or the peak plus 10σ; the instrument's peak exceeds the model's where the snap-in lifts the detected substrate), within 90 % of the readout's {:.2} V on the {} side",
+            room,
+            side.name()
         ),
         check,
     );
@@ -461,15 +475,27 @@ fn max_push(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
         20e-6
     }
     .min(range);
+    let mut why = format!(
+        "a longer move is planned as several pushes, each re-parked: the substrate's slope {:.1} mrad may change the contact angle by at most 5° a push ({:.1} nm of height), at most 20 µm and the stage's range",
+        slope * 1e3,
+        dz * 1e9
+    );
+    let max_push = match d.push_cap {
+        Some((cap, lost)) if cap < max_push => {
+            why = format!(
+                "pushes of {} µm: the dry run of a longer push lost the particle after {} µm as the reading drifted off the contact, and a fresh set point each push keeps it",
+                short(cap * 1e6),
+                short(lost * 1e6)
+            );
+            cap
+        }
+        _ => max_push,
+    };
     s.max_push = d.choose(
         "strategy.max_push_um",
         f.strategy.max_push_um,
         (max_push * 1e8).floor() / 100.0,
-        format!(
-            "a longer move is planned as several pushes, each re-parked: the substrate's slope {:.1} mrad may change the contact angle by at most 5° a push ({:.1} nm of height), at most 20 µm and the stage's range",
-            slope * 1e3,
-            dz * 1e9
-        ),
+        why,
         None,
     ) * 1e-6;
     Ok(())

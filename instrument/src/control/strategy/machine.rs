@@ -20,7 +20,7 @@
 use super::pull_off::{self, Motion, Saturation};
 use super::{Control, Failure, PushTask, SearchStep, StrategyParams, Summary};
 use crate::afm::Reading;
-use crate::control::estimator::Hxy;
+use crate::control::estimator::{ContactSide, Hxy};
 
 /// How far the tip backs off along the line of centres before it lifts (m).
 pub const BACK_OFF: f64 = 100e-9;
@@ -258,7 +258,9 @@ impl Strategy {
             Phase::Park => self.park(r, sig),
             Phase::ToParkingHeight { z } => self.rise_to_parking_height(r, sig, z),
             Phase::LetGo { park_z } => self.rise_until_let_go(r, sig, park_z),
-            Phase::ContactSearch { step, in_step, dwell } => self.contact_search(r, sig, step, in_step, dwell),
+            Phase::ContactSearch { step, in_step, dwell } => {
+                self.contact_search(r, sig * self.params.contact_side.sign(), step, in_step, dwell)
+            }
             Phase::Push { from } => self.push(r, sig, from),
             Phase::Hold { ticks } => self.hold(r, ticks),
             Phase::BackOff { goal } => {
@@ -274,10 +276,21 @@ impl Strategy {
 
     /// Safety first, in every phase that can touch something: a reading past the safety limit
     /// fails the run.
+    /// A contact read on the pull side has its limit there, for the phases that touch the
+    /// particle; the tip's adhesion to the substrate reads on that side too while it parks, and
+    /// is ridden out by the saturation guard's rule instead.
     fn guard_safety_limit(&mut self, r: &Reading, sig: f64) {
         let p = self.params;
-        let limit = p.signal(p.safety_limit);
-        if sig > limit && !matches!(self.phase, Phase::Retract | Phase::BackOff { .. } | Phase::Done) {
+        let side = p.contact_side.sign();
+        let limit = p.signal(p.safety_limit) * side;
+        let guarded = match p.contact_side {
+            ContactSide::Push => !matches!(self.phase, Phase::Retract | Phase::BackOff { .. } | Phase::Done),
+            ContactSide::Pull => matches!(
+                self.phase,
+                Phase::ContactSearch { .. } | Phase::Push { .. } | Phase::Hold { .. }
+            ),
+        };
+        if sig * side > limit && guarded {
             let phase = self.phase.name();
             self.fail(
                 Failure::DeflectionLimit {
@@ -464,9 +477,10 @@ impl Strategy {
         }
     }
 
+    /// B → C; `sig` is the contact signal ([`StrategyParams::contact_signal`]).
     fn contact_search(&mut self, r: &Reading, sig: f64, step: u32, in_step: f64, dwell: u32) {
         let p = self.params;
-        let set = p.signal(p.set_point);
+        let set = p.contact_signal(p.set_point);
         // A fast search can step over the whole stick phase between two samples, and the
         // particle then rolls ahead of the tip below the set point: a deflection held above half
         // the set point for three samples is a contact too.
@@ -526,11 +540,14 @@ impl Strategy {
         }
     }
 
+    /// C → D; `sig` is the push-side signal: the estimator and the lost-particle test read the
+    /// contact signal, the z loop the deflection itself.
     fn push(&mut self, r: &Reading, sig: f64, from: [f64; 3]) {
         let p = self.params;
         let d = self.task.direction;
         let travel = (r.stage[0] - from[0]) * d.0 + (r.stage[1] - from[1]) * d.1;
-        let est = self.hxy.update(r.t, sig, travel);
+        let contact = sig * p.contact_side.sign();
+        let est = self.hxy.update(r.t, contact, travel);
         if self.summary.t_star.is_none() {
             self.summary.t_star = self.hxy.detector.peak.map(|(t, _)| t);
         }
@@ -538,7 +555,7 @@ impl Strategy {
         self.summary.push_travel = travel;
         self.summary.estimated_particle = (self.task.particle.0 + d.0 * est, self.task.particle.1 + d.1 * est);
         // Lost: after the separation the deflection must stay off the baseline.
-        if self.hxy.separated() && sig < p.lost_threshold {
+        if self.hxy.separated() && contact < p.lost_threshold {
             self.lost_count += 1;
             if self.lost_count >= 5 {
                 self.fail(
@@ -597,7 +614,8 @@ impl Strategy {
             // Hold the deflection at its level just after t*. The tip meets the particle above
             // its equator: raising it moves the contact up toward the top, which turns more of
             // the push force into the vertical load that bends the lever (ζ_z grows with β, as
-            // Eq 18 and Fig 11 show), so a reading below the reference raises the tip.
+            // Eq 18 and Fig 11 show), so a reading below the reference raises the tip. The law
+            // is in the deflection itself (raising the tip raises ζ_z on either side).
             // The reference is the mean of the first 20 samples after t*, past the stage's
             // ringing at the separation.
             let (sum, n) = &mut self.z_hold;

@@ -1,5 +1,7 @@
 //! The strategy's settings and one push's task, as the operator and the scene give them.
 
+use crate::control::estimator::ContactSide;
+
 /// How the push closes its loops (Sec 3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Control {
@@ -56,12 +58,20 @@ pub struct StrategyParams {
     /// is ridden out, and by which the tip must have let go of the substrate (m):
     /// [`super::pull_off::pull_off_rise`].
     pub pull_off_rise: f64,
+    /// The side of the baseline the contact is read on: the side of the set point.
+    pub contact_side: ContactSide,
 }
 
 impl StrategyParams {
     /// The reading as a deflection signal (V): positive on the push's side of the baseline.
     pub fn signal(&self, volts: f64) -> f64 {
         (volts - self.baseline) * self.polarity
+    }
+
+    /// The reading as a contact signal (V): the distance from the baseline toward the side the
+    /// contact is read on ([`ContactSide`]); the push-side signal on the push side.
+    pub fn contact_signal(&self, volts: f64) -> f64 {
+        self.signal(volts) * self.contact_side.sign()
     }
 }
 

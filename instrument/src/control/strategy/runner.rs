@@ -2,7 +2,7 @@
 //! `nanopush push` does, and what the server's loop will do one tick at a time.
 
 use crate::afm::{Afm, AfmError};
-use crate::control::estimator::{Hxy, PushPrediction, RetractPlan, predict_past_separation};
+use crate::control::estimator::{ContactSide, Hxy, PushPrediction, RetractPlan, predict_past_separation};
 use crate::control::moves::locate::DONE_WITHIN;
 use crate::control::route::{Leg, travel_on_stage};
 use crate::control::strategy::{BACK_OFF, Control, HOLD, PushTask, Strategy, StrategyParams, Summary};
@@ -206,6 +206,7 @@ impl Scene {
             },
             z_gain: st.z_gain_nm_per_v * 1e-9,
             pull_off_rise: crate::control::strategy::pull_off_rise(&self.tip_sample()),
+            contact_side: ContactSide::of((st.set_point_v - f.sensor.baseline_v) * f.sensor.gain_v_per_nm.signum()),
         }
     }
 }

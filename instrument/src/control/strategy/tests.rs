@@ -648,3 +648,46 @@ fn a_large_particle_dragged_back_by_the_lift_ends_where_it_was_sent() {
     let moved = run.true_distance();
     assert!((moved - 5.0 * UM).abs() < 25e-9, "moved {:.4} µm for 5 µm", moved / UM);
 }
+
+/// A contact read on the pull side (the set point and the safety limit mirrored about the
+/// baseline): a push-side reading as far out as the set point does not stop the search, the
+/// pull-side one does, and past the pull-side safety limit the push fails with the limit's
+/// reading and backs off.
+#[test]
+fn a_contact_read_on_the_pull_side_stops_and_is_limited_there() {
+    let (mut st, start) = bare_strategy();
+    let p = st.params;
+    st.params.set_point = 2.0 * p.baseline - p.set_point;
+    st.params.safety_limit = 2.0 * p.baseline - p.safety_limit;
+    st.params.contact_side = crate::control::estimator::ContactSide::Pull;
+    st.phase = Phase::ContactSearch {
+        step: 1,
+        in_step: 0.0,
+        dwell: 0,
+    };
+    let mut t = 0.0;
+    let mut at = start;
+    let mut feed = |st: &mut Strategy, volts: f64| {
+        t += 1e-3;
+        at = st.tick(&reading(t, volts, at));
+    };
+    for _ in 0..5 {
+        feed(&mut st, p.set_point);
+    }
+    assert!(matches!(st.phase, Phase::ContactSearch { .. }), "{:?}", st.phase);
+    assert_eq!(st.summary.contact_step, None);
+    let (set, limit) = (st.params.set_point, st.params.safety_limit);
+    feed(&mut st, set);
+    assert!(matches!(st.phase, Phase::Push { .. }), "{:?}", st.phase);
+    let beyond = limit + (limit - p.baseline) * 0.01;
+    feed(&mut st, beyond);
+    match st.summary.failure {
+        Some(Failure::DeflectionLimit { volts, limit, phase }) => {
+            assert_eq!((volts, limit, phase), (beyond, st.params.safety_limit, "push"));
+            assert!((volts - p.baseline) * p.polarity < 0.0, "on the pull side: {volts} V");
+        }
+        ref other => panic!("{other:?}"),
+    }
+    // Straight up (never parked here, so already at the start height: done).
+    assert!(matches!(st.phase, Phase::Retract | Phase::Done), "{:?}", st.phase);
+}
