@@ -538,4 +538,15 @@ mod tests {
         assert_eq!(c.judged.outcome, "ok", "{} [{}]", c.judged.reason, c.summary);
         assert!(c.judged.true_error.expect("pushed") <= tolerance);
     }
+
+    /// Lab seed 29's push never drops at t* on either side: the refusal says no gain a scene
+    /// allows can read it instead of asking for a gain of millions of V/nm.
+    #[test]
+    fn an_unreadable_refusal_names_no_gain_beyond_what_a_scene_allows() {
+        let r = random_scene(29, Ranges::Lab);
+        let id = r.scene.pushed_particle().id;
+        let e = nanopush_instrument::control::derive::derive(&r.scene, id, 25e-9).unwrap_err();
+        assert_eq!(e.code, "unreadable", "{e}");
+        assert!(e.field.contains("beyond the 10 V/nm a scene allows"), "{e}");
+    }
 }

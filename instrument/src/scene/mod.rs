@@ -12,7 +12,9 @@ mod ranges;
 
 pub use error::{SceneError, SceneWarning};
 pub use file::SceneFile;
-pub use ranges::{MAX_PARTICLES, MAX_SCAN_PIXELS, MIN_SCAN_PIXELS, Range, START_HEIGHT_UM, STIFFNESS_N_PER_M};
+pub use ranges::{
+    GAIN_V_PER_NM, MAX_PARTICLES, MAX_SCAN_PIXELS, MIN_SCAN_PIXELS, Range, START_HEIGHT_UM, STIFFNESS_N_PER_M,
+};
 
 /// The largest scene file read (bytes): 4 MiB.
 pub const MAX_SCENE_BYTES: u64 = 4 << 20;

@@ -296,12 +296,26 @@ fn tangential_stiffness_and_damping_by_hand() {
 
 #[test]
 fn strategy_values_are_checked_against_the_sensor() {
-    // A push lowers the reading (negative gain): a set point above the −0.2 V baseline is never
-    // reached.
+    // A push lowers the reading (negative gain). A set point at the −0.2 V baseline is no
+    // contact; one above it reads the contact on the pull side, with its safety limit beyond it
+    // there, not at the push side's −4 V.
+    let e = err("set_point_v = -1.5", "set_point_v = -0.2");
+    assert!(
+        e.contains("strategy.set_point_v") && e.contains("is the baseline"),
+        "{e}"
+    );
     let e = err("set_point_v = -1.5", "set_point_v = 0.5");
     assert!(
-        e.contains("strategy.set_point_v") && e.contains("below the baseline -0.2 V"),
+        e.contains("strategy.safety_limit_v") && e.contains("further above the baseline -0.2 V"),
         "{e}"
+    );
+    let pull = DEFAULT_SCENE
+        .replacen("set_point_v = -1.5", "set_point_v = 0.5", 1)
+        .replacen("safety_limit_v = -4.0", "safety_limit_v = 3.0", 1);
+    let s = Scene::parse("pull.toml", &pull).expect("a contact read on the pull side");
+    assert_eq!(
+        s.strategy_params(1e-3).contact_side,
+        crate::control::estimator::ContactSide::Pull
     );
     let e = err("safety_limit_v = -4.0", "safety_limit_v = -1.0");
     assert!(

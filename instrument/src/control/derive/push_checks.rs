@@ -91,10 +91,7 @@ impl Derivation<'_> {
                     SET_FRACTION * peak_v * 1e3,
                     floor * 1e3
                 ),
-                field: format!(
-                    "sensor.gain_v_per_nm: |gain| ≥ {} V/nm, or a lower sensor.noise_rms_mv",
-                    short(gain_nm * 10.0 * floor / (SET_FRACTION * peak_v))
-                ),
+                field: gain_field(gain_nm * 10.0 * floor / (SET_FRACTION * peak_v), true),
             });
         }
         let drop_v = (p.peak_deflection - p.settled_deflection) * ro.gain;
@@ -109,10 +106,7 @@ impl Derivation<'_> {
                     drop_v * 1e3,
                     need_drop * 1e3
                 ),
-                field: format!(
-                    "sensor.gain_v_per_nm: |gain| ≥ {} V/nm, or a lower sensor.noise_rms_mv",
-                    short(gain_nm * need_drop / drop_v.max(1e-12))
-                ),
+                field: gain_field(gain_nm * need_drop / drop_v.max(1e-12), true),
             });
         }
         let settled_v = p.settled_deflection * ro.gain;
@@ -126,10 +120,7 @@ impl Derivation<'_> {
                     settled_v * 1e3,
                     need_settled * 1e3
                 ),
-                field: format!(
-                    "sensor.gain_v_per_nm: |gain| ≥ {} V/nm",
-                    short(gain_nm * need_settled / settled_v.max(1e-12))
-                ),
+                field: gain_field(gain_nm * need_settled / settled_v.max(1e-12), false),
             });
         }
         if p.release_lift.is_none() {
@@ -192,5 +183,25 @@ impl Derivation<'_> {
                 "the particle, its friction or the contact angle: neither a stiffer lever ({k_no}) nor a smaller gain ({gain_no}) can help"
             ),
         }
+    }
+}
+
+/// The field an `unreadable` refusal names: the gain the reading needs (V/nm), when a scene
+/// allows it ([`crate::scene::GAIN_V_PER_NM`]), and a quieter readout when `noise_helps`.
+fn gain_field(need: f64, noise_helps: bool) -> String {
+    let max = crate::scene::GAIN_V_PER_NM.hi();
+    let quieter = if noise_helps {
+        ", or a lower sensor.noise_rms_mv"
+    } else {
+        ""
+    };
+    if need <= max {
+        format!("sensor.gain_v_per_nm: |gain| ≥ {} V/nm{quieter}", short(need))
+    } else {
+        format!(
+            "the particle, its friction or the contact angle: the reading would need |sensor.gain_v_per_nm| ≥ {} V/nm, beyond the {} V/nm a scene allows{quieter}",
+            short(need),
+            short(max)
+        )
     }
 }

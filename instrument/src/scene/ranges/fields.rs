@@ -3,7 +3,8 @@
 //! static one); such a range is written with the scene's name `s`.
 
 use super::{
-    HAMAKER, MAX_SCAN_PIXELS, MIN_SCAN_PIXELS, MODULUS, MU, POISSON, Range, START_HEIGHT_UM, STIFFNESS_N_PER_M,
+    GAIN_V_PER_NM, HAMAKER, MAX_SCAN_PIXELS, MIN_SCAN_PIXELS, MODULUS, MU, POISSON, Range, START_HEIGHT_UM,
+    STIFFNESS_N_PER_M,
 };
 use crate::scene::file::{ParticleFile, SceneFile};
 
@@ -135,7 +136,7 @@ const VOLTS: Range = Range::closed(-10.0, 10.0, "V");
 /// `[sensor]`'s levels (the gain must not be 0 either, checked after them).
 pub(super) const SENSOR_LEVELS: &[Field] = fields![
     "sensor.baseline_v": s => s.sensor.baseline_v, VOLTS;
-    "sensor.gain_v_per_nm": s => s.sensor.gain_v_per_nm, Range::closed(-10.0, 10.0, "V/nm");
+    "sensor.gain_v_per_nm": s => s.sensor.gain_v_per_nm, GAIN_V_PER_NM;
 ];
 
 /// `[sensor]`'s noise and full scale.

@@ -103,6 +103,8 @@ const HAMAKER: Range = Range::closed(1.0, 1000.0, "zJ");
 const MU: Range = Range::closed(0.0, 5.0, "");
 /// `cantilever.stiffness_n_per_m` (the planner names no stiffness beyond it).
 pub const STIFFNESS_N_PER_M: Range = Range::closed(0.01, 500.0, "N/m");
+/// `sensor.gain_v_per_nm` (the planner asks for no larger gain).
+pub const GAIN_V_PER_NM: Range = Range::closed(-10.0, 10.0, "V/nm");
 /// `strategy.start_height_um` (the planner lifts no higher).
 pub const START_HEIGHT_UM: Range = Range::open_closed(0.0, 50.0, "µm");
 

@@ -114,28 +114,37 @@ fn pushed_particle(origin: &str, s: &SceneFile) -> Result<(), SceneError> {
     ))
 }
 
-/// The set point and safety limit the scene gives lie on the side of the baseline a push
-/// deflects to (`ζ_z > 0`, so the reading moves along the gain's sign), and every level the
-/// strategy reads within the readout's full scale. Levels the scene does not give are derived
-/// by the plan from the sensor and the model (`control::derive`), not checked here.
+/// The set point the scene gives lies off the baseline, on the side the strategy reads the
+/// contact on: the push side (`ζ_z > 0`, the reading moving along the gain's sign) or, for a push
+/// that bends the lever the other way, the pull side (`control::estimator::ContactSide`). The
+/// safety limit lies beyond it on the same side, and every level the strategy reads within the
+/// readout's full scale. Levels the scene does not give are derived by the plan from the sensor
+/// and the model (`control::derive`), not checked here.
 fn strategy_levels(origin: &str, s: &SceneFile, hand_set: &HandSet) -> Result<(), SceneError> {
     let st = &s.strategy;
     let given = |key: &str| hand_set.contains(key);
     let dir = s.sensor.gain_v_per_nm.signum();
     let base = s.sensor.baseline_v;
     let set = (st.set_point_v - base) * dir;
-    let safety = (st.safety_limit_v - base) * dir;
-    let side = if dir < 0.0 { "below" } else { "above" };
-    if set <= 0.0 && given("strategy.set_point_v") {
+    if set == 0.0 && given("strategy.set_point_v") {
         return Err(inconsistent(
             origin,
             "strategy.set_point_v",
             format!(
-                "{} V must be {side} the baseline {base} V: a push deflects the reading that way (sensor.gain_v_per_nm = {})",
+                "{} V is the baseline: the set point must lie off it, on the side the push bends the lever (above it for a push read on the push side with sensor.gain_v_per_nm = {})",
                 st.set_point_v, s.sensor.gain_v_per_nm
             ),
         ));
     }
+    // Distances from the baseline on the set point's side (the push side for a set point the
+    // scene leaves to the plan).
+    let contact = if set < 0.0 && given("strategy.set_point_v") {
+        -1.0
+    } else {
+        1.0
+    };
+    let (set, safety) = (set * contact, (st.safety_limit_v - base) * dir * contact);
+    let side = if dir * contact < 0.0 { "below" } else { "above" };
     if safety <= set && (given("strategy.set_point_v") || given("strategy.safety_limit_v")) {
         return Err(inconsistent(
             origin,
