@@ -146,7 +146,9 @@ fn ratio_range<'a>(pts: impl Iterator<Item = &'a Point>) -> (f64, f64) {
 /// them — steps exactly, final error and estimate to their two digits: Rodas4 4.0e-15 / 3.9e-15
 /// / 9.2e-18 m in 205 / 218 / 1228 steps at 1e-2 / 1e-6 / 1e-10 (the same 205 steps at 1e-2 …
 /// 1e-4); TR-BDF2 9.0e-12 / 3.3e-12 / 1.2e-14 m in 205 / 459 / 7353 steps; implicit Euler
-/// 1.9e-13 m in 3989 steps at 1e-6; the reference and its TR-BDF2 cross-check 1.2e-14 m apart.
+/// 1.9e-13 m in 3989 steps at 1e-6; Rodas5P 8.5e-19 / 8.5e-19 / 4.5e-19 m (estimates 3.9e-19 at
+/// 1e-2 and 1e-6) in 205 / 205 / 406 steps (the same 205 steps from 1e-2 to 1e-8); the reference
+/// and its TR-BDF2 cross-check 1.2e-14 m apart.
 /// Then the error falls with the tolerance for each method (implicit Euler down to 1e-7: its
 /// finer runs, 4·10⁴ steps and more, are too slow for a debug build), and the estimate / error
 /// ranges over the Rodas4 and TR-BDF2 rows: 0.88-1.00 and 0.77-1.00.
@@ -158,9 +160,10 @@ fn the_readmes_push_work_precision_rows() {
     let rodas = push_rows(&model, &reference, Method::Rodas4, &TOLERANCES);
     let trbdf2 = push_rows(&model, &reference, Method::TrBdf2, &TOLERANCES);
     let euler = push_rows(&model, &reference, Method::ImplicitEuler, &TOLERANCES[..6]);
+    let rodas5p = push_rows(&model, &reference, Method::Rodas5P, &TOLERANCES);
     let row = |pts: &[Point], rtol: f64| pts.iter().find(|p| p.rtol == rtol).cloned().unwrap();
     // (rows, rtol, steps, final error, estimate; NaN: none).
-    let readme: [(&[Point], f64, u64, f64, f64); 7] = [
+    let readme: [(&[Point], f64, u64, f64, f64); 10] = [
         (&rodas, 1e-2, 205, 4.0e-15, 4.0e-15),
         (&rodas, 1e-6, 218, 3.9e-15, 3.9e-15),
         (&rodas, 1e-10, 1228, 9.2e-18, f64::NAN),
@@ -168,6 +171,9 @@ fn the_readmes_push_work_precision_rows() {
         (&trbdf2, 1e-6, 459, 3.3e-12, 3.3e-12),
         (&trbdf2, 1e-10, 7353, 1.2e-14, f64::NAN),
         (&euler, 1e-6, 3989, 1.9e-13, f64::NAN),
+        (&rodas5p, 1e-2, 205, 8.5e-19, 3.9e-19),
+        (&rodas5p, 1e-6, 205, 8.5e-19, 3.9e-19),
+        (&rodas5p, 1e-10, 406, 4.5e-19, f64::NAN),
     ];
     for (pts, rtol, steps, error, estimate) in readme {
         let p = row(pts, rtol);
@@ -189,7 +195,10 @@ fn the_readmes_push_work_precision_rows() {
     for rtol in [1e-3, 1e-4] {
         assert_eq!((row(&rodas, rtol).steps, row(&trbdf2, rtol).steps), (205, 205));
     }
-    for pts in [&rodas, &trbdf2, &euler] {
+    for rtol in [1e-3, 1e-4, 1e-5, 1e-7, 1e-8] {
+        assert_eq!(row(&rodas5p, rtol).steps, 205);
+    }
+    for pts in [&rodas, &trbdf2, &euler, &rodas5p] {
         assert!(pts.windows(2).all(|w| w[1].final_error <= w[0].final_error), "{pts:?}");
     }
     let (lo, hi) = ratio_range(rodas.iter());
