@@ -121,11 +121,11 @@ fn push_rows(model: &PushModel, reference: &PushRun, method: Method, rtols: &[f6
     pts
 }
 
-/// The Rodas4 and TR-BDF2 work-precision points of a classical problem at every tolerance
-/// (the report's [`Classical::point`]), with their estimates.
+/// The Rodas4, Rodas5P and TR-BDF2 work-precision points of a classical problem at every
+/// tolerance (the report's [`Classical::point`]), with their estimates.
 fn classical_rows<P: Problem>(c: &Classical<'_, P>) -> Vec<Point> {
     let mut pts = Vec::new();
-    for method in [Method::Rodas4, Method::TrBdf2] {
+    for method in [Method::Rodas4, Method::Rodas5P, Method::TrBdf2] {
         for rtol in TOLERANCES {
             pts.push(c.point(1, method, Options::with_rtol(rtol)));
         }
@@ -210,7 +210,8 @@ fn the_readmes_push_work_precision_rows() {
 /// docs/validation.md, "`nanopush accuracy`": estimate / true error on the classical problems,
 /// every tolerance 1e-2 … 1e-10: Rodas4 0.89-1.02 (Robertson) and 1.00-1.56 (Van der Pol),
 /// TR-BDF2 within the 0.77-1.00 of its push rows; the estimates of the table's rows to their
-/// two digits (Van der Pol 2.3e-7 and 1.5e-4 at 1e-6, Robertson 6.2e-9 and 1.1e-5 at 1e-8); the
+/// two digits (Van der Pol 2.3e-7, 5.7e-7 and 1.5e-4 at 1e-6, Robertson 6.2e-9, 2.0e-8 and
+/// 1.1e-5 at 1e-8, for Rodas4, Rodas5P and TR-BDF2); the
 /// error falls with the tolerance (TR-BDF2 on Van der Pol from 1e-3: its error at 1e-2 is
 /// below the one at 1e-3).
 #[test]
@@ -241,6 +242,8 @@ fn the_estimate_tracks_the_error_on_the_classical_problems() {
     assert!(two_digits(estimate(&vdp, Method::TrBdf2, 1e-6), 1.5e-4));
     assert!(two_digits(estimate(&rob, Method::Rodas4, 1e-8), 6.2e-9));
     assert!(two_digits(estimate(&rob, Method::TrBdf2, 1e-8), 1.1e-5));
+    assert!(two_digits(estimate(&vdp, Method::Rodas5P, 1e-6), 5.7e-7));
+    assert!(two_digits(estimate(&rob, Method::Rodas5P, 1e-8), 2.0e-8));
     for pts in [&vdp, &rob] {
         for m in [Method::Rodas4, Method::TrBdf2] {
             let rows = of(pts, m);
