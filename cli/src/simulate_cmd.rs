@@ -21,7 +21,7 @@ pub struct SimulateArgs {
     /// Simulated time (s), in (0, 100].
     #[arg(long, default_value_t = 0.05)]
     duration: f64,
-    /// Integration method: rodas4, trbdf2 or implicit-euler.
+    /// Integration method: rodas4, rodas5p, trbdf2 or implicit-euler.
     #[arg(long, default_value = "rodas4")]
     method: String,
     /// Relative tolerance, in [1e-12, 1e-1].

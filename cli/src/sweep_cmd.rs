@@ -56,7 +56,7 @@ pub struct SweepArgs {
     /// Turn the particle's rotation off (it can only stick or slide, as Eq 18 assumes).
     #[arg(long)]
     pure_sliding: bool,
-    /// Integration method: rodas4, trbdf2 or implicit-euler.
+    /// Integration method: rodas4, rodas5p, trbdf2 or implicit-euler.
     #[arg(long, default_value = "rodas4")]
     method: String,
     /// Relative tolerance, in [1e-12, 1e-1].

@@ -66,7 +66,7 @@ pub fn num(v: f64) -> String {
 pub fn parse_method(name: &str) -> anyhow::Result<nanopush_instrument::numerics::integrate::Method> {
     use anyhow::Context as _;
     nanopush_instrument::numerics::integrate::Method::parse(name)
-        .with_context(|| format!("--method {name}: unknown; allowed: rodas4, trbdf2, implicit-euler"))
+        .with_context(|| format!("--method {name}: unknown; allowed: rodas4, rodas5p, trbdf2, implicit-euler"))
 }
 
 /// [`nanopush_instrument::files::write_atomic`] with the path in the error.

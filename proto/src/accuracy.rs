@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 pub struct AccuracyPoint {
     /// `push` (the scene), `van-der-pol` or `robertson`.
     pub problem: String,
-    /// `rodas4`, `trbdf2` or `implicit-euler`.
+    /// `rodas4`, `rodas5p`, `trbdf2` or `implicit-euler`, or a peer solver's name.
     pub method: String,
     /// Relative tolerance.
     pub rtol: f64,
@@ -133,7 +133,7 @@ pub struct EqualError {
     pub problem: String,
     /// Target error (relative).
     pub error: f64,
-    /// Our default method.
+    /// Our default method (chosen by the tolerance) at the point that reached the target.
     pub ours: String,
     /// Its least wall time over the tolerances that reached the target (s); `null` if none did.
     pub ours_time: Option<f64>,

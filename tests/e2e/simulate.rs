@@ -44,7 +44,7 @@ fn simulate_rejects_bad_arguments_clearly() {
     for (args, expected) in [
         (
             vec!["simulate", "--method", "euler"],
-            "--method euler: unknown; allowed: rodas4, trbdf2, implicit-euler",
+            "--method euler: unknown; allowed: rodas4, rodas5p, trbdf2, implicit-euler",
         ),
         (
             vec!["simulate", "--duration", "0"],

@@ -121,11 +121,11 @@ fn push_rows(model: &PushModel, reference: &PushRun, method: Method, rtols: &[f6
     pts
 }
 
-/// The Rodas4 and TR-BDF2 work-precision points of a classical problem at every tolerance
-/// (the report's [`Classical::point`]), with their estimates.
+/// The Rodas4, Rodas5P and TR-BDF2 work-precision points of a classical problem at every
+/// tolerance (the report's [`Classical::point`]), with their estimates.
 fn classical_rows<P: Problem>(c: &Classical<'_, P>) -> Vec<Point> {
     let mut pts = Vec::new();
-    for method in [Method::Rodas4, Method::TrBdf2] {
+    for method in [Method::Rodas4, Method::Rodas5P, Method::TrBdf2] {
         for rtol in TOLERANCES {
             pts.push(c.point(1, method, Options::with_rtol(rtol)));
         }
@@ -146,7 +146,9 @@ fn ratio_range<'a>(pts: impl Iterator<Item = &'a Point>) -> (f64, f64) {
 /// them — steps exactly, final error and estimate to their two digits: Rodas4 4.0e-15 / 3.9e-15
 /// / 9.2e-18 m in 205 / 218 / 1228 steps at 1e-2 / 1e-6 / 1e-10 (the same 205 steps at 1e-2 …
 /// 1e-4); TR-BDF2 9.0e-12 / 3.3e-12 / 1.2e-14 m in 205 / 459 / 7353 steps; implicit Euler
-/// 1.9e-13 m in 3989 steps at 1e-6; the reference and its TR-BDF2 cross-check 1.2e-14 m apart.
+/// 1.9e-13 m in 3989 steps at 1e-6; Rodas5P 8.5e-19 / 8.5e-19 / 4.5e-19 m (estimates 3.9e-19 at
+/// 1e-2 and 1e-6) in 205 / 205 / 406 steps (the same 205 steps from 1e-2 to 1e-8); the reference
+/// and its TR-BDF2 cross-check 1.2e-14 m apart.
 /// Then the error falls with the tolerance for each method (implicit Euler down to 1e-7: its
 /// finer runs, 4·10⁴ steps and more, are too slow for a debug build), and the estimate / error
 /// ranges over the Rodas4 and TR-BDF2 rows: 0.88-1.00 and 0.77-1.00.
@@ -158,9 +160,10 @@ fn the_readmes_push_work_precision_rows() {
     let rodas = push_rows(&model, &reference, Method::Rodas4, &TOLERANCES);
     let trbdf2 = push_rows(&model, &reference, Method::TrBdf2, &TOLERANCES);
     let euler = push_rows(&model, &reference, Method::ImplicitEuler, &TOLERANCES[..6]);
+    let rodas5p = push_rows(&model, &reference, Method::Rodas5P, &TOLERANCES);
     let row = |pts: &[Point], rtol: f64| pts.iter().find(|p| p.rtol == rtol).cloned().unwrap();
     // (rows, rtol, steps, final error, estimate; NaN: none).
-    let readme: [(&[Point], f64, u64, f64, f64); 7] = [
+    let readme: [(&[Point], f64, u64, f64, f64); 10] = [
         (&rodas, 1e-2, 205, 4.0e-15, 4.0e-15),
         (&rodas, 1e-6, 218, 3.9e-15, 3.9e-15),
         (&rodas, 1e-10, 1228, 9.2e-18, f64::NAN),
@@ -168,6 +171,9 @@ fn the_readmes_push_work_precision_rows() {
         (&trbdf2, 1e-6, 459, 3.3e-12, 3.3e-12),
         (&trbdf2, 1e-10, 7353, 1.2e-14, f64::NAN),
         (&euler, 1e-6, 3989, 1.9e-13, f64::NAN),
+        (&rodas5p, 1e-2, 205, 8.5e-19, 3.9e-19),
+        (&rodas5p, 1e-6, 205, 8.5e-19, 3.9e-19),
+        (&rodas5p, 1e-10, 406, 4.5e-19, f64::NAN),
     ];
     for (pts, rtol, steps, error, estimate) in readme {
         let p = row(pts, rtol);
@@ -189,7 +195,10 @@ fn the_readmes_push_work_precision_rows() {
     for rtol in [1e-3, 1e-4] {
         assert_eq!((row(&rodas, rtol).steps, row(&trbdf2, rtol).steps), (205, 205));
     }
-    for pts in [&rodas, &trbdf2, &euler] {
+    for rtol in [1e-3, 1e-4, 1e-5, 1e-7, 1e-8] {
+        assert_eq!(row(&rodas5p, rtol).steps, 205);
+    }
+    for pts in [&rodas, &trbdf2, &euler, &rodas5p] {
         assert!(pts.windows(2).all(|w| w[1].final_error <= w[0].final_error), "{pts:?}");
     }
     let (lo, hi) = ratio_range(rodas.iter());
@@ -201,7 +210,8 @@ fn the_readmes_push_work_precision_rows() {
 /// docs/validation.md, "`nanopush accuracy`": estimate / true error on the classical problems,
 /// every tolerance 1e-2 … 1e-10: Rodas4 0.89-1.02 (Robertson) and 1.00-1.56 (Van der Pol),
 /// TR-BDF2 within the 0.77-1.00 of its push rows; the estimates of the table's rows to their
-/// two digits (Van der Pol 2.3e-7 and 1.5e-4 at 1e-6, Robertson 6.2e-9 and 1.1e-5 at 1e-8); the
+/// two digits (Van der Pol 2.3e-7, 5.7e-7 and 1.5e-4 at 1e-6, Robertson 6.2e-9, 2.0e-8 and
+/// 1.1e-5 at 1e-8, for Rodas4, Rodas5P and TR-BDF2); the
 /// error falls with the tolerance (TR-BDF2 on Van der Pol from 1e-3: its error at 1e-2 is
 /// below the one at 1e-3).
 #[test]
@@ -232,6 +242,8 @@ fn the_estimate_tracks_the_error_on_the_classical_problems() {
     assert!(two_digits(estimate(&vdp, Method::TrBdf2, 1e-6), 1.5e-4));
     assert!(two_digits(estimate(&rob, Method::Rodas4, 1e-8), 6.2e-9));
     assert!(two_digits(estimate(&rob, Method::TrBdf2, 1e-8), 1.1e-5));
+    assert!(two_digits(estimate(&vdp, Method::Rodas5P, 1e-6), 5.7e-7));
+    assert!(two_digits(estimate(&rob, Method::Rodas5P, 1e-8), 2.0e-8));
     for pts in [&vdp, &rob] {
         for m in [Method::Rodas4, Method::TrBdf2] {
             let rows = of(pts, m);

@@ -27,27 +27,51 @@ fn fixed_step_error(method: Method, h: f64) -> f64 {
     ((y[0] - ex[0]).powi(2) + (y[1] - ex[1]).powi(2)).sqrt()
 }
 
-/// Every method's order observed from the errors at `h` = 0.1 … 0.0125 (the last halving)
-/// is its classical order, within 0.3.
+/// Every method's order observed from the errors at `h` = 0.025 and 0.0125 is its classical
+/// order, within 0.3.
 fn assert_classical_order(error: impl Fn(Method, f64) -> f64) {
+    assert_observed_order(error, |_| [0.025, 0.0125], |m| m.order());
+}
+
+/// Every method's order observed from the errors at the two steps `hs(m)` is `order(m)`,
+/// within 0.3.
+fn assert_observed_order(
+    error: impl Fn(Method, f64) -> f64,
+    hs: impl Fn(Method) -> [f64; 2],
+    order: impl Fn(Method) -> u32,
+) {
     for m in Method::ALL {
-        let hs = [0.1, 0.05, 0.025, 0.0125];
-        let errs: Vec<f64> = hs.iter().map(|&h| error(m, h)).collect();
-        let n = errs.len();
-        let observed = (errs[n - 2] / errs[n - 1]).log2();
-        let p = m.order() as f64;
+        let [h1, h2] = hs(m);
+        let errs = [error(m, h1), error(m, h2)];
+        let observed = (errs[0] / errs[1]).log(h1 / h2);
+        let p = order(m) as f64;
         assert!(
             (observed - p).abs() <= 0.3,
-            "{}: observed order {observed:.3} (errors {errs:?}), theory {p}",
+            "{}: observed order {observed:.3} (errors {errs:?} at h = {h1}, {h2}), theory {p}",
             m.name()
         );
     }
 }
 
+/// On the linear problem the solution stays on the slow eigenvector, so the error is that of
+/// the stability function, `R(−h)ᴺ` against `e⁻¹`. Rodas5P's `R(z)` matches `e^z` to `z⁶`, one
+/// order beyond the method's (its Taylor coefficients from the tableau are `1/k!` for `k ≤ 6`;
+/// for `k = 7`, 1.88e-4 against 1.98e-4), so it shows order 6 here, at larger steps (0.1 and
+/// 0.05: at 0.0125 its error, 4e-15, is rounding). The others show their classical order.
 #[test]
 fn observed_order_of_convergence() {
-    // hλ for the fast mode runs from −100 to −12.5: the stiff regime.
-    assert_classical_order(fixed_step_error);
+    // hλ for the fast mode runs from −25 to −12.5 (Rodas5P: −100 to −50): the stiff regime.
+    assert_observed_order(
+        fixed_step_error,
+        |m| {
+            if m == Method::Rodas5P {
+                [0.1, 0.05]
+            } else {
+                [0.025, 0.0125]
+            }
+        },
+        |m| if m == Method::Rodas5P { 6 } else { m.order() },
+    );
 }
 
 /// Fixed steps of size `h` on Prothero-Robinson over `[0, 1]`: the error at `t = 1`.
@@ -58,8 +82,8 @@ fn prothero_robinson_error(method: Method, lambda: f64, h: f64) -> f64 {
 
 /// An autonomous problem cannot tell Rodas4 without its `∂f/∂t` terms, or with every stage
 /// evaluated at `t`, from the method. On the time-dependent, nonlinear
-/// Prothero-Robinson problem (mildly stiff, `hλ` from −1 to −0.125) every method shows its
-/// classical order.
+/// Prothero-Robinson problem (mildly stiff, `hλ` = −0.25 and −0.125) every method shows its
+/// classical order: 4, 5, 2 and 1 (Rodas5P's errors 3.4e-11 and 1.0e-12, order 5.08).
 #[test]
 fn observed_order_on_a_time_dependent_nonlinear_problem() {
     assert_classical_order(|m, h| prothero_robinson_error(m, -10.0, h));
@@ -95,6 +119,7 @@ fn van_der_pol_matches_the_published_reference() {
     let p = VanDerPol { eps: 1e-6 };
     for (m, rtol, tol) in [
         (Method::Rodas4, 1e-8, 1e-5),
+        (Method::Rodas5P, 1e-8, 1e-5),
         (Method::TrBdf2, 1e-7, 1e-3),
         (Method::ImplicitEuler, 1e-5, 3e-2),
     ] {
@@ -114,13 +139,15 @@ fn van_der_pol_matches_the_published_reference() {
 
 /// Robertson to t = 1e11 against its published reference, and the work each method does there,
 /// exactly (see `work_on_the_reference_problems_is_pinned`): steps, rejections, right-hand
-/// sides, Jacobians and LUs (docs/validation.md's 1545 and 6412 steps at 1e-8), and docs/validation.md's final
-/// errors at 1e-8 (`nanopush accuracy`'s largest relative component error): 6.2e-9 (Rodas4) and
-/// 1.1e-5 (TR-BDF2), to half a unit of the second digit.
+/// sides, Jacobians and LUs (docs/validation.md's 1545, 716 and 6412 steps at 1e-8), and
+/// docs/validation.md's final errors at 1e-8 (`nanopush accuracy`'s largest relative component
+/// error): 6.2e-9 (Rodas4), 2.0e-8 (Rodas5P) and 1.1e-5 (TR-BDF2), to half a unit of the
+/// second digit.
 #[test]
 fn robertson_matches_the_published_reference() {
     for (m, rtol, work, error) in [
         (Method::Rodas4, 1e-8, (1545, 0, 9271, 1546, 1545), 6.2e-9_f64),
+        (Method::Rodas5P, 1e-8, (716, 3, 5750, 717, 719), 2.0e-8),
         (Method::TrBdf2, 1e-8, (6412, 1, 45690, 6413, 6413), 1.1e-5),
     ] {
         let (y, st) = solve(&Robertson, &Robertson::Y0, Robertson::T_END, m, rtol);
@@ -151,7 +178,7 @@ fn robertson_matches_the_published_reference() {
 #[test]
 fn error_falls_with_tolerance_and_the_estimate_tracks_it() {
     let p = VanDerPol { eps: 1e-6 };
-    for m in [Method::Rodas4, Method::TrBdf2] {
+    for m in [Method::Rodas4, Method::Rodas5P, Method::TrBdf2] {
         let mut prev = f64::INFINITY;
         for rtol in [1e-4, 1e-6, 1e-8] {
             let (y, _) = solve(&p, &VanDerPol::Y0, VanDerPol::T_END, m, rtol);
@@ -199,7 +226,7 @@ impl Events for Ground {
 /// The falling ball's impact, located on each method's solution, and the Illinois iteration's
 /// work, pinned: 9, 9 and 2 evaluations of the switching function to 1e-12 s (superlinear;
 /// bisection from a bracket of one step would take about 40; implicit Euler's dense output is
-/// linear, and regula falsi on a linear function is exact).
+/// linear, and regula falsi on a linear function is exact); Rodas5P's, 9 too.
 #[test]
 fn event_is_located_at_the_known_time() {
     let t_hit = (2.0 / 9.81f64).sqrt();
@@ -218,7 +245,7 @@ fn event_is_located_at_the_known_time() {
         assert!((t - t_hit).abs() < tol, "{}: event at {t}, exact {t_hit}", m.name());
         assert!(y[0] <= 0.0 && y[0] > -1e-8, "{}: y at the event {}", m.name(), y[0]);
     }
-    assert_eq!(evals, [9, 9, 2]);
+    assert_eq!(evals, [9, 9, 9, 2]);
 }
 
 /// An index-1 DAE: `y₁' = −y₁ + y₂`, `0 = y₂ − y₁²/2`... written as `0 = y₁² − 2y₂`; exact
@@ -312,18 +339,19 @@ fn crossing_from_exactly_zero_fires_at_once() {
 
 /// The work each method does on Van der Pol, exactly (the runs are deterministic): accepted and
 /// rejected steps, right-hand sides, Jacobians and LU factorizations. These are docs/validation.md's
-/// step counts (`nanopush accuracy`: 1069 and 2787 steps at 1e-6; Robertson's are pinned with
+/// step counts (`nanopush accuracy`: 1069, 628 and 2787 steps at 1e-6; Robertson's are pinned with
 /// its reference values), and they pin the step-size control: a change to the initial step,
 /// the controller or the rejection rule changes them, even where the error control still meets
 /// the tolerance. With them, docs/validation.md's final errors at 1e-6 (the largest relative component
-/// error against the published reference, as `nanopush accuracy` reports it): 2.3e-7 (Rodas4)
-/// and 1.5e-4 (TR-BDF2), to half a unit of the second digit.
+/// error against the published reference, as `nanopush accuracy` reports it): 2.3e-7 (Rodas4),
+/// 5.7e-7 (Rodas5P) and 1.5e-4 (TR-BDF2), to half a unit of the second digit.
 #[test]
 fn work_on_the_reference_problems_is_pinned() {
     let p = VanDerPol { eps: 1e-6 };
     let work = |st: &Stats| (st.steps, st.rejected, st.rhs_evals, st.jac_evals, st.factorizations);
     for (m, rtol, expected, error) in [
         (Method::Rodas4, 1e-6, (1069, 8, 6455, 1070, 1077), Some(2.3e-7_f64)),
+        (Method::Rodas5P, 1e-6, (628, 13, 5116, 629, 641), Some(5.7e-7)),
         (Method::TrBdf2, 1e-6, (2787, 3, 20182, 2788, 2790), Some(1.5e-4)),
         (Method::ImplicitEuler, 1e-5, (14349, 0, 57397, 14350, 14349), None),
     ] {
@@ -419,7 +447,7 @@ fn a_changed_problem_is_not_stepped_with_the_old_derivatives() {
             let fresh = u64::from(how != "same problem");
             assert_eq!(st.jac_evals, st.steps + fresh, "{} ({how})", m.name());
             let tol = match m {
-                Method::Rodas4 => 1e-8,
+                Method::Rodas4 | Method::Rodas5P => 1e-8,
                 Method::TrBdf2 => 1e-5,
                 Method::ImplicitEuler => 1e-3,
             };
@@ -488,14 +516,29 @@ fn only_crossings_fire_and_the_earliest_is_reported() {
 #[test]
 fn method_names_round_trip() {
     let names: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
-    assert_eq!(names, ["rodas4", "trbdf2", "implicit-euler"]);
+    assert_eq!(names, ["rodas4", "rodas5p", "trbdf2", "implicit-euler"]);
     for m in Method::ALL {
         assert_eq!(Method::parse(m.name()), Some(m));
     }
     assert_eq!(Method::parse("rk4"), None);
     assert_eq!(Method::parse(""), None);
     let orders: Vec<u32> = Method::ALL.iter().map(|m| m.order()).collect();
-    assert_eq!(orders, [4, 2, 1]);
+    assert_eq!(orders, [4, 5, 2, 1]);
+}
+
+/// The choice by tolerance: Rodas4 above 1e-3, Rodas5P from 1e-3 down (the report's
+/// tolerances 1e-2 … 1e-10).
+#[test]
+fn the_tolerance_chooses_rodas5p_from_1e_3_down() {
+    let chosen: Vec<&str> = [1e-2, 1e-3, 1e-4, 1e-6, 1e-8, 1e-10]
+        .into_iter()
+        .map(|rtol| Method::for_tolerance(rtol).name())
+        .collect();
+    assert_eq!(
+        chosen,
+        ["rodas4", "rodas5p", "rodas5p", "rodas5p", "rodas5p", "rodas5p"]
+    );
+    assert_eq!(Method::for_tolerance(1.01e-3), Method::Rodas4);
 }
 
 /// At rest until `t = 0.5`, then `y' = −1000 y` (a kink the steps, grown large on the flat
@@ -533,9 +576,11 @@ impl Problem for Kink {
 fn failed_steps_are_rejected_and_retried_smaller() {
     let pinned = [
         (true, Method::Rodas4, (67, 22, 513, 89)),
+        (true, Method::Rodas5P, (45, 19, 494, 64)),
         (true, Method::TrBdf2, (135, 22, 1029, 157)),
         (true, Method::ImplicitEuler, (1411, 24, 5701, 1435)),
         (false, Method::Rodas4, (1420, 22, 8631, 1442)),
+        (false, Method::Rodas5P, (378, 19, 3158, 397)),
         (false, Method::TrBdf2, (135, 22, 1186, 157)),
         (false, Method::ImplicitEuler, (1416, 24, 5827, 1440)),
     ];
@@ -648,15 +693,12 @@ fn illinois_locates_time_events_of_either_curvature() {
     assert_eq!(evals, [8, 8]);
 }
 
-/// Rodas4's dense output is of third order (Hairer & Wanner's continuous extension): an event
-/// located inside a step of a time-dependent nonlinear problem (Prothero-Robinson, λ = −10,
-/// fixed steps) lands within h⁴ of the exact crossing. `y = φ(t)` falls through
-/// `φ(0.77)` at `t* = 0.77`, mid-step for h = 0.08 and 0.04 (the crossing at the top of
-/// φ's hump, 0.26, is not near).
-#[test]
-fn rodas4_dense_output_locates_a_crossing_to_fourth_order() {
+/// How far from the exact crossing `t* = 0.77` an event lands when `method` takes fixed steps
+/// of `h` on Prothero-Robinson (λ = −10, time-dependent and nonlinear) and locates it on its
+/// dense output to 1e-14 s: `y = φ(t)` falls through `φ(0.77)` there, mid-step for the steps
+/// used below (the crossing at the top of φ's hump, 0.26, is not near).
+fn crossing_error(method: Method, h: f64) -> f64 {
     let p = ProtheroRobinson { lambda: -10.0 };
-    let level = ProtheroRobinson::phi(0.77);
     struct Level(f64);
     impl Events for Level {
         fn count(&self) -> usize {
@@ -666,24 +708,152 @@ fn rodas4_dense_output_locates_a_crossing_to_fourth_order() {
             out[0] = y[0] - self.0;
         }
     }
-    let error = |h: f64| {
-        let mut opts = Options::with_rtol(1e12);
-        opts.h_max = h;
-        opts.event_tol = 1e-14;
-        let mut it = Integrator::new(Method::Rodas4, opts);
-        let (mut t, mut y) = (0.0, [ProtheroRobinson::phi(0.0)]);
-        let (o, _) = it.advance(&p, &Level(level), &mut t, &mut y, 2.0).unwrap();
-        assert_eq!(o, Outcome::Event { index: 0 });
-        (t - 0.77).abs()
-    };
+    let mut opts = Options::with_rtol(1e12);
+    opts.h_max = h;
+    opts.event_tol = 1e-14;
+    let mut it = Integrator::new(method, opts);
+    let (mut t, mut y) = (0.0, [ProtheroRobinson::phi(0.0)]);
+    let (o, _) = it
+        .advance(&p, &Level(ProtheroRobinson::phi(0.77)), &mut t, &mut y, 2.0)
+        .unwrap();
+    assert_eq!(o, Outcome::Event { index: 0 });
+    (t - 0.77).abs()
+}
+
+/// Rodas4's dense output is of third order (Hairer & Wanner's continuous extension): an event
+/// located inside a step lands within h⁴ of the exact crossing (see [`crossing_error`]) for
+/// h = 0.08 and 0.04.
+#[test]
+fn rodas4_dense_output_locates_a_crossing_to_fourth_order() {
     // Measured: 1.65e-5 and 9.6e-9 s. With a coefficient of the extension's cubic term of the
     // wrong sign, 3.7e-3 and 5.7e-4 s (second order and a constant 600 times larger).
     for h in [0.08, 0.04] {
-        let e = error(h);
+        let e = crossing_error(Method::Rodas4, h);
         assert!(
             e < h.powi(4),
             "h = {h}: the event is {e:e} s off, above h⁴ = {:e}",
             h.powi(4)
         );
     }
+}
+
+/// Rodas5P's dense output is of fourth order (Steinebach 2023): the same crossing lands within
+/// h⁵ of the exact one for h = 0.16, 0.08 and 0.04.
+#[test]
+fn rodas5p_dense_output_locates_a_crossing_to_fifth_order() {
+    // Measured: 2.6e-7, 1.0e-8 and 9.4e-11 s (Rodas4: 2.1e-4, 1.7e-5, 9.6e-9). With the sign of
+    // the coefficient of k₄ in h₂ flipped, 0.11 s at h = 0.16.
+    for h in [0.16, 0.08, 0.04] {
+        let e = crossing_error(Method::Rodas5P, h);
+        assert!(
+            e < h.powi(5),
+            "h = {h}: the event is {e:e} s off, above h⁵ = {:e}",
+            h.powi(5)
+        );
+    }
+}
+
+/// The Rosenbrock tableaus as transcribed hang together (Hairer & Wanner, *Solving ODEs II*,
+/// Sec VI.4, eq 4.8 ff.): with `Γ = (diag(1/γ) − C)⁻¹` and `(αᵢⱼ) = (aᵢⱼ)·Γ`, the stage times
+/// `αᵢ` are the row sums of `(αᵢⱼ)` and the `γᵢ` those of `Γ`; the weights `bᵢ` of the solution
+/// (the last stage's `a` row plus `k_S`, times `Γ`) meet the order conditions up to order 4 and
+/// the bushy one of order 5, `Σ bᵢ αᵢ⁴ = 1/5`, to their method's order (to 1e-12); the embedded
+/// solution (without `k_S`) meets those one order lower and misses one of its method's order.
+#[test]
+fn rosenbrock_tableaus_meet_their_order_conditions() {
+    fn check<const S: usize, const D: usize>(name: &str, tab: &methods::Rosenbrock<S, D>, order: u32) {
+        let g = tab.gamma;
+        // Γ⁻¹ = diag(1/γ) − C is lower triangular: invert it column by column.
+        let mut gam = [[0.0; S]; S];
+        for col in 0..S {
+            for i in col..S {
+                let mut v = if i == col { 1.0 } else { 0.0 };
+                for k in col..i {
+                    v += tab.c[i][k] * gam[k][col];
+                }
+                gam[i][col] = v * g;
+            }
+        }
+        let mut alpha = [[0.0; S]; S];
+        for i in 0..S {
+            for j in 0..S {
+                alpha[i][j] = (0..S).map(|k| tab.a[i][k] * gam[k][j]).sum();
+            }
+        }
+        for i in 0..S {
+            let ai: f64 = alpha[i].iter().sum();
+            let gi: f64 = gam[i].iter().sum();
+            assert!(
+                (ai - tab.alpha[i]).abs() < 1e-12,
+                "{name}: α{i} {ai} vs {}",
+                tab.alpha[i]
+            );
+            assert!((gi - tab.d[i]).abs() < 1e-12, "{name}: γ{i} {gi} vs {}", tab.d[i]);
+        }
+        let weights = |with_last: bool| {
+            let mut m = tab.a[S - 1];
+            if with_last {
+                m[S - 1] += 1.0;
+            }
+            let mut b = [0.0; S];
+            for j in 0..S {
+                b[j] = (0..S).map(|k| m[k] * gam[k][j]).sum();
+            }
+            b
+        };
+        // βᵢⱼ = αᵢⱼ + γᵢⱼ below the diagonal; β'ᵢ its row sums; αᵢ the stage times.
+        let mut beta = [[0.0; S]; S];
+        for i in 0..S {
+            for j in 0..i {
+                beta[i][j] = alpha[i][j] + gam[i][j];
+            }
+        }
+        let bp: Vec<f64> = beta.iter().map(|r| r.iter().sum()).collect();
+        let al: Vec<f64> = alpha.iter().map(|r| r.iter().sum()).collect();
+        let mv = |m: &[[f64; S]; S], v: &[f64]| -> Vec<f64> {
+            m.iter().map(|r| r.iter().zip(v).map(|(a, b)| a * b).sum()).collect()
+        };
+        let dot = |b: &[f64; S], v: &[f64]| -> f64 { b.iter().zip(v).map(|(a, b)| a * b).sum() };
+        let pow = |k: i32| al.iter().map(|a| a.powi(k)).collect::<Vec<_>>();
+        let residuals = |b: &[f64; S]| {
+            let al_ab: Vec<f64> = al.iter().zip(mv(&alpha, &bp)).map(|(a, x)| a * x).collect();
+            [
+                (1, b.iter().sum::<f64>() - 1.0),
+                (2, dot(b, &bp) - (0.5 - g)),
+                (3, dot(b, &pow(2)) - 1.0 / 3.0),
+                (3, dot(b, &mv(&beta, &bp)) - (1.0 / 6.0 - g + g * g)),
+                (4, dot(b, &pow(3)) - 0.25),
+                (4, dot(b, &al_ab) - (1.0 / 8.0 - g / 3.0)),
+                (4, dot(b, &mv(&beta, &pow(2))) - (1.0 / 12.0 - g / 3.0)),
+                (
+                    4,
+                    dot(b, &mv(&beta, &mv(&beta, &bp))) - (1.0 / 24.0 - g / 2.0 + 1.5 * g * g - g.powi(3)),
+                ),
+                (5, dot(b, &pow(4)) - 0.2),
+            ]
+        };
+        for (q, r) in residuals(&weights(true)) {
+            assert!(r.abs() < 1e-12, "{name}: a condition of order {q} is off by {r:e}");
+        }
+        let embedded = residuals(&weights(false));
+        for (q, r) in embedded {
+            if q < order {
+                assert!(
+                    r.abs() < 1e-12,
+                    "{name}, embedded: a condition of order {q} is off by {r:e}"
+                );
+            }
+        }
+        let worst = embedded
+            .iter()
+            .filter(|(q, _)| *q == order)
+            .map(|(_, r)| r.abs())
+            .fold(0.0, f64::max);
+        assert!(
+            worst > 1e-4,
+            "{name}, embedded: meets every condition of order {order} ({worst:e})"
+        );
+    }
+    check("rodas4", &methods::RODAS4, 4);
+    check("rodas5p", &methods::RODAS5P, 5);
 }
