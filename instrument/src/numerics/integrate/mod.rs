@@ -5,6 +5,7 @@ mod driver;
 pub(crate) mod linalg;
 pub(crate) mod methods;
 mod problem;
+pub(crate) mod rosenbrock;
 /// The reference problems, for the tests here and the studies' work-precision report (feature
 /// `test-problems`): not part of the instrument.
 #[cfg(any(test, feature = "test-problems"))]

@@ -761,7 +761,7 @@ fn rodas5p_dense_output_locates_a_crossing_to_fifth_order() {
 /// solution (without `k_S`) meets those one order lower and misses one of its method's order.
 #[test]
 fn rosenbrock_tableaus_meet_their_order_conditions() {
-    fn check<const S: usize, const D: usize>(name: &str, tab: &methods::Rosenbrock<S, D>, order: u32) {
+    fn check<const S: usize, const D: usize>(name: &str, tab: &rosenbrock::Rosenbrock<S, D>, order: u32) {
         let g = tab.gamma;
         // Γ⁻¹ = diag(1/γ) − C is lower triangular: invert it column by column.
         let mut gam = [[0.0; S]; S];
@@ -854,6 +854,6 @@ fn rosenbrock_tableaus_meet_their_order_conditions() {
             "{name}, embedded: meets every condition of order {order} ({worst:e})"
         );
     }
-    check("rodas4", &methods::RODAS4, 4);
-    check("rodas5p", &methods::RODAS5P, 5);
+    check("rodas4", &rosenbrock::RODAS4, 4);
+    check("rodas5p", &rosenbrock::RODAS5P, 5);
 }
