@@ -549,4 +549,20 @@ mod tests {
         assert_eq!(e.code, "unreadable", "{e}");
         assert!(e.field.contains("beyond the 10 V/nm a scene allows"), "{e}");
     }
+
+    /// Lab seed 160 (an 11 nm particle, a 4 nm tip): at β = 80° the tip's apex would park
+    /// 0.23 nm below the particle's top, and the push itself passed over it. The plan keeps every
+    /// angle whose margin is under 1 nm (and 4 × the roughness) out, here 70° and 80°.
+    #[test]
+    fn a_contact_angle_that_parks_the_tip_over_the_top_is_not_planned() {
+        let r = random_scene(160, Ranges::Lab);
+        let id = r.scene.pushed_particle().id;
+        let (r_a, r_t) = (r.scene.pushed_particle().radius_nm, r.scene.file.tip.radius_nm);
+        let margin = |beta: f64| (r_a + r_t) * (1.0 - beta.to_radians().sin());
+        assert!(margin(80.0) < 0.3 && margin(70.0) < 1.0 && margin(60.0) > 1.0);
+        match nanopush_instrument::control::derive::derive(&r.scene, id, 25e-9) {
+            Ok(plan) => assert!(margin(plan.contact_angle_deg) >= 1.0, "{}", plan.explain()),
+            Err(e) => assert!(!e.reason.contains("80.0]") && !e.reason.contains("70.0"), "{e}"),
+        }
+    }
 }

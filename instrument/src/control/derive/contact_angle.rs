@@ -4,7 +4,9 @@
 //! ([`ContactSide`]).
 
 use super::adhesion_field;
-use super::{BACK_OFF, BETAS_DEG, Candidate, Derivation, Fails, MAX_START, Refusal, SET_FRACTION, TICK};
+use super::{
+    BACK_OFF, BETAS_DEG, Candidate, Derivation, Fails, MAX_START, OVER_TOP_MARGIN, Refusal, SET_FRACTION, TICK,
+};
 use crate::control::estimator::{ContactSide, RetractPlan, predict_with_set_fraction};
 use crate::control::strategy::HOLD;
 
@@ -42,9 +44,15 @@ impl Derivation<'_> {
         // a parking height below it would drive the tip down into the meniscus while the
         // substrate still holds it.
         let snap_in = crate::control::strategy::runner::detection_offset(self.scene, &self.scene.strategy_params(TICK));
+        // How far off the parking height may be: the roughness under the tip, and a nanometre of
+        // the detection's own error.
+        let height_error = OVER_TOP_MARGIN + 4.0 * self.scene.file.substrate.roughness_rms_nm * 1e-9;
         for &beta_deg in &betas {
             let beta = beta_deg.to_radians();
             let parking = r_a - r_t + (r_a + r_t) * beta.sin();
+            // The apex passes the particle's top by (Rₐ + Rₜ)(1 − sin β): a parking height off
+            // by more sends the tip over the particle without touching it.
+            let over_top = (r_a + r_t) * (1.0 - beta.sin());
             let result = if parking <= 0.05 * r_a {
                 Err(Fails {
                     code: "geometry",
@@ -53,6 +61,16 @@ impl Derivation<'_> {
                         parking * 1e9
                     ),
                     field: "tip.radius_nm (a sharper tip) or push.contact_angle_deg (steeper)".into(),
+                })
+            } else if over_top < height_error && !hand {
+                Err(Fails {
+                    code: "geometry",
+                    reason: format!(
+                        "at β = {beta_deg}° the tip's apex parks {:.2} nm below the particle's top, within the {:.2} nm the parking height may be off (1 nm and 4 × the substrate's roughness): the tip may pass over the particle",
+                        over_top * 1e9,
+                        height_error * 1e9
+                    ),
+                    field: "push.contact_angle_deg (lower) or substrate.roughness_rms_nm (smoother)".into(),
                 })
             } else if parking <= snap_in {
                 let (cause, field) = adhesion_field::snap_in_cause(

@@ -13,8 +13,8 @@ use crate::scene::Scene;
 /// the longest leg the plan allows (within [0.3, 1] µm) up the substrate's slope, and one down it
 /// (the contact angle falls on the way up, rises on the way down), each from where a local scan
 /// finds the particle and judged with the plan's tolerance; a leg that would leave the stage is
-/// not run; with `push_cap` the legs are that long instead (the plan's shorter pushes). The legs
-/// run, or how one failed.
+/// not run; with `push_cap` (the plan's shorter pushes) each is a move of three such pushes. The
+/// legs run, or how one failed.
 pub fn dry_run(scene: &Scene, plan: &DerivedStrategy, push_cap: Option<f64>) -> Result<usize, DryRunFailure> {
     let mut s = scene.clone();
     plan.apply(&mut s);
@@ -30,7 +30,11 @@ pub fn dry_run(scene: &Scene, plan: &DerivedStrategy, push_cap: Option<f64>) -> 
         .ok_or_else(|| DryRunFailure::said(format!("no particle {}", plan.particle)))?;
     let (x, y, r) = (part.x_um * 1e-6, part.y_um * 1e-6, part.radius_nm * 1e-9);
     let range = s.file.stage.range_um * 1e-6;
-    let distance = push_cap.unwrap_or((s.file.strategy.max_push_um * 1e-6).clamp(0.3e-6, 1e-6));
+    // Shorter pushes are dry-run as a move of three of them (at most 1 µm), each re-parked as a
+    // real move's legs are: their errors add up, and one leg alone does not show it.
+    let distance = push_cap.map_or((s.file.strategy.max_push_um * 1e-6).clamp(0.3e-6, 1e-6), |cap| {
+        (3.0 * cap).min(1e-6).max(cap)
+    });
     let (tx, ty) = (s.file.substrate.tilt_x_mrad, s.file.substrate.tilt_y_mrad);
     let tilt = tx.hypot(ty);
     let up = if tilt > 0.0 { (tx / tilt, ty / tilt) } else { (1.0, 0.0) };

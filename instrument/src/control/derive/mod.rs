@@ -90,6 +90,10 @@ pub const SET_FRACTION: f64 = 0.6;
 /// Contact angles tried, in order (degrees): the paper's 30° first.
 pub const BETAS_DEG: [f64; 8] = [30.0, 45.0, 20.0, 60.0, 15.0, 70.0, 10.0, 80.0];
 
+/// The least the tip's apex may park below the particle's top on a smooth substrate (m): the
+/// detected substrate's own error (the snap-in's estimate, the noise at the touch).
+pub const OVER_TOP_MARGIN: f64 = 1e-9;
+
 /// The shortest push the plan splits a move into when a longer one loses the particle in its
 /// dry run (m).
 pub const MIN_PUSH: f64 = 0.1e-6;
