@@ -47,6 +47,8 @@ pub fn run(a: &PlanArgs) -> anyhow::Result<String> {
             "scene": scene.file.name,
             "particle": id,
             "tolerance": plan.tolerance,
+            "summary": plan.summary(),
+            "tried": plan.tried,
             "choices": choices,
             "warnings": plan.warnings,
         });
@@ -58,6 +60,10 @@ pub fn run(a: &PlanArgs) -> anyhow::Result<String> {
         "Strategy for particle {id} of scene {:?} (tolerance {} nm):",
         scene.file.name, a.tolerance_nm
     );
+    let _ = writeln!(s, "  chosen: {}", plan.summary());
+    for t in &plan.tried {
+        let _ = writeln!(s, "  tried first: {t}");
+    }
     s.push_str(&plan.explain());
     Ok(s)
 }

@@ -81,6 +81,10 @@ fn a_push_is_ok_only_when_the_scan_after_it_finds_it_within_tolerance() {
         let (started, done) = judged_push(&mut op, 3, 1.0, 25.0).await;
         assert_eq!(started.len(), 1, "one push: {started:?}");
         assert_eq!(started[0]["attempt"], 1);
+        // The plan's choice, said with the move's first push.
+        let summary = started[0]["strategy"]["summary"].as_str().unwrap_or_default();
+        assert!(summary.starts_with("β = ") && summary.contains(" side, xy control, "), "{}", started[0]);
+        assert!(started[0]["strategy"]["tried"].is_array(), "{}", started[0]);
         assert_eq!(done["outcome"], "ok", "{done}");
         assert_eq!(done["judged"]["attempts"], 1);
         check_against_truth(&srv.addr, &done, 25.0 * 1e-9);

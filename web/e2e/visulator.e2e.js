@@ -167,6 +167,7 @@ test('the operator scans and pushes; /api/status shows the particle moved', asyn
   const text = await waitText(op, '#lastrun', /^push of #1/, 60000);
   assert.match(text, /push of #1 ok/, text);
   assert.match(await op.textContent('#log'), /push of #1 ok.*record push-/, 'the log names the record');
+  assert.match(await op.textContent('#log'), /strategy for #1: β = \d+°, read on the (push|pull) side, xy control/, 'the chosen strategy is said when the push starts');
   assert.equal(await op.textContent('#reply-push'), 'push ended: ok');
   const after = await getJson(srv.base, '/api/status');
   const p1 = after.particles.find((p) => p.id === 1);

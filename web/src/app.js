@@ -20,7 +20,7 @@ import { fetchStatus } from './devicefaults.js';
 import { StatusBar } from './status.js';
 import { Controls, Replies, pushEndedText } from './controls.js';
 import { PushStatus } from './pushstatus.js';
-import { EventLog, LEASE_LOST_ON_CLOSE, lostOnCloseText, welcomeText, stateText, pushStartedText, pushWarnings, leaseNote, replyErrorText, closedText, restartText, lostPushText, hapticLinkNote, clockTime } from './eventlog.js';
+import { EventLog, LEASE_LOST_ON_CLOSE, lostOnCloseText, welcomeText, stateText, pushStartedText, pushStrategy, pushWarnings, leaseNote, replyErrorText, closedText, restartText, lostPushText, hapticLinkNote, clockTime } from './eventlog.js';
 import { MapOverlay } from './mapoverlay.js';
 import { Records } from './records.js';
 import { Scans } from './scans.js';
@@ -302,6 +302,7 @@ export class App {
         break;
       case 'push_started':
         log.log(pushStartedText(ev.push, st.client));
+        for (const line of pushStrategy(ev.push)) log.log(line);
         for (const w of pushWarnings(ev.push)) log.log(w, 'warn');
         this.charts.restartFd(st.tip?.t ?? -Infinity);
         this.map.pushStarted();

@@ -62,6 +62,17 @@ export function pushStartedText(push, client) {
   return `push started: #${push.particle} by ${pusher(push, client)}, to ${formatStagePoint(end)} in ${legs}`;
 }
 
+/**
+ * The strategy the plan chose for a push and what it tried first (`push_started`'s `strategy`),
+ * one line each: said when a move's first push starts.
+ */
+export function pushStrategy(push) {
+  const st = push?.strategy;
+  if (!st || typeof st.summary !== 'string') return [];
+  const tried = Array.isArray(st.tried) ? st.tried.filter((t) => typeof t === 'string') : [];
+  return [`strategy for #${push.particle}: ${st.summary}`, ...tried.map((t) => `  tried first: ${t}`)];
+}
+
 /** What the strategy plan warns of for a push (`push_started`'s `warnings`), one line each. */
 export function pushWarnings(push) {
   return Array.isArray(push?.warnings) ? push.warnings.map((w) => `plan warning for #${push.particle}: ${w}`) : [];

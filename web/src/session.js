@@ -243,7 +243,10 @@ const handlers = {
 
   push_started(session, m) {
     const s = session.state;
-    s.push = { particle: m.particle, path: m.path ?? [], by: m.by ?? null, run: m.run ?? null };
+    s.push = {
+      particle: m.particle, path: m.path ?? [], by: m.by ?? null, run: m.run ?? null,
+      attempt: m.attempt ?? 1, warnings: m.warnings ?? [], strategy: m.strategy ?? null,
+    };
     return { kind: 'push_started', push: s.push };
   },
 

@@ -2,7 +2,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import {
-  welcomeText, stateText, scanSize, scanDoneNote, pusher, pushStartedText, pushWarnings, leaseNote, replyErrorText, closedText, LEASE_LOST_ON_CLOSE, lostOnCloseText,
+  welcomeText, stateText, scanSize, scanDoneNote, pusher, pushStartedText, pushStrategy, pushWarnings, leaseNote, replyErrorText, closedText, LEASE_LOST_ON_CLOSE, lostOnCloseText,
 } from '../src/eventlog.js';
 import { Session } from '../src/session.js';
 
@@ -39,6 +39,11 @@ test('a push started, by this client or another, in one leg or more', () => {
   assert.deepEqual(pushWarnings({ ...p, warnings: ['strategy.start_height_um = 1.2 (hand-set): below the 1.26 µm'] }),
     ['plan warning for #2: strategy.start_height_um = 1.2 (hand-set): below the 1.26 µm']);
   assert.deepEqual(pushWarnings(p), []);
+  const strategy = { summary: 'β = 30°, read on the pull side, xy control, 1 µm/s, pushes of at most 20 µm: why', tried: ['β = 45°, push side: unreadable'] };
+  assert.deepEqual(pushStrategy({ ...p, strategy }),
+    ['strategy for #2: β = 30°, read on the pull side, xy control, 1 µm/s, pushes of at most 20 µm: why', '  tried first: β = 45°, push side: unreadable']);
+  assert.deepEqual(pushStrategy(p), []);
+  assert.deepEqual(pushStrategy({ ...p, strategy: { summary: 3 } }), []);
 });
 
 test('the lease: taken, lost (said aloud), changed elsewhere, with reasons', () => {

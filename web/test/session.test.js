@@ -255,6 +255,9 @@ test('session: a push that never started is a run; it clears the push path', () 
   const s = openSession(4);
   s.apply({ type: 'push_started', particle: 1, path: [[40e-6, 30e-6], [50e-6, 30e-6]], by: 4 });
   assert.deepEqual(s.state.push.path[1], [50e-6, 30e-6]);
+  assert.equal(s.state.push.attempt, 1);
+  s.apply({ type: 'push_started', particle: 1, path: [[40e-6, 30e-6]], by: 4, attempt: 1, warnings: ['w'], strategy: { summary: 'β = 30°', tried: [] } });
+  assert.deepEqual([s.state.push.warnings, s.state.push.strategy.summary], [['w'], 'β = 30°']);
   const r = { type: 'run_done', particle: 1, outcome: 'plan', failure: 'particle 1: target out of reach', estimate: null, record: null, record_error: null };
   const ev = s.apply(r);
   assert.equal(ev.kind, 'run_done');

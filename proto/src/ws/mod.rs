@@ -19,8 +19,8 @@ pub use client::{ASSEMBLE_MAX_GENERATOR, ASSEMBLE_MAX_SITES, ClientMessage, Hapt
 pub use scan_line::{FrameError, SCAN_LINE_HEADER_LEN, SCAN_LINE_MAGIC, ScanLineHeader};
 pub use server::ServerMessage;
 pub use types::{
-    AssemblyNow, AssemblyPlan, AssemblySite, Bounds, ErrorCode, HapticScales, HapticTelemetry, InstrumentInfo, Judged,
-    MapParticle, ParticleNow, PlanMove, PlanSite, PushPath, Role, ScanNow, Telemetry,
+    AssemblyNow, AssemblyPlan, AssemblySite, Bounds, ChosenStrategy, ErrorCode, HapticScales, HapticTelemetry,
+    InstrumentInfo, Judged, MapParticle, ParticleNow, PlanMove, PlanSite, PushPath, Role, ScanNow, Telemetry,
 };
 
 /// Protocol version, sent in `welcome`; bumped on any incompatible change.

@@ -275,9 +275,17 @@ mod tests {
             run: 3,
             attempt: 2,
             warnings: vec!["strategy.speed_um_per_s = 10 (hand-set): faster than the set point allows".into()],
+            strategy: Some(super::ChosenStrategy {
+                summary: "β = 30°, read on the pull side, xy control, 1 µm/s, pushes of at most 20 µm: why".into(),
+                tried: vec!["β = 45°, push side: unreadable".into()],
+            }),
         };
         let s = serde_json::to_value(ServerMessage::PushStarted(path.clone())).unwrap();
         assert_eq!(s["attempt"], 2);
+        assert_eq!(s["strategy"]["tried"][0], "β = 45°, push side: unreadable");
+        assert!(s["strategy"]["summary"].as_str().unwrap().contains("pull side"));
+        let old: PushPath = serde_json::from_str(r#"{"particle":1,"path":[],"by":1,"run":1}"#).unwrap();
+        assert_eq!((old.attempt, old.strategy), (1, None));
         assert_eq!(
             s["warnings"][0],
             "strategy.speed_um_per_s = 10 (hand-set): faster than the set point allows"

@@ -158,6 +158,21 @@ pub struct PushPath {
     /// dry run that fails, a tolerance no push can reach), on the first push of a move.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// The strategy the plan chose for this particle and why, on the first push of a move (none
+    /// on a correction, and from older servers).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub strategy: Option<ChosenStrategy>,
+}
+
+/// The strategy a plan chose, in words.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChosenStrategy {
+    /// One line: the contact angle, the side the contact is read on, the loop closure, the
+    /// speed, the longest push, and why.
+    pub summary: String,
+    /// What the plan tried before it and why each was not taken, a line each (at most 16).
+    #[serde(default)]
+    pub tried: Vec<String>,
 }
 
 fn first_attempt() -> u32 {

@@ -4,7 +4,7 @@
 
 use std::sync::atomic::Ordering::Relaxed;
 
-use nanopush_proto::ws::{PushPath, ServerMessage};
+use nanopush_proto::ws::{ChosenStrategy, PushPath, ServerMessage};
 
 use crate::app_state::{AppState, Move, Pending};
 use crate::control_loop::{LoopCommand, PushJob};
@@ -129,12 +129,16 @@ pub(crate) fn launch(
         .map_or(located.radius, |p| p.radius_nm * 1e-9);
     let mut path = vec![[located.x, located.y]];
     path.extend(plan.legs.iter().map(|l| [l.to.0, l.to.1]));
-    // The plan's warnings, said to everyone with the move's first push.
-    let warnings = (attempt == 1)
+    // The plan's choice and warnings, said to everyone with the move's first push.
+    let (warnings, strategy) = (attempt == 1)
         .then(|| {
             let plans = st.activity.plans.lock().ok()?;
             let plan = plans.get(&(particle, mv.tolerance.to_bits()))?.as_ref().ok()?;
-            Some(plan.warnings.clone())
+            let chosen = ChosenStrategy {
+                summary: plan.summary(),
+                tried: plan.tried.iter().take(16).cloned().collect(),
+            };
+            Some((plan.warnings.clone(), Some(chosen)))
         })
         .flatten()
         .unwrap_or_default();
@@ -145,6 +149,7 @@ pub(crate) fn launch(
         run,
         attempt,
         warnings,
+        strategy,
     };
     if let Ok(mut j) = st.activity.judging.lock() {
         j.insert(

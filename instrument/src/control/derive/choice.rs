@@ -63,6 +63,9 @@ pub struct DerivedStrategy {
     pub local_scan: (f64, usize),
     /// The model's prediction at the chosen β and V (retraction lifted to the release).
     pub prediction: PushPrediction,
+    /// What the plan tried before this strategy and why each was not taken, a line each: the
+    /// angles that failed the model's checks, and those whose dry run failed.
+    pub tried: Vec<String>,
 }
 
 impl DerivedStrategy {
@@ -72,6 +75,44 @@ impl DerivedStrategy {
         scene.file.strategy = self.strategy.clone();
         scene.file.push.contact_angle_deg = self.contact_angle_deg;
         scene.file.push.speed_um_per_s = self.speed_um_per_s;
+    }
+
+    /// The strategy in one line: the contact angle, the side the contact is read on, the loop
+    /// closure, the speed and the longest push, and why this one.
+    pub fn summary(&self) -> String {
+        let hand = |key: &str| self.choices.iter().any(|c| c.key == key && c.hand_set);
+        let control = match self.strategy.control {
+            crate::scene::file::ControlFile::Xy => "xy",
+            crate::scene::file::ControlFile::Z => "z",
+            crate::scene::file::ControlFile::Xyz => "xyz",
+        };
+        let max_push = self.strategy.max_push_um;
+        let shorter = self
+            .choices
+            .iter()
+            .any(|c| c.key == "strategy.max_push_um" && c.why.starts_with("pushes of"));
+        let why = if hand("push.contact_angle_deg") {
+            "the scene's own contact angle".to_string()
+        } else if self.tried.is_empty() {
+            "the first angle tried, and it passes every check and its dry run".to_string()
+        } else {
+            format!(
+                "the first angle that passes every check and its dry run, after {} tried before it",
+                self.tried.len()
+            )
+        };
+        format!(
+            "β = {}°, read on the {} side, {control} control, {} µm/s, pushes of at most {} µm{}: {why}",
+            short(self.contact_angle_deg),
+            self.prediction.side.name(),
+            short(self.speed_um_per_s),
+            short(max_push),
+            if shorter {
+                " (a longer push lost the particle in the dry run)"
+            } else {
+                ""
+            },
+        )
     }
 
     /// The plan in words: a line per setting, then the warnings.

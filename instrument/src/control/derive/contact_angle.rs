@@ -123,6 +123,11 @@ impl Derivation<'_> {
                     return Err(self.refuse(f));
                 }
                 Err(f) => {
+                    self.note_tried(format!(
+                        "β = {beta_deg}°, push side: {}: {}",
+                        f.code,
+                        super::derivation::brief(f.reason.trim_start_matches(&format!("at β = {beta_deg}° ")))
+                    ));
                     if matches!(f.code, "unreadable" | "no_resistance") {
                         unread.push((beta, parking, f.clone()));
                     }
@@ -137,6 +142,18 @@ impl Derivation<'_> {
             let pull = self
                 .predict_at(beta, parking, v, approach_speed, ContactSide::Pull)
                 .and_then(|c| self.check(&c).map(|()| c));
+            match &pull {
+                Err(g) => self.note_tried(format!(
+                    "β = {:.0}°, pull side: {}: {}",
+                    beta.to_degrees(),
+                    g.code,
+                    super::derivation::brief(
+                        g.reason
+                            .trim_start_matches(&format!("at β = {:.0}° ", beta.to_degrees()))
+                    )
+                )),
+                Ok(_) => {}
+            }
             match pull {
                 Ok(c) => return Ok(c),
                 Err(g) if pull_failure.is_none() => {

@@ -18,6 +18,8 @@ pub(super) struct Derivation<'a> {
     /// The longest push a dry run showed the particle is kept for (m), with the travel at which
     /// a longer one lost it: the settings' longest push is held under it.
     pub(super) push_cap: Option<(f64, f64)>,
+    /// What was tried before the strategy the plan gives, a line each ([`DerivedStrategy::tried`]).
+    pub(super) tried: Vec<String>,
 }
 
 impl<'a> Derivation<'a> {
@@ -42,6 +44,7 @@ impl<'a> Derivation<'a> {
             choices: Vec::new(),
             warnings: Vec::new(),
             push_cap: None,
+            tried: Vec::new(),
         })
     }
 
@@ -163,6 +166,13 @@ impl<'a> Derivation<'a> {
                 // well after t*: shorter pushes, each re-parked at a fresh set point, keep it.
                 // Tried at half the travel it was lost at, while that is at least MIN_PUSH.
                 Err(why) if let Some(cap) = self.shorter_push(why.lost_after, plan.strategy.max_push_um * 1e-6) => {
+                    self.note_tried(format!(
+                        "β = {}°, {} side, pushes of at most {} µm: the dry run failed: {}",
+                        cand.beta_deg,
+                        cand.prediction.side.name(),
+                        short(plan.strategy.max_push_um),
+                        brief(&why.text)
+                    ));
                     self.push_cap = Some((cap, why.lost_after.unwrap_or(cap)));
                     self.choices = base_choices.clone();
                     self.warnings = base_warnings.clone();
@@ -175,12 +185,26 @@ impl<'a> Derivation<'a> {
                     return Ok(plan);
                 }
                 Err(why) => {
+                    self.note_tried(format!(
+                        "β = {}°, {} side, pushes of at most {} µm: the dry run failed: {}",
+                        cand.beta_deg,
+                        cand.prediction.side.name(),
+                        short(plan.strategy.max_push_um),
+                        brief(&why.text)
+                    ));
                     rejected.push((cand.beta_deg, why.text, plan.warnings.clone()));
                     self.push_cap = None;
                     self.choices = base_choices.clone();
                     self.warnings = base_warnings.clone();
                 }
             }
+        }
+    }
+
+    /// Adds a line to what was tried, once (each retry of the angles meets the same failures).
+    pub(super) fn note_tried(&mut self, line: String) {
+        if !self.tried.contains(&line) {
+            self.tried.push(line);
         }
     }
 
@@ -236,4 +260,19 @@ impl<'a> Derivation<'a> {
             field,
         })
     }
+}
+
+/// The first clause or two of a reason (`code: what happened`), at most 160 characters: enough
+/// for a line of what was tried.
+pub(super) fn brief(reason: &str) -> String {
+    let mut parts = reason.splitn(3, ": ");
+    let mut s = parts.next().unwrap_or("").to_string();
+    if let Some(next) = parts.next() {
+        s.push_str(": ");
+        s.push_str(next.split(';').next().unwrap_or(next));
+    }
+    if s.chars().count() > 160 {
+        s = s.chars().take(157).collect::<String>() + "...";
+    }
+    s
 }

@@ -100,6 +100,7 @@ impl Derivation<'_> {
             speed_um_per_s: s.speed_um,
             local_scan: (s.scan, LOCAL_PIXELS),
             prediction: cand.prediction,
+            tried: self.tried.clone(),
         })
     }
 

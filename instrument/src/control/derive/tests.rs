@@ -70,6 +70,22 @@ fn minimal_skips_an_angle_that_bends_the_lever_down() {
     assert_eq!(plan.contact_angle_deg, 45.0);
 }
 
+/// The plan says its choice in one line and what it tried first: on `minimal`, 30° bends the
+/// lever down (unreadable on the push side), so 45° is chosen after it.
+#[test]
+fn the_plan_says_its_choice_and_what_it_tried_first() {
+    let s = untuned("minimal", &[]);
+    let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
+    let summary = plan.summary();
+    assert!(
+        summary.starts_with("β = 45°, read on the push side, xy control, ")
+            && summary.ends_with("after 1 tried before it"),
+        "{summary}"
+    );
+    assert_eq!(plan.tried.len(), 1, "{:?}", plan.tried);
+    assert!(plan.tried[0].starts_with("β = 30°, push side: unreadable: "), "{:?}", plan.tried);
+}
+
 /// A lever too soft to shear the particle loose within the readout is
 /// refused, naming the stiffness it would need (and the gain that would fit).
 #[test]
