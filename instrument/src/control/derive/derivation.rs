@@ -171,7 +171,7 @@ impl<'a> Derivation<'a> {
                         cand.beta_deg,
                         cand.prediction.side.name(),
                         short(plan.strategy.max_push_um),
-                        brief(&why.text)
+                        brief_with(&why)
                     ));
                     self.push_cap = Some((cap, why.lost_after.unwrap_or(cap)));
                     self.choices = base_choices.clone();
@@ -190,9 +190,9 @@ impl<'a> Derivation<'a> {
                         cand.beta_deg,
                         cand.prediction.side.name(),
                         short(plan.strategy.max_push_um),
-                        brief(&why.text)
+                        brief_with(&why)
                     ));
-                    rejected.push((cand.beta_deg, why.text, plan.warnings.clone()));
+                    rejected.push((cand.beta_deg, why.to_string(), plan.warnings.clone()));
                     self.push_cap = None;
                     self.choices = base_choices.clone();
                     self.warnings = base_warnings.clone();
@@ -259,6 +259,14 @@ impl<'a> Derivation<'a> {
             ),
             field,
         })
+    }
+}
+
+/// [`brief`] of a dry run's failure, with what the particle did when a leg lost it.
+fn brief_with(why: &dry_run::DryRunFailure) -> String {
+    match &why.how {
+        Some(how) => format!("{} ({how})", brief(&why.text)),
+        None => brief(&why.text),
     }
 }
 

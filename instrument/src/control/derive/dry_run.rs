@@ -58,12 +58,19 @@ pub fn dry_run(scene: &Scene, plan: &DerivedStrategy, push_cap: Option<f64>) -> 
         let target = MoveTarget::Distance { distance, direction };
         let moved = move_particle(&s, &mut afm, plan.particle, at, r, target, options)
             .map_err(|e| DryRunFailure::said(e.to_string()))?;
-        judge(&moved, plan).map_err(|text| DryRunFailure {
-            text,
-            lost_after: moved.legs.iter().find_map(|l| match l.run.summary.failure {
-                Some(Failure::ParticleLost { travel_um }) => Some(travel_um * 1e-6),
-                _ => None,
-            }),
+        judge(&moved, plan).map_err(|text| {
+            let lost = moved
+                .legs
+                .iter()
+                .find(|l| matches!(l.run.summary.failure, Some(Failure::ParticleLost { .. })));
+            DryRunFailure {
+                how: lost.and_then(|l| how_lost(&l.run, direction)),
+                text,
+                lost_after: lost.and_then(|l| match l.run.summary.failure {
+                    Some(Failure::ParticleLost { travel_um }) => Some(travel_um * 1e-6),
+                    _ => None,
+                }),
+            }
         })?;
         if let Some(found) = moved.after.1 {
             at = (found.x, found.y);
@@ -72,25 +79,62 @@ pub fn dry_run(scene: &Scene, plan: &DerivedStrategy, push_cap: Option<f64>) -> 
     Ok(legs)
 }
 
+/// What the particle did while the push lost it, from the run's hidden truth (the dry run is a
+/// simulation, so it may look): how far it moved along the push while the tip pushed, against the
+/// tip's own travel. Under 0.8 of the tip's travel the tip climbed over it (it rolled or slid
+/// under the tip); over 1.2 it ran ahead; in between it went with the tip and the reading drifted
+/// off the contact.
+fn how_lost(run: &crate::control::strategy::StrategyRun, d: (f64, f64)) -> Option<String> {
+    let pushing: Vec<_> = run.trace.iter().filter(|r| r.phase == "push").collect();
+    let (first, last) = (pushing.first()?, pushing.last()?);
+    let along = |a: (f64, f64), b: (f64, f64)| (b.0 - a.0) * d.0 + (b.1 - a.1) * d.1;
+    let tip = along((first.stage[0], first.stage[1]), (last.stage[0], last.stage[1]));
+    let particle = along(first.particle, last.particle);
+    if tip <= 1e-9 {
+        return None;
+    }
+    let what = if particle < 0.8 * tip {
+        "the tip climbed over it"
+    } else if particle > 1.2 * tip {
+        "it ran ahead of the tip"
+    } else {
+        "it went with the tip, and the reading drifted off the contact"
+    };
+    Some(format!(
+        "the particle moved {:.0} nm while the tip pushed {:.0} nm: {what}",
+        particle * 1e9,
+        tip * 1e9
+    ))
+}
+
 /// How a dry run failed: in words (`code: text`), and the push's travel when a leg lost the
 /// particle.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DryRunFailure {
     /// `code: what happened`.
     pub text: String,
+    /// What the particle did, when a leg lost it ([`how_lost`]).
+    pub how: Option<String>,
     /// The push travel (m) at which a leg lost the particle.
     pub lost_after: Option<f64>,
 }
 
 impl DryRunFailure {
     fn said(text: String) -> DryRunFailure {
-        DryRunFailure { text, lost_after: None }
+        DryRunFailure {
+            text,
+            how: None,
+            lost_after: None,
+        }
     }
 }
 
 impl std::fmt::Display for DryRunFailure {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.text)
+        match &self.how {
+            Some(how) => write!(f, "{} ({how})", self.text),
+            None => f.write_str(&self.text),
+        }
     }
 }
 

@@ -83,7 +83,11 @@ fn the_plan_says_its_choice_and_what_it_tried_first() {
         "{summary}"
     );
     assert_eq!(plan.tried.len(), 1, "{:?}", plan.tried);
-    assert!(plan.tried[0].starts_with("β = 30°, push side: unreadable: "), "{:?}", plan.tried);
+    assert!(
+        plan.tried[0].starts_with("β = 30°, push side: unreadable: "),
+        "{:?}",
+        plan.tried
+    );
 }
 
 /// A lever too soft to shear the particle loose within the readout is
