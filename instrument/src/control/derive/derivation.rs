@@ -3,6 +3,7 @@
 
 use super::readout::Readout;
 use super::{BETAS_DEG, Choice, DerivedStrategy, Fails, MAX_DRY_RUN, MIN_PUSH, PAPER_SPEED, Refusal, dry_run, short};
+use crate::control::estimator::ContactSide;
 use crate::scene::Scene;
 use crate::scene::file::{ParticleFile, StrategyFile};
 
@@ -152,7 +153,21 @@ impl<'a> Derivation<'a> {
                 ));
                 return Ok(plan);
             }
-            match dry_run::dry_run(self.scene, &plan, self.push_cap.map(|c| c.0)) {
+            let cap = self.push_cap.map(|c| c.0);
+            // A marginal plan (read on the pull side, or found only after a dry run failed) must
+            // also pass a move of three of its longest pushes in a row with other noise and
+            // roughness: one push can pass by luck (a pull-side plan for validator seed 110
+            // passed once and lost the particle in the push).
+            let marginal = cand.prediction.side == ContactSide::Pull || !rejected.is_empty() || self.push_cap.is_some();
+            let longest = cap.unwrap_or(plan.strategy.max_push_um * 1e-6);
+            let result = dry_run::dry_run(self.scene, &plan, cap).and_then(|legs| {
+                if marginal && legs > 0 {
+                    dry_run::dry_run_with(self.scene, &plan, Some(longest), 2)
+                } else {
+                    Ok(legs)
+                }
+            });
+            match result {
                 Ok(0) => {
                     plan.warnings.push(
                         "no dry run: neither leg of it (up and down the slope, 0.3-1 µm) stays on the stage from this particle"

@@ -16,10 +16,25 @@ use crate::scene::Scene;
 /// not run; with `push_cap` (the plan's shorter pushes) each is a move of three such pushes. The
 /// legs run, or how one failed.
 pub fn dry_run(scene: &Scene, plan: &DerivedStrategy, push_cap: Option<f64>) -> Result<usize, DryRunFailure> {
+    dry_run_with(scene, plan, push_cap, 1)
+}
+
+/// [`dry_run`] with realization `k` (1, 2, ...) of the noise and the roughness: a marginal plan
+/// is dry-run again with a second.
+pub fn dry_run_with(
+    scene: &Scene,
+    plan: &DerivedStrategy,
+    push_cap: Option<f64>,
+    k: u64,
+) -> Result<usize, DryRunFailure> {
     let mut s = scene.clone();
     plan.apply(&mut s);
-    s.file.sensor.noise_seed = s.file.sensor.noise_seed.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    s.file.substrate.roughness_seed = s.file.substrate.roughness_seed.wrapping_add(0x2545_f491_4f6c_dd1d);
+    s.file.sensor.noise_seed = s.file.sensor.noise_seed.wrapping_add(k.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+    s.file.substrate.roughness_seed = s
+        .file
+        .substrate
+        .roughness_seed
+        .wrapping_add(k.wrapping_mul(0x2545_f491_4f6c_dd1d));
     s.pushable(plan.particle)
         .map_err(|e| DryRunFailure::said(e.to_string()))?;
     let part = s
@@ -33,7 +48,7 @@ pub fn dry_run(scene: &Scene, plan: &DerivedStrategy, push_cap: Option<f64>) -> 
     // Shorter pushes are dry-run as a move of three of them (at most 1 µm), each re-parked as a
     // real move's legs are: their errors add up, and one leg alone does not show it.
     let distance = push_cap.map_or((s.file.strategy.max_push_um * 1e-6).clamp(0.3e-6, 1e-6), |cap| {
-        (3.0 * cap).min(1e-6).max(cap)
+        (3.0 * cap).min(1e-6)
     });
     let (tx, ty) = (s.file.substrate.tilt_x_mrad, s.file.substrate.tilt_y_mrad);
     let tilt = tx.hypot(ty);
