@@ -135,7 +135,7 @@ pub struct Refusal {
     /// The particle (id).
     pub particle: u32,
     /// A short code for tables: `geometry`, `unreadable`, `no_resistance`, `deflection_limit`,
-    /// `no_separation`, `stuck`, `too_tall`, `adhesion`, `stage`, `model`, `dry_run`.
+    /// `no_separation`, `stuck`, `too_tall`, `adhesion`, `stage`, `escapes`, `model`, `dry_run`.
     pub code: &'static str,
     /// What fails, with the numbers.
     pub reason: String,

@@ -9,6 +9,7 @@ use super::{
 };
 use crate::control::estimator::{ContactSide, RetractPlan, predict_with_set_fraction};
 use crate::control::strategy::HOLD;
+use crate::physics::pushing::SimulationError;
 
 impl Derivation<'_> {
     /// The contact angle: the hand-set one, or the first of [`BETAS_DEG`] whose predicted push
@@ -201,10 +202,21 @@ impl Derivation<'_> {
         };
         // The set point at SET_FRACTION of the push's own peak, and the travel to it, from one
         // model push.
-        let prediction = predict_with_set_fraction(params, side, SET_FRACTION, retract).map_err(|e| Fails {
-            code: "model",
-            reason: format!("the model's push at β = {:.0}° failed: {e}", beta.to_degrees()),
-            field: crate::physics::pushing::MODEL_REFUSAL_FIELD.into(),
+        // A push that loses its particle is a physical outcome, not a failure of the solver.
+        let prediction = predict_with_set_fraction(params, side, SET_FRACTION, retract).map_err(|e| match e {
+            SimulationError::ContactLost { .. } => Fails {
+                code: "escapes",
+                reason: format!(
+                    "at β = {:.0}° the model's push loses the particle: {e}",
+                    beta.to_degrees()
+                ),
+                field: crate::physics::pushing::ESCAPE_FIELD.into(),
+            },
+            _ => Fails {
+                code: "model",
+                reason: format!("the model's push at β = {:.0}° failed: {e}", beta.to_degrees()),
+                field: crate::physics::pushing::MODEL_REFUSAL_FIELD.into(),
+            },
         })?;
         Ok(Candidate {
             beta_deg: beta.to_degrees().round(),

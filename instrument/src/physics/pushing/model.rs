@@ -564,7 +564,7 @@ impl Probe<f64> {
 mod eval;
 mod switching;
 
-pub use switching::SwitchKind;
+pub use switching::{SwitchKind, UNLOADED_OVERLAP};
 
 #[cfg(test)]
 mod eq17_reference;

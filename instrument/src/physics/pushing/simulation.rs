@@ -118,9 +118,12 @@ pub enum SimulationError {
     },
     /// The tip's contact broke under a quasi-static particle, or its balance vanished (see
     /// [`Advance::Released`]): [`Simulation::advance_or_release`] calls it a release; for a
-    /// fixed-duration run the push lost its particle.
+    /// fixed-duration run the push lost its particle. A physical outcome of the model, not a
+    /// failure of the integrator: the tip's push left the friction cones that hold a particle
+    /// with no inertia and no rolling resistance, and it slid or rolled ahead of the tip (see
+    /// [`PushModel::break_overlap`]).
     #[error(
-        "the tip's contact with the particle broke (or its quasi-static balance vanished) at t = {t:e} s: the tip lost the particle"
+        "the tip's contact with the particle broke (or its quasi-static balance vanished) at t = {t:e} s: the tip lost the particle, which slid or rolled away from it"
     )]
     ContactLost {
         /// Time (s).

@@ -388,3 +388,36 @@ fn the_full_models_first_slip_step_count_is_pinned() {
     assert!((t_full - 6.2078e-3).abs() < 0.05e-6, "full t* {t_full:e} s");
     assert!((t_reduced - 6.2078e-3).abs() < 0.05e-6, "reduced t* {t_reduced:e} s");
 }
+
+/// The minimal scene with no adhesion (van der Waals off, dry: a Hertz tip contact and nothing
+/// but the tip's push to load the substrate), a quasi-static rolling particle on a dynamic
+/// stage, pushed at β = 30° with μ_as 0.1: the push's horizontal share, cot 30° = 1.73 of its
+/// downward one, is far outside the substrate's friction cone. The particle slides ahead of the
+/// tip at vanishing load; the integrator's step once collapsed to 7e-21 s at 2.0 µs following
+/// it into the Hertz law's zero-stiffness root. The contact breaks instead, at the start.
+#[test]
+fn a_particle_pushed_outside_its_friction_cone_leaves_the_tip() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/minimal.toml");
+    let text = std::fs::read_to_string(path)
+        .unwrap()
+        .replace("van_der_waals = true", "van_der_waals = false")
+        .replace("particle_rotation = \"off\"", "particle_rotation = \"quasi_static\"")
+        .replace("stage = \"off\"", "stage = \"dynamic\"")
+        .replace("particle_substrate_static = 0.3 ", "particle_substrate_static = 0.1 ")
+        .replace(
+            "particle_substrate_kinetic = 0.2 ",
+            "particle_substrate_kinetic = 0.05 ",
+        )
+        .replace("particle_id = 1", "particle_id = 1\ncontact_angle_deg = 30.0");
+    let scene = Scene::parse("minimal, no adhesion", &text).unwrap();
+    let model = PushModel::new(scene.push_params());
+    assert_eq!(model.p.jkr_ta.pull_off_load(), 0.0, "a Hertz tip contact");
+    let mut sim = Simulation::new(model, Method::Rodas4, Options::with_rtol(1e-6));
+    match sim.advance_to(1e-4) {
+        Err(SimulationError::ContactLost { t }) => assert!(t < 1e-6, "the contact broke at {t:e} s"),
+        other => panic!("expected the tip to lose the particle at the start, got {other:?}"),
+    }
+    assert!(!sim.mode.tip_contact);
+    let n = sim.model.len();
+    assert!(sim.x[..n].iter().all(|v| v.is_finite()));
+}
