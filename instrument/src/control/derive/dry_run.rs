@@ -29,7 +29,11 @@ pub fn dry_run_with(
 ) -> Result<usize, DryRunFailure> {
     let mut s = scene.clone();
     plan.apply(&mut s);
-    s.file.sensor.noise_seed = s.file.sensor.noise_seed.wrapping_add(k.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+    s.file.sensor.noise_seed = s
+        .file
+        .sensor
+        .noise_seed
+        .wrapping_add(k.wrapping_mul(0x9e37_79b9_7f4a_7c15));
     s.file.substrate.roughness_seed = s
         .file
         .substrate
