@@ -275,10 +275,10 @@ mod tests {
             run: 3,
             attempt: 2,
             warnings: vec!["strategy.speed_um_per_s = 10 (hand-set): faster than the set point allows".into()],
-            strategy: Some(super::ChosenStrategy {
+            strategy: Some(Box::new(crate::ws::ChosenStrategy {
                 summary: "β = 30°, read on the pull side, xy control, 1 µm/s, pushes of at most 20 µm: why".into(),
                 tried: vec!["β = 45°, push side: unreadable".into()],
-            }),
+            })),
         };
         let s = serde_json::to_value(ServerMessage::PushStarted(path.clone())).unwrap();
         assert_eq!(s["attempt"], 2);

@@ -161,7 +161,7 @@ pub struct PushPath {
     /// The strategy the plan chose for this particle and why, on the first push of a move (none
     /// on a correction, and from older servers).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub strategy: Option<ChosenStrategy>,
+    pub strategy: Option<Box<ChosenStrategy>>,
 }
 
 /// The strategy a plan chose, in words.

@@ -138,7 +138,7 @@ pub(crate) fn launch(
                 summary: plan.summary(),
                 tried: plan.tried.iter().take(16).cloned().collect(),
             };
-            Some((plan.warnings.clone(), Some(chosen)))
+            Some((plan.warnings.clone(), Some(Box::new(chosen))))
         })
         .flatten()
         .unwrap_or_default();

@@ -143,8 +143,8 @@ impl Derivation<'_> {
             let pull = self
                 .predict_at(beta, parking, v, approach_speed, ContactSide::Pull)
                 .and_then(|c| self.check(&c).map(|()| c));
-            match &pull {
-                Err(g) => self.note_tried(format!(
+            if let Err(g) = &pull {
+                self.note_tried(format!(
                     "β = {:.0}°, pull side: {}: {}",
                     beta.to_degrees(),
                     g.code,
@@ -152,8 +152,7 @@ impl Derivation<'_> {
                         g.reason
                             .trim_start_matches(&format!("at β = {:.0}° ", beta.to_degrees()))
                     )
-                )),
-                Ok(_) => {}
+                ));
             }
             match pull {
                 Ok(c) => return Ok(c),
