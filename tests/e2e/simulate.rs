@@ -84,8 +84,8 @@ fn accuracy_report_writes_table_csv_and_plots() {
     ]);
     assert_eq!(v["schema"], "nanopush.accuracy");
     let points = v["points"].as_array().unwrap();
-    // Ours: 3 methods x 3 tolerances x 3 problems; peers: 4 solvers x 3 tolerances x 2 problems.
-    assert_eq!(points.len(), 27 + 24);
+    // Ours: 4 methods x 3 tolerances x 3 problems; peers: 4 solvers x 3 tolerances x 2 problems.
+    assert_eq!(points.len(), 36 + 24);
     assert_eq!(v["equal_error"].as_array().unwrap().len(), 6);
     // Rodas4 on Robertson: the error falls with the tolerance.
     let rob: Vec<f64> = points
