@@ -181,13 +181,7 @@ impl<'a> Derivation<'a> {
                 // well after t*: shorter pushes, each re-parked at a fresh set point, keep it.
                 // Tried at half the travel it was lost at, while that is at least MIN_PUSH.
                 Err(why) if let Some(cap) = self.shorter_push(why.lost_after, plan.strategy.max_push_um * 1e-6) => {
-                    self.note_tried(format!(
-                        "β = {}°, {} side, pushes of at most {} µm: the dry run failed: {}",
-                        cand.beta_deg,
-                        cand.prediction.side.name(),
-                        short(plan.strategy.max_push_um),
-                        brief_with(&why)
-                    ));
+                    self.note_tried(dry_run_line(&plan, &why));
                     self.push_cap = Some((cap, why.lost_after.unwrap_or(cap)));
                     self.choices = base_choices.clone();
                     self.warnings = base_warnings.clone();
@@ -200,13 +194,7 @@ impl<'a> Derivation<'a> {
                     return Ok(plan);
                 }
                 Err(why) => {
-                    self.note_tried(format!(
-                        "β = {}°, {} side, pushes of at most {} µm: the dry run failed: {}",
-                        cand.beta_deg,
-                        cand.prediction.side.name(),
-                        short(plan.strategy.max_push_um),
-                        brief_with(&why)
-                    ));
+                    self.note_tried(dry_run_line(&plan, &why));
                     rejected.push((cand.beta_deg, why.to_string(), plan.warnings.clone()));
                     self.push_cap = None;
                     self.choices = base_choices.clone();
@@ -275,6 +263,17 @@ impl<'a> Derivation<'a> {
             field,
         })
     }
+}
+
+/// The line of what was tried for a plan whose dry run failed.
+fn dry_run_line(plan: &DerivedStrategy, why: &dry_run::DryRunFailure) -> String {
+    format!(
+        "β = {}°, {} side, pushes of at most {} µm: the dry run failed: {}",
+        plan.contact_angle_deg,
+        plan.prediction.side.name(),
+        short(plan.strategy.max_push_um),
+        brief_with(why)
+    )
 }
 
 /// [`brief`] of a dry run's failure, with what the particle did when a leg lost it.
