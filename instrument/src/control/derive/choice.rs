@@ -66,6 +66,8 @@ pub struct DerivedStrategy {
     /// What the plan tried before this strategy and why each was not taken, a line each: the
     /// angles that failed the model's checks, and those whose dry run failed.
     pub tried: Vec<String>,
+    /// The longest push was cut short because a dry run of a longer one lost the particle.
+    pub shortened: bool,
 }
 
 impl DerivedStrategy {
@@ -87,10 +89,7 @@ impl DerivedStrategy {
             crate::scene::file::ControlFile::Xyz => "xyz",
         };
         let max_push = self.strategy.max_push_um;
-        let shorter = self
-            .choices
-            .iter()
-            .any(|c| c.key == "strategy.max_push_um" && c.why.starts_with("pushes of"));
+        let shorter = self.shortened;
         let why = if hand("push.contact_angle_deg") {
             "the scene's own contact angle".to_string()
         } else if self.tried.is_empty() {

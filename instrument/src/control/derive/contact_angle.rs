@@ -124,11 +124,7 @@ impl Derivation<'_> {
                     return Err(self.refuse(f));
                 }
                 Err(f) => {
-                    self.note_tried(format!(
-                        "β = {beta_deg}°, push side: {}: {}",
-                        f.code,
-                        super::derivation::brief(f.reason.trim_start_matches(&format!("at β = {beta_deg}° ")))
-                    ));
+                    self.note_failure(beta_deg, ContactSide::Push, &f);
                     if matches!(f.code, "unreadable" | "no_resistance") {
                         unread.push((beta, parking, f.clone()));
                     }
@@ -144,15 +140,7 @@ impl Derivation<'_> {
                 .predict_at(beta, parking, v, approach_speed, ContactSide::Pull)
                 .and_then(|c| self.check(&c).map(|()| c));
             if let Err(g) = &pull {
-                self.note_tried(format!(
-                    "β = {:.0}°, pull side: {}: {}",
-                    beta.to_degrees(),
-                    g.code,
-                    super::derivation::brief(
-                        g.reason
-                            .trim_start_matches(&format!("at β = {:.0}° ", beta.to_degrees()))
-                    )
-                ));
+                self.note_failure(beta.to_degrees().round(), ContactSide::Pull, g);
             }
             match pull {
                 Ok(c) => return Ok(c),
@@ -180,6 +168,17 @@ impl Derivation<'_> {
             reason: format!("{} (and at every other contact angle tried: {tried:?}°)", f.reason),
             ..f
         }))
+    }
+
+    /// Notes an angle that failed the model's checks on `side` among what was tried.
+    fn note_failure(&mut self, beta_deg: f64, side: ContactSide, f: &Fails) {
+        let reason = f.reason.trim_start_matches(&format!("at β = {beta_deg}° ")).to_string();
+        self.note_tried(format!(
+            "β = {beta_deg}°, {} side: {}: {}",
+            side.name(),
+            f.code,
+            super::derivation::brief(&reason)
+        ));
     }
 
     fn predict_at(

@@ -78,17 +78,14 @@ pub fn dry_run_with(
         let moved = move_particle(&s, &mut afm, plan.particle, at, r, target, options)
             .map_err(|e| DryRunFailure::said(e.to_string()))?;
         judge(&moved, plan).map_err(|text| {
-            let lost = moved
-                .legs
-                .iter()
-                .find(|l| matches!(l.run.summary.failure, Some(Failure::ParticleLost { .. })));
+            let lost = moved.legs.iter().find_map(|l| match l.run.summary.failure {
+                Some(Failure::ParticleLost { travel_um }) => Some((l, travel_um * 1e-6)),
+                _ => None,
+            });
             DryRunFailure {
-                how: lost.and_then(|l| how_lost(&l.run, direction)),
+                how: lost.and_then(|(l, _)| how_lost(&l.run, direction)),
                 text,
-                lost_after: lost.and_then(|l| match l.run.summary.failure {
-                    Some(Failure::ParticleLost { travel_um }) => Some(travel_um * 1e-6),
-                    _ => None,
-                }),
+                lost_after: lost.map(|(_, travel)| travel),
             }
         })?;
         if let Some(found) = moved.after.1 {

@@ -33,6 +33,8 @@ struct Settled {
     search: f64,
     start: f64,
     max_push: f64,
+    /// The longest push was cut to what a dry run kept the particle for.
+    shortened: bool,
 }
 
 /// One setting: records its choice (or refuses the scene) from what is settled so far.
@@ -84,6 +86,7 @@ impl Derivation<'_> {
             search: 0.0,
             start: 0.0,
             max_push: 0.0,
+            shortened: false,
         };
         for setting in SETTINGS {
             setting(self, &mut s)?;
@@ -101,6 +104,7 @@ impl Derivation<'_> {
             local_scan: (s.scan, LOCAL_PIXELS),
             prediction: cand.prediction,
             tried: self.tried.clone(),
+            shortened: s.shortened,
         })
     }
 
@@ -483,6 +487,7 @@ fn max_push(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
     );
     let max_push = match d.push_cap {
         Some((cap, lost)) if cap < max_push => {
+            s.shortened = true;
             why = format!(
                 "pushes of {} µm: the dry run of a longer push lost the particle after {} µm as the reading drifted off the contact, and a fresh set point each push keeps it",
                 short(cap * 1e6),

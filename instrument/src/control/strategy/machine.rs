@@ -250,7 +250,7 @@ impl Strategy {
     /// time-out), then the phase's own step.
     pub fn tick(&mut self, r: &Reading) -> [f64; 3] {
         let sig = self.params.signal(r.volts);
-        self.guard_safety_limit(r, sig);
+        self.guard_safety_limit(r);
         self.guard_saturation(r, sig);
         self.guard_timeout(r);
         match self.phase.clone() {
@@ -259,7 +259,7 @@ impl Strategy {
             Phase::ToParkingHeight { z } => self.rise_to_parking_height(r, sig, z),
             Phase::LetGo { park_z } => self.rise_until_let_go(r, sig, park_z),
             Phase::ContactSearch { step, in_step, dwell } => {
-                self.contact_search(r, sig * self.params.contact_side.sign(), step, in_step, dwell)
+                self.contact_search(r, self.params.contact_signal(r.volts), step, in_step, dwell)
             }
             Phase::Push { from } => self.push(r, sig, from),
             Phase::Hold { ticks } => self.hold(r, ticks),
@@ -279,10 +279,9 @@ impl Strategy {
     /// A contact read on the pull side has its limit there, for the phases that touch the
     /// particle; the tip's adhesion to the substrate reads on that side too while it parks, and
     /// is ridden out by the saturation guard's rule instead.
-    fn guard_safety_limit(&mut self, r: &Reading, sig: f64) {
+    fn guard_safety_limit(&mut self, r: &Reading) {
         let p = self.params;
-        let side = p.contact_side.sign();
-        let limit = p.signal(p.safety_limit) * side;
+        let limit = p.contact_signal(p.safety_limit);
         let guarded = match p.contact_side {
             ContactSide::Push => !matches!(self.phase, Phase::Retract | Phase::BackOff { .. } | Phase::Done),
             ContactSide::Pull => matches!(
@@ -290,7 +289,7 @@ impl Strategy {
                 Phase::ContactSearch { .. } | Phase::Push { .. } | Phase::Hold { .. }
             ),
         };
-        if sig * side > limit && guarded {
+        if p.contact_signal(r.volts) > limit && guarded {
             let phase = self.phase.name();
             self.fail(
                 Failure::DeflectionLimit {
@@ -546,7 +545,7 @@ impl Strategy {
         let p = self.params;
         let d = self.task.direction;
         let travel = (r.stage[0] - from[0]) * d.0 + (r.stage[1] - from[1]) * d.1;
-        let contact = sig * p.contact_side.sign();
+        let contact = p.contact_signal(r.volts);
         let est = self.hxy.update(r.t, contact, travel);
         if self.summary.t_star.is_none() {
             self.summary.t_star = self.hxy.detector.peak.map(|(t, _)| t);
