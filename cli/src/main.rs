@@ -94,7 +94,10 @@ fn print_stdout(text: &str) -> ExitCode {
 
 /// A refusal as the JSON a `--json` caller reads on stdout (the error still goes to stderr and
 /// the exit status is 2): `{"schema", "outcome": "refused", "particle", "code", "reason",
-/// "field"}`.
+/// "field", "advice"}`, `advice` a list of the values the field names, each `{"key", "value",
+/// "checked"}` (`checked`: true when the plan passes with it, false when it and every value
+/// further that way that was tried did not, null when not checked) and `tried`, the values
+/// refused on the way with their codes.
 fn refusal_json(schema: &str, e: &anyhow::Error) -> Option<String> {
     let r = e.downcast_ref::<nanopush_instrument::control::derive::Refusal>()?;
     let v = serde_json::json!({
@@ -105,6 +108,12 @@ fn refusal_json(schema: &str, e: &anyhow::Error) -> Option<String> {
         "code": r.code,
         "reason": r.reason,
         "field": r.field,
+        "advice": r.advice.iter().map(|a| serde_json::json!({
+            "key": a.key,
+            "value": a.value,
+            "checked": a.checked,
+            "tried": a.tried.iter().map(|(v, code)| serde_json::json!({"value": v, "code": code})).collect::<Vec<_>>(),
+        })).collect::<Vec<_>>(),
     });
     serde_json::to_string_pretty(&v).ok().map(|t| t + "\n")
 }

@@ -140,6 +140,65 @@ pub struct Refusal {
     pub reason: String,
     /// The scene field(s) to change, and how.
     pub field: String,
+    /// The values named in `field`, each with whether the plan, given it, passes its checks and
+    /// its dry run ([`Advice::checked`]).
+    pub advice: Vec<Advice>,
+}
+
+/// A scene value a refusal names as a way out: a stiffer lever, a larger or smaller gain.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Advice {
+    /// The scene field: `cantilever.stiffness_n_per_m` or `sensor.gain_v_per_nm`.
+    pub key: &'static str,
+    /// The value, in the field's unit (for the gain its magnitude: the sign is the scene's).
+    pub value: f64,
+    /// `+1` when a larger value goes further the right way, `-1` when a smaller one does.
+    pub direction: f64,
+    /// The furthest value a scene allows, or that still lets the readout work, that way.
+    pub bound: f64,
+    /// The model's figure before it was checked (equal to `value` when that passed first).
+    pub estimate: f64,
+    /// `Some(true)`: the plan with this value passes its checks and dry run; `Some(false)`:
+    /// no value tried that way did ([`Advice::tried`]); `None`: not checked.
+    pub checked: Option<bool>,
+    /// Values that were tried and refused, with the refusal's code.
+    pub tried: Vec<(f64, &'static str)>,
+}
+
+impl Advice {
+    /// An unchecked way out: `key` moved to `value` (towards `bound`, `direction` ±1).
+    pub fn new(key: &'static str, value: f64, direction: f64, bound: f64) -> Advice {
+        Advice {
+            key,
+            value,
+            direction,
+            bound,
+            estimate: value,
+            checked: None,
+            tried: Vec::new(),
+        }
+    }
+
+    /// The unit of the field, for text.
+    pub fn unit(&self) -> &'static str {
+        if self.key == "cantilever.stiffness_n_per_m" {
+            "N/m"
+        } else {
+            "V/nm"
+        }
+    }
+
+    /// `scene` with this advice applied at `value`, validated as a scene file is (the gain
+    /// keeps its sign).
+    pub fn applied(&self, scene: &Scene, value: f64) -> Option<Scene> {
+        let mut file = scene.file.clone();
+        match self.key {
+            "cantilever.stiffness_n_per_m" => file.cantilever.stiffness_n_per_m = value,
+            "sensor.gain_v_per_nm" => file.sensor.gain_v_per_nm = value.copysign(file.sensor.gain_v_per_nm),
+            _ => return None,
+        }
+        Scene::from_file_with(&scene.origin, file, scene.hand_set.clone()).ok()
+    }
 }
 
 #[cfg(test)]

@@ -31,6 +31,7 @@ impl Derivation<'_> {
         if betas.is_empty() {
             return Err(self.refuse(Fails {
                 code: "dry_run",
+                advice: Vec::new(),
                 reason: "no contact angle left to try".into(),
                 field: "push.contact_angle_deg".into(),
             }));
@@ -57,6 +58,7 @@ impl Derivation<'_> {
             let result = if parking <= 0.05 * r_a {
                 Err(Fails {
                     code: "geometry",
+                    advice: Vec::new(),
                     reason: format!(
                         "at β = {beta_deg}° the parking height Rₐ − Rₜ + (Rₐ + Rₜ) sin β = {:.2} nm leaves the apex within 5 % of Rₐ of the substrate",
                         parking * 1e9
@@ -66,6 +68,7 @@ impl Derivation<'_> {
             } else if over_top < height_error && !hand {
                 Err(Fails {
                     code: "geometry",
+                    advice: Vec::new(),
                     reason: format!(
                         "at β = {beta_deg}° the tip's apex parks {:.2} nm below the particle's top, within the {:.2} nm the parking height may be off (1 nm and 4 × the substrate's roughness): the tip may pass over the particle",
                         over_top * 1e9,
@@ -94,6 +97,7 @@ impl Derivation<'_> {
                 };
                 Err(Fails {
                     code: "geometry",
+                    advice: Vec::new(),
                     reason: format!(
                         "at β = {beta_deg}° the parking height {:.2} nm is not above the {:.2} nm where the tip snaps in to the substrate: the tip would park where {cause} holds it",
                         parking * 1e9,
@@ -204,6 +208,7 @@ impl Derivation<'_> {
         let prediction = predict_with_set_fraction(params, side, SET_FRACTION, retract).map_err(|e| match e {
             SimulationError::ContactLost { .. } => Fails {
                 code: "escapes",
+                advice: Vec::new(),
                 reason: format!(
                     "at β = {:.0}° the model's push loses the particle: {e}",
                     beta.to_degrees()
@@ -212,6 +217,7 @@ impl Derivation<'_> {
             },
             _ => Fails {
                 code: "model",
+                advice: Vec::new(),
                 reason: format!("the model's push at β = {:.0}° failed: {e}", beta.to_degrees()),
                 field: crate::physics::pushing::MODEL_REFUSAL_FIELD.into(),
             },

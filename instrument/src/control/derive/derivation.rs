@@ -33,6 +33,7 @@ impl<'a> Derivation<'a> {
             .ok_or_else(|| Refusal {
                 particle: id,
                 code: "geometry",
+                advice: Vec::new(),
                 reason: format!("the scene has no particle with id {id}"),
                 field: "push.particle_id".into(),
             })?;
@@ -57,6 +58,7 @@ impl<'a> Derivation<'a> {
         Refusal {
             particle: self.part.id,
             code: fails.code,
+            advice: fails.advice,
             reason: fails.reason,
             field: fails.field,
         }
@@ -140,6 +142,7 @@ impl<'a> Derivation<'a> {
                     .unwrap_or("strategy");
                 return Err(self.refuse(Fails {
                     code: "geometry",
+                    advice: Vec::new(),
                     reason: text.clone(),
                     field: field.to_string(),
                 }));
@@ -235,6 +238,7 @@ impl<'a> Derivation<'a> {
                 .map_or("physics".to_string(), |k| format!("physics.{k} = \"quasi_static\""));
             return Err(self.refuse(Fails {
                 code: "model",
+                advice: Vec::new(),
                 reason: text,
                 field,
             }));
@@ -257,6 +261,7 @@ impl<'a> Derivation<'a> {
         };
         self.refuse(Fails {
             code: "dry_run",
+            advice: Vec::new(),
             reason: format!(
                 "the strategy passes the model's checks but its dry run on the model fails at every such angle ({angles:?}°); at β = {beta}°: {why}{hand}"
             ),

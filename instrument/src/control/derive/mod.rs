@@ -62,6 +62,7 @@
 //! change and the value it would need ([`Refusal`]).
 
 mod adhesion_field;
+mod advice;
 mod choice;
 mod contact_angle;
 mod derivation;
@@ -73,7 +74,7 @@ mod settings;
 #[cfg(test)]
 mod tests;
 
-pub use choice::{Choice, DerivedStrategy, Refusal, short};
+pub use choice::{Advice, Choice, DerivedStrategy, Refusal, short};
 
 use crate::control::estimator::PushPrediction;
 use crate::control::strategy::BACK_OFF;
@@ -139,11 +140,17 @@ struct Candidate {
 #[derive(Clone)]
 struct Fails {
     code: &'static str,
+    /// The values `field` names, unchecked.
+    advice: Vec<Advice>,
     reason: String,
     field: String,
 }
 
 /// Derives the strategy for pushing particle `id` of `scene` to within `tolerance` (m).
+/// A refusal that names values has each checked ([`advice::check`]): the plan is derived again
+/// with the value, and its field says which value passes the dry run.
 pub fn derive(scene: &Scene, id: u32, tolerance: f64) -> Result<DerivedStrategy, Refusal> {
-    Derivation::new(scene, id, tolerance)?.run()
+    Derivation::new(scene, id, tolerance)?
+        .run()
+        .map_err(|r| advice::check(scene, id, tolerance, r))
 }

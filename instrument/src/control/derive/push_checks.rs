@@ -3,7 +3,9 @@
 //! names.
 
 use super::adhesion_field::{Pair, field as adhesion_field};
-use super::{Candidate, Derivation, Fails, MAX_START, MAX_STIFFNESS, PEAK_SPARE, SET_FRACTION, TOUCH_PRESS, short};
+use super::{
+    Advice, Candidate, Derivation, Fails, MAX_START, MAX_STIFFNESS, PEAK_SPARE, SET_FRACTION, TOUCH_PRESS, short,
+};
 use crate::control::estimator::PushPrediction;
 
 impl Derivation<'_> {
@@ -18,6 +20,7 @@ impl Derivation<'_> {
         if p.peak_deflection.abs() < 1e-13 && p.settled_deflection.abs() < 1e-13 {
             return Err(Fails {
                 code: "no_resistance",
+                advice: Vec::new(),
                 reason: format!(
                     "at β = {}° the particle offers the tip no resistance: it moves without bending the lever (ζ_z stays below 0.1 pm), so no reading can find or follow it",
                     c.beta_deg
@@ -28,6 +31,7 @@ impl Derivation<'_> {
         if p.peak_deflection <= 0.0 {
             return Err(Fails {
                 code: "unreadable",
+                advice: Vec::new(),
                 reason: format!(
                     "at β = {}° the push bends the lever away from the {} side (peak ζ_z on that side {:.3} nm)",
                     c.beta_deg,
@@ -43,8 +47,10 @@ impl Derivation<'_> {
         let peak_v = p.peak_deflection * ro.gain;
         if PEAK_SPARE * peak_v > 0.9 * room {
             let need_k = k * PEAK_SPARE * peak_v / (0.9 * room);
+            let (field, advice) = self.deflection_limit_field(p, separates, need_k, peak_v);
             return Err(Fails {
                 code: "deflection_limit",
+                advice,
                 reason: format!(
                     "at β = {}° the lever's deflection limit is reached before the particle shears: the stick-phase peak {}{:.2} nm reads {:.2} V, and twice that is beyond 90 % of the readout's {:.2} V on the {} side",
                     c.beta_deg,
@@ -63,12 +69,13 @@ impl Derivation<'_> {
                 // times more). A figure outside what a scene allows,
                 // or a gain too small for the readout to see the touch or the set point, is
                 // said to be no way out rather than offered.
-                field: self.deflection_limit_field(p, separates, need_k, peak_v),
+                field,
             });
         }
         if !separates {
             return Err(Fails {
                 code: "no_separation",
+                advice: Vec::new(),
                 reason: format!(
                     "at β = {}° the particle does not shear loose within {:.0} nm of push (ζ_z still rising at {:.2} nm, {:.2} nN on the lever)",
                     c.beta_deg,
@@ -81,8 +88,10 @@ impl Derivation<'_> {
         }
         let floor = ro.sigma + ro.pert;
         if SET_FRACTION * peak_v < 10.0 * floor {
+            let gain = gain_field(gain_nm * 10.0 * floor / (SET_FRACTION * peak_v), true);
             return Err(Fails {
                 code: "unreadable",
+                advice: gain.1,
                 reason: format!(
                     "at β = {}° the set point, {:.0} % of the peak {:.4} nm, reads {:.1} mV: under 10 × the noise and perturbation ({:.1} mV)",
                     c.beta_deg,
@@ -91,14 +100,16 @@ impl Derivation<'_> {
                     SET_FRACTION * peak_v * 1e3,
                     floor * 1e3
                 ),
-                field: gain_field(gain_nm * 10.0 * floor / (SET_FRACTION * peak_v), true),
+                field: gain.0,
             });
         }
         let drop_v = (p.peak_deflection - p.settled_deflection) * ro.gain;
         let need_drop = 12.0 * ro.sigma + 2.0 * ro.pert;
         if drop_v < need_drop {
+            let gain = gain_field(gain_nm * need_drop / drop_v.max(1e-12), true);
             return Err(Fails {
                 code: "unreadable",
+                advice: gain.1,
                 reason: format!(
                     "at β = {}° the drop at t* ({:.3} nm, {:.1} mV) is under 12σ + 2p = {:.1} mV: the separation cannot be told from noise",
                     c.beta_deg,
@@ -106,26 +117,29 @@ impl Derivation<'_> {
                     drop_v * 1e3,
                     need_drop * 1e3
                 ),
-                field: gain_field(gain_nm * need_drop / drop_v.max(1e-12), true),
+                field: gain.0,
             });
         }
         let settled_v = p.settled_deflection * ro.gain;
         let need_settled = 8.0 * ro.sigma + 2.0 * ro.pert;
         if settled_v < need_settled {
+            let gain = gain_field(gain_nm * need_settled / settled_v.max(1e-12), false);
             return Err(Fails {
                 code: "unreadable",
+                advice: gain.1,
                 reason: format!(
                     "at β = {}° the settled reading after t* ({:.1} mV) is under 8σ + 2p = {:.1} mV: the push could not be told from a lost particle",
                     c.beta_deg,
                     settled_v * 1e3,
                     need_settled * 1e3
                 ),
-                field: gain_field(gain_nm * need_settled / settled_v.max(1e-12), false),
+                field: gain.0,
             });
         }
         if p.release_lift.is_none() {
             return Err(Fails {
                 code: "stuck",
+                advice: Vec::new(),
                 reason: format!(
                     "at β = {}° the tip still holds the particle after a lift to {} µm: the adhesion outlasts any retraction",
                     c.beta_deg,
@@ -144,7 +158,13 @@ impl Derivation<'_> {
     /// [`MAX_STIFFNESS`]) or a smaller gain (no smaller than the readout needs to see the touch
     /// of the substrate, [`TOUCH_PRESS`], and the set point, 10 × the noise), each figure "at
     /// the least" when the model's peak was still rising.
-    fn deflection_limit_field(&self, p: &PushPrediction, separates: bool, need_k: f64, peak_v: f64) -> String {
+    fn deflection_limit_field(
+        &self,
+        p: &PushPrediction,
+        separates: bool,
+        need_k: f64,
+        peak_v: f64,
+    ) -> (String, Vec<Advice>) {
         let ro = self.readout;
         let gain_nm = ro.gain * 1e-9;
         let (ge, le, least, least_gain) = if separates {
@@ -175,12 +195,26 @@ impl Derivation<'_> {
             "{smaller}, but below {} V/nm the readout does not see the touch of the substrate or the set point",
             short(gain_floor)
         );
+        let k_advice = Advice::new("cantilever.stiffness_n_per_m", need_k, 1.0, MAX_STIFFNESS);
+        let gain_advice = Advice::new("sensor.gain_v_per_nm", gain_max, -1.0, gain_floor);
         match (k_helps, gain_helps) {
-            (true, true) => format!("{stiffer}{least}, or {smaller}{least_gain}"),
-            (true, false) => format!("{stiffer}{least} (a smaller gain cannot help: {gain_no})"),
-            (false, true) => format!("{smaller}{least} (a stiffer lever cannot help: {k_no})"),
-            (false, false) => format!(
-                "the particle, its friction or the contact angle: neither a stiffer lever ({k_no}) nor a smaller gain ({gain_no}) can help"
+            (true, true) => (
+                format!("{stiffer}{least}, or {smaller}{least_gain}"),
+                vec![k_advice, gain_advice],
+            ),
+            (true, false) => (
+                format!("{stiffer}{least} (a smaller gain cannot help: {gain_no})"),
+                vec![k_advice],
+            ),
+            (false, true) => (
+                format!("{smaller}{least} (a stiffer lever cannot help: {k_no})"),
+                vec![gain_advice],
+            ),
+            (false, false) => (
+                format!(
+                    "the particle, its friction or the contact angle: neither a stiffer lever ({k_no}) nor a smaller gain ({gain_no}) can help"
+                ),
+                Vec::new(),
             ),
         }
     }
@@ -188,7 +222,7 @@ impl Derivation<'_> {
 
 /// The field an `unreadable` refusal names: the gain the reading needs (V/nm), when a scene
 /// allows it ([`crate::scene::GAIN_V_PER_NM`]), and a quieter readout when `noise_helps`.
-fn gain_field(need: f64, noise_helps: bool) -> String {
+fn gain_field(need: f64, noise_helps: bool) -> (String, Vec<Advice>) {
     let max = crate::scene::GAIN_V_PER_NM.hi();
     let quieter = if noise_helps {
         ", or a lower sensor.noise_rms_mv"
@@ -196,12 +230,16 @@ fn gain_field(need: f64, noise_helps: bool) -> String {
         ""
     };
     if need <= max {
-        format!("sensor.gain_v_per_nm: |gain| ≥ {} V/nm{quieter}", short(need))
+        (
+            format!("sensor.gain_v_per_nm: |gain| ≥ {} V/nm{quieter}", short(need)),
+            vec![Advice::new("sensor.gain_v_per_nm", need, 1.0, max)],
+        )
     } else {
-        format!(
+        let text = format!(
             "the particle, its friction or the contact angle: the reading would need |sensor.gain_v_per_nm| ≥ {} V/nm, beyond the {} V/nm a scene allows{quieter}",
             short(need),
             short(max)
-        )
+        );
+        (text, Vec::new())
     }
 }

@@ -2,7 +2,9 @@
 //! tip's pull-off from the substrate after auto-parking, and the stage.
 
 use super::adhesion_field::{Pair, field as adhesion_field};
-use super::{Choice, Derivation, Fails, MAX_START, Refusal, STAGE_SETTLE, STAGE_STIFFNESS_RATIO, TOUCH_PRESS, short};
+use super::{
+    Advice, Choice, Derivation, Fails, MAX_START, Refusal, STAGE_SETTLE, STAGE_STIFFNESS_RATIO, TOUCH_PRESS, short,
+};
 use crate::control::strategy::pull_off::{PULL_OFF_MARGIN, PULL_OFF_SLACK, pull_off_rise};
 
 impl Derivation<'_> {
@@ -34,6 +36,7 @@ impl Derivation<'_> {
         if thr >= 0.5 * ro.room {
             return Err(self.refuse(Fails {
                 code: "unreadable",
+                advice: Vec::new(),
                 reason: format!(
                     "the substrate threshold {:.0} mV (10σ of the noise) is over half the readout's room {:.2} V on the push side",
                     thr * 1e3,
@@ -44,18 +47,22 @@ impl Derivation<'_> {
         }
         let press = thr / ro.gain;
         if press > TOUCH_PRESS {
+            let need = thr / TOUCH_PRESS * 1e-9;
             return Err(self.refuse(Fails {
                 code: "unreadable",
+                advice: vec![Advice::new(
+                    "sensor.gain_v_per_nm",
+                    need,
+                    1.0,
+                    crate::scene::GAIN_V_PER_NM.hi(),
+                )],
                 reason: format!(
                     "the tip would press {:.1} nm into the substrate before the reading shows it ({:.0} mV at {} V/nm)",
                     press * 1e9,
                     thr * 1e3,
                     short(ro.gain * 1e-9)
                 ),
-                field: format!(
-                    "sensor.gain_v_per_nm: |gain| ≥ {} V/nm",
-                    short(thr / TOUCH_PRESS * 1e-9)
-                ),
+                field: format!("sensor.gain_v_per_nm: |gain| ≥ {} V/nm", short(need)),
             }));
         }
         Ok(())
@@ -79,8 +86,15 @@ impl Derivation<'_> {
             // 1.5 (F/k + r) + slack ≤ MAX: F/k ≤ (MAX − slack)/1.5 − r.
             let rest = ts.release_distance() - bend;
             let room = (MAX_START - PULL_OFF_SLACK) / PULL_OFF_MARGIN - rest;
+            let need_k = adhesion / room.max(1e-12);
             return Err(self.refuse(Fails {
                 code: "adhesion",
+                advice: vec![Advice::new(
+                    "cantilever.stiffness_n_per_m",
+                    need_k,
+                    1.0,
+                    crate::scene::STIFFNESS_N_PER_M.hi(),
+                )],
                 reason: format!(
                     "the tip's adhesion to the substrate, {:.2} nN, holds it until the {} N/m lever has bent {:.2} µm: letting go after auto-parking needs a rise of up to {:.1} µm (1.5 (F_ad/k_c + L_t + δ_b + a₀) + 10 nm), more than the {} µm the strategy may lift",
                     adhesion * 1e9,
@@ -91,7 +105,7 @@ impl Derivation<'_> {
                 ),
                 field: format!(
                     "cantilever.stiffness_n_per_m: k_c ≥ {} N/m, or {}",
-                    short(adhesion / room.max(1e-12)),
+                    short(need_k),
                     adhesion_field(Pair::TipSubstrate, &ts.adhesion_sources())
                 ),
             }));
@@ -149,6 +163,7 @@ impl Derivation<'_> {
         if settle > STAGE_SETTLE {
             return Err(self.refuse(Fails {
                 code: "stage",
+                advice: Vec::new(),
                 reason: format!(
                     "the stage rings for Q/(π f_y) = {} s after every step and stop, more than {} s",
                     short(settle),

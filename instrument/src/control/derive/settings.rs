@@ -405,6 +405,7 @@ fn start_height(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
     if start > MAX_START {
         return Err(d.refuse(Fails {
             code: "too_tall",
+            advice: Vec::new(),
             reason: format!(
                 "the retraction needs a start height of {:.1} µm (the tallest particle {:.1} µm, the lift to let go {:.2} µm), above the {} µm allowed",
                 start * 1e6,
