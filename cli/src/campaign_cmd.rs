@@ -4,6 +4,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
+use nanopush_instrument::control::derive::short;
 use nanopush_study::random_scenes::{RandomCase, Ranges, random_scene, run_random, scene_text, shard_seeds};
 use rayon::prelude::*;
 
@@ -133,7 +134,7 @@ fn write_scenes(out: &Path, seeds: &[u64], ranges: Ranges, tolerance_nm: f64) ->
 }
 
 /// The header of `random.csv`.
-const HEADER: &str = "seed,outcome,refusal,true_error_nm,measured_error_nm,attempts,distance_um,simulated_s,wall_s,violations,reason,scene\n";
+const HEADER: &str = "seed,outcome,refusal,true_error_nm,measured_error_nm,attempts,distance_um,simulated_s,wall_s,violations,advice,advice_outcome,reason,scene\n";
 
 /// Pushes every seed's scene (in parallel), appending each row to `csv_path` as it is done,
 /// then rewrites the file in seed order. Returns the cases and the wall time of the pushes (s).
@@ -188,7 +189,8 @@ fn json(d: &Done) -> anyhow::Result<String> {
         "schema": "nanopush.random_campaign", "ranges": d.ranges.name(), "seeds": d.seeds, "first_seed": a.seed, "shard": [d.shard.0, d.shard.1],
         "tolerance": a.tolerance_nm * 1e-9, "accepted": t.accepted, "ok": t.ok, "refused": t.refused,
         "outcomes": t.outcomes, "refusals": t.refusals, "unsound": t.unsound,
-        "worst_ok_true_error": t.worst_ok, "median_wall_time": t.median_wall, "max_wall_time": t.max_wall,
+        "worst_ok_true_error": t.worst_ok, "median_wall_time": t.median_wall, "p95_wall_time": t.p95_wall, "max_wall_time": t.max_wall,
+        "advised": t.advised, "advice_ok": t.advice_ok, "advice_outcomes": t.advice_outcomes, "advice_failed": t.advice_failed,
         "wall_time": d.wall_time,
     });
     Ok(serde_json::to_string_pretty(&v)? + "\n")
@@ -242,7 +244,7 @@ fn write_summary(s: &mut String, d: &Done) -> anyhow::Result<()> {
     writeln!(s, "  refused {} by reason: {}", t.refused, counts_text(&t.refusals))?;
     writeln!(
         s,
-        "  worst true error of an ok {}; unsound {}; wall time per scene median {:.2} s, max {:.2} s",
+        "  worst true error of an ok {}; unsound {}; wall time per scene median {:.2} s, p95 {:.2} s, max {:.2} s",
         if t.ok > 0 {
             format!("{:.2} nm", t.worst_ok * 1e9)
         } else {
@@ -250,7 +252,17 @@ fn write_summary(s: &mut String, d: &Done) -> anyhow::Result<()> {
         },
         t.unsound,
         t.median_wall,
+        t.p95_wall,
         t.max_wall
+    )?;
+    writeln!(
+        s,
+        "  refusals naming a value the plan checked {}: with it applied, ok {} ({:.0} %), outcomes {}; refusals whose values all failed the check {}",
+        t.advised,
+        t.advice_ok,
+        pct(t.advice_ok, t.advised),
+        counts_text(&t.advice_outcomes),
+        t.advice_failed
     )?;
     Ok(())
 }
@@ -262,6 +274,21 @@ fn write_cases(s: &mut String, cases: &[RandomCase]) -> anyhow::Result<()> {
             s,
             "  UNSOUND seed {}: {} {:?}",
             c.seed, c.judged.outcome, c.judged.violations
+        )?;
+    }
+    for (c, a) in cases
+        .iter()
+        .filter_map(|c| c.advice.as_ref().map(|a| (c, a)))
+        .filter(|(_, a)| !a.judged.violations.is_empty())
+    {
+        writeln!(
+            s,
+            "  UNSOUND seed {} with {} = {}: {} {:?}",
+            c.seed,
+            a.key,
+            short(a.value),
+            a.judged.outcome,
+            a.judged.violations
         )?;
     }
     for c in cases
@@ -284,7 +311,7 @@ fn write_cases(s: &mut String, cases: &[RandomCase]) -> anyhow::Result<()> {
 fn csv_row(c: &RandomCase) -> String {
     let j = &c.judged;
     format!(
-        "{},{},{},{},{},{},{},{:.3},{:.3},{},{},{}\n",
+        "{},{},{},{},{},{},{},{:.3},{:.3},{},{},{},{},{}\n",
         c.seed,
         j.outcome,
         j.refusal.as_deref().unwrap_or(""),
@@ -295,6 +322,10 @@ fn csv_row(c: &RandomCase) -> String {
         j.simulated,
         j.wall_time,
         j.violations.join("; ").replace(',', ";"),
+        c.advice
+            .as_ref()
+            .map_or(String::new(), |a| format!("{} = {}", a.key, short(a.value))),
+        c.advice.as_ref().map_or(String::new(), |a| a.judged.outcome.clone()),
         j.reason.replace([',', '\n'], ";"),
         c.summary.replace(',', ";")
     )
@@ -317,7 +348,16 @@ struct RandomTable {
     unsound: usize,
     worst_ok: f64,
     median_wall: f64,
+    p95_wall: f64,
     max_wall: f64,
+    /// Refusals that name a value the plan checked.
+    advised: usize,
+    /// Those whose move, with the value applied, ended `ok`.
+    advice_ok: usize,
+    /// Outcomes of the moves with the values applied.
+    advice_outcomes: Vec<(String, usize)>,
+    /// Refusals that named values none of which passed the plan's check.
+    advice_failed: usize,
 }
 
 impl RandomTable {
@@ -334,6 +374,7 @@ impl RandomTable {
             v
         };
         let accepted: Vec<_> = cases.iter().filter(|c| c.judged.refusal.is_none()).collect();
+        let advised: Vec<_> = cases.iter().filter_map(|c| c.advice.as_ref()).collect();
         let mut walls: Vec<f64> = cases.iter().map(|c| c.judged.wall_time).collect();
         walls.sort_by(f64::total_cmp);
         RandomTable {
@@ -342,13 +383,35 @@ impl RandomTable {
             refused: cases.len() - accepted.len(),
             outcomes: count(accepted.iter().map(|c| c.judged.outcome.clone()).collect()),
             refusals: count(cases.iter().filter_map(|c| c.judged.refusal.clone()).collect()),
-            unsound: cases.iter().filter(|c| !c.judged.violations.is_empty()).count(),
+            unsound: cases
+                .iter()
+                .filter(|c| {
+                    !c.judged.violations.is_empty()
+                        || c.advice.as_ref().is_some_and(|a| !a.judged.violations.is_empty())
+                })
+                .count(),
             worst_ok: accepted
                 .iter()
                 .filter(|c| c.judged.outcome == "ok")
                 .filter_map(|c| c.judged.true_error)
                 .fold(0.0, f64::max),
             median_wall: walls.get(walls.len() / 2).copied().unwrap_or(0.0),
+            p95_wall: walls.get(walls.len() * 95 / 100).copied().unwrap_or(0.0),
+            advised: advised.len(),
+            advice_ok: advised.iter().filter(|a| a.judged.outcome == "ok").count(),
+            advice_outcomes: count(
+                advised
+                    .iter()
+                    .map(|a| match &a.judged.refusal {
+                        Some(code) => format!("refused {code}"),
+                        None => a.judged.outcome.clone(),
+                    })
+                    .collect(),
+            ),
+            advice_failed: cases
+                .iter()
+                .filter(|c| c.advice.is_none() && c.judged.advice.iter().any(|a| a.checked == Some(false)))
+                .count(),
             max_wall: walls.last().copied().unwrap_or(0.0),
         }
     }

@@ -48,6 +48,8 @@ pub struct Judged {
     pub simulated: f64,
     /// Wall time (s).
     pub wall_time: f64,
+    /// The values a refusal names as a way out, each checked or not by the plan.
+    pub advice: Vec<derive::Advice>,
 }
 
 impl Judged {
@@ -68,6 +70,7 @@ impl Judged {
             trace_bytes: 0,
             simulated: 0.0,
             wall_time: 0.0,
+            advice: Vec::new(),
         }
     }
 }
@@ -98,7 +101,11 @@ fn judge_inner(scene: &Scene, distance: f64, direction: (f64, f64), tolerance: f
     let p = scene.pushed_particle();
     let plan = match derive::derive(scene, p.id, tolerance) {
         Ok(plan) => plan,
-        Err(e) => return Judged::refused(e.code, e.to_string(), distance),
+        Err(e) => {
+            let mut j = Judged::refused(e.code, e.to_string(), distance);
+            j.advice = e.advice;
+            return j;
+        }
     };
     let mut scene = scene.clone();
     plan.apply(&mut scene);
@@ -167,6 +174,7 @@ fn judge_inner(scene: &Scene, distance: f64, direction: (f64, f64), tolerance: f
             .sum(),
         simulated: afm.time(),
         wall_time: 0.0,
+        advice: Vec::new(),
     };
     j.reason = match &moved.verdict {
         Verdict::Ok { .. } => String::new(),

@@ -265,6 +265,38 @@ pub struct RandomCase {
     pub summary: String,
     /// What happened.
     pub judged: Judged,
+    /// When the plan refused and named a value it checked: that value applied to the scene,
+    /// and the same move planned, pushed and judged again.
+    pub advice: Option<AdviceRun>,
+}
+
+/// A refusal's checked value, applied: does the move then end `ok`?
+#[derive(Debug, Clone)]
+pub struct AdviceRun {
+    /// The scene field changed.
+    pub key: &'static str,
+    /// Its new value (the field's unit; the gain's magnitude).
+    pub value: f64,
+    /// The move with it.
+    pub judged: Judged,
+}
+
+/// The first value `judged`'s refusal names that the plan checked, applied to `scene`, and the
+/// same move pushed and judged again.
+fn apply_advice(
+    scene: &Scene,
+    judged: &Judged,
+    distance: f64,
+    direction: (f64, f64),
+    tolerance: f64,
+) -> Option<AdviceRun> {
+    let a = judged.advice.iter().find(|a| a.checked == Some(true))?;
+    let applied = a.applied(scene, a.value)?;
+    Some(AdviceRun {
+        key: a.key,
+        value: a.value,
+        judged: push_judged(&applied, distance, direction, tolerance),
+    })
 }
 
 /// Plans, pushes and judges the random scene of `seed` from `ranges` with `tolerance` (m).
@@ -287,7 +319,13 @@ pub fn run_random(seed: u64, ranges: Ranges, tolerance: f64) -> RandomCase {
         r.distance * 1e6
     );
     let judged = push_judged(&r.scene, r.distance, r.direction, tolerance);
-    RandomCase { seed, summary, judged }
+    let advice = apply_advice(&r.scene, &judged, r.distance, r.direction, tolerance);
+    RandomCase {
+        seed,
+        summary,
+        judged,
+        advice,
+    }
 }
 
 /// The scene of `r` as a scene file that plans as the campaign planned it at `tolerance_nm`
@@ -583,5 +621,30 @@ mod tests {
             e.reason.contains("particle_lost") && e.reason.contains("the tip climbed over it"),
             "{e}"
         );
+    }
+
+    /// Lab seed 18 bends its 0.159 N/m lever past the readout: the refusal names 5.076 N/m, which
+    /// the plan checked by deriving itself again; applied, the same move ends `ok`.
+    #[test]
+    fn a_refusals_checked_stiffness_applied_pushes_ok() {
+        let tolerance = nanopush_instrument::control::derive::DEFAULT_TOLERANCE;
+        let c = run_random(18, Ranges::Lab, tolerance);
+        assert_eq!(
+            c.judged.refusal.as_deref(),
+            Some("deflection_limit"),
+            "{}",
+            c.judged.reason
+        );
+        assert!(
+            c.judged
+                .reason
+                .contains("change cantilever.stiffness_n_per_m = 5.076 N/m (checked: with it the plan passes"),
+            "{}",
+            c.judged.reason
+        );
+        let a = c.advice.expect("a checked value applied");
+        assert_eq!((a.key, a.value), ("cantilever.stiffness_n_per_m", 5.076));
+        assert_eq!(a.judged.outcome, "ok", "{}", a.judged.reason);
+        assert!(a.judged.true_error.expect("pushed") <= tolerance);
     }
 }
