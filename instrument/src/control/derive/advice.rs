@@ -10,7 +10,7 @@ use crate::scene::Scene;
 
 /// The most plans derived to check one refusal's values: each is a whole derivation with its
 /// dry runs (0.3-3 s on the lab campaign's scenes).
-const MAX_CHECKS: usize = 4;
+const MAX_CHECKS: usize = 3;
 
 /// Powers of the ladder's step: the model's figure, one step past it, four steps past it.
 const LADDER: [f64; 3] = [0.0, 1.0, 4.0];
