@@ -156,7 +156,9 @@ pub enum IntegrateError {
     /// saddle-node, where the solution `y_a(t)` runs into `t_f` with a square-root law and has no
     /// continuation past it (the step size collapses approaching it). Located as an event: `t`
     /// is the last accepted time, nearer to `t_f` than the last accepted step.
-    #[error("the algebraic rows' balance ends at a fold at t = {t:.6e} s: their Jacobian turns singular and no solution continues")]
+    #[error(
+        "the algebraic rows' balance ends at a fold at t = {t:.6e} s: their Jacobian turns singular and no solution continues"
+    )]
     Fold {
         /// Time reached.
         t: f64,

@@ -321,7 +321,12 @@ fn a_fold_of_the_algebraic_rows_is_located() {
             }
             other => panic!("{}: expected the fold, got {other:?}", m.name()),
         }
-        assert!((y[1] - (1.0 - t).max(0.0).sqrt()).abs() < 1e-5, "{}: y₂ = {}", m.name(), y[1]);
+        assert!(
+            (y[1] - (1.0 - t).max(0.0).sqrt()).abs() < 1e-5,
+            "{}: y₂ = {}",
+            m.name(),
+            y[1]
+        );
         assert!((y[0] - (-t).exp()).abs() < 1e-7, "{}: y₁ = {}", m.name(), y[0]);
     }
 }
