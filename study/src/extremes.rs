@@ -267,10 +267,56 @@ pub fn push_lab_seed(
     run_push(PushModel::new(p), Method::Rodas4, Options::with_rtol(1e-6), 0.15, 1e-3)
 }
 
+/// Validator scenes of the random campaign (`random_scenes::random_scene(seed,
+/// Ranges::Validator)`) whose model push at β = 30° once ended in a collapsed step (1e-21 s):
+/// in 21, 79 and 82 the quasi-static balance folds and the push loses its particle (79: the tip
+/// pulls off its stretched JKR contact at 5.50 ms; 21 and 82: the particle, stuck at both
+/// contacts, rolls out from under the tip at 69.7 ms and 81.8 ms); in 107 the tip rolls over the
+/// particle and keeps it, past φ = −π at 0.41 s, for the whole 0.5 s.
+pub const FOLDING_VALIDATOR_SEEDS: [(u64, Option<f64>); 4] = [
+    (21, Some(69.731e-3)),
+    (79, Some(5.5044e-3)),
+    (82, Some(81.811e-3)),
+    (107, None),
+];
+
+/// Pushes a validator seed's scene at β = 30° and 1 µm/s for 0.5 s (Rodas4, rtol 1e-6, as the
+/// plan's prediction): what [`FOLDING_VALIDATOR_SEEDS`] are checked with.
+pub fn push_validator_seed(
+    seed: u64,
+) -> Result<nanopush_instrument::physics::pushing::trace::PushRun, nanopush_instrument::physics::pushing::SimulationError>
+{
+    let scene = crate::random_scenes::random_scene(seed, crate::random_scenes::Ranges::Validator).scene;
+    let mut p = scene.push_params();
+    p.beta = 30f64.to_radians();
+    p.speed = 1e-6;
+    run_push(PushModel::new(p), Method::Rodas4, Options::with_rtol(1e-6), 0.5, 1e-3)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use nanopush_instrument::physics::pushing::SimulationError;
+
+    /// Each of [`FOLDING_VALIDATOR_SEEDS`] ends as the model says, never with the integrator
+    /// failing: the tip loses the particle at the fold of its balance (to 1 µs), or the push runs
+    /// through with the particle still in the tip's contact.
+    #[test]
+    fn the_folding_validator_scenes_end_as_the_model_says_without_a_solver_failure() {
+        for (seed, fold) in FOLDING_VALIDATOR_SEEDS {
+            match (push_validator_seed(seed), fold) {
+                (Err(SimulationError::ContactLost { t }), Some(t_fold)) => {
+                    assert!((t - t_fold).abs() < 1e-6, "seed {seed}: lost at {t:e} s");
+                }
+                (Ok(run), None) => {
+                    let last = run.trace.last().unwrap();
+                    assert!((last.t - 0.5).abs() < 1e-12, "seed {seed}: ran to {} s", last.t);
+                    assert!(last.normal_ta != 0.0, "seed {seed}: the tip let go");
+                }
+                (other, _) => panic!("seed {seed}: expected {fold:?}, got {:?}", other.err()),
+            }
+        }
+    }
 
     /// Each of [`ESCAPING_LAB_SEEDS`] ends with the tip losing its particle, where the model
     /// says it does (seed 1 at 118 ms, the others within 1 µs), and never with the integrator

@@ -7,6 +7,7 @@
 
 use std::time::Instant;
 
+use super::linalg::Lu;
 use super::methods::{Method, StepFailure, Work};
 use super::problem::{Events, IntegrateError, MAX_DIM, Options, Outcome, Problem, Stats};
 
@@ -29,6 +30,10 @@ pub struct Integrator {
     /// ended at its end time. A call that starts there skips re-evaluating them.
     cached_at: Option<(f64, [f64; MAX_DIM])>,
     g_next: [f64; MAX_EVENTS],
+    /// `(t, det ∂f_a/∂y_a)` at the ends of the last two accepted steps of one problem (oldest
+    /// first; `NaN` times where there is none yet): what locates a fold of the algebraic rows
+    /// ([`Self::fold_time`]).
+    balance: [(f64, f64); 2],
 }
 
 impl Integrator {
@@ -44,6 +49,7 @@ impl Integrator {
             work: Work::new(method),
             cached_at: None,
             g_next: [f64::NAN; MAX_EVENTS],
+            balance: [(f64::NAN, f64::NAN); 2],
         }
     }
 
@@ -55,6 +61,7 @@ impl Integrator {
         self.h_old = 0.0;
         self.err_old = 1.0;
         self.cached_at = None;
+        self.balance = [(f64::NAN, f64::NAN); 2];
     }
 
     /// Forgets the derivatives kept from the last call but keeps the step size: for a problem
@@ -62,6 +69,7 @@ impl Integrator {
     /// control segment), where the step-size history is still a good guess.
     pub fn forget_derivatives(&mut self) {
         self.cached_at = None;
+        self.balance = [(f64::NAN, f64::NAN); 2];
     }
 
     /// The method (fixed at construction: its workspace is built for it).
@@ -82,6 +90,62 @@ impl Integrator {
             sum += (w.err[i] / sc).powi(2);
         }
         (sum / n as f64).sqrt()
+    }
+
+    /// Records `det ∂f_a/∂y_a` (the algebraic rows' block of the Jacobian just evaluated at the
+    /// end of an accepted step, `work.jac_next`) at `t`, when the problem has algebraic rows.
+    fn note_balance(&mut self, t: f64) {
+        let w = &self.work;
+        let n = w.n;
+        let mut alg = [0usize; MAX_DIM];
+        let mut m = 0;
+        for i in 0..n {
+            if w.mass[i] == 0.0 {
+                alg[m] = i;
+                m += 1;
+            }
+        }
+        if m == 0 {
+            return;
+        }
+        let mut a = [0.0; MAX_DIM * MAX_DIM];
+        for (c, &j) in alg[..m].iter().enumerate() {
+            for (r, &i) in alg[..m].iter().enumerate() {
+                a[c * m + r] = w.jac_next[j * n + i];
+            }
+        }
+        let mut lu = Lu::default();
+        lu.factor(m, &a);
+        self.balance = [self.balance[1], (t, lu.determinant())];
+    }
+
+    /// Whether the algebraic rows' balance, followed up to `t` (the last accepted time), has
+    /// reached a fold there: `det ∂f_a/∂y_a` changed sign over the last accepted step (a real
+    /// eigenvalue crossed zero: the balance lost its stability, and the step landed past the
+    /// fold), or [`Self::fold_time`] is nearer than the last accepted step (or within
+    /// `event_tol`): the next step at the size the solution allowed so far would cross it. What
+    /// the driver asks when no step from `t` is accepted, to tell the end of the solution from a
+    /// failure to follow it.
+    fn at_fold(&self, t: f64) -> bool {
+        let [(t0, d0), (t1, d1)] = self.balance;
+        let crossed = t1 == t && t0 < t1 && d0 * d1 < 0.0;
+        let reach = self.opts.event_tol.max(t1 - t0);
+        crossed || self.fold_time(t).is_some_and(|tf| tf - t <= reach)
+    }
+
+    /// Where the algebraic rows' balance, followed up to `t` (the last accepted time), ends at a
+    /// fold, if it is heading for one: `None` unless the last two accepted steps ended at `t` and
+    /// before it with `det ∂f_a/∂y_a` of one sign and shrinking.
+    ///
+    /// At a saddle-node fold of `f_a(y_a, t) = 0` one eigenvalue of `∂f_a/∂y_a` goes to zero as
+    /// `√(t_f − t)` and the others stay finite: `det²` is linear in `t` near `t_f`, and its line
+    /// through the last two points crosses zero at `t_f`. The solution cannot be followed to
+    /// `t_f` itself (its rate grows as `1/√(t_f − t)`), only ever closer: the fold is located when
+    /// the step collapses there ([`Self::at_fold`]).
+    fn fold_time(&self, t: f64) -> Option<f64> {
+        let [(t0, d0), (t1, d1)] = self.balance;
+        let shrinking = t1 == t && t0 < t1 && d0 * d1 > 0.0 && d1.abs() < d0.abs();
+        shrinking.then(|| t1 + d1 * d1 * (t1 - t0) / (d0 * d0 - d1 * d1))
     }
 
     /// Initial step from the size of `y'` (Hairer & Wanner's heuristic, first part).
@@ -157,6 +221,11 @@ impl Integrator {
             let accepted = self.attempt(p, *t, h, q, &mut st);
             let (h, err, h_new) = match accepted {
                 Ok(v) => v,
+                // No step gets on from here because the solution ends here: the algebraic
+                // rows' balance reached a fold.
+                Err(IntegrateError::StepTooSmall { .. }) if self.at_fold(*t) => {
+                    break Err(IntegrateError::Fold { t: *t });
+                }
                 Err(e) => break Err(e),
             };
             st.steps += 1;
@@ -177,6 +246,7 @@ impl Integrator {
                 st.rhs_evals += 1;
                 st.jac_evals += 1;
             }
+            self.note_balance(t1);
             // Events: the earliest switching function that went from > 0 to ≤ 0.
             if ne > 0 {
                 let (first, g1) = self.first_event(p, events, ne, *t, h, &g0, &mut st);

@@ -132,6 +132,12 @@ impl Lu {
         }, empty => true)
     }
 
+    /// The determinant of the last factorized matrix (1 for `n` = 0): the product of the pivots,
+    /// signed by the row permutation.
+    pub fn determinant(&self) -> f64 {
+        each_size!(&self.0, |f, _N| f.determinant(), empty => 1.0)
+    }
+
     /// Solves `A x = b` in place with the last factorization (`b[..n]`).
     pub fn solve(&self, b: &mut [f64]) {
         each_size!(&self.0, |f, N| {

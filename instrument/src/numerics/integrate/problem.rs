@@ -152,6 +152,17 @@ pub enum IntegrateError {
         /// Step tried.
         h: f64,
     },
+    /// The algebraic rows' balance ends at a fold: their Jacobian `∂f_a/∂y_a` turns singular at a
+    /// saddle-node, where the solution `y_a(t)` runs into `t_f` with a square-root law and has no
+    /// continuation past it (the step size collapses approaching it). Located as an event: `t`
+    /// is the last accepted time, nearer to `t_f` than the last accepted step.
+    #[error(
+        "the algebraic rows' balance ends at a fold at t = {t:.6e} s: their Jacobian turns singular and no solution continues"
+    )]
+    Fold {
+        /// Time reached.
+        t: f64,
+    },
     /// More than `max_steps` steps.
     #[error("more than {max} steps before t = {t:e} s")]
     TooManySteps {

@@ -283,6 +283,54 @@ fn index_one_dae_keeps_its_constraint() {
     }
 }
 
+/// A balance with a saddle-node fold at `t = 1`: `y₁' = −y₁`, `0 = (1 − t) − y₂²` on the branch
+/// `y₂ = √(1 − t)`, whose rate `−1/(2√(1 − t))` grows without bound: no solution goes past `t = 1`.
+struct Fold;
+impl Problem for Fold {
+    fn len(&self) -> usize {
+        2
+    }
+    fn mass(&self, i: usize) -> f64 {
+        if i == 0 { 1.0 } else { 0.0 }
+    }
+    fn rhs(&self, t: f64, y: &[f64], out: &mut [f64]) {
+        out[0] = -y[0];
+        out[1] = (1.0 - t) - y[1] * y[1];
+    }
+    fn jacobian(&self, _t: f64, y: &[f64], jac: &mut [f64]) {
+        jac[..4].copy_from_slice(&[-1.0, 0.0, 0.0, -2.0 * y[1]]);
+    }
+    fn time_derivative(&self, _t: f64, _y: &[f64], out: &mut [f64]) {
+        out[..2].copy_from_slice(&[0.0, -1.0]);
+    }
+}
+
+/// The balance's fold is where the integration ends, as [`IntegrateError::Fold`] within
+/// `event_tol` of `t = 1` (the step no longer collapses into an unexplained failure), with the
+/// branch followed to it: `y₂ = √(1 − t)`.
+#[test]
+fn a_fold_of_the_algebraic_rows_is_located() {
+    for m in [Method::Rodas4, Method::Rodas5P] {
+        let mut integ = Integrator::new(m, Options::with_rtol(1e-8));
+        let (mut t, mut y) = (0.0, [1.0, 1.0]);
+        let r = integ.advance(&Fold, &NoEvents, &mut t, &mut y, 2.0);
+        match r {
+            Err(IntegrateError::Fold { t: tf }) => {
+                assert!((tf - 1.0).abs() < 1e-12, "{}: fold at {tf:e}", m.name());
+                assert_eq!(tf, t);
+            }
+            other => panic!("{}: expected the fold, got {other:?}", m.name()),
+        }
+        assert!(
+            (y[1] - (1.0 - t).max(0.0).sqrt()).abs() < 1e-5,
+            "{}: y₂ = {}",
+            m.name(),
+            y[1]
+        );
+        assert!((y[0] - (-t).exp()).abs() < 1e-7, "{}: y₁ = {}", m.name(), y[0]);
+    }
+}
+
 #[test]
 fn too_large_and_non_finite_are_errors() {
     struct Bad;

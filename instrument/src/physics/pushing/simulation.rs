@@ -378,9 +378,18 @@ impl Simulation {
                 mode: self.mode,
                 scale: self.scale,
             };
-            let (outcome, st) = self
+            let (outcome, st) = match self
                 .integrator
-                .advance(&problem, &problem, &mut self.t, &mut self.x[..n], t_end)?;
+                .advance(&problem, &problem, &mut self.t, &mut self.x[..n], t_end)
+            {
+                // The quasi-static balance ends at a fold (see [`Self::balance_lost`]): the state
+                // is where it vanished, and the next pass stops there.
+                Err(IntegrateError::Fold { .. }) => {
+                    self.balance_lost = true;
+                    continue;
+                }
+                r => r?,
+            };
 
             report.stats.add(&st);
             match outcome {

@@ -172,7 +172,16 @@ impl PushModel {
         let (rvy, rvz) = (k.y_d - k.tip_v.0, k.z_d - k.tip_v.1);
         let (dy, dz, dist) = (k.dy, k.dz, k.dist);
         let gap_d = (dy * rvy + dz * rvz) / dist;
+        // φ in (−3π/2, π/2]: continuous wherever the particle can be, ahead of the tip, under it
+        // or behind it (a tip that rolls over the particle passes φ = −π); the cut is straight
+        // above the tip, where the particle, resting on the substrate under the tip, never is.
+        // At `atan2`'s own cut, ±π, ξ would jump by 2π(Rₜ+Rₐ) and the tip's stick spring with it.
         let phi = dz.atan2(dy);
+        let phi = if phi.re() > std::f64::consts::FRAC_PI_2 {
+            phi - 2.0 * std::f64::consts::PI
+        } else {
+            phi
+        };
         let xi = phi * rsum + k.th * p.r_a;
         let phi_d = (dy * rvz - dz * rvy) / (dist * dist);
         let xi_d = phi_d * rsum + k.om * p.r_a;

@@ -421,3 +421,112 @@ fn a_particle_pushed_outside_its_friction_cone_leaves_the_tip() {
     let n = sim.model.len();
     assert!(sim.x[..n].iter().all(|v| v.is_finite()));
 }
+
+/// A random scene of the validator ranges (`nanopush campaign --random 1 --seed N --ranges
+/// validator --scenes`) pushed from β = 30° as the plan's first contact angle, in ticks of
+/// 0.1 ms for at most 0.5 s: the simulation where it stopped and how.
+fn push_validator_seed(seed: u64) -> (Simulation, Result<(), SimulationError>) {
+    let text = match seed {
+        21 => include_str!("scenes/validator-seed-21.toml"),
+        79 => include_str!("scenes/validator-seed-79.toml"),
+        82 => include_str!("scenes/validator-seed-82.toml"),
+        107 => include_str!("scenes/validator-seed-107.toml"),
+        _ => unreachable!(),
+    }
+    .replace("[push]\n", "[push]\ncontact_angle_deg = 30.0\n");
+    let scene = Scene::parse("validator seed", &text).unwrap();
+    let mut sim = Simulation::new(
+        PushModel::new(scene.push_params()),
+        Method::Rodas4,
+        Options::with_rtol(1e-6),
+    );
+    for k in 1..=5000 {
+        if let Err(e) = sim.advance_to(k as f64 * 1e-4) {
+            return (sim, Err(e));
+        }
+    }
+    (sim, Ok(()))
+}
+
+/// The determinant of the quasi-static rows' block of the Jacobian at the simulation's state,
+/// signed so that it is positive for a stable balance: `(−1)^m det ∂f_a/∂x_a`.
+fn balance_det(sim: &Simulation) -> f64 {
+    let n = sim.model.len();
+    let mut jac = [0.0; MAX_STATES * MAX_STATES];
+    sim.model.jacobian(sim.t, &sim.x[..n], &sim.mode, &mut jac);
+    let mass = sim.model.mass_diagonal();
+    let alg: Vec<usize> = (0..n).filter(|&i| mass[i] == 0.0).collect();
+    let a = nalgebra::DMatrix::from_fn(alg.len(), alg.len(), |r, c| jac[alg[c] * n + alg[r]]);
+    (-1f64).powi(alg.len() as i32) * a.determinant()
+}
+
+/// Validator seed 79 (a 3.5 nm particle, a 1.5 nm tip on a 1.9 N/m lever, a meniscus): the tip
+/// rides over the particle on a stretched JKR contact until, at 5.5044 ms, the quasi-static
+/// balance folds 29 fm short of the JKR stable branch's end `δ_min` (the contact's negative
+/// stiffness there outgrows the lever's): the tip pulls off. The step once collapsed to 9e-21 s
+/// there; now the push loses its particle at the fold, the balance having turned unstable.
+#[test]
+fn the_tip_pulls_off_where_the_quasi_static_balance_folds() {
+    let (sim, r) = push_validator_seed(79);
+    let t = match r {
+        Err(SimulationError::ContactLost { t }) => t,
+        other => panic!("expected the tip to lose the particle, got {other:?}"),
+    };
+    assert!((t - 5.5044e-3).abs() < 0.0001e-3, "lost at {t:e} s");
+    let n = sim.model.len();
+    let pr = sim.model.probe(sim.t, &sim.x[..n], &sim.mode);
+    let beyond = (sim.model.p.interactions.a0 - pr.gap) - sim.model.p.jkr_ta.min_indentation();
+    assert!(beyond > 0.0 && beyond < 1e-13, "{beyond:e} m short of δ_min");
+    assert!(sim.mode.tip_contact);
+    assert!(balance_det(&sim) < 0.0, "the balance is unstable where the push stops");
+}
+
+/// Validator seeds 21 and 82: the particle sticks at both contacts and rolls under the tip
+/// (rotation, cantilever and particle quasi-static); its rolling balance loses stiffness as the
+/// tip's load grows and folds, at 69.73 ms and 81.81 ms, with no contact event near (both
+/// friction limits and the contact far from their switches; the balance's determinant down by five
+/// orders or past zero). The particle rolls out from under
+/// the tip: the push loses it, where the step once collapsed to 4e-21 s.
+#[test]
+fn a_particle_rolling_under_the_tip_leaves_it_where_its_balance_folds() {
+    for (seed, t_fold) in [(21, 69.731e-3), (82, 81.811e-3)] {
+        let (sim, r) = push_validator_seed(seed);
+        let t = match r {
+            Err(SimulationError::ContactLost { t }) => t,
+            other => panic!("seed {seed}: expected the tip to lose the particle, got {other:?}"),
+        };
+        assert!((t - t_fold).abs() < 0.001e-3, "seed {seed}: lost at {t:e} s");
+        let n = sim.model.len();
+        let sw = sim.model.switching(sim.t, &sim.x[..n], &sim.mode);
+        for g in [sw.substrate, sw.tip, sw.meniscus, sw.tip_contact] {
+            assert!(g.is_some_and(|g| g > 1e-10), "seed {seed}: a switch is near: {sw:?}");
+        }
+        let start = Simulation::new(sim.model.clone(), Method::Rodas4, Options::with_rtol(1e-6));
+        let d = balance_det(&sim);
+        assert!(
+            d.abs() < 1e-5 * balance_det(&start),
+            "seed {seed}: det {d:e} at the fold"
+        );
+    }
+}
+
+/// Validator seed 107: a soft lever (0.048 N/m) whose tip sticks to the particle by adhesion
+/// (JKR and meniscus, 0.1 µN) rolls over it; the line of centres turns past the horizontal
+/// behind the particle (φ = −π) at 0.4124 s, where `atan2`'s cut made ξ jump by 2π(Rₜ+Rₐ) and
+/// the step collapsed. The contact holds: the push runs its 0.5 s, the particle rolled 10 rad,
+/// its balance stable.
+#[test]
+fn a_tip_rolling_over_the_particle_keeps_its_contact_past_the_horizontal() {
+    let (sim, r) = push_validator_seed(107);
+    r.unwrap();
+    assert_eq!(sim.t, 0.5);
+    assert!(sim.mode.tip_contact);
+    let n = sim.model.len();
+    let pr = sim.model.probe(sim.t, &sim.x[..n], &sim.mode);
+    let p = &sim.model.p;
+    let theta = sim.x[sim.model.layout.rotation.unwrap().pos];
+    assert!((theta - 10.03).abs() < 0.01, "rolled {theta} rad");
+    let phi = (pr.contact_ta - theta * p.r_a) / (p.r_t + p.r_a);
+    assert!(phi < -std::f64::consts::PI && phi > -4.2, "φ = {phi}");
+    assert!(balance_det(&sim) > 0.0);
+}
