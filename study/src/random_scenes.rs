@@ -275,7 +275,7 @@ pub struct RandomCase {
 pub struct AdviceRun {
     /// The scene field changed.
     pub key: &'static str,
-    /// Its new value (the field's unit; the gain's magnitude).
+    /// Its new value as the scene file takes it (the field's unit; the gain with its sign).
     pub value: f64,
     /// The move with it.
     pub judged: Judged,
@@ -292,9 +292,13 @@ fn apply_advice(
 ) -> Option<AdviceRun> {
     let a = judged.advice.iter().find(|a| a.checked == Some(true))?;
     let applied = a.applied(scene, a.value)?;
+    let value = match a.key {
+        "sensor.gain_v_per_nm" => applied.file.sensor.gain_v_per_nm,
+        _ => a.value,
+    };
     Some(AdviceRun {
         key: a.key,
-        value: a.value,
+        value,
         judged: push_judged(&applied, distance, direction, tolerance),
     })
 }
@@ -646,5 +650,47 @@ mod tests {
         assert_eq!((a.key, a.value), ("cantilever.stiffness_n_per_m", 5.076));
         assert_eq!(a.judged.outcome, "ok", "{}", a.judged.reason);
         assert!(a.judged.true_error.expect("pushed") <= tolerance);
+    }
+
+    /// Every value a refusal says it checked gives a plan that passed its dry run, and no value
+    /// is tried twice. Lab seed 198's gain of 10 V/nm was said to be checked by a plan that had
+    /// no dry run (and its push lost the particle); seed 20 tried 4.326 V/nm four times (the
+    /// model's 4.3263 rounded down) and said no value works, where 4.327 does; seed 18 on a
+    /// 0.01 N/m lever went from 0.3308 N/m (deflection limit) to 10.26 N/m (unreadable) and on
+    /// up, past 5.076 N/m, which works.
+    #[test]
+    fn a_checked_value_passes_a_dry_run_and_none_is_tried_twice() {
+        let tol = nanopush_instrument::control::derive::DEFAULT_TOLERANCE;
+        let mut soft = random_scene(18, Ranges::Lab);
+        soft.scene.file.cantilever.stiffness_n_per_m = 0.01;
+        let scenes = [198, 20, 15].map(|seed| random_scene(seed, Ranges::Lab).scene);
+        let mut checked = 0;
+        for (name, scene) in ["198", "20", "15", "18 at 0.01 N/m"]
+            .iter()
+            .zip(scenes.iter().chain([&soft.scene]))
+        {
+            let id = scene.pushed_particle().id;
+            let e = nanopush_instrument::control::derive::derive(scene, id, tol).unwrap_err();
+            for a in &e.advice {
+                for (k, t) in a.tried.iter().enumerate() {
+                    assert!(
+                        a.tried[..k].iter().all(|u| u.0 != t.0),
+                        "seed {name}: {} tried twice: {e}",
+                        t.0
+                    );
+                }
+                if a.checked == Some(true) {
+                    checked += 1;
+                    let applied = a.applied(scene, a.value).expect("a valid scene");
+                    let plan = nanopush_instrument::control::derive::derive(&applied, id, tol)
+                        .unwrap_or_else(|r| panic!("seed {name} with {} = {}: {r}", a.key, a.value));
+                    assert!(plan.dry_run_passed(), "seed {name}: {:?}", plan.warnings);
+                }
+            }
+            if *name == "20" || name.starts_with("18") {
+                assert!(e.advice.iter().any(|a| a.checked == Some(true)), "seed {name}: {e}");
+            }
+        }
+        assert!(checked >= 2, "{checked} values checked");
     }
 }

@@ -1,112 +1,124 @@
 //! The way out a refusal names, checked before it is said: each value (a stiffer lever, a larger
-//! or smaller gain) is applied to the scene and the plan derived again, dry run included. The
-//! model's figure comes first; when the plan still refuses, values further the same way are
-//! tried (one and four steps past it, a step being the factor the figure asks for and at least
-//! 2; never past what a scene allows or the readout needs). The refusal then names the value that passed, or says that
-//! none tried did.
+//! or smaller gain) is applied to the scene and the plan derived again; the value passes when
+//! the plan is given and its dry run was run and passed. The model's figure comes first. While
+//! the plan at a value still refuses for want of more (the same refusal, or one that names a
+//! figure further the same way), the next value is that figure, and at least one step of 2 past
+//! the last; once a value fails otherwise (a lever now too stiff to read the contact), the next
+//! lies between it and the last value that was not enough (their geometric mean). Never past
+//! what a scene allows or the readout needs, never a value twice. The refusal then names the
+//! value that passed, or says that none tried did.
 
 use super::{Advice, Derivation, Refusal, short};
 use crate::scene::Scene;
 
 /// The most plans derived to check one refusal's values: each is a whole derivation with its
-/// dry runs (0.3-3 s on the lab campaign's scenes).
-const MAX_CHECKS: usize = 3;
+/// dry runs (0.1-3 s on the lab campaign's scenes).
+const MAX_CHECKS: usize = 4;
 
-/// Powers of the ladder's step: the model's figure, one step past it, four steps past it.
-const LADDER: [f64; 3] = [0.0, 1.0, 4.0];
-
-/// The least step of the ladder, as a factor: a figure close to the scene's own value still
-/// doubles (or halves) from one rung to the next.
+/// The least step from a value that was not enough, as a factor: the figures of successive
+/// refusals may creep (1.645, 4.609, 4.689 N/m), and each plan derived costs seconds.
 const MIN_STEP: f64 = 2.0;
 
+/// What the plan at one value says, for the walk: passed, or the code of why not and the figure
+/// its refusal names for the same field the same way.
+enum Verdict {
+    Passes,
+    Fails(&'static str, Option<f64>),
+}
+
 /// Checks the values `r` names on `scene` and rewrites its field with what was found. The first
-/// value named gets the whole ladder (restarted from a further figure that a refusal on the way
-/// names for the same field), the others their model figure only; once one passes the rest are
+/// value named gets the walk, the others their model figure only; once one passes the rest are
 /// not checked (and not said: the refusal names a way out that works).
 pub(super) fn check(scene: &Scene, id: u32, tolerance: f64, mut r: Refusal) -> Refusal {
     if r.advice.is_empty() {
         return r;
     }
+    for a in &mut r.advice {
+        a.value = round_toward(a.value, a.direction);
+    }
+    let code = r.code;
     let mut budget = MAX_CHECKS;
     for (i, a) in r.advice.iter_mut().enumerate() {
-        let mut rungs = ladder(now(scene, a), a.estimate, a);
-        rungs.truncate(if i == 0 { LADDER.len() } else { 1 });
-        let mut next = 0;
-        while next < rungs.len() && budget > 0 {
-            let v = rungs[next];
-            next += 1;
+        let mut next = Some(a.value).filter(|&v| within(a, v));
+        // The furthest value whose plan still wanted more.
+        let mut short_of: Option<f64> = None;
+        while let Some(v) = next.take() {
+            if budget == 0 || a.tried.iter().any(|t| same(t.0, v)) {
+                break;
+            }
             budget -= 1;
-            let result = match a.applied(scene, v) {
-                Some(s) => Derivation::new(&s, id, tolerance).and_then(|d| d.run()).map(|_| ()),
-                None => break,
-            };
-            match result {
-                Ok(()) => {
+            let Some(applied) = a.applied(scene, v) else { break };
+            let (failed, figure) = match verdict(&applied, id, tolerance, a) {
+                Verdict::Passes => {
                     a.value = v;
                     a.checked = Some(true);
                     budget = 0;
+                    break;
                 }
-                Err(e) => {
-                    a.tried.push((v, e.code));
-                    a.checked = Some(false);
-                    // The refusal at `v` may name its own figure for the same field (the
-                    // adhesion's stiffness, then the deflection limit's): the rest of the
-                    // ladder starts from it when it lies further.
-                    let further = e
-                        .advice
-                        .iter()
-                        .find(|b| b.key == a.key && b.direction == a.direction)
-                        .map(|b| b.estimate)
-                        .filter(|&n| (n - v) * a.direction > 0.0);
-                    if let Some(n) = further
-                        && i == 0
-                    {
-                        rungs.truncate(next);
-                        rungs.extend(ladder(v, n, a));
-                    }
-                }
+                Verdict::Fails(failed, figure) => (failed, figure),
+            };
+            a.tried.push((v, failed));
+            a.checked = Some(false);
+            if i > 0 {
+                break;
             }
+            let step = v * MIN_STEP.powf(a.direction);
+            next = if failed == code || figure.is_some() {
+                short_of = Some(v);
+                let further = figure.map_or(step, |f| if (f - step) * a.direction > 0.0 { f } else { step });
+                Some(further)
+            } else if let Some(lo) = short_of {
+                Some((lo * v).sqrt())
+            } else {
+                Some(step)
+            }
+            .map(|n| round_toward(if within(a, n) { n } else { a.bound }, a.direction));
         }
     }
     r.field = field_text(&r.field, &r.advice);
     r
 }
 
-/// The scene's own value of `a`'s field (the gain's magnitude).
-fn now(scene: &Scene, a: &Advice) -> f64 {
-    match a.key {
-        "cantilever.stiffness_n_per_m" => scene.file.cantilever.stiffness_n_per_m,
-        _ => scene.file.sensor.gain_v_per_nm.abs(),
-    }
-}
-
-/// The values to try for `a`'s field, now at `now`, whose figure is `estimate`: the figure, then
-/// one and four steps past it, a step being the factor the figure asks for (at least
-/// [`MIN_STEP`]), each within `a.bound`; none when the figure is already past it.
-fn ladder(now: f64, estimate: f64, a: &Advice) -> Vec<f64> {
-    let within = |v: f64| if a.direction > 0.0 { v <= a.bound } else { v >= a.bound };
-    if !within(estimate) {
-        return Vec::new();
-    }
-    // Multiplicative steps: the figures span decades (0.01-500 N/m).
-    let step = (estimate / now).powf(a.direction).max(MIN_STEP);
-    let mut values: Vec<f64> = Vec::new();
-    for m in LADDER {
-        let v = round4(if within(estimate * step.powf(m * a.direction)) {
-            estimate * step.powf(m * a.direction)
-        } else {
-            a.bound
-        });
-        if values.last().is_none_or(|l| (l - v).abs() > 1e-9 * v.abs()) {
-            values.push(v);
+/// The plan on `applied`, for the walk of `a`.
+fn verdict(applied: &Scene, id: u32, tolerance: f64, a: &Advice) -> Verdict {
+    match Derivation::new(applied, id, tolerance).and_then(|d| d.run()) {
+        Ok(plan) if plan.dry_run_passed() => Verdict::Passes,
+        Ok(_) => Verdict::Fails("no_dry_run", None),
+        Err(e) => {
+            let figure = e
+                .advice
+                .iter()
+                .find(|b| b.key == a.key && b.direction == a.direction)
+                .map(|b| b.estimate)
+                .filter(|&f| within(a, f));
+            Verdict::Fails(e.code, figure)
         }
     }
-    values
 }
 
-/// Four significant digits, as the refusal prints it: the value checked is the value said.
-fn round4(v: f64) -> f64 {
-    short(v).parse().unwrap_or(v)
+/// Whether `v` lies within what `a`'s field may take the way it goes.
+fn within(a: &Advice, v: f64) -> bool {
+    v.is_finite() && v > 0.0 && if a.direction > 0.0 { v <= a.bound } else { v >= a.bound }
+}
+
+fn same(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-9 * a.abs().max(b.abs())
+}
+
+/// `v` to four significant digits, as the refusal prints it, rounded the way the advice goes (a
+/// stiffness the plan needs at least is never rounded below it): the value checked is the value
+/// said.
+fn round_toward(v: f64, direction: f64) -> f64 {
+    if v <= 0.0 || !v.is_finite() {
+        return v;
+    }
+    let scale = 10f64.powi(3 - v.log10().floor() as i32);
+    let r = if direction > 0.0 {
+        (v * scale - 1e-9).ceil() / scale
+    } else {
+        (v * scale + 1e-9).floor() / scale
+    };
+    short(r).parse().unwrap_or(r)
 }
 
 /// The field of a refusal once its values are checked: the values that pass (with the model's
@@ -169,30 +181,20 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_ladder_goes_past_the_figure_and_stops_at_the_bound() {
-        let mut scene = Scene::default_scene();
-        scene.file.cantilever.stiffness_n_per_m = 1.0;
-        let a = Advice::new("cantilever.stiffness_n_per_m", 4.0, 1.0, 50.0);
-        assert_eq!(ladder(now(&scene, &a), a.estimate, &a), vec![4.0, 16.0, 50.0]);
-        let close = Advice::new("cantilever.stiffness_n_per_m", 1.1, 1.0, 50.0);
-        assert_eq!(
-            ladder(now(&scene, &close), close.estimate, &close),
-            vec![1.1, 2.2, 17.6],
-            "at least doubling"
-        );
-        let far = Advice::new("cantilever.stiffness_n_per_m", 60.0, 1.0, 50.0);
-        assert!(
-            ladder(now(&scene, &far), far.estimate, &far).is_empty(),
-            "a figure past the bound is not tried"
-        );
-        scene.file.sensor.gain_v_per_nm = -1.0;
+    fn values_round_the_way_the_advice_goes() {
+        assert_eq!(round_toward(0.117_83, 1.0), 0.1179);
+        assert_eq!(round_toward(0.117_83, -1.0), 0.1178);
+        assert_eq!(round_toward(4.326, 1.0), 4.326, "a value already at four digits stays");
+        assert_eq!(round_toward(6.514_040_673_7, 1.0), 6.515);
+        let scene = Scene::default_scene();
         let smaller = Advice::new("sensor.gain_v_per_nm", 0.5, -1.0, 0.2);
-        assert_eq!(
-            ladder(now(&scene, &smaller), smaller.estimate, &smaller),
-            vec![0.5, 0.25, 0.2]
-        );
         let applied = smaller.applied(&scene, 0.25).expect("a valid scene");
-        assert_eq!(applied.file.sensor.gain_v_per_nm, -0.25, "the gain keeps its sign");
+        assert_eq!(
+            applied.file.sensor.gain_v_per_nm,
+            0.25f64.copysign(scene.file.sensor.gain_v_per_nm),
+            "the gain keeps its sign"
+        );
+        assert!(!within(&smaller, 0.1) && within(&smaller, 0.3));
     }
 
     #[test]

@@ -79,6 +79,15 @@ impl DerivedStrategy {
         scene.file.push.speed_um_per_s = self.speed_um_per_s;
     }
 
+    /// Whether the plan passed its dry run: it was run, and it did not fail (a hand-set contact
+    /// angle is planned with a warning even when it fails).
+    pub fn dry_run_passed(&self) -> bool {
+        !self
+            .warnings
+            .iter()
+            .any(|w| w.starts_with(super::NO_DRY_RUN) || w.starts_with(super::DRY_RUN_FAILS))
+    }
+
     /// The strategy in one line: the contact angle, the side the contact is read on, the loop
     /// closure, the speed and the longest push, and why this one.
     pub fn summary(&self) -> String {

@@ -103,11 +103,11 @@ fn a_soft_lever_is_refused_naming_the_stiffness_it_needs() {
     // in the model's longest push (640 nm). Its pull-off from the substrate (2.8 µm of bend)
     // is no longer a reason: the strategy rides out the saturated reading while it rises.
     assert_eq!(e.code, "deflection_limit", "{e}");
-    // Still rising: the model's figure, 0.6277 N/m, is needed but not enough; the plan with it
-    // names 4.146 N/m (its own peak, still rising), with which the plan passes its dry run.
+    // Still rising: the model's figure, 0.6278 N/m, is needed but not enough; the plan with it
+    // names 4.147 N/m (its own peak, still rising), with which the plan passes its dry run.
     assert_eq!(
         e.field,
-        "cantilever.stiffness_n_per_m = 4.146 N/m (checked: with it the plan passes its checks and its dry run; the plan still refused at 0.6277 N/m (deflection_limit))"
+        "cantilever.stiffness_n_per_m = 4.147 N/m (checked: with it the plan passes its checks and its dry run; the plan still refused at 0.6278 N/m (deflection_limit))"
     );
     checked_value_plans(&s, &e);
     // Dry, the adhesion is small; the lever still cannot shear the particle loose in time.
