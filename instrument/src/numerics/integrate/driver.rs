@@ -30,10 +30,47 @@ pub struct Integrator {
     /// ended at its end time. A call that starts there skips re-evaluating them.
     cached_at: Option<(f64, [f64; MAX_DIM])>,
     g_next: [f64; MAX_EVENTS],
-    /// `(t, det ∂f_a/∂y_a)` at the ends of the last two accepted steps of one problem (oldest
-    /// first; `NaN` times where there is none yet): what locates a fold of the algebraic rows
-    /// ([`Self::fold_time`]).
-    balance: [(f64, f64); 2],
+    /// The algebraic rows' block `∂f_a/∂y_a` of the Jacobian at the ends of the last two
+    /// accepted steps of one problem: what locates a fold of those rows ([`Self::fold_time`]).
+    balance: Balance,
+}
+
+/// The algebraic rows' Jacobian block at the ends of the last two accepted steps.
+#[derive(Debug, Clone)]
+struct Balance {
+    /// Column-major `m × m` blocks.
+    blocks: [[f64; MAX_DIM * MAX_DIM]; 2],
+    /// Their times (`NaN` where there is none yet).
+    times: [f64; 2],
+    /// Which of the two is the newer.
+    newest: usize,
+    /// Rows in a block.
+    m: usize,
+}
+
+impl Balance {
+    fn new() -> Balance {
+        Balance {
+            blocks: [[0.0; MAX_DIM * MAX_DIM]; 2],
+            times: [f64::NAN; 2],
+            newest: 0,
+            m: 0,
+        }
+    }
+
+    fn forget(&mut self) {
+        self.times = [f64::NAN; 2];
+    }
+
+    /// `(t, det ∂f_a/∂y_a)` of the older and the newer block.
+    fn determinants(&self) -> [(f64, f64); 2] {
+        let det = |k: usize| {
+            let mut lu = Lu::default();
+            lu.factor(self.m, &self.blocks[k][..self.m * self.m]);
+            (self.times[k], lu.determinant())
+        };
+        [det(1 - self.newest), det(self.newest)]
+    }
 }
 
 impl Integrator {
@@ -49,7 +86,7 @@ impl Integrator {
             work: Work::new(method),
             cached_at: None,
             g_next: [f64::NAN; MAX_EVENTS],
-            balance: [(f64::NAN, f64::NAN); 2],
+            balance: Balance::new(),
         }
     }
 
@@ -61,7 +98,7 @@ impl Integrator {
         self.h_old = 0.0;
         self.err_old = 1.0;
         self.cached_at = None;
-        self.balance = [(f64::NAN, f64::NAN); 2];
+        self.balance.forget();
     }
 
     /// Forgets the derivatives kept from the last call but keeps the step size: for a problem
@@ -69,7 +106,7 @@ impl Integrator {
     /// control segment), where the step-size history is still a good guess.
     pub fn forget_derivatives(&mut self) {
         self.cached_at = None;
-        self.balance = [(f64::NAN, f64::NAN); 2];
+        self.balance.forget();
     }
 
     /// The method (fixed at construction: its workspace is built for it).
@@ -92,8 +129,9 @@ impl Integrator {
         (sum / n as f64).sqrt()
     }
 
-    /// Records `det ∂f_a/∂y_a` (the algebraic rows' block of the Jacobian just evaluated at the
-    /// end of an accepted step, `work.jac_next`) at `t`, when the problem has algebraic rows.
+    /// Records the algebraic rows' block of the Jacobian just evaluated at the end of an
+    /// accepted step (`work.jac_next`) at `t`, when the problem has algebraic rows: a copy, its
+    /// determinant taken only when a step collapses ([`Self::at_fold`]).
     fn note_balance(&mut self, t: f64) {
         let w = &self.work;
         let n = w.n;
@@ -108,15 +146,16 @@ impl Integrator {
         if m == 0 {
             return;
         }
-        let mut a = [0.0; MAX_DIM * MAX_DIM];
+        let b = &mut self.balance;
+        let slot = 1 - b.newest;
         for (c, &j) in alg[..m].iter().enumerate() {
             for (r, &i) in alg[..m].iter().enumerate() {
-                a[c * m + r] = w.jac_next[j * n + i];
+                b.blocks[slot][c * m + r] = w.jac_next[j * n + i];
             }
         }
-        let mut lu = Lu::default();
-        lu.factor(m, &a);
-        self.balance = [self.balance[1], (t, lu.determinant())];
+        b.m = m;
+        b.times[slot] = t;
+        b.newest = slot;
     }
 
     /// Whether the algebraic rows' balance, followed up to `t` (the last accepted time), has
@@ -127,7 +166,7 @@ impl Integrator {
     /// the driver asks when no step from `t` is accepted, to tell the end of the solution from a
     /// failure to follow it.
     fn at_fold(&self, t: f64) -> bool {
-        let [(t0, d0), (t1, d1)] = self.balance;
+        let [(t0, d0), (t1, d1)] = self.balance.determinants();
         let crossed = t1 == t && t0 < t1 && d0 * d1 < 0.0;
         let reach = self.opts.event_tol.max(t1 - t0);
         crossed || self.fold_time(t).is_some_and(|tf| tf - t <= reach)
@@ -143,7 +182,7 @@ impl Integrator {
     /// `t_f` itself (its rate grows as `1/√(t_f − t)`), only ever closer: the fold is located when
     /// the step collapses there ([`Self::at_fold`]).
     fn fold_time(&self, t: f64) -> Option<f64> {
-        let [(t0, d0), (t1, d1)] = self.balance;
+        let [(t0, d0), (t1, d1)] = self.balance.determinants();
         let shrinking = t1 == t && t0 < t1 && d0 * d1 > 0.0 && d1.abs() < d0.abs();
         shrinking.then(|| t1 + d1 * d1 * (t1 - t0) / (d0 * d0 - d1 * d1))
     }
