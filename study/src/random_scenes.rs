@@ -627,7 +627,7 @@ mod tests {
         );
     }
 
-    /// Lab seed 18 bends its 0.159 N/m lever past the readout: the refusal names 5.076 N/m, which
+    /// Lab seed 18 bends its 0.159 N/m lever past the readout: the refusal names 5.077 N/m, which
     /// the plan checked by deriving itself again; applied, the same move ends `ok`.
     #[test]
     fn a_refusals_checked_stiffness_applied_pushes_ok() {
@@ -642,12 +642,12 @@ mod tests {
         assert!(
             c.judged
                 .reason
-                .contains("change cantilever.stiffness_n_per_m = 5.076 N/m (checked: with it the plan passes"),
+                .contains("change cantilever.stiffness_n_per_m = 5.077 N/m (checked: with it the plan passes"),
             "{}",
             c.judged.reason
         );
         let a = c.advice.expect("a checked value applied");
-        assert_eq!((a.key, a.value), ("cantilever.stiffness_n_per_m", 5.076));
+        assert_eq!((a.key, a.value), ("cantilever.stiffness_n_per_m", 5.077));
         assert_eq!(a.judged.outcome, "ok", "{}", a.judged.reason);
         assert!(a.judged.true_error.expect("pushed") <= tolerance);
     }
