@@ -172,32 +172,68 @@ fn judge(moved: &crate::control::moves::run::MoveRun, plan: &DerivedStrategy) ->
 }
 
 /// The scene field a dry run's failure points to (`still_held`: the fields of the terms that
-/// hold the tip on the substrate, [`super::adhesion_field`]).
+/// hold the tip on the substrate, [`super::adhesion_field`]). A stiffer lever is named only
+/// while the scene's is below the stiffest a scene allows.
 pub fn field_for(why: &str, scene: &Scene) -> String {
     let code = why.split(':').next().unwrap_or("");
-    if code == "still_held" {
-        return format!(
-            "cantilever.stiffness_n_per_m (stiffer) or {}",
-            super::adhesion_field::field(
-                super::adhesion_field::Pair::TipSubstrate,
-                &scene.tip_sample().adhesion_sources()
+    let can_stiffen = scene.file.cantilever.stiffness_n_per_m < super::MAX_STIFFNESS;
+    let stiffer = |other: &str| {
+        if can_stiffen {
+            format!("cantilever.stiffness_n_per_m (stiffer) or {other}")
+        } else {
+            format!(
+                "{other} (the lever is already the stiffest a scene allows, {} N/m)",
+                super::short(super::MAX_STIFFNESS)
             )
-        );
-    }
+        }
+    };
     match code {
-        "deflection_limit" => "cantilever.stiffness_n_per_m (stiffer) or sensor.gain_v_per_nm (smaller |gain|)",
+        "still_held" => stiffer(&super::adhesion_field::field(
+            super::adhesion_field::Pair::TipSubstrate,
+            &scene.tip_sample().adhesion_sources(),
+        )),
+        "deflection_limit" => stiffer("sensor.gain_v_per_nm (smaller |gain|)"),
         // Both raised to their limits, the dry run loses the particle at the same travel: the
         // instrument and the model's push disagree, and no field is known to settle it.
         "particle_lost" => {
-            "friction.tip_particle_static (higher), though no field is known to help: the dry run lost the particle that the model's push kept"
+            "friction.tip_particle_static (higher), though no field is known to help: the dry run lost the particle that the model's push kept".into()
         }
-        "no_contact" => "sensor.gain_v_per_nm (larger |gain|) or friction.particle_substrate_static",
-        "no_separation" => "cantilever.stiffness_n_per_m (stiffer) or friction.particle_substrate_static (lower)",
-        "snapped_back" => "push.contact_angle_deg (a higher parking height) or cantilever.stiffness_n_per_m (stiffer)",
-        "missed" => "stage.resonance_hz (a stiffer stage) or a looser --tolerance-nm",
-        "not_found" => "scan.noise_rms_nm or substrate.roughness_rms_nm (lower)",
-        "timeout" => "push.speed_um_per_s (faster) or strategy.phase_timeout_s",
-        _ => "the scene's physics (see the reason)",
+        "no_contact" => "sensor.gain_v_per_nm (larger |gain|) or friction.particle_substrate_static".into(),
+        "no_separation" => stiffer("friction.particle_substrate_static (lower)"),
+        "snapped_back" => {
+            if can_stiffen {
+                "push.contact_angle_deg (a higher parking height) or cantilever.stiffness_n_per_m (stiffer)".into()
+            } else {
+                "push.contact_angle_deg (a higher parking height)".into()
+            }
+        }
+        "missed" => "stage.resonance_hz (a stiffer stage) or a looser --tolerance-nm".into(),
+        "not_found" => "scan.noise_rms_nm or substrate.roughness_rms_nm (lower)".into(),
+        "timeout" => "push.speed_um_per_s (faster) or strategy.phase_timeout_s".into(),
+        _ => "the scene's physics (see the reason)".into(),
     }
-    .into()
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::scene::Scene;
+
+    #[test]
+    fn a_lever_at_the_stiffest_a_scene_allows_is_not_asked_to_be_stiffer() {
+        let mut scene = Scene::default_scene();
+        let why = "deflection_limit: deflection -10.000 V at or beyond the limit";
+        assert_eq!(
+            super::field_for(why, &scene),
+            "cantilever.stiffness_n_per_m (stiffer) or sensor.gain_v_per_nm (smaller |gain|)"
+        );
+        scene.file.cantilever.stiffness_n_per_m = super::super::MAX_STIFFNESS;
+        assert_eq!(
+            super::field_for(why, &scene),
+            "sensor.gain_v_per_nm (smaller |gain|) (the lever is already the stiffest a scene allows, 500 N/m)"
+        );
+        assert_eq!(
+            super::field_for("snapped_back: x", &scene),
+            "push.contact_angle_deg (a higher parking height)"
+        );
+    }
 }
