@@ -227,6 +227,9 @@ pub struct PushModel {
     b_c: f64,
     z_fixed: f64,
     adhesion_as: f64,
+    /// [`Self::break_overlap`], fixed by the parameters: the switching function reads it at
+    /// every step.
+    break_overlap: f64,
     mass: [f64; MAX_STATES],
     /// The tip base's drive (stage reference and height); [`Drive::constant_speed`] at `V` unless
     /// a controller sets it.
@@ -263,6 +266,7 @@ impl PushModel {
         let d = p.r_t + p.r_a + a0 - overlap;
         let base = (-d * cb, p.r_a + a0 + z_fixed + d * sb);
         let kk = p.cantilever.stiffness_yz();
+        let break_overlap = switching::break_overlap(&p, &layout);
         PushModel {
             layout,
             base,
@@ -272,6 +276,7 @@ impl PushModel {
             b_c: p.cantilever.damping(),
             z_fixed,
             adhesion_as: p.adhesion_as(),
+            break_overlap,
             mass: layout.mass_diagonal(),
             drive: Drive::constant_speed(p.speed),
             p,

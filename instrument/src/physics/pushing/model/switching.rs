@@ -5,7 +5,8 @@
 use super::{Mode, Probe, PushModel, Switching, Tangential};
 use crate::numerics::dual::Dual;
 use crate::physics::forces::capillary::Meniscus;
-use crate::physics::pushing::layout::MAX_STATES;
+use crate::physics::pushing::layout::{Layout, MAX_STATES};
+use crate::physics::pushing::params::PushParams;
 
 impl PushModel {
     /// The switching functions at `(t, x)` (see [`Switching`]); an event fires when a value
@@ -99,40 +100,10 @@ impl PushModel {
         }
     }
 
-    /// The overlap `a₀ − h` at which the tip's contact breaks: the JKR stable branch's end
-    /// `δ_min` (negative for an adhesive contact, where the load at the break is finite and
-    /// tensile); where the tip's push is the particle's only load ([`Self::unloaded_root`]),
-    /// [`UNLOADED_OVERLAP`].
-    ///
-    /// A Hertz contact's load `P ∝ δ^{3/2}` has no stiffness at `δ = 0`. A quasi-static particle
-    /// that the tip pushes outside its friction cone with no adhesion (every force on it then
-    /// scales with the tip's load) has only the load-free balance `P = 0`: it slides or rolls
-    /// ahead of the tip, and its rows tend to that root of multiplicity 3/2, where their
-    /// Jacobian is singular. The integrator cannot follow it there (the step fell below 1e-20 s
-    /// within microseconds) and the event at `δ = 0` is never crossed. Below `UNLOADED_OVERLAP`
-    /// the contact carries under `K·δ^{3/2}` ≈ 1e-16 N, so it is broken there, and the push
-    /// reports what the physics says: the particle left the tip. A dynamic particle is carried
-    /// by its inertia through such a contact, and any adhesion gives the balance a load of its
-    /// own: both keep `δ_min`.
+    /// The overlap `a₀ − h` at which the tip's contact breaks ([`break_overlap`], computed once
+    /// with the model).
     pub fn break_overlap(&self) -> f64 {
-        let d_min = self.p.jkr_ta.min_indentation();
-        if self.unloaded_root() {
-            d_min.max(UNLOADED_OVERLAP)
-        } else {
-            d_min
-        }
-    }
-
-    /// Whether the tip's push is the only load on the particle and its contact is Hertz: a
-    /// quasi-static particle, no adhesion at either contact (no attraction at contact, no JKR
-    /// pull-off, no meniscus). Then every force on the particle scales with the tip's load, and a
-    /// push outside the friction cones has only the load-free balance.
-    pub fn unloaded_root(&self) -> bool {
-        let p = &self.p;
-        self.layout.particle_y.vel.is_none()
-            && p.jkr_ta.min_indentation() >= 0.0
-            && p.adhesion_as() == 0.0
-            && p.adhesion_ta() == 0.0
+        self.break_overlap
     }
 
     /// The mode after the switch whose function crossed zero, keeping forces continuous: a contact
@@ -179,6 +150,39 @@ impl PushModel {
         }
         m
     }
+}
+
+/// The overlap `a₀ − h` at which the tip's contact breaks: the JKR stable branch's end `δ_min`
+/// (negative for an adhesive contact, where the load at the break is finite and tensile); where
+/// the tip's push is the particle's only load ([`unloaded_root`]), [`UNLOADED_OVERLAP`].
+///
+/// A Hertz contact's load `P ∝ δ^{3/2}` has no stiffness at `δ = 0`. A quasi-static particle
+/// that the tip pushes outside its friction cone with no adhesion (every force on it then scales
+/// with the tip's load) has only the load-free balance `P = 0`: it slides or rolls ahead of the
+/// tip, and its rows tend to that root of multiplicity 3/2, where their Jacobian is singular.
+/// The integrator cannot follow it there (the step fell below 1e-20 s within microseconds) and
+/// the event at `δ = 0` is never crossed. Below `UNLOADED_OVERLAP` the contact carries under
+/// `K·δ^{3/2}` ≈ 1e-16 N, so it is broken there, and the push reports what the physics says: the
+/// particle left the tip. A dynamic particle is carried by its inertia through such a contact,
+/// and any adhesion gives the balance a load of its own: both keep `δ_min`.
+pub(super) fn break_overlap(p: &PushParams, layout: &Layout) -> f64 {
+    let d_min = p.jkr_ta.min_indentation();
+    if unloaded_root(p, layout) {
+        d_min.max(UNLOADED_OVERLAP)
+    } else {
+        d_min
+    }
+}
+
+/// Whether the tip's push is the only load on the particle and its contact is Hertz: a
+/// quasi-static particle, no adhesion at either contact (no attraction at contact, no JKR
+/// pull-off, no meniscus). Then every force on the particle scales with the tip's load, and a
+/// push outside the friction cones has only the load-free balance.
+fn unloaded_root(p: &PushParams, layout: &Layout) -> bool {
+    layout.particle_y.vel.is_none()
+        && p.jkr_ta.min_indentation() >= 0.0
+        && p.adhesion_as() == 0.0
+        && p.adhesion_ta() == 0.0
 }
 
 /// The overlap (m) below which the tip's contact with a quasi-static particle carries no load
