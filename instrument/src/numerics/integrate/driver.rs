@@ -31,7 +31,7 @@ pub struct Integrator {
     cached_at: Option<(f64, [f64; MAX_DIM])>,
     g_next: [f64; MAX_EVENTS],
     /// The algebraic rows' block `∂f_a/∂y_a` of the Jacobian at the ends of the last two
-    /// accepted steps of one problem: what locates a fold of those rows ([`Self::fold_time`]).
+    /// accepted steps of one problem: what locates a fold of those rows ([`fold_time`]).
     balance: Balance,
 }
 
@@ -71,6 +71,20 @@ impl Balance {
         };
         [det(1 - self.newest), det(self.newest)]
     }
+}
+
+/// Where the algebraic rows' balance, followed up to `t` (the last accepted time), ends at a
+/// fold, from `(t, det ∂f_a/∂y_a)` at the last two accepted steps (older first): `None` unless
+/// they ended at `t` and before it with the determinant of one sign and shrinking.
+///
+/// At a saddle-node fold of `f_a(y_a, t) = 0` one eigenvalue of `∂f_a/∂y_a` goes to zero as
+/// `√(t_f − t)` and the others stay finite: `det²` is linear in `t` near `t_f`, and its line
+/// through the last two points crosses zero at `t_f`. The solution cannot be followed to `t_f`
+/// itself (its rate grows as `1/√(t_f − t)`), only ever closer: the fold is located when the step
+/// collapses there ([`Integrator::at_fold`]).
+fn fold_time([(t0, d0), (t1, d1)]: [(f64, f64); 2], t: f64) -> Option<f64> {
+    let shrinking = t1 == t && t0 < t1 && d0 * d1 > 0.0 && d1.abs() < d0.abs();
+    shrinking.then(|| t1 + d1 * d1 * (t1 - t0) / (d0 * d0 - d1 * d1))
 }
 
 impl Integrator {
@@ -161,30 +175,16 @@ impl Integrator {
     /// Whether the algebraic rows' balance, followed up to `t` (the last accepted time), has
     /// reached a fold there: `det ∂f_a/∂y_a` changed sign over the last accepted step (a real
     /// eigenvalue crossed zero: the balance lost its stability, and the step landed past the
-    /// fold), or [`Self::fold_time`] is nearer than the last accepted step (or within
-    /// `event_tol`): the next step at the size the solution allowed so far would cross it. What
-    /// the driver asks when no step from `t` is accepted, to tell the end of the solution from a
-    /// failure to follow it.
+    /// fold), or [`fold_time`] is nearer than the last accepted step (or within `event_tol`): the
+    /// next step at the size the solution allowed so far would cross it. What the driver asks
+    /// when no step from `t` is accepted, to tell the end of the solution from a failure to
+    /// follow it.
     fn at_fold(&self, t: f64) -> bool {
-        let [(t0, d0), (t1, d1)] = self.balance.determinants();
+        let dets = self.balance.determinants();
+        let [(t0, d0), (t1, d1)] = dets;
         let crossed = t1 == t && t0 < t1 && d0 * d1 < 0.0;
         let reach = self.opts.event_tol.max(t1 - t0);
-        crossed || self.fold_time(t).is_some_and(|tf| tf - t <= reach)
-    }
-
-    /// Where the algebraic rows' balance, followed up to `t` (the last accepted time), ends at a
-    /// fold, if it is heading for one: `None` unless the last two accepted steps ended at `t` and
-    /// before it with `det ∂f_a/∂y_a` of one sign and shrinking.
-    ///
-    /// At a saddle-node fold of `f_a(y_a, t) = 0` one eigenvalue of `∂f_a/∂y_a` goes to zero as
-    /// `√(t_f − t)` and the others stay finite: `det²` is linear in `t` near `t_f`, and its line
-    /// through the last two points crosses zero at `t_f`. The solution cannot be followed to
-    /// `t_f` itself (its rate grows as `1/√(t_f − t)`), only ever closer: the fold is located when
-    /// the step collapses there ([`Self::at_fold`]).
-    fn fold_time(&self, t: f64) -> Option<f64> {
-        let [(t0, d0), (t1, d1)] = self.balance.determinants();
-        let shrinking = t1 == t && t0 < t1 && d0 * d1 > 0.0 && d1.abs() < d0.abs();
-        shrinking.then(|| t1 + d1 * d1 * (t1 - t0) / (d0 * d0 - d1 * d1))
+        crossed || fold_time(dets, t).is_some_and(|tf| tf - t <= reach)
     }
 
     /// Initial step from the size of `y'` (Hairer & Wanner's heuristic, first part).
