@@ -306,12 +306,7 @@ pub fn run(a: &PushArgs) -> anyhow::Result<(String, bool)> {
         version: nanopush_proto::VERSION,
         scene: f.name.clone(),
         particle: req.id,
-        control: match req.control {
-            ControlFile::Xy => "xy",
-            ControlFile::Z => "z",
-            ControlFile::Xyz => "xyz",
-        }
-        .into(),
+        control: req.control.name().into(),
         located_before: located(&moved.before.1),
         located_after: after.map(located),
         target: [target.0, target.1],

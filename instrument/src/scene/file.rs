@@ -332,6 +332,17 @@ pub enum ControlFile {
     Xyz,
 }
 
+impl ControlFile {
+    /// The name a scene file and the command line use (`xy`, `z`, `xyz`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ControlFile::Xy => "xy",
+            ControlFile::Z => "z",
+            ControlFile::Xyz => "xyz",
+        }
+    }
+}
+
 /// `[strategy]`: the auto-parking, contact detection, push and retract of Sec 2.1, with the
 /// limits that end a run safely. Defaults are the paper's (Sec 5) where it gives them.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -92,11 +92,7 @@ impl DerivedStrategy {
     /// closure, the speed and the longest push, and why this one.
     pub fn summary(&self) -> String {
         let hand = |key: &str| self.choices.iter().any(|c| c.key == key && c.hand_set);
-        let control = match self.strategy.control {
-            crate::scene::file::ControlFile::Xy => "xy",
-            crate::scene::file::ControlFile::Z => "z",
-            crate::scene::file::ControlFile::Xyz => "xyz",
-        };
+        let control = self.strategy.control.name();
         let max_push = self.strategy.max_push_um;
         let shorter = self.shortened;
         let why = if hand("push.contact_angle_deg") {
