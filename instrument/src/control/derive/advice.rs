@@ -82,7 +82,7 @@ pub(super) fn check(scene: &Scene, id: u32, tolerance: f64, mut r: Refusal) -> R
 /// The plan on `applied`, for the walk of `a`.
 fn verdict(applied: &Scene, id: u32, tolerance: f64, a: &Advice) -> Verdict {
     match Derivation::new(applied, id, tolerance).and_then(|d| d.run()) {
-        Ok(plan) if plan.dry_run_passed() => Verdict::Passes,
+        Ok(plan) if plan.dry_run_passed => Verdict::Passes,
         Ok(_) => Verdict::Fails("no_dry_run", None),
         Err(e) => {
             let figure = e

@@ -68,6 +68,10 @@ pub struct DerivedStrategy {
     pub tried: Vec<String>,
     /// The longest push was cut short because a dry run of a longer one lost the particle.
     pub shortened: bool,
+    /// The plan passed its dry run: one was run, and it did not fail (a plan too slow to
+    /// dry-run, or with no leg on the stage, is given without one; a hand-set contact angle is
+    /// planned with a warning even when its dry run fails).
+    pub dry_run_passed: bool,
 }
 
 impl DerivedStrategy {
@@ -77,15 +81,6 @@ impl DerivedStrategy {
         scene.file.strategy = self.strategy.clone();
         scene.file.push.contact_angle_deg = self.contact_angle_deg;
         scene.file.push.speed_um_per_s = self.speed_um_per_s;
-    }
-
-    /// Whether the plan passed its dry run: it was run, and it did not fail (a hand-set contact
-    /// angle is planned with a warning even when it fails).
-    pub fn dry_run_passed(&self) -> bool {
-        !self
-            .warnings
-            .iter()
-            .any(|w| w.starts_with(super::NO_DRY_RUN) || w.starts_with(super::DRY_RUN_FAILS))
     }
 
     /// The strategy in one line: the contact angle, the side the contact is read on, the loop

@@ -2,10 +2,7 @@
 //! the model's checks gets its settings and a dry run, until one ends `ok`.
 
 use super::readout::Readout;
-use super::{
-    BETAS_DEG, Choice, DRY_RUN_FAILS, DerivedStrategy, Fails, MAX_DRY_RUN, MIN_PUSH, NO_DRY_RUN, PAPER_SPEED, Refusal,
-    dry_run, short,
-};
+use super::{BETAS_DEG, Choice, DerivedStrategy, Fails, MAX_DRY_RUN, MIN_PUSH, PAPER_SPEED, Refusal, dry_run, short};
 use crate::control::estimator::ContactSide;
 use crate::scene::Scene;
 use crate::scene::file::{ParticleFile, StrategyFile};
@@ -154,7 +151,7 @@ impl<'a> Derivation<'a> {
             let dry_run_time = 2.0 * (1e-6 + plan.strategy.search_range_um * 1e-6) / (plan.speed_um_per_s * 1e-6);
             if dry_run_time > MAX_DRY_RUN {
                 plan.warnings.push(format!(
-                    "{NO_DRY_RUN}at {} µm/s it would take {dry_run_time:.0} s of simulated time (at most {MAX_DRY_RUN:.0} s)",
+                    "no dry run: at {} µm/s it would take {dry_run_time:.0} s of simulated time (at most {MAX_DRY_RUN:.0} s)",
                     short(plan.speed_um_per_s)
                 ));
                 return Ok(plan);
@@ -175,12 +172,16 @@ impl<'a> Derivation<'a> {
             });
             match result {
                 Ok(0) => {
-                    plan.warnings.push(format!(
-                        "{NO_DRY_RUN}neither leg of it (up and down the slope, 0.3-1 µm) stays on the stage from this particle"
-                    ));
+                    plan.warnings.push(
+                        "no dry run: neither leg of it (up and down the slope, 0.3-1 µm) stays on the stage from this particle"
+                            .into(),
+                    );
                     return Ok(plan);
                 }
-                Ok(_) => return Ok(plan),
+                Ok(_) => {
+                    plan.dry_run_passed = true;
+                    return Ok(plan);
+                }
                 // A reading that drifts off the contact over a long push (the substrate's slope
                 // or the particle's turn changing the contact) trips the lost-particle test
                 // well after t*: shorter pushes, each re-parked at a fresh set point, keep it.
@@ -194,7 +195,8 @@ impl<'a> Derivation<'a> {
                     retry = Some(cand.beta_deg);
                 }
                 Err(why) if self.hand("push.contact_angle_deg") => {
-                    plan.warnings.push(format!("{DRY_RUN_FAILS}{why}"));
+                    plan.warnings
+                        .push(format!("the plan's dry run on the model fails: {why}"));
                     return Ok(plan);
                 }
                 Err(why) => {

@@ -99,12 +99,6 @@ pub const OVER_TOP_MARGIN: f64 = 1e-9;
 /// dry run (m).
 pub const MIN_PUSH: f64 = 0.1e-6;
 
-/// How a plan's warning starts when the plan was not dry-run.
-pub const NO_DRY_RUN: &str = "no dry run: ";
-
-/// How a plan's warning starts when its dry run failed (a hand-set contact angle wins anyway).
-pub const DRY_RUN_FAILS: &str = "the plan's dry run on the model fails: ";
-
 /// Below this many times the lever's stiffness the stage's yield under the push is warned about.
 pub const STAGE_STIFFNESS_RATIO: f64 = 20.0;
 

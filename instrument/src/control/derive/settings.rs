@@ -105,6 +105,7 @@ impl Derivation<'_> {
             prediction: cand.prediction,
             tried: self.tried.clone(),
             shortened: s.shortened,
+            dry_run_passed: false,
         })
     }
 
