@@ -285,7 +285,7 @@ fn write_cases(s: &mut String, cases: &[RandomCase]) -> anyhow::Result<()> {
             s,
             "  UNSOUND seed {} with {} = {}: {} {:?}",
             c.seed,
-            a.key,
+            a.key.field(),
             short(a.value),
             a.judged.outcome,
             a.judged.violations
@@ -324,7 +324,7 @@ fn csv_row(c: &RandomCase) -> String {
         j.violations.join("; ").replace(',', ";"),
         c.advice
             .as_ref()
-            .map_or(String::new(), |a| format!("{} = {}", a.key, short(a.value))),
+            .map_or(String::new(), |a| format!("{} = {}", a.key.field(), short(a.value))),
         c.advice.as_ref().map_or(String::new(), |a| a.judged.outcome.clone()),
         j.reason.replace([',', '\n'], ";"),
         c.summary.replace(',', ";")

@@ -109,7 +109,7 @@ fn refusal_json(schema: &str, e: &anyhow::Error) -> Option<String> {
         "reason": r.reason,
         "field": r.field,
         "advice": r.advice.iter().map(|a| serde_json::json!({
-            "key": a.key,
+            "key": a.key.field(),
             "value": a.value,
             "checked": a.checked,
             "tried": a.tried.iter().map(|(v, code)| serde_json::json!({"value": v, "code": code})).collect::<Vec<_>>(),

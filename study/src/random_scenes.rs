@@ -274,7 +274,7 @@ pub struct RandomCase {
 #[derive(Debug, Clone)]
 pub struct AdviceRun {
     /// The scene field changed.
-    pub key: &'static str,
+    pub key: nanopush_instrument::control::derive::AdviceKey,
     /// Its new value as the scene file takes it (the field's unit; the gain with its sign).
     pub value: f64,
     /// The move with it.
@@ -292,13 +292,9 @@ fn apply_advice(
 ) -> Option<AdviceRun> {
     let a = judged.advice.iter().find(|a| a.checked == Some(true))?;
     let applied = a.applied(scene, a.value)?;
-    let value = match a.key {
-        "sensor.gain_v_per_nm" => applied.file.sensor.gain_v_per_nm,
-        _ => a.value,
-    };
     Some(AdviceRun {
         key: a.key,
-        value,
+        value: a.key.of(&applied),
         judged: push_judged(&applied, distance, direction, tolerance),
     })
 }
@@ -647,7 +643,7 @@ mod tests {
             c.judged.reason
         );
         let a = c.advice.expect("a checked value applied");
-        assert_eq!((a.key, a.value), ("cantilever.stiffness_n_per_m", 5.077));
+        assert_eq!((a.key.field(), a.value), ("cantilever.stiffness_n_per_m", 5.077));
         assert_eq!(a.judged.outcome, "ok", "{}", a.judged.reason);
         assert!(a.judged.true_error.expect("pushed") <= tolerance);
     }
@@ -683,7 +679,7 @@ mod tests {
                     checked += 1;
                     let applied = a.applied(scene, a.value).expect("a valid scene");
                     let plan = nanopush_instrument::control::derive::derive(&applied, id, tol)
-                        .unwrap_or_else(|r| panic!("seed {name} with {} = {}: {r}", a.key, a.value));
+                        .unwrap_or_else(|r| panic!("seed {name} with {} = {}: {r}", a.key.field(), a.value));
                     assert!(plan.dry_run_passed, "seed {name}: {:?}", plan.warnings);
                 }
             }

@@ -125,17 +125,10 @@ fn round_toward(v: f64, direction: f64) -> f64 {
 /// figure when that did not), then those that did not; the original text when nothing was
 /// checked.
 fn field_text(original: &str, advice: &[Advice]) -> String {
-    let name = |a: &Advice| {
-        if a.key == "sensor.gain_v_per_nm" {
-            "|sensor.gain_v_per_nm|".to_string()
-        } else {
-            a.key.to_string()
-        }
-    };
     let list = |a: &Advice| {
         a.tried
             .iter()
-            .map(|(v, code)| format!("{} {} ({code})", short(*v), a.unit()))
+            .map(|(v, code)| format!("{} {} ({code})", short(*v), a.key.unit()))
             .collect::<Vec<_>>()
             .join(", ")
     };
@@ -150,16 +143,16 @@ fn field_text(original: &str, advice: &[Advice]) -> String {
             };
             format!(
                 "{} = {} {} (checked: with it the plan passes its checks and its dry run{before})",
-                name(a),
+                a.key.said(),
                 short(a.value),
-                a.unit()
+                a.key.unit()
             )
         })
         .collect();
     let failed: Vec<String> = advice
         .iter()
         .filter(|a| a.checked == Some(false))
-        .map(|a| format!("{} at {}", name(a), list(a)))
+        .map(|a| format!("{} at {}", a.key.said(), list(a)))
         .collect();
     match (passed.is_empty(), failed.is_empty()) {
         (true, true) => original.to_string(),
@@ -178,6 +171,7 @@ fn field_text(original: &str, advice: &[Advice]) -> String {
 
 #[cfg(test)]
 mod tests {
+    use super::super::AdviceKey;
     use super::*;
 
     #[test]
@@ -187,7 +181,7 @@ mod tests {
         assert_eq!(round_toward(4.326, 1.0), 4.326, "a value already at four digits stays");
         assert_eq!(round_toward(6.514_040_673_7, 1.0), 6.515);
         let scene = Scene::default_scene();
-        let smaller = Advice::new("sensor.gain_v_per_nm", 0.5, -1.0, 0.2);
+        let smaller = Advice::new(AdviceKey::Gain, 0.5, -1.0, 0.2);
         let applied = smaller.applied(&scene, 0.25).expect("a valid scene");
         assert_eq!(
             applied.file.sensor.gain_v_per_nm,
@@ -199,11 +193,11 @@ mod tests {
 
     #[test]
     fn the_field_names_the_value_that_passed_and_what_did_not() {
-        let mut k = Advice::new("cantilever.stiffness_n_per_m", 4.0, 1.0, 100.0);
+        let mut k = Advice::new(AdviceKey::Stiffness, 4.0, 1.0, 100.0);
         k.tried.push((4.0, "dry_run"));
         k.value = 16.0;
         k.checked = Some(true);
-        let mut g = Advice::new("sensor.gain_v_per_nm", 0.1, -1.0, 0.01);
+        let mut g = Advice::new(AdviceKey::Gain, 0.1, -1.0, 0.01);
         g.tried.push((0.1, "unreadable"));
         g.checked = Some(false);
         let text = field_text("orig", &[k.clone(), g.clone()]);

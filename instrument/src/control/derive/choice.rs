@@ -145,11 +145,54 @@ pub struct Refusal {
     pub advice: Vec<Advice>,
 }
 
+/// The scene field an [`Advice`] changes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AdviceKey {
+    /// `cantilever.stiffness_n_per_m`.
+    Stiffness,
+    /// `sensor.gain_v_per_nm`, by its magnitude (the sign is the scene's).
+    Gain,
+}
+
+impl AdviceKey {
+    /// The field's key in a scene file.
+    pub fn field(self) -> &'static str {
+        match self {
+            AdviceKey::Stiffness => "cantilever.stiffness_n_per_m",
+            AdviceKey::Gain => "sensor.gain_v_per_nm",
+        }
+    }
+
+    /// The field as a refusal names its value: the gain by its magnitude.
+    pub fn said(self) -> &'static str {
+        match self {
+            AdviceKey::Stiffness => "cantilever.stiffness_n_per_m",
+            AdviceKey::Gain => "|sensor.gain_v_per_nm|",
+        }
+    }
+
+    /// The field's unit.
+    pub fn unit(self) -> &'static str {
+        match self {
+            AdviceKey::Stiffness => "N/m",
+            AdviceKey::Gain => "V/nm",
+        }
+    }
+
+    /// The field's value in `scene`, as the scene file holds it (the gain with its sign).
+    pub fn of(self, scene: &Scene) -> f64 {
+        match self {
+            AdviceKey::Stiffness => scene.file.cantilever.stiffness_n_per_m,
+            AdviceKey::Gain => scene.file.sensor.gain_v_per_nm,
+        }
+    }
+}
+
 /// A scene value a refusal names as a way out: a stiffer lever, a larger or smaller gain.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Advice {
-    /// The scene field: `cantilever.stiffness_n_per_m` or `sensor.gain_v_per_nm`.
-    pub key: &'static str,
+    /// The scene field.
+    pub key: AdviceKey,
     /// The value, in the field's unit (for the gain its magnitude: the sign is the scene's).
     pub value: f64,
     /// `+1` when a larger value goes further the right way, `-1` when a smaller one does.
@@ -167,7 +210,7 @@ pub struct Advice {
 
 impl Advice {
     /// An unchecked way out: `key` moved to `value` (towards `bound`, `direction` ±1).
-    pub fn new(key: &'static str, value: f64, direction: f64, bound: f64) -> Advice {
+    pub fn new(key: AdviceKey, value: f64, direction: f64, bound: f64) -> Advice {
         Advice {
             key,
             value,
@@ -179,23 +222,13 @@ impl Advice {
         }
     }
 
-    /// The unit of the field, for text.
-    pub fn unit(&self) -> &'static str {
-        if self.key == "cantilever.stiffness_n_per_m" {
-            "N/m"
-        } else {
-            "V/nm"
-        }
-    }
-
     /// `scene` with this advice applied at `value`, validated as a scene file is (the gain
-    /// keeps its sign).
+    /// keeps its sign); `None` when the scene would not be valid.
     pub fn applied(&self, scene: &Scene, value: f64) -> Option<Scene> {
         let mut file = scene.file.clone();
         match self.key {
-            "cantilever.stiffness_n_per_m" => file.cantilever.stiffness_n_per_m = value,
-            "sensor.gain_v_per_nm" => file.sensor.gain_v_per_nm = value.copysign(file.sensor.gain_v_per_nm),
-            _ => return None,
+            AdviceKey::Stiffness => file.cantilever.stiffness_n_per_m = value,
+            AdviceKey::Gain => file.sensor.gain_v_per_nm = value.copysign(file.sensor.gain_v_per_nm),
         }
         Scene::from_file_with(&scene.origin, file, scene.hand_set.clone()).ok()
     }

@@ -4,7 +4,8 @@
 
 use super::adhesion_field::{Pair, field as adhesion_field};
 use super::{
-    Advice, Candidate, Derivation, Fails, MAX_START, MAX_STIFFNESS, PEAK_SPARE, SET_FRACTION, TOUCH_PRESS, short,
+    Advice, AdviceKey, Candidate, Derivation, Fails, MAX_START, MAX_STIFFNESS, PEAK_SPARE, SET_FRACTION, TOUCH_PRESS,
+    short,
 };
 use crate::control::estimator::PushPrediction;
 
@@ -195,8 +196,8 @@ impl Derivation<'_> {
             "{smaller}, but below {} V/nm the readout does not see the touch of the substrate or the set point",
             short(gain_floor)
         );
-        let k_advice = Advice::new("cantilever.stiffness_n_per_m", need_k, 1.0, MAX_STIFFNESS);
-        let gain_advice = Advice::new("sensor.gain_v_per_nm", gain_max, -1.0, gain_floor);
+        let k_advice = Advice::new(AdviceKey::Stiffness, need_k, 1.0, MAX_STIFFNESS);
+        let gain_advice = Advice::new(AdviceKey::Gain, gain_max, -1.0, gain_floor);
         match (k_helps, gain_helps) {
             (true, true) => (
                 format!("{stiffer}{least}, or {smaller}{least_gain}"),
@@ -232,7 +233,7 @@ fn gain_field(need: f64, noise_helps: bool) -> (String, Vec<Advice>) {
     if need <= max {
         (
             format!("sensor.gain_v_per_nm: |gain| ≥ {} V/nm{quieter}", short(need)),
-            vec![Advice::new("sensor.gain_v_per_nm", need, 1.0, max)],
+            vec![Advice::new(AdviceKey::Gain, need, 1.0, max)],
         )
     } else {
         let text = format!(

@@ -3,7 +3,8 @@
 
 use super::adhesion_field::{Pair, field as adhesion_field};
 use super::{
-    Advice, Choice, Derivation, Fails, MAX_START, Refusal, STAGE_SETTLE, STAGE_STIFFNESS_RATIO, TOUCH_PRESS, short,
+    Advice, AdviceKey, Choice, Derivation, Fails, MAX_START, Refusal, STAGE_SETTLE, STAGE_STIFFNESS_RATIO, TOUCH_PRESS,
+    short,
 };
 use crate::control::strategy::pull_off::{PULL_OFF_MARGIN, PULL_OFF_SLACK, pull_off_rise};
 
@@ -51,7 +52,7 @@ impl Derivation<'_> {
             return Err(self.refuse(Fails {
                 code: "unreadable",
                 advice: vec![Advice::new(
-                    "sensor.gain_v_per_nm",
+                    AdviceKey::Gain,
                     need,
                     1.0,
                     crate::scene::GAIN_V_PER_NM.hi(),
@@ -90,7 +91,7 @@ impl Derivation<'_> {
             return Err(self.refuse(Fails {
                 code: "adhesion",
                 advice: vec![Advice::new(
-                    "cantilever.stiffness_n_per_m",
+                    AdviceKey::Stiffness,
                     need_k,
                     1.0,
                     crate::scene::STIFFNESS_N_PER_M.hi(),

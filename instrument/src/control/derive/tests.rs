@@ -162,7 +162,7 @@ fn checked_value_plans(s: &Scene, e: &super::Refusal) {
         .unwrap_or_else(|| panic!("a checked value: {e}"));
     assert!(e.field.contains(&format!("= {} ", super::short(a.value))), "{e}");
     let applied = a.applied(s, a.value).expect("a valid scene");
-    derive(&applied, 1, DEFAULT_TOLERANCE).unwrap_or_else(|r| panic!("with {} = {}: {r}", a.key, a.value));
+    derive(&applied, 1, DEFAULT_TOLERANCE).unwrap_or_else(|r| panic!("with {} = {}: {r}", a.key.field(), a.value));
 }
 
 /// A stage softer than 20 times the lever (the paper's stage with a 5 g moving mass: 8.6 times
