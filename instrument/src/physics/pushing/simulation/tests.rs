@@ -426,14 +426,18 @@ fn a_particle_pushed_outside_its_friction_cone_leaves_the_tip() {
 /// validator --scenes`) pushed from β = 30° as the plan's first contact angle, in ticks of
 /// 0.1 ms for at most 0.5 s: the simulation where it stopped and how.
 fn push_validator_seed(seed: u64) -> (Simulation, Result<(), SimulationError>) {
-    let text = match seed {
+    push_scene(match seed {
         21 => include_str!("scenes/validator-seed-21.toml"),
         79 => include_str!("scenes/validator-seed-79.toml"),
         82 => include_str!("scenes/validator-seed-82.toml"),
         107 => include_str!("scenes/validator-seed-107.toml"),
         _ => unreachable!(),
-    }
-    .replace("[push]\n", "[push]\ncontact_angle_deg = 30.0\n");
+    })
+}
+
+/// [`push_validator_seed`] for a scene's text.
+fn push_scene(text: &str) -> (Simulation, Result<(), SimulationError>) {
+    let text = text.replace("[push]\n", "[push]\ncontact_angle_deg = 30.0\n");
     let scene = Scene::parse("validator seed", &text).unwrap();
     let mut sim = Simulation::new(
         PushModel::new(scene.push_params()),
@@ -508,6 +512,27 @@ fn a_particle_rolling_under_the_tip_leaves_it_where_its_balance_folds() {
             "seed {seed}: det {d:e} at the fold"
         );
     }
+}
+
+/// Lab campaign seed 41 (an 8 nm particle under an 8 nm tip on a 0.29 N/m lever, dry): the
+/// particle rolls under the tip until its balance folds at 58.597 ms, one step after the
+/// friction phase switched. The switch restarts the balance's history, so a single block of
+/// `∂f_a/∂y_a` is all there is to tell the fold by: it is singular to working precision there
+/// (its determinant −1.5e-15 where the last step before the switch had 8.9e-7), and the push
+/// loses its particle instead of collapsing its step to 3e-21 s.
+#[test]
+fn a_fold_one_step_after_a_phase_switch_loses_the_particle() {
+    let text = include_str!("scenes/lab-seed-41.toml").replace("[push]\n", "[push]\ncontact_angle_deg = 30.0\n");
+    let scene = Scene::parse("lab seed 41", &text).unwrap();
+    let model = PushModel::new(scene.push_params());
+    // `nanopush simulate --duration 0.16 --sample 0.0001`: 1600 samples.
+    let r =
+        crate::physics::pushing::trace::run_push(model.clone(), Method::Rodas4, Options::with_rtol(1e-6), 0.16, 1e-4);
+    let t = match r {
+        Err(SimulationError::ContactLost { t }) => t,
+        other => panic!("expected the tip to lose the particle, got {other:?}"),
+    };
+    assert!((t - 58.597e-3).abs() < 0.001e-3, "lost at {t:e} s");
 }
 
 /// Validator seed 107: a soft lever (0.048 N/m) whose tip sticks to the particle by adhesion
