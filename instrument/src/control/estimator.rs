@@ -15,7 +15,7 @@
 //! carries the particle, becomes "no displacement").
 
 use crate::numerics::integrate::{Method, Options};
-use crate::physics::pushing::trace::run_push_within;
+use crate::physics::pushing::trace::{TraceRow, run_push_within};
 use crate::physics::pushing::{Advance, PushModel, PushParams, Simulation, SimulationError};
 
 /// What the model predicts for a push at constant speed, for the estimator.
@@ -48,6 +48,9 @@ pub struct PushPrediction {
     /// The side of the lever the deflections above are read on: `ζ_z` itself on the push side,
     /// `−ζ_z` on the pull side.
     pub side: ContactSide,
+    /// Whether the push had settled by its end ([`settled`]): the settled constants above hold
+    /// for a longer push only then.
+    pub settled: bool,
 }
 
 /// Which way the contact bends the lever, and so which side of the baseline the strategy reads
@@ -240,7 +243,7 @@ fn predict_with(
     let retraction = predict_retract(model, duration, retract, PREDICTION_STEPS)?;
     let n = run.trace.len();
     let tail = &run.trace[n / 2..];
-    let lag = |r: &crate::physics::pushing::trace::TraceRow| r.stage_y - r.particle_y;
+    let lag = |r: &TraceRow| r.stage_y - r.particle_y;
     let mean = tail.iter().map(lag).sum::<f64>() / tail.len() as f64;
     let (lo, hi) = tail
         .iter()
@@ -256,6 +259,7 @@ fn predict_with(
     let deflection = deflection_of(peak);
     let travel_to_deflection = on_side.iter().find(|r| r.0 >= deflection).map(|r| r.1);
     let settled = side.sign() * tail.iter().map(|r| r.zeta_z).sum::<f64>() / tail.len() as f64;
+    let steady = self::settled(tail, peak.abs().max(highest.0.abs()));
     Ok(PushPrediction {
         retract_shift: retraction.shift,
         release_lift: retraction.release_lift,
@@ -268,7 +272,29 @@ fn predict_with(
         phase: run.final_phase,
         travel: duration * params.speed,
         side,
+        settled: steady,
     })
+}
+
+/// Whether the second half of a push (`tail`) has settled: the means of its two halves differ
+/// by at most a tenth of `peak` in `ζ_z` and by at most a tenth of the lag (at least 2 nm) in
+/// the lag `s − y`. A particle that rolls under a tip that sticks to it moves at
+/// `1/(1 + sin β)` of the tip's speed: its lag grows the whole time, and its `ζ_z` falls as the
+/// contact turns over the top, until it rolls ahead at the tip's speed with no load on the lever
+/// (lab campaign seed 11, β = 70°: the lag grows to 87 nm and `ζ_z` falls from 4.9 nm to
+/// −0.09 nm over 175 nm of travel). Its constants are those of the end, not a mean over the growth.
+fn settled(tail: &[TraceRow], peak: f64) -> bool {
+    let half = tail.len() / 2;
+    if half == 0 {
+        return true;
+    }
+    let mean = |rows: &[TraceRow], f: fn(&TraceRow) -> f64| rows.iter().map(f).sum::<f64>() / rows.len() as f64;
+    let (early, late) = tail.split_at(half);
+    let zeta: fn(&TraceRow) -> f64 = |r| r.zeta_z;
+    let lag: fn(&TraceRow) -> f64 = |r| r.stage_y - r.particle_y;
+    let (lag_early, lag_late) = (mean(early, lag), mean(late, lag));
+    (mean(late, zeta) - mean(early, zeta)).abs() <= 0.1 * peak
+        && (lag_late - lag_early).abs() <= (0.1 * lag_late.abs()).max(2e-9)
 }
 
 /// The stick-phase peak of a model push, from its `(ζ_z, travel)` samples on the side it is read
@@ -331,7 +357,7 @@ fn past_separation(
     loop {
         let duration = (travel / params.speed).max(0.02);
         let p = predict_with(params, duration, retract, side, deflection_of)?;
-        if p.travel_to_peak <= 0.75 * p.travel || travel >= MAX_PREDICTED_TRAVEL {
+        if (p.travel_to_peak <= 0.75 * p.travel && p.settled) || travel >= MAX_PREDICTED_TRAVEL {
             return Ok(p);
         }
         travel *= 4.0;
@@ -569,6 +595,7 @@ mod tests {
             release_lift: Some(0.0),
             travel: 40e-9,
             side: super::ContactSide::Push,
+            settled: true,
         }
     }
 
@@ -686,5 +713,43 @@ mod tests {
         assert!(p.peak_deflection > p.settled_deflection);
         let s = p.travel_to_deflection.unwrap();
         assert!(s > 0.0 && s < p.settle_offset + 5e-9, "travel to 1 nm: {s:e}");
+    }
+
+    /// Lab campaign seed 11 at β = 70° (a 115 nm particle under an 11 nm tip, both frictions
+    /// near 0.9): the particle rolls under the tip, which sticks to it, at 1/(1 + sin β) of its
+    /// speed while the contact turns over the top (`ζ_z` peaks at 4.89 nm after 85 nm of travel,
+    /// then falls), until, after 175 nm, it rolls on in front of the tip at its speed with no
+    /// load on the lever. The 160 nm push has its peak early enough but has not settled; the
+    /// prediction runs on to 640 nm and gives the rolling push's constants: a lag of 86.6 nm
+    /// (58.6 nm as the mean over 80-160 nm) and a settled `ζ_z` of −0.09 nm (3.72 nm as that mean).
+    #[test]
+    fn a_particle_rolling_under_the_tip_is_predicted_once_it_has_settled() {
+        let scene = Scene::parse("lab seed 11", include_str!("derive/scenes/lab-seed-11.toml")).unwrap();
+        let mut params = scene.push_params();
+        params.beta = 70f64.to_radians();
+        params.speed = 1e-6;
+        let plan = RetractPlan {
+            hold: 0.05,
+            back_off: 100e-9,
+            speed: 1e-6,
+            lift: 2e-6,
+        };
+        let short = predict_with(params, 0.16, plan, ContactSide::Push, |peak| 0.6 * peak).unwrap();
+        assert!(short.travel_to_peak <= 0.75 * short.travel, "{short:?}");
+        assert!(!short.settled, "{short:?}");
+        assert!((short.peak_deflection / 1e-9 - 4.89).abs() < 0.01, "{short:?}");
+        let p = predict_with_set_fraction(params, ContactSide::Push, 0.6, plan).unwrap();
+        assert!(p.settled, "{p:?}");
+        assert_eq!(p.phase, "roll");
+        assert!((p.travel / 1e-9 - 640.0).abs() < 1e-6, "{p:?}");
+        assert!((p.peak_deflection / 1e-9 - 4.89).abs() < 0.01, "{p:?}");
+        assert!((p.settle_offset / 1e-9 - 86.6).abs() < 0.1, "lag {:e}", p.settle_offset);
+        assert!(
+            (p.settled_deflection / 1e-9 + 0.09).abs() < 0.01,
+            "ζ° {:e}",
+            p.settled_deflection
+        );
+        assert!((short.settle_offset / 1e-9 - 58.6).abs() < 0.1, "{short:?}");
+        assert!((short.settled_deflection / 1e-9 - 3.72).abs() < 0.01, "{short:?}");
     }
 }
