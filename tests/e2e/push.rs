@@ -208,3 +208,37 @@ fn a_refusal_is_json_for_json_callers_and_plan_refuses_as_push_does() {
     let v: serde_json::Value = serde_json::from_str(&text(&out).0).unwrap();
     assert_eq!((v["code"].as_str(), out.status.code()), (Some("model"), Some(2)));
 }
+
+/// A particle that rolls on in front of the tip (lab campaign seed 9, the scene the plan's unit
+/// test derives from): `nanopush plan --json` chooses no lost-particle test and says why, and
+/// `nanopush push --distance-um 1` moves it in three pushes to within a nanometre (0.7 nm).
+#[test]
+fn a_rolling_particle_is_planned_without_a_lost_test_and_pushed_ok() {
+    let scene = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../instrument/src/control/derive/scenes/lab-seed-9.toml"
+    );
+    let plan = json(&["plan", "--scene", scene, "--json"]);
+    let lost = plan["choices"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["key"] == "strategy.lost_threshold_mv")
+        .unwrap();
+    assert_eq!(lost["value"], 0.0, "{lost}");
+    assert!(
+        lost["why"].as_str().unwrap().starts_with("no lost-particle test: "),
+        "{lost}"
+    );
+    assert!(
+        plan["summary"].as_str().unwrap().contains("then no lost-particle test"),
+        "{plan}"
+    );
+    let r = json(&["push", "--scene", scene, "--distance-um", "1", "--json"]);
+    assert_eq!(r["outcome"], "ok", "{r}");
+    let legs = r["legs"].as_array().unwrap();
+    assert_eq!(legs.len(), 3, "{r}");
+    assert!(legs.iter().all(|l| l["outcome"] == "ok"), "{r}");
+    let err = r["final_error"].as_f64().unwrap();
+    assert!(err < 1e-9, "final error {err:e} m");
+}

@@ -369,7 +369,9 @@ pub struct StrategyFile {
     /// Safety limit on the reading (V): beyond it (on the set point's side of the baseline) the
     /// tip retracts at once.
     pub safety_limit_v: f64,
-    /// "Particle lost": the deflection fell back within this of the baseline (mV) during a push.
+    /// "Particle lost": the deflection fell back within this of the baseline (mV) during a push;
+    /// 0 turns the test off (a particle that rolls ahead of the tip with no load on the lever
+    /// reads as the baseline, as a lost one does: the scan after the push judges it).
     pub lost_threshold_mv: f64,
     /// Longest single push (µm); a longer move is planned as several pushes.
     pub max_push_um: f64,

@@ -100,10 +100,18 @@ impl DerivedStrategy {
                 self.tried.len()
             )
         };
+        // A push whose particle rolls on in front of the tip with no load has no lost test.
+        let reading = if self.strategy.lost_threshold_mv > 0.0 {
+            format!("read on the {} side", self.prediction.side.name())
+        } else {
+            format!(
+                "read on the {} side until t*, then no lost-particle test (the particle rolls on in front of the tip)",
+                self.prediction.side.name()
+            )
+        };
         format!(
-            "β = {}°, read on the {} side, {control} control, {} µm/s, pushes of at most {} µm{}: {why}",
+            "β = {}°, {reading}, {control} control, {} µm/s, pushes of at most {} µm{}: {why}",
             short(self.contact_angle_deg),
-            self.prediction.side.name(),
             short(self.speed_um_per_s),
             short(max_push),
             if shorter {

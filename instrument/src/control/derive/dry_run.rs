@@ -27,6 +27,29 @@ pub fn dry_run_with(
     push_cap: Option<f64>,
     k: u64,
 ) -> Result<usize, DryRunFailure> {
+    dry_run_along(scene, plan, push_cap, k, false)
+}
+
+/// [`dry_run_with`] across the substrate's slope (its legs at right angles to the slope's
+/// direction, one way and back) instead of up and down it: a plan that pushes without a
+/// lost-particle test is dry-run in a third realization this way, since nothing tells it, while
+/// it pushes, that a leg lost the particle.
+pub fn dry_run_across(
+    scene: &Scene,
+    plan: &DerivedStrategy,
+    push_cap: Option<f64>,
+    k: u64,
+) -> Result<usize, DryRunFailure> {
+    dry_run_along(scene, plan, push_cap, k, true)
+}
+
+fn dry_run_along(
+    scene: &Scene,
+    plan: &DerivedStrategy,
+    push_cap: Option<f64>,
+    k: u64,
+    across: bool,
+) -> Result<usize, DryRunFailure> {
     let mut s = scene.clone();
     plan.apply(&mut s);
     s.file.sensor.noise_seed = s
@@ -57,6 +80,7 @@ pub fn dry_run_with(
     let (tx, ty) = (s.file.substrate.tilt_x_mrad, s.file.substrate.tilt_y_mrad);
     let tilt = tx.hypot(ty);
     let up = if tilt > 0.0 { (tx / tilt, ty / tilt) } else { (1.0, 0.0) };
+    let up = if across { (-up.1, up.0) } else { up };
     // Up the slope, then down it, each from where the scan after the last found the particle.
     let back = s.file.strategy.approach_distance_um * 1e-6 + r + 2e-6;
     let start = ((x - up.0 * back).clamp(0.0, range), (y - up.1 * back).clamp(0.0, range));

@@ -123,8 +123,16 @@ impl Derivation<'_> {
         }
         let settled_v = p.settled_deflection * ro.gain;
         let need_settled = 8.0 * ro.sigma + 2.0 * ro.pert;
-        if settled_v < need_settled {
-            let gain = gain_field(gain_nm * need_settled / settled_v.max(1e-12), false);
+        if settled_v < need_settled && !self.rolls_unread(p) {
+            // A reading that settles at or beyond the baseline cannot be raised by any gain.
+            let gain = if settled_v > 0.0 {
+                gain_field(gain_nm * need_settled / settled_v, false)
+            } else {
+                (
+                    "the particle, its friction or the contact angle: the push settles with the lever at or beyond the baseline, which no gain can read".into(),
+                    Vec::new(),
+                )
+            };
             return Err(Fails {
                 code: "unreadable",
                 advice: gain.1,
@@ -153,6 +161,16 @@ impl Derivation<'_> {
             });
         }
         Ok(())
+    }
+
+    /// Whether the model's push settles with the particle rolling on in front of the tip and a
+    /// reading the push-side lost-particle test cannot follow (under `8σ + 2p`: at the baseline,
+    /// or past it on the other side): such a push is run without that test
+    /// (`strategy.lost_threshold_mv = 0`), its end told by the scan after it. The particle then
+    /// moves at the tip's speed, behind its travel by the settled lag.
+    pub(super) fn rolls_unread(&self, p: &PushPrediction) -> bool {
+        let ro = self.readout;
+        p.settled && p.phase == "roll" && p.settled_deflection * ro.gain < 8.0 * ro.sigma + 2.0 * ro.pert
     }
 
     /// The fields a `deflection_limit` refusal names: a stiffer lever (at most

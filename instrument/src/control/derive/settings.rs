@@ -239,10 +239,44 @@ fn safety_limit(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
     Ok(())
 }
 
-/// **Particle lost** at half the settled reading after `t*`.
+/// **Particle lost** at half the settled reading after `t*`; no test (0) when the particle
+/// rolls ahead of the tip with a reading no test can tell from the baseline
+/// ([`Derivation::rolls_unread`]).
 fn lost_threshold(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
     let f = &d.scene.file;
     let settled_v = s.cand.prediction.settled_deflection * d.readout.gain;
+    if d.rolls_unread(&s.cand.prediction) {
+        let check = (f.strategy.lost_threshold_mv > 0.0).then(|| {
+            format!(
+                "the particle rolls ahead of the tip at a settled reading of {:.1} mV: a push reads as lost",
+                settled_v * 1e3
+            )
+        });
+        // Past the baseline, the reading crosses it on the way from the peak: a test on either
+        // side would fire before the push settles.
+        let reading = if settled_v < 0.0 {
+            format!(
+                "the reading {:.1} mV, past the baseline on the other side, which it crosses from the peak on the way",
+                settled_v * 1e3
+            )
+        } else {
+            format!(
+                "the reading {:.1} mV, as near the baseline as a lost particle's",
+                settled_v * 1e3
+            )
+        };
+        d.choose(
+            "strategy.lost_threshold_mv",
+            f.strategy.lost_threshold_mv,
+            0.0,
+            format!(
+                "no lost-particle test: after t* the model's particle rolls on in front of the tip at its speed (its lag behind the travel settles at {:.1} nm), {reading}; the scan after the push judges it",
+                s.cand.prediction.settle_offset * 1e9,
+            ),
+            check,
+        );
+        return Ok(());
+    }
     let lost = settled_v / 2.0;
     let check = (f.strategy.lost_threshold_mv * 1e-3 >= 0.9 * settled_v).then(|| {
         format!(

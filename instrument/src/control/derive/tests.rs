@@ -352,3 +352,67 @@ fn a_parking_height_below_the_snap_in_is_refused_naming_the_humidity() {
     assert!(e.reason.contains("where the tip snaps in to the substrate"), "{e}");
     assert!(e.field.contains("environment.relative_humidity"), "{e}");
 }
+
+/// Lab campaign seed 9 (a 17 nm particle under a 2.2 nm tip on a 0.28 N/m lever): after `t*` the
+/// model's particle rolls on in front of the tip at its speed, 35.1 nm behind its travel, with
+/// the lever bent past the baseline to the pull side (−632.5 mV), where the push-side reading
+/// crosses the baseline on its way from the peak. The plan pushes without a lost-particle test
+/// (`lost_threshold_mv = 0`), says so in its summary, and passes its dry runs: up and down the
+/// slope, three pushes in a row, and across the slope. A 1 µm move, three pushes, ends within
+/// 1 nm; with a lost-particle test at the scene's default 60 mV, its first push fails as lost.
+#[test]
+fn a_particle_that_rolls_on_in_front_of_the_tip_is_pushed_without_a_lost_test() {
+    let s = Scene::parse("lab seed 9", include_str!("scenes/lab-seed-9.toml")).unwrap();
+    let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
+    assert_eq!(plan.contact_angle_deg, 30.0);
+    assert_eq!(value(&plan, "strategy.lost_threshold_mv"), 0.0);
+    assert!(plan.dry_run_passed, "{:?}", plan.warnings);
+    assert_eq!(plan.prediction.phase, "roll");
+    assert!(plan.prediction.settled);
+    assert!(
+        (plan.prediction.settle_offset / 1e-9 - 35.1).abs() < 0.05,
+        "{:?}",
+        plan.prediction
+    );
+    let settled_mv = plan.prediction.settled_deflection * s.file.sensor.gain_v_per_nm.abs() * 1e12;
+    assert!((settled_mv + 632.5).abs() < 0.05, "{settled_mv} mV");
+    assert!(
+        plan.summary()
+            .starts_with("β = 30°, read on the push side until t*, then no lost-particle test (the particle rolls on in front of the tip), xy control, "),
+        "{}",
+        plan.summary()
+    );
+    // The pushes as `nanopush push` runs them, on the plan.
+    let mut applied = s.clone();
+    plan.apply(&mut applied);
+    let mut afm = crate::afm::Afm::from_scene(&applied, 48e-6, 50e-6, 1e-3);
+    let options = crate::control::moves::run::MoveOptions {
+        tolerance: DEFAULT_TOLERANCE,
+        attempts: 3,
+        pause: None,
+    };
+    let target = crate::control::moves::locate::MoveTarget::Distance {
+        distance: 1e-6,
+        direction: (1.0, 0.0),
+    };
+    let r = s.pushed_particle().radius_nm * 1e-9;
+    let moved =
+        crate::control::moves::run::move_particle(&applied, &mut afm, 1, (50e-6, 50e-6), r, target, options).unwrap();
+    assert_eq!(moved.legs.len(), 3);
+    assert!(moved.legs.iter().all(|l| l.run.summary.failure.is_none()));
+    match moved.verdict {
+        crate::control::moves::run::Verdict::Ok { error } => assert!(error < 1e-9, "{error:e} m off"),
+        v => panic!("{v:?}"),
+    }
+    // With the scene's default lost-particle test (60 mV) the same move reads the rolling
+    // particle as lost in its first push.
+    applied.file.strategy.lost_threshold_mv = 60.0;
+    let mut afm = crate::afm::Afm::from_scene(&applied, 48e-6, 50e-6, 1e-3);
+    let moved =
+        crate::control::moves::run::move_particle(&applied, &mut afm, 1, (50e-6, 50e-6), r, target, options).unwrap();
+    assert_eq!(moved.legs.len(), 1);
+    assert_eq!(
+        moved.verdict,
+        crate::control::moves::run::Verdict::Failed { code: "particle_lost" }
+    );
+}

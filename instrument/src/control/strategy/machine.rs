@@ -553,8 +553,9 @@ impl Strategy {
         self.summary.estimated_distance = est;
         self.summary.push_travel = travel;
         self.summary.estimated_particle = (self.task.particle.0 + d.0 * est, self.task.particle.1 + d.1 * est);
-        // Lost: after the separation the deflection must stay off the baseline.
-        if self.hxy.separated() && contact < p.lost_threshold {
+        // Lost: after the separation the deflection must stay off the baseline (a threshold of 0:
+        // no test, the particle rolls ahead with no load on the lever).
+        if p.lost_threshold > 0.0 && self.hxy.separated() && contact < p.lost_threshold {
             self.lost_count += 1;
             if self.lost_count >= 5 {
                 self.fail(
