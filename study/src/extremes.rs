@@ -267,6 +267,25 @@ pub fn push_lab_seed(
     run_push(PushModel::new(p), Method::Rodas4, Options::with_rtol(1e-6), 0.15, 1e-3)
 }
 
+/// Lab scenes whose model push at β = 30°, sampled every 0.1 ms as the plan's prediction is,
+/// folds one step after its friction phase switched (seed 41: an 8 nm particle rolling under
+/// an 8 nm tip, at 58.597 ms), with their fold times: the switch leaves one block of the
+/// balance to tell the fold by ([`push_lab_seed_finely`]).
+pub const FOLDING_LAB_SEEDS: [(u64, f64); 1] = [(41, 58.597e-3)];
+
+/// [`push_lab_seed`] sampled every 0.1 ms for 160 nm: what [`FOLDING_LAB_SEEDS`] are checked
+/// with.
+pub fn push_lab_seed_finely(
+    seed: u64,
+) -> Result<nanopush_instrument::physics::pushing::trace::PushRun, nanopush_instrument::physics::pushing::SimulationError>
+{
+    let scene = crate::random_scenes::random_scene(seed, crate::random_scenes::Ranges::Lab).scene;
+    let mut p = scene.push_params();
+    p.beta = 30f64.to_radians();
+    p.speed = 1e-6;
+    run_push(PushModel::new(p), Method::Rodas4, Options::with_rtol(1e-6), 0.16, 1e-4)
+}
+
 /// Validator scenes of the random campaign (`random_scenes::random_scene(seed,
 /// Ranges::Validator)`) whose model push at β = 30° once ended in a collapsed step (1e-21 s):
 /// in 21, 79 and 82 the quasi-static balance folds and the push loses its particle (79: the tip
@@ -314,6 +333,20 @@ mod tests {
                     assert!(last.normal_ta != 0.0, "seed {seed}: the tip let go");
                 }
                 (other, _) => panic!("seed {seed}: expected {fold:?}, got {:?}", other.err()),
+            }
+        }
+    }
+
+    /// Each of [`FOLDING_LAB_SEEDS`] loses its particle at its fold (to 1 µs), never with the
+    /// step collapsing.
+    #[test]
+    fn the_folding_lab_scenes_lose_the_particle_at_the_fold() {
+        for (seed, t_fold) in FOLDING_LAB_SEEDS {
+            match push_lab_seed_finely(seed) {
+                Err(SimulationError::ContactLost { t }) => {
+                    assert!((t - t_fold).abs() < 1e-6, "seed {seed}: lost at {t:e} s");
+                }
+                other => panic!("seed {seed}: expected the fold at {t_fold:e} s, got {:?}", other.err()),
             }
         }
     }
