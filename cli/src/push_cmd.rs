@@ -265,9 +265,10 @@ pub fn run(a: &PushArgs) -> anyhow::Result<(String, bool)> {
     if a.derive_all {
         scene.hand_set = nanopush_instrument::scene::hand_set::HandSet::none();
     }
+    // The plan is derived and dry-run with the loop closure the push will use.
+    scene.file.strategy.control = req.control;
     let plan = derive::derive(&scene, req.id, req.tolerance)?;
     plan.apply(&mut scene);
-    scene.file.strategy.control = req.control;
     let f = &scene.file;
     let part = f.particles.iter().find(|p| p.id == req.id).expect("checked");
     let click = (part.x_um * UM, part.y_um * UM);

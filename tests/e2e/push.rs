@@ -211,7 +211,8 @@ fn a_refusal_is_json_for_json_callers_and_plan_refuses_as_push_does() {
 
 /// A particle that rolls on in front of the tip (lab campaign seed 9, the scene the plan's unit
 /// test derives from): `nanopush plan --json` chooses no lost-particle test and says why, and
-/// `nanopush push --distance-um 1` moves it in three pushes to within a nanometre (0.7 nm).
+/// `nanopush push --distance-um 1` moves it in three pushes to within a nanometre (0.7 nm);
+/// with `--control z` the push is refused before anything moves.
 #[test]
 fn a_rolling_particle_is_planned_without_a_lost_test_and_pushed_ok() {
     let scene = concat!(
@@ -241,4 +242,26 @@ fn a_rolling_particle_is_planned_without_a_lost_test_and_pushed_ok() {
     assert!(legs.iter().all(|l| l["outcome"] == "ok"), "{r}");
     let err = r["final_error"].as_f64().unwrap();
     assert!(err < 1e-9, "final error {err:e} m");
+    // The z loop would hold a reading that is not the contact's: the push is refused, naming xy.
+    let out = run(
+        "nanopush",
+        &[
+            "push",
+            "--scene",
+            scene,
+            "--distance-um",
+            "1",
+            "--control",
+            "z",
+            "--json",
+        ],
+        None,
+    );
+    assert_eq!(out.status.code(), Some(2));
+    let v: serde_json::Value = serde_json::from_str(&text(&out).0).unwrap();
+    assert_eq!(v["code"], "unreadable", "{v}");
+    assert!(
+        v["field"].as_str().unwrap().starts_with("strategy.control = \"xy\""),
+        "{v}"
+    );
 }

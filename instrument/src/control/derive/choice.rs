@@ -101,12 +101,14 @@ impl DerivedStrategy {
             )
         };
         // A push whose particle rolls on in front of the tip with no load has no lost test.
+        let side = self.prediction.side.name();
         let reading = if self.strategy.lost_threshold_mv > 0.0 {
-            format!("read on the {} side", self.prediction.side.name())
+            format!("read on the {side} side")
+        } else if hand("strategy.lost_threshold_mv") {
+            format!("read on the {side} side until t*, then no lost-particle test (hand-set)")
         } else {
             format!(
-                "read on the {} side until t*, then no lost-particle test (the particle rolls on in front of the tip)",
-                self.prediction.side.name()
+                "read on the {side} side until t*, then no lost-particle test (the particle rolls on in front of the tip)"
             )
         };
         format!(

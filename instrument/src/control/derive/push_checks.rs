@@ -8,6 +8,7 @@ use super::{
     short,
 };
 use crate::control::estimator::PushPrediction;
+use crate::scene::file::ControlFile;
 
 impl Derivation<'_> {
     /// Whether the strategy can work on the predicted push: the reading shows the contact, the
@@ -143,6 +144,21 @@ impl Derivation<'_> {
                     need_settled * 1e3
                 ),
                 field: gain.0,
+            });
+        }
+        // The z loop holds the reading after t* at its level: a particle rolling on with no
+        // load gives it no contact to hold.
+        if self.rolls_unread(p) && self.file.control != ControlFile::Xy {
+            return Err(Fails {
+                code: "unreadable",
+                advice: Vec::new(),
+                reason: format!(
+                    "at β = {}° the particle rolls on in front of the tip after t* with no load on the lever (a settled reading of {:.1} mV): the {} loop would hold the tip to a reading that is not the contact's",
+                    c.beta_deg,
+                    settled_v * 1e3,
+                    self.file.control.name()
+                ),
+                field: "strategy.control = \"xy\" (or --control xy)".into(),
             });
         }
         if p.release_lift.is_none() {

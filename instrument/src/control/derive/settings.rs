@@ -278,12 +278,19 @@ fn lost_threshold(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
         return Ok(());
     }
     let lost = settled_v / 2.0;
-    let check = (f.strategy.lost_threshold_mv * 1e-3 >= 0.9 * settled_v).then(|| {
-        format!(
-            "at or above the settled reading {:.1} mV: an ordinary push looks lost",
+    let check = if f.strategy.lost_threshold_mv == 0.0 {
+        Some(format!(
+            "0 turns the lost-particle test off, though the model's settled reading {:.1} mV would tell a lost particle",
             settled_v * 1e3
-        )
-    });
+        ))
+    } else {
+        (f.strategy.lost_threshold_mv * 1e-3 >= 0.9 * settled_v).then(|| {
+            format!(
+                "at or above the settled reading {:.1} mV: an ordinary push looks lost",
+                settled_v * 1e3
+            )
+        })
+    };
     d.choose(
         "strategy.lost_threshold_mv",
         f.strategy.lost_threshold_mv,
