@@ -15,11 +15,16 @@
 //!   passes every check below (the paper's 30° first).
 //! - **set point** `ζ_set = 0.6 ζ_peak`: reached before the particle moves; its reading must be
 //!   at least `10 (σ + p)` from the baseline.
-//! - **safety limit**: `max(2.5 ζ_peak g, ζ_peak g + 10σ)` from the baseline, within 90 % of
-//!   the readout's room on the push side, which must hold twice the peak.
+//! - **safety limit**: `max(2.5 ζ_peak g, ζ_peak g + 10σ)` from the baseline, and on the push
+//!   side beyond what auto-parking reads at the touch of the substrate (the substrate threshold
+//!   plus 1.5 ticks of the approach, `1.5 v_z Δt g`), within 90 % of the readout's room on the
+//!   push side, which must hold twice the peak.
 //! - **`t*` is seen**: the drop `(ζ_peak − ζ°) g` at least `12σ + 2p` (the detector's margin
 //!   is a third of it, at least 4σ); **particle lost** at half the settled reading, which
-//!   must be at least `8σ + 2p`.
+//!   must be at least `8σ + 2p`, or no lost-particle test (0) when the model's settled push
+//!   rolls the particle on in front of the tip with a reading under that (at the baseline, or
+//!   past it on the other side); such a plan is pushed under xy control only, and dry-run across
+//!   the slope too. The model's push is run until it has settled (its lag and `ζ_z` steady).
 //! - **V**: at most the paper's 1 µm/s; at most the travel between the set point and the peak
 //!   in 1.5 ticks of 1 ms (the search stops before the particle shears); at most
 //!   `tolerance · 2π f_y / 4`, so the stage's ringing at the stop (`≈ V/(2π f_y)`) stays

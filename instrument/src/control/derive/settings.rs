@@ -37,6 +37,10 @@ struct Settled {
     shortened: bool,
 }
 
+/// Ticks of the z approach the lever may take up before auto-parking reads the touch: the
+/// touch falls between two readings, and the next may come a tick later.
+const TOUCH_TICKS: f64 = 1.5;
+
 /// One setting: records its choice (or refuses the scene) from what is settled so far.
 type Setting = fn(&mut Derivation, &mut Settled) -> Result<(), Refusal>;
 
@@ -215,8 +219,21 @@ fn safety_limit(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
     let side = s.cand.prediction.side;
     let room = ro.room_on(side);
     let peak_v = s.cand.prediction.peak_deflection * ro.gain;
+    // Auto-parking reads the touch of the substrate on the push side: the substrate threshold,
+    // and up to a tick and a half of the approach pressed into the lever before a reading shows
+    // it (lab seed 357's park read 1.775 V in the tick after the touch, past a 1.32 V limit).
+    let threshold = d
+        .choices
+        .iter()
+        .find(|c| c.key == "strategy.substrate_threshold_mv")
+        .map_or(0.03, |c| c.value * 1e-3);
+    let touch_v = match side {
+        ContactSide::Push => threshold + TOUCH_TICKS * s.approach_speed * TICK * ro.gain,
+        ContactSide::Pull => 0.0,
+    };
     let safety = (2.5 * peak_v)
         .max(peak_v + 10.0 * ro.sigma)
+        .max(touch_v)
         .min(0.9 * room)
         .max(PEAK_SPARE * peak_v);
     let hand = (f.strategy.safety_limit_v - ro.baseline) * ro.sign * side.sign();
@@ -230,7 +247,7 @@ fn safety_limit(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
         f.strategy.safety_limit_v,
         ro.baseline + ro.sign * side.sign() * safety,
         format!(
-            "2.5 × the peak reading {peak_v:.3} V (or the peak plus 10σ; the instrument's peak exceeds the model's where the snap-in lifts the detected substrate), within 90 % of the readout's {:.2} V on the {} side",
+            "2.5 × the peak reading {peak_v:.3} V (or the peak plus 10σ; the instrument's peak exceeds the model's where the snap-in lifts the detected substrate), above the {touch_v:.3} V auto-parking may read at the touch (the substrate threshold and {TOUCH_TICKS} ticks of the approach), within 90 % of the readout's {:.2} V on the {} side",
             room,
             side.name()
         ),

@@ -461,3 +461,21 @@ fn a_lost_test_turned_off_by_hand_is_warned_about() {
         plan.warnings
     );
 }
+
+/// Lab campaign seed 357 (a readout of 1.73 V/nm, a stick-phase peak of 0.448 V): auto-parking
+/// reads the touch of the substrate on the push side, up to the substrate threshold and a tick
+/// and a half of the 1 µm/s approach (2.703 V from the baseline), so the safety limit lies
+/// there (2.904 V) rather than at 2.5 × the peak (1.12 V from the baseline, 1.32 V), which a
+/// park read past in the tick after the touch (1.775 V) on the 16th leg of a 3.86 µm move.
+#[test]
+fn the_safety_limit_clears_the_reading_at_the_touch_of_the_substrate() {
+    let s = Scene::parse("lab seed 357", include_str!("scenes/lab-seed-357.toml")).unwrap();
+    let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
+    let from_baseline = value(&plan, "strategy.safety_limit_v") - s.file.sensor.baseline_v;
+    let touch = value(&plan, "strategy.substrate_threshold_mv") * 1e-3 + 1.5 * s.file.sensor.gain_v_per_nm;
+    assert!((touch - 2.703).abs() < 0.001, "{touch} V at the touch");
+    assert!((from_baseline - touch).abs() < 1e-9, "{from_baseline} V");
+    assert!((value(&plan, "strategy.safety_limit_v") - 2.904).abs() < 0.001);
+    let peak = plan.prediction.peak_deflection * s.file.sensor.gain_v_per_nm * 1e9;
+    assert!((peak - 0.448).abs() < 0.001, "{peak} V");
+}
