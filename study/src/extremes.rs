@@ -260,11 +260,27 @@ pub fn push_lab_seed(
     seed: u64,
 ) -> Result<nanopush_instrument::physics::pushing::trace::PushRun, nanopush_instrument::physics::pushing::SimulationError>
 {
+    push_lab_seed_for(seed, 0.15, 1e-3)
+}
+
+/// A lab seed's scene pushed at β = 30° and 1 µm/s for `duration` (s), sampled every `dt` (s).
+fn push_lab_seed_for(
+    seed: u64,
+    duration: f64,
+    dt: f64,
+) -> Result<nanopush_instrument::physics::pushing::trace::PushRun, nanopush_instrument::physics::pushing::SimulationError>
+{
     let scene = crate::random_scenes::random_scene(seed, crate::random_scenes::Ranges::Lab).scene;
     let mut p = scene.push_params();
     p.beta = 30f64.to_radians();
     p.speed = 1e-6;
-    run_push(PushModel::new(p), Method::Rodas4, Options::with_rtol(1e-6), 0.15, 1e-3)
+    run_push(
+        PushModel::new(p),
+        Method::Rodas4,
+        Options::with_rtol(1e-6),
+        duration,
+        dt,
+    )
 }
 
 /// Lab scenes whose model push at β = 30°, sampled every 0.1 ms as the plan's prediction is,
@@ -279,11 +295,7 @@ pub fn push_lab_seed_finely(
     seed: u64,
 ) -> Result<nanopush_instrument::physics::pushing::trace::PushRun, nanopush_instrument::physics::pushing::SimulationError>
 {
-    let scene = crate::random_scenes::random_scene(seed, crate::random_scenes::Ranges::Lab).scene;
-    let mut p = scene.push_params();
-    p.beta = 30f64.to_radians();
-    p.speed = 1e-6;
-    run_push(PushModel::new(p), Method::Rodas4, Options::with_rtol(1e-6), 0.16, 1e-4)
+    push_lab_seed_for(seed, 0.16, 1e-4)
 }
 
 /// Validator scenes of the random campaign (`random_scenes::random_scene(seed,

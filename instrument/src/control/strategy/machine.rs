@@ -482,8 +482,17 @@ impl Strategy {
         let set = p.contact_signal(p.set_point);
         // A fast search can step over the whole stick phase between two samples, and the
         // particle then rolls ahead of the tip below the set point: a deflection held above half
-        // the set point for three samples is a contact too.
-        self.moving_contact = if sig >= 0.5 * set { self.moving_contact + 1 } else { 0 };
+        // the set point for three samples is a contact too. So is, in a push without a
+        // lost-particle test, one held past half the model's settled reading where that lies
+        // past the baseline, beyond 10σ of it: a particle that rolls on in front of the tip
+        // bends the lever that way, and may start to before the reading reaches the set point.
+        let settled = self.hxy.settled_signal;
+        let rolling = p.lost_threshold == 0.0 && settled < -10.0 * p.noise && sig <= 0.5 * settled;
+        self.moving_contact = if sig >= 0.5 * set || rolling {
+            self.moving_contact + 1
+        } else {
+            0
+        };
         if sig >= set || self.moving_contact >= 3 {
             // C: stop where we are.
             self.summary.contact_step = Some(step);
