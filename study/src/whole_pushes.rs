@@ -447,20 +447,17 @@ mod tests {
     }
 
     /// A 7 nm particle under the scene's 30 nm tip cannot be met at the paper's 30° (the tip would
-    /// park below the substrate: `Rₐ − Rₜ + (Rₐ + Rₜ) sin β ≤ 0`); the plan goes to steeper angles,
-    /// where the dry run loses the particle, and refuses, naming the failure and the field.
+    /// park below the substrate: `Rₐ − Rₜ + (Rₐ + Rₜ) sin β ≤ 0`); the plan goes to steeper
+    /// angles, where the particle rolls on in front of the tip, and pushes it without a
+    /// lost-particle test, `ok`. (Its dry run lost the particle while the plan set a lost test
+    /// from the model's push before it had settled.)
     #[test]
-    fn a_particle_too_small_for_the_tip_is_refused_with_its_dry_run() {
+    fn a_particle_too_small_for_the_tip_is_pushed_at_a_steeper_angle() {
         use Edit::*;
         let small = [RadiusNm(7.0)];
         assert!(cases(false).contains(&small.to_vec()), "a case of the full set");
         let r = run_case(&Scene::default_scene(), &small);
-        assert_eq!(r.outcome, "refused", "{}", r.reason);
-        assert!(
-            r.reason.contains("dry run") && r.reason.contains("; change "),
-            "{}",
-            r.reason
-        );
+        assert_eq!(r.outcome, "ok", "{}", r.reason);
         assert!(r.violations.is_empty(), "{:?}", r.violations);
     }
 

@@ -132,6 +132,9 @@ impl Derivation<'_> {
                     if matches!(f.code, "unreadable" | "no_resistance") {
                         unread.push((beta, parking, f.clone()));
                     }
+                    if f.code == "deflection_limit" && self.limit_advice.is_empty() {
+                        self.limit_advice = f.advice.clone();
+                    }
                     if first_failure.is_none() {
                         first_failure = Some(f);
                     }

@@ -21,6 +21,9 @@ pub(super) struct Derivation<'a> {
     pub(super) push_cap: Option<(f64, f64)>,
     /// What was tried before the strategy the plan gives, a line each ([`DerivedStrategy::tried`]).
     pub(super) tried: Vec<String>,
+    /// The values the first angle the lever's deflection limit ruled out named (a stiffer lever,
+    /// a smaller gain): a refusal whose dry runs then trip the same limit names them too.
+    pub(super) limit_advice: Vec<super::Advice>,
 }
 
 impl<'a> Derivation<'a> {
@@ -47,6 +50,7 @@ impl<'a> Derivation<'a> {
             warnings: Vec::new(),
             push_cap: None,
             tried: Vec::new(),
+            limit_advice: Vec::new(),
         })
     }
 
@@ -263,8 +267,15 @@ impl<'a> Derivation<'a> {
 
     /// The refusal when every angle that passes the model's checks fails its dry run:
     /// `rejected` holds each angle, why its dry run failed, and the plan's warnings then.
+    /// When the dry run tripped the deflection limit, the values the model's check of another
+    /// angle named for it are named (and checked) here too.
     fn every_dry_run_failed(&self, rejected: &[(f64, String, Vec<String>)]) -> Refusal {
         let (beta, why, warned) = &rejected[0];
+        let advice = if why.starts_with("deflection_limit:") {
+            self.limit_advice.clone()
+        } else {
+            Vec::new()
+        };
         let angles: Vec<f64> = rejected.iter().map(|r| r.0).collect();
         // A hand-set value the plan warned about is the likelier cause.
         let (hand, field) = match warned.iter().find(|w| w.contains("(hand-set)")) {
@@ -276,7 +287,7 @@ impl<'a> Derivation<'a> {
         };
         self.refuse(Fails {
             code: "dry_run",
-            advice: Vec::new(),
+            advice,
             reason: format!(
                 "the strategy passes the model's checks but its dry run on the model fails at every such angle ({angles:?}°); at β = {beta}°: {why}{hand}"
             ),
