@@ -384,21 +384,7 @@ fn a_particle_that_rolls_on_in_front_of_the_tip_is_pushed_without_a_lost_test() 
         plan.summary()
     );
     // The pushes as `nanopush push` runs them, on the plan.
-    let mut applied = s.clone();
-    plan.apply(&mut applied);
-    let mut afm = crate::afm::Afm::from_scene(&applied, 48e-6, 50e-6, 1e-3);
-    let options = crate::control::moves::run::MoveOptions {
-        tolerance: DEFAULT_TOLERANCE,
-        attempts: 3,
-        pause: None,
-    };
-    let target = crate::control::moves::locate::MoveTarget::Distance {
-        distance: 1e-6,
-        direction: (1.0, 0.0),
-    };
-    let r = s.pushed_particle().radius_nm * 1e-9;
-    let moved =
-        crate::control::moves::run::move_particle(&applied, &mut afm, 1, (50e-6, 50e-6), r, target, options).unwrap();
+    let moved = move_on_plan(&s, &plan, (48e-6, 50e-6), 1e-6, 0.0);
     assert_eq!(moved.legs.len(), 3);
     assert!(moved.legs.iter().all(|l| l.run.summary.failure.is_none()));
     match moved.verdict {
@@ -407,10 +393,9 @@ fn a_particle_that_rolls_on_in_front_of_the_tip_is_pushed_without_a_lost_test() 
     }
     // With the scene's default lost-particle test (60 mV) the same move reads the rolling
     // particle as lost in its first push.
-    applied.file.strategy.lost_threshold_mv = 60.0;
-    let mut afm = crate::afm::Afm::from_scene(&applied, 48e-6, 50e-6, 1e-3);
-    let moved =
-        crate::control::moves::run::move_particle(&applied, &mut afm, 1, (50e-6, 50e-6), r, target, options).unwrap();
+    let mut tested = plan.clone();
+    tested.strategy.lost_threshold_mv = 60.0;
+    let moved = move_on_plan(&s, &tested, (48e-6, 50e-6), 1e-6, 0.0);
     assert_eq!(moved.legs.len(), 1);
     assert_eq!(
         moved.verdict,
@@ -491,22 +476,7 @@ fn a_search_that_starts_the_particle_rolling_stops_at_the_contact() {
     let s = Scene::parse("lab seed 128", include_str!("scenes/lab-seed-128.toml")).unwrap();
     let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
     assert_eq!(value(&plan, "strategy.lost_threshold_mv"), 0.0);
-    let mut applied = s.clone();
-    plan.apply(&mut applied);
-    let r = s.pushed_particle().radius_nm * 1e-9;
-    let d = 290f64.to_radians();
-    let mut afm = crate::afm::Afm::from_scene(&applied, 42e-6, 50e-6, 1e-3);
-    let options = crate::control::moves::run::MoveOptions {
-        tolerance: DEFAULT_TOLERANCE,
-        attempts: 3,
-        pause: None,
-    };
-    let target = crate::control::moves::locate::MoveTarget::Distance {
-        distance: 2e-6,
-        direction: (d.cos(), d.sin()),
-    };
-    let moved =
-        crate::control::moves::run::move_particle(&applied, &mut afm, 1, (50e-6, 50e-6), r, target, options).unwrap();
+    let moved = move_on_plan(&s, &plan, (42e-6, 50e-6), 2e-6, 290f64.to_radians());
     let legs: Vec<_> = moved
         .legs
         .iter()
@@ -518,4 +488,29 @@ fn a_search_that_starts_the_particle_rolling_stops_at_the_contact() {
         "{:?}",
         moved.verdict
     );
+}
+
+/// A move of particle 1 (at 50, 50 µm) by `distance` (m) along `direction` (radians from +x) on
+/// `scene` with `plan` applied, the stage starting at `start` (m), as `nanopush push` moves it.
+fn move_on_plan(
+    scene: &Scene,
+    plan: &DerivedStrategy,
+    start: (f64, f64),
+    distance: f64,
+    direction: f64,
+) -> crate::control::moves::run::MoveRun {
+    let mut applied = scene.clone();
+    plan.apply(&mut applied);
+    let mut afm = crate::afm::Afm::from_scene(&applied, start.0, start.1, 1e-3);
+    let options = crate::control::moves::run::MoveOptions {
+        tolerance: DEFAULT_TOLERANCE,
+        attempts: 3,
+        pause: None,
+    };
+    let target = crate::control::moves::locate::MoveTarget::Distance {
+        distance,
+        direction: (direction.cos(), direction.sin()),
+    };
+    let r = scene.pushed_particle().radius_nm * 1e-9;
+    crate::control::moves::run::move_particle(&applied, &mut afm, 1, (50e-6, 50e-6), r, target, options).unwrap()
 }
