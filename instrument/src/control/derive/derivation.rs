@@ -165,13 +165,12 @@ impl<'a> Derivation<'a> {
             // also pass a move of three of its longest pushes in a row with other noise and
             // roughness: one push can pass by luck (a pull-side plan for validator seed 110
             // passed once and lost the particle in the push).
-            let marginal = cand.prediction.side == ContactSide::Pull
-                || self.rolls_unread(&cand.prediction)
-                || !rejected.is_empty()
-                || self.push_cap.is_some();
-            let longest = cap.unwrap_or(plan.strategy.max_push_um * 1e-6);
-            // A plan without a lost-particle test is dry-run a third time, across the slope.
+            // A plan without a lost-particle test is marginal too, and dry-run a third time,
+            // across the slope.
             let blind = self.rolls_unread(&cand.prediction);
+            let marginal =
+                cand.prediction.side == ContactSide::Pull || blind || !rejected.is_empty() || self.push_cap.is_some();
+            let longest = cap.unwrap_or(plan.strategy.max_push_um * 1e-6);
             let result = dry_run::dry_run(self.scene, &plan, cap).and_then(|legs| {
                 if marginal && legs > 0 {
                     dry_run::dry_run_with(self.scene, &plan, Some(longest), 2)

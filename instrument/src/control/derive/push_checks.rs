@@ -124,7 +124,8 @@ impl Derivation<'_> {
         }
         let settled_v = p.settled_deflection * ro.gain;
         let need_settled = 8.0 * ro.sigma + 2.0 * ro.pert;
-        if settled_v < need_settled && !self.rolls_unread(p) {
+        let rolls_unread = self.rolls_unread(p);
+        if settled_v < need_settled && !rolls_unread {
             // A reading that settles at or beyond the baseline cannot be raised by any gain.
             let gain = if settled_v > 0.0 {
                 gain_field(gain_nm * need_settled / settled_v, false)
@@ -148,7 +149,7 @@ impl Derivation<'_> {
         }
         // The z loop holds the reading after t* at its level: a particle rolling on with no
         // load gives it no contact to hold.
-        if self.rolls_unread(p) && self.file.control != ControlFile::Xy {
+        if rolls_unread && self.file.control != ControlFile::Xy {
             return Err(Fails {
                 code: "unreadable",
                 advice: Vec::new(),
@@ -177,6 +178,14 @@ impl Derivation<'_> {
             });
         }
         Ok(())
+    }
+
+    /// The substrate threshold chosen (V; the scene's 30 mV floor before it is).
+    pub(super) fn substrate_threshold_v(&self) -> f64 {
+        self.choices
+            .iter()
+            .find(|c| c.key == "strategy.substrate_threshold_mv")
+            .map_or(0.03, |c| c.value * 1e-3)
     }
 
     /// Whether the model's push settles with the particle rolling on in front of the tip and a
@@ -216,11 +225,7 @@ impl Derivation<'_> {
         let stiffer = format!("cantilever.stiffness_n_per_m: k_c {ge} {} N/m needed", short(need_k));
         let k_no = format!("{stiffer}, beyond the {} N/m a scene allows", short(MAX_STIFFNESS));
         let gain_max = gain_nm * 0.9 * ro.room_on(p.side) / (PEAK_SPARE * peak_v);
-        let threshold = self
-            .choices
-            .iter()
-            .find(|c| c.key == "strategy.substrate_threshold_mv")
-            .map_or(0.03, |c| c.value * 1e-3);
+        let threshold = self.substrate_threshold_v();
         let touch_floor = threshold / (TOUCH_PRESS * 1e9);
         let set_floor = 10.0 * (ro.sigma + ro.pert) / (SET_FRACTION * p.peak_deflection * 1e9);
         let gain_floor = touch_floor.max(set_floor);

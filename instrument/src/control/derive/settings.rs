@@ -221,14 +221,9 @@ fn safety_limit(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
     let peak_v = s.cand.prediction.peak_deflection * ro.gain;
     // Auto-parking reads the touch of the substrate on the push side: the substrate threshold,
     // and up to a tick and a half of the approach pressed into the lever before a reading shows
-    // it (lab seed 357's park read 1.775 V in the tick after the touch, past a 1.32 V limit).
-    let threshold = d
-        .choices
-        .iter()
-        .find(|c| c.key == "strategy.substrate_threshold_mv")
-        .map_or(0.03, |c| c.value * 1e-3);
+    // it.
     let touch_v = match side {
-        ContactSide::Push => threshold + TOUCH_TICKS * s.approach_speed * TICK * ro.gain,
+        ContactSide::Push => d.substrate_threshold_v() + TOUCH_TICKS * s.approach_speed * TICK * ro.gain,
         ContactSide::Pull => 0.0,
     };
     let safety = (2.5 * peak_v)

@@ -71,8 +71,7 @@ impl Balance {
     /// then its columns scaled to a largest entry of 1 (the rows and unknowns are in different
     /// units), `|det|` is under [`SINGULAR`] of the product of its rows' norms (Hadamard's
     /// bound, 1 for orthogonal rows). What tells a fold when an event has just restarted the
-    /// balance's history, so that one block is all there is (lab campaign seed 41: a step of
-    /// 2.8e-21 s, one block since the phase switched, `det` −1.5e-15 where it was 8.9e-7).
+    /// balance's history, so that one block is all there is.
     fn singular_at(&self, t: f64) -> bool {
         let m = self.m;
         if m == 0 || self.times[self.newest] != t {
