@@ -220,16 +220,41 @@ fn predict_with(
     side: ContactSide,
     deflection_of: impl Fn(f64) -> f64,
 ) -> Result<PushPrediction, SimulationError> {
-    let model = PushModel::new(params);
+    let push = predict_push(params, duration, side, deflection_of)?;
+    with_retraction(push, params, duration, retract)
+}
+
+/// What the retraction after `push` (the model's push for `duration`) does to the particle,
+/// added to it.
+fn with_retraction(
+    mut push: PushPrediction,
+    params: PushParams,
+    duration: f64,
+    retract: RetractPlan,
+) -> Result<PushPrediction, SimulationError> {
+    let retraction = predict_retract(PushModel::new(params), duration, retract, PREDICTION_STEPS)?;
+    push.retract_shift = retraction.shift;
+    push.release_lift = retraction.release_lift;
+    Ok(push)
+}
+
+/// [`predict_with`]'s push alone, its retraction's fields not yet predicted (no shift, no
+/// release): what [`past_separation`] judges a push's length by before it predicts the
+/// retraction of the one it keeps.
+fn predict_push(
+    params: PushParams,
+    duration: f64,
+    side: ContactSide,
+    deflection_of: impl Fn(f64) -> f64,
+) -> Result<PushPrediction, SimulationError> {
     let run = run_push_within(
-        model.clone(),
+        PushModel::new(params),
         Method::Rodas4,
         Options::with_rtol(1e-6),
         duration,
         sample_step(duration),
         PREDICTION_STEPS,
     )?;
-    let retraction = predict_retract(model, duration, retract, PREDICTION_STEPS)?;
     let n = run.trace.len();
     let tail = &run.trace[n / 2..];
     let lag = |r: &TraceRow| r.stage_y - r.particle_y;
@@ -250,8 +275,8 @@ fn predict_with(
     let settled = side.sign() * tail.iter().map(|r| r.zeta_z).sum::<f64>() / tail.len() as f64;
     let steady = self::settled(tail, peak.abs().max(highest.0.abs()));
     Ok(PushPrediction {
-        retract_shift: retraction.shift,
-        release_lift: retraction.release_lift,
+        retract_shift: 0.0,
+        release_lift: None,
         settle_offset: mean,
         periodic_amplitude: hi - lo,
         travel_to_deflection,
@@ -345,9 +370,10 @@ fn past_separation(
     let mut travel = PREDICTED_TRAVEL;
     loop {
         let duration = (travel / params.speed).max(0.02);
-        let p = predict_with(params, duration, retract, side, deflection_of)?;
+        let p = predict_push(params, duration, side, deflection_of)?;
         if (p.travel_to_peak <= 0.75 * p.travel && p.settled) || travel >= MAX_PREDICTED_TRAVEL {
-            return Ok(p);
+            // Only the push kept gets its retraction.
+            return with_retraction(p, params, duration, retract);
         }
         travel *= 4.0;
     }
