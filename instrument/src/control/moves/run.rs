@@ -9,10 +9,12 @@
 use crate::afm::Afm;
 use crate::control::moves::locate::MoveRoute;
 use crate::control::moves::locate::{MoveError, MoveTarget, locate_near, route_move};
+use crate::control::route::Leg;
 use crate::control::strategy::StrategyParams;
 use crate::control::strategy::runner::{Prepared, RunError, StrategyRun};
 use crate::scan::{HeightImage, Located, ScanParams, Tip};
 use crate::scene::Scene;
+use std::collections::VecDeque;
 
 /// How a move is judged.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -237,8 +239,13 @@ pub fn move_particle_with(
         }
         attempts += 1;
         let mut estimate = measured;
-        for (k, leg) in route.legs.iter().enumerate() {
-            if k > 0 {
+        let mut todo: VecDeque<Leg> = route.legs.iter().copied().collect();
+        // Where the last leg was to leave the particle, and the re-plans this attempt has left.
+        let mut planned = measured;
+        let mut replans = route.legs.len();
+        let mut first = true;
+        while let Some(mut leg) = todo.pop_front() {
+            if !first {
                 // Each later leg starts from where a local scan finds the particle, not from the
                 // estimate: its search starts a few pixels behind it.
                 match routing.locate(scene, afm, estimate, prepared.radius) {
@@ -255,7 +262,39 @@ pub fn move_particle_with(
                         });
                     }
                 }
+                // A particle the last leg left beyond the tolerance of where it was to go (a
+                // rolling particle the tip left behind, one that slid on ahead) is routed again
+                // from where it is: held to the old legs, it would fall further behind with each.
+                let off = (estimate.0 - planned.0).hypot(estimate.1 - planned.1);
+                if off > options.tolerance && replans > 0 {
+                    replans -= 1;
+                    let again = match routing.route(afm, estimate, radius_hint, MoveTarget::Point(target)) {
+                        Ok(r) => r,
+                        Err(MoveError::NotFound { .. }) => {
+                            let (img, _) = routing.locate(scene, afm, estimate, prepared.radius);
+                            return Ok(MoveRun {
+                                before,
+                                target,
+                                legs,
+                                after: (img, None),
+                                verdict: Verdict::NotFound,
+                                attempts,
+                                cut_short: None,
+                            });
+                        }
+                        Err(e) => return Err(e.into()),
+                    };
+                    estimate = (again.located.x, again.located.y);
+                    // Legs the tip cannot get behind are left to the scan after to judge.
+                    if prepared.check_reach(&again.legs).is_err() {
+                        break;
+                    }
+                    todo = again.legs.into_iter().collect();
+                    let Some(next) = todo.pop_front() else { break };
+                    leg = next;
+                }
             }
+            first = false;
             let pause = if attempts == 1 && legs.is_empty() {
                 options.pause
             } else {
@@ -264,6 +303,7 @@ pub fn move_particle_with(
             let Some(request) = prepared.request(id, estimate, leg.to, pause) else {
                 continue;
             };
+            planned = leg.to;
             let run = prepared.run(afm, &request, params)?;
             let failed = run.summary.failure.map(|f| f.code());
             legs.push(PushedLeg {
