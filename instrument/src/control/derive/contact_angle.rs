@@ -113,6 +113,15 @@ impl Derivation<'_> {
             match result {
                 Ok(c) => return Ok(c),
                 Err(f) if hand => {
+                    // A hand-set angle the push side cannot read is read on the pull side when
+                    // that side can, as a derived one is.
+                    if matches!(f.code, "unreadable" | "no_resistance")
+                        && let Ok(c) = self
+                            .predict_at(beta, parking, v, approach_speed, ContactSide::Pull)
+                            .and_then(|c| self.check(&c).map(|()| c))
+                    {
+                        return Ok(c);
+                    }
                     // The hand-set angle wins; its failure is a warning, when the model could
                     // say anything at all.
                     let warning = format!(

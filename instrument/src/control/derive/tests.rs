@@ -71,6 +71,20 @@ fn minimal_skips_an_angle_that_bends_the_lever_down() {
     assert_eq!(plan.contact_angle_deg, 45.0);
 }
 
+/// A hand-set contact angle the push side cannot read is read on the pull side, as a derived
+/// one is: `minimal` at a hand-set 30° (the lever bent down) was refused with "bends the lever
+/// away from the push side" while the derived plan would read 30° on the pull side.
+#[test]
+fn a_hand_set_angle_is_read_on_the_pull_side_when_the_push_side_cannot() {
+    let mut s = untuned("minimal", &[]);
+    s.file.push.contact_angle_deg = 30.0;
+    s.hand_set = HandSet::from_table(&toml::from_str("[push]\ncontact_angle_deg = 30.0").unwrap());
+    let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
+    assert_eq!(plan.contact_angle_deg, 30.0);
+    assert_eq!(plan.prediction.side, crate::control::estimator::ContactSide::Pull);
+    assert!(plan.summary().starts_with("β = 30°, read on the pull side, "), "{}", plan.summary());
+}
+
 /// The plan says its choice in one line and what it tried first: on `minimal`, 30° bends the
 /// lever down (unreadable on the push side), so 45° is chosen after it.
 #[test]
