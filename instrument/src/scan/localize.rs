@@ -96,6 +96,9 @@ pub struct Located {
     pub radius_from_height: f64,
     /// Radius from the half-height width, inverting the tip model (the cross-check).
     pub radius_from_width: Option<f64>,
+    /// The substrate's slope under the image, `(∂z/∂x, ∂z/∂y)`: the gradient of the robust plane
+    /// the image is levelled by (a tilt the tip follows in a push that follows the slope).
+    pub slope: (f64, f64),
 }
 
 /// Plane `z = a + b·col + c·row` and the residuals' robust σ.
@@ -383,6 +386,7 @@ fn measure(img: &HeightImage, tip: &Tip, lv: &Level, i: usize, j: usize) -> Loca
         radius,
         radius_from_height: 0.5 * height,
         radius_from_width: tip.radius_from_width(half_height_width, 0.5),
+        slope: (lv.b / img.dx(), lv.c / img.dy()),
     }
 }
 

@@ -402,6 +402,15 @@ fn small_particle_on_a_tilted_rough_substrate() {
         (l.base_width - 4.0 * (sp.r * t.radius).sqrt()).abs() < 2.0 * p.pixel(),
         "{l:?}"
     );
+    // The substrate's slope under the image, from the plane it is levelled by: the tilt plus
+    // what the roughness's waves (0.5 nm, 5 µm long) tilt this 0.5 µm window by, their
+    // gradient at its centre.
+    let g = s.topography.gradient(5.0 * UM, 5.0 * UM);
+    assert!(
+        (l.slope.0 - g.0).abs() < 0.1e-3 && (l.slope.1 - g.1).abs() < 0.1e-3,
+        "{:?} against {g:?}",
+        l.slope
+    );
 }
 
 #[test]

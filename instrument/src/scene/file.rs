@@ -383,6 +383,11 @@ pub struct StrategyFile {
     pub control: ControlFile,
     /// Proportional gain of the z force loop (nm of height per V of error per tick).
     pub z_gain_nm_per_v: f64,
+    /// Whether the tip follows the substrate's slope, as the local scan before each push measured
+    /// it, through the contact search and the push: the tip then keeps its height above the
+    /// substrate and the contact angle its value. `false` holds the stage's height, as the paper
+    /// does (its Fig 15 shows the slope changing the contact angle along a push).
+    pub follow_slope: bool,
 }
 
 impl Default for StrategyFile {
@@ -406,6 +411,7 @@ impl Default for StrategyFile {
             phase_timeout_s: 120.0,
             control: ControlFile::Xy,
             z_gain_nm_per_v: 2.0,
+            follow_slope: false,
         }
     }
 }

@@ -6,7 +6,7 @@ use std::collections::BTreeSet;
 
 /// The settings the planner derives, as `section.field` of the scene file: all of
 /// `[strategy]`, and the contact angle β and the stage speed V of `[push]`.
-pub const DERIVABLE: [&str; 18] = [
+pub const DERIVABLE: [&str; 19] = [
     "push.contact_angle_deg",
     "push.speed_um_per_s",
     "strategy.start_height_um",
@@ -25,6 +25,7 @@ pub const DERIVABLE: [&str; 18] = [
     "strategy.phase_timeout_s",
     "strategy.control",
     "strategy.z_gain_nm_per_v",
+    "strategy.follow_slope",
 ];
 
 /// The derivable settings a scene gives by hand.

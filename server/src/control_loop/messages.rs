@@ -13,6 +13,8 @@ pub struct PushJob {
     pub particle: u32,
     /// The legs, in order.
     pub legs: Vec<Leg>,
+    /// The substrate's slope as the scan before the push measured it (`∂z/∂x, ∂z/∂y`).
+    pub slope: (f64, f64),
     /// The model prediction and geometry.
     pub prepared: Prepared,
     /// The strategy's settings for this particle (the plan's, where the scene sets none).

@@ -157,7 +157,10 @@ impl ControlLoop {
     /// Starts leg `leg` of `job` from where the particle is believed to be (`estimate`); a leg
     /// that is already done (within 10 nm) ends the run there.
     fn next_leg(&mut self, job: Box<PushJob>, leg: usize, estimate: (f64, f64), distance: f64, reading: &Reading) {
-        match job.prepared.request(job.particle, estimate, job.legs[leg].to, None) {
+        match job
+            .prepared
+            .request(job.particle, estimate, job.legs[leg].to, None, job.slope)
+        {
             Some(request) => {
                 let task = job.prepared.task(&request, job.params.tick);
                 let strategy = Strategy::new(job.params, task, job.prepared.hxy(), reading);

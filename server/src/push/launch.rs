@@ -167,6 +167,7 @@ pub(crate) fn launch(
         run,
         particle,
         legs: plan.legs,
+        slope: located.slope,
         prepared,
         params,
     };

@@ -13,7 +13,7 @@ pub struct Choice {
     /// local scan and `pull_off.*` for the rise that lets go of the substrate, which the scene
     /// does not set.
     pub key: &'static str,
-    /// The value, in the unit the key names.
+    /// The value, in the unit the key names; a switch ([`SWITCHES`]) is 1 on, 0 off.
     pub value: f64,
     /// Given by the scene (it wins over the derived value).
     pub hand_set: bool,
@@ -21,10 +21,24 @@ pub struct Choice {
     pub why: String,
 }
 
+/// The settings that are on or off (`true` or `false` in the scene file).
+pub const SWITCHES: [&str; 1] = ["strategy.follow_slope"];
+
+impl Choice {
+    /// The value as the scene file writes it.
+    pub fn value_text(&self) -> String {
+        if SWITCHES.contains(&self.key) {
+            (self.value != 0.0).to_string()
+        } else {
+            short(self.value)
+        }
+    }
+}
+
 impl std::fmt::Display for Choice {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let source = if self.hand_set { "hand-set" } else { "derived" };
-        write!(f, "{} = {} ({source}): {}", self.key, short(self.value), self.why)
+        write!(f, "{} = {} ({source}): {}", self.key, self.value_text(), self.why)
     }
 }
 
@@ -111,8 +125,13 @@ impl DerivedStrategy {
                 "read on the {side} side until t*, then no lost-particle test (the particle rolls on in front of the tip)"
             )
         };
+        let height = if self.strategy.follow_slope {
+            "following the substrate's slope"
+        } else {
+            "at one height"
+        };
         format!(
-            "β = {}°, {reading}, {control} control, {} µm/s, pushes of at most {} µm{}: {why}",
+            "β = {}°, {reading}, {control} control {height}, {} µm/s, pushes of at most {} µm{}: {why}",
             short(self.contact_angle_deg),
             short(self.speed_um_per_s),
             short(max_push),

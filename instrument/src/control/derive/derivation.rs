@@ -88,7 +88,12 @@ impl<'a> Derivation<'a> {
             ));
         }
         let why = if hand_set && (hand_value - derived).abs() > 1e-12 * derived.abs().max(1e-30) {
-            format!("given by the scene; derived would be {}: {why}", short(derived))
+            let derived = if super::choice::SWITCHES.contains(&key) {
+                (derived != 0.0).to_string()
+            } else {
+                short(derived)
+            };
+            format!("given by the scene; derived would be {derived}: {why}")
         } else {
             why
         };
@@ -172,14 +177,14 @@ impl<'a> Derivation<'a> {
                 cand.prediction.side == ContactSide::Pull || blind || !rejected.is_empty() || self.push_cap.is_some();
             let longest = cap.unwrap_or(plan.strategy.max_push_um * 1e-6);
             let result = dry_run::dry_run(self.scene, &plan, cap).and_then(|legs| {
-                if marginal && legs > 0 {
+                if blind && legs > 0 {
                     dry_run::dry_run_with(self.scene, &plan, Some(longest), 2)
                 } else {
                     Ok(legs)
                 }
             });
             let result = result.and_then(|legs| {
-                if blind && legs > 0 {
+                if marginal && legs > 0 {
                     dry_run::dry_run_across(self.scene, &plan, Some(longest), 3).map(|_| legs)
                 } else {
                     Ok(legs)
@@ -298,9 +303,14 @@ impl<'a> Derivation<'a> {
 /// The line of what was tried for a plan whose dry run failed.
 fn dry_run_line(plan: &DerivedStrategy, why: &dry_run::DryRunFailure) -> String {
     format!(
-        "β = {}°, {} side, pushes of at most {} µm: the dry run failed: {}",
+        "β = {}°, {} side, {}, pushes of at most {} µm: the dry run failed: {}",
         plan.contact_angle_deg,
         plan.prediction.side.name(),
+        if plan.strategy.follow_slope {
+            "following the slope"
+        } else {
+            "at one height"
+        },
         short(plan.strategy.max_push_um),
         brief_with(why)
     )

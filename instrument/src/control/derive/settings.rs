@@ -46,7 +46,7 @@ type Setting = fn(&mut Derivation, &mut Settled) -> Result<(), Refusal>;
 
 /// Every setting, in the order each needs the ones before it (and the order `nanopush plan`
 /// prints them).
-const SETTINGS: [Setting; 17] = [
+const SETTINGS: [Setting; 18] = [
     contact_angle,
     set_point,
     safety_limit,
@@ -60,6 +60,7 @@ const SETTINGS: [Setting; 17] = [
     approach_speed,
     travel_speed,
     dwell,
+    follow_slope,
     max_push,
     clearance,
     z_gain,
@@ -521,9 +522,31 @@ fn dwell(d: &mut Derivation, _: &mut Settled) -> Result<(), Refusal> {
     Ok(())
 }
 
+/// **Follow the slope**: the tip follows the substrate's slope, as the local scan before each
+/// push measures it, through the contact search and the push: held at one height instead, the
+/// tip's height above a sloping substrate changes along the push by the slope times the travel,
+/// and with it the contact angle and the reading (a pull-side reading drifts off the contact,
+/// a rolling particle is left behind).
+fn follow_slope(d: &mut Derivation, _: &mut Settled) -> Result<(), Refusal> {
+    let f = &d.scene.file;
+    let slope = f.substrate.tilt_x_mrad.hypot(f.substrate.tilt_y_mrad);
+    let why = format!(
+        "the tip follows the substrate's slope ({slope:.1} mrad here) as the local scan before each push measures it, keeping its height above the substrate and the contact angle along the push"
+    );
+    d.choose(
+        "strategy.follow_slope",
+        if f.strategy.follow_slope { 1.0 } else { 0.0 },
+        1.0,
+        why,
+        None,
+    );
+    Ok(())
+}
+
 /// **Longest push**: the substrate's slope changes the contact angle along a push held at one
 /// height by at most 5° a leg, `Δz = 0.087 (Rₐ + Rₜ) cos β`; a longer move re-parks for each
-/// leg.
+/// leg. A push that follows the slope keeps the same bound: the measured slope and the
+/// roughness still leave the height off by some of it.
 fn max_push(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
     let f = &d.scene.file;
     let slope = (f.substrate.tilt_x_mrad.hypot(f.substrate.tilt_y_mrad)) * 1e-3;
@@ -627,6 +650,7 @@ fn resolved(scene: &Scene, choices: &[Choice]) -> StrategyFile {
             "strategy.clearance_um" => s.clearance_um = v,
             "strategy.phase_timeout_s" => s.phase_timeout_s = v,
             "strategy.z_gain_nm_per_v" => s.z_gain_nm_per_v = v,
+            "strategy.follow_slope" => s.follow_slope = v != 0.0,
             _ => {}
         }
     }

@@ -82,7 +82,11 @@ fn a_hand_set_angle_is_read_on_the_pull_side_when_the_push_side_cannot() {
     let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
     assert_eq!(plan.contact_angle_deg, 30.0);
     assert_eq!(plan.prediction.side, crate::control::estimator::ContactSide::Pull);
-    assert!(plan.summary().starts_with("β = 30°, read on the pull side, "), "{}", plan.summary());
+    assert!(
+        plan.summary().starts_with("β = 30°, read on the pull side, "),
+        "{}",
+        plan.summary()
+    );
 }
 
 /// The plan says its choice in one line and what it tried first: on `minimal`, 30° bends the
@@ -93,7 +97,7 @@ fn the_plan_says_its_choice_and_what_it_tried_first() {
     let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
     let summary = plan.summary();
     assert!(
-        summary.starts_with("β = 45°, read on the push side, xy control, ")
+        summary.starts_with("β = 45°, read on the push side, xy control following the substrate's slope, ")
             && summary.ends_with("after 1 tried before it"),
         "{summary}"
     );
@@ -373,8 +377,8 @@ fn a_parking_height_below_the_snap_in_is_refused_naming_the_humidity() {
 /// the lever bent past the baseline to the pull side (−632.5 mV), where the push-side reading
 /// crosses the baseline on its way from the peak. The plan pushes without a lost-particle test
 /// (`lost_threshold_mv = 0`), says so in its summary, and passes its dry runs: up and down the
-/// slope, three pushes in a row, and across the slope. A 1 µm move, three pushes, ends within
-/// 1 nm; with a lost-particle test at the scene's default 60 mV, its first push fails as lost.
+/// slope, three pushes in a row, and across the slope. A 1 µm move, three pushes following the
+/// slope, ends within 5 nm (4.6 nm); with a lost-particle test at the scene's default 60 mV, its first push fails as lost.
 #[test]
 fn a_particle_that_rolls_on_in_front_of_the_tip_is_pushed_without_a_lost_test() {
     let s = Scene::parse("lab seed 9", include_str!("scenes/lab-seed-9.toml")).unwrap();
@@ -393,7 +397,7 @@ fn a_particle_that_rolls_on_in_front_of_the_tip_is_pushed_without_a_lost_test() 
     assert!((settled_mv + 632.5).abs() < 0.05, "{settled_mv} mV");
     assert!(
         plan.summary()
-            .starts_with("β = 30°, read on the push side until t*, then no lost-particle test (the particle rolls on in front of the tip), xy control, "),
+            .starts_with("β = 30°, read on the push side until t*, then no lost-particle test (the particle rolls on in front of the tip), xy control following the substrate's slope, "),
         "{}",
         plan.summary()
     );
@@ -402,7 +406,7 @@ fn a_particle_that_rolls_on_in_front_of_the_tip_is_pushed_without_a_lost_test() 
     assert_eq!(moved.legs.len(), 3);
     assert!(moved.legs.iter().all(|l| l.run.summary.failure.is_none()));
     match moved.verdict {
-        crate::control::moves::run::Verdict::Ok { error } => assert!(error < 1e-9, "{error:e} m off"),
+        crate::control::moves::run::Verdict::Ok { error } => assert!(error < 5e-9, "{error:e} m off"),
         v => panic!("{v:?}"),
     }
     // With the scene's default lost-particle test (60 mV) the same move reads the rolling
@@ -504,14 +508,19 @@ fn a_search_that_starts_the_particle_rolling_stops_at_the_contact() {
     );
 }
 
-/// Lab campaign seed 128 pushed 1.39 µm at −31°: from the second leg on, the particle rolls
-/// 161 nm and the tip leaves it, 30-40 nm short of each 0.2 µm leg's end. Each leg is routed
+/// Lab campaign seed 128 pushed 1.39 µm at −31° with the tip held at one height: from the
+/// second leg on, the particle rolls 161 nm and the tip leaves it, 30-40 nm short of each 0.2 µm
+/// leg's end (the substrate falls 1.1 nm under it meanwhile). Each leg is routed
 /// again from where the scan before it finds the particle: the move ends `ok` where, held to
 /// the first route, the particle fell 39 nm further behind with each leg and the scan after
 /// did not find it 221 nm short of the target.
 #[test]
 fn a_particle_left_short_of_its_leg_is_routed_again() {
-    let s = Scene::parse("lab seed 128", include_str!("scenes/lab-seed-128.toml")).unwrap();
+    let held = format!(
+        "{}\n[strategy]\nfollow_slope = false\n",
+        include_str!("scenes/lab-seed-128.toml")
+    );
+    let s = Scene::parse("lab seed 128, held at one height", &held).unwrap();
     let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
     let moved = move_on_plan(&s, &plan, (42e-6, 50e-6), 1.3895e-6, (-31.107f64).to_radians());
     let short = moved
@@ -531,6 +540,42 @@ fn a_particle_left_short_of_its_leg_is_routed_again() {
         "{:?} after {} legs",
         moved.verdict,
         moved.legs.len()
+    );
+}
+
+/// Lab campaign seed 103 (a 91 nm particle under a 19 nm tip on a 1.19 N/m lever, the substrate
+/// sloping 10.2 mrad): read on the pull side at 45°, a push held at one height drifts its reading
+/// off the contact as the substrate falls or rises under the tip, and the dry run loses the
+/// particle 32 nm into its push while it went on with the tip. Following the slope the local
+/// scan measures, the plan passes its dry runs and a 1 µm move ends `ok`.
+#[test]
+fn following_the_slope_keeps_a_pull_side_reading_on_the_contact() {
+    let text = include_str!("scenes/lab-seed-103.toml");
+    let s = Scene::parse("lab seed 103", text).unwrap();
+    let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
+    assert!(plan.strategy.follow_slope);
+    assert!(plan.dry_run_passed, "{:?}", plan.warnings);
+    assert_eq!(plan.prediction.side, crate::control::estimator::ContactSide::Pull);
+    assert!(
+        plan.summary().contains("xy control following the substrate's slope"),
+        "{}",
+        plan.summary()
+    );
+    let moved = move_on_plan(&s, &plan, (48e-6, 50e-6), 1e-6, 0.0);
+    match moved.verdict {
+        crate::control::moves::run::Verdict::Ok { error } => assert!(error < 5e-9, "{error:e} m off"),
+        v => panic!("{v:?}"),
+    }
+    let held = Scene::parse(
+        "lab seed 103, held",
+        &format!("{text}\n[strategy]\nfollow_slope = false\n"),
+    )
+    .unwrap();
+    let e = derive(&held, 1, DEFAULT_TOLERANCE).unwrap_err();
+    assert_eq!(e.code, "dry_run", "{e}");
+    assert!(
+        e.reason.contains("particle_lost") && e.reason.contains("it went with the tip"),
+        "{e}"
     );
 }
 

@@ -239,6 +239,8 @@ pub fn move_particle_with(
         }
         attempts += 1;
         let mut estimate = measured;
+        // The substrate's slope as the latest scan measured it.
+        let mut slope = route.located.slope;
         let mut todo: VecDeque<Leg> = route.legs.iter().copied().collect();
         // Where the last leg was to leave the particle, and the re-plans this attempt has left.
         let mut planned = measured;
@@ -249,7 +251,7 @@ pub fn move_particle_with(
                 // Each later leg starts from where a local scan finds the particle, not from the
                 // estimate: its search starts a few pixels behind it.
                 match routing.locate(scene, afm, estimate, prepared.radius) {
-                    (_, Ok(found)) => estimate = (found.x, found.y),
+                    (_, Ok(found)) => (estimate, slope) = ((found.x, found.y), found.slope),
                     (img, Err(_)) => {
                         return Ok(MoveRun {
                             before,
@@ -284,7 +286,7 @@ pub fn move_particle_with(
                         }
                         Err(e) => return Err(e.into()),
                     };
-                    estimate = (again.located.x, again.located.y);
+                    (estimate, slope) = ((again.located.x, again.located.y), again.located.slope);
                     // Legs the tip cannot get behind are left to the scan after to judge.
                     if prepared.check_reach(&again.legs).is_err() {
                         break;
@@ -300,7 +302,7 @@ pub fn move_particle_with(
             } else {
                 None
             };
-            let Some(request) = prepared.request(id, estimate, leg.to, pause) else {
+            let Some(request) = prepared.request(id, estimate, leg.to, pause, slope) else {
                 continue;
             };
             planned = leg.to;

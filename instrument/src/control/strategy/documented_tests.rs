@@ -44,7 +44,13 @@ pub(super) fn push_as_the_cli_does(scene: &Scene, distance: f64) -> (StrategyRun
     let params = scene.strategy_params(1e-3);
     let prepared = Prepared::new(scene, p.id, found.radius, &params).unwrap();
     let request = prepared
-        .request(p.id, (found.x, found.y), (found.x + distance, found.y), None)
+        .request(
+            p.id,
+            (found.x, found.y),
+            (found.x + distance, found.y),
+            None,
+            found.slope,
+        )
         .unwrap();
     let run = prepared.run(&mut afm, &request, params).unwrap();
     (run, afm.time())

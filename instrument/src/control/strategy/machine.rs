@@ -520,6 +520,7 @@ impl Strategy {
             let ds = (p.speed * p.tick).min(p.step - in_step);
             self.target[0] += d.0 * ds;
             self.target[1] += d.1 * ds;
+            self.target[2] += self.rise(ds);
             self.phase = Phase::ContactSearch {
                 step,
                 in_step: in_step + ds,
@@ -546,6 +547,17 @@ impl Strategy {
                 dwell: 0,
             };
         }
+    }
+
+    /// How much the substrate rises under the tip over `ds` (m) of travel along the push when
+    /// the tip follows its slope, `Δz = (∇z_s · d) ds` with the slope the scan before the push
+    /// measured; 0 when it holds its height.
+    fn rise(&self, ds: f64) -> f64 {
+        if !self.params.follow_slope {
+            return 0.0;
+        }
+        let (d, g) = (self.task.direction, self.task.slope);
+        (g.0 * d.0 + g.1 * d.1) * ds
     }
 
     /// C → D; `sig` is the push-side signal: the estimator and the lost-particle test read the
@@ -619,6 +631,7 @@ impl Strategy {
         }
         self.target[0] += d.0 * p.speed * p.tick;
         self.target[1] += d.1 * p.speed * p.tick;
+        self.target[2] += self.rise(p.speed * p.tick);
         if z_loop && self.hxy.separated() {
             // Hold the deflection at its level just after t*. The tip meets the particle above
             // its equator: raising it moves the contact up toward the top, which turns more of

@@ -60,6 +60,9 @@ pub struct StrategyParams {
     pub pull_off_rise: f64,
     /// The side of the baseline the contact is read on: the side of the set point.
     pub contact_side: ContactSide,
+    /// Whether the tip follows the substrate's slope ([`PushTask::slope`]) through the contact
+    /// search and the push (`strategy.follow_slope`).
+    pub follow_slope: bool,
 }
 
 impl StrategyParams {
@@ -105,6 +108,9 @@ pub struct PushTask {
     /// the retraction's drag asks for more, and the particle then ends short (the move is judged
     /// by the scan after it).
     pub max_travel: f64,
+    /// The substrate's slope `(∂z/∂x, ∂z/∂y)` the scan before the push measured: the height the
+    /// tip follows along the push when [`StrategyParams::follow_slope`] is set.
+    pub slope: (f64, f64),
 }
 
 impl PushTask {

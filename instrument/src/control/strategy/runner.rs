@@ -207,6 +207,7 @@ impl Scene {
             z_gain: st.z_gain_nm_per_v * 1e-9,
             pull_off_rise: crate::control::strategy::pull_off_rise(&self.tip_sample()),
             contact_side: ContactSide::of((st.set_point_v - f.sensor.baseline_v) * f.sensor.gain_v_per_nm.signum()),
+            follow_slope: st.follow_slope,
         }
     }
 }
@@ -226,6 +227,9 @@ pub struct PushRequest {
     pub distance: f64,
     /// A brief stop during the push: at this push travel (m), for this long (s).
     pub pause: Option<(f64, f64)>,
+    /// The substrate's slope `(∂z/∂x, ∂z/∂y)` as the scan before the push measured it
+    /// ([`crate::scan::Located::slope`]).
+    pub slope: (f64, f64),
 }
 
 /// What the controller computes once for a particle before pushing it: the model's prediction
@@ -346,13 +350,14 @@ impl Prepared {
 
     /// The push from where the particle is believed to be (`estimate`) to `to`, or `None` when it
     /// is already within [`DONE_WITHIN`]: each leg of a move starts from the latest estimate, so
-    /// errors do not add up.
+    /// errors do not add up. `slope` is the substrate's as the latest scan measured it.
     pub fn request(
         &self,
         id: u32,
         estimate: (f64, f64),
         to: (f64, f64),
         pause: Option<(f64, f64)>,
+        slope: (f64, f64),
     ) -> Option<PushRequest> {
         let leg = Leg { from: estimate, to };
         (leg.length() >= DONE_WITHIN).then(|| PushRequest {
@@ -362,6 +367,7 @@ impl Prepared {
             direction: leg.direction(),
             distance: leg.length(),
             pause,
+            slope,
         })
     }
 
@@ -378,6 +384,7 @@ impl Prepared {
             approach_distance: self.approach_distance,
             pause: request.pause.map(|(at, secs)| (at, (secs / tick).round() as u32)),
             detect_offset: self.detect_offset,
+            slope: request.slope,
         }
     }
 }

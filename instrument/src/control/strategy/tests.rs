@@ -33,6 +33,7 @@ pub(super) fn push(scene: &Scene, distance: f64, offset: (f64, f64)) -> Strategy
         direction: (1.0, 0.0),
         distance,
         pause: None,
+        slope: (0.0, 0.0),
     };
     push_once(scene, &mut afm, &request, scene.strategy_params(1e-3)).expect("the run completes")
 }
@@ -176,6 +177,7 @@ fn no_substrate_within_range_fails_and_retracts() {
         direction: (1.0, 0.0),
         distance: 1.0 * UM,
         pause: None,
+        slope: (0.0, 0.0),
     };
     let run = push_once(&s, &mut afm, &request, s.strategy_params(1e-3)).unwrap();
     assert!(
@@ -221,7 +223,7 @@ fn a_push_that_never_sees_the_separation_fails_and_retracts() {
     let (x, y, r) = (p.x_um * UM, p.y_um * UM, p.radius_nm * 1e-9);
     let params = s.strategy_params(1e-3);
     let prep = Prepared::new(&s, p.id, r, &params).unwrap();
-    let request = prep.request(p.id, (x, y), (x + UM, y), None).unwrap();
+    let request = prep.request(p.id, (x, y), (x + UM, y), None, (0.0, 0.0)).unwrap();
     let mut afm = Afm::from_scene(&s, x - 6.0 * UM, y, 1e-3);
     let first = afm.read();
     let mut never = prep.prediction;
@@ -339,7 +341,13 @@ pub(super) fn bare_strategy() -> (Strategy, [f64; 3]) {
     let params = s.strategy_params(1e-3);
     let prep = Prepared::new(&s, p.id, p.radius_nm * 1e-9, &params).unwrap();
     let request = prep
-        .request(p.id, (p.x_um * UM, p.y_um * UM), (p.x_um * UM + UM, p.y_um * UM), None)
+        .request(
+            p.id,
+            (p.x_um * UM, p.y_um * UM),
+            (p.x_um * UM + UM, p.y_um * UM),
+            None,
+            (0.0, 0.0),
+        )
         .unwrap();
     let start = [p.x_um * UM - 6.0 * UM, p.y_um * UM, 3.0 * UM];
     let strategy = Strategy::new(
@@ -477,6 +485,7 @@ fn every_shipped_scene_pushes_its_particle() {
             direction: (1.0, 0.0),
             distance,
             pause: None,
+            slope: found.slope,
         };
         let run = push_once(&s, &mut afm, &request, s.strategy_params(1e-3))
             .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
@@ -690,4 +699,51 @@ fn a_contact_read_on_the_pull_side_stops_and_is_limited_there() {
     }
     // Straight up (never parked here, so already at the start height: done).
     assert!(matches!(st.phase, Phase::Retract | Phase::Done), "{:?}", st.phase);
+}
+
+/// gold-latex's substrate rises 6 nm per µm along +x. Held at one height (the paper's push, its
+/// Fig 15), the stage keeps the height it parked at through the contact search and the push;
+/// following the slope the request carries, it rises with the substrate by the slope times its
+/// travel in both (the behaviour this buys is checked on the scenes it changes, in
+/// `derive::tests`: lab seeds 103 and 128).
+#[test]
+fn a_push_that_follows_the_slope_rises_with_the_substrate() {
+    let rises = |follow: bool| {
+        let s = scene(&[(
+            "follow_slope = false",
+            if follow {
+                "follow_slope = true"
+            } else {
+                "follow_slope = false"
+            },
+        )]);
+        let p = s.pushed_particle();
+        let (x, y) = (p.x_um * UM, p.y_um * UM);
+        let mut afm = Afm::from_scene(&s, x - 6.0 * UM, y, 1e-3);
+        let request = PushRequest {
+            id: p.id,
+            particle: (x, y),
+            radius: p.radius_nm * 1e-9,
+            direction: (1.0, 0.0),
+            distance: UM,
+            pause: None,
+            slope: (6e-3, 0.0),
+        };
+        let run = push_once(&s, &mut afm, &request, s.strategy_params(1e-3)).unwrap();
+        assert_eq!(run.summary.failure, None);
+        // Rise against travel over each phase, from its first row to its last.
+        ["contact_search", "push"].map(|phase| {
+            let rows: Vec<_> = run.trace.iter().filter(|r| r.phase == phase).collect();
+            let (a, b) = (rows[0], rows[rows.len() - 1]);
+            (b.stage[2] - a.stage[2], b.stage[0] - a.stage[0])
+        })
+    };
+    for (rise, travel) in rises(false) {
+        assert!(travel > 0.5 * UM);
+        assert_eq!(rise, 0.0);
+    }
+    for (rise, travel) in rises(true) {
+        assert!(travel > 0.5 * UM);
+        assert!((rise - 6e-3 * travel).abs() < 1e-12, "{rise:e} over {travel:e}");
+    }
 }
