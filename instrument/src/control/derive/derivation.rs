@@ -177,7 +177,7 @@ impl<'a> Derivation<'a> {
                 cand.prediction.side == ContactSide::Pull || blind || !rejected.is_empty() || self.push_cap.is_some();
             let longest = cap.unwrap_or(plan.strategy.max_push_um * 1e-6);
             let result = dry_run::dry_run(self.scene, &plan, cap).and_then(|legs| {
-                if blind && legs > 0 {
+                if marginal && legs > 0 {
                     dry_run::dry_run_with(self.scene, &plan, Some(longest), 2)
                 } else {
                     Ok(legs)

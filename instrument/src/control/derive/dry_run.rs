@@ -179,6 +179,13 @@ impl std::fmt::Display for DryRunFailure {
 }
 
 fn judge(moved: &crate::control::moves::run::MoveRun, plan: &DerivedStrategy) -> Result<(), String> {
+    // A push that read the particle as lost fails the dry run even when the move's scan after
+    // found it and a correction brought it home: a plan is to keep its particle, and a shorter
+    // push may (the move's correction is the real push's fallback, not the plan).
+    if let Some(l) = moved.legs.iter().find(|l| l.run.summary.failure.is_some()) {
+        let code = l.run.summary.failure.map_or("failed", |f| f.code());
+        return Err(format!("{code}: {}", l.run.failure_text().unwrap_or_default()));
+    }
     match moved.verdict {
         Verdict::Ok { .. } => Ok(()),
         Verdict::Missed { error } => Err(format!(

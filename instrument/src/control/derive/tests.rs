@@ -378,7 +378,8 @@ fn a_parking_height_below_the_snap_in_is_refused_naming_the_humidity() {
 /// crosses the baseline on its way from the peak. The plan pushes without a lost-particle test
 /// (`lost_threshold_mv = 0`), says so in its summary, and passes its dry runs: up and down the
 /// slope, three pushes in a row, and across the slope. A 1 µm move, three pushes following the
-/// slope, ends within 5 nm (4.6 nm); with a lost-particle test at the scene's default 60 mV, its first push fails as lost.
+/// slope, ends within 5 nm (4.6 nm); with a lost-particle test at the scene's default 60 mV, each of its three pushes reads
+/// the particle as lost.
 #[test]
 fn a_particle_that_rolls_on_in_front_of_the_tip_is_pushed_without_a_lost_test() {
     let s = Scene::parse("lab seed 9", include_str!("scenes/lab-seed-9.toml")).unwrap();
@@ -410,11 +411,16 @@ fn a_particle_that_rolls_on_in_front_of_the_tip_is_pushed_without_a_lost_test() 
         v => panic!("{v:?}"),
     }
     // With the scene's default lost-particle test (60 mV) the same move reads the rolling
-    // particle as lost in its first push.
+    // particle as lost in every push: each is corrected from the scan after it, until the last.
     let mut tested = plan.clone();
     tested.strategy.lost_threshold_mv = 60.0;
     let moved = move_on_plan(&s, &tested, (48e-6, 50e-6), 1e-6, 0.0);
-    assert_eq!(moved.legs.len(), 1);
+    let codes: Vec<_> = moved
+        .legs
+        .iter()
+        .map(|l| l.run.summary.failure.map(|f| f.code()))
+        .collect();
+    assert_eq!(codes, vec![Some("particle_lost"); 3], "{:?}", moved.verdict);
     assert_eq!(
         moved.verdict,
         crate::control::moves::run::Verdict::Failed { code: "particle_lost" }

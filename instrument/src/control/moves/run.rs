@@ -246,6 +246,8 @@ pub fn move_particle_with(
         let mut planned = measured;
         let mut replans = route.legs.len();
         let mut first = true;
+        // The failure of a push this attempt ended on, when the scan after decides the move.
+        let mut lost = None;
         while let Some(mut leg) = todo.pop_front() {
             if !first {
                 // Each later leg starts from where a local scan finds the particle, not from the
@@ -315,6 +317,13 @@ pub fn move_particle_with(
                 run,
             });
             estimate = legs.last().expect("pushed").run.summary.estimated_particle;
+            // A push that read the particle as lost, with a push left to make, is not the move's
+            // end: the scan after finds where the particle is (a reading that drifted off the
+            // contact loses a particle that is still in front of the tip) and corrects from there.
+            if failed == Some("particle_lost") && attempts < options.attempts {
+                lost = failed;
+                break;
+            }
             if let Some(code) = failed {
                 let (img, located) = routing.locate(scene, afm, estimate, prepared.radius);
                 return Ok(MoveRun {
@@ -339,7 +348,8 @@ pub fn move_particle_with(
                     target,
                     legs,
                     after: (img, None),
-                    verdict: Verdict::NotFound,
+                    // Not found after a push that lost it: lost.
+                    verdict: lost.map_or(Verdict::NotFound, |code| Verdict::Failed { code }),
                     attempts,
                     cut_short: None,
                 });
