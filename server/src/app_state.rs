@@ -237,6 +237,10 @@ pub struct Pending {
     pub attempt: u32,
     /// Its model prediction and geometry.
     pub prepared: Prepared,
+    /// Why the push read its particle as lost (`particle_lost`), when it did and the move had a
+    /// push left to make: the scan after decides, and not finding the particle there ends the
+    /// move `particle_lost` with this.
+    pub lost: Option<String>,
 }
 
 /// A particle's strategy plan, or why none can push it.

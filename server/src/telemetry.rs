@@ -57,7 +57,17 @@ pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiv
             }
             e = events.recv() => {
                 let Some((LoopEvent::RunDone { run, particle, outcome, failure, estimate, .. }, record)) = e else { break };
-                if outcome == PUSHED {
+                // A push that read its particle as lost with a push left to make is judged as a
+                // push that ran its legs (the reading can drift off a particle still in front of
+                // the tip): the scan after finds it and corrects, as `nanopush push` does.
+                let lost = outcome == "particle_lost"
+                    && st.activity.judging.lock().is_ok_and(|mut j| {
+                        j.get_mut(&run).is_some_and(|p| {
+                            p.lost = failure.clone();
+                            p.attempt < judge::DEFAULT_ATTEMPTS
+                        })
+                    });
+                if outcome == PUSHED || lost {
                     // The legs ran: the scan after the push decides (`push/judge.rs`).
                     judge::on_pushed(&st, run, particle, estimate, record);
                     continue;

@@ -21,7 +21,8 @@ use nanopush_proto::ws::{Judged, ServerMessage};
 use super::launch::{audit_early_end, launch, strategy_scene};
 use crate::app_state::{AppState, Move, Pending};
 use crate::records::{self, Recorded};
-use nanopush_instrument::control::{DEFAULT_ATTEMPTS, MoveError, MoveRoute, MoveTarget, Verdict, route_move};
+pub(crate) use nanopush_instrument::control::DEFAULT_ATTEMPTS;
+use nanopush_instrument::control::{MoveError, MoveRoute, MoveTarget, Verdict, route_move};
 use nanopush_instrument::scene::Scene;
 
 /// The loop ran run `run`'s legs (`pushed`) and left the particle believed at `estimate`:
@@ -63,6 +64,10 @@ fn judge_with(st: &AppState, scene: &Scene, run: u64, p: &Pending, estimate: [f6
     let near = (estimate[0], estimate[1]);
     let plan = match route_move(scene, &st.surface_now(), near, p.radius, MoveTarget::Point(p.target)) {
         Ok(plan) => plan,
+        Err(MoveError::NotFound { .. }) if let Some(lost) = &p.lost => {
+            let why = format!("{lost}; the scan after push {} did not find particle {id}", p.attempt);
+            return end(st, run, id, "particle_lost", Some(why), Some(estimate), record, None);
+        }
         Err(MoveError::NotFound { .. }) => {
             let why = format!(
                 "the scan after push {} did not find particle {id} near ({:.3}, {:.3}) µm, where the controller believed it",
@@ -325,6 +330,7 @@ mod tests {
         let params = scene.strategy_params(st.params.tick);
         let prepared = nanopush_instrument::control::Prepared::new(&scene, 1, part.radius_nm * 1e-9, &params).unwrap();
         let p = Pending {
+            lost: None,
             mv,
             target,
             radius: part.radius_nm * 1e-9,
@@ -516,5 +522,31 @@ mod tests {
             why.contains("found a particle 300") && why.contains("not particle 1 (1000.0 nm)"),
             "{why}"
         );
+    }
+
+    /// A push that read its particle as lost, judged by the scan after as a push that ran its
+    /// legs: found 30 nm off, it is corrected (the instrument stays busy); not found, the move
+    /// ends `particle_lost`, saying both.
+    #[test]
+    fn a_push_that_lost_its_particle_is_judged_by_the_scan_after_it() {
+        let lost = "particle lost after 0.098 µm of push: the deflection fell back to the baseline";
+        let (st, mut p, estimate) = left_off(30e-9, 1, 25e-9);
+        p.lost = Some(lost.into());
+        judge_with(&st, &st.scene.clone(), 1, &p, estimate, Err("no trace".into()));
+        assert!(st.shared.commands.pop().is_some(), "a correction is queued");
+        assert!(st.shared.busy.load(Relaxed));
+
+        let (st, mut p, estimate) = left_off(20e-6, 1, 25e-9);
+        p.lost = Some(lost.into());
+        let mut rx = st.channels.events.subscribe();
+        judge_with(&st, &st.scene.clone(), 1, &p, estimate, Err("no trace".into()));
+        let done = run_done(&mut rx);
+        assert_eq!(done["outcome"], "particle_lost", "{done}");
+        let why = done["failure"].as_str().unwrap();
+        assert!(
+            why.starts_with(lost) && why.ends_with("the scan after push 1 did not find particle 1"),
+            "{why}"
+        );
+        assert!(!st.shared.busy.load(Relaxed));
     }
 }

@@ -160,6 +160,7 @@ pub(crate) fn launch(
                 radius: scene_radius,
                 attempt,
                 prepared: prepared.clone(),
+                lost: None,
             },
         );
     }
