@@ -131,7 +131,7 @@ impl DerivedStrategy {
             "at one height"
         };
         format!(
-            "β = {}°, {reading}, {control} control {height}, {} µm/s, pushes of at most {} µm{}: {why}",
+            "β = {}°, {reading}, {control} control, {height}, {} µm/s, pushes of at most {} µm{}: {why}",
             short(self.contact_angle_deg),
             short(self.speed_um_per_s),
             short(max_push),

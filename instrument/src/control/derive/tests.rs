@@ -97,7 +97,7 @@ fn the_plan_says_its_choice_and_what_it_tried_first() {
     let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
     let summary = plan.summary();
     assert!(
-        summary.starts_with("β = 45°, read on the push side, xy control following the substrate's slope, ")
+        summary.starts_with("β = 45°, read on the push side, xy control, following the substrate's slope, ")
             && summary.ends_with("after 1 tried before it"),
         "{summary}"
     );
@@ -398,7 +398,7 @@ fn a_particle_that_rolls_on_in_front_of_the_tip_is_pushed_without_a_lost_test() 
     assert!((settled_mv + 632.5).abs() < 0.05, "{settled_mv} mV");
     assert!(
         plan.summary()
-            .starts_with("β = 30°, read on the push side until t*, then no lost-particle test (the particle rolls on in front of the tip), xy control following the substrate's slope, "),
+            .starts_with("β = 30°, read on the push side until t*, then no lost-particle test (the particle rolls on in front of the tip), xy control, following the substrate's slope, "),
         "{}",
         plan.summary()
     );
@@ -563,7 +563,7 @@ fn following_the_slope_keeps_a_pull_side_reading_on_the_contact() {
     assert!(plan.dry_run_passed, "{:?}", plan.warnings);
     assert_eq!(plan.prediction.side, crate::control::estimator::ContactSide::Pull);
     assert!(
-        plan.summary().contains("xy control following the substrate's slope"),
+        plan.summary().contains("xy control, following the substrate's slope"),
         "{}",
         plan.summary()
     );
