@@ -40,7 +40,15 @@ pub fn run(a: &PlanArgs) -> anyhow::Result<String> {
         let choices: Vec<serde_json::Value> = plan
             .choices
             .iter()
-            .map(|c| serde_json::json!({"key": c.key, "value": c.value, "hand_set": c.hand_set, "why": c.why}))
+            .map(|c| {
+                // A switch as the scene file writes it: `true` or `false`.
+                let value = if derive::SWITCHES.contains(&c.key) {
+                    serde_json::json!(c.value != 0.0)
+                } else {
+                    serde_json::json!(c.value)
+                };
+                serde_json::json!({"key": c.key, "value": value, "hand_set": c.hand_set, "why": c.why})
+            })
             .collect();
         let v = serde_json::json!({
             "schema": "plan",

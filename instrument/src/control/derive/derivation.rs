@@ -24,6 +24,10 @@ pub(super) struct Derivation<'a> {
     /// The values the first angle the lever's deflection limit ruled out named (a stiffer lever,
     /// a smaller gain): a refusal whose dry runs then trip the same limit names them too.
     pub(super) limit_advice: Vec<super::Advice>,
+    /// The tip is held at one height: a dry run of this angle's plan following the slope the
+    /// scans measure failed (a scan whose height drifts reads a slope the substrate does not
+    /// have, along its slow axis).
+    pub(super) held: bool,
 }
 
 impl<'a> Derivation<'a> {
@@ -51,6 +55,7 @@ impl<'a> Derivation<'a> {
             push_cap: None,
             tried: Vec::new(),
             limit_advice: Vec::new(),
+            held: false,
         })
     }
 
@@ -214,6 +219,16 @@ impl<'a> Derivation<'a> {
                     rejected.retain(|r| r.0 != cand.beta_deg);
                     retry = Some(cand.beta_deg);
                 }
+                // Held at one height instead, a slope the scan misreads is not followed.
+                Err(why) if plan.strategy.follow_slope && !self.hand("strategy.follow_slope") => {
+                    self.note_tried(dry_run_line(&plan, &why));
+                    self.held = true;
+                    self.push_cap = None;
+                    self.choices = base_choices.clone();
+                    self.warnings = base_warnings.clone();
+                    rejected.retain(|r| r.0 != cand.beta_deg);
+                    retry = Some(cand.beta_deg);
+                }
                 Err(why) if self.hand("push.contact_angle_deg") => {
                     plan.warnings
                         .push(format!("the plan's dry run on the model fails: {why}"));
@@ -223,6 +238,7 @@ impl<'a> Derivation<'a> {
                     self.note_tried(dry_run_line(&plan, &why));
                     rejected.push((cand.beta_deg, why.to_string(), plan.warnings.clone()));
                     self.push_cap = None;
+                    self.held = false;
                     self.choices = base_choices.clone();
                     self.warnings = base_warnings.clone();
                 }

@@ -79,7 +79,7 @@ mod settings;
 #[cfg(test)]
 mod tests;
 
-pub use choice::{Advice, AdviceKey, Choice, DerivedStrategy, Refusal, short};
+pub use choice::{Advice, AdviceKey, Choice, DerivedStrategy, Refusal, SWITCHES, short};
 
 use crate::control::estimator::PushPrediction;
 use crate::control::strategy::BACK_OFF;

@@ -526,17 +526,21 @@ fn dwell(d: &mut Derivation, _: &mut Settled) -> Result<(), Refusal> {
 /// push measures it, through the contact search and the push: held at one height instead, the
 /// tip's height above a sloping substrate changes along the push by the slope times the travel,
 /// and with it the contact angle and the reading (a pull-side reading drifts off the contact,
-/// a rolling particle is left behind).
+/// a rolling particle is left behind). An angle whose dry run fails following the measured slope
+/// is tried again held at one height ([`Derivation::held`]): a scan whose height drifts
+/// (`scan.drift_z_nm_per_s`) levels its image by a plane tilted along its slow axis, a slope the
+/// substrate does not have.
 fn follow_slope(d: &mut Derivation, _: &mut Settled) -> Result<(), Refusal> {
     let f = &d.scene.file;
-    let slope = f.substrate.tilt_x_mrad.hypot(f.substrate.tilt_y_mrad);
-    let why = format!(
-        "the tip follows the substrate's slope ({slope:.1} mrad here) as the local scan before each push measures it, keeping its height above the substrate and the contact angle along the push"
-    );
+    let why = if d.held {
+        "the tip is held at one height: following the slope the local scan measured, this angle's dry run failed (what was tried says how; a scan whose height drifts reads a slope along its slow axis that the substrate does not have)".to_string()
+    } else {
+        "the tip follows the substrate's slope as the local scan before each push measures it, keeping its height above the substrate and the contact angle along the push".to_string()
+    };
     d.choose(
         "strategy.follow_slope",
         if f.strategy.follow_slope { 1.0 } else { 0.0 },
-        1.0,
+        if d.held { 0.0 } else { 1.0 },
         why,
         None,
     );

@@ -585,6 +585,42 @@ fn following_the_slope_keeps_a_pull_side_reading_on_the_contact() {
     );
 }
 
+/// Lab seed 1001 with the scan's height drifting 2 nm/s (`scan.drift_z_nm_per_s`): each row of
+/// the local scan comes a line later, so the plane it is levelled by tilts along the slow axis,
+/// a slope the substrate does not have, and a push that follows it sinks the tip toward the
+/// substrate (the review: 12 nm a leg at 0.5 nm/s, under a 25.7 nm particle). Following it, the
+/// dry run fails; the plan holds the tip at one height, says why, and passes its dry run.
+#[test]
+fn a_slope_the_drifting_scan_misreads_is_not_followed() {
+    let s = Scene::parse(
+        "lab seed 1001, drifting",
+        include_str!("scenes/lab-seed-1001-drift.toml"),
+    )
+    .unwrap();
+    let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
+    assert!(!plan.strategy.follow_slope);
+    assert!(plan.dry_run_passed, "{:?}", plan.warnings);
+    assert!(
+        plan.tried
+            .iter()
+            .any(|t| t.contains("following the slope") && t.contains("the dry run failed")),
+        "{:?}",
+        plan.tried
+    );
+    let why = &plan
+        .choices
+        .iter()
+        .find(|c| c.key == "strategy.follow_slope")
+        .unwrap()
+        .why;
+    assert!(why.starts_with("the tip is held at one height: "), "{why}");
+    assert!(
+        plan.summary().contains("xy control, at one height, "),
+        "{}",
+        plan.summary()
+    );
+}
+
 /// A move of particle 1 (at 50, 50 µm) by `distance` (m) along `direction` (radians from +x) on
 /// `scene` with `plan` applied, the stage starting at `start` (m), as `nanopush push` moves it.
 fn move_on_plan(
