@@ -457,7 +457,7 @@ mod tests {
     }
 
     /// `make test`'s seeded sample of docs/manipulation.md's random-scene campaign: lab scenes 27
-    /// (its dry run's contact search finds no contact), 13, 14 and 1 (the model's push loses it: the first two
+    /// (its dry run fails), 13, 14 and 1 (the model's push loses it: the first two
     /// with no adhesion slide ahead of the tip at once, the last rolls out from under it after
     /// 118 nm) and 96 (the lever's deflection limit) are refused with their reasons and the field
     /// to change; 7 and 166 are accepted and end `ok`, truly within 25 nm of their targets; none
