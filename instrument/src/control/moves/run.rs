@@ -255,15 +255,7 @@ pub fn move_particle_with(
                 match routing.locate(scene, afm, estimate, prepared.radius) {
                     (_, Ok(found)) => (estimate, slope) = ((found.x, found.y), found.slope),
                     (img, Err(_)) => {
-                        return Ok(MoveRun {
-                            before,
-                            target,
-                            legs,
-                            after: (img, None),
-                            verdict: Verdict::NotFound,
-                            attempts,
-                            cut_short: None,
-                        });
+                        return Ok(ended(before, target, legs, (img, None), Verdict::NotFound, attempts));
                     }
                 }
                 // A particle the last leg left beyond the tolerance of where it was to go (a
@@ -276,15 +268,7 @@ pub fn move_particle_with(
                         Ok(r) => r,
                         Err(MoveError::NotFound { .. }) => {
                             let (img, _) = routing.locate(scene, afm, estimate, prepared.radius);
-                            return Ok(MoveRun {
-                                before,
-                                target,
-                                legs,
-                                after: (img, None),
-                                verdict: Verdict::NotFound,
-                                attempts,
-                                cut_short: None,
-                            });
+                            return Ok(ended(before, target, legs, (img, None), Verdict::NotFound, attempts));
                         }
                         Err(e) => return Err(e.into()),
                     };
@@ -326,15 +310,14 @@ pub fn move_particle_with(
             }
             if let Some(code) = failed {
                 let (img, located) = routing.locate(scene, afm, estimate, prepared.radius);
-                return Ok(MoveRun {
+                return Ok(ended(
                     before,
                     target,
                     legs,
-                    after: (img, located.ok()),
-                    verdict: Verdict::Failed { code },
+                    (img, located.ok()),
+                    Verdict::Failed { code },
                     attempts,
-                    cut_short: None,
-                });
+                ));
             }
         }
         // The scan after: where the particle is now, and the legs from there.
@@ -356,6 +339,27 @@ pub fn move_particle_with(
             }
             Err(e) => return Err(e.into()),
         }
+    }
+}
+
+/// A move that ends before its verdict could be judged the usual way (the particle not found,
+/// a push that failed): nothing cut it short.
+fn ended(
+    before: (HeightImage, Located),
+    target: (f64, f64),
+    legs: Vec<PushedLeg>,
+    after: (HeightImage, Option<Located>),
+    verdict: Verdict,
+    attempts: u32,
+) -> MoveRun {
+    MoveRun {
+        before,
+        target,
+        legs,
+        after,
+        verdict,
+        attempts,
+        cut_short: None,
     }
 }
 
