@@ -49,8 +49,8 @@
 //!   (Eq 13, the load through the stage's stiffness) predicts that yield, and the dry run judges
 //!   the result.
 //! - **longest push**: the substrate's slope moves the contact angle by at most 5° a push,
-//!   `|slope| · L ≤ 0.087 (Rₐ + Rₜ) cos β`, within [0.2, 20] µm; longer moves are split and
-//!   each leg re-parks.
+//!   `|slope| · L ≤ 0.087 (Rₐ + Rₜ) cos β`, within [0.2, 20] µm (where the least push breaks the
+//!   bound, the reason says by how much); longer moves are split and each leg re-parks.
 //! - **time-out**: three times the longest phase (the longest push at V, the approach from
 //!   twice the start height), within [120, 600] s.
 //!

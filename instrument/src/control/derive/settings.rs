@@ -562,8 +562,17 @@ fn max_push(d: &mut Derivation, s: &mut Settled) -> Result<(), Refusal> {
         20e-6
     }
     .min(range);
+    // Below the least push the bound cannot hold: said, with what the least push changes.
+    let floor = if slope > 0.0 && dz / slope < 0.2e-6 {
+        format!(
+            "; held at one height, even the least push, 0.2 µm, changes it by {:.1} nm",
+            slope * 0.2e-6 * 1e9
+        )
+    } else {
+        String::new()
+    };
     let mut why = format!(
-        "a longer move is planned as several pushes, each re-parked: the substrate's slope {:.1} mrad may change the contact angle by at most 5° a push ({:.1} nm of height), at most 20 µm and the stage's range",
+        "a longer move is planned as several pushes, each re-parked: the substrate's slope {:.1} mrad may change the contact angle by at most 5° a push ({:.1} nm of height{floor}), at most 20 µm and the stage's range",
         slope * 1e3,
         dz * 1e9
     );

@@ -621,6 +621,32 @@ fn a_slope_the_drifting_scan_misreads_is_not_followed() {
     );
 }
 
+/// Lab seed 9 (a 17 nm particle under a 2.2 nm tip) on a substrate sloping 100 mrad: 5° of
+/// contact angle is 1.4 nm of height, which held at one height a 14 nm push would cross; the
+/// longest push stays at the least a plan makes, 0.2 µm, and says that it changes the height
+/// by 20 nm held at one height. The plan follows the slope, and its dry runs pass.
+#[test]
+fn the_longest_push_says_when_its_least_breaks_the_height_bound() {
+    let text =
+        include_str!("scenes/lab-seed-9.toml").replacen("tilt_x_mrad = -2.648004861588853", "tilt_x_mrad = 100.0", 1);
+    let s = Scene::parse("lab seed 9 at 100 mrad", &text).unwrap();
+    assert_eq!(s.file.substrate.tilt_x_mrad, 100.0);
+    let plan = derive(&s, 1, DEFAULT_TOLERANCE).unwrap();
+    assert_eq!(value(&plan, "strategy.max_push_um"), 0.2);
+    let why = &plan
+        .choices
+        .iter()
+        .find(|c| c.key == "strategy.max_push_um")
+        .unwrap()
+        .why;
+    assert!(
+        why.contains("(1.4 nm of height; held at one height, even the least push, 0.2 µm, changes it by 20.0 nm)"),
+        "{why}"
+    );
+    assert!(plan.strategy.follow_slope);
+    assert!(plan.dry_run_passed, "{:?}", plan.warnings);
+}
+
 /// A move of particle 1 (at 50, 50 µm) by `distance` (m) along `direction` (radians from +x) on
 /// `scene` with `plan` applied, the stage starting at `start` (m), as `nanopush push` moves it.
 fn move_on_plan(
