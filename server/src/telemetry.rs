@@ -61,11 +61,12 @@ pub async fn telemetry_task(st: Arc<AppState>, mut events: mpsc::UnboundedReceiv
                 // push that ran its legs (the reading can drift off a particle still in front of
                 // the tip): the scan after finds it and corrects, as `nanopush push` does.
                 let lost = outcome == "particle_lost"
-                    && st.activity.judging.lock().is_ok_and(|mut j| {
-                        j.get_mut(&run).is_some_and(|p| {
+                    && st.activity.judging.lock().is_ok_and(|mut j| match j.get_mut(&run) {
+                        Some(p) if p.attempt < nanopush_instrument::control::DEFAULT_ATTEMPTS => {
                             p.lost = failure.clone();
-                            p.attempt < judge::DEFAULT_ATTEMPTS
-                        })
+                            true
+                        }
+                        _ => false,
                     });
                 if outcome == PUSHED || lost {
                     // The legs ran: the scan after the push decides (`push/judge.rs`).

@@ -21,8 +21,7 @@ use nanopush_proto::ws::{Judged, ServerMessage};
 use super::launch::{audit_early_end, launch, strategy_scene};
 use crate::app_state::{AppState, Move, Pending};
 use crate::records::{self, Recorded};
-pub(crate) use nanopush_instrument::control::DEFAULT_ATTEMPTS;
-use nanopush_instrument::control::{MoveError, MoveRoute, MoveTarget, Verdict, route_move};
+use nanopush_instrument::control::{DEFAULT_ATTEMPTS, MoveError, MoveRoute, MoveTarget, Verdict, route_move};
 use nanopush_instrument::scene::Scene;
 
 /// The loop ran run `run`'s legs (`pushed`) and left the particle believed at `estimate`:

@@ -24,14 +24,20 @@ pub struct Choice {
 /// The settings that are on or off (`true` or `false` in the scene file).
 pub const SWITCHES: [&str; 1] = ["strategy.follow_slope"];
 
+/// Value `value` of setting `key` as the scene file writes it: a switch `true` or `false`, a
+/// number with four significant digits.
+pub(super) fn value_text(key: &str, value: f64) -> String {
+    if SWITCHES.contains(&key) {
+        (value != 0.0).to_string()
+    } else {
+        short(value)
+    }
+}
+
 impl Choice {
     /// The value as the scene file writes it.
     pub fn value_text(&self) -> String {
-        if SWITCHES.contains(&self.key) {
-            (self.value != 0.0).to_string()
-        } else {
-            short(self.value)
-        }
+        value_text(self.key, self.value)
     }
 }
 
@@ -97,6 +103,15 @@ impl DerivedStrategy {
         scene.file.push.speed_um_per_s = self.speed_um_per_s;
     }
 
+    /// Whether the tip follows the substrate's slope, in words.
+    pub(super) fn height(&self) -> &'static str {
+        if self.strategy.follow_slope {
+            "following the substrate's slope"
+        } else {
+            "at one height"
+        }
+    }
+
     /// The strategy in one line: the contact angle, the side the contact is read on, the loop
     /// closure, the speed and the longest push, and why this one.
     pub fn summary(&self) -> String {
@@ -125,11 +140,7 @@ impl DerivedStrategy {
                 "read on the {side} side until t*, then no lost-particle test (the particle rolls on in front of the tip)"
             )
         };
-        let height = if self.strategy.follow_slope {
-            "following the substrate's slope"
-        } else {
-            "at one height"
-        };
+        let height = self.height();
         format!(
             "β = {}°, {reading}, {control} control, {height}, {} µm/s, pushes of at most {} µm{}: {why}",
             short(self.contact_angle_deg),

@@ -93,12 +93,10 @@ impl<'a> Derivation<'a> {
             ));
         }
         let why = if hand_set && (hand_value - derived).abs() > 1e-12 * derived.abs().max(1e-30) {
-            let derived = if super::choice::SWITCHES.contains(&key) {
-                (derived != 0.0).to_string()
-            } else {
-                short(derived)
-            };
-            format!("given by the scene; derived would be {derived}: {why}")
+            format!(
+                "given by the scene; derived would be {}: {why}",
+                super::choice::value_text(key, derived)
+            )
         } else {
             why
         };
@@ -322,11 +320,7 @@ fn dry_run_line(plan: &DerivedStrategy, why: &dry_run::DryRunFailure) -> String 
         "β = {}°, {} side, {}, pushes of at most {} µm: the dry run failed: {}",
         plan.contact_angle_deg,
         plan.prediction.side.name(),
-        if plan.strategy.follow_slope {
-            "following the slope"
-        } else {
-            "at one height"
-        },
+        plan.height(),
         short(plan.strategy.max_push_um),
         brief_with(why)
     )

@@ -603,7 +603,7 @@ fn a_slope_the_drifting_scan_misreads_is_not_followed() {
     assert!(
         plan.tried
             .iter()
-            .any(|t| t.contains("following the slope") && t.contains("the dry run failed")),
+            .any(|t| t.contains("following the substrate's slope") && t.contains("the dry run failed")),
         "{:?}",
         plan.tried
     );

@@ -326,16 +326,9 @@ pub fn move_particle_with(
             Ok(p) => route = p,
             Err(MoveError::NotFound { .. }) => {
                 let (img, _) = routing.locate(scene, afm, estimate, prepared.radius);
-                return Ok(MoveRun {
-                    before,
-                    target,
-                    legs,
-                    after: (img, None),
-                    // Not found after a push that lost it: lost.
-                    verdict: lost.map_or(Verdict::NotFound, |code| Verdict::Failed { code }),
-                    attempts,
-                    cut_short: None,
-                });
+                // Not found after a push that lost it: lost.
+                let verdict = lost.map_or(Verdict::NotFound, |code| Verdict::Failed { code });
+                return Ok(ended(before, target, legs, (img, None), verdict, attempts));
             }
             Err(e) => return Err(e.into()),
         }
