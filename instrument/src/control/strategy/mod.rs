@@ -15,6 +15,8 @@ pub use pull_off::pull_off_rise;
 pub use runner::{Prepared, PushRequest, RunError, RunRow, StrategyRun, push_once};
 
 #[cfg(test)]
+mod contact_tests;
+#[cfg(test)]
 mod documented_tests;
 #[cfg(test)]
 mod pull_off_tests;
